@@ -1,0 +1,15 @@
+// spheretouch-bench: the benchmark programs behind perf/RESULTS.md.
+#include "bench.hpp"
+
+int main(int argc, char** argv) {
+  CLI::App app{"spheretouch-bench: benchmarks behind perf/RESULTS.md (ratios against baselines "
+               "measured in the same run)"};
+  app.require_subcommand(1);
+  st::bench::add_load(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  return 0;
+}

@@ -1,0 +1,11 @@
+// The `spheretouch` subcommands. Each lives in its own cmd_*.cpp and registers itself on the
+// root CLI11 app; a failing command throws CLI::RuntimeError(exit_code) after printing why.
+#pragma once
+#include <CLI/CLI.hpp>
+
+namespace st::app {
+
+void add_info(CLI::App& app);    ///< spheretouch info MESH...
+void add_export(CLI::App& app);  ///< spheretouch export IN -o OUT (scale, subdivide, write OFF)
+
+}  // namespace st::app

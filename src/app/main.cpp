@@ -1,0 +1,21 @@
+// spheretouch: the command line. Subcommands are registered from commands.hpp.
+#include <cstdio>
+
+#include "app/commands.hpp"
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "spheretouch: touch virtual objects of millions of triangles through a haptic device.\n"
+      "Exact face-level collision with layered boundary spheres, distributed over workers,\n"
+      "force at 1 kHz. Units: millimetres, newtons, seconds."};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "spheretouch 0.1.0");
+  st::app::add_info(app);
+  st::app::add_export(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  return 0;
+}
