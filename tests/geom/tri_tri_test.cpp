@@ -462,3 +462,29 @@ TEST_CASE("tri_tri: rotated grid pairs (near-touching doubles) against the big-i
   CHECK(yes > kCases / 5);
   CHECK(kCases - yes > kCases / 5);
 }
+
+TEST_CASE("tri_tri: offsets far below the other coordinates' ulp are still seen exactly") {
+  // Exactness holds while nonzero magnitudes are ≥ 2^-306 of the largest (tri_tri.hpp).
+  for (double tiny : {1e-20, 1e-80, 0x1p-300}) {
+    CAPTURE(tiny);
+    const Tri3 p{Vec3(0, 0, 0), Vec3(4, 0, 0), Vec3(0, 4, 0)};
+    for (double z : {-tiny, 0.0, tiny}) {
+      const Tri3 q{Vec3(1, 1, z), Vec3(1, 2, 1), Vec3(2, 1, 1)};
+      CHECK(st::test::ref_overlap_doubles(p, q) == (z <= 0));
+      CHECK(disagreements(p, q, z <= 0) == 0);
+    }
+    // In-plane: a vertex a tiny distance outside / on / inside an edge.
+    for (double y : {-tiny, 0.0, tiny}) {
+      const Tri3 q{Vec3(1, y, 0), Vec3(0, -2, 0), Vec3(2, -2, 0)};
+      CHECK(disagreements(p, q, y >= 0) == 0);
+    }
+  }
+}
+
+TEST_CASE("tri_tri: non-finite input is rejected, never reported as contact") {
+  const Vec3 a(0, 0, 0), b(1, 0, 0), c(0, 1, 0);
+  for (double bad : {double(NAN), double(INFINITY), -double(INFINITY)}) {
+    CHECK_FALSE(tri_tri_overlap(a, b, c, Vec3(bad, 0, 0), b, c));
+    CHECK_FALSE(tri_tri_overlap(Vec3(0, bad, 0), b, c, a, b, c));
+  }
+}
