@@ -258,7 +258,7 @@ void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object
   const double mag = q.rt.t.norm() + q.s * (centre_of(rp).norm() + rp.radius) + centre_of(ro).norm() + ro.radius;
   q.eps = 1e-9 * mag + 1e-300;
 
-  if (options.object_roots.empty()) {
+  if (!options.restrict_object) {
     q.descend(0, 0);
   } else {
     for (const std::uint32_t r : options.object_roots)

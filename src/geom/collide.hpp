@@ -50,9 +50,10 @@ struct CollideOptions {
   /// (or leaves) and report every face pair of the overlapping sphere pair (a superset of exact).
   int stop_layer = kExact;
   bool sort_pairs = false;  ///< sort `pairs` by (probe, object)
-  /// Object subtree roots to restrict to (a worker's blocks, partition.hpp); empty = whole object.
-  /// Must be disjoint subtrees (e.g. nodes of one layer).
+  /// With restrict_object: only these object subtree roots (a worker's blocks, partition.hpp; may
+  /// be empty = nothing). Must be disjoint subtrees (e.g. nodes of one layer).
   std::span<const std::uint32_t> object_roots{};
+  bool restrict_object = false;  ///< use object_roots instead of the whole object
   bool approx_face_pairs = true;  ///< approximate mode: also expand sphere pairs into face pairs
 };
 inline CollideOptions DefaultCollideOptions() { return {}; }  ///< exact, unsorted, whole object
