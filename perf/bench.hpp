@@ -6,5 +6,7 @@
 namespace st::bench {
 
 void add_load(CLI::App& app);  ///< mesh loading time (issue 2: the 832k-face armadillo)
+void add_tree(CLI::App& app);  ///< sphere-tree build time and bytes/face (issue 3)
+void add_collide(CLI::App& app);  ///< collide() query time at contact buckets, pose finder (issue 3)
 
 }  // namespace st::bench

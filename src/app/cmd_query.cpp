@@ -98,6 +98,7 @@ void run_query(const QueryArgs& a) {
       } else {
         for (const auto& w : roots) {
           opt.object_roots = w;
+          opt.restrict_object = true;
           geom::collide(probe.mesh, ptree, object.mesh, otree, pose, opt, scratch, result);
           merged.insert(merged.end(), result.pairs.begin(), result.pairs.end());
           stats.node_pairs += result.stats.node_pairs;

@@ -1,0 +1,4 @@
+#include "bench.hpp"
+namespace st::bench {
+void add_collide(CLI::App&) {}
+}
