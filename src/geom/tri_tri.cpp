@@ -27,6 +27,7 @@
 // (predicates.cpp); non-finite input returns false.
 #include "geom/tri_tri.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <utility>
 
