@@ -25,8 +25,13 @@
 
 #include "geom/predicates.hpp"
 
+#if defined(__FAST_MATH__)
+#error "predicates.cpp needs IEEE arithmetic: do not compile it with -ffast-math"
+#endif
+
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace st::geom {
 namespace {

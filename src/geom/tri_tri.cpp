@@ -21,11 +21,13 @@
 // Coplanar convex sets are disjoint iff one has an edge with the other strictly outside its
 // line (the edges of the Minkowski difference are edges of the two sets).
 //
-// Range: coordinates are used as given while their magnitudes sum to ≤ 2^300 (the filter's
-// domain, predicates.hpp); otherwise all 18 are first scaled by one power of two, which changes
-// no answer. Exactness then needs every nonzero coordinate ≥ 2^-306·max (predicates.cpp).
+// Range: coordinates are used as given while their magnitudes sum to [2^-100, 2^300] (inside
+// the filter's domain, predicates.hpp); otherwise all 18 are first scaled by one power of two,
+// which changes no answer. Exactness then needs every nonzero coordinate ≥ 2^-306·max
+// (predicates.cpp); non-finite input returns false.
 #include "geom/tri_tri.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <utility>
 

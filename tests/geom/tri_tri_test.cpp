@@ -11,6 +11,7 @@
 #include <cmath>
 #include <functional>
 #include <random>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -416,7 +417,9 @@ TEST_CASE("tri_tri: random integer-grid pairs against the exact reference") {
                                : tri_tri_overlap(q0, q1, q2, p0, p1, p2);
     if (got != want && ++failures <= 10) {
       auto str = [](const I3& v) {
-        return "(" + std::to_string(v[0]) + "," + std::to_string(v[1]) + "," + std::to_string(v[2]) + ")";
+        std::ostringstream os;
+        os << '(' << v[0] << ',' << v[1] << ',' << v[2] << ')';
+        return os.str();
       };
       FAIL_CHECK("case ", n, ": P ", str(ip[0]), str(ip[1]), str(ip[2]), " Q ", str(iq[0]),
                  str(iq[1]), str(iq[2]), " want ", want);
