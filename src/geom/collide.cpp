@@ -18,6 +18,7 @@
 
 #include <algorithm>
 #include <cassert>
+#include <limits>
 
 #include "geom/tri_tri.hpp"
 
@@ -162,28 +163,42 @@ struct CollideQuery {
   void leaf_leaf(std::uint32_t p, std::uint32_t o, const Vec3& cp) {
     const SphereNode& hp = PT.nodes[p];
     const SphereNode& ho = OT.nodes[o];
+    ++res.stats.leaf_pairs;
     const Vec3 co = centre_of(ho);
     const double ro = ho.radius + eps;
     const double rp = s * hp.radius + eps;
     std::uint32_t keep[kMaxLeafFaces];
     const std::array<double, 6>* kbox[kMaxLeafFaces];
     int nk = 0;
+    // Probe faces whose (exact) box meets the object leaf sphere; their union box.
+    double ulo[3] = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
+                     std::numeric_limits<double>::infinity()};
+    double uhi[3] = {-ulo[0], -ulo[1], -ulo[2]};
     for (std::uint32_t slot = hp.first, e = hp.first + hp.count; slot < e; ++slot) {
       const std::uint32_t f = PT.face_order[slot];
       const auto& bx = probe_box(f);
-      if (box_dist2(co, bx.data(), bx.data() + 3) <= ro * ro) { keep[nk] = f; kbox[nk] = &bx; ++nk; }
+      if (box_dist2(co, bx.data(), bx.data() + 3) <= ro * ro) {
+        keep[nk] = f;
+        kbox[nk] = &bx;
+        ++nk;
+        for (int k = 0; k < 3; ++k) { ulo[k] = std::min(ulo[k], bx[k]); uhi[k] = std::max(uhi[k], bx[3 + k]); }
+      }
     }
     if (nk == 0) return;
+    (void)cp;
+    (void)rp;
+    // Object faces whose (outward-rounded) box meets that union box, then face box vs face box.
     for (std::uint32_t slot = ho.first, e = ho.first + ho.count; slot < e; ++slot) {
       const FaceBox& fb = OT.face_boxes[slot];
       const double lo[3] = {fb.lo[0], fb.lo[1], fb.lo[2]};
       const double hi[3] = {fb.hi[0], fb.hi[1], fb.hi[2]};
-      if (box_dist2(cp, lo, hi) > rp * rp) continue;
+      if ((ulo[0] > hi[0]) | (ulo[1] > hi[1]) | (ulo[2] > hi[2]) | (uhi[0] < lo[0]) | (uhi[1] < lo[1]) | (uhi[2] < lo[2]))
+        continue;
       const std::uint32_t of = OT.face_order[slot];
       const Tri& ot = O.faces[of];
       for (int k = 0; k < nk; ++k) {
         const auto& pb = *kbox[k];
-        if (pb[0] > hi[0] || pb[1] > hi[1] || pb[2] > hi[2] || pb[3] < lo[0] || pb[4] < lo[1] || pb[5] < lo[2]) continue;
+        if ((pb[0] > hi[0]) | (pb[1] > hi[1]) | (pb[2] > hi[2]) | (pb[3] < lo[0]) | (pb[4] < lo[1]) | (pb[5] < lo[2])) continue;
         ++res.stats.tri_pairs;
         const Tri& pt = P.faces[keep[k]];
         if (tri_tri_overlap(sc.vx_[pt[0]], sc.vx_[pt[1]], sc.vx_[pt[2]], O.local[ot[0]], O.local[ot[1]],

@@ -61,6 +61,7 @@ inline CollideOptions DefaultCollideOptions() { return {}; }  ///< exact, unsort
 /// Counters of one query (Box2D-style, for tests and benchmarks).
 struct CollideStats {
   std::uint64_t node_pairs = 0;       ///< sphere pairs tested
+  std::uint64_t leaf_pairs = 0;       ///< leaf-leaf pairs reached (exact mode)
   std::uint64_t tri_pairs = 0;        ///< exact tri_tri_overlap calls
   std::uint64_t exact_fallbacks = 0;  ///< not exposed by tri_tri.hpp: always 0
   std::uint64_t sphere_pairs = 0;     ///< approximate mode: overlapping sphere pairs reported

@@ -12,8 +12,9 @@ namespace st::geom {
 /// How a SphereTree is built. Part of the tree file's hash (tree_io.hpp).
 struct TreeParams {
   /// Upper bound on faces per leaf; leaves hold floor(F/M) or ceil(F/M) faces, M = ceil(F/leaf_faces),
-  /// so every leaf is in (leaf_faces/2, leaf_faces] once F >= leaf_faces. Default 8: measured
-  /// fastest for hand_L2 x elephant at 100..1,500 contacts (perf/bench_collide.cpp, see RESULTS).
+  /// so every leaf is in (leaf_faces/2, leaf_faces] once F >= leaf_faces. Default 8: for hand_L2 x
+  /// elephant at 100..1,500 contacts, 8, 12 and 16 time the same within noise and 4 is ~15% slower
+  /// (`spheretouch-bench collide --leaf-faces N`); 8 keeps leaf spheres (approximate mode) small.
   std::uint32_t leaf_faces = 8;
 };
 inline TreeParams DefaultTreeParams() { return {}; }  ///< Box2D-style default config
