@@ -1,0 +1,17 @@
+// Test helper: counts heap allocations made while armed. Replaces the global operator new
+// family (and, outside sanitizer builds, malloc/calloc/realloc via glibc's __libc_* entry
+// points) for the whole test binary; disarmed it only forwards.
+#pragma once
+#include <atomic>
+#include <cstdint>
+
+namespace st::test {
+
+/// Starts counting allocations (from any thread).
+void arm_alloc_counter();
+/// Stops counting; returns the allocations counted since arm_alloc_counter().
+std::uint64_t disarm_alloc_counter();
+/// True when malloc itself is counted (not just operator new).
+bool counts_malloc();
+
+}  // namespace st::test
