@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# One entry point for a fresh Debian 12 machine: installs the missing Debian packages, configures
+# and builds, then does what was asked.
+#   scripts/setup.sh demo    set up, build the model set, run the main job on the embedded default
+#   scripts/setup.sh test    set up, build the model set, run every test suite (and sanitizer builds)
+#   scripts/setup.sh build   set up and build only
+set -euo pipefail
+cd "$(dirname "$0")/.."
+mode="${1:-build}"
+case "$mode" in demo|test|build) ;; -h|--help) sed -n '2,7p' "$0"; exit 0 ;;
+  *) echo "usage: scripts/setup.sh demo|test|build" >&2; exit 2 ;; esac
+
+# Build and test dependencies, all Debian packages (no downloads at build time beyond apt).
+packages=(g++ meson ninja-build pkg-config
+          libeigen3-dev libassimp-dev libzmq3-dev cppzmq-dev libconcurrentqueue-dev libreaderwriterqueue-dev
+          doctest-dev libtomlplusplus-dev libcli11-dev libsystemd-dev libfcl-dev systemd)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  echo "setup: installing ${missing[*]}"
+  sudo=""; [ "$(id -u)" -eq 0 ] || sudo="sudo"
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+
+jobs="${ST_JOBS:-2}"
+if [ ! -f build/build.ninja ]; then
+  meson setup build --buildtype=release
+fi
+ninja -C build -j"$jobs"
+
+case "$mode" in
+  build) ;;
+  demo)
+    scripts/models.sh
+    models="${ST_MODEL_DIR:-.cache/models}"
+    build/spheretouch info "$models"/hand_L2.off "$models"/elephant.off "$models"/armadillo_L1.off \
+      "$models"/armadillo_L2.off "$models"/bunny.off
+    ;;
+  test)
+    scripts/models.sh
+    scripts/run_tests.sh
+    ;;
+esac

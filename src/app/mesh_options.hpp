@@ -1,0 +1,28 @@
+// Command-line options shared by every subcommand that loads a mesh (--units, --scale).
+#pragma once
+#include <CLI/CLI.hpp>
+
+#include "geom/mesh_io.hpp"
+
+namespace st::app {
+
+/// Adds --units and --scale to `cmd`, writing into `opts`.
+inline void add_load_options(CLI::App* cmd, geom::LoadOptions& opts) {
+  cmd->add_option("--units", opts.units, "unit of the file's coordinates: um, mm, cm, m, in (converted to mm)")
+      ->capture_default_str();
+  cmd->add_option("--scale", opts.scale, "extra scale factor applied after the unit conversion")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+}
+
+/// Loads a mesh or prints the error and throws CLI::RuntimeError(2).
+inline geom::LoadedMesh load_or_exit(const std::string& path, const geom::LoadOptions& opts) {
+  Result<geom::LoadedMesh> r = geom::load_mesh(path, opts);
+  if (!r) {
+    std::fprintf(stderr, "spheretouch: %s\n", r.error().c_str());
+    throw CLI::RuntimeError(2);
+  }
+  return std::move(r).value();
+}
+
+}  // namespace st::app

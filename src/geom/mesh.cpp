@@ -1,0 +1,110 @@
+// Mesh bookkeeping: bounds, topology, degeneracy, validation, re-centring.
+#include "geom/mesh.hpp"
+
+#include <algorithm>
+#include <cfloat>
+#include <cmath>
+
+namespace st::geom {
+
+Box Mesh::local_bounds() const {
+  Box b;
+  for (const Vec3& p : local) b.grow(p);
+  return b;
+}
+
+Box Mesh::bounds() const {
+  Box b = local_bounds();
+  if (!b.empty()) { b.lo += origin; b.hi += origin; }
+  return b;
+}
+
+Topology Mesh::topology() const {
+  // One record per directed half-edge, keyed by its undirected edge; sorting groups the uses
+  // of each edge together (no hash map: deterministic and cache-friendly).
+  struct Half { std::uint64_t key; bool forward; };
+  std::vector<Half> halves;
+  halves.reserve(faces.size() * 3);
+  for (const Tri& f : faces) {
+    for (int k = 0; k < 3; ++k) {
+      std::uint32_t a = f[k], b = f[(k + 1) % 3];
+      if (a == b) continue;  // an edge of a degenerate face with a repeated vertex has no extent
+      const bool fwd = a < b;
+      const std::uint64_t key = fwd ? (std::uint64_t(a) << 32 | b) : (std::uint64_t(b) << 32 | a);
+      halves.push_back({key, fwd});
+    }
+  }
+  std::sort(halves.begin(), halves.end(), [](const Half& x, const Half& y) { return x.key < y.key; });
+  Topology t;
+  for (std::size_t i = 0; i < halves.size();) {
+    std::size_t j = i;
+    while (j < halves.size() && halves[j].key == halves[i].key) ++j;
+    const std::size_t uses = j - i;
+    if (uses == 1) ++t.boundary_edges;
+    else if (uses > 2) ++t.nonmanifold_edges;
+    else if (halves[i].forward == halves[i + 1].forward) ++t.misoriented_edges;
+    i = j;
+  }
+  return t;
+}
+
+std::vector<std::uint32_t> Mesh::degenerate_faces() const {
+  // Zero area up to rounding: |e1 x e2| <= 8 eps |e1||e2| (the sine of the corner angle is below
+  // ~1.8e-15, i.e. the three vertices are collinear to within the precision of their doubles).
+  // Scale-free by construction.
+  std::vector<std::uint32_t> out;
+  for (std::uint32_t i = 0; i < faces.size(); ++i) {
+    const Tri& f = faces[i];
+    if (f[0] == f[1] || f[1] == f[2] || f[0] == f[2]) { out.push_back(i); continue; }
+    const Vec3 e1 = local[f[1]] - local[f[0]], e2 = local[f[2]] - local[f[0]];
+    const double lim = 8 * DBL_EPSILON * e1.norm() * e2.norm();
+    if (!(e1.cross(e2).norm() > lim)) out.push_back(i);
+  }
+  return out;
+}
+
+void Mesh::recentre() {
+  const Box b = local_bounds();
+  if (b.empty()) return;
+  // Snap the new centre to a grid of 2^k mm with 2^k near a quarter of the extent. When the body
+  // sits far from the frame's origin, every coordinate's ulp divides 2^k, so v - centre is exact;
+  // near the origin the subtraction may round by at most an ulp of the extent.
+  const double extent = (b.hi - b.lo).maxCoeff();
+  Vec3 c = b.centre();
+  if (extent > 0 && std::isfinite(extent)) {
+    const double grid = std::ldexp(1.0, std::ilogb(extent) - 2);
+    for (int i = 0; i < 3; ++i) c[i] = std::round(c[i] / grid) * grid;
+  }
+  for (Vec3& p : local) p -= c;
+  origin += c;
+}
+
+void Mesh::scale(double s) {
+  for (Vec3& p : local) p *= s;
+  origin *= s;
+}
+
+Status Mesh::validate() const {
+  if (faces.empty()) return fail(name, ": no triangles");
+  for (std::size_t i = 0; i < local.size(); ++i) {
+    if (!local[i].allFinite() || !std::isfinite((origin + local[i]).squaredNorm()))
+      return fail(name, ": vertex ", i, ": coordinate is NaN or infinite (", local[i].x() + origin.x(), ", ",
+                  local[i].y() + origin.y(), ", ", local[i].z() + origin.z(), ")");
+  }
+  for (std::size_t i = 0; i < faces.size(); ++i)
+    for (int k = 0; k < 3; ++k)
+      if (faces[i][k] >= local.size())
+        return fail(name, ": face ", i, ": vertex index ", faces[i][k], " out of range [0, ", local.size(), ")");
+  return Ok{};
+}
+
+Mesh make_mesh(std::string name, const std::vector<Vec3>& positions, std::vector<Tri> faces) {
+  Mesh m;
+  m.name = std::move(name);
+  m.local = positions;
+  m.faces = std::move(faces);
+  m.recentre();
+  return m;
+}
+
+}  // namespace st::geom

@@ -1,0 +1,59 @@
+// Mesh import and export. OFF, OBJ and ASCII PLY are read by our own parsers in double
+// precision (correctly rounded std::from_chars), because Debian's assimp rounds to float;
+// every other format goes through assimp with no post-processing, so face order is kept.
+#pragma once
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "geom/mesh.hpp"
+
+namespace st::geom {
+
+/// How a file is turned into a Mesh.
+struct LoadOptions {
+  double scale = 1.0;        ///< extra factor applied after the unit conversion
+  std::string units = "mm";  ///< unit of the file's coordinates: um, mm, cm, m, in
+};
+
+/// What the loader did, for `spheretouch info` and logs.
+struct LoadReport {
+  std::string reader;                    ///< which path read the file (ours or assimp's importer)
+  std::string precision;                 ///< "double" (ours) or "float" (assimp's ai_real)
+  std::size_t polygons = 0;              ///< polygons in the file
+  std::size_t fanned_polygons = 0;       ///< polygons with more than 3 corners, fan-triangulated
+  std::size_t skipped_primitives = 0;    ///< points and lines in the file (not surfaces; ignored)
+  std::size_t welded_vertices = 0;       ///< exact duplicate vertices merged (assimp path only)
+  std::vector<std::uint32_t> degenerate; ///< zero-area faces (kept, see DEGENERATE_POLICY)
+  double seconds = 0;                    ///< wall time to read and build the mesh
+};
+
+/// Degenerate (zero-area) faces are kept where they are: they take part in collision as the
+/// segment or point they span, and no other face is renumbered.
+inline constexpr std::string_view DEGENERATE_POLICY = "kept (tested as the segment or point they span)";
+
+/// A loaded mesh and the report of how it was loaded.
+struct LoadedMesh {
+  Mesh mesh;          ///< the body, recentred (origin = snapped bounding-box centre)
+  LoadReport report;  ///< how it was read
+};
+
+/// Factor from `units` to millimetres, or an error naming the unit.
+Result<double> unit_to_mm(std::string_view units);
+
+/// Reads any supported mesh file. Face i of the result is the i-th triangle of the file,
+/// polygons fan-triangulated in order: (v0, v1, v2), (v0, v2, v3), ...
+Result<LoadedMesh> load_mesh(const std::string& path, const LoadOptions& options = {});
+
+/// Parses OFF / OBJ / ASCII PLY text already in memory; `name` is used in messages.
+Result<LoadedMesh> parse_off(std::string_view text, const std::string& name);
+Result<LoadedMesh> parse_obj(std::string_view text, const std::string& name);  ///< OBJ text
+Result<LoadedMesh> parse_ply_ascii(std::string_view text, const std::string& name);  ///< ASCII PLY
+
+/// Writes OFF with shortest round-trip doubles (reads back to the same coordinates).
+Status write_off(const Mesh& mesh, const std::string& path);
+
+/// File extensions the loader accepts (ours and assimp's), lower case with the dot.
+std::vector<std::string> supported_extensions();
+
+}  // namespace st::geom

@@ -1,0 +1,294 @@
+// Tests for src/geom/mesh_io.*: every format from a small generated file, face order, every bad
+// input's message, precision far from the origin, units and scale, degenerate-face policy.
+#include "geom/mesh_io.hpp"
+
+#include <cmath>
+#include <cstring>
+
+#include "test_util.hpp"
+
+using namespace st;
+using namespace st::geom;
+using st::test::TempDir;
+using st::test::write_file;
+
+namespace {
+
+// A square pyramid whose five faces are all different, coordinates exact in float.
+const std::vector<Vec3> kPos = {{0, 0, 0}, {2, 0, 0}, {2, 2, 0}, {0, 2, 0}, {1, 1, 1.5}};
+const std::vector<Tri> kTris = {{0, 2, 1}, {0, 3, 2}, {0, 1, 4}, {1, 2, 4}, {2, 3, 4}, {3, 0, 4}};
+
+std::string off_text() {
+  // The base is one quad (0 3 2 1) -> fan (0,3,2), (0,2,1): written as a polygon to test fanning.
+  return "OFF\n# a pyramid\n5 5 0\n0 0 0\n2 0 0\n2 2 0\n0 2 0\n1 1 1.5\n4 0 3 2 1\n3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 4\n";
+}
+const std::vector<Tri> kFannedOff = {{0, 3, 2}, {0, 2, 1}, {0, 1, 4}, {1, 2, 4}, {2, 3, 4}, {3, 0, 4}};
+
+/// Face i of `m` must be the triangle kPos[want[i]] in the same cyclic order.
+void check_faces(const Mesh& m, const std::vector<Tri>& want) {
+  REQUIRE(m.num_faces() == want.size());
+  for (std::size_t i = 0; i < want.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      INFO("face " << i << " corner " << k);
+      CHECK(m.vertex(m.faces[i][k]).isApprox(kPos[want[i][k]], 0.0));
+      CHECK((m.vertex(m.faces[i][k]) - kPos[want[i][k]]).norm() == 0.0);
+    }
+}
+
+std::string binary_stl(const std::vector<Tri>& tris) {
+  std::string s(80, ' ');
+  const auto n = static_cast<std::uint32_t>(tris.size());
+  s.append(reinterpret_cast<const char*>(&n), 4);
+  for (const Tri& t : tris) {
+    const Vec3 nrm = (kPos[t[1]] - kPos[t[0]]).cross(kPos[t[2]] - kPos[t[0]]).normalized();
+    float f[12] = {float(nrm.x()), float(nrm.y()), float(nrm.z())};
+    for (int k = 0; k < 3; ++k)
+      for (int c = 0; c < 3; ++c) f[3 + 3 * k + c] = float(kPos[t[k]][c]);
+    s.append(reinterpret_cast<const char*>(f), sizeof f);
+    s.append(2, '\0');
+  }
+  return s;
+}
+
+std::string base64(const std::string& in) {
+  static const char* tbl = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  std::size_t i = 0;
+  for (; i + 2 < in.size(); i += 3) {
+    const unsigned v = (unsigned char)in[i] << 16 | (unsigned char)in[i + 1] << 8 | (unsigned char)in[i + 2];
+    out += tbl[v >> 18 & 63]; out += tbl[v >> 12 & 63]; out += tbl[v >> 6 & 63]; out += tbl[v & 63];
+  }
+  if (i + 1 == in.size()) {
+    const unsigned v = (unsigned char)in[i] << 16;
+    out += tbl[v >> 18 & 63]; out += tbl[v >> 12 & 63]; out += "==";
+  } else if (i + 2 == in.size()) {
+    const unsigned v = (unsigned char)in[i] << 16 | (unsigned char)in[i + 1] << 8;
+    out += tbl[v >> 18 & 63]; out += tbl[v >> 12 & 63]; out += tbl[v >> 6 & 63]; out += '=';
+  }
+  return out;
+}
+
+std::string gltf_text() {
+  std::string bin;
+  for (const Vec3& p : kPos)
+    for (int c = 0; c < 3; ++c) { float f = float(p[c]); bin.append(reinterpret_cast<const char*>(&f), 4); }
+  const std::size_t pos_bytes = bin.size();
+  for (const Tri& t : kTris)
+    for (int k = 0; k < 3; ++k) { std::uint16_t i = std::uint16_t(t[k]); bin.append(reinterpret_cast<const char*>(&i), 2); }
+  const std::size_t idx_bytes = bin.size() - pos_bytes;
+  return R"({"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{"mesh":0}],
+"meshes":[{"primitives":[{"attributes":{"POSITION":0},"indices":1,"mode":4}]}],
+"buffers":[{"byteLength":)" + std::to_string(bin.size()) + R"(,"uri":"data:application/octet-stream;base64,)" + base64(bin) + R"("}],
+"bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":)" + std::to_string(pos_bytes) + R"(},
+{"buffer":0,"byteOffset":)" + std::to_string(pos_bytes) + R"(,"byteLength":)" + std::to_string(idx_bytes) + R"(}],
+"accessors":[{"bufferView":0,"componentType":5126,"count":5,"type":"VEC3","min":[0,0,0],"max":[2,2,1.5]},
+{"bufferView":1,"componentType":5123,"count":18,"type":"SCALAR"}]})";
+}
+
+std::string error_of(const std::string& path, const LoadOptions& o = {}) {
+  Result<LoadedMesh> r = load_mesh(path, o);
+  REQUIRE_FALSE(r.ok());
+  return r.error();
+}
+
+bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+}  // namespace
+
+TEST_CASE("OFF: double path, polygons fan-triangulated in file order") {
+  TempDir d;
+  write_file(d.file("p.off"), off_text());
+  Result<LoadedMesh> r = load_mesh(d.file("p.off"));
+  REQUIRE(r.ok());
+  check_faces(r.value().mesh, kFannedOff);
+  CHECK(r.value().report.precision.rfind("double", 0) == 0);
+  CHECK(r.value().report.polygons == 5);
+  CHECK(r.value().report.fanned_polygons == 1);
+  CHECK(r.value().mesh.topology().closed());
+  CHECK(r.value().mesh.topology().manifold());
+}
+
+TEST_CASE("OBJ: double path, negative indices, v/vt/vn forms, order kept across materials") {
+  TempDir d;
+  write_file(d.file("p.obj"),
+             "mtllib none.mtl\nv 0 0 0\nv 2 0 0\nv 2 2 0\nv 0 2 0\nv 1 1 1.5\nvt 0 0\nvn 0 0 1\n"
+             "usemtl a\nf 1/1/1 3/1/1 2/1/1\nusemtl b\nf 1//1 4//1 3//1\nusemtl a\nf -5 -4 -1\nf 2/1 3/1 5/1\n"
+             "usemtl b\nf 3 4 5\nf 4 1 5\n");
+  Result<LoadedMesh> r = load_mesh(d.file("p.obj"));
+  REQUIRE(r.ok());
+  check_faces(r.value().mesh, kTris);
+  CHECK(r.value().report.reader == "spheretouch OBJ reader");
+}
+
+TEST_CASE("ASCII PLY: double path, extra properties skipped") {
+  TempDir d;
+  std::string s = "ply\nformat ascii 1.0\ncomment test\nelement vertex 5\nproperty float x\nproperty float y\n"
+                  "property float z\nproperty uchar red\nelement face 6\nproperty list uchar int vertex_indices\n"
+                  "property int flags\nend_header\n";
+  for (const Vec3& p : kPos) s += std::to_string(p.x()) + " " + std::to_string(p.y()) + " " + std::to_string(p.z()) + " 7\n";
+  for (const Tri& t : kTris) s += "3 " + std::to_string(t[0]) + " " + std::to_string(t[1]) + " " + std::to_string(t[2]) + " 0\n";
+  write_file(d.file("p.ply"), s);
+  Result<LoadedMesh> r = load_mesh(d.file("p.ply"));
+  REQUIRE(r.ok());
+  check_faces(r.value().mesh, kTris);
+  CHECK(r.value().report.precision.rfind("double", 0) == 0);
+}
+
+TEST_CASE("binary PLY, ASCII and binary STL, glTF: assimp path keeps face order") {
+  TempDir d;
+  SUBCASE("binary PLY") {
+    std::string s = "ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+                    "property float z\nelement face 6\nproperty list uchar int vertex_indices\nend_header\n";
+    for (const Vec3& p : kPos)
+      for (int c = 0; c < 3; ++c) { float f = float(p[c]); s.append(reinterpret_cast<const char*>(&f), 4); }
+    for (const Tri& t : kTris) {
+      s += char(3);
+      for (int k = 0; k < 3; ++k) { std::int32_t i = std::int32_t(t[k]); s.append(reinterpret_cast<const char*>(&i), 4); }
+    }
+    write_file(d.file("p.ply"), s);
+    Result<LoadedMesh> r = load_mesh(d.file("p.ply"));
+    REQUIRE(r.ok());
+    check_faces(r.value().mesh, kTris);
+    CHECK(r.value().report.reader == "assimp");
+  }
+  SUBCASE("ASCII STL") {
+    std::string s = "solid p\n";
+    for (const Tri& t : kTris) {
+      s += "facet normal 0 0 0\nouter loop\n";
+      for (int k = 0; k < 3; ++k)
+        s += "vertex " + std::to_string(kPos[t[k]].x()) + " " + std::to_string(kPos[t[k]].y()) + " " + std::to_string(kPos[t[k]].z()) + "\n";
+      s += "endloop\nendfacet\n";
+    }
+    s += "endsolid p\n";
+    write_file(d.file("p.stl"), s);
+    Result<LoadedMesh> r = load_mesh(d.file("p.stl"));
+    REQUIRE(r.ok());
+    check_faces(r.value().mesh, kTris);
+    CHECK(r.value().mesh.num_vertices() == 5);  // welded
+    CHECK(r.value().mesh.topology().closed());
+  }
+  SUBCASE("binary STL") {
+    write_file(d.file("p.stl"), binary_stl(kTris));
+    Result<LoadedMesh> r = load_mesh(d.file("p.stl"));
+    REQUIRE(r.ok());
+    check_faces(r.value().mesh, kTris);
+    CHECK(r.value().report.welded_vertices == 18 - 5);
+  }
+  SUBCASE("glTF with an embedded buffer") {
+    write_file(d.file("p.gltf"), gltf_text());
+    Result<LoadedMesh> r = load_mesh(d.file("p.gltf"));
+    REQUIRE(r.ok());
+    check_faces(r.value().mesh, kTris);
+    CHECK(r.value().report.precision.rfind("float", 0) == 0);
+  }
+}
+
+TEST_CASE("bad input: each error names the file and the item") {
+  TempDir d;
+  CHECK(contains(error_of(d.file("missing.off")), "missing.off: cannot open"));
+  write_file(d.file("x.xyzzy"), "hello");
+  CHECK(contains(error_of(d.file("x.xyzzy")), "unknown mesh format '.xyzzy'"));
+  write_file(d.file("noext"), "hello");
+  CHECK(contains(error_of(d.file("noext")), "unknown mesh format"));
+  write_file(d.file("empty.off"), "OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n");
+  CHECK(contains(error_of(d.file("empty.off")), "empty.off: no triangles"));
+  write_file(d.file("range.off"), "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n");
+  CHECK(contains(error_of(d.file("range.off")), "range.off:6: face 0: vertex index 3 out of range [0, 3)"));
+  write_file(d.file("nan.off"), "OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n");
+  CHECK(contains(error_of(d.file("nan.off")), "nan.off:4: vertex 1: coordinate 'nan' is not finite"));
+  write_file(d.file("inf.obj"), "v 0 0 0\nv 1 0 inf\nv 0 1 0\nf 1 2 3\n");
+  CHECK(contains(error_of(d.file("inf.obj")), "inf.obj:2: vertex 1: coordinate 'inf' is not finite"));
+  write_file(d.file("word.off"), "OFF\n3 1 0\n0 0 0\n1 zero 0\n0 1 0\n3 0 1 2\n");
+  CHECK(contains(error_of(d.file("word.off")), "word.off:4: vertex 1: 'zero' is not a number"));
+  write_file(d.file("short.off"), "OFF\n3 1 0\n0 0 0\n1 0 0\n");
+  CHECK(contains(error_of(d.file("short.off")), "short.off: file ends after 2 of 3 vertices"));
+  write_file(d.file("header.off"), "PLY\n3 1 0\n");
+  CHECK(contains(error_of(d.file("header.off")), "header.off:1: expected an 'OFF' header"));
+  write_file(d.file("huge.off"), "OFF\n999999999999 1 0\n");
+  CHECK(contains(error_of(d.file("huge.off")), "exceed what a"));
+  write_file(d.file("obj0.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n");
+  CHECK(contains(error_of(d.file("obj0.obj")), "obj0.obj:4: face 0: vertex reference '0' is not a non-zero integer"));
+  write_file(d.file("objr.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n");
+  CHECK(contains(error_of(d.file("objr.obj")), "objr.obj:4: face 0: vertex index 4 out of range"));
+  write_file(d.file("line.obj"), "v 0 0 0\nv 1 0 0\nf 1 2\n");
+  CHECK(contains(error_of(d.file("line.obj")), "line.obj:3: face 0: has 2 corners"));
+  write_file(d.file("p.ply"), "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                              "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n");
+  CHECK(contains(error_of(d.file("p.ply")), "p.ply:13: face 0: vertex index 9 out of range [0, 3)"));
+  write_file(d.file("bad.stl"), "solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 0\n");
+  CHECK(contains(error_of(d.file("bad.stl")), "bad.stl"));
+  write_file(d.file("u.off"), off_text());
+  LoadOptions bad_units;
+  bad_units.units = "furlong";
+  CHECK(contains(error_of(d.file("u.off"), bad_units), "units 'furlong' not known"));
+}
+
+TEST_CASE("degenerate faces are reported and kept in place") {
+  TempDir d;
+  // Face 1 is collinear, face 2 repeats a vertex; faces 0 and 3 are fine.
+  write_file(d.file("deg.off"), "OFF\n5 4 0\n0 0 0\n1 0 0\n0 1 0\n2 0 0\n0 0 1\n3 0 1 2\n3 0 1 3\n3 0 0 2\n3 0 1 4\n");
+  Result<LoadedMesh> r = load_mesh(d.file("deg.off"));
+  REQUIRE(r.ok());
+  CHECK(r.value().mesh.num_faces() == 4);
+  CHECK(r.value().report.degenerate == std::vector<std::uint32_t>{1, 2});
+  CHECK(r.value().mesh.faces[3] == Tri{0, 1, 4});
+}
+
+TEST_CASE("units and scale convert to millimetres") {
+  TempDir d;
+  write_file(d.file("p.off"), off_text());
+  LoadOptions o;
+  o.units = "cm";
+  o.scale = 2;
+  Result<LoadedMesh> r = load_mesh(d.file("p.off"), o);
+  REQUIRE(r.ok());
+  CHECK(r.value().mesh.vertex(4).isApprox(Vec3(20, 20, 30), 1e-15));
+  CHECK(unit_to_mm("in").value() == 25.4);
+}
+
+TEST_CASE("a mesh 10^6 mm from the origin keeps its shape to 1e-9 relative") {
+  TempDir d;
+  for (const double offset : {1e6, -1e6, 3.7e6}) {
+    std::string s = "OFF\n5 5 0\n";
+    std::vector<Vec3> placed;
+    char buf[64];
+    for (const Vec3& p : kPos) {
+      // Perturb the shape so it is not grid-aligned, then place it far away.
+      const Vec3 q = Vec3(offset, offset / 2, -offset) + p * 1.2345678;
+      placed.push_back(q);
+      std::snprintf(buf, sizeof buf, "%.17g %.17g %.17g\n", q.x(), q.y(), q.z());
+      s += buf;
+    }
+    s += "4 0 3 2 1\n3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 4\n";
+    write_file(d.file("far.off"), s);
+    Result<LoadedMesh> r = load_mesh(d.file("far.off"));
+    REQUIRE(r.ok());
+    const Mesh& m = r.value().mesh;
+    CHECK(m.origin.norm() > 0.5 * std::abs(offset));
+    for (int a = 0; a < 5; ++a)
+      for (int b = 0; b < 5; ++b) {
+        const Vec3 want = placed[b] - placed[a];  // exact: both within a factor 2 (Sterbenz)
+        const Vec3 got = m.local[b] - m.local[a];
+        CHECK((got - want).norm() <= 1e-9 * std::max(1.0, want.norm()));
+      }
+    // Round trip through write_off keeps every coordinate exactly.
+    REQUIRE(write_off(m, d.file("back.off")).ok());
+    Result<LoadedMesh> back = load_mesh(d.file("back.off"));
+    REQUIRE(back.ok());
+    for (std::uint32_t i = 0; i < 5; ++i) CHECK((back.value().mesh.vertex(i) - placed[i]).norm() == 0.0);
+  }
+}
+
+TEST_CASE("real meshes: the model set loads closed and manifold") {
+  for (const char* name : {"hand.off", "hand_L2.off", "elephant.off", "armadillo_L1.off"}) {
+    Result<LoadedMesh> r = load_mesh(st::test::model(name));
+    REQUIRE(r.ok());
+    const Topology t = r.value().mesh.topology();
+    INFO(name);
+    CHECK(t.closed());
+    CHECK(t.manifold());
+  }
+  CHECK(load_mesh(st::test::model("hand_L2.off")).value().mesh.num_faces() == 38240);
+  CHECK(load_mesh(st::test::model("elephant.off")).value().mesh.num_faces() == 88928);
+  CHECK(load_mesh(st::test::model("armadillo_L1.off")).value().mesh.num_faces() == 208000);
+}

@@ -1,0 +1,53 @@
+// Helpers shared by the doctest suites: temporary directories, files, and where the model set is.
+#pragma once
+#include <doctest/doctest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+
+namespace st::test {
+
+/// A fresh directory under the system temp dir, removed when the object dies.
+struct TempDir {
+  std::filesystem::path path;
+  TempDir() {
+    std::random_device rd;
+    path = std::filesystem::temp_directory_path() / ("spheretouch-test-" + std::to_string(rd()) + std::to_string(rd()));
+    std::filesystem::create_directories(path);
+  }
+  ~TempDir() { std::error_code ec; std::filesystem::remove_all(path, ec); }
+  std::string file(const std::string& name) const { return (path / name).string(); }  ///< path of a file inside
+};
+
+/// Writes `data` to `path` (binary).
+inline void write_file(const std::string& path, const std::string& data) {
+  std::ofstream o(path, std::ios::binary);
+  o.write(data.data(), static_cast<std::streamsize>(data.size()));
+  REQUIRE(o.good());
+}
+
+/// Directory of the model set (scripts/models.sh): $ST_MODEL_DIR, else $ST_SOURCE_ROOT/.cache/models.
+inline std::string models_dir() {
+  if (const char* d = std::getenv("ST_MODEL_DIR")) return d;
+  if (const char* r = std::getenv("ST_SOURCE_ROOT")) return std::string(r) + "/.cache/models";
+  return ".cache/models";
+}
+
+/// Path of a model-set mesh; fails the test (never skips) when the model set has not been built.
+inline std::string model(const std::string& name) {
+  const std::string p = models_dir() + "/" + name;
+  INFO("model set missing: run scripts/models.sh (looked for " << p << ")");
+  REQUIRE(std::filesystem::exists(p));
+  return p;
+}
+
+/// Directory of the build tree (for running the built executables), from meson's test env.
+inline std::string build_root() {
+  if (const char* b = std::getenv("ST_BUILD_ROOT")) return b;
+  return "build";
+}
+
+}  // namespace st::test
