@@ -47,7 +47,8 @@ TEST_CASE("contact: tip pressed into a wall gives FD = +z, PD = depth, plane con
   ContactBuilder b;
   const Mesh w = wall(), t = tip();
   const auto pairs = tip_pairs({0, 1});
-  const Pose p = at({2.0, 3.0, -0.5});
+  // Tip right under face 1's centroid (-10/3, 10/3, 0): the tip is the nearest vertex.
+  const Pose p = at({-10.0 / 3, 10.0 / 3, -0.5});
   const ContactModel m = b.build(t, w, p, pairs);
   REQUIRE(m.in_contact());
   CHECK(m.force_dir.z == doctest::Approx(1.0));
@@ -61,10 +62,11 @@ TEST_CASE("contact: tip pressed into a wall gives FD = +z, PD = depth, plane con
   CHECK(m.contacts == 5);
   CHECK(m.pairs == 6);
   CHECK(m.contact_point.z == doctest::Approx(0.0).epsilon(1e-12));
-  CHECK(m.contact_point.x == doctest::Approx(2.0));
+  CHECK(m.contact_point.x == doctest::Approx(-10.0 / 3));
+  CHECK(m.nearest_object_face == 1);
   CHECK(plane_depth(m, p) == doctest::Approx(m.penetration_mm).epsilon(1e-12));
   // Deeper: PD grows, the first face stays recorded (no replane).
-  const ContactModel m2 = b.build(t, w, at({2.0, 3.0, -0.8}), pairs);
+  const ContactModel m2 = b.build(t, w, at({-10.0 / 3, 10.0 / 3, -0.8}), pairs);
   CHECK(m2.penetration_mm == doctest::Approx(0.8).epsilon(1e-12));
   CHECK((m2.flags & kReplaned) == 0);
   CHECK(m2.first_contact_face == m.first_contact_face);
@@ -126,10 +128,10 @@ TEST_CASE("contact: normals that disagree are flagged, FD follows the nearest fa
   w.local.push_back({1, 0, -0.05});
   w.faces.push_back({4, 5, 6});
   ContactBuilder b;
-  const ContactModel m = b.build(tip(), w, at({5, 5, -0.1}), tip_pairs({0, 1, 2}));
+  const ContactModel m = b.build(tip(), w, at({-3, 3.5, -0.1}), tip_pairs({0, 1, 2}));
   REQUIRE(m.in_contact());
   CHECK((m.flags & kNormalsDisagree) != 0);
-  CHECK(m.nearest_object_face == 1);  // centroid (3.33, 6.67, 0) is nearest to (5, 5, -0.1)
+  CHECK(m.nearest_object_face == 1);  // centroid (-3.33, 3.33, 0) is nearest to the tip
   CHECK(m.force_dir.z == doctest::Approx(1.0));
 }
 

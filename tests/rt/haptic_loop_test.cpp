@@ -5,7 +5,7 @@
 
 #include <doctest/doctest.h>
 
-#include "test_util.hpp"
+#include "rt_test_util.hpp"
 
 #include <chrono>
 #include <thread>

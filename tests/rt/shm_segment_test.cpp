@@ -4,7 +4,7 @@
 
 #include <doctest/doctest.h>
 
-#include "test_util.hpp"
+#include "rt_test_util.hpp"
 #include <fcntl.h>
 #include <sys/mman.h>
 #include <sys/wait.h>
