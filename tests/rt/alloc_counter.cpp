@@ -6,8 +6,9 @@
 namespace {
 std::atomic<bool> g_armed{false};
 std::atomic<std::uint64_t> g_count{0};
+thread_local bool t_excluded = false;  // initialised without allocation (constant init)
 inline void note() {
-  if (g_armed.load(std::memory_order_relaxed)) g_count.fetch_add(1, std::memory_order_relaxed);
+  if (g_armed.load(std::memory_order_relaxed) && !t_excluded) g_count.fetch_add(1, std::memory_order_relaxed);
 }
 }  // namespace
 
@@ -31,6 +32,7 @@ std::uint64_t disarm_alloc_counter() {
   g_armed.store(false, std::memory_order_seq_cst);
   return g_count.load(std::memory_order_relaxed);
 }
+void exclude_this_thread() { t_excluded = true; }
 bool counts_malloc() { return ST_COUNT_MALLOC != 0; }
 }  // namespace st::test
 

@@ -11,6 +11,9 @@ namespace st::test {
 void arm_alloc_counter();
 /// Stops counting; returns the allocations counted since arm_alloc_counter().
 std::uint64_t disarm_alloc_counter();
+/// The calling thread's allocations are never counted (e.g. a stand-in collision thread that
+/// shares the process with the tick path under test).
+void exclude_this_thread();
 /// True when malloc itself is counted (not just operator new).
 bool counts_malloc();
 
