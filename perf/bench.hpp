@@ -6,5 +6,7 @@
 namespace st::bench {
 
 void add_load(CLI::App& app);  ///< mesh loading time (issue 2: the 832k-face armadillo)
+void add_exchange(CLI::App& app);  ///< TripleBuffer vs mutex take-newest latency (rt issue)
+void add_haptic(CLI::App& app);    ///< HapticLoop vs bare clock_nanosleep wake-up latency (rt issue)
 
 }  // namespace st::bench

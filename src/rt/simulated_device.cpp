@@ -105,8 +105,10 @@ SimulatedDevice::SimulatedDevice(Trajectory script, VirtualUser user, std::size_
 bool SimulatedDevice::read_pose(std::int64_t now_ns, Eigen::Isometry3d& pose) noexcept {
   if (start_ns_ < 0) start_ns_ = last_ns_ = now_ns;
   elapsed_s_ = static_cast<double>(now_ns - start_ns_) * 1e-9;
-  finished_ = elapsed_s_ >= script_.duration_s();
-  const Eigen::Isometry3d target = script_.at(elapsed_s_);
+  const double d = script_.duration_s();
+  const double t = (repeat_ && d > 0) ? std::fmod(elapsed_s_, d) : elapsed_s_;
+  finished_ = !repeat_ && elapsed_s_ >= d;
+  const Eigen::Isometry3d target = script_.at(t);
   if (!user_.enabled) {
     pose_ = target;
   } else {

@@ -78,6 +78,8 @@ class SimulatedDevice final : public Device {
   bool finished() const { return finished_; }
   /// Seconds since the first read_pose().
   double elapsed_s() const { return elapsed_s_; }
+  /// Replay the script from the start each time it ends (long benchmarks); never finished().
+  void set_repeat(bool repeat) { repeat_ = repeat; }
 
  private:
   Trajectory script_;
@@ -88,6 +90,7 @@ class SimulatedDevice final : public Device {
   std::int64_t start_ns_ = -1, last_ns_ = -1;
   double elapsed_s_ = 0;
   bool finished_ = false;
+  bool repeat_ = false;
   Eigen::Vector3d x_{Eigen::Vector3d::Zero()}, v_{Eigen::Vector3d::Zero()};  ///< hand state, mm, mm/s
   Eigen::Vector3d last_force_{Eigen::Vector3d::Zero()};
   Eigen::Isometry3d pose_{Eigen::Isometry3d::Identity()};
