@@ -159,10 +159,11 @@ Result<RtReport> HapticLoop::start(TickHandler& handler) {
   std::promise<RtReport> setup;
   std::future<RtReport> report = setup.get_future();
   running_.store(true, std::memory_order_release);
-  thread_ = std::thread([this, &handler, &setup] {
+  // The thread owns the promise: destroying it here while set_value() still runs would race.
+  thread_ = std::thread([this, &handler, setup = std::move(setup)]() mutable {
     RtReport r = apply_realtime(config_);
     const bool go = !(config_.strict && !r.all_applied());
-    setup.set_value(r);  // `setup` is not touched after this line
+    setup.set_value(r);
     if (go) loop(handler);
     running_.store(false, std::memory_order_release);
   });

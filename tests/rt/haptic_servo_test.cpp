@@ -38,7 +38,7 @@ struct FakeCollision {
   TripleBuffer<PoseSample>& poses;
   TripleBuffer<ContactModel>& models;
   std::atomic<bool> stop{false};
-  std::uint64_t published = 0;
+  std::atomic<std::uint64_t> published{0};
   void run() {
     const Mesh w = wall(), t = tip();
     ContactBuilder builder;
