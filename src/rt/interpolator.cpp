@@ -156,7 +156,7 @@ Eigen::Vector3d Interpolator::force(const Eigen::Isometry3d& pose, std::int64_t 
   last_point_ = p;
   have_last_point_ = contact_;
   if (!f.allFinite()) f.setZero();
-  last_out_ = f;
+  last_out_ = f * fade;  // what was commanded: the next cross-fade starts from it (even after a stall)
   state_.penetration_mm = std::isfinite(pd) ? pd : 0.0;
   state_.fade = fade;
   state_.raw_force_N = f.norm();

@@ -86,7 +86,7 @@ class Interpolator {
   Eigen::Vector3d anchor_{Eigen::Vector3d::Zero()};       ///< probe_point at the model's pose, object frame
   Eigen::Vector3d force_a_{Eigen::Vector3d::Zero()};      ///< A = law(PD)·FD
   Eigen::Vector3d offset_{Eigen::Vector3d::Zero()};       ///< plane: jump at the last arrival, decaying
-  Eigen::Vector3d last_out_{Eigen::Vector3d::Zero()};     ///< last force() before fade
+  Eigen::Vector3d last_out_{Eigen::Vector3d::Zero()};     ///< last force() output (after fade)
   Eigen::Vector3d last_point_{Eigen::Vector3d::Zero()};   ///< probe point, previous tick (damping)
   bool pending_offset_ = false;           ///< plane: offset_ to be taken at the next force()
   bool have_last_point_ = false;          ///< last_point_ is valid (damping)

@@ -142,8 +142,21 @@ TEST_CASE("interpolator: when updates stop, every method fades to zero") {
     CHECK(in.force(at_z(-30.0), 10'000 * kMs).norm() == 0.0);
     // A new update brings the force back.
     in.on_model(wall_model(2, -2.0), 10'001 * kMs);
-    CHECK(in.force(at_z(-2.0), 10'001 * kMs).norm() > 0.5);
+    CHECK(in.force(at_z(-2.0), 10'001 * kMs + c.crossfade_ns).norm() > 0.5);  // plane ramps in
   }
+}
+
+TEST_CASE("interpolator: plane resumes smoothly after a stall faded the force out") {
+  const ForceLaw law;
+  const InterpolatorConfig c = cfg(InterpMode::plane);
+  Interpolator in(law, c);
+  in.on_model(wall_model(1, -2.0), 0);
+  CHECK(in.force(at_z(-2.0), 50 * kMs).norm() > 1.0);
+  const std::int64_t silent = c.stale_timeout_ns + c.fade_ns + 10 * kMs;
+  CHECK(in.force(at_z(-2.0), silent).norm() == 0.0);
+  in.on_model(wall_model(2, -2.0), silent + kMs);
+  CHECK(in.force(at_z(-2.0), silent + kMs).norm() == doctest::Approx(0.0));  // no jump back up
+  CHECK(in.force(at_z(-2.0), silent + kMs + c.crossfade_ns).norm() == doctest::Approx(law.magnitude_N(2.0)));
 }
 
 TEST_CASE("interpolator: bad models and poses give zero force, counted") {
