@@ -6,6 +6,8 @@ int main(int argc, char** argv) {
                "measured in the same run)"};
   app.require_subcommand(1);
   st::bench::add_load(app);
+  st::bench::add_tree(app);
+  st::bench::add_collide(app);
   st::bench::add_exchange(app);
   st::bench::add_haptic(app);
   try {

@@ -1,17 +1,53 @@
 #!/usr/bin/env bash
-# Runs every doctest suite through meson and closes with one line "tests: N passed, N failed"
-# (test cases summed over the suites). Expects a configured build in build/.
+# Runs every doctest suite: the release build, then (unless ST_SANITIZERS=0) the whole suite
+# under ASan+UBSan and the concurrent suites (rt, net) under TSan. Closes with one line
+# "tests: N passed, N failed" (doctest test cases summed over every run).
 set -uo pipefail
 cd "$(dirname "$0")/.."
-build="${1:-build}"
-meson test -C "$build" --print-errorlogs --num-processes 1 "${@:2}"
-status=$?
-passed=0; failed=0
-log="$build/meson-logs/testlog.txt"
-if [ -f "$log" ]; then
-  while read -r p f; do passed=$((passed + p)); failed=$((failed + f)); done < <(
-    grep -E '^\[doctest\] test cases:' "$log" | sed -E 's/.*\| *([0-9]+) passed \| *([0-9]+) failed.*/\1 \2/')
+jobs="${ST_JOBS:-2}"
+passed=0; failed=0; status=0
+
+run_suites() {  # build-dir [suite...]
+  local dir=$1; shift
+  local args=()
+  for s in "$@"; do args+=(--suite "$s"); done
+  echo "== meson test -C $dir ${*:-(all suites)}"
+  meson test -C "$dir" --print-errorlogs --num-processes 1 --no-rebuild "${args[@]}" || status=1
+  local log="$dir/meson-logs/testlog.txt" p f
+  if [ -f "$log" ]; then
+    while read -r p f; do passed=$((passed + p)); failed=$((failed + f)); done < <(
+      grep -E '^\[doctest\] test cases:' "$log" | sed -E 's/.*\| *([0-9]+) passed \| *([0-9]+) failed.*/\1 \2/')
+  fi
+}
+
+build_targets() {  # build-dir target... (targets this build does not define are skipped)
+  local dir=$1; shift
+  local have want=()
+  have=$(ninja -C "$dir" -t targets all 2>/dev/null | cut -d: -f1)
+  for t in "$@"; do grep -qx "$t" <<<"$have" && want+=("$t"); done
+  ninja -C "$dir" -j"$jobs" "${want[@]}" || status=1
+}
+
+configure() {  # build-dir meson-args...
+  local dir=$1; shift
+  [ -f "$dir/build.ninja" ] || meson setup "$dir" "$@" >/dev/null || { echo "meson setup $dir failed"; status=1; return 1; }
+}
+
+ninja -C build -j"$jobs" || exit 1
+run_suites build
+
+if [ "${ST_SANITIZERS:-1}" != 0 ]; then
+  # Sanitizer builds compile only the test programs and the executables the tests start.
+  if configure build-asan --buildtype=debugoptimized -Db_sanitize=address,undefined -Db_lundef=false -Dnative=false; then
+    build_targets build-asan spheretouch daemons/spheretouch-worker tests/test_geom tests/test_rt tests/test_net tests/test_app
+    UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 ASAN_OPTIONS=detect_leaks=1 LSAN_OPTIONS=suppressions=$PWD/tests/lsan.supp run_suites build-asan
+  fi
+  if configure build-tsan --buildtype=debugoptimized -Db_sanitize=thread -Db_lundef=false -Dnative=false; then
+    build_targets build-tsan spheretouch daemons/spheretouch-worker tests/test_rt tests/test_net
+    TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1 run_suites build-tsan rt net
+  fi
 fi
+
 if [ $status -ne 0 ] && [ $failed -eq 0 ]; then failed=1; fi  # a suite crashed before its summary
 echo "tests: $passed passed, $failed failed"
 exit $status

@@ -51,3 +51,32 @@ inline std::string build_root() {
 }
 
 }  // namespace st::test
+
+#include <array>
+#include <cstdio>
+#include <sys/wait.h>
+
+namespace st::test {
+
+/// Output (stdout and stderr together) and exit code of a shell command.
+struct CommandResult {
+  int exit_code = -1;
+  std::string output;
+};
+
+/// Runs `command` through /bin/sh and captures its output.
+inline CommandResult run_command(const std::string& command) {
+  CommandResult r;
+  FILE* p = popen((command + " 2>&1").c_str(), "r");
+  REQUIRE(p != nullptr);
+  std::array<char, 4096> buf;
+  for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;) r.output.append(buf.data(), n);
+  const int status = pclose(p);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  return r;
+}
+
+/// Path of the built `spheretouch` command line.
+inline std::string spheretouch_exe() { return build_root() + "/spheretouch"; }
+
+}  // namespace st::test

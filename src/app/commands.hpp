@@ -7,5 +7,7 @@ namespace st::app {
 
 void add_info(CLI::App& app);    ///< spheretouch info MESH...
 void add_export(CLI::App& app);  ///< spheretouch export IN -o OUT (scale, subdivide, write OFF)
+void add_query(CLI::App& app);   ///< spheretouch query PROBE OBJECT --poses FILE
+void add_build(CLI::App& app);   ///< spheretouch build MESH -o FILE (sphere-tree file)
 
 }  // namespace st::app

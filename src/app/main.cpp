@@ -12,6 +12,8 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", "spheretouch 0.1.0");
   st::app::add_info(app);
   st::app::add_export(app);
+  st::app::add_query(app);
+  st::app::add_build(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -49,13 +49,13 @@ ContactModel ContactBuilder::build(const Mesh& probe, const Mesh& object, const 
   probe_faces_.clear();
   object_faces_.clear();
   for (const ContactPair& p : pairs) {
-    const bool bad = p.probe_face >= probe.faces.size() || p.object_face >= object.faces.size();
+    const bool bad = p.probe >= probe.faces.size() || p.object >= object.faces.size();
     if (bad) {
       ++m.skipped_pairs;
       continue;
     }
-    probe_faces_.push_back(p.probe_face);
-    object_faces_.push_back(p.object_face);
+    probe_faces_.push_back(p.probe);
+    object_faces_.push_back(p.object);
   }
   if (m.skipped_pairs) m.flags |= kBadInput;
   sort_unique(probe_faces_);

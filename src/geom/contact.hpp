@@ -34,6 +34,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "geom/collide.hpp"
 #include "geom/mesh.hpp"
 #include "geom/pod.hpp"
 
@@ -52,11 +53,9 @@ enum ContactFlag : std::uint32_t {
   kBadInput = 1u << 4,           ///< non-finite pose or out-of-range pair indices (skipped)
 };
 
-/// One colliding face pair from the collision detection, faces named by file index.
-struct ContactPair {
-  std::uint32_t probe_face;   ///< face index in the probe mesh
-  std::uint32_t object_face;  ///< face index in the object mesh
-};
+/// One colliding face pair from the collision detection (collide()'s FacePair), faces named by
+/// file index, so CollideResult::pairs feeds build() directly.
+using ContactPair = FacePair;
 
 /// Everything the haptic side needs from one collision round. Plain data, fixed size.
 struct ContactModel {

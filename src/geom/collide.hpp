@@ -1,0 +1,110 @@
+// collide(): exact face-level collision of a probe (the hand) against an object by simultaneous
+// descent of their SphereTrees with the relative transform (paper §3.3, Coal/FCL traversal).
+// Nothing is transformed wholesale: sphere centres and probe vertices are mapped as visited.
+#pragma once
+#include <cmath>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "geom/mesh.hpp"
+#include "geom/sphere_tree.hpp"
+
+namespace st::geom {
+
+/// Probe-local -> object-local map: p_obj_local = R p_probe_local + t. The ONE arithmetic every
+/// caller (collide, references in tests, tools) uses, so "the same transformed doubles" is literal.
+struct RelTransform {
+  Eigen::Matrix3d R;  ///< pose.linear()
+  Vec3 t;             ///< R probe.origin + pose.translation() - object.origin, rounded once
+};
+
+/// R and t for `pose` (probe file -> object file coordinates). t is computed with error-free
+/// transformations (fma TwoProduct + TwoSum) and rounded once, so origins at 1e6 mm lose nothing.
+RelTransform transform_to_object(const Pose& pose, const Mesh& probe, const Mesh& object);
+
+/// p mapped by rt: each coordinate fma(R_i0, x, fma(R_i1, y, fma(R_i2, z, t_i))), identical on every
+/// compiler setting (no contraction freedom).
+inline Vec3 apply(const RelTransform& rt, const Vec3& p) {
+  Vec3 out;
+  for (int i = 0; i < 3; ++i)
+    out[i] = std::fma(rt.R(i, 0), p.x(), std::fma(rt.R(i, 1), p.y(), std::fma(rt.R(i, 2), p.z(), rt.t[i])));
+  return out;
+}
+
+/// A colliding face pair, named by input-file face indices.
+struct FacePair {
+  std::uint32_t probe;   ///< probe face index
+  std::uint32_t object;  ///< object face index
+  friend bool operator==(const FacePair&, const FacePair&) = default;
+  friend auto operator<=>(const FacePair&, const FacePair&) = default;
+};
+
+/// Approximate-mode stop layers (CollideOptions::stop_layer).
+inline constexpr int kExact = -2;        ///< full exact descent (default)
+inline constexpr int kLeafSpheres = -1;  ///< stop at leaf spheres, no triangle tests
+
+/// What a query does.
+struct CollideOptions {
+  /// kExact: triangle tests. kLeafSpheres or a layer K >= 0: stop where both nodes are at layer K
+  /// (or leaves) and report every face pair of the overlapping sphere pair (a superset of exact).
+  int stop_layer = kExact;
+  bool sort_pairs = false;  ///< sort `pairs` by (probe, object)
+  /// With restrict_object: only these object subtree roots (a worker's blocks, partition.hpp; may
+  /// be empty = nothing). Must be disjoint subtrees (e.g. nodes of one layer).
+  std::span<const std::uint32_t> object_roots{};
+  bool restrict_object = false;  ///< use object_roots instead of the whole object
+  bool approx_face_pairs = true;  ///< approximate mode: also expand sphere pairs into face pairs
+};
+inline CollideOptions DefaultCollideOptions() { return {}; }  ///< exact, unsorted, whole object
+
+/// Counters of one query (Box2D-style, for tests and benchmarks).
+struct CollideStats {
+  std::uint64_t node_pairs = 0;       ///< sphere pairs tested
+  std::uint64_t leaf_pairs = 0;       ///< leaf-leaf pairs reached (exact mode)
+  std::uint64_t tri_pairs = 0;        ///< exact tri_tri_overlap calls
+  std::uint64_t exact_fallbacks = 0;  ///< not exposed by tri_tri.hpp: always 0
+  std::uint64_t sphere_pairs = 0;     ///< approximate mode: overlapping sphere pairs reported
+};
+
+/// Output of a query; caller-owned, reused across queries (clear() keeps capacity).
+struct CollideResult {
+  std::vector<FacePair> pairs;  ///< colliding (or, approximate mode, candidate) face pairs
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> sphere_pairs;  ///< approximate mode: (probe node, object node)
+  std::uint32_t probe_faces = 0;   ///< distinct probe faces in `pairs`
+  std::uint32_t object_faces = 0;  ///< distinct object faces in `pairs`
+  CollideStats stats;              ///< counters
+  std::uint32_t contacts() const { return probe_faces + object_faces; }  ///< paper §3.5 "number of contacts"
+  void clear() { pairs.clear(); sphere_pairs.clear(); probe_faces = object_faces = 0; stats = {}; }
+};
+
+/// Per-caller scratch: transformed-vertex cache with generation stamps, contact stamps, explicit
+/// stack. Sized on first use for a (probe, object) pair; later queries allocate nothing.
+class CollideScratch {
+ public:
+  /// Sizes everything for these meshes/trees (also done lazily by collide()).
+  void prepare(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree);
+
+ private:
+  friend struct CollideQuery;
+  friend void collide(const Mesh&, const SphereTree&, const Mesh&, const SphereTree&, const Pose&,
+                      const CollideOptions&, CollideScratch&, CollideResult&);
+  std::uint32_t gen_ = 0;
+  std::vector<std::uint32_t> vstamp_;       // probe vertex -> generation of its cached transform
+  std::vector<Vec3> vx_;                    // probe vertex transformed into object-local
+  std::vector<std::uint32_t> fstamp_;       // probe face -> generation of its cached box
+  std::vector<std::array<double, 6>> fbox_; // probe face box in object-local (lo xyz, hi xyz)
+  std::vector<std::uint32_t> pmark_;        // probe face -> generation it was counted as a contact
+  std::vector<std::uint32_t> omark_;        // object face -> generation it was counted
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> stack_;
+  std::uint32_t stack_cap_ = 0;
+  std::uint32_t next_generation();
+};
+
+/// Collides probe (posed by `pose`: probe file -> object file coordinates) with object. The pair
+/// set is exactly {(p, o) : tri_tri_overlap(apply(rt, probe p's vertices), object o's vertices)}
+/// (restricted to object_roots if given). Never throws; allocates only while warming up.
+void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree,
+             const Pose& pose, const CollideOptions& options, CollideScratch& scratch, CollideResult& result);
+
+}  // namespace st::geom

@@ -1,0 +1,28 @@
+// Pose files (DESIGN.md): one rigid transform per line as 16 numbers separated by whitespace
+// (spaces/tabs; commas are not separators), a row-major 4×4 matrix whose last row is 0 0 0 1;
+// '#' starts a comment to the end of the line, blank lines are ignored. Checked where they enter.
+#pragma once
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "geom/mesh.hpp"
+#include "geom/result.hpp"
+
+namespace st::geom {
+
+/// Largest accepted entry of |RᵀR − I| for the rotation block: catches typos and reflections,
+/// lets through matrices printed with ~7 significant digits. Accepted poses are kept as written.
+inline constexpr double kPoseOrthonormalTolerance = 1e-6;
+
+/// Reads every pose of a pose file; an error names path:line and what is wrong.
+Result<std::vector<Pose>> read_poses(const std::string& path);
+
+/// Parses pose-file text; `name` (usually the path) prefixes error messages.
+Result<std::vector<Pose>> parse_poses(std::string_view text, std::string_view name);
+
+/// One pose-file line (no newline): 16 numbers, shortest round-trip form, so parsing it back
+/// gives the identical matrix.
+std::string format_pose(const Pose& pose);
+
+}  // namespace st::geom

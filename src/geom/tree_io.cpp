@@ -1,0 +1,153 @@
+// SphereTree file format (version 1), little-endian, native struct layout (sizes pinned by
+// static_assert in sphere_tree.hpp):
+//   [0,64) header: char magic[8] "STSPHTR1"; u32 version; u32 leaf_faces; u64 mesh_hash;
+//                  u32 num_vertices; u32 num_faces; u32 num_nodes; u32 num_depths;
+//                  u64 payload_bytes; u64 payload_checksum; u64 reserved
+//   payload:       SphereNode[num_nodes], SphereNodeCold[num_nodes], u32 face_order[num_faces],
+//                  FaceBox[num_faces]
+#include "geom/tree_io.hpp"
+
+#include <bit>
+#include <cstring>
+#include <fstream>
+
+namespace st::geom {
+namespace {
+
+static_assert(std::endian::native == std::endian::little, "tree files are little-endian");
+
+constexpr char kMagic[8] = {'S', 'T', 'S', 'P', 'H', 'T', 'R', '1'};
+
+struct Header {
+  char magic[8];
+  std::uint32_t version;
+  std::uint32_t leaf_faces;
+  std::uint64_t mesh_hash;
+  std::uint32_t num_vertices;
+  std::uint32_t num_faces;
+  std::uint32_t num_nodes;
+  std::uint32_t num_depths;
+  std::uint64_t payload_bytes;
+  std::uint64_t checksum;
+  std::uint64_t reserved;
+};
+static_assert(sizeof(Header) == 64);
+
+// FNV-1a over 64-bit words plus a final avalanche (integrity, not security).
+std::uint64_t checksum(const void* p, std::size_t n, std::uint64_t h) {
+  const auto* c = static_cast<const unsigned char*>(p);
+  std::size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    std::uint64_t w;
+    std::memcpy(&w, c + i, 8);
+    h = (h ^ w) * 0x100000001b3ull;
+    h ^= h >> 29;
+  }
+  for (; i < n; ++i) h = (h ^ c[i]) * 0x100000001b3ull;
+  return h;
+}
+
+std::uint64_t payload_checksum(const SphereTree& t) {
+  std::uint64_t h = 0xcbf29ce484222325ull;
+  h = checksum(t.nodes.data(), t.nodes.size() * sizeof(SphereNode), h);
+  h = checksum(t.cold.data(), t.cold.size() * sizeof(SphereNodeCold), h);
+  h = checksum(t.face_order.data(), t.face_order.size() * sizeof(std::uint32_t), h);
+  h = checksum(t.face_boxes.data(), t.face_boxes.size() * sizeof(FaceBox), h);
+  return h;
+}
+
+std::uint64_t payload_size(std::uint64_t nodes, std::uint64_t faces) {
+  return nodes * (sizeof(SphereNode) + sizeof(SphereNodeCold)) + faces * (sizeof(std::uint32_t) + sizeof(FaceBox));
+}
+
+// Structural checks so a hostile file with a valid checksum still cannot make collide() read out of bounds.
+Status check_structure(const SphereTree& t, const std::string& path) {
+  const std::uint32_t N = t.num_nodes(), F = t.num_faces();
+  for (std::uint32_t i = 0; i < N; ++i) {
+    const SphereNode& h = t.nodes[i];
+    const SphereNodeCold& c = t.cold[i];
+    if (c.face_begin > c.face_end || c.face_end > F) return fail(path, ": corrupt: node ", i, " face range");
+    if (h.leaf) {
+      if (h.first != c.face_begin || h.count != c.face_end - c.face_begin || h.count > kMaxLeafFaces)
+        return fail(path, ": corrupt: leaf ", i, " face range");
+    } else if (h.count < 1 || h.count > kMaxChildren || h.first <= i || std::uint64_t{h.first} + h.count > N) {
+      return fail(path, ": corrupt: node ", i, " child range");
+    }
+    if (h.depth >= t.num_depths) return fail(path, ": corrupt: node ", i, " depth");
+  }
+  std::vector<bool> seen(F, false);
+  for (std::uint32_t f : t.face_order) {
+    if (f >= F || seen[f]) return fail(path, ": corrupt: face_order is not a permutation");
+    seen[f] = true;
+  }
+  return Ok{};
+}
+
+}  // namespace
+
+Status write_tree(const SphereTree& t, const std::string& path) {
+  Header h{};
+  std::memcpy(h.magic, kMagic, 8);
+  h.version = kTreeFormatVersion;
+  h.leaf_faces = t.params.leaf_faces;
+  h.mesh_hash = t.mesh_hash;
+  h.num_vertices = t.num_vertices;
+  h.num_faces = t.num_faces();
+  h.num_nodes = t.num_nodes();
+  h.num_depths = t.num_depths;
+  h.payload_bytes = payload_size(h.num_nodes, h.num_faces);
+  h.checksum = payload_checksum(t);
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) return fail(path, ": cannot open for writing");
+    out.write(reinterpret_cast<const char*>(&h), sizeof h);
+    out.write(reinterpret_cast<const char*>(t.nodes.data()), static_cast<std::streamsize>(t.nodes.size() * sizeof(SphereNode)));
+    out.write(reinterpret_cast<const char*>(t.cold.data()), static_cast<std::streamsize>(t.cold.size() * sizeof(SphereNodeCold)));
+    out.write(reinterpret_cast<const char*>(t.face_order.data()), static_cast<std::streamsize>(t.face_order.size() * 4));
+    out.write(reinterpret_cast<const char*>(t.face_boxes.data()), static_cast<std::streamsize>(t.face_boxes.size() * sizeof(FaceBox)));
+    if (!out.flush()) return fail(path, ": write failed");
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) return fail(path, ": cannot rename ", tmp, " into place");
+  return Ok{};
+}
+
+Result<SphereTree> read_tree(const std::string& path, const Mesh& mesh, const TreeParams& params) {
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  if (!in) return fail(path, ": cannot open");
+  const auto file_size = static_cast<std::uint64_t>(in.tellg());
+  in.seekg(0);
+  Header h{};
+  if (file_size < sizeof h || !in.read(reinterpret_cast<char*>(&h), sizeof h))
+    return fail(path, ": corrupt: file of ", file_size, " bytes is shorter than the 64-byte header");
+  if (std::memcmp(h.magic, kMagic, 8) != 0) return fail(path, ": corrupt: bad magic (not a spheretouch tree file)");
+  if (h.version != kTreeFormatVersion)
+    return fail(path, ": corrupt: format version ", h.version, ", expected ", kTreeFormatVersion);
+  if (h.num_nodes == 0 || h.num_faces == 0 || h.payload_bytes != payload_size(h.num_nodes, h.num_faces) ||
+      file_size != sizeof h + h.payload_bytes)
+    return fail(path, ": corrupt: sizes (", h.num_nodes, " nodes, ", h.num_faces, " faces, payload ", h.payload_bytes,
+                " bytes) do not match the file size ", file_size);
+  SphereTree t;
+  t.params.leaf_faces = h.leaf_faces;
+  t.mesh_hash = h.mesh_hash;
+  t.num_vertices = h.num_vertices;
+  t.num_depths = h.num_depths;
+  t.nodes.resize(h.num_nodes);
+  t.cold.resize(h.num_nodes);
+  t.face_order.resize(h.num_faces);
+  t.face_boxes.resize(h.num_faces);
+  in.read(reinterpret_cast<char*>(t.nodes.data()), static_cast<std::streamsize>(t.nodes.size() * sizeof(SphereNode)));
+  in.read(reinterpret_cast<char*>(t.cold.data()), static_cast<std::streamsize>(t.cold.size() * sizeof(SphereNodeCold)));
+  in.read(reinterpret_cast<char*>(t.face_order.data()), static_cast<std::streamsize>(t.face_order.size() * 4));
+  in.read(reinterpret_cast<char*>(t.face_boxes.data()), static_cast<std::streamsize>(t.face_boxes.size() * sizeof(FaceBox)));
+  if (!in) return fail(path, ": corrupt: short read");
+  if (payload_checksum(t) != h.checksum) return fail(path, ": corrupt: payload checksum mismatch");
+  if (h.leaf_faces != params.leaf_faces || h.mesh_hash != tree_hash(mesh, params) || h.num_faces != mesh.num_faces() ||
+      h.num_vertices != mesh.num_vertices())
+    return fail(path, ": stale: built for another mesh or parameters (hash/leaf_faces/sizes differ from ", mesh.name,
+                " with leaf_faces ", params.leaf_faces, ")");
+  if (Status s = check_structure(t, path); !s) return Error{s.error()};
+  return t;
+}
+
+}  // namespace st::geom

@@ -1,0 +1,59 @@
+// Tests for src/app: the command line as a user runs it (the real binary, through a shell).
+#include "test_util.hpp"
+
+using st::test::run_command;
+using st::test::spheretouch_exe;
+
+namespace {
+bool has(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+}  // namespace
+
+TEST_CASE("--help explains the command and every subcommand") {
+  const auto top = run_command(spheretouch_exe() + " --help");
+  CHECK(top.exit_code == 0);
+  CHECK(has(top.output, "info"));
+  CHECK(has(top.output, "export"));
+  for (const char* sub : {"info", "export"}) {
+    const auto r = run_command(spheretouch_exe() + " " + sub + " --help");
+    INFO(sub << ": " << r.output);
+    CHECK(r.exit_code == 0);
+    CHECK(has(r.output, "Usage"));
+    CHECK(has(r.output, "--units"));
+  }
+  const auto none = run_command(spheretouch_exe());
+  CHECK(none.exit_code != 0);
+}
+
+TEST_CASE("info on a generated and a real mesh reports reader, topology and counts") {
+  st::test::TempDir d;
+  st::test::write_file(d.file("t.off"), "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 1 2 3\n3 0 3 2\n");
+  const auto r = run_command(spheretouch_exe() + " info " + d.file("t.off") + " " + st::test::model("hand_L2.off"));
+  INFO(r.output);
+  CHECK(r.exit_code == 0);
+  CHECK(has(r.output, "faces       4 "));
+  CHECK(has(r.output, "faces       38240 "));
+  CHECK(has(r.output, "closed, manifold"));
+  CHECK(has(r.output, "precision double"));
+}
+
+TEST_CASE("info and export fail with the file named, exit code 2") {
+  st::test::TempDir d;
+  st::test::write_file(d.file("bad.off"), "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n");
+  auto r = run_command(spheretouch_exe() + " info " + d.file("bad.off"));
+  CHECK(r.exit_code == 2);
+  CHECK(has(r.output, "bad.off:6: face 0: vertex index 5 out of range [0, 3)"));
+  st::test::write_file(d.file("open.off"), "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  r = run_command(spheretouch_exe() + " export " + d.file("open.off") + " -o " + d.file("o.off") + " --subdivide 1");
+  CHECK(r.exit_code == 2);
+  CHECK(has(r.output, "open mesh"));
+}
+
+TEST_CASE("export: rescale then subdivide, readable again with the same face count") {
+  st::test::TempDir d;
+  const auto r = run_command(spheretouch_exe() + " export " + st::test::model("hand.off") + " -o " + d.file("h.off") +
+                             " --diagonal 50 --subdivide 1");
+  INFO(r.output);
+  REQUIRE(r.exit_code == 0);
+  const auto info = run_command(spheretouch_exe() + " info " + d.file("h.off"));
+  CHECK(has(info.output, "faces       9560 "));
+}

@@ -1,0 +1,114 @@
+// Helpers shared by the geom suites: the model set under $ST_SOURCE_ROOT/.cache/models, a
+// brute-force collision reference and pose builders.
+#pragma once
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <filesystem>
+#include <map>
+#include <optional>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "geom/collide.hpp"
+#include "geom/mesh_io.hpp"
+#include "geom/tri_tri.hpp"
+
+namespace st::test {
+
+/// A model of the set, loaded once per process; nullopt (with a message) when it is missing.
+inline const geom::Mesh* model(const std::string& name) {
+  static std::map<std::string, std::optional<geom::Mesh>> cache;
+  auto it = cache.find(name);
+  if (it == cache.end()) {
+    const char* root = std::getenv("ST_SOURCE_ROOT");
+    const std::filesystem::path p = std::filesystem::path(root ? root : ".") / ".cache" / "models" / name;
+    std::optional<geom::Mesh> m;
+    if (std::filesystem::exists(p)) {
+      auto r = geom::load_mesh(p.string());
+      if (r) m = std::move(r.value().mesh);
+    }
+    if (!m) MESSAGE("model ", p.string(), " missing: run scripts/fetch_models.sh; skipping");
+    it = cache.emplace(name, std::move(m)).first;
+  }
+  return it->second ? &*it->second : nullptr;
+}
+
+/// Exact reference: every (probe, object) face pair, through tri_tri_overlap on the transformed
+/// doubles of transform_to_object/apply. Candidates are cut by exact double AABB tests (two closed
+/// triangles that share a point have overlapping boxes), so this equals all-pairs exactly.
+/// `all_pairs` forces the literal loop over every pair (slow; for small probes).
+inline std::vector<geom::FacePair> brute_force(const geom::Mesh& probe, const geom::Mesh& object, const geom::Pose& pose,
+                                               bool all_pairs = false) {
+  using geom::Vec3;
+  const geom::RelTransform rt = geom::transform_to_object(pose, probe, object);
+  std::vector<Vec3> pv(probe.local.size());
+  for (std::size_t i = 0; i < pv.size(); ++i) pv[i] = geom::apply(rt, probe.local[i]);
+  auto box_of = [](const Vec3& a, const Vec3& b, const Vec3& c) {
+    geom::Box bx; bx.grow(a); bx.grow(b); bx.grow(c); return bx;
+  };
+  auto meet = [](const geom::Box& a, const geom::Box& b) {
+    return (a.lo.array() <= b.hi.array()).all() && (b.lo.array() <= a.hi.array()).all();
+  };
+  std::vector<geom::Box> pb(probe.faces.size()), ob(object.faces.size());
+  geom::Box pall, oall;
+  for (std::size_t f = 0; f < pb.size(); ++f) {
+    const auto& t = probe.faces[f];
+    pb[f] = box_of(pv[t[0]], pv[t[1]], pv[t[2]]);
+    pall.grow(pb[f].lo); pall.grow(pb[f].hi);
+  }
+  std::vector<std::uint32_t> oc, pc;
+  for (std::size_t f = 0; f < ob.size(); ++f) {
+    const auto& t = object.faces[f];
+    ob[f] = box_of(object.local[t[0]], object.local[t[1]], object.local[t[2]]);
+    if (all_pairs || meet(ob[f], pall)) { oc.push_back(static_cast<std::uint32_t>(f)); oall.grow(ob[f].lo); oall.grow(ob[f].hi); }
+  }
+  for (std::size_t f = 0; f < pb.size(); ++f)
+    if (all_pairs || (!oall.empty() && meet(pb[f], oall))) pc.push_back(static_cast<std::uint32_t>(f));
+  std::vector<geom::FacePair> out;
+  for (std::uint32_t p : pc) {
+    const auto& t = probe.faces[p];
+    for (std::uint32_t o : oc) {
+      if (!all_pairs && !meet(pb[p], ob[o])) continue;
+      const auto& u = object.faces[o];
+      if (geom::tri_tri_overlap(pv[t[0]], pv[t[1]], pv[t[2]], object.local[u[0]], object.local[u[1]], object.local[u[2]]))
+        out.push_back({p, o});
+    }
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+/// Area-weighted vertex normals (outward for a CCW-from-outside mesh).
+inline std::vector<geom::Vec3> vertex_normals(const geom::Mesh& m) {
+  std::vector<geom::Vec3> n(m.local.size(), geom::Vec3::Zero());
+  for (const auto& t : m.faces) {
+    const geom::Vec3 fn = (m.local[t[1]] - m.local[t[0]]).cross(m.local[t[2]] - m.local[t[0]]);
+    for (auto v : t) n[v] += fn;
+  }
+  for (auto& v : n) if (v.norm() > 0) v.normalize();
+  return n;
+}
+
+/// Random rotation (uniform quaternion).
+inline Eigen::Matrix3d random_rotation(std::mt19937_64& rng) {
+  std::normal_distribution<double> g;
+  Eigen::Quaterniond q(g(rng), g(rng), g(rng), g(rng));
+  q.normalize();
+  return q.toRotationMatrix();
+}
+
+/// Pose (probe file -> object file) that puts probe vertex vp at `depth_mm` below object vertex vo
+/// along the object's normal there, with a random rotation.
+inline geom::Pose pose_near(const geom::Mesh& probe, std::uint32_t vp, const geom::Mesh& object, std::uint32_t vo,
+                            const geom::Vec3& normal, double depth_mm, const Eigen::Matrix3d& R) {
+  geom::Pose pose = geom::Pose::Identity();
+  pose.linear() = R;
+  const geom::Vec3 target = object.vertex(vo) - depth_mm * normal;
+  pose.translation() = target - R * probe.vertex(vp);
+  return pose;
+}
+
+}  // namespace st::test
