@@ -135,8 +135,13 @@ Eigen::Vector3d Interpolator::force(const Eigen::Isometry3d& pose, std::int64_t 
       offset_ = c_.crossfade_ns > 0 ? Eigen::Vector3d(last_out_ - f) : Eigen::Vector3d::Zero();
       pending_offset_ = false;
     }
-    if (c_.crossfade_ns > 0 && idle < c_.crossfade_ns)
-      f += offset_ * (1.0 - static_cast<double>(std::max<std::int64_t>(idle, 0)) / static_cast<double>(c_.crossfade_ns));
+    // The fade counts the current tick too (idle + dt): a model arriving every tick must still
+    // let the output move. Otherwise the offset is re-taken at full weight on each arrival and
+    // the force freezes at its old value while updates stream in (found in `spheretouch run`).
+    // With arrivals every tick this is exponential smoothing with time constant ~crossfade_ns.
+    const double faded = static_cast<double>(std::max<std::int64_t>(idle, 0)) + dt_s * 1e9;
+    if (c_.crossfade_ns > 0 && faded < static_cast<double>(c_.crossfade_ns))
+      f += offset_ * (1.0 - faded / static_cast<double>(c_.crossfade_ns));
   } else {
     pending_offset_ = false;
   }

@@ -113,8 +113,9 @@ TEST_CASE("interpolator: plane cross-fades a new plane without a jump") {
   m.penetration_mm = 1.0;
   in.on_model(m, 12 * kMs);
   const double at_arrival = in.force(at_z(-2.0), 12 * kMs).z();
-  CHECK(at_arrival == doctest::Approx(before));  // continuous
-  const double mid = in.force(at_z(-2.0), 17 * kMs).z();
+  // Continuous: the arrival tick moves one tick (1 ms of the 10 ms fade) toward the new force.
+  CHECK(at_arrival == doctest::Approx(law.magnitude_N(1.0) + 0.9 * (before - law.magnitude_N(1.0))));
+  const double mid = in.force(at_z(-2.0), 16 * kMs).z();  // 4 ms idle + this 4 ms step: 80 % faded
   CHECK(mid < before);
   CHECK(mid > law.magnitude_N(1.0));
   const double after = in.force(at_z(-2.0), 23 * kMs).z();
@@ -155,7 +156,8 @@ TEST_CASE("interpolator: plane resumes smoothly after a stall faded the force ou
   const std::int64_t silent = c.stale_timeout_ns + c.fade_ns + 10 * kMs;
   CHECK(in.force(at_z(-2.0), silent).norm() == 0.0);
   in.on_model(wall_model(2, -2.0), silent + kMs);
-  CHECK(in.force(at_z(-2.0), silent + kMs).norm() == doctest::Approx(0.0));  // no jump back up
+  // No jump back up: the first tick after the stall gets one tick's share (1/10) of the step.
+  CHECK(in.force(at_z(-2.0), silent + kMs).norm() == doctest::Approx(0.1 * law.magnitude_N(2.0)));
   CHECK(in.force(at_z(-2.0), silent + kMs + c.crossfade_ns).norm() == doctest::Approx(law.magnitude_N(2.0)));
 }
 
@@ -260,4 +262,26 @@ TEST_CASE("saturation: peak cap, sustained limit settles at the continuous force
   c.continuous_N = 5;
   c.sustained = true;
   CHECK(Saturator::check(c).find("continuous_N") != std::string::npos);
+}
+
+TEST_CASE("interpolator: plane follows models that arrive every tick (no freeze), and releases to zero") {
+  // Regression: the cross-fade restarted at full weight on every arrival, so with one model per
+  // tick the output never left its old value (zero on contact, stuck on after release).
+  const ForceLaw law;
+  InterpolatorConfig c = cfg(InterpMode::plane);
+  c.crossfade_ns = 10 * kMs;
+  Interpolator in(law, c);
+  std::int64_t t = 0;
+  for (int k = 1; k <= 60; ++k, t += kMs) {  // 60 ms in contact at 2 mm, a model every tick
+    in.on_model(wall_model(std::uint64_t(k), -2.0), t);
+    in.force(at_z(-2.0), t);
+  }
+  CHECK(in.force(at_z(-2.0), t).z() == doctest::Approx(law.magnitude_N(2.0)).epsilon(0.01));
+  for (int k = 61; k <= 120; ++k, t += kMs) {  // released: models without contact every tick
+    ContactModel none{};
+    none.seq = std::uint64_t(k);
+    in.on_model(none, t);
+    in.force(at_z(5.0), t);
+  }
+  CHECK(in.force(at_z(5.0), t).norm() < 0.01 * law.magnitude_N(2.0));
 }
