@@ -63,6 +63,11 @@ inline constexpr double kDefaultPaperGainNPerMm = 0.5;
 /// stalled collision side cannot make the extrapolated force grow without limit.
 inline constexpr double kDefaultPaperMaxMoveMm = 2.0;
 
+/// Smallest force the interpolator outputs, N: anything below is rendered as exactly 0. The
+/// plane cross-fade decays a released force geometrically; without a floor it would never reach
+/// zero. 1 µN is four orders of magnitude below an Omni's force resolution (~10 mN).
+inline constexpr double kMinRenderedForceN = 1e-6;
+
 /// Telemetry queue capacity, samples: 8 s at 1 kHz of slack for a stalled disk.
 inline constexpr std::size_t kDefaultTelemetryCapacity = 8192;
 

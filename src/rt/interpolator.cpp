@@ -161,6 +161,7 @@ Eigen::Vector3d Interpolator::force(const Eigen::Isometry3d& pose, std::int64_t 
   last_point_ = p;
   have_last_point_ = contact_;
   if (!f.allFinite()) f.setZero();
+  if ((f * fade).norm() < kMinRenderedForceN) f.setZero();  // a released force reaches exactly 0
   last_out_ = f * fade;  // what was commanded: the next cross-fade starts from it (even after a stall)
   state_.penetration_mm = std::isfinite(pd) ? pd : 0.0;
   state_.fade = fade;
