@@ -1,0 +1,94 @@
+// WorkerService: one worker of the distributed collision (paper §3.4). Binds a ZeroMQ ROUTER,
+// keeps the block sets it was sent in memory (content-addressed, LRU), and answers each Query
+// with its backend's pairs for the block set the Query names. The same code runs on a thread
+// over inproc:// (the embedded default, local_workers.hpp) and in the spheretouch-worker daemon
+// over tcp:// or ipc://. It never blocks on a send: replies to a peer that is gone or slow are
+// dropped by the ROUTER, and every malformed message gets an Error reply or is dropped.
+#pragma once
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <list>
+#include <memory>
+#include <string>
+#include <vector>
+#include <zmq.hpp>
+
+#include "net/backend.hpp"
+#include "net/protocol.hpp"
+
+namespace st::net {
+
+/// What a worker is and how much it may hold.
+struct WorkerConfig {
+  std::uint32_t worker_id = 0;     ///< reported in Hello and Result
+  std::uint32_t max_sets = 3;      ///< block sets kept in memory (LRU): own share + reassigned variants
+  Limits limits = default_limits();  ///< decode limits; memory ≤ (max_sets + 1) · max_blockset_bytes
+  int sndhwm = 256;                ///< messages queued per client before replies are dropped
+  int rcvhwm = 256;                ///< messages queued from clients
+};
+
+/// Counters since start (read on the service's thread, or after it stopped).
+struct WorkerCounters {
+  std::uint64_t queries = 0;       ///< Query messages answered with a Result
+  std::uint64_t loads = 0;         ///< block sets loaded
+  std::uint64_t chunks = 0;        ///< LoadBlocks messages accepted
+  std::uint64_t bad_messages = 0;  ///< undecodable or misframed messages
+  std::uint64_t errors_sent = 0;   ///< Error replies sent
+  std::uint64_t heartbeats = 0;    ///< Heartbeats answered
+};
+
+/// One worker; not thread-safe: construct, bind and run it on one thread.
+class WorkerService {
+ public:
+  /// A service in `ctx` that makes one backend per loaded block set with `factory`.
+  WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFactory factory);
+  /// Binds the ROUTER to `endpoint` (tcp://, ipc://, inproc://); error names the endpoint.
+  Status bind(const std::string& endpoint);
+  /// The endpoint last bound, resolved (a tcp wildcard port becomes the real one).
+  std::string last_endpoint() const;
+  /// Waits up to `timeout` for messages and handles all that are waiting; false when the context
+  /// is being terminated (the caller should stop).
+  bool poll_once(std::chrono::milliseconds timeout);
+  /// Polls until `stop` is set, calling `tick` (if any) at least every `period`.
+  void run(const std::atomic<bool>& stop, std::chrono::milliseconds period = std::chrono::milliseconds(100),
+           const std::function<void()>& tick = {});
+  std::uint64_t epoch() const { return epoch_; }                 ///< random per instance
+  const WorkerCounters& counters() const { return counters_; }   ///< counters so far
+  std::vector<Held> held() const;                                ///< block sets in memory, MRU first
+
+ private:
+  struct Loaded {
+    std::uint64_t hash;
+    std::uint32_t faces;
+    std::unique_ptr<CollisionBackend> backend;
+  };
+  struct Assembly {
+    std::uint64_t hash = 0, total = 0;
+    std::vector<std::uint8_t> bytes;
+    bool active = false;
+  };
+  void handle(const zmq::message_t& peer, std::span<const std::uint8_t> frame);
+  void on_load(const zmq::message_t& peer, const LoadBlocksMsg& m);
+  void on_query(const zmq::message_t& peer, const QueryMsg& m);
+  void send(const zmq::message_t& peer, const Message& m);
+  void send_error(const zmq::message_t& peer, ErrorCode code, std::uint64_t ref, std::string text);
+  HelloMsg hello(std::uint64_t echo) const;
+
+  WorkerConfig cfg_;
+  BackendFactory factory_;
+  zmq::socket_t sock_;
+  std::uint64_t epoch_;
+  std::list<Loaded> sets_;        // MRU first
+  Assembly asm_;
+  WorkerCounters counters_;
+  std::vector<FacePair> pairs_;   // reused per query
+  std::vector<std::uint8_t> out_; // reused encode buffer
+};
+
+/// Sets the socket options every spheretouch socket uses: LINGER 0, the given high-water marks,
+/// ZMQ_MAXMSGSIZE = max_message_bytes (libzmq drops a peer that sends more).
+void set_common_options(zmq::socket_t& s, int sndhwm, int rcvhwm, std::int64_t max_message_bytes);
+
+}  // namespace st::net
