@@ -63,6 +63,16 @@ void WorkerService::send(const zmq::message_t& peer, const Message& m) {
   }
 }
 
+void WorkerService::note_bad(const std::string& why) {
+  ++counters_.bad_messages;
+  ++bad_unlogged_;
+  const auto now = std::chrono::steady_clock::now();
+  if (now - bad_logged_ < std::chrono::seconds(1)) return;
+  log(4, st::fail(bad_unlogged_, " bad message(s) since the last report; latest: ", why).message);
+  bad_logged_ = now;
+  bad_unlogged_ = 0;
+}
+
 void WorkerService::send_error(const zmq::message_t& peer, ErrorCode code, std::uint64_t ref, std::string text) {
   if (text.size() > cfg_.limits.max_text) text.resize(cfg_.limits.max_text);
   ++counters_.errors_sent;
@@ -81,7 +91,7 @@ bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
     zmq::message_t peer, frame;
     try {
       if (!sock_.recv(peer, zmq::recv_flags::dontwait)) break;
-      if (!peer.more()) { ++counters_.bad_messages; continue; }  // cannot happen on a ROUTER
+      if (!peer.more()) { note_bad("no body frame"); continue; }  // cannot happen on a ROUTER
       (void)sock_.recv(frame, zmq::recv_flags::none);             // parts of a message arrive together
       bool extra = frame.more();
       for (bool more = extra; more;) {                            // discard surplus frames
@@ -90,7 +100,7 @@ bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
         more = junk.more();
       }
       if (extra || frame.size() == 0) {
-        ++counters_.bad_messages;
+        note_bad(extra ? "more than one frame" : "empty frame");
         send_error(peer, ErrorCode::BadMessage, 0, "expected exactly one non-empty frame per message");
         continue;
       }
@@ -112,7 +122,7 @@ void WorkerService::run(const std::atomic<bool>& stop, std::chrono::milliseconds
 void WorkerService::handle(const zmq::message_t& peer, std::span<const std::uint8_t> frame) {
   Result<Message> m = decode(frame, cfg_.limits);
   if (!m) {
-    ++counters_.bad_messages;
+    note_bad(m.error());
     send_error(peer, ErrorCode::BadMessage, 0, m.error());
     return;
   }
@@ -123,6 +133,7 @@ void WorkerService::handle(const zmq::message_t& peer, std::span<const std::uint
     ++counters_.heartbeats;
     return send(peer, hello(h->nonce));
   }
+  note_bad(std::string("unexpected ") + type_name(msg));
   send_error(peer, ErrorCode::Unexpected, 0, std::string("a worker does not accept ") + type_name(msg));
 }
 
@@ -166,21 +177,33 @@ void WorkerService::on_load(const zmq::message_t& peer, const LoadBlocksMsg& m) 
   asm_.bytes.insert(asm_.bytes.end(), m.data.begin(), m.data.end());
   if (asm_.bytes.size() < asm_.total) return;
 
+  const auto t0 = std::chrono::steady_clock::now();
   Assembly done = std::move(asm_);
   asm_ = Assembly{};
   if (block_set_hash(done.bytes) != done.hash) {
+    log(4, "load refused: block set bytes do not match their hash");
     send_error(peer, ErrorCode::LoadFailed, done.hash, "block set bytes do not match their hash");
     return;
   }
   Result<BlockSet> set = decode_block_set(done.bytes, cfg_.limits);
-  if (!set) return send_error(peer, ErrorCode::LoadFailed, done.hash, set.error());
+  if (!set) {
+    log(4, "load refused: " + set.error());
+    return send_error(peer, ErrorCode::LoadFailed, done.hash, set.error());
+  }
   std::vector<std::uint8_t>().swap(done.bytes);  // free the encoding before building
   std::unique_ptr<CollisionBackend> backend = factory_();
-  if (Status s = backend->load(set.value()); !s) return send_error(peer, ErrorCode::LoadFailed, done.hash, s.error());
+  if (Status s = backend->load(set.value()); !s) {
+    log(3, "backend failed to load a block set: " + s.error());
+    return send_error(peer, ErrorCode::LoadFailed, done.hash, s.error());
+  }
   sets_.remove_if([&](const Loaded& l) { return l.hash == done.hash; });
   while (!sets_.empty() && sets_.size() >= std::max<std::uint32_t>(cfg_.max_sets, 1)) sets_.pop_back();
   sets_.push_front(Loaded{done.hash, static_cast<std::uint32_t>(set.value().object.faces.size()), std::move(backend)});
   ++counters_.loads;
+  const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  log(6, st::fail("loaded block set ", std::hex, done.hash, std::dec, ": ", set.value().blocks.size(), " blocks, ",
+                  set.value().object.faces.size(), " object faces, ", set.value().probe.faces.size(), " probe faces, in ",
+                  ms, " ms; holding ", sets_.size(), " set(s)").message);
   send(peer, hello(0));
 }
 

@@ -27,6 +27,9 @@ struct WorkerConfig {
   Limits limits = default_limits();  ///< decode limits; memory ≤ (max_sets + 1) · max_blockset_bytes
   int sndhwm = 256;                ///< messages queued per client before replies are dropped
   int rcvhwm = 256;                ///< messages queued from clients
+  /// Log sink (syslog priority 3 error … 7 debug, message); empty: silent. Bad messages are
+  /// summarised at most once a second so a flood cannot flood the log.
+  std::function<void(int, const std::string&)> log;
 };
 
 /// Counters since start (read on the service's thread, or after it stopped).
@@ -75,6 +78,8 @@ class WorkerService {
   void send(const zmq::message_t& peer, const Message& m);
   void send_error(const zmq::message_t& peer, ErrorCode code, std::uint64_t ref, std::string text);
   HelloMsg hello(std::uint64_t echo) const;
+  void log(int priority, const std::string& text) const { if (cfg_.log) cfg_.log(priority, text); }
+  void note_bad(const std::string& why);
 
   WorkerConfig cfg_;
   BackendFactory factory_;
@@ -85,6 +90,8 @@ class WorkerService {
   WorkerCounters counters_;
   std::vector<FacePair> pairs_;   // reused per query
   std::vector<std::uint8_t> out_; // reused encode buffer
+  std::chrono::steady_clock::time_point bad_logged_{};
+  std::uint64_t bad_unlogged_ = 0;
 };
 
 /// Sets the socket options every spheretouch socket uses: LINGER 0, the given high-water marks,
