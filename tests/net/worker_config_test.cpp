@@ -1,0 +1,66 @@
+// Tests src/net/worker_config.*: TOML parsing (unknown keys named), and the safe-by-default bind policy.
+#include <doctest/doctest.h>
+
+#include "net/worker_config.hpp"
+
+using namespace st::net;
+
+TEST_CASE("a full config parses; the command line's defaults stay for keys not given") {
+  auto c = parse_daemon_config(R"(
+bind = "tcp://127.0.0.1:6000"
+worker_id = 5
+log_level = "debug"
+max_sets = 4
+max_blockset_mb = 256
+)", "w.toml");
+  REQUIRE_MESSAGE(c.ok(), c.error());
+  CHECK(c.value().bind == "tcp://127.0.0.1:6000");
+  CHECK(c.value().worker_id == 5);
+  CHECK(c.value().log_level == "debug");
+  CHECK(c.value().max_sets == 4);
+  CHECK(c.value().max_blockset_mb == 256);
+  CHECK_FALSE(c.value().insecure);
+  CHECK(check_daemon_config(c.value()).ok());
+}
+
+TEST_CASE("unknown keys, wrong types and bad values are errors naming the key and the line") {
+  auto e = [](const char* text) {
+    auto c = parse_daemon_config(text, "w.toml");
+    REQUIRE_FALSE(c.ok());
+    return c.error();
+  };
+  CHECK(e("bind = \"tcp://127.0.0.1:1\"\nbnid = 3\n").find("w.toml:2: unknown key 'bnid'") != std::string::npos);
+  CHECK(e("worker_id = \"3\"\n").find("worker_id: expected an integer") != std::string::npos);
+  CHECK(e("worker_id = -1\n").find("outside") != std::string::npos);
+  CHECK(e("insecure = 1\n").find("insecure") != std::string::npos);
+  CHECK(e("[curve]\nsecret = \"x\"\n").find("unknown key 'curve.secret'") != std::string::npos);
+  CHECK(e("bind = \n").find("w.toml:1") != std::string::npos);  // TOML syntax error, with its line
+}
+
+TEST_CASE("loopback detection") {
+  for (const char* ok : {"tcp://127.0.0.1:5", "tcp://127.1.2.3:5", "tcp://localhost:5", "tcp://[::1]:5",
+                         "ipc:///run/x.sock", "inproc://w"})
+    CHECK_MESSAGE(is_local_endpoint(ok), ok);
+  for (const char* no : {"tcp://0.0.0.0:5", "tcp://*:5", "tcp://10.0.0.1:5", "tcp://eth0:5", "tcp://128.0.0.1:5",
+                         "tcp://127.0.0.1.evil.com:5", "tcp://127.0.0.1;10.0.0.1:5", "pgm://x", "tcp://127.0.0.1"})
+    CHECK_FALSE_MESSAGE(is_local_endpoint(no), no);
+}
+
+TEST_CASE("a non-loopback bind needs --insecure; CURVE is refused until implemented; log_level is checked") {
+  DaemonConfig c;
+  c.bind = "tcp://0.0.0.0:5555";
+  auto s = check_daemon_config(c);
+  REQUIRE_FALSE(s.ok());
+  CHECK(s.error().find("0.0.0.0") != std::string::npos);
+  CHECK(s.error().find("--insecure") != std::string::npos);
+  c.insecure = true;
+  CHECK(check_daemon_config(c).ok());
+  c.curve_secret_key_file = "/etc/k";
+  CHECK_FALSE(check_daemon_config(c).ok());
+  DaemonConfig d;
+  d.log_level = "loud";
+  CHECK_FALSE(check_daemon_config(d).ok());
+  d = DaemonConfig{};
+  d.bind = "udp://127.0.0.1:5";
+  CHECK_FALSE(check_daemon_config(d).ok());
+}
