@@ -5,6 +5,7 @@
 
 namespace st::bench {
 
-void add_load(CLI::App& app);  ///< mesh loading time (issue 2: the 832k-face armadillo)
+void add_load(CLI::App& app);     ///< mesh loading time (issue 2: the 832k-face armadillo)
+void add_scatter(CLI::App& app);  ///< scatter-gather round trip of an empty query, N workers × transport
 
 }  // namespace st::bench

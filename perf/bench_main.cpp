@@ -6,6 +6,7 @@ int main(int argc, char** argv) {
                "measured in the same run)"};
   app.require_subcommand(1);
   st::bench::add_load(app);
+  st::bench::add_scatter(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

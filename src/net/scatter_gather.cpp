@@ -441,9 +441,11 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   m.cur_seq = seq;
   m.in_round = true;
   m.begin_round_sends(pose, Clock::now());
+  const auto spin_until = std::min(deadline, Clock::now() + std::chrono::microseconds(m.cfg.spin_us));
   while (!m.all_replied()) {
-    if (Clock::now() >= deadline) break;
-    m.wait_and_service(deadline);
+    const auto now = Clock::now();
+    if (now >= deadline) break;
+    m.wait_and_service(now < spin_until ? now : deadline);  // until == now: poll without waiting
   }
   m.in_round = false;
   m.end_round(Clock::now());

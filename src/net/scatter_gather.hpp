@@ -39,6 +39,9 @@ struct ScatterConfig {
   int sndhwm = 8;                            ///< per-worker send queue, messages (small: no stale backlog)
   int rcvhwm = 64;                           ///< per-worker receive queue, messages
   Limits limits = default_limits();          ///< decode limits for replies
+  /// Busy-poll for replies this long before blocking in poll(), us: trades CPU on the collision
+  /// thread's core for the wake-up latency of an idle core (tens of us on a VM). 0 = never spin.
+  std::uint32_t spin_us = 0;
 };
 
 /// What the collision thread gets back from one round.
