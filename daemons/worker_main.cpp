@@ -52,14 +52,21 @@ int main(int argc, char** argv) {
                "(binds loopback unless told otherwise)"};
   std::string config_file, bind, log_level;
   std::int64_t worker_id = -1;
-  bool insecure = false;
+  bool insecure = false, keygen = false;
   app.add_option("--config", config_file, "TOML config (bind, worker_id, log_level, insecure, max_sets, max_blockset_mb)")
       ->check(CLI::ExistingFile);
   app.add_option("--bind", bind, "endpoint to bind: tcp://HOST:PORT or ipc://PATH (overrides the config; default tcp://127.0.0.1:5555)");
   app.add_option("--id", worker_id, "worker id (overrides the config)")->check(CLI::Range(0, 1 << 20));
   app.add_option("--log-level", log_level, "error, warning, info or debug (overrides the config)");
   app.add_flag("--insecure", insecure, "allow binding a non-loopback address without CURVE (trusted networks only)");
+  app.add_flag("--keygen", keygen, "print a new CURVE key pair (Z85) and exit");
   CLI11_PARSE(app, argc, argv);
+  if (keygen) {
+    char pub[41] = {}, sec[41] = {};
+    if (zmq_curve_keypair(pub, sec) != 0) { std::fprintf(stderr, "libzmq has no CURVE support\n"); return 1; }
+    std::printf("public %s\nsecret %s\n", pub, sec);
+    return 0;
+  }
 
   g_journal = std::getenv("JOURNAL_STREAM") != nullptr;
   st::net::DaemonConfig cfg;
@@ -88,13 +95,21 @@ int main(int argc, char** argv) {
   wc.max_sets = cfg.max_sets;
   wc.limits.max_blockset_bytes = cfg.max_blockset_mb << 20;
   wc.log = log_line;
+  if (!cfg.curve_secret_key_file.empty()) {
+    auto key = st::net::read_secret_key(cfg.curve_secret_key_file);
+    if (!key) { log_line(3, key.error()); return 2; }
+    wc.curve = st::net::CurveServer{key.value(), cfg.curve_allowed_clients};
+    log_line(6, "CURVE on: public key " + st::net::curve_public_of(key.value()).value() + ", " +
+                    std::to_string(cfg.curve_allowed_clients.size()) + " allowed client key(s)");
+  }
   int rc = 0;
   {
     // The collision core's collide() replaces the reference backend when it lands.
     st::net::WorkerService svc(ctx, wc, st::net::reference_backend_factory());
     if (auto s = svc.bind(cfg.bind); !s) { log_line(3, s.error()); return 1; }
     const std::string ep = svc.last_endpoint();
-    log_line(6, "listening on " + ep + (st::net::is_local_endpoint(cfg.bind) ? "" : " (INSECURE: no authentication)"));
+    const bool exposed = !st::net::is_local_endpoint(cfg.bind) && !wc.curve;
+    log_line(exposed ? 4 : 6, "listening on " + ep + (exposed ? " (INSECURE: no authentication)" : ""));
     notify(("READY=1\nSTATUS=listening on " + ep).c_str());
 
     // Watchdog: ping at a quarter of WatchdogSec; the loop wakes at least every 100 ms.

@@ -110,6 +110,29 @@ struct ScatterGather::Impl {
     return r.value();
   }
 
+  /// Drops encoded sets no worker is meant to hold, holds, or owns originally (memory stays
+  /// bounded however often workers come and go), and collects finished background encodings.
+  void prune_sets() {
+    for (auto it = encoding.begin(); it != encoding.end();) {
+      if (it->second.wait_for(std::chrono::seconds(0)) != std::future_status::ready) { ++it; continue; }
+      if (Result<SetPtr> r = it->second.get(); r) remember(r.value());
+      it = encoding.erase(it);
+    }
+    std::unordered_map<std::uint64_t, bool> keep;
+    for (const Peer& p : peers) {
+      for (std::uint64_t h : p.held) keep[h] = true;
+      if (p.target_hash) keep[p.target_hash] = true;
+      if (p.upload) keep[p.upload->hash] = true;
+    }
+    for (auto it = by_blocks.begin(); it != by_blocks.end();) {
+      const bool original = std::any_of(peers.begin(), peers.end(), [&](const Peer& p) { return p.original == it->first; });
+      const bool targeted = std::any_of(peers.begin(), peers.end(), [&](const Peer& p) { return p.target == it->first; });
+      if (original || targeted || keep.count(it->second->hash)) { ++it; continue; }
+      by_hash.erase(it->second->hash);
+      it = by_blocks.erase(it);
+    }
+  }
+
   void refresh_targets() {
     for (Peer& p : peers)
       if (p.up && !p.target_hash && !p.target.empty())
@@ -134,6 +157,7 @@ struct ScatterGather::Impl {
       SetPtr s = p.target.empty() ? nullptr : get_set(p.target);
       p.target_hash = s ? s->hash : 0;
     }
+    prune_sets();
   }
 
   Status open_socket(Peer& p) {
@@ -144,6 +168,11 @@ struct ScatterGather::Impl {
     p.sock.set(zmq::sockopt::reconnect_ivl_max, 1000);
     p.sock.set(zmq::sockopt::heartbeat_ivl, 500);    // ZMTP heartbeats drop half-open connections
     p.sock.set(zmq::sockopt::heartbeat_timeout, 1500);
+    if (!cfg.curve_server_public.empty()) {
+      p.sock.set(zmq::sockopt::curve_serverkey, cfg.curve_server_public);
+      p.sock.set(zmq::sockopt::curve_publickey, cfg.curve_public);
+      p.sock.set(zmq::sockopt::curve_secretkey, cfg.curve_secret);
+    }
     try {
       p.sock.connect(p.endpoint);
     } catch (const zmq::error_t& e) {
@@ -393,6 +422,11 @@ Result<std::unique_ptr<ScatterGather>> ScatterGather::create(zmq::context_t& ctx
                                                               geom::Mesh object, Blocks blocks) {
   if (config.endpoints.empty()) return fail("scatter-gather: no worker endpoints");
   if (config.miss_limit == 0) return fail("scatter-gather: miss_limit must be at least 1");
+  if (!config.curve_server_public.empty() || !config.curve_public.empty() || !config.curve_secret.empty()) {
+    if (Status s = check_z85_key(config.curve_server_public, "curve_server_public"); !s) return Error{s.error()};
+    if (Status s = check_z85_key(config.curve_public, "curve_public"); !s) return Error{s.error()};
+    if (Status s = check_z85_key(config.curve_secret, "curve_secret"); !s) return Error{s.error()};
+  }
   auto impl = std::make_unique<Impl>();
   impl->ctx = &ctx;
   impl->probe_faces = static_cast<std::uint32_t>(probe.faces.size());

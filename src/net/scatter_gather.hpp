@@ -42,6 +42,9 @@ struct ScatterConfig {
   /// Busy-poll for replies this long before blocking in poll(), us: trades CPU on the collision
   /// thread's core for the wake-up latency of an idle core (tens of us on a VM). 0 = never spin.
   std::uint32_t spin_us = 0;
+  /// CURVE: the workers' public key (one fleet key) and this client's key pair, Z85; all empty
+  /// for plain loopback / ipc.
+  std::string curve_server_public, curve_public, curve_secret;
 };
 
 /// What the collision thread gets back from one round.

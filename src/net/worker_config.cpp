@@ -4,6 +4,12 @@
 #include <fstream>
 #include <sstream>
 #include <toml++/toml.h>
+#include <sys/stat.h>
+
+#include <cctype>
+#include <cstdlib>
+
+#include "net/worker_service.hpp"
 
 namespace st::net {
 
@@ -104,13 +110,38 @@ Status check_daemon_config(const DaemonConfig& c) {
   if (log_priority(c.log_level) < 0) return fail("log_level: '", c.log_level, "' is not one of error, warning, info, debug");
   if (c.bind.rfind("tcp://", 0) != 0 && c.bind.rfind("ipc://", 0) != 0)
     return fail("bind: '", c.bind, "': expected tcp://HOST:PORT or ipc://PATH");
-  if (!c.curve_secret_key_file.empty() || !c.curve_allowed_clients.empty())
-    return fail("[curve]: CURVE authentication is not implemented yet; bind to loopback or ipc://, "
-                "or run on a trusted network with --insecure");
-  if (!is_local_endpoint(c.bind) && !c.insecure)
+  const bool curve = !c.curve_secret_key_file.empty();
+  if (curve && c.curve_allowed_clients.empty())
+    return fail("[curve]: secret_key_file is set but allowed_clients is empty: no client could connect");
+  if (!curve && !c.curve_allowed_clients.empty())
+    return fail("[curve]: allowed_clients is set but secret_key_file is not");
+  for (const std::string& k : c.curve_allowed_clients)
+    if (Status s = check_z85_key(k, "[curve] allowed_clients: '" + k + "'"); !s) return s;
+  if (c.bind.rfind("ipc://", 0) == 0 && curve) return fail("[curve]: CURVE over ipc:// is pointless; use file permissions");
+  if (!is_local_endpoint(c.bind) && !c.insecure && !curve)
     return fail("bind: '", c.bind, "' is not a loopback address; refusing to serve unauthenticated on a network. "
                 "Configure [curve] keys, or pass --insecure (insecure = true) on a trusted network");
   return Ok{};
+}
+
+Result<std::string> read_secret_key(const std::string& path_in) {
+  std::string path = path_in;
+  const std::string var = "$CREDENTIALS_DIRECTORY";
+  if (path.rfind(var, 0) == 0) {
+    const char* dir = std::getenv("CREDENTIALS_DIRECTORY");
+    if (!dir) return fail(path_in, ": $CREDENTIALS_DIRECTORY is not set (use LoadCredential= in the unit)");
+    path = dir + path.substr(var.size());
+  }
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return fail(path, ": cannot stat the CURVE secret key file");
+  if (st.st_mode & 077) return fail(path, ": the CURVE secret key file is readable by group or others (chmod 600)");
+  std::ifstream in(path);
+  std::string line;
+  if (!std::getline(in, line)) return fail(path, ": empty");
+  while (!line.empty() && std::isspace(static_cast<unsigned char>(line.back()))) line.pop_back();
+  while (!line.empty() && std::isspace(static_cast<unsigned char>(line.front()))) line.erase(line.begin());
+  if (Status s = check_z85_key(line, path + ": first line"); !s) return Error{s.error()};
+  return line;
 }
 
 int log_priority(const std::string& level) {

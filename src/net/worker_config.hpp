@@ -33,8 +33,13 @@ Result<DaemonConfig> load_daemon_config(const std::string& path, DaemonConfig ba
 
 /// True for tcp:// on 127.0.0.0/8, [::1] or localhost, and for ipc:// and inproc:// (not on a network).
 bool is_local_endpoint(const std::string& endpoint);
-/// Refuses a non-local bind unless CURVE keys are configured or `insecure` is set; checks log_level.
+/// Refuses a non-local bind unless CURVE (secret key file and allowed clients) is configured or
+/// `insecure` is set; checks log_level, the endpoint scheme and the client keys.
 Status check_daemon_config(const DaemonConfig& c);
+/// Reads a Z85 CURVE secret key from the first line of `path`; a leading "$CREDENTIALS_DIRECTORY"
+/// is expanded (systemd LoadCredential=). Refuses files readable by group or others.
+Result<std::string> read_secret_key(const std::string& path);
+
 /// Syslog priority of a log level name (3 error, 4 warning, 6 info, 7 debug), or -1.
 int log_priority(const std::string& level);
 

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <random>
+#include <stdexcept>
 
 #include "net/block_set.hpp"
 
@@ -23,12 +24,34 @@ WorkerService::WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFa
   // off by libzmq before it is buffered.
   const std::int64_t max_in = std::int64_t(kHeaderBytes) + 64 + cfg_.limits.max_chunk_bytes;
   set_common_options(sock_, cfg_.sndhwm, cfg_.rcvhwm, std::min<std::int64_t>(max_in, cfg_.limits.max_message_bytes));
+  if (cfg_.curve) {
+    // ZAP (RFC 27): libzmq asks the handler bound at this inproc address about every CURVE
+    // handshake; it must exist before the ROUTER accepts connections.
+    try {
+      if (Status s = check_z85_key(cfg_.curve->secret_z85, "CURVE secret key"); !s) throw std::runtime_error(s.error());
+      for (const std::string& k : cfg_.curve->allowed_clients_z85) {
+        if (Status s = check_z85_key(k, "allowed client key " + k); !s) throw std::runtime_error(s.error());
+        std::string raw(32, '\0');
+        zmq_z85_decode(reinterpret_cast<std::uint8_t*>(raw.data()), k.c_str());
+        allowed_.push_back(raw);
+      }
+      zap_ = zmq::socket_t(ctx, zmq::socket_type::rep);
+      zap_.set(zmq::sockopt::linger, 0);
+      zap_.bind("inproc://zeromq.zap.01");
+      sock_.set(zmq::sockopt::curve_server, true);
+      sock_.set(zmq::sockopt::curve_secretkey, cfg_.curve->secret_z85);
+      sock_.set(zmq::sockopt::zap_domain, "spheretouch");
+    } catch (const std::exception& e) {
+      init_error_ = std::string("CURVE set-up: ") + e.what();
+    }
+  }
   // ZMTP heartbeats drop half-open TCP connections of vanished clients.
   sock_.set(zmq::sockopt::heartbeat_ivl, 1000);
   sock_.set(zmq::sockopt::heartbeat_timeout, 3000);
 }
 
 Status WorkerService::bind(const std::string& endpoint) {
+  if (!init_error_.empty()) return Error{init_error_};
   try {
     sock_.bind(endpoint);
   } catch (const zmq::error_t& e) {
@@ -79,13 +102,64 @@ void WorkerService::send_error(const zmq::message_t& peer, ErrorCode code, std::
   send(peer, ErrorMsg{code, ref, std::move(text)});
 }
 
-bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
-  zmq::pollitem_t item{sock_.handle(), 0, ZMQ_POLLIN, 0};
+Status check_z85_key(const std::string& z85, const std::string& what) {
+  std::uint8_t raw[32];
+  if (z85.size() != 40 || !zmq_z85_decode(raw, z85.c_str())) return fail(what, ": not a 40-character Z85 CURVE key");
+  return Ok{};
+}
+
+Result<std::string> curve_public_of(const std::string& secret_z85) {
+  if (Status s = check_z85_key(secret_z85, "secret key"); !s) return Error{s.error()};
+  char pub[41] = {};
+  if (zmq_curve_public(pub, secret_z85.c_str()) != 0) return fail("secret key: libzmq has no CURVE support");
+  return std::string(pub);
+}
+
+void WorkerService::handle_zap() {
+  // Request frames: version, request id, domain, address, routing id, mechanism, credentials.
+  std::vector<zmq::message_t> f;
   try {
-    if (zmq::poll(&item, 1, timeout) <= 0) return true;
+    do {
+      f.emplace_back();
+      if (!zap_.recv(f.back(), zmq::recv_flags::dontwait)) return;
+    } while (f.back().more() && f.size() < 16);
+    while (f.back().more()) { zmq::message_t junk; (void)zap_.recv(junk); }
+  } catch (const zmq::error_t&) {
+    return;
+  }
+  bool ok = false;
+  if (f.size() >= 7 && f[5].to_string_view() == "CURVE" && f[6].size() == 32) {
+    const std::string key(static_cast<const char*>(f[6].data()), 32);
+    ok = std::find(allowed_.begin(), allowed_.end(), key) != allowed_.end();
+    if (!ok) {
+      char z85[41] = {};
+      zmq_z85_encode(z85, static_cast<const std::uint8_t*>(f[6].data()), 32);
+      log(4, std::string("refused CURVE client ") + z85 + " from " + std::string(f[3].to_string_view()) + ": not in allowed_clients");
+    }
+  }
+  const std::string request_id = f.size() > 1 ? f[1].to_string() : std::string();
+  const char* status = ok ? "200" : "400";
+  try {
+    zap_.send(zmq::str_buffer("1.0"), zmq::send_flags::sndmore);
+    zap_.send(zmq::buffer(request_id), zmq::send_flags::sndmore);
+    zap_.send(zmq::buffer(std::string_view(status)), zmq::send_flags::sndmore);
+    zap_.send(zmq::buffer(std::string_view(ok ? "OK" : "client key not allowed")), zmq::send_flags::sndmore);
+    zap_.send(zmq::str_buffer(""), zmq::send_flags::sndmore);
+    zap_.send(zmq::str_buffer(""), zmq::send_flags::none);
+  } catch (const zmq::error_t&) {
+  }
+}
+
+bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
+  zmq::pollitem_t items[2] = {{sock_.handle(), 0, ZMQ_POLLIN, 0}, {zap_.handle(), 0, ZMQ_POLLIN, 0}};
+  const int n = zap_ ? 2 : 1;
+  try {
+    if (zmq::poll(items, n, timeout) <= 0) return true;
   } catch (const zmq::error_t& e) {
     return e.num() != ETERM;  // EINTR (a signal): let the caller look at its stop flag
   }
+  if (n == 2 && (items[1].revents & ZMQ_POLLIN)) handle_zap();
+  if (!(items[0].revents & ZMQ_POLLIN)) return true;
   // Handle what is queued now, then return so the caller can tick (watchdog, stop flag).
   for (int budget = 0; budget < 1024; ++budget) {
     zmq::message_t peer, frame;

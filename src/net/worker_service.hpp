@@ -11,6 +11,7 @@
 #include <functional>
 #include <list>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 #include <zmq.hpp>
@@ -19,6 +20,13 @@
 #include "net/protocol.hpp"
 
 namespace st::net {
+
+/// CURVE on the worker's socket: its secret key and the client public keys it admits (a ZAP
+/// handler in the service's context checks each connecting client against the list).
+struct CurveServer {
+  std::string secret_z85;                        ///< the worker's secret key, Z85 (40 characters)
+  std::vector<std::string> allowed_clients_z85;  ///< admitted client public keys, Z85; empty: none
+};
 
 /// What a worker is and how much it may hold.
 struct WorkerConfig {
@@ -30,6 +38,9 @@ struct WorkerConfig {
   /// Log sink (syslog priority 3 error … 7 debug, message); empty: silent. Bad messages are
   /// summarised at most once a second so a flood cannot flood the log.
   std::function<void(int, const std::string&)> log;
+  /// Encrypt and authenticate with CURVE; the service then owns its context's ZAP endpoint, so
+  /// only one CURVE service per context (the daemon's case).
+  std::optional<CurveServer> curve;
 };
 
 /// Counters since start (read on the service's thread, or after it stopped).
@@ -73,6 +84,7 @@ class WorkerService {
     bool active = false;
   };
   void handle(const zmq::message_t& peer, std::span<const std::uint8_t> frame);
+  void handle_zap();
   void on_load(const zmq::message_t& peer, const LoadBlocksMsg& m);
   void on_query(const zmq::message_t& peer, const QueryMsg& m);
   void send(const zmq::message_t& peer, const Message& m);
@@ -84,6 +96,9 @@ class WorkerService {
   WorkerConfig cfg_;
   BackendFactory factory_;
   zmq::socket_t sock_;
+  zmq::socket_t zap_;             // ZAP handler (CURVE client allow-list), or empty
+  std::vector<std::string> allowed_;  // admitted client public keys, 32 raw bytes each
+  std::string init_error_;        // a CURVE set-up failure, reported by bind()
   std::uint64_t epoch_;
   std::list<Loaded> sets_;        // MRU first
   Assembly asm_;
@@ -93,6 +108,11 @@ class WorkerService {
   std::chrono::steady_clock::time_point bad_logged_{};
   std::uint64_t bad_unlogged_ = 0;
 };
+
+/// Checks a Z85 CURVE key (40 characters that decode to 32 bytes); the error names `what`.
+Status check_z85_key(const std::string& z85, const std::string& what);
+/// The public key of a Z85 secret key, Z85.
+Result<std::string> curve_public_of(const std::string& secret_z85);
 
 /// Sets the socket options every spheretouch socket uses: LINGER 0, the given high-water marks,
 /// ZMQ_MAXMSGSIZE = max_message_bytes (libzmq drops a peer that sends more).

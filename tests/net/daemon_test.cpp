@@ -5,6 +5,7 @@
 
 #include <cstdio>
 #include <regex>
+#include <sys/stat.h>
 
 #include "net/reference_backend.hpp"
 #include "net/scatter_gather.hpp"
@@ -287,4 +288,47 @@ TEST_CASE("systemd units pass systemd-analyze verify") {
   // verify exits 0 on unknown keys and bad values, so any complaint about our files fails too.
   CHECK(os.str().find("spheretouch-worker@1.service") == std::string::npos);
   CHECK(os.str().find("spheretouch-workers.target") == std::string::npos);
+}
+
+TEST_CASE("daemon with CURVE: a network bind without --insecure; allowed client served, others refused") {
+  char spub[41], ssec[41], cpub[41], csec[41], rpub[41], rsec[41];
+  REQUIRE(zmq_curve_keypair(spub, ssec) == 0);
+  REQUIRE(zmq_curve_keypair(cpub, csec) == 0);
+  REQUIRE(zmq_curve_keypair(rpub, rsec) == 0);
+  test::TempDir dir;
+  test::write_file(dir.file("worker.key"), std::string(ssec) + "\n");
+  ::chmod(dir.file("worker.key").c_str(), 0600);
+  const int port = test::free_port();
+  // toml literal strings ('...') take Z85's punctuation as is.
+  test::write_file(dir.file("w.toml"), "bind = \"tcp://0.0.0.0:" + std::to_string(port) + "\"\n[curve]\nsecret_key_file = '" +
+                                           dir.file("worker.key") + "'\nallowed_clients = ['" + cpub + "']\n");
+  test::Process p({test::worker_binary(), "--config", dir.file("w.toml")}, dir.file("w.log"));
+  const test::NetScene s = test::small_scene(6);
+  const std::string ep = "tcp://127.0.0.1:" + std::to_string(port);
+  zmq::context_t ctx;
+  auto make = [&](const char* pub, const char* sec, bool curve) {
+    ScatterConfig cfg;
+    cfg.endpoints = {ep};
+    if (curve) { cfg.curve_server_public = spub; cfg.curve_public = pub; cfg.curve_secret = sec; }
+    auto c = ScatterGather::create(ctx, cfg, s.probe, s.object, s.blocks);
+    REQUIRE_MESSAGE(c.ok(), c.error());
+    return std::move(c.value());
+  };
+  {
+    auto c = make(cpub, csec, true);
+    REQUIRE(c->wait_ready(Clock::now() + 20s));
+    const auto pose = test::contact_poses(s, 1)[0];
+    RoundResult r = c->round(1, pose, Clock::now() + 5s);
+    CHECK(r.complete);
+    CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+  }
+  {
+    auto rogue = make(rpub, rsec, true);
+    CHECK_FALSE(rogue->wait_ready(Clock::now() + 1500ms));
+    auto plain = make(nullptr, nullptr, false);
+    CHECK_FALSE(plain->wait_ready(Clock::now() + 1500ms));
+  }
+  CHECK(p.wait(0ms) == -1);  // still running
+  CHECK(p.log().find("refused CURVE client " + std::string(rpub)) != std::string::npos);
+  CHECK(p.log().find("INSECURE") == std::string::npos);
 }

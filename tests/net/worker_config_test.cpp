@@ -1,7 +1,10 @@
 // Tests src/net/worker_config.*: TOML parsing (unknown keys named), and the safe-by-default bind policy.
 #include <doctest/doctest.h>
 
+#include <sys/stat.h>
+
 #include "net/worker_config.hpp"
+#include "test_util.hpp"
 
 using namespace st::net;
 
@@ -63,4 +66,31 @@ TEST_CASE("a non-loopback bind needs --insecure; CURVE is refused until implemen
   d = DaemonConfig{};
   d.bind = "udp://127.0.0.1:5";
   CHECK_FALSE(check_daemon_config(d).ok());
+}
+
+TEST_CASE("CURVE config: a secret key file needs allowed clients with valid keys; then a network bind is allowed") {
+  const std::string k40 = "Yne@$w-vo<fVvi]a<NY6T1ed:M$fCG*[IaLV{hID";  // the libzmq test vector public key
+  DaemonConfig c;
+  c.bind = "tcp://0.0.0.0:5555";
+  c.curve_secret_key_file = "/etc/spheretouch/worker.key";
+  CHECK(check_daemon_config(c).error().find("allowed_clients is empty") != std::string::npos);
+  c.curve_allowed_clients = {"not a key"};
+  CHECK(check_daemon_config(c).error().find("Z85") != std::string::npos);
+  c.curve_allowed_clients = {k40};
+  CHECK(check_daemon_config(c).ok());
+  DaemonConfig d;
+  d.curve_allowed_clients = {k40};
+  CHECK_FALSE(check_daemon_config(d).ok());
+}
+
+TEST_CASE("read_secret_key refuses world-readable files and reads the first line") {
+  st::test::TempDir dir;
+  const std::string f = dir.file("k");
+  st::test::write_file(f, "JTKVSB%%)wK0E.X)V>+}o?pNmC{O&4W4b!Ni{Lh6\n");  // libzmq test vector secret key
+  ::chmod(f.c_str(), 0644);
+  CHECK(read_secret_key(f).error().find("chmod 600") != std::string::npos);
+  ::chmod(f.c_str(), 0600);
+  auto k = read_secret_key(f);
+  REQUIRE_MESSAGE(k.ok(), k.error());
+  CHECK(k.value() == "JTKVSB%%)wK0E.X)V>+}o?pNmC{O&4W4b!Ni{Lh6");
 }
