@@ -486,6 +486,15 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   m.out = nullptr;
   std::sort(out.pairs.begin(), out.pairs.end());
   out.pairs.erase(std::unique(out.pairs.begin(), out.pairs.end()), out.pairs.end());
+  // The same probe face collides on several workers: merge to distinct faces (paper §3.5).
+  out.probe_faces.clear();
+  out.object_faces.clear();
+  for (const FacePair& f : out.pairs) {
+    if (out.probe_faces.empty() || out.probe_faces.back() != f.probe) out.probe_faces.push_back(f.probe);
+    out.object_faces.push_back(f.object);
+  }
+  std::sort(out.object_faces.begin(), out.object_faces.end());
+  out.object_faces.erase(std::unique(out.object_faces.begin(), out.object_faces.end()), out.object_faces.end());
   out.blocks_covered = static_cast<std::uint32_t>(std::count(m.covered.begin(), m.covered.end(), 1));
   out.complete = out.blocks_covered == out.blocks_total;
 }

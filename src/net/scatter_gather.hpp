@@ -51,6 +51,8 @@ struct ScatterConfig {
 struct RoundResult {
   std::uint64_t seq = 0;                 ///< the round's sequence number
   std::vector<FacePair> pairs;           ///< colliding pairs, sorted by (probe, object), unique
+  std::vector<std::uint32_t> probe_faces;   ///< distinct colliding probe faces, ascending (merged over workers)
+  std::vector<std::uint32_t> object_faces;  ///< distinct colliding object faces, ascending
   bool complete = false;                 ///< the merged replies cover every block: pairs are exact
   std::uint32_t workers_asked = 0;       ///< Queries sent this round
   std::uint32_t workers_replied = 0;     ///< Results merged this round
@@ -59,6 +61,8 @@ struct RoundResult {
   std::uint32_t stale_dropped = 0;       ///< replies of older rounds dropped
   std::uint32_t bad_messages = 0;        ///< undecodable or unexpected replies dropped
   QueryStats stats;                      ///< summed counters; compute_ns is the slowest worker's
+  /// "Contacts" (paper §3.5): distinct colliding probe faces + distinct colliding object faces.
+  std::size_t contacts() const { return probe_faces.size() + object_faces.size(); }
 };
 
 /// A worker as the client sees it.

@@ -55,6 +55,8 @@ TEST_CASE("merged pairs equal the single-process reference for 1, 2, 4 and 8 inp
       CHECK(r.blocks_covered == s.blocks.size());
       CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
       CHECK(std::is_sorted(r.pairs.begin(), r.pairs.end()));
+      CHECK(r.contacts() == count_contacts(r.pairs));
+      CHECK(std::adjacent_find(r.probe_faces.begin(), r.probe_faces.end()) == r.probe_faces.end());
     }
   }
 }
