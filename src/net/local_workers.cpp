@@ -29,7 +29,14 @@ Status LocalWorkers::launch(int i, const std::string& endpoint) {
   const std::atomic<bool>* stop = slot.stop.get();
   slot.thread = std::thread([this, cfg, endpoint, stop, &bound] {
     WorkerService svc(ctx_, cfg, factory_);
-    if (Status s = svc.bind(endpoint); !s) { bound.set_value(Error{s.error()}); return; }
+    // A restarted worker's old socket closes its listening fd asynchronously (libzmq's I/O
+    // thread): retry the bind briefly instead of failing on EADDRINUSE.
+    Status s = svc.bind(endpoint);
+    for (int tries = 0; !s && tries < 100; ++tries) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      s = svc.bind(endpoint);
+    }
+    if (!s) { bound.set_value(Error{s.error()}); return; }
     bound.set_value(svc.last_endpoint());
     svc.run(*stop, std::chrono::milliseconds(20));
   });

@@ -61,6 +61,9 @@ struct ScatterGather::Impl {
     std::uint64_t failed_hash = 0;           // a set it refused to load (not retried until load_timeout)
     Clock::time_point failed_at{};
     Clock::time_point next_heartbeat{};
+    Clock::time_point last_heard{};          // last message received from it
+    Clock::time_point last_asked{};          // last Query or Heartbeat sent to it
+    Clock::time_point socket_opened{};
     std::uint64_t nonce = 0;
     // This round.
     Ask ask = Ask::None;
@@ -161,6 +164,7 @@ struct ScatterGather::Impl {
   }
 
   Status open_socket(Peer& p) {
+    p.socket_opened = Clock::now();
     p.sock = zmq::socket_t(*ctx, zmq::socket_type::dealer);
     set_common_options(p.sock, cfg.sndhwm, cfg.rcvhwm, cfg.limits.max_message_bytes);
     p.sock.set(zmq::sockopt::immediate, 1);          // no queueing to a worker that is not connected
@@ -194,6 +198,7 @@ struct ScatterGather::Impl {
 
   void heartbeat(Peer& p, Clock::time_point now) {
     p.next_heartbeat = now + cfg.heartbeat_period;
+    p.last_asked = now;
     send(p, HeartbeatMsg{++p.nonce});
   }
 
@@ -289,6 +294,7 @@ struct ScatterGather::Impl {
       }
       Result<Message> m = decode({static_cast<const std::uint8_t*>(msg.data()), msg.size()}, cfg.limits);
       if (!m) { if (out) ++out->bad_messages; continue; }
+      p.last_heard = now;
       if (auto* h = std::get_if<HelloMsg>(&m.value())) on_hello(p, *h, now);
       else if (auto* r = std::get_if<ResultMsg>(&m.value())) { if (out) on_result(p, *r); }
       else if (auto* e = std::get_if<ErrorMsg>(&m.value())) on_error(p, *e, now);
@@ -359,7 +365,20 @@ struct ScatterGather::Impl {
     }
   }
 
+  /// Gives a fresh socket to every worker that was asked but has been silent for
+  /// reconnect_after (unless it is busy loading what we sent).
+  void revive_silent(Clock::time_point now) {
+    for (Peer& p : peers) {
+      const auto since = std::max({p.last_heard, p.socket_opened});
+      if (p.last_asked <= since || now - since < cfg.reconnect_after) continue;
+      if (uploading(p) && now - p.upload_progress <= cfg.load_timeout) continue;
+      p.upload = nullptr;
+      (void)open_socket(p);
+    }
+  }
+
   void begin_round_sends(const geom::Pose& pose, Clock::time_point now) {
+    revive_silent(now);
     if (dirty) reassign();
     refresh_targets();
     for (Peer& p : peers) maybe_start_upload(p, now);
@@ -375,6 +394,7 @@ struct ScatterGather::Impl {
       if (p.asked) {
         p.ask = Ask::Query;
         ++out->workers_asked;
+        p.last_asked = now;
         if (!send(p, QueryMsg{cur_seq, p.asked->hash, pose})) p.asked = nullptr;  // counts as a miss
       } else if (!uploading(p)) {
         p.ask = Ask::Heartbeat;  // unknown or empty: it must at least say hello by the deadline
@@ -509,6 +529,7 @@ bool ScatterGather::wait_ready(Clock::time_point deadline) {
   Impl& m = *impl_;
   for (;;) {
     const auto now = Clock::now();
+    m.revive_silent(now);
     if (m.dirty) m.reassign();
     m.refresh_targets();
     bool ready = true;

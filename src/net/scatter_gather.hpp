@@ -34,6 +34,9 @@ struct ScatterConfig {
   std::uint32_t miss_limit = 3;              ///< K: consecutive missed deadlines before a worker is down
   std::chrono::milliseconds heartbeat_period{100};  ///< Heartbeats to down workers
   std::chrono::milliseconds load_timeout{10000};    ///< an upload not acknowledged in this long fails
+  /// A worker asked but silent this long gets a fresh socket: libzmq gives up on a connection for
+  /// good after a protocol error (e.g. an oversized or garbled frame) and never reconnects it.
+  std::chrono::milliseconds reconnect_after{1000};
   std::uint32_t chunk_bytes = 256u << 10;    ///< LoadBlocks chunk size (≤ limits.max_chunk_bytes)
   std::uint32_t leaf_faces = 8;              ///< tree parameter sent with every block set
   int sndhwm = 8;                            ///< per-worker send queue, messages (small: no stale backlog)

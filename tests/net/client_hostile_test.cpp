@@ -105,7 +105,6 @@ TEST_CASE("the client drops truncated, oversized, wrong-version, garbage, stale 
     bad += static_cast<int>(r.bad_messages);
     stale += static_cast<int>(r.stale_dropped);
     if (r.complete) CHECK(r.pairs.empty());
-    if (std::getenv("ST_DEBUG")) MESSAGE(seq << " asked " << r.workers_asked << " replied " << r.workers_replied << " bad " << r.bad_messages << " up " << c.value()->workers()[0].up << " misses " << c.value()->workers()[0].misses);
   }
   MESSAGE(complete << " complete rounds, " << bad << " bad replies, " << stale << " stale dropped, "
                    << fake.hostile_sent() << " hostile replies sent");

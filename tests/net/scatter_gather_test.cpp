@@ -236,3 +236,33 @@ TEST_CASE("an oversized frame is cut off by ZMQ_MAXMSGSIZE before it is buffered
   REQUIRE(r.ok());
   CHECK(std::get<HelloMsg>(r.value()).echo == 5);
 }
+
+TEST_CASE("a worker restarted before it is marked down (new epoch) is reloaded; the others are left alone") {
+  zmq::context_t ctx;
+  const test::NetScene s = test::small_scene(8, 24);
+  const auto poses = test::contact_poses(s, 4);
+  auto wr = LocalWorkers::start(ctx, 3, reference_backend_factory(), [](int) { return std::string("tcp://127.0.0.1:*"); });
+  REQUIRE(wr.ok());
+  LocalWorkers& w = *wr.value();
+  auto c = client(ctx, w, s, 1u << 30);  // never marked down: only the epoch tells
+  REQUIRE(c->wait_ready(Clock::now() + 10s));
+  const std::uint64_t epoch0 = c->workers()[1].epoch;
+  std::uint64_t seq = 0;
+  REQUIRE(c->round(++seq, poses[0], Clock::now() + 1s).complete);
+  REQUIRE(w.restart(1).ok());
+  bool reloaded = false;
+  const auto give_up = Clock::now() + 20s;  // rounds that skip the reconnecting worker are fast: bound by time
+  for (int k = 0; Clock::now() < give_up && !reloaded; ++k) {
+    const auto& pose = poses[k % poses.size()];
+    RoundResult r = c->round(++seq, pose, Clock::now() + 50ms);
+    if (r.complete) CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+    const auto ws = c->workers();
+    reloaded = r.complete && ws[1].epoch != epoch0 && ws[1].holds_target;
+  }
+  REQUIRE(reloaded);
+  const auto ws = c->workers();
+  CHECK(ws[1].loads_sent == 2);
+  CHECK(ws[0].loads_sent == 1);
+  CHECK(ws[2].loads_sent == 1);
+  for (const auto& x : ws) CHECK(x.up);
+}
