@@ -134,7 +134,7 @@ Result<Message> decode_body(MsgType type, Reader& r, const Limits& L) {
       if (r.count_ok(n, L.max_pairs, sizeof(FacePair), "pair count")) {
         m.pairs.resize(n);
         auto b = r.bytes(std::size_t{n} * sizeof(FacePair), "pairs");
-        if (r.ok()) std::memcpy(m.pairs.data(), b.data(), b.size());
+        if (r.ok() && n > 0) std::memcpy(m.pairs.data(), b.data(), b.size());
       }
       out = std::move(m);
       break;

@@ -32,9 +32,11 @@ struct CurveServer {
 struct WorkerConfig {
   std::uint32_t worker_id = 0;     ///< reported in Hello and Result
   std::uint32_t max_sets = 3;      ///< block sets kept in memory (LRU): own share + reassigned variants
-  Limits limits = default_limits();  ///< decode limits; memory ≤ (max_sets + 1) · max_blockset_bytes
-  int sndhwm = 256;                ///< messages queued per client before replies are dropped
-  int rcvhwm = 256;                ///< messages queued from clients
+  /// Decode limits. Memory is bounded by (max_sets + 1) · max_blockset_bytes for block sets plus
+  /// rcvhwm frames of at most max_chunk_bytes queued per client connection.
+  Limits limits = default_limits();
+  int sndhwm = 64;                 ///< messages queued per client before replies are dropped
+  int rcvhwm = 32;                 ///< messages queued per client (32 × 1 MiB chunks at most)
   /// Log sink (syslog priority 3 error … 7 debug, message); empty: silent. Bad messages are
   /// summarised at most once a second so a flood cannot flood the log.
   std::function<void(int, const std::string&)> log;
