@@ -15,7 +15,7 @@
 #include <systemd/sd-daemon.h>
 #endif
 
-#include "net/reference_backend.hpp"
+#include "net/tree_backend.hpp"
 #include "net/worker_config.hpp"
 #include "net/worker_service.hpp"
 
@@ -104,8 +104,8 @@ int main(int argc, char** argv) {
   }
   int rc = 0;
   {
-    // The collision core's collide() replaces the reference backend when it lands.
-    st::net::WorkerService svc(ctx, wc, st::net::reference_backend_factory());
+    // Sphere trees + collide() (exact); the SAT reference backend stays for tests.
+    st::net::WorkerService svc(ctx, wc, st::net::tree_backend_factory());
     if (auto s = svc.bind(cfg.bind); !s) { log_line(3, s.error()); return 1; }
     const std::string ep = svc.last_endpoint();
     const bool exposed = !st::net::is_local_endpoint(cfg.bind) && !wc.curve;

@@ -13,6 +13,7 @@
 
 #include "app/collision_loop.hpp"
 #include "app/commands.hpp"
+#include "app/distributed.hpp"
 #include "app/run_outputs.hpp"
 #include "app/scene.hpp"
 #include "app/tree_cache.hpp"
@@ -160,13 +161,37 @@ void run(const RunArgs& a) {
   const geom::SphereTree& ptree = pt.value().tree;
   const geom::SphereTree& otree = ot.value().tree;
   std::string backend = "in the collision thread";
-  if (!s.endpoints.empty() || s.workers > 0) {
-    std::fprintf(stderr, "spheretouch: workers are not wired into `run` yet; colliding in the collision thread\n");
-  }
+  std::unique_ptr<Fleet> fleet;
+  std::atomic<std::uint32_t> replied{0}, asked{0};  // newest round, for the status line
   CollideFn collide_fn = [&](std::uint64_t, const geom::Pose& pose, RoundOutput& out) {
     geom::collide(probe, ptree, object, otree, pose, copt, scratch, result);
     out.pairs.assign(result.pairs.begin(), result.pairs.end());
   };
+  if (!s.endpoints.empty() || s.workers > 0) {
+    if (s.approx_layer != geom::kExact) die(2, s.file + ": collision.mode = \"approximate\" runs without workers (set workers.count = 0)");
+    FleetSpec spec;
+    spec.workers = s.workers;
+    spec.endpoints = s.endpoints;
+    spec.layer = s.layer;
+    spec.block_size = s.block_size;
+    spec.leaf_faces = s.tree.leaf_faces;
+    spec.miss_limit = std::uint32_t(s.down_after);
+    std::fprintf(stderr, "starting workers and loading their blocks ...\n");
+    Result<std::unique_ptr<Fleet>> f = start_fleet(spec, probe, object, otree);
+    if (!f) die(2, f.error());
+    fleet = std::move(f).value();
+    backend = fleet->description;
+    const auto deadline = std::chrono::microseconds(std::int64_t(s.deadline_ms * 1000));
+    collide_fn = [&, deadline, round = net::RoundResult{}](std::uint64_t seq, const geom::Pose& pose,
+                                                           RoundOutput& out) mutable {
+      fleet->client->round(seq, pose, net::Clock::now() + deadline, round);
+      out.pairs.resize(round.pairs.size());
+      for (std::size_t i = 0; i < round.pairs.size(); ++i) out.pairs[i] = {round.pairs[i].probe, round.pairs[i].object};
+      out.complete = round.complete;
+      replied.store(round.workers_replied, std::memory_order_relaxed);
+      asked.store(round.workers_asked, std::memory_order_relaxed);
+    };
+  }
 
   const std::string dir = new_run_dir(s.out_dir);
   std::error_code ec;
@@ -225,10 +250,11 @@ void run(const RunArgs& a) {
       char line[256];
       std::snprintf(line, sizeof line,
                     "t %5.1f s | haptic %6.0f Hz, %llu misses | collision %5.0f Hz, %6.2f ms, %u contacts | "
-                    "force %5.2f N | %s",
+                    "force %5.2f N | %s%s",
                     elapsed, double(ticks - last_ticks) / dt, static_cast<unsigned long long>(loop.misses()),
                     double(rounds - last_rounds) / dt, double(collision.last_latency_ns()) * 1e-6,
-                    collision.last_contacts(), device.last_N(), backend.c_str());
+                    collision.last_contacts(), device.last_N(), backend.c_str(),
+                    fleet ? (", " + std::to_string(replied.load()) + "/" + std::to_string(asked.load()) + " answering").c_str() : "");
       if (tty) std::printf("\r\033[K%s", line);
       else std::printf("%s\n", line);
       std::fflush(stdout);
