@@ -7,6 +7,7 @@
 #include "geom/mesh_io.hpp"
 #include "geom/pose_io.hpp"
 #include "geom/primitives.hpp"
+#include "net/process_util.hpp"
 #include "test_util.hpp"
 
 using namespace st;
@@ -148,4 +149,34 @@ TEST_CASE("build writes a tree file; a stale or corrupt cache file is rebuilt, n
   // After rebuilding, the output is the same and the cache is silent again.
   r = run_command(f.query(""));
   CHECK(r.output == good);
+}
+
+TEST_CASE("query over in-process workers and over worker daemons gives the single-process output (real meshes)") {
+  const std::string root = std::getenv("ST_SOURCE_ROOT") ? std::getenv("ST_SOURCE_ROOT") : ".";
+  const std::string base = spheretouch_exe() + " query " + st::test::model("hand_L2.off") + " " +
+                           st::test::model("elephant.off") + " --poses " + root + "/perf/poses/hand_elephant.txt --no-cache";
+  const auto single = run_command(base);
+  REQUIRE(single.exit_code == 0);
+  CHECK(has(single.output, "pose 2 pairs "));
+  CHECK_FALSE(has(single.output, "pose 2 pairs 0 "));
+  for (int w : {1, 2, 4, 8}) {
+    const auto r = run_command(base + " --workers " + std::to_string(w));
+    INFO("workers " << w);
+    CHECK(r.exit_code == 0);
+    CHECK(r.output == single.output);
+  }
+  // Two real daemons on loopback.
+  st::test::TempDir d;
+  std::vector<std::unique_ptr<st::test::Process>> daemons;
+  std::string endpoints;
+  for (int i = 0; i < 2; ++i) {
+    const std::string ep = "tcp://127.0.0.1:" + std::to_string(st::test::free_port());
+    daemons.push_back(std::make_unique<st::test::Process>(
+        std::vector<std::string>{st::test::worker_binary(), "--bind", ep, "--id", std::to_string(i)}, d.file("w.log")));
+    endpoints += (i ? "," : "") + ep;
+  }
+  const auto r = run_command(base + " --connect " + endpoints);
+  INFO(r.output.substr(0, 400));
+  CHECK(r.exit_code == 0);
+  CHECK(r.output == single.output);
 }
