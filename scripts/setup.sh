@@ -35,6 +35,9 @@ case "$mode" in
   build) ;;
   demo)
     scripts/models.sh
+    models="${ST_MODEL_DIR:-.cache/models}"
+    build/spheretouch info "$models"/hand_L2.off "$models"/elephant.off "$models"/armadillo_L1.off \
+      "$models"/armadillo_L2.off "$models"/bunny.off
     # The main job on the embedded default: the hand touches the elephant with in-process workers.
     build/spheretouch run configs/demo.toml --duration "${ST_DEMO_SECONDS:-6}"
     ;;
