@@ -277,6 +277,7 @@ void run(const RunArgs& a) {
   const std::int64_t print_every = tty ? 200'000'000 : 1'000'000'000;
   int servo_exit = -1;        // split: the servo process's exit code once it ended
   bool forwarded = false;     // split: a signal was passed on to the servo
+  std::int64_t forwarded_ns = 0;
   SilenceWatch silence(s.interp.stale_timeout_ns);
   while (true) {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
@@ -290,8 +291,11 @@ void run(const RunArgs& a) {
         break;
       }
       if ((g_signal.load() && !forwarded) || (elapsed > s.duration_s + 10 && !forwarded)) {
-        kill(servo_pid, SIGTERM);
+        kill(servo_pid, SIGTERM);  // it stops ticking, writes its outputs and exits
         forwarded = true;
+        forwarded_ns = now;
+      } else if (forwarded && now - forwarded_ns > 5'000'000'000) {
+        kill(servo_pid, SIGKILL);  // unresponsive for 5 s: do not hang the run
       }
     } else {
       if (g_signal.load() || elapsed >= s.duration_s) break;
@@ -418,7 +422,8 @@ void add_run(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand(
       "run", "Touch an object: haptic loop (1 kHz), collision thread, workers and telemetry, with a simulated\n"
              "device running the scene's script. Writes a run directory: ticks.csv, trace.json, contact.ply,\n"
-             "summary.txt.");
+             "summary.txt. --split: the servo runs as its own process on a shared-memory segment\n"
+             "(`spheretouch monitor` watches either kind of run).");
   cmd->add_option("scene", a->scene, "scene file (configs/demo.toml documents every field)")
       ->required()
       ->check(CLI::ExistingFile);

@@ -146,3 +146,25 @@ TEST_CASE("run --split: collision process SIGKILLed mid-press, the servo fades t
   CHECK(faded_ticks > 1000);   // and it kept ticking (about 2 s more)
   CHECK(t_last < duration - 1.0);
 }
+
+TEST_CASE("SilenceWatch: reports a silent collision side once the force has faded, and its return") {
+  st::app::SilenceWatch w(200'000'000);
+  st::rt::ServoStatus st;
+  CHECK(w.poll(st, 1'000'000'000).empty());  // no model yet: nothing to report
+  st.model_seq = 5;
+  st.model_received_ns = 1'000'000'000;
+  st.fade = 1.0;
+  CHECK(w.poll(st, 1'100'000'000).empty());  // fresh
+  CHECK(w.poll(st, 1'250'000'000).empty());  // past the timeout but still fading
+  st.fade = 0.0;
+  const std::string m = w.poll(st, 1'300'000'000);
+  CHECK(m == "collision side silent for 300 ms: force faded to zero");
+  CHECK(w.silent());
+  CHECK(w.poll(st, 1'500'000'000).empty());  // once per episode
+  st.model_seq = 6;
+  st.model_received_ns = 1'600'000'000;
+  CHECK(w.poll(st, 1'600'000'000) == "collision side back: contact models resumed after 600 ms");
+  CHECK_FALSE(w.silent());
+  CHECK(w.episodes() == 1);
+  CHECK(w.longest_ms() == doctest::Approx(500).epsilon(1e-9));
+}
