@@ -9,16 +9,20 @@
 #include <ctime>
 #include <filesystem>
 #include <thread>
+#include <sys/wait.h>
 #include <unistd.h>
+#include <cmath>
 
 #include "app/collision_loop.hpp"
 #include "app/commands.hpp"
 #include "app/distributed.hpp"
 #include "app/run_outputs.hpp"
 #include "app/scene.hpp"
+#include "app/servo_process.hpp"
 #include "app/tree_cache.hpp"
 #include "rt/clock.hpp"
 #include "rt/haptic_servo.hpp"
+#include "rt/shm_segment.hpp"
 #include "rt/telemetry.hpp"
 
 namespace st::app {
@@ -27,33 +31,13 @@ namespace {
 std::atomic<int> g_signal{0};
 extern "C" void on_signal(int sig) { g_signal.store(sig); }
 
-/// Forwards to the real device and keeps the last and peak commanded force for the status line
-/// (relaxed atomic stores: no lock, no syscall on the tick path).
-class MonitoredDevice final : public rt::Device {
- public:
-  explicit MonitoredDevice(rt::Device& inner) : inner_(inner) {}
-  bool read_pose(std::int64_t now_ns, Eigen::Isometry3d& pose) noexcept override { return inner_.read_pose(now_ns, pose); }
-  void command_force(std::int64_t now_ns, const Eigen::Vector3d& f) noexcept override {
-    inner_.command_force(now_ns, f);
-    const double m = f.norm();
-    last_.store(m, std::memory_order_relaxed);
-    if (m > peak_.load(std::memory_order_relaxed)) peak_.store(m, std::memory_order_relaxed);
-  }
-  double max_force_N() const noexcept override { return inner_.max_force_N(); }
-  double last_N() const { return last_.load(std::memory_order_relaxed); }  ///< newest commanded |F|
-  double peak_N() const { return peak_.load(std::memory_order_relaxed); }  ///< largest commanded |F|
-
- private:
-  static_assert(std::atomic<double>::is_always_lock_free);
-  rt::Device& inner_;
-  std::atomic<double> last_{0}, peak_{0};
-};
-
 struct RunArgs {
   std::string scene;
   double duration_s = -1;
   int workers = -1;
   std::string connect, out;
+  bool split = false;       ///< the servo as its own process
+  std::string shm_name;     ///< segment name ("" = /spheretouch-<pid>)
 };
 
 [[noreturn]] void die(int code, const std::string& msg) {
@@ -200,21 +184,36 @@ void run(const RunArgs& a) {
 
   Result<rt::ForceLaw> law = rt::ForceLaw::make(s.law);
   if (!law) die(2, s.file + ": " + law.error());
-  const std::size_t ticks_expected = std::size_t(s.haptic.rate_hz * (s.duration_s + 2));
-  rt::SimulatedDevice sim(script, s.device.user, ticks_expected, s.saturation.peak_N);
-  MonitoredDevice device(sim);
-  std::unique_ptr<rt::Telemetry> telemetry;
+
+  // The triple buffers live in a named shared-memory segment in both modes, so `spheretouch
+  // monitor` can watch any run; with --split the servo process attaches to it.
+  const std::string shm_name = a.shm_name.empty() ? "/spheretouch-" + std::to_string(getpid()) : a.shm_name;
+  Result<std::unique_ptr<rt::ShmSegment>> segr = rt::ShmSegment::create(shm_name);
+  if (!segr) die(2, segr.error());
+  rt::ShmSegment& shm = *segr.value();
+  rt::ShmStatus& status = shm.status();
+
   const std::string csv = dir + "/ticks.csv";
-  if (s.write_trace || s.write_perfetto) {
-    Result<std::unique_ptr<rt::Telemetry>> t = rt::Telemetry::open(csv);
-    if (!t) die(2, t.error());
-    telemetry = std::move(t).value();
+  // In-process servo (no --split): device, telemetry and loop live here.
+  std::unique_ptr<rt::SimulatedDevice> sim;
+  std::unique_ptr<rt::Telemetry> telemetry;
+  std::unique_ptr<rt::HapticServo> servo;
+  rt::HapticLoop loop(s.haptic);
+  if (!a.split) {
+    const std::size_t ticks_expected = std::size_t(s.haptic.rate_hz * (s.duration_s + 2));
+    sim = std::make_unique<rt::SimulatedDevice>(script, s.device.user, ticks_expected, s.saturation.peak_N);
+    if (s.write_trace || s.write_perfetto) {
+      Result<std::unique_ptr<rt::Telemetry>> t = rt::Telemetry::open(csv);
+      if (!t) die(2, t.error());
+      telemetry = std::move(t).value();
+    }
+    servo = std::make_unique<rt::HapticServo>(*sim, shm.poses(), shm.models(), law.value(), s.interp, s.saturation,
+                                              telemetry.get());
+    servo->publish_status_to(&status.servo);
   }
-  auto poses = std::make_unique<rt::TripleBuffer<rt::PoseSample>>();
-  auto models = std::make_unique<rt::TripleBuffer<geom::ContactModel>>();
-  rt::HapticServo servo(device, *poses, *models, law.value(), s.interp, s.saturation, telemetry.get());
-  CollisionLoop collision(probe, object, *poses, *models, collide_fn, s.collision_rate_hz,
+  CollisionLoop collision(probe, object, shm.poses(), shm.models(), collide_fn, s.collision_rate_hz,
                           std::size_t(std::max(1.0, s.duration_s) * 20000));
+  collision.publish_status_to(&status.collision);
 
   struct sigaction sa {};
   sa.sa_handler = on_signal;
@@ -222,38 +221,104 @@ void run(const RunArgs& a) {
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
 
-  rt::HapticLoop loop(s.haptic);
-  collision.start();
-  Result<rt::RtReport> rep = loop.start(servo);
-  if (!rep) {
-    collision.stop();
-    die(1, "haptic loop: " + rep.error());
+  pid_t servo_pid = 0;
+  if (a.split) {
+    // The servo gets the trajectory as a file (it loads no meshes) and the scene for its settings.
+    const std::string script_file = dir + "/script.txt";
+    if (Status w = write_trajectory(script_file, script); !w) die(2, w.error());
+    ServoArgs sa_child;
+    sa_child.shm = shm.name();
+    sa_child.scene = std::filesystem::absolute(a.scene).string();
+    sa_child.script = std::filesystem::absolute(script_file).string();
+    sa_child.out = std::filesystem::absolute(dir).string();
+    sa_child.duration_s = s.duration_s;
+    sa_child.parent = getpid();
+    Result<pid_t> sp = spawn_servo(sa_child);
+    if (!sp) die(1, sp.error());
+    servo_pid = sp.value();
+    // Wait until the servo ticks (or fails to start): its status says so.
+    for (int i = 0; status.servo_state.load(std::memory_order_acquire) < std::uint32_t(rt::ServoState::running); ++i) {
+      int ws = 0;
+      if (waitpid(servo_pid, &ws, WNOHANG) == servo_pid)
+        die(1, "servo process (pid " + std::to_string(servo_pid) + ") failed to start (exit " +
+                   std::to_string(WIFEXITED(ws) ? WEXITSTATUS(ws) : 128 + WTERMSIG(ws)) + ")");
+      if (i > 1000 || g_signal.load()) {  // 10 s
+        kill(servo_pid, SIGKILL);
+        waitpid(servo_pid, &ws, 0);
+        die(1, "servo process (pid " + std::to_string(servo_pid) + ") did not start ticking within 10 s");
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    collision.start();
+  } else {
+    status.servo_start_ticks.store(rt::process_start_ticks(getpid()), std::memory_order_relaxed);
+    status.servo_pid.store(getpid(), std::memory_order_relaxed);
+    status.servo_state.store(std::uint32_t(rt::ServoState::starting), std::memory_order_release);
+    collision.start();
+    Result<rt::RtReport> rep = loop.start(*servo);
+    if (!rep) {
+      collision.stop();
+      die(1, "haptic loop: " + rep.error());
+    }
+    if (!rep.value().all_applied() || rep.value().fifo.requested || rep.value().mlock.requested)
+      std::fprintf(stderr, "real-time: %s\n", rep.value().describe().c_str());
+    status.servo_state.store(std::uint32_t(rt::ServoState::running), std::memory_order_release);
   }
-  if (!rep.value().all_applied() || rep.value().fifo.requested || rep.value().mlock.requested)
-    std::fprintf(stderr, "real-time: %s\n", rep.value().describe().c_str());
-  std::fprintf(stderr, "running %.1f s: %s, collision %s; run directory %s (Ctrl-C stops)\n", s.duration_s,
+  const std::string servo_where =
+      a.split ? "servo process pid " + std::to_string(servo_pid) : std::string("servo thread");
+  std::fprintf(stderr, "running %.1f s: %s, collision %s, %s; shm %s; run directory %s (Ctrl-C stops)\n",
+               s.duration_s,
                s.device.script == "builtin" ? "built-in approach/press/slide/release" : s.device.script.c_str(),
-               backend.c_str(), dir.c_str());
+               backend.c_str(), servo_where.c_str(), shm.name().c_str(), dir.c_str());
 
   const std::int64_t t_start = rt::now_ns();
   std::int64_t last_print = t_start;
   std::uint64_t last_ticks = 0, last_rounds = 0;
   const std::int64_t print_every = tty ? 200'000'000 : 1'000'000'000;
-  while (g_signal.load() == 0) {
+  int servo_exit = -1;        // split: the servo process's exit code once it ended
+  bool forwarded = false;     // split: a signal was passed on to the servo
+  std::int64_t forwarded_ns = 0;
+  SilenceWatch silence(s.interp.stale_timeout_ns);
+  while (true) {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
     const std::int64_t now = rt::now_ns();
     const double elapsed = double(now - t_start) * 1e-9;
-    if (elapsed >= s.duration_s) break;
+    if (a.split) {
+      // The servo ends the run (its duration, or a signal we forward); never wait forever.
+      int ws = 0;
+      if (waitpid(servo_pid, &ws, WNOHANG) == servo_pid) {
+        servo_exit = WIFEXITED(ws) ? WEXITSTATUS(ws) : 128 + WTERMSIG(ws);
+        break;
+      }
+      if ((g_signal.load() && !forwarded) || (elapsed > s.duration_s + 10 && !forwarded)) {
+        kill(servo_pid, SIGTERM);  // it stops ticking, writes its outputs and exits
+        forwarded = true;
+        forwarded_ns = now;
+      } else if (forwarded && now - forwarded_ns > 5'000'000'000) {
+        kill(servo_pid, SIGKILL);  // unresponsive for 5 s: do not hang the run
+      }
+    } else {
+      if (g_signal.load() || elapsed >= s.duration_s) break;
+    }
+    rt::ServoStatus ss;
+    const bool have_ss = status.servo.load(ss);
+    if (!a.split && have_ss) {
+      const std::string msg = silence.poll(ss, now);
+      if (!msg.empty()) std::fprintf(stderr, "%s%s\n", tty && show ? "\n" : "", msg.c_str());
+    }
     if (show && now - last_print >= print_every) {
       const double dt = double(now - last_print) * 1e-9;
-      const std::uint64_t ticks = loop.ticks(), rounds = collision.rounds();
+      const std::uint64_t ticks = have_ss ? ss.ticks : 0, rounds = collision.rounds();
+      const double force = have_ss ? std::sqrt(ss.force_N[0] * ss.force_N[0] + ss.force_N[1] * ss.force_N[1] +
+                                               ss.force_N[2] * ss.force_N[2])
+                                   : 0.0;
       char line[256];
       std::snprintf(line, sizeof line,
                     "t %5.1f s | haptic %6.0f Hz, %llu misses | collision %5.0f Hz, %6.2f ms, %u contacts | "
                     "force %5.2f N | %s%s",
-                    elapsed, double(ticks - last_ticks) / dt, static_cast<unsigned long long>(loop.misses()),
+                    elapsed, double(ticks - last_ticks) / dt, static_cast<unsigned long long>(have_ss ? ss.misses : 0),
                     double(rounds - last_rounds) / dt, double(collision.last_latency_ns()) * 1e-6,
-                    collision.last_contacts(), device.last_N(), backend.c_str(),
+                    collision.last_contacts(), force, backend.c_str(),
                     fleet ? (", " + std::to_string(replied.load()) + "/" + std::to_string(asked.load()) + " answering").c_str() : "");
       if (tty) std::printf("\r\033[K%s", line);
       else std::printf("%s\n", line);
@@ -264,43 +329,75 @@ void run(const RunArgs& a) {
     }
   }
   const std::int64_t t_end = rt::now_ns();
-  loop.stop();
+  ServoResults sres;
+  if (!a.split) {
+    loop.stop();
+    status.servo_state.store(std::uint32_t(rt::ServoState::finished), std::memory_order_release);
+  }
   collision.stop();
   if (telemetry) telemetry->close();
   if (tty && show) std::printf("\n");
   if (g_signal.load()) std::fprintf(stderr, "stopped by signal %d\n", g_signal.load());
 
-  // Summary.
   const double secs = double(t_end - t_start) * 1e-9;
-  const rt::LoopStats& ls = loop.stats();
+  if (a.split) {
+    if (servo_exit != 0) die(1, "servo process (pid " + std::to_string(servo_pid) + ") ended with exit " + std::to_string(servo_exit));
+    Result<ServoResults> r = read_servo_results(dir + "/servo.txt");
+    if (!r) die(1, r.error());
+    sres = r.value();
+  } else {
+    const rt::LoopStats& ls = loop.stats();
+    sres.seconds = secs;
+    sres.ticks = ls.ticks;
+    sres.misses = ls.misses;
+    sres.overruns = ls.overruns;
+    sres.wake_p99_us = double(ls.wake_latency.percentile_ns(0.99)) / 1000.0;
+    sres.peak_force_N = servo->peak_force_N();
+    sres.models = servo->stats().models;
+    if (telemetry) {
+      sres.telemetry_pushed = telemetry->stats().pushed;
+      sres.telemetry_dropped = telemetry->stats().dropped;
+    }
+    sres.device_dropped = sim->dropped_records();
+    sres.silences = silence.episodes();
+    sres.longest_silence_ms = silence.longest_ms();
+  }
+
+  // Summary.
   std::vector<double> lat_ms;
   for (const RoundRecord& r : collision.records()) lat_ms.push_back(double(r.end_ns - r.start_ns) * 1e-6);
-  const rt::TelemetryStats ts = telemetry ? telemetry->stats() : rt::TelemetryStats{};
   std::string summary;
   char buf[512];
   auto add = [&](const char* fmt, auto... v) {
     std::snprintf(buf, sizeof buf, fmt, v...);
     summary += buf;
   };
+  const double servo_secs = sres.seconds > 0 ? sres.seconds : secs;
   add("summary\n");
   add("  duration        %.2f s\n", secs);
-  add("  haptic          %llu ticks (%.1f Hz), %llu misses, %llu overruns, wake-up p99 %.1f us\n",
-      static_cast<unsigned long long>(ls.ticks), double(ls.ticks) / secs, static_cast<unsigned long long>(ls.misses),
-      static_cast<unsigned long long>(ls.overruns), double(ls.wake_latency.percentile_ns(0.99)) / 1000.0);
+  add("  haptic          %llu ticks (%.1f Hz), %llu misses, %llu overruns, wake-up p99 %.1f us; %s\n",
+      static_cast<unsigned long long>(sres.ticks), double(sres.ticks) / servo_secs,
+      static_cast<unsigned long long>(sres.misses), static_cast<unsigned long long>(sres.overruns), sres.wake_p99_us,
+      servo_where.c_str());
   add("  collision       %llu rounds (%.1f Hz), latency p50 %.3f ms, p99 %.3f ms, %llu incomplete; %s\n",
       static_cast<unsigned long long>(collision.rounds()), double(collision.rounds()) / secs, percentile(lat_ms, 0.5),
       percentile(lat_ms, 0.99), static_cast<unsigned long long>(collision.incomplete()), backend.c_str());
-  add("  force           peak %.3f N (limit %.2f N), peak penetration %.3f mm\n", device.peak_N(), s.saturation.peak_N,
+  if (sres.silences)
+    add("  silences        %llu: no contact model for the stale timeout, force faded to zero (longest %.0f ms)\n",
+        static_cast<unsigned long long>(sres.silences), sres.longest_silence_ms);
+  add("  force           peak %.3f N (limit %.2f N), peak penetration %.3f mm\n", sres.peak_force_N, s.saturation.peak_N,
       std::max(0.0, collision.peak_penetration_mm()));
-  add("  telemetry       %llu samples, %llu dropped\n", static_cast<unsigned long long>(ts.pushed),
-      static_cast<unsigned long long>(ts.dropped));
-  if (sim.dropped_records()) add("  device records  %llu dropped\n", static_cast<unsigned long long>(sim.dropped_records()));
+  add("  telemetry       %llu samples, %llu dropped\n", static_cast<unsigned long long>(sres.telemetry_pushed),
+      static_cast<unsigned long long>(sres.telemetry_dropped));
+  if (sres.device_dropped) add("  device records  %llu dropped\n", static_cast<unsigned long long>(sres.device_dropped));
   add("  outputs         %s/\n", dir.c_str());
-  if (s.write_perfetto && telemetry) {
+  const bool have_csv = (s.write_trace || s.write_perfetto) && std::filesystem::exists(csv);
+  if (s.write_perfetto && have_csv) {
     if (Status st = write_trace_json(dir + "/trace.json", csv, collision.records()); !st) add("  trace.json: %s\n", st.error().c_str());
     else add("    trace.json    haptic ticks and collision rounds (open in ui.perfetto.dev or chrome://tracing)\n");
   }
   if (s.write_trace) add("    ticks.csv     one line per haptic tick\n");
+  if (a.split) add("    servo.txt     the servo process's counters; script.txt its trajectory\n");
   if (s.write_ply) {
     if (collision.peak_pairs().empty()) {
       add("    contact.ply   not written: the probe never touched the object\n");
@@ -315,7 +412,7 @@ void run(const RunArgs& a) {
     std::fputs(summary.c_str(), f);
     std::fclose(f);
   }
-  if (!s.write_trace && telemetry) std::filesystem::remove(csv, ec);
+  if (!s.write_trace && have_csv) std::filesystem::remove(csv, ec);
 }
 
 }  // namespace
@@ -325,7 +422,8 @@ void add_run(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand(
       "run", "Touch an object: haptic loop (1 kHz), collision thread, workers and telemetry, with a simulated\n"
              "device running the scene's script. Writes a run directory: ticks.csv, trace.json, contact.ply,\n"
-             "summary.txt.");
+             "summary.txt. --split: the servo runs as its own process on a shared-memory segment\n"
+             "(`spheretouch monitor` watches either kind of run).");
   cmd->add_option("scene", a->scene, "scene file (configs/demo.toml documents every field)")
       ->required()
       ->check(CLI::ExistingFile);
@@ -334,6 +432,11 @@ void add_run(CLI::App& app) {
       ->check(CLI::Range(0, 64));
   cmd->add_option("--connect", a->connect, "worker daemons EP1,EP2,... (tcp:// or ipc://; overrides [workers])");
   cmd->add_option("--out", a->out, "run directory (default: a new runs/<timestamp>)");
+  cmd->add_flag("--split", a->split,
+                "run the haptic servo as its own process on the shared-memory segment: it keeps the device\n"
+                "safe (force fades to zero) and finishes its run if the collision side dies");
+  cmd->add_option("--shm-name", a->shm_name,
+                  "shared-memory segment of the run (default /spheretouch-<pid>); `spheretouch monitor` attaches to it");
   cmd->callback([a] { run(*a); });
 }
 

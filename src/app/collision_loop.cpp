@@ -64,6 +64,18 @@ void CollisionLoop::run() {
     if (!out.complete) incomplete_.fetch_add(1, std::memory_order_relaxed);
     last_latency_ns_.store(t1 - t0, std::memory_order_relaxed);
     last_contacts_.store(m.contacts, std::memory_order_relaxed);
+    if (status_) {
+      rt::CollisionStatus st;
+      st.updated_ns = t1;
+      st.rounds = rounds_.load(std::memory_order_relaxed);
+      st.model_seq = m.seq;
+      st.pose_seq = sample.seq;
+      st.latency_ns = t1 - t0;
+      st.penetration_mm = m.penetration_mm;
+      st.contacts = m.contacts;
+      st.incomplete = static_cast<std::uint32_t>(incomplete_.load(std::memory_order_relaxed));
+      status_->store(st);
+    }
     if (records_.size() < max_rounds_)
       records_.push_back({t0, t1, sample.seq, m.pairs, m.contacts, m.penetration_mm, out.complete});
     if (m.in_contact() && m.penetration_mm > peak_pd_) {

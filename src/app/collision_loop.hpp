@@ -9,6 +9,7 @@
 
 #include "geom/contact.hpp"
 #include "rt/pose_sample.hpp"
+#include "rt/shm_status.hpp"
 #include "rt/triple_buffer.hpp"
 
 namespace st::app {
@@ -39,6 +40,8 @@ class CollisionLoop {
                 rt::TripleBuffer<geom::ContactModel>& models, CollideFn collide, double rate_hz,
                 std::size_t max_rounds);
   ~CollisionLoop();
+  /// Publish a CollisionStatus after every round into `status` (null = off); before start().
+  void publish_status_to(rt::SeqLock<rt::CollisionStatus>* status) { status_ = status; }
   void start();  ///< starts the thread
   void stop();   ///< stops and joins it (idempotent)
 
@@ -59,6 +62,7 @@ class CollisionLoop {
   rt::TripleBuffer<rt::PoseSample>& poses_;
   rt::TripleBuffer<geom::ContactModel>& models_;
   CollideFn collide_;
+  rt::SeqLock<rt::CollisionStatus>* status_ = nullptr;
   double rate_hz_;
   std::size_t max_rounds_;
   std::atomic<bool> stop_{false};

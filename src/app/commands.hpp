@@ -9,6 +9,8 @@ void add_info(CLI::App& app);    ///< spheretouch info MESH...
 void add_export(CLI::App& app);  ///< spheretouch export IN -o OUT (scale, subdivide, write OFF)
 void add_query(CLI::App& app);   ///< spheretouch query PROBE OBJECT --poses FILE
 void add_build(CLI::App& app);   ///< spheretouch build MESH -o FILE (sphere-tree file)
-void add_run(CLI::App& app);     ///< spheretouch run SCENE (the main job)
+void add_run(CLI::App& app);     ///< spheretouch run SCENE [--split] (the main job)
+void add_servo(CLI::App& app);   ///< spheretouch servo ... (hidden: the servo process of run --split)
+void add_monitor(CLI::App& app); ///< spheretouch monitor [--name SEGMENT] (watch a live run)
 
 }  // namespace st::app

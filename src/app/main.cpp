@@ -15,6 +15,8 @@ int main(int argc, char** argv) {
   st::app::add_query(app);
   st::app::add_build(app);
   st::app::add_run(app);
+  st::app::add_monitor(app);
+  st::app::add_servo(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -32,6 +32,7 @@ void HapticServo::tick(const TickInfo& info) noexcept {
     PoseSample& ps = poses_.input();
     ps.seq = ++pose_seq_;
     ps.sampled_ns = now;
+    pose_ns_ = now;
     ps.pose = geom::to_pod(pose);
     poses_.publish();
   } else {
@@ -41,6 +42,8 @@ void HapticServo::tick(const TickInfo& info) noexcept {
     const geom::ContactModel& m = models_.output();
     interp_.on_model(m, now);
     model_pose_ns_ = m.pose_sampled_ns;
+    model_received_ns_ = now;
+    model_contacts_ = m.contacts;
     ++stats_.models;
   }
   const Eigen::Vector3d raw = have_pose ? interp_.force(pose, now) : Eigen::Vector3d::Zero();
@@ -50,6 +53,29 @@ void HapticServo::tick(const TickInfo& info) noexcept {
   if (sat_.limited()) ++stats_.saturated;
   device_.command_force(now, f);
   ++stats_.ticks;
+  const double f_norm = f.norm();
+  if (f_norm > peak_force_N_) peak_force_N_ = f_norm;
+  const std::uint32_t flags =
+      (interp_.state().in_contact ? 1u : 0u) | (sat_.limited() ? 2u : 0u) | (have_pose ? 0u : 4u);
+  if (status_ && info.tick % kStatusEveryTicks == 0) {
+    ServoStatus st;
+    st.updated_ns = now;
+    st.ticks = info.tick + 1;
+    st.misses = info.deadline_index - info.tick;
+    st.pose_seq = pose_seq_;
+    st.pose_sampled_ns = pose_ns_;
+    st.model_seq = interp_.model_seq();
+    st.model_received_ns = model_received_ns_;
+    st.model_pose_ns = model_pose_ns_;
+    st.models = stats_.models;
+    for (int i = 0; i < 3; ++i) st.force_N[i] = f(i);
+    st.peak_force_N = peak_force_N_;
+    st.penetration_mm = interp_.state().penetration_mm;
+    st.fade = interp_.state().fade;
+    st.contacts = model_contacts_;
+    st.flags = flags;
+    status_->store(st);
+  }
   if (telemetry_) {
     TelemetrySample s;
     s.tick = info.tick;
@@ -64,7 +90,7 @@ void HapticServo::tick(const TickInfo& info) noexcept {
     s.penetration_mm = interp_.state().penetration_mm;
     s.fade = interp_.state().fade;
     s.ceiling_N = sat_.ceiling_N();
-    s.flags = (interp_.state().in_contact ? 1u : 0u) | (sat_.limited() ? 2u : 0u) | (have_pose ? 0u : 4u);
+    s.flags = flags;
     s.misses = static_cast<std::uint32_t>(info.deadline_index - info.tick);
     telemetry_->push(s);
   }

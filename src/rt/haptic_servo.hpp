@@ -11,6 +11,7 @@
 #include "rt/interpolator.hpp"
 #include "rt/pose_sample.hpp"
 #include "rt/saturation.hpp"
+#include "rt/shm_status.hpp"
 #include "rt/telemetry.hpp"
 #include "rt/triple_buffer.hpp"
 
@@ -33,7 +34,11 @@ class HapticServo final : public TickHandler {
               const ForceLaw& law, const InterpolatorConfig& interp, SaturationConfig saturation,
               Telemetry* telemetry);
   void tick(const TickInfo& info) noexcept override;
+  /// Publish a ServoStatus every kStatusEveryTicks ticks into `status` (null = off). Set before
+  /// the loop starts; the servo is the SeqLock's only writer.
+  void publish_status_to(SeqLock<ServoStatus>* status) { status_ = status; }
   const ServoStats& stats() const { return stats_; }             ///< counters
+  double peak_force_N() const { return peak_force_N_; }          ///< largest |force| commanded (after the loop)
   const Interpolator& interpolator() const { return interp_; }   ///< for inspection
   const Saturator& saturator() const { return sat_; }            ///< for inspection
 
@@ -44,7 +49,12 @@ class HapticServo final : public TickHandler {
   Interpolator interp_;
   Saturator sat_;
   Telemetry* telemetry_;
+  SeqLock<ServoStatus>* status_ = nullptr;
   ServoStats stats_;
+  double peak_force_N_ = 0;         ///< largest |force| commanded
+  std::int64_t model_received_ns_ = 0;
+  std::int64_t pose_ns_ = 0;        ///< sampling time of the newest published pose
+  std::uint32_t model_contacts_ = 0;
   std::uint64_t pose_seq_ = 0;
   std::int64_t last_ns_ = 0;
   std::int64_t model_pose_ns_ = 0;  ///< pose_sampled_ns of the newest model

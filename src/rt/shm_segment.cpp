@@ -152,15 +152,15 @@ Result<std::unique_ptr<ShmSegment>> ShmSegment::create(const std::string& name) 
   return Error{"shm " + n + ": another process keeps re-creating it; giving up"};
 }
 
-Result<std::unique_ptr<ShmSegment>> ShmSegment::attach(const std::string& name) {
-  auto nn = normalise(name);
-  if (!nn) return Error{nn.error()};
-  const std::string& n = nn.value();
-  const int fd = shm_open(n.c_str(), O_RDWR, 0);
+namespace {
+
+// Opens `n` and checks its header against this build; returns the open fd (caller closes) and
+// the header copy, or the reason to refuse it. `need_live_creator`: refuse a dead creator's.
+Result<int> open_checked(const std::string& n, int oflag, bool need_live_creator, ShmHeader& h) {
+  const int fd = shm_open(n.c_str(), oflag, 0);
   if (fd < 0) return Error{sys_error("shm " + n + ": cannot attach")};
-  ShmHeader h{};
   const long size = read_header(fd, h);
-  auto refuse = [&](const std::string& why) -> Result<std::unique_ptr<ShmSegment>> {
+  auto refuse = [&](const std::string& why) -> Result<int> {
     close(fd);
     return Error{"shm " + n + ": " + why};
   };
@@ -180,10 +180,22 @@ Result<std::unique_ptr<ShmSegment>> ShmSegment::attach(const std::string& name) 
                   std::to_string(h.model_size) + " (file " + std::to_string(size) + "), expected " +
                   std::to_string(sizeof(ShmHeader)) + "/" + std::to_string(sizeof(ShmLayout)) + "/" +
                   std::to_string(sizeof(PoseSample)) + "/" + std::to_string(sizeof(geom::ContactModel)));
-  if (!process_alive(h.creator_pid, h.creator_start_ticks))
+  if (need_live_creator && !process_alive(h.creator_pid, h.creator_start_ticks))
     return refuse("stale: its creator " + describe_creator(h) + " is dead; the creator must create it anew");
-  void* p = mmap(nullptr, sizeof(ShmLayout), PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
-  close(fd);
+  return fd;
+}
+
+}  // namespace
+
+Result<std::unique_ptr<ShmSegment>> ShmSegment::attach(const std::string& name) {
+  auto nn = normalise(name);
+  if (!nn) return Error{nn.error()};
+  const std::string& n = nn.value();
+  ShmHeader h{};
+  Result<int> fd = open_checked(n, O_RDWR, true, h);
+  if (!fd) return Error{fd.error()};
+  void* p = mmap(nullptr, sizeof(ShmLayout), PROT_READ | PROT_WRITE, MAP_SHARED, fd.value(), 0);
+  close(fd.value());
   if (p == MAP_FAILED) return Error{sys_error("mmap " + n)};
   auto* layout = std::launder(static_cast<ShmLayout*>(p));
   if (layout->header.state.load(std::memory_order_acquire) != 1) {
@@ -193,18 +205,46 @@ Result<std::unique_ptr<ShmSegment>> ShmSegment::attach(const std::string& name) 
   return std::unique_ptr<ShmSegment>(new ShmSegment(n, layout, false));
 }
 
-ShmSegment::~ShmSegment() {
-  if (creator_) {
-    // Unlink only if the name still refers to our segment (not a replacement by someone else).
-    const int fd = shm_open(name_.c_str(), O_RDONLY, 0);
-    if (fd >= 0) {
-      ShmHeader h{};
-      if (read_header(fd, h) >= static_cast<long>(sizeof(ShmHeader)) && h.magic == kShmMagic &&
-          h.creator_pid == layout_->header.creator_pid && h.created_ns == layout_->header.created_ns)
-        shm_unlink(name_.c_str());
-      close(fd);
-    }
+Result<std::unique_ptr<const ShmSegment>> ShmSegment::attach_read_only(const std::string& name) {
+  auto nn = normalise(name);
+  if (!nn) return Error{nn.error()};
+  const std::string& n = nn.value();
+  ShmHeader h{};
+  Result<int> fd = open_checked(n, O_RDONLY, false, h);
+  if (!fd) return Error{fd.error()};
+  void* p = mmap(nullptr, sizeof(ShmLayout), PROT_READ, MAP_SHARED, fd.value(), 0);
+  close(fd.value());
+  if (p == MAP_FAILED) return Error{sys_error("mmap " + n)};
+  auto* layout = std::launder(static_cast<ShmLayout*>(p));
+  if (layout->header.state.load(std::memory_order_acquire) != 1) {
+    munmap(p, sizeof(ShmLayout));
+    return Error{"shm " + n + ": still being initialised by " + describe_creator(h) + "; try again"};
   }
+  return std::unique_ptr<const ShmSegment>(new ShmSegment(n, layout, false));
+}
+
+bool ShmSegment::creator_alive() const {
+  return process_alive(layout_->header.creator_pid, layout_->header.creator_start_ticks);
+}
+
+bool ShmSegment::names_this() const {
+  const int fd = shm_open(name_.c_str(), O_RDONLY, 0);
+  if (fd < 0) return false;
+  ShmHeader h{};
+  const bool same = read_header(fd, h) >= static_cast<long>(sizeof(ShmHeader)) && h.magic == kShmMagic &&
+                    h.creator_pid == layout_->header.creator_pid && h.created_ns == layout_->header.created_ns;
+  close(fd);
+  return same;
+}
+
+bool ShmSegment::unlink_if_orphaned() const {
+  if (creator_alive() || !names_this()) return false;
+  return shm_unlink(name_.c_str()) == 0;
+}
+
+ShmSegment::~ShmSegment() {
+  // Unlink only if the name still refers to our segment (not a replacement by someone else).
+  if (creator_ && names_this()) shm_unlink(name_.c_str());
   munmap(layout_, sizeof(ShmLayout));
 }
 

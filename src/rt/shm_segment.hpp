@@ -12,6 +12,7 @@
 #include "geom/contact.hpp"
 #include "geom/result.hpp"
 #include "rt/pose_sample.hpp"
+#include "rt/shm_status.hpp"
 #include "rt/triple_buffer.hpp"
 
 namespace st::rt {
@@ -35,14 +36,16 @@ struct alignas(kCacheLine) ShmHeader {
 
 /// "STSHMRT1" little-endian: identifies a spheretouch real-time segment.
 inline constexpr std::uint64_t kShmMagic = 0x3154524D48535453ull;
-/// Bump on any change of ShmHeader, ShmLayout, PoseSample or ContactModel.
-inline constexpr std::uint32_t kShmLayoutVersion = 1;
+/// Bump on any change of ShmHeader, ShmLayout, PoseSample, ContactModel or ShmStatus.
+/// 2: the status area (ShmStatus) after the triple buffers.
+inline constexpr std::uint32_t kShmLayoutVersion = 2;
 
 /// The whole segment.
 struct ShmLayout {
   ShmHeader header;                          ///< guard
   TripleBuffer<PoseSample> poses;            ///< haptic → collision
   TripleBuffer<geom::ContactModel> models;   ///< collision → haptic
+  ShmStatus status;                          ///< live status, any number of readers
 };
 
 /// A mapping of the segment. The creator unlinks the name when destroyed.
@@ -55,6 +58,10 @@ class ShmSegment {
   static Result<std::unique_ptr<ShmSegment>> create(const std::string& name);
   /// Attaches to an existing, ready segment of this layout whose creator is alive.
   static Result<std::unique_ptr<ShmSegment>> attach(const std::string& name);
+  /// Maps an existing segment of this layout read-only (PROT_READ), for watchers: any number
+  /// may attach, and the creator may be dead (a split servo outliving its collision side).
+  /// Only header() and status() may be used on it.
+  static Result<std::unique_ptr<const ShmSegment>> attach_read_only(const std::string& name);
   /// Removes the name (no error if absent).
   static Status remove(const std::string& name);
   ~ShmSegment();
@@ -63,13 +70,21 @@ class ShmSegment {
 
   TripleBuffer<PoseSample>& poses() { return layout_->poses; }            ///< haptic → collision
   TripleBuffer<geom::ContactModel>& models() { return layout_->models; }  ///< collision → haptic
+  ShmStatus& status() { return layout_->status; }                         ///< live status (writers)
+  const ShmStatus& status() const { return layout_->status; }             ///< live status (readers)
   const ShmHeader& header() const { return layout_->header; }             ///< the guard
+  /// True when the creator recorded in the header is alive.
+  bool creator_alive() const;
+  /// Unlinks the name if it still refers to this segment and its creator is dead (an attacher
+  /// that outlived the creator tidies up); true when it did.
+  bool unlink_if_orphaned() const;
   const std::string& name() const { return name_; }                       ///< normalised name
   bool creator() const { return creator_; }                               ///< this mapping created it
 
  private:
   ShmSegment(std::string name, ShmLayout* layout, bool creator)
       : name_(std::move(name)), layout_(layout), creator_(creator) {}
+  bool names_this() const;  ///< the name still refers to this segment (same creator and time)
   std::string name_;
   ShmLayout* layout_;
   bool creator_;

@@ -184,3 +184,53 @@ TEST_CASE("process_alive: self alive, pid reuse detected") {
   CHECK_FALSE(process_alive(getpid(), start + 1));
   CHECK_FALSE(process_alive(-1, 0));
 }
+
+TEST_CASE("ShmSegment: read-only attach sees the status area, survives its creator, checks the header") {
+  const std::string name = unique_name("ro");
+  auto seg = ShmSegment::create(name);
+  REQUIRE_MESSAGE(seg.ok(), err_of(seg));
+  ServoStatus sv;
+  sv.ticks = 42;
+  seg.value()->status().servo.store(sv);
+  seg.value()->status().servo_state.store(static_cast<std::uint32_t>(ServoState::running));
+  auto ro = ShmSegment::attach_read_only(name);
+  REQUIRE_MESSAGE(ro.ok(), err_of(ro));
+  ServoStatus got;
+  REQUIRE(ro.value()->status().servo.load(got));
+  CHECK(got.ticks == 42);
+  CHECK(ro.value()->creator_alive());
+  CHECK_FALSE(ro.value()->unlink_if_orphaned());  // creator alive: not ours to remove
+  auto ro2 = ShmSegment::attach_read_only(name);  // any number of read-only attachers
+  CHECK(ro2.ok());
+
+  // Wrong magic: refused with a clear error.
+  const int fd = shm_open(name.c_str(), O_RDWR, 0);
+  REQUIRE(fd >= 0);
+  void* p = mmap(nullptr, sizeof(ShmLayout), PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+  close(fd);
+  REQUIRE(p != MAP_FAILED);
+  auto* h = static_cast<ShmHeader*>(p);
+  h->magic ^= 1;
+  auto bad = ShmSegment::attach_read_only(name);
+  REQUIRE_FALSE(bad.ok());
+  CHECK_MESSAGE(bad.error().find("magic") != std::string::npos, bad.error());
+  h->magic ^= 1;
+  munmap(p, sizeof(ShmLayout));
+
+  // A dead creator's segment: attach refuses it, read-only attach still shows it.
+  const std::string dead = unique_name("ro-dead");
+  const pid_t child = fork();
+  REQUIRE(child >= 0);
+  if (child == 0) {
+    auto s = ShmSegment::create(dead);
+    if (!s.ok()) _exit(1);
+    (void)s.value().release();
+    _exit(0);
+  }
+  REQUIRE(wait_child(child) == 0);
+  auto rd = ShmSegment::attach_read_only(dead);
+  REQUIRE_MESSAGE(rd.ok(), err_of(rd));
+  CHECK_FALSE(rd.value()->creator_alive());
+  CHECK(rd.value()->unlink_if_orphaned());  // a survivor tidies up the name
+  CHECK_FALSE(ShmSegment::attach_read_only(dead).ok());
+}

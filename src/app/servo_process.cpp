@@ -1,0 +1,286 @@
+// The split servo process: see servo_process.hpp.
+#include "app/servo_process.hpp"
+
+#include <spawn.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <thread>
+
+#include "app/commands.hpp"
+#include "app/scene.hpp"
+#include "rt/clock.hpp"
+#include "rt/haptic_servo.hpp"
+#include "rt/shm_segment.hpp"
+#include "rt/telemetry.hpp"
+
+extern char** environ;
+
+namespace st::app {
+
+Status write_servo_results(const std::string& path, const ServoResults& r) {
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (!f) return fail(path, ": cannot create");
+  std::fprintf(f, "# spheretouch servo results: key value\n");
+  std::fprintf(f, "seconds %.6f\nticks %llu\nmisses %llu\noverruns %llu\nwake_p99_us %.3f\npeak_force_N %.9g\n",
+               r.seconds, static_cast<unsigned long long>(r.ticks), static_cast<unsigned long long>(r.misses),
+               static_cast<unsigned long long>(r.overruns), r.wake_p99_us, r.peak_force_N);
+  std::fprintf(f, "models %llu\ntelemetry_pushed %llu\ntelemetry_dropped %llu\ndevice_dropped %llu\n",
+               static_cast<unsigned long long>(r.models), static_cast<unsigned long long>(r.telemetry_pushed),
+               static_cast<unsigned long long>(r.telemetry_dropped), static_cast<unsigned long long>(r.device_dropped));
+  std::fprintf(f, "silences %llu\nlongest_silence_ms %.3f\ncollision_died %d\ncollision_died_at_s %.6f\nsignal %d\n",
+               static_cast<unsigned long long>(r.silences), r.longest_silence_ms, r.collision_died,
+               r.collision_died_at_s, r.signal);
+  const bool ok = std::ferror(f) == 0;
+  if (std::fclose(f) != 0 || !ok) return fail(path, ": write error");
+  return Ok{};
+}
+
+Result<ServoResults> read_servo_results(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return fail(path, ": cannot read (the servo process wrote no results)");
+  std::map<std::string, double> kv;
+  std::string line;
+  for (int n = 1; std::getline(in, line); ++n) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ls(line);
+    std::string key;
+    double v = 0;
+    if (!(ls >> key >> v)) return fail(path, ":", n, ": expected 'key number'");
+    kv[key] = v;
+  }
+  ServoResults r;
+  auto u = [&](const char* k, std::uint64_t& x) { x = static_cast<std::uint64_t>(kv[k]); };
+  r.seconds = kv["seconds"];
+  u("ticks", r.ticks);
+  u("misses", r.misses);
+  u("overruns", r.overruns);
+  r.wake_p99_us = kv["wake_p99_us"];
+  r.peak_force_N = kv["peak_force_N"];
+  u("models", r.models);
+  u("telemetry_pushed", r.telemetry_pushed);
+  u("telemetry_dropped", r.telemetry_dropped);
+  u("device_dropped", r.device_dropped);
+  u("silences", r.silences);
+  r.longest_silence_ms = kv["longest_silence_ms"];
+  r.collision_died = static_cast<int>(kv["collision_died"]);
+  r.collision_died_at_s = kv.count("collision_died_at_s") ? kv["collision_died_at_s"] : -1;
+  r.signal = static_cast<int>(kv["signal"]);
+  if (!kv.count("ticks")) return fail(path, ": no 'ticks' line (truncated?)");
+  return r;
+}
+
+std::string SilenceWatch::poll(const rt::ServoStatus& st, std::int64_t now_ns) {
+  if (st.model_seq == 0) return "";  // no model yet: nothing to fade
+  char buf[160];
+  if (st.model_seq != last_seq_) {
+    last_seq_ = st.model_seq;
+    if (!silent_) return "";
+    silent_ = false;
+    std::snprintf(buf, sizeof buf, "collision side back: contact models resumed after %.0f ms",
+                  double(st.model_received_ns - since_ns_) * 1e-6);
+    return buf;
+  }
+  const std::int64_t idle = now_ns - st.model_received_ns;
+  if (silent_) {
+    longest_ms_ = std::max(longest_ms_, double(idle) * 1e-6);
+    return "";
+  }
+  // Report once the stale timeout has passed and the tick has faded the force all the way.
+  if (idle < stale_ns_ || st.fade != 0.0) return "";
+  silent_ = true;
+  since_ns_ = st.model_received_ns;
+  ++episodes_;
+  longest_ms_ = std::max(longest_ms_, double(idle) * 1e-6);
+  std::snprintf(buf, sizeof buf, "collision side silent for %.0f ms: force faded to zero", double(idle) * 1e-6);
+  return buf;
+}
+
+Status write_trajectory(const std::string& path, const rt::Trajectory& t) {
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (!f) return fail(path, ": cannot create");
+  std::fprintf(f, "# spheretouch trajectory: t_s then the probe -> object pose, row-major 4x4\n");
+  for (const rt::TimedPose& k : t.keys) {
+    std::fprintf(f, "%.17g", k.t_s);
+    for (int r = 0; r < 4; ++r)
+      for (int c = 0; c < 4; ++c) std::fprintf(f, " %.17g", k.pose.matrix()(r, c));
+    std::fprintf(f, "\n");
+  }
+  const bool ok = std::ferror(f) == 0;
+  if (std::fclose(f) != 0 || !ok) return fail(path, ": write error");
+  return Ok{};
+}
+
+Result<pid_t> spawn_servo(const ServoArgs& a) {
+  char exe[4096];
+  const ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
+  if (n <= 0) return fail("servo process: cannot find this executable (/proc/self/exe): ", std::strerror(errno));
+  exe[n] = 0;
+  char dur[64];
+  std::snprintf(dur, sizeof dur, "%.17g", a.duration_s);
+  std::vector<std::string> args = {"spheretouch", "servo", "--shm", a.shm, "--scene", a.scene, "--script", a.script,
+                                   "--out", a.out, "--duration", dur, "--parent", std::to_string(a.parent)};
+  std::vector<char*> argv;
+  for (std::string& s : args) argv.push_back(s.data());
+  argv.push_back(nullptr);
+  pid_t pid = 0;
+  if (const int e = posix_spawn(&pid, exe, nullptr, nullptr, argv.data(), environ); e != 0)
+    return fail("servo process: cannot start ", exe, ": ", std::strerror(e));
+  return pid;
+}
+
+namespace {
+
+std::atomic<int> g_servo_signal{0};
+extern "C" void on_servo_signal(int sig) { g_servo_signal.store(sig); }
+
+[[noreturn]] void servo_die(int code, const std::string& msg) {
+  std::fprintf(stderr, "spheretouch servo: %s\n", msg.c_str());
+  throw CLI::RuntimeError(code);
+}
+
+void run_servo(const ServoArgs& a) {
+  Result<Scene> sr = load_scene(a.scene);
+  if (!sr) servo_die(2, sr.error());
+  Scene s = std::move(sr).value();
+  if (a.duration_s > 0) s.duration_s = a.duration_s;
+  Result<rt::Trajectory> script = rt::load_trajectory(a.script);
+  if (!script) servo_die(2, script.error());
+  Result<std::unique_ptr<rt::ShmSegment>> seg = rt::ShmSegment::attach(a.shm);
+  if (!seg) servo_die(2, seg.error());
+  rt::ShmSegment& shm = *seg.value();
+  rt::ShmStatus& status = shm.status();
+  status.servo_start_ticks.store(rt::process_start_ticks(getpid()), std::memory_order_relaxed);
+  status.split.store(1, std::memory_order_relaxed);
+  status.servo_pid.store(getpid(), std::memory_order_relaxed);
+  status.servo_state.store(std::uint32_t(rt::ServoState::starting), std::memory_order_release);
+
+  Result<rt::ForceLaw> law = rt::ForceLaw::make(s.law);
+  if (!law) servo_die(2, s.file + ": " + law.error());
+  const std::size_t ticks_expected = std::size_t(s.haptic.rate_hz * (s.duration_s + 2));
+  rt::SimulatedDevice sim(std::move(script).value(), s.device.user, ticks_expected, s.saturation.peak_N);
+  std::unique_ptr<rt::Telemetry> telemetry;
+  if (s.write_trace || s.write_perfetto) {
+    Result<std::unique_ptr<rt::Telemetry>> t = rt::Telemetry::open(a.out + "/ticks.csv");
+    if (!t) servo_die(2, t.error());
+    telemetry = std::move(t).value();
+  }
+  rt::HapticServo servo(sim, shm.poses(), shm.models(), law.value(), s.interp, s.saturation, telemetry.get());
+  servo.publish_status_to(&status.servo);
+
+  struct sigaction sa {};
+  sa.sa_handler = on_servo_signal;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+
+  rt::HapticLoop loop(s.haptic);
+  Result<rt::RtReport> rep = loop.start(servo);
+  if (!rep) servo_die(1, "haptic loop: " + rep.error());
+  if (!rep.value().all_applied() || rep.value().fifo.requested || rep.value().mlock.requested)
+    std::fprintf(stderr, "spheretouch servo: real-time: %s\n", rep.value().describe().c_str());
+  status.servo_state.store(std::uint32_t(rt::ServoState::running), std::memory_order_release);
+
+  // The watcher: this (non-real-time) thread, every 10 ms. The tick path never makes a syscall
+  // for it; getppid() and the status snapshot are read here.
+  const std::int64_t t_start = rt::now_ns();
+  ServoResults res;
+  SilenceWatch silence(s.interp.stale_timeout_ns);
+  bool parent_dead = false;
+  while (g_servo_signal.load() == 0) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    const std::int64_t now = rt::now_ns();
+    const double t = double(now - t_start) * 1e-9;
+    if (t >= s.duration_s) break;
+    if (!parent_dead && getppid() != a.parent) {  // reparented: the collision process is gone
+      parent_dead = true;
+      res.collision_died = 1;
+      res.collision_died_at_s = t;
+      status.collision_lost.store(2, std::memory_order_relaxed);
+      std::fprintf(stderr,
+                   "spheretouch servo: collision process (pid %d) died at t %.2f s; the force fades to zero "
+                   "after the %.0f ms stale timeout; ticking on to the end of the run (%.1f s)\n",
+                   a.parent, t, double(s.interp.stale_timeout_ns) * 1e-6, s.duration_s);
+    }
+    rt::ServoStatus st;
+    if (status.servo.load(st)) {
+      const std::string msg = silence.poll(st, now);
+      if (!msg.empty()) {
+        std::fprintf(stderr, "spheretouch servo: %s\n", msg.c_str());
+        if (!parent_dead) status.collision_lost.store(silence.silent() ? 1 : 0, std::memory_order_relaxed);
+      }
+    }
+  }
+  const std::int64_t t_end = rt::now_ns();
+  loop.stop();
+  if (telemetry) telemetry->close();
+  status.servo_state.store(std::uint32_t(rt::ServoState::finished), std::memory_order_release);
+
+  const rt::LoopStats& ls = loop.stats();
+  res.seconds = double(t_end - t_start) * 1e-9;
+  res.ticks = ls.ticks;
+  res.misses = ls.misses;
+  res.overruns = ls.overruns;
+  res.wake_p99_us = double(ls.wake_latency.percentile_ns(0.99)) / 1000.0;
+  res.peak_force_N = servo.peak_force_N();
+  res.models = servo.stats().models;
+  if (telemetry) {
+    res.telemetry_pushed = telemetry->stats().pushed;
+    res.telemetry_dropped = telemetry->stats().dropped;
+  }
+  res.device_dropped = sim.dropped_records();
+  res.silences = silence.episodes();
+  res.longest_silence_ms = silence.longest_ms();
+  res.signal = g_servo_signal.load();
+  if (Status w = write_servo_results(a.out + "/servo.txt", res); !w) servo_die(1, w.error());
+  if (parent_dead) {
+    // Nobody else will report this run: the servo's own summary, and the segment's name removed.
+    char buf[1024];
+    std::snprintf(buf, sizeof buf,
+                  "summary (servo process only: the collision process died)\n"
+                  "  duration        %.2f s\n"
+                  "  haptic          %llu ticks (%.1f Hz), %llu misses, %llu overruns, wake-up p99 %.1f us\n"
+                  "  collision side  died at t %.2f s; %llu silence(s), longest %.0f ms, force faded to zero\n"
+                  "  force           peak %.3f N\n"
+                  "  telemetry       %llu samples, %llu dropped\n"
+                  "  outputs         %s/ (ticks.csv, servo.txt; no trace.json or contact.ply)\n",
+                  res.seconds, static_cast<unsigned long long>(res.ticks), double(res.ticks) / res.seconds,
+                  static_cast<unsigned long long>(res.misses), static_cast<unsigned long long>(res.overruns),
+                  res.wake_p99_us, res.collision_died_at_s, static_cast<unsigned long long>(res.silences),
+                  res.longest_silence_ms, res.peak_force_N, static_cast<unsigned long long>(res.telemetry_pushed),
+                  static_cast<unsigned long long>(res.telemetry_dropped), a.out.c_str());
+    std::fputs(buf, stdout);
+    std::fflush(stdout);
+    if (std::FILE* f = std::fopen((a.out + "/summary.txt").c_str(), "w")) {
+      std::fputs(buf, f);
+      std::fclose(f);
+    }
+    if (shm.unlink_if_orphaned()) std::fprintf(stderr, "spheretouch servo: removed the orphaned segment %s\n", shm.name().c_str());
+  }
+}
+
+}  // namespace
+
+void add_servo(CLI::App& app) {
+  auto a = std::make_shared<ServoArgs>();
+  CLI::App* cmd = app.add_subcommand("servo", "internal: the haptic servo process of `run --split`");
+  cmd->group("");  // hidden: started by `run --split`, not by hand
+  cmd->add_option("--shm", a->shm, "segment")->required();
+  cmd->add_option("--scene", a->scene, "scene file")->required();
+  cmd->add_option("--script", a->script, "trajectory file")->required();
+  cmd->add_option("--out", a->out, "run directory")->required();
+  cmd->add_option("--duration", a->duration_s, "seconds")->required();
+  cmd->add_option("--parent", a->parent, "collision process pid")->required();
+  cmd->callback([a] { run_servo(*a); });
+}
+
+}  // namespace st::app
