@@ -152,7 +152,10 @@ TEST_CASE("collide equals brute force: hand x elephant (all pairs)") {
   const Mesh* ele = st::test::model_mesh("elephant.off");
   Body probe(*hand), object(*ele);
   auto poses = poses_for(*hand, *ele, 4, 1);
-  poses.resize(3);  // far, two near: the literal all-pairs loop is 2e8 box tests per pose
+  // One near pose: the literal loop is 2e8 exact triangle tests per pose (the grid-accelerated
+  // reference, identical by construction, covers the other poses below).
+  poses.erase(poses.begin());
+  poses.resize(1);
   compare_at(probe, object, poses, true);
 }
 

@@ -64,13 +64,47 @@ inline std::vector<geom::FacePair> brute_force(const geom::Mesh& probe, const ge
   for (std::size_t f = 0; f < pb.size(); ++f)
     if (all_pairs || (!oall.empty() && meet(pb[f], oall))) pc.push_back(static_cast<std::uint32_t>(f));
   std::vector<geom::FacePair> out;
-  for (std::uint32_t p : pc) {
+  auto test_pair = [&](std::uint32_t p, std::uint32_t o) {
     const auto& t = probe.faces[p];
-    for (std::uint32_t o : oc) {
-      if (!all_pairs && !meet(pb[p], ob[o])) continue;
-      const auto& u = object.faces[o];
-      if (geom::tri_tri_overlap(pv[t[0]], pv[t[1]], pv[t[2]], object.local[u[0]], object.local[u[1]], object.local[u[2]]))
-        out.push_back({p, o});
+    const auto& u = object.faces[o];
+    if (geom::tri_tri_overlap(pv[t[0]], pv[t[1]], pv[t[2]], object.local[u[0]], object.local[u[1]], object.local[u[2]]))
+      out.push_back({p, o});
+  };
+  if (all_pairs) {
+    for (std::uint32_t p : pc)
+      for (std::uint32_t o : oc) test_pair(p, o);
+  } else if (!oc.empty() && !pc.empty()) {
+    // Uniform grid over the candidate object boxes (cell ~ 2x the mean box extent): a probe box
+    // visits only the cells it overlaps. The same exact box test then decides, so the result is
+    // still exactly all-pairs; the grid only skips pairs whose boxes are in disjoint cells.
+    Vec3 mean = Vec3::Zero();
+    for (std::uint32_t o : oc) mean += ob[o].hi - ob[o].lo;
+    const double cell = std::max(2.0 * mean.maxCoeff() / double(oc.size()), 1e-300);
+    const Vec3 origin = oall.lo;
+    Eigen::Vector3i dims;
+    for (int k = 0; k < 3; ++k)
+      dims[k] = std::clamp(static_cast<int>((oall.hi[k] - oall.lo[k]) / cell) + 1, 1, 256);
+    auto cell_of = [&](double x, int k) {
+      const double c = (x - origin[k]) / (oall.hi[k] - oall.lo[k] > 0 ? (oall.hi[k] - oall.lo[k]) : 1.0) * dims[k];
+      return std::clamp(static_cast<int>(std::floor(c)), 0, dims[k] - 1);
+    };
+    std::vector<std::vector<std::uint32_t>> grid(std::size_t(dims.prod()));
+    auto idx = [&](int x, int y, int z) { return (std::size_t(z) * dims.y() + std::size_t(y)) * dims.x() + std::size_t(x); };
+    for (std::uint32_t o : oc)
+      for (int z = cell_of(ob[o].lo.z(), 2); z <= cell_of(ob[o].hi.z(), 2); ++z)
+        for (int y = cell_of(ob[o].lo.y(), 1); y <= cell_of(ob[o].hi.y(), 1); ++y)
+          for (int x = cell_of(ob[o].lo.x(), 0); x <= cell_of(ob[o].hi.x(), 0); ++x) grid[idx(x, y, z)].push_back(o);
+    std::vector<std::uint32_t> seen(object.faces.size(), ~0u);
+    for (std::uint32_t p : pc) {
+      // Probe boxes beyond the grid are clamped into its border cells (cell_of clamps).
+      for (int z = cell_of(pb[p].lo.z(), 2); z <= cell_of(pb[p].hi.z(), 2); ++z)
+        for (int y = cell_of(pb[p].lo.y(), 1); y <= cell_of(pb[p].hi.y(), 1); ++y)
+          for (int x = cell_of(pb[p].lo.x(), 0); x <= cell_of(pb[p].hi.x(), 0); ++x)
+            for (std::uint32_t o : grid[idx(x, y, z)]) {
+              if (seen[o] == p) continue;
+              seen[o] = p;
+              if (meet(pb[p], ob[o])) test_pair(p, o);
+            }
     }
   }
   std::sort(out.begin(), out.end());
