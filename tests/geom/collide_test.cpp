@@ -148,8 +148,8 @@ TEST_CASE("collide equals brute force: generated meshes, touching cases") {
 }
 
 TEST_CASE("collide equals brute force: hand x elephant (all pairs)") {
-  const Mesh* hand = st::test::model("hand.off");
-  const Mesh* ele = st::test::model("elephant.off");
+  const Mesh* hand = st::test::model_mesh("hand.off");
+  const Mesh* ele = st::test::model_mesh("elephant.off");
   if (!hand || !ele) return;
   Body probe(*hand), object(*ele);
   auto poses = poses_for(*hand, *ele, 4, 1);
@@ -158,11 +158,11 @@ TEST_CASE("collide equals brute force: hand x elephant (all pairs)") {
 }
 
 TEST_CASE("collide equals brute force: hand and hand_L2 x elephant at >= 20 poses") {
-  const Mesh* ele = st::test::model("elephant.off");
+  const Mesh* ele = st::test::model_mesh("elephant.off");
   if (!ele) return;
   Body object(*ele);
   for (const char* hn : {"hand.off", "hand_L2.off"}) {
-    const Mesh* hand = st::test::model(hn);
+    const Mesh* hand = st::test::model_mesh(hn);
     if (!hand) continue;
     CAPTURE(hn);
     Body probe(*hand);
@@ -184,8 +184,8 @@ TEST_CASE("collide equals brute force: hand and hand_L2 x elephant at >= 20 pose
 }
 
 TEST_CASE("approximate mode is a superset of exact") {
-  const Mesh* hand = st::test::model("hand.off");
-  const Mesh* ele = st::test::model("elephant.off");
+  const Mesh* hand = st::test::model_mesh("hand.off");
+  const Mesh* ele = st::test::model_mesh("elephant.off");
   if (!hand || !ele) return;
   Body probe(*hand), object(*ele);
   const auto poses = poses_for(*hand, *ele, 6, 3);

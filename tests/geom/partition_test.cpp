@@ -10,8 +10,8 @@
 using namespace st::geom;
 
 TEST_CASE("block-cyclic partition: cover and union over workers") {
-  const Mesh* hp = st::test::model("hand_L2.off");
-  const Mesh* ep = st::test::model("elephant.off");
+  const Mesh* hp = st::test::model_mesh("hand_L2.off");
+  const Mesh* ep = st::test::model_mesh("elephant.off");
   const Mesh hand = hp ? *hp : make_capsule(6, 20, 32);
   const Mesh ele = ep ? *ep : make_icosphere(30, 20);
   const SphereTree ht = SphereTree::build(hand).value();

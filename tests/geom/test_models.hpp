@@ -19,7 +19,7 @@
 namespace st::test {
 
 /// A model of the set, loaded once per process; nullopt (with a message) when it is missing.
-inline const geom::Mesh* model(const std::string& name) {
+inline const geom::Mesh* model_mesh(const std::string& name) {
   static std::map<std::string, std::optional<geom::Mesh>> cache;
   auto it = cache.find(name);
   if (it == cache.end()) {
