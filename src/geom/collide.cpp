@@ -82,6 +82,66 @@ inline std::uint32_t sphere_mask(const float* c, std::size_t st, std::uint32_t n
 #endif
 }
 
+
+// Bit i (i < n <= 64) set when box i of a float SoA block (lo x at c[i], lo y at c[st + i], ...,
+// hi z at c[5 st + i]) meets box b (lo xyz, hi xyz). Pure comparisons, exact. Reads whole
+// 8-lane vectors past n: the SoA arrays are padded by kMaxLeafFaces.
+inline std::uint64_t soa_box_mask(const float* c, std::size_t st, std::uint32_t n, const float* b) {
+  std::uint64_t m = 0;
+#ifdef __AVX2__
+  const __m256 blx = _mm256_set1_ps(b[0]), bly = _mm256_set1_ps(b[1]), blz = _mm256_set1_ps(b[2]);
+  const __m256 bhx = _mm256_set1_ps(b[3]), bhy = _mm256_set1_ps(b[4]), bhz = _mm256_set1_ps(b[5]);
+  for (std::uint32_t i = 0; i < n; i += 8) {
+    __m256 h = _mm256_and_ps(_mm256_cmp_ps(_mm256_loadu_ps(c + i), bhx, _CMP_LE_OQ),
+                             _mm256_cmp_ps(_mm256_loadu_ps(c + st + i), bhy, _CMP_LE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(_mm256_loadu_ps(c + 2 * st + i), bhz, _CMP_LE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(_mm256_loadu_ps(c + 3 * st + i), blx, _CMP_GE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(_mm256_loadu_ps(c + 4 * st + i), bly, _CMP_GE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(_mm256_loadu_ps(c + 5 * st + i), blz, _CMP_GE_OQ));
+    m |= static_cast<std::uint64_t>(static_cast<std::uint32_t>(_mm256_movemask_ps(h))) << i;
+  }
+  return n >= 64 ? m : m & ((std::uint64_t{1} << n) - 1);
+#else
+  for (std::uint32_t i = 0; i < n; ++i) {
+    const bool hit = (c[i] <= b[3]) & (c[st + i] <= b[4]) & (c[2 * st + i] <= b[5]) & (c[3 * st + i] >= b[0]) &
+                     (c[4 * st + i] >= b[1]) & (c[5 * st + i] >= b[2]);
+    m |= static_cast<std::uint64_t>(hit) << i;
+  }
+  return m;
+#endif
+}
+
+// Bit j (j < n <= 64) set when face box fb[j] meets box b (lo xyz, hi xyz). Exact.
+inline std::uint64_t face_box_mask(const FaceBox* fb, std::uint32_t n, const float* b) {
+  std::uint64_t m = 0;
+#ifdef __AVX2__
+  // 8 boxes at a time, gathered from the 24-byte AoS (masked: never reads past fb[n - 1]).
+  static_assert(sizeof(FaceBox) == 6 * sizeof(float));
+  const __m256i idx = _mm256_setr_epi32(0, 6, 12, 18, 24, 30, 36, 42);
+  const float* base = fb[0].lo;
+  for (std::uint32_t j = 0; j < n; j += 8) {
+    const std::uint32_t left = n - j;
+    const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    const __m256 live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32(static_cast<int>(std::min(left, 8u))), lane));
+    const float* p = base + 6 * j;
+    auto g = [&](int k) { return _mm256_mask_i32gather_ps(_mm256_setzero_ps(), p + k, idx, live, 4); };
+    __m256 h = _mm256_and_ps(live, _mm256_cmp_ps(g(0), _mm256_set1_ps(b[3]), _CMP_LE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(g(1), _mm256_set1_ps(b[4]), _CMP_LE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(g(2), _mm256_set1_ps(b[5]), _CMP_LE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(g(3), _mm256_set1_ps(b[0]), _CMP_GE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(g(4), _mm256_set1_ps(b[1]), _CMP_GE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(g(5), _mm256_set1_ps(b[2]), _CMP_GE_OQ));
+    m |= static_cast<std::uint64_t>(static_cast<std::uint32_t>(_mm256_movemask_ps(h))) << j;
+  }
+#else
+  for (std::uint32_t j = 0; j < n; ++j) {
+    const bool hit = (fb[j].lo[0] <= b[3]) & (fb[j].lo[1] <= b[4]) & (fb[j].lo[2] <= b[5]) & (fb[j].hi[0] >= b[0]) &
+                     (fb[j].hi[1] >= b[1]) & (fb[j].hi[2] >= b[2]);
+    m |= static_cast<std::uint64_t>(hit) << j;
+  }
+#endif
+  return m;
+}
 }  // namespace
 
 RelTransform transform_to_object(const Pose& pose, const Mesh& probe, const Mesh& object) {
@@ -98,7 +158,6 @@ RelTransform transform_to_object(const Pose& pose, const Mesh& probe, const Mesh
 
 std::uint32_t CollideScratch::next_generation() {
   if (++gen_ == 0) {
-    std::fill(vstamp_.begin(), vstamp_.end(), 0u);
     std::fill(cstamp_.begin(), cstamp_.end(), 0u);
     std::fill(lstamp_.begin(), lstamp_.end(), 0u);
     std::fill(pmark_.begin(), pmark_.end(), 0u);
@@ -113,8 +172,35 @@ void CollideScratch::prepare(const Mesh& probe, const SphereTree& probe_tree, co
   auto fit = [](auto& v, std::size_t n) {
     if (v.size() != n) v.assign(n, {});
   };
-  fit(vstamp_, probe.local.size());
-  vx_.resize(probe.local.size());
+  // Probe leaves as little meshes (distinct vertices per leaf, faces as indices into them).
+  lvrange_.assign(probe_tree.nodes.size(), {0, 0});
+  lverts_.clear();
+  lidx_.assign(probe_tree.face_order.size(), {0, 0, 0});
+  {
+    std::vector<std::uint32_t> at(probe.local.size(), kNoNode), stamp(probe.local.size(), kNoNode);
+    for (std::uint32_t i = 0; i < probe_tree.num_nodes(); ++i) {
+      const SphereNode& h = probe_tree.nodes[i];
+      if (!h.leaf) continue;
+      const auto begin = static_cast<std::uint32_t>(lverts_.size());
+      for (std::uint32_t slot = h.first; slot < h.first + h.count; ++slot) {
+        const Tri& t = probe.faces[probe_tree.face_order[slot]];
+        for (int k = 0; k < 3; ++k) {
+          const std::uint32_t v = t[k];
+          if (stamp[v] != i) {
+            stamp[v] = i;
+            at[v] = static_cast<std::uint32_t>(lverts_.size());
+            lverts_.push_back(probe.local[v]);
+          }
+          lidx_[slot][k] = at[v];
+        }
+      }
+      lvrange_[i] = {begin, static_cast<std::uint32_t>(lverts_.size())};
+    }
+  }
+  lverts_.shrink_to_fit();
+  ptx_.resize(lverts_.size());
+  pkey_ = probe_tree.nodes.data();
+  phash_ = probe_tree.mesh_hash;
   fit(cstamp_, probe_tree.nodes.size());
   nstride_p_ = probe_tree.nodes.size() + kMaxChildren;
   psph_.assign(4 * nstride_p_, 0.0f);
@@ -190,14 +276,6 @@ struct CollideQuery {
   bool terminal_p(const SphereNode& n) const { return n.leaf || (!exact && n.depth >= stop); }
   bool terminal_o(const SphereNode& n) const { return n.leaf || (!exact && n.depth >= stop); }
 
-  const Vec3& vertex(std::uint32_t v) {
-    if (sc.vstamp_[v] != gen) {
-      sc.vstamp_[v] = gen;
-      sc.vx_[v] = apply(rt, P.local[v]);
-    }
-    return sc.vx_[v];
-  }
-
   // Float bounds of a double, branch-free: x ∓ |x|·2^-22 ∓ 1e-30 is at least 2^-22·|x| away from x
   // on the wide side, and float conversion moves it by at most 2^-24 of itself, so the result is
   // still on the wide side (x = 0 included: ±1e-30 is a normal float).
@@ -215,11 +293,14 @@ struct CollideQuery {
     u = {inf, inf, inf, -inf, -inf, -inf, 0, 0};
     float* pb = sc.pbox_.data();
     const std::size_t st = sc.pstride_;
+    // The very doubles tri_tri_overlap will see: apply(rt, v) of the same local vertices.
+    const auto [v0, v1] = sc.lvrange_[p];
+    for (std::uint32_t v = v0; v < v1; ++v) sc.ptx_[v] = apply(rt, sc.lverts_[v]);
     for (std::uint32_t slot = hp.first, e = hp.first + hp.count; slot < e; ++slot) {
-      const Tri& t = P.faces[PT.face_order[slot]];
-      const Vec3& a = vertex(t[0]);
-      const Vec3& b = vertex(t[1]);
-      const Vec3& c = vertex(t[2]);
+      const auto& ix = sc.lidx_[slot];
+      const Vec3& a = sc.ptx_[ix[0]];
+      const Vec3& b = sc.ptx_[ix[1]];
+      const Vec3& c = sc.ptx_[ix[2]];
       for (int k = 0; k < 3; ++k) {
         const float lo = float_below(std::min(a[k], std::min(b[k], c[k])));
         const float hi = float_above(std::max(a[k], std::max(b[k], c[k])));
@@ -240,15 +321,7 @@ struct CollideQuery {
 
   // Bit i set when probe face box at slot first + i (i < n) meets box b (lo xyz, hi xyz).
   std::uint64_t probe_mask(std::uint32_t first, std::uint32_t n, const float* b) const {
-    const float* pb = sc.pbox_.data() + first;
-    const std::size_t st = sc.pstride_;
-    std::uint64_t m = 0;
-    for (std::uint32_t i = 0; i < n; ++i) {
-      const bool hit = (pb[i] <= b[3]) & (pb[st + i] <= b[4]) & (pb[2 * st + i] <= b[5]) & (pb[3 * st + i] >= b[0]) &
-                       (pb[4 * st + i] >= b[1]) & (pb[5 * st + i] >= b[2]);
-      m |= static_cast<std::uint64_t>(hit) << i;
-    }
-    return m;
+    return soa_box_mask(sc.pbox_.data() + first, sc.pstride_, n, b);
   }
 
   // Leaf pair: object faces against the probe leaf's box, probe faces against the survivors'
@@ -279,13 +352,7 @@ struct CollideQuery {
       if ((v[0] > u[3]) | (v[1] > u[4]) | (v[2] > u[5]) | (v[3] < u[0]) | (v[4] < u[1]) | (v[5] < u[2])) return;
     }
     const FaceBox* ob = OT.face_boxes.data() + ho.first;
-    std::uint64_t mo = 0;
-    for (std::uint32_t j = 0; j < ho.count; ++j) {
-      const FaceBox& fb = ob[j];
-      const bool hit = (fb.lo[0] <= u[3]) & (fb.lo[1] <= u[4]) & (fb.lo[2] <= u[5]) & (fb.hi[0] >= u[0]) &
-                       (fb.hi[1] >= u[1]) & (fb.hi[2] >= u[2]);
-      mo |= static_cast<std::uint64_t>(hit) << j;
-    }
+    const std::uint64_t mo = face_box_mask(ob, ho.count, u.data());
     if (mo == 0) return;
     const float inf = std::numeric_limits<float>::infinity();
     float ou[6] = {inf, inf, inf, -inf, -inf, -inf};
@@ -307,10 +374,10 @@ struct CollideQuery {
       const Vec3& o1 = O.local[ot[1]];
       const Vec3& o2 = O.local[ot[2]];
       for (; mf != 0; mf &= mf - 1) {
-        const std::uint32_t pf = PT.face_order[hp.first + static_cast<unsigned>(std::countr_zero(mf))];
+        const std::uint32_t slot = hp.first + static_cast<unsigned>(std::countr_zero(mf));
         ++res.stats.tri_pairs;
-        const Tri& pt = P.faces[pf];
-        if (tri_tri_overlap(sc.vx_[pt[0]], sc.vx_[pt[1]], sc.vx_[pt[2]], o0, o1, o2)) emit(pf, of);
+        const auto& ix = sc.lidx_[slot];
+        if (tri_tri_overlap(sc.ptx_[ix[0]], sc.ptx_[ix[1]], sc.ptx_[ix[2]], o0, o1, o2)) emit(PT.face_order[slot], of);
       }
     }
   }
@@ -373,7 +440,8 @@ void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object
   result.clear();
   if (probe_tree.nodes.empty() || object_tree.nodes.empty()) return;
   if (!pose.matrix().allFinite()) return;  // boundaries validate poses; never crash here
-  if (scratch.vstamp_.size() != probe.local.size() || scratch.omark_.size() != object.faces.size() ||
+  if (scratch.pkey_ != probe_tree.nodes.data() || scratch.phash_ != probe_tree.mesh_hash ||
+      scratch.lidx_.size() != probe_tree.face_order.size() || scratch.omark_.size() != object.faces.size() ||
       scratch.cstamp_.size() != probe_tree.nodes.size() || scratch.osph_key_ != object_tree.nodes.data() ||
       scratch.osph_hash_ != object_tree.mesh_hash || scratch.nstride_o_ != object_tree.nodes.size() + kMaxChildren ||
       scratch.stack_cap_ < 8 * (probe_tree.num_depths + object_tree.num_depths) + 8)

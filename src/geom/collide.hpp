@@ -90,8 +90,14 @@ class CollideScratch {
   friend void collide(const Mesh&, const SphereTree&, const Mesh&, const SphereTree&, const Pose&,
                       const CollideOptions&, CollideScratch&, CollideResult&);
   std::uint32_t gen_ = 0;
-  std::vector<std::uint32_t> vstamp_;       // probe vertex -> generation of its cached transform
-  std::vector<Vec3> vx_;                    // probe vertex transformed into object-local
+  // Probe leaves as little meshes, so a query transforms a leaf's vertices in one sequential pass
+  // (derived from the probe tree once, keyed by pkey_/phash_):
+  std::vector<std::array<std::uint32_t, 2>> lvrange_;  // probe leaf node -> its vertices [begin, end) in lverts_
+  std::vector<Vec3> lverts_;                // distinct vertices of each leaf, leaves one after another, probe-local
+  std::vector<std::array<std::uint32_t, 3>> lidx_;  // probe slot -> its face's vertices as indices into lverts_
+  std::vector<Vec3> ptx_;                   // lverts_ transformed into object-local (valid for leaves stamped this query)
+  const void* pkey_ = nullptr;              // probe tree the above was derived from (nodes.data()) ...
+  std::uint64_t phash_ = 0;                 // ... and its mesh_hash
   std::vector<std::uint32_t> cstamp_;       // probe node -> generation its CHILDREN's spheres were transformed
   std::vector<float> psph_;                 // probe node spheres in object-local, SoA (x, y, z, s·r + slack) by node, stride nstride_p_
   std::size_t nstride_p_ = 0;               // probe nodes + padding for 8-wide loads
