@@ -1,5 +1,5 @@
 // Simultaneous descent of two SphereTrees (paper §3.3; traversal after Coal/FCL: relative
-// transform, larger node first, explicit stack).
+// transform, larger node first, explicit stack), then a leaf-pair stage of box masks.
 //
 // Why no pair is ever missed. Let x be a point common to probe triangle P' (the fl-transformed
 // vertices apply(rt, v)) and object triangle O. Every filter tests a convex set that contains x:
@@ -9,13 +9,18 @@
 //    s·r_p + (rounding of apply and of the centre) of the computed centre;
 //  * probe face box: min/max of the very doubles tri_tri_overlap sees, widened to float (exact
 //    containment, float_below/float_above); a probe leaf box is the union of its face boxes;
-//  * object face box: float rounded outward from the doubles (exact containment).
+//  * object face box: float rounded outward from the doubles (exact containment); an object leaf
+//    box is the union of its face boxes.
 // Box against box is pure comparison (no arithmetic), so it rejects only disjoint boxes.
-// Sphere-sphere and sphere-box distances are computed in double; every rounding error above is
-// below 1e-14·M where M bounds the magnitudes (|t|, centres, radii), and each test is widened by
-// eps = 1e-9·M. So a filter rejects only when the true sets are disjoint, and the final set equals
-// {(p, o) : tri_tri_overlap(same doubles)}. Each face is in exactly one leaf and each leaf pair is
-// reached at most once, so no pair is reported twice.
+// Sphere-sphere (sphere_mask) and leaf box-sphere tests run in float. Let M bound every centre,
+// radius and coordinate involved (M = |t| + s(|c_p root| + r_p root) + |c_o root| + r_o root:
+// every node's centre lies in the hull of its vertices, hence in the root sphere). The float
+// probe centre is within 2^-24·M·√3 + 1e-14·M of the exact R c_p + t; radii are rounded once;
+// the differences, squares and sums lose at most a few 2^-24 relative. Together that is below
+// 4e-7·M in distance, and the probe radius (or, box-sphere, the object radius) is widened by
+// slack = 1e-5·M, 25x that. So a filter rejects only when the true sets are disjoint, and the final
+// set equals {(p, o) : tri_tri_overlap(same doubles)}. Each face is in exactly one leaf and each
+// leaf pair is reached at most once, so no pair is reported twice.
 #include "geom/collide.hpp"
 
 #include <algorithm>
