@@ -221,6 +221,7 @@ void add_collide(CLI::App& app) {
 
     std::vector<PoseRow> rows;
     double fcl_build_s = 0;
+    std::size_t scratch_bytes = 0;
     if (!a->poses.empty()) {
 #ifdef ST_HAVE_FCL
       std::unique_ptr<FclPeer> peer;
@@ -288,6 +289,7 @@ void add_collide(CLI::App& app) {
 #endif
         rows.push_back(std::move(row));
       }
+      scratch_bytes = sc.bytes();
     }
 
     const double bpf_probe = double(s.pt.bytes()) / double(s.probe.num_faces());
@@ -295,9 +297,9 @@ void add_collide(CLI::App& app) {
     if (a->json) {
       std::printf("{\"probe\": \"%s\", \"object\": \"%s\", \"probe_faces\": %zu, \"object_faces\": %zu, \"leaf_faces\": %u, "
                   "\"runs\": %d,\n \"build\": {\"probe_s\": %.4f, \"object_s\": %.4f, \"probe_bytes_per_face\": %.1f, "
-                  "\"object_bytes_per_face\": %.1f, \"fcl_both_s\": %.4f",
+                  "\"object_bytes_per_face\": %.1f, \"scratch_bytes\": %zu, \"fcl_both_s\": %.4f",
                   a->probe.c_str(), a->object.c_str(), s.probe.num_faces(), s.object.num_faces(), a->leaf, a->runs,
-                  probe_build_s, object_build_s, bpf_probe, bpf_object, fcl_build_s);
+                  probe_build_s, object_build_s, bpf_probe, bpf_object, scratch_bytes, fcl_build_s);
       if (!a->build_mesh.empty())
         std::printf(", \"big_mesh\": \"%s\", \"big_faces\": %zu, \"big_s\": %.4f, \"big_bytes_per_face\": %.1f, \"big_fcl_s\": %.4f",
                     a->build_mesh.c_str(), big_faces, big_build_s, big_bytes_per_face, big_fcl_build_s);
@@ -321,7 +323,7 @@ void add_collide(CLI::App& app) {
     std::printf("leaf_faces %u; probe %zu faces (tree %.3f s, %.1f B/face), object %zu faces (tree %.3f s, %.1f B/face)",
                 a->leaf, s.probe.num_faces(), probe_build_s, bpf_probe, s.object.num_faces(), object_build_s, bpf_object);
     if (a->fcl) std::printf("; FCL OBBRSS build of both %.3f s", fcl_build_s);
-    std::printf("; %d runs per pose\n", a->runs);
+    std::printf("; %d runs per pose; query scratch %.1f MB\n", a->runs, double(scratch_bytes) / 1e6);
     if (!rows.empty()) {
       std::printf("%8s %8s %10s %10s %10s %9s %9s %9s", "contacts", "pairs", "node_pairs", "leaf_pairs", "tri_tests", "p50_ms",
                   "p95_ms", "min_ms");

@@ -244,6 +244,12 @@ void CollideScratch::prepare(const Mesh& probe, const SphereTree& probe_tree, co
   stack_cap_ = static_cast<std::uint32_t>(stack_.size());
 }
 
+std::size_t CollideScratch::bytes() const {
+  auto b = [](const auto& v) { return v.capacity() * sizeof(v[0]); };
+  return b(lvrange_) + b(lverts_) + b(lidx_) + b(ptx_) + b(cstamp_) + b(psph_) + b(osph_) + b(obox_) + b(lstamp_) +
+         b(lbox_) + b(pbox_) + b(pmark_) + b(omark_) + b(stack_);
+}
+
 struct CollideQuery {
   const Mesh& P;
   const SphereTree& PT;

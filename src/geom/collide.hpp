@@ -84,6 +84,8 @@ class CollideScratch {
  public:
   /// Sizes everything for these meshes/trees (also done lazily by collide()).
   void prepare(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree);
+  /// Heap bytes held (the per-query caches and what is derived from the two trees).
+  std::size_t bytes() const;
 
  private:
   friend struct CollideQuery;
