@@ -30,8 +30,14 @@
 
 #include "geom/tri_tri.hpp"
 
-#ifdef __AVX2__
+// SIMD: AVX2 with -march=native, SSE2 on any other x86-64, scalar elsewhere or with -Dsimd=false
+// (ST_NO_SIMD). All three give the same masks.
+#if !defined(ST_NO_SIMD) && defined(__AVX2__)
+#define ST_COLLIDE_AVX2 1
 #include <immintrin.h>
+#elif !defined(ST_NO_SIMD) && defined(__SSE2__)
+#define ST_COLLIDE_SSE2 1
+#include <emmintrin.h>
 #endif
 
 namespace st::geom {
@@ -69,13 +75,24 @@ inline Vec3 centre_of(const SphereNode& n) { return Vec3(n.centre[0], n.centre[1
 // Conservative by the slack in the probe radii (see the top of this file). Reads 8 lanes: the
 // SoA arrays are padded by kMaxChildren.
 inline std::uint32_t sphere_mask(const float* c, std::size_t st, std::uint32_t n, float qx, float qy, float qz, float qr) {
-#ifdef __AVX2__
+#if defined(ST_COLLIDE_AVX2)
   const __m256 dx = _mm256_sub_ps(_mm256_loadu_ps(c), _mm256_set1_ps(qx));
   const __m256 dy = _mm256_sub_ps(_mm256_loadu_ps(c + st), _mm256_set1_ps(qy));
   const __m256 dz = _mm256_sub_ps(_mm256_loadu_ps(c + 2 * st), _mm256_set1_ps(qz));
   const __m256 rr = _mm256_add_ps(_mm256_loadu_ps(c + 3 * st), _mm256_set1_ps(qr));
   const __m256 d2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)), _mm256_mul_ps(dz, dz));
   const auto m = static_cast<std::uint32_t>(_mm256_movemask_ps(_mm256_cmp_ps(d2, _mm256_mul_ps(rr, rr), _CMP_LE_OQ)));
+  return m & ((1u << n) - 1u);
+#elif defined(ST_COLLIDE_SSE2)
+  std::uint32_t m = 0;
+  for (std::uint32_t k = 0; k < n; k += 4) {
+    const __m128 dx = _mm_sub_ps(_mm_loadu_ps(c + k), _mm_set1_ps(qx));
+    const __m128 dy = _mm_sub_ps(_mm_loadu_ps(c + st + k), _mm_set1_ps(qy));
+    const __m128 dz = _mm_sub_ps(_mm_loadu_ps(c + 2 * st + k), _mm_set1_ps(qz));
+    const __m128 rr = _mm_add_ps(_mm_loadu_ps(c + 3 * st + k), _mm_set1_ps(qr));
+    const __m128 d2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy)), _mm_mul_ps(dz, dz));
+    m |= static_cast<std::uint32_t>(_mm_movemask_ps(_mm_cmple_ps(d2, _mm_mul_ps(rr, rr)))) << k;
+  }
   return m & ((1u << n) - 1u);
 #else
   std::uint32_t m = 0;
@@ -93,7 +110,7 @@ inline std::uint32_t sphere_mask(const float* c, std::size_t st, std::uint32_t n
 // 8-lane vectors past n: the SoA arrays are padded by kMaxLeafFaces.
 inline std::uint64_t soa_box_mask(const float* c, std::size_t st, std::uint32_t n, const float* b) {
   std::uint64_t m = 0;
-#ifdef __AVX2__
+#if defined(ST_COLLIDE_AVX2)
   const __m256 blx = _mm256_set1_ps(b[0]), bly = _mm256_set1_ps(b[1]), blz = _mm256_set1_ps(b[2]);
   const __m256 bhx = _mm256_set1_ps(b[3]), bhy = _mm256_set1_ps(b[4]), bhz = _mm256_set1_ps(b[5]);
   for (std::uint32_t i = 0; i < n; i += 8) {
@@ -104,6 +121,18 @@ inline std::uint64_t soa_box_mask(const float* c, std::size_t st, std::uint32_t 
     h = _mm256_and_ps(h, _mm256_cmp_ps(_mm256_loadu_ps(c + 4 * st + i), bly, _CMP_GE_OQ));
     h = _mm256_and_ps(h, _mm256_cmp_ps(_mm256_loadu_ps(c + 5 * st + i), blz, _CMP_GE_OQ));
     m |= static_cast<std::uint64_t>(static_cast<std::uint32_t>(_mm256_movemask_ps(h))) << i;
+  }
+  return n >= 64 ? m : m & ((std::uint64_t{1} << n) - 1);
+#elif defined(ST_COLLIDE_SSE2)
+  const __m128 blx = _mm_set1_ps(b[0]), bly = _mm_set1_ps(b[1]), blz = _mm_set1_ps(b[2]);
+  const __m128 bhx = _mm_set1_ps(b[3]), bhy = _mm_set1_ps(b[4]), bhz = _mm_set1_ps(b[5]);
+  for (std::uint32_t i = 0; i < n; i += 4) {
+    __m128 h = _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(c + i), bhx), _mm_cmple_ps(_mm_loadu_ps(c + st + i), bhy));
+    h = _mm_and_ps(h, _mm_cmple_ps(_mm_loadu_ps(c + 2 * st + i), bhz));
+    h = _mm_and_ps(h, _mm_cmpge_ps(_mm_loadu_ps(c + 3 * st + i), blx));
+    h = _mm_and_ps(h, _mm_cmpge_ps(_mm_loadu_ps(c + 4 * st + i), bly));
+    h = _mm_and_ps(h, _mm_cmpge_ps(_mm_loadu_ps(c + 5 * st + i), blz));
+    m |= static_cast<std::uint64_t>(static_cast<std::uint32_t>(_mm_movemask_ps(h))) << i;
   }
   return n >= 64 ? m : m & ((std::uint64_t{1} << n) - 1);
 #else
@@ -118,10 +147,10 @@ inline std::uint64_t soa_box_mask(const float* c, std::size_t st, std::uint32_t 
 
 // Bit j (j < n <= 64) set when face box fb[j] meets box b (lo xyz, hi xyz). Exact.
 inline std::uint64_t face_box_mask(const FaceBox* fb, std::uint32_t n, const float* b) {
+  static_assert(sizeof(FaceBox) == 6 * sizeof(float), "face boxes are read as 6 packed floats");
   std::uint64_t m = 0;
-#ifdef __AVX2__
+#if defined(ST_COLLIDE_AVX2)
   // 8 boxes at a time, gathered from the 24-byte AoS (masked: never reads past fb[n - 1]).
-  static_assert(sizeof(FaceBox) == 6 * sizeof(float));
   const __m256i idx = _mm256_setr_epi32(0, 6, 12, 18, 24, 30, 36, 42);
   const float* base = fb[0].lo;
   for (std::uint32_t j = 0; j < n; j += 8) {
@@ -137,6 +166,17 @@ inline std::uint64_t face_box_mask(const FaceBox* fb, std::uint32_t n, const flo
     h = _mm256_and_ps(h, _mm256_cmp_ps(g(4), _mm256_set1_ps(b[1]), _CMP_GE_OQ));
     h = _mm256_and_ps(h, _mm256_cmp_ps(g(5), _mm256_set1_ps(b[2]), _CMP_GE_OQ));
     m |= static_cast<std::uint64_t>(static_cast<std::uint32_t>(_mm256_movemask_ps(h))) << j;
+  }
+#elif defined(ST_COLLIDE_SSE2)
+  // One box per step from the AoS: (lo x, lo y, lo z, hi x) <= (b hi xyz, +inf) and
+  // (lo z, hi x, hi y, hi z) >= (-inf, b lo xyz); both loads stay inside the 24-byte box.
+  const float inf = std::numeric_limits<float>::infinity();
+  const __m128 hi_b = _mm_setr_ps(b[3], b[4], b[5], inf);
+  const __m128 lo_b = _mm_setr_ps(-inf, b[0], b[1], b[2]);
+  const float* f = reinterpret_cast<const float*>(fb);
+  for (std::uint32_t j = 0; j < n; ++j, f += 6) {
+    const __m128 h = _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(f), hi_b), _mm_cmpge_ps(_mm_loadu_ps(f + 2), lo_b));
+    m |= static_cast<std::uint64_t>(_mm_movemask_ps(h) == 0xf) << j;
   }
 #else
   for (std::uint32_t j = 0; j < n; ++j) {
