@@ -1,12 +1,136 @@
-// spheretouch-worker: the worker daemon (distribution issue). Minimal main for now.
+// spheretouch-worker: one worker of the distributed collision (paper §3.4) as a daemon. Binds a
+// ZeroMQ endpoint, holds the block sets it is sent in memory and answers queries (WorkerService).
+// Logs to stderr (with <N> syslog prefixes when journald reads it); under systemd it sends
+// READY=1 once bound and WATCHDOG=1 pings; SIGTERM/SIGINT stop it within 0.1 s.
 #include <CLI/CLI.hpp>
+#include <atomic>
+#include <chrono>
+#include <csignal>
 #include <cstdio>
+#include <cstdlib>
+#include <ctime>
+#include <string>
+#include <zmq.hpp>
+#ifdef ST_HAVE_SYSTEMD
+#include <systemd/sd-daemon.h>
+#endif
+
+#include "net/tree_backend.hpp"
+#include "net/worker_config.hpp"
+#include "net/worker_service.hpp"
+
+namespace {
+
+std::atomic<bool> g_stop{false};
+extern "C" void on_signal(int) { g_stop.store(true); }
+
+int g_max_priority = 6;
+bool g_journal = false;
+std::uint32_t g_id = 0;
+
+void log_line(int priority, const std::string& text) {
+  if (priority > g_max_priority) return;
+  static const char* names[] = {"emerg", "alert", "crit", "error", "warning", "notice", "info", "debug"};
+  if (g_journal)  // journald reads the <N> prefix as the priority; it adds its own timestamps
+    std::fprintf(stderr, "<%d>worker %u: %s\n", priority, g_id, text.c_str());
+  else
+    std::fprintf(stderr, "spheretouch-worker %u: %s: %s\n", g_id, names[priority & 7], text.c_str());
+}
+
+void notify(const char* state) {
+#ifdef ST_HAVE_SYSTEMD
+  sd_notify(0, state);
+#else
+  (void)state;
+#endif
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"spheretouch-worker: holds sphere blocks in memory and answers collision queries"};
-  std::string bind = "tcp://127.0.0.1:5555";
-  app.add_option("--bind", bind, "endpoint to bind (tcp://, ipc://)");
+  CLI::App app{"spheretouch-worker: holds sphere blocks in memory and answers collision queries "
+               "(binds loopback unless told otherwise)"};
+  std::string config_file, bind, log_level;
+  std::int64_t worker_id = -1;
+  bool insecure = false, keygen = false;
+  app.add_option("--config", config_file, "TOML config (bind, worker_id, log_level, insecure, max_sets, max_blockset_mb)")
+      ->check(CLI::ExistingFile);
+  app.add_option("--bind", bind, "endpoint to bind: tcp://HOST:PORT or ipc://PATH (overrides the config; default tcp://127.0.0.1:5555)");
+  app.add_option("--id", worker_id, "worker id (overrides the config)")->check(CLI::Range(0, 1 << 20));
+  app.add_option("--log-level", log_level, "error, warning, info or debug (overrides the config)");
+  app.add_flag("--insecure", insecure, "allow binding a non-loopback address without CURVE (trusted networks only)");
+  app.add_flag("--keygen", keygen, "print a new CURVE key pair (Z85) and exit");
   CLI11_PARSE(app, argc, argv);
-  std::fprintf(stderr, "spheretouch-worker: not implemented yet (bind %s)\n", bind.c_str());
-  return 1;
+  if (keygen) {
+    char pub[41] = {}, sec[41] = {};
+    if (zmq_curve_keypair(pub, sec) != 0) { std::fprintf(stderr, "libzmq has no CURVE support\n"); return 1; }
+    std::printf("public %s\nsecret %s\n", pub, sec);
+    return 0;
+  }
+
+  g_journal = std::getenv("JOURNAL_STREAM") != nullptr;
+  st::net::DaemonConfig cfg;
+  if (!config_file.empty()) {
+    auto c = st::net::load_daemon_config(config_file);
+    if (!c) { log_line(3, c.error()); return 2; }
+    cfg = std::move(c.value());
+  }
+  if (!bind.empty()) cfg.bind = bind;
+  if (worker_id >= 0) cfg.worker_id = static_cast<std::uint32_t>(worker_id);
+  if (!log_level.empty()) cfg.log_level = log_level;
+  if (insecure) cfg.insecure = true;
+  g_id = cfg.worker_id;
+  if (auto s = st::net::check_daemon_config(cfg); !s) { log_line(3, s.error()); return 2; }
+  g_max_priority = st::net::log_priority(cfg.log_level);
+
+  struct sigaction sa {};
+  sa.sa_handler = on_signal;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGTERM, &sa, nullptr);
+  sigaction(SIGINT, &sa, nullptr);
+
+  zmq::context_t ctx(1);
+  st::net::WorkerConfig wc;
+  wc.worker_id = cfg.worker_id;
+  wc.max_sets = cfg.max_sets;
+  wc.limits.max_blockset_bytes = cfg.max_blockset_mb << 20;
+  wc.log = log_line;
+  if (!cfg.curve_secret_key_file.empty()) {
+    auto key = st::net::read_secret_key(cfg.curve_secret_key_file);
+    if (!key) { log_line(3, key.error()); return 2; }
+    wc.curve = st::net::CurveServer{key.value(), cfg.curve_allowed_clients};
+    log_line(6, "CURVE on: public key " + st::net::curve_public_of(key.value()).value() + ", " +
+                    std::to_string(cfg.curve_allowed_clients.size()) + " allowed client key(s)");
+  }
+  int rc = 0;
+  {
+    // Sphere trees + collide() (exact); the SAT reference backend stays for tests.
+    st::net::WorkerService svc(ctx, wc, st::net::tree_backend_factory());
+    if (auto s = svc.bind(cfg.bind); !s) { log_line(3, s.error()); return 1; }
+    const std::string ep = svc.last_endpoint();
+    const bool exposed = !st::net::is_local_endpoint(cfg.bind) && !wc.curve;
+    log_line(exposed ? 4 : 6, "listening on " + ep + (exposed ? " (INSECURE: no authentication)" : ""));
+    notify(("READY=1\nSTATUS=listening on " + ep).c_str());
+
+    // Watchdog: ping at a quarter of WatchdogSec; the loop wakes at least every 100 ms.
+    std::chrono::microseconds wd_period{0};
+#ifdef ST_HAVE_SYSTEMD
+    std::uint64_t usec = 0;
+    if (sd_watchdog_enabled(0, &usec) > 0) wd_period = std::chrono::microseconds(usec / 4);
+#endif
+    auto next_ping = std::chrono::steady_clock::now();
+    const auto tick = std::chrono::milliseconds(100);
+    const auto on_tick = [&] {
+      if (wd_period.count() == 0) return;
+      const auto now = std::chrono::steady_clock::now();
+      if (now >= next_ping) { notify("WATCHDOG=1"); next_ping = now + wd_period; }
+    };
+    on_tick();
+    svc.run(g_stop, tick, on_tick);
+    notify("STOPPING=1");
+    const auto& c = svc.counters();
+    log_line(6, "stopping: " + std::to_string(c.queries) + " queries, " + std::to_string(c.loads) + " loads, " +
+                    std::to_string(c.bad_messages) + " bad messages");
+  }
+  return rc;
 }

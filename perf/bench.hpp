@@ -8,5 +8,8 @@ namespace st::bench {
 void add_load(CLI::App& app);  ///< mesh loading time (issue 2: the 832k-face armadillo)
 void add_tree(CLI::App& app);  ///< sphere-tree build time and bytes/face (issue 3)
 void add_collide(CLI::App& app);  ///< collide() query time at contact buckets, pose finder (issue 3)
+void add_exchange(CLI::App& app);  ///< TripleBuffer vs mutex take-newest latency (rt issue)
+void add_haptic(CLI::App& app);    ///< HapticLoop vs bare clock_nanosleep wake-up latency (rt issue)
+void add_scatter(CLI::App& app);  ///< scatter-gather round trip of an empty query, N workers × transport
 
 }  // namespace st::bench

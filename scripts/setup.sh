@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # One entry point for a fresh Debian 12 machine: installs the missing Debian packages, configures
 # and builds, then does what was asked.
-#   scripts/setup.sh demo    set up, build the model set, run the main job on the embedded default
+#   scripts/setup.sh demo    set up, build the model set, run the main job (configs/demo.toml) for a few seconds
 #   scripts/setup.sh test    set up, build the model set, run every test suite (and sanitizer builds)
 #   scripts/setup.sh build   set up and build only
 set -euo pipefail
@@ -38,6 +38,8 @@ case "$mode" in
     models="${ST_MODEL_DIR:-.cache/models}"
     build/spheretouch info "$models"/hand_L2.off "$models"/elephant.off "$models"/armadillo_L1.off \
       "$models"/armadillo_L2.off "$models"/bunny.off
+    # The main job on the embedded default: the hand touches the elephant with in-process workers.
+    build/spheretouch run configs/demo.toml --duration "${ST_DEMO_SECONDS:-6}"
     ;;
   test)
     scripts/models.sh

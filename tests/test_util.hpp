@@ -67,7 +67,7 @@ struct CommandResult {
 /// Runs `command` through /bin/sh and captures its output.
 inline CommandResult run_command(const std::string& command) {
   CommandResult r;
-  FILE* p = popen((command + " 2>&1").c_str(), "r");
+  FILE* p = popen(("{ " + command + "; } 2>&1").c_str(), "r");
   REQUIRE(p != nullptr);
   std::array<char, 4096> buf;
   for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), p)) > 0;) r.output.append(buf.data(), n);

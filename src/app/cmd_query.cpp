@@ -7,6 +7,7 @@
 #include <cstdio>
 
 #include "app/commands.hpp"
+#include "app/distributed.hpp"
 #include "app/mesh_options.hpp"
 #include "app/tree_cache.hpp"
 #include "geom/collide.hpp"
@@ -22,6 +23,8 @@ struct QueryArgs {
   std::uint32_t leaf_faces = geom::DefaultTreeParams().leaf_faces;
   std::uint32_t blocks = 0, layer = 2, block_size = 1;
   int repeat = 1;
+  int workers = 0;
+  std::string connect;
   int approx_layer = geom::kExact;
   bool count_only = false, stats = false, no_cache = false;
 };
@@ -62,6 +65,28 @@ void run_query(const QueryArgs& a) {
   const geom::SphereTree ptree = tree_or_exit(probe.mesh, params, cache);
   const geom::SphereTree otree = tree_or_exit(object.mesh, params, cache);
 
+  // --workers N / --connect: the same query through scatter-gather over workers.
+  std::unique_ptr<Fleet> fleet;
+  if (a.workers > 0 || !a.connect.empty()) {
+    FleetSpec spec;
+    spec.workers = a.workers;
+    for (std::string rest = a.connect; !rest.empty();) {
+      const auto comma = rest.find(',');
+      spec.endpoints.push_back(rest.substr(0, comma));
+      rest = comma == std::string::npos ? "" : rest.substr(comma + 1);
+    }
+    spec.layer = a.layer;
+    spec.block_size = a.block_size;
+    spec.leaf_faces = a.leaf_faces;
+    Result<std::unique_ptr<Fleet>> f = start_fleet(spec, probe.mesh, object.mesh, otree);
+    if (!f) {
+      std::fprintf(stderr, "spheretouch: %s\n", f.error().c_str());
+      throw CLI::RuntimeError(2);
+    }
+    fleet = std::move(f).value();
+  }
+  net::RoundResult round;
+
   // --blocks W: the object's layer-n spheres split block-cyclically over W in-process "workers";
   // the query runs once per worker restricted to its blocks, and the results are merged.
   std::vector<std::vector<std::uint32_t>> roots;
@@ -91,7 +116,19 @@ void run_query(const QueryArgs& a) {
       const auto t0 = std::chrono::steady_clock::now();
       merged.clear();
       stats = {};
-      if (roots.empty()) {
+      if (fleet) {
+        // Exactness needs every block: a generous deadline, and an incomplete round is an error.
+        fleet->client->round(i * std::uint64_t(a.repeat) + std::uint64_t(r) + 1, pose,
+                             net::Clock::now() + std::chrono::seconds(30), round);
+        if (!round.complete) {
+          std::fprintf(stderr, "spheretouch: pose %zu: only %u of %u workers answered (%u of %u blocks)\n", i,
+                       round.workers_replied, round.workers_asked, round.blocks_covered, round.blocks_total);
+          throw CLI::RuntimeError(1);
+        }
+        for (const net::FacePair& p : round.pairs) merged.push_back({p.probe, p.object});
+        stats.node_pairs = round.stats.sphere_tests;
+        stats.tri_pairs = round.stats.tri_tests;
+      } else if (roots.empty()) {
         geom::collide(probe.mesh, ptree, object.mesh, otree, pose, opt, scratch, result);
         merged.insert(merged.end(), result.pairs.begin(), result.pairs.end());
         stats = result.stats;
@@ -161,6 +198,11 @@ void add_query(CLI::App& app) {
                   "approximate mode: stop the descent at sphere layer K (-1 = leaf spheres) and report the faces of "
                   "overlapping spheres without triangle tests; not exact (a superset)")
       ->check(CLI::Range(-1, 64));
+  cmd->add_option("--workers", a->workers,
+                  "run the query over N in-process workers (inproc://), the object's layer-n sphere blocks dealt "
+                  "block-cyclically; same output")
+      ->check(CLI::Range(1, 64));
+  cmd->add_option("--connect", a->connect, "run the query over worker daemons EP1,EP2,... (tcp:// or ipc://); same output");
   cmd->add_option("--tree-cache", a->cache_dir, "directory of cached sphere trees")->capture_default_str();
   cmd->add_flag("--no-cache", a->no_cache, "build trees in memory only");
   cmd->callback([a] { run_query(*a); });

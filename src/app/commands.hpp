@@ -9,5 +9,6 @@ void add_info(CLI::App& app);    ///< spheretouch info MESH...
 void add_export(CLI::App& app);  ///< spheretouch export IN -o OUT (scale, subdivide, write OFF)
 void add_query(CLI::App& app);   ///< spheretouch query PROBE OBJECT --poses FILE
 void add_build(CLI::App& app);   ///< spheretouch build MESH -o FILE (sphere-tree file)
+void add_run(CLI::App& app);     ///< spheretouch run SCENE (the main job)
 
 }  // namespace st::app

@@ -14,6 +14,7 @@ int main(int argc, char** argv) {
   st::app::add_export(app);
   st::app::add_query(app);
   st::app::add_build(app);
+  st::app::add_run(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

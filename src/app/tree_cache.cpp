@@ -36,7 +36,7 @@ Result<CachedTree> tree_for(const geom::Mesh& mesh, const geom::TreeParams& para
         return out;
       }
       out.note = r.error();
-      out.source = r.error().find("stale") != std::string::npos ? TreeSource::rebuilt_stale : TreeSource::rebuilt_corrupt;
+      out.source = r.error().find(": stale:") != std::string::npos ? TreeSource::rebuilt_stale : TreeSource::rebuilt_corrupt;
     }
   }
   Result<geom::SphereTree> built = geom::SphereTree::build(mesh, params);

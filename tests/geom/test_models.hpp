@@ -15,25 +15,21 @@
 #include "geom/collide.hpp"
 #include "geom/mesh_io.hpp"
 #include "geom/tri_tri.hpp"
+#include "test_util.hpp"
 
 namespace st::test {
 
-/// A model of the set, loaded once per process; nullopt (with a message) when it is missing.
+/// A model of the set, loaded once per process. A missing model set fails the test (never skips):
+/// run scripts/models.sh.
 inline const geom::Mesh* model_mesh(const std::string& name) {
-  static std::map<std::string, std::optional<geom::Mesh>> cache;
+  static std::map<std::string, geom::Mesh> cache;
   auto it = cache.find(name);
   if (it == cache.end()) {
-    const char* root = std::getenv("ST_SOURCE_ROOT");
-    const std::filesystem::path p = std::filesystem::path(root ? root : ".") / ".cache" / "models" / name;
-    std::optional<geom::Mesh> m;
-    if (std::filesystem::exists(p)) {
-      auto r = geom::load_mesh(p.string());
-      if (r) m = std::move(r.value().mesh);
-    }
-    if (!m) MESSAGE("model ", p.string(), " missing: run scripts/fetch_models.sh; skipping");
-    it = cache.emplace(name, std::move(m)).first;
+    auto r = geom::load_mesh(st::test::model(name));
+    REQUIRE_MESSAGE(r.ok(), r.error());
+    it = cache.emplace(name, std::move(r.value().mesh)).first;
   }
-  return it->second ? &*it->second : nullptr;
+  return &it->second;
 }
 
 /// Exact reference: every (probe, object) face pair, through tri_tri_overlap on the transformed

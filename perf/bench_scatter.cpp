@@ -1,0 +1,206 @@
+// spheretouch-bench scatter: round trip of an empty query through N workers (scatter-gather
+// overhead), over inproc, ipc or tcp loopback. Rounds are spaced like the collision loop spaces
+// them (--gap-us between the end of one round and the start of the next): ZeroMQ latency rises
+// when sends are spaced out (wake-ups from idle), so back-to-back bursts would flatter it.
+// Baseline, measured in the same run and spaced the same way: one plain request-reply
+// (Heartbeat → Hello) with worker 0 over the same transport.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <string>
+#include <thread>
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <vector>
+
+#include "bench.hpp"
+#include "geom/primitives.hpp"
+#include "net/local_workers.hpp"
+#include "net/reference_backend.hpp"
+#include "net/scatter_gather.hpp"
+
+namespace st::bench {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct Stats {
+  double p50 = 0, p99 = 0, max = 0, mean = 0;
+};
+
+Stats summarise(std::vector<double> us) {
+  Stats s;
+  if (us.empty()) return s;
+  std::sort(us.begin(), us.end());
+  auto at = [&](double q) { return us[std::min(us.size() - 1, static_cast<std::size_t>(q * double(us.size())))]; };
+  s.p50 = at(0.50);
+  s.p99 = at(0.99);
+  s.max = us.back();
+  for (double v : us) s.mean += v;
+  s.mean /= double(us.size());
+  return s;
+}
+
+int free_tcp_port() {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
+  socklen_t len = sizeof addr;
+  ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
+  ::close(fd);
+  return ntohs(addr.sin_port);
+}
+
+std::string endpoint_for(const std::string& transport, int i) {
+  if (transport == "inproc") return net::inproc_endpoint(i, "bench");
+  if (transport == "ipc") return "ipc:///tmp/spheretouch-bench-" + std::to_string(::getpid()) + "-" + std::to_string(i) + ".sock";
+  return "tcp://127.0.0.1:*";
+}
+
+}  // namespace
+
+void add_scatter(CLI::App& app) {
+  struct Args {
+    int workers = 4;
+    std::string transport = "tcp";
+    int rounds = 5000;
+    int warmup = 200;
+    int gap_us = 1000;
+    int deadline_ms = 50;
+    int spin_us = 0;
+    bool json = false;
+    std::string csv;
+    std::string spawn;        // worker daemon binary: run workers as processes (tcp/ipc)
+    bool own_context = false; // threads, but each worker with its own ZeroMQ context (I/O thread)
+  };
+  auto a = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand("scatter", "Round trip of an empty query through N workers (scatter-gather overhead), p50/p99");
+  cmd->add_option("--workers", a->workers, "workers (threads of this process)")->check(CLI::Range(1, 64))->capture_default_str();
+  cmd->add_option("--transport", a->transport, "inproc, ipc or tcp (loopback)")->check(CLI::IsMember({"inproc", "ipc", "tcp"}))->capture_default_str();
+  cmd->add_option("--rounds", a->rounds, "measured rounds")->check(CLI::Range(10, 10000000))->capture_default_str();
+  cmd->add_option("--warmup", a->warmup, "unmeasured rounds first")->check(CLI::Range(0, 1000000))->capture_default_str();
+  cmd->add_option("--gap-us", a->gap_us, "idle time between rounds, us (the collision loop's own work)")->check(CLI::Range(0, 1000000))->capture_default_str();
+  cmd->add_option("--deadline-ms", a->deadline_ms, "round deadline, ms")->check(CLI::Range(1, 10000))->capture_default_str();
+  cmd->add_option("--spin-us", a->spin_us, "client busy-polls this long before blocking (ScatterConfig::spin_us)")->capture_default_str();
+  cmd->add_flag("--json", a->json, "print one JSON object");
+  cmd->add_option("--spawn", a->spawn, "run the workers as processes of this spheretouch-worker binary (tcp/ipc)");
+  cmd->add_flag("--own-context", a->own_context, "worker threads each get their own ZeroMQ context, as processes would");
+  cmd->add_option("--csv", a->csv, "append one CSV row to this file (header written if new)");
+  cmd->callback([a] {
+    zmq::context_t ctx(1);
+    // A tiny object far from the probe: every query is empty, the backend does almost nothing,
+    // so the round trip is the scatter-gather overhead.
+    const geom::Mesh probe = geom::make_capsule(4, 10, 8);
+    const geom::Mesh object = geom::make_icosphere(20, 2);
+    const net::Blocks blocks = net::spatial_blocks(object, 1);  // 80 blocks: every worker holds some
+    std::vector<std::unique_ptr<zmq::context_t>> wctx;
+    std::vector<std::unique_ptr<net::LocalWorkers>> local;
+    std::vector<pid_t> procs;
+    std::vector<std::string> endpoints;
+    if (!a->spawn.empty()) {
+      if (a->transport == "inproc") { std::fprintf(stderr, "--spawn needs tcp or ipc\n"); throw CLI::RuntimeError(2); }
+      for (int i = 0; i < a->workers; ++i) {
+        std::string ep = a->transport == "ipc" ? endpoint_for("ipc", i) : "tcp://127.0.0.1:" + std::to_string(free_tcp_port());
+        const pid_t pid = ::fork();
+        if (pid == 0) {
+          const std::string id = std::to_string(i);
+          ::execl(a->spawn.c_str(), a->spawn.c_str(), "--bind", ep.c_str(), "--id", id.c_str(), "--log-level", "warning", (char*)nullptr);
+          ::_exit(127);
+        }
+        procs.push_back(pid);
+        endpoints.push_back(ep);
+      }
+    } else {
+      for (int i = 0; i < a->workers; ++i) {
+        zmq::context_t* wc = &ctx;
+        if (a->own_context) { wctx.push_back(std::make_unique<zmq::context_t>(1)); wc = wctx.back().get(); }
+        const std::string ep = endpoint_for(a->own_context && a->transport == "inproc" ? "tcp" : a->transport, i);
+        auto w = net::LocalWorkers::start(*wc, 1, net::reference_backend_factory(), [&](int) { return ep; });
+        if (!w) { std::fprintf(stderr, "%s\n", w.error().c_str()); throw CLI::RuntimeError(2); }
+        endpoints.push_back(w.value()->endpoints()[0]);
+        local.push_back(std::move(w.value()));
+      }
+    }
+    struct Reaper {
+      std::vector<pid_t>& p;
+      ~Reaper() { for (pid_t x : p) { ::kill(x, SIGTERM); int st; ::waitpid(x, &st, 0); } }
+    } reaper{procs};
+    net::ScatterConfig cfg;
+    cfg.endpoints = endpoints;
+    cfg.spin_us = static_cast<std::uint32_t>(a->spin_us);
+    auto c = net::ScatterGather::create(ctx, cfg, probe, object, blocks);
+    if (!c) { std::fprintf(stderr, "%s\n", c.error().c_str()); throw CLI::RuntimeError(2); }
+    if (!c.value()->wait_ready(Clock::now() + std::chrono::seconds(10))) {
+      std::fprintf(stderr, "workers not ready after 10 s\n");
+      throw CLI::RuntimeError(2);
+    }
+    geom::Pose far = geom::Pose::Identity();
+    far.translation() = geom::Vec3(1000, 0, 0);
+    const auto gap = std::chrono::microseconds(a->gap_us);
+    const auto deadline = std::chrono::milliseconds(a->deadline_ms);
+
+    std::vector<double> us;
+    us.reserve(a->rounds);
+    int incomplete = 0;
+    net::RoundResult r;
+    std::uint64_t seq = 0;
+    for (int i = 0; i < a->warmup + a->rounds; ++i) {
+      const auto t0 = Clock::now();
+      c.value()->round(++seq, far, t0 + deadline, r);
+      const auto t1 = Clock::now();
+      if (i >= a->warmup) {
+        us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+        incomplete += !r.complete;
+      }
+      if (gap.count()) std::this_thread::sleep_until(t1 + gap);
+    }
+    const Stats s = summarise(us);
+
+    // Baseline: one plain request-reply with worker 0, same transport, same spacing.
+    zmq::socket_t d(ctx, zmq::socket_type::dealer);
+    d.set(zmq::sockopt::linger, 0);
+    d.connect(endpoints[0]);
+    std::vector<double> base;
+    const auto hb = net::encode(net::HeartbeatMsg{1});
+    const int base_rounds = std::min(a->rounds, 2000);
+    for (int i = 0; i < a->warmup + base_rounds; ++i) {
+      const auto t0 = Clock::now();
+      d.send(zmq::buffer(hb), zmq::send_flags::none);
+      zmq::message_t m;
+      zmq::pollitem_t it{d.handle(), 0, ZMQ_POLLIN, 0};
+      if (zmq::poll(&it, 1, std::chrono::milliseconds(a->deadline_ms)) > 0) (void)d.recv(m, zmq::recv_flags::dontwait);
+      const auto t1 = Clock::now();
+      if (i >= a->warmup) base.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+      if (gap.count()) std::this_thread::sleep_until(t1 + gap);
+    }
+    const Stats b = summarise(base);
+
+    if (a->json)
+      std::printf("{\"bench\": \"scatter\", \"workers\": %d, \"transport\": \"%s\", \"gap_us\": %d, \"rounds\": %d, "
+                  "\"incomplete\": %d, \"p50_us\": %.1f, \"p99_us\": %.1f, \"max_us\": %.1f, \"mean_us\": %.1f, "
+                  "\"baseline_p50_us\": %.1f, \"baseline_p99_us\": %.1f}\n",
+                  a->workers, a->transport.c_str(), a->gap_us, a->rounds, incomplete, s.p50, s.p99, s.max, s.mean, b.p50, b.p99);
+    else
+      std::printf("scatter  %d workers  %-6s gap %5d us  %d rounds (%d incomplete)  p50 %7.1f us  p99 %7.1f us  max %8.1f us"
+                  "   | baseline 1 req-rep: p50 %6.1f us  p99 %6.1f us  (p50 x%.2f)\n",
+                  a->workers, a->transport.c_str(), a->gap_us, a->rounds, incomplete, s.p50, s.p99, s.max, b.p50, b.p99,
+                  b.p50 > 0 ? s.p50 / b.p50 : 0.0);
+    if (!a->csv.empty()) {
+      const bool fresh = !std::ifstream(a->csv).good();
+      std::ofstream o(a->csv, std::ios::app);
+      if (fresh) o << "bench,workers,transport,gap_us,rounds,incomplete,p50_us,p99_us,max_us,mean_us,baseline_p50_us,baseline_p99_us\n";
+      o << "scatter," << a->workers << ',' << a->transport << ',' << a->gap_us << ',' << a->rounds << ',' << incomplete << ','
+        << s.p50 << ',' << s.p99 << ',' << s.max << ',' << s.mean << ',' << b.p50 << ',' << b.p99 << '\n';
+    }
+  });
+}
+
+}  // namespace st::bench

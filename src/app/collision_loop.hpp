@@ -1,0 +1,75 @@
+// The collision thread of `spheretouch run` (DESIGN.md data flow): take the newest pose → one
+// collision round (in this thread, or scatter-gather over workers) → contact model (paper §3.6)
+// → publish. It runs as fast as it can, or at a capped rate.
+#pragma once
+#include <atomic>
+#include <functional>
+#include <thread>
+#include <vector>
+
+#include "geom/contact.hpp"
+#include "rt/pose_sample.hpp"
+#include "rt/triple_buffer.hpp"
+
+namespace st::app {
+
+/// One finished collision round, for the trace and the summary.
+struct RoundRecord {
+  std::int64_t start_ns = 0, end_ns = 0;  ///< CLOCK_MONOTONIC
+  std::uint64_t pose_seq = 0;             ///< pose it answered
+  std::uint32_t pairs = 0, contacts = 0;  ///< face pairs, paper §3.5 contacts
+  double penetration_mm = 0;              ///< PD of the model built from it
+  bool complete = true;                   ///< every worker answered (always true without workers)
+};
+
+/// What one round of collision detection returns to the loop.
+struct RoundOutput {
+  std::vector<geom::FacePair> pairs;  ///< colliding pairs (any order)
+  bool complete = true;               ///< false when a worker missed the deadline
+};
+
+/// Computes the pairs for a pose; set up by the caller (direct collide() or scatter-gather).
+using CollideFn = std::function<void(std::uint64_t seq, const geom::Pose& pose, RoundOutput& out)>;
+
+/// The collision thread.
+class CollisionLoop {
+ public:
+  /// `rate_hz` 0 = uncapped. `max_rounds` bounds the stored records (later rounds are counted only).
+  CollisionLoop(const geom::Mesh& probe, const geom::Mesh& object, rt::TripleBuffer<rt::PoseSample>& poses,
+                rt::TripleBuffer<geom::ContactModel>& models, CollideFn collide, double rate_hz,
+                std::size_t max_rounds);
+  ~CollisionLoop();
+  void start();  ///< starts the thread
+  void stop();   ///< stops and joins it (idempotent)
+
+  std::uint64_t rounds() const { return rounds_.load(std::memory_order_relaxed); }                 ///< rounds so far
+  std::uint64_t incomplete() const { return incomplete_.load(std::memory_order_relaxed); }         ///< rounds missing a worker
+  std::int64_t last_latency_ns() const { return last_latency_ns_.load(std::memory_order_relaxed); }  ///< newest round's time
+  std::uint32_t last_contacts() const { return last_contacts_.load(std::memory_order_relaxed); }    ///< newest round's contacts
+  const std::vector<RoundRecord>& records() const { return records_; }  ///< after stop()
+  /// The round with the deepest penetration (the peak of the force law): its pose and pairs.
+  const geom::Pose& peak_pose() const { return peak_pose_; }
+  const std::vector<geom::FacePair>& peak_pairs() const { return peak_pairs_; }  ///< after stop()
+  double peak_penetration_mm() const { return peak_pd_; }                       ///< after stop()
+
+ private:
+  void run();
+  const geom::Mesh& probe_;
+  const geom::Mesh& object_;
+  rt::TripleBuffer<rt::PoseSample>& poses_;
+  rt::TripleBuffer<geom::ContactModel>& models_;
+  CollideFn collide_;
+  double rate_hz_;
+  std::size_t max_rounds_;
+  std::atomic<bool> stop_{false};
+  std::atomic<std::uint64_t> rounds_{0}, incomplete_{0};
+  std::atomic<std::int64_t> last_latency_ns_{0};
+  std::atomic<std::uint32_t> last_contacts_{0};
+  std::vector<RoundRecord> records_;
+  geom::Pose peak_pose_ = geom::Pose::Identity();
+  std::vector<geom::FacePair> peak_pairs_;
+  double peak_pd_ = -1;
+  std::thread thread_;
+};
+
+}  // namespace st::app

@@ -1,0 +1,97 @@
+// Run outputs: see run_outputs.hpp.
+#include "app/run_outputs.hpp"
+
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+#include "geom/collide.hpp"
+
+namespace st::app {
+
+Status write_contact_ply(const std::string& path, const geom::Mesh& probe, const geom::Mesh& object,
+                         const geom::Pose& pose, const std::vector<geom::FacePair>& pairs) {
+  std::vector<char> hit_o(object.num_faces(), 0), hit_p(probe.num_faces(), 0);
+  for (const geom::FacePair& p : pairs) {
+    if (p.object < hit_o.size()) hit_o[p.object] = 1;
+    if (p.probe < hit_p.size()) hit_p[p.probe] = 1;
+  }
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (!f) return fail(path, ": cannot create");
+  const std::size_t nv = object.num_vertices() + probe.num_vertices(), nf = object.num_faces() + probe.num_faces();
+  std::fprintf(f,
+               "ply\nformat ascii 1.0\ncomment spheretouch contact state: object faces first, then the probe's; "
+               "colliding faces red\nelement vertex %zu\nproperty double x\nproperty double y\nproperty double z\n"
+               "element face %zu\nproperty list uchar int vertex_indices\nproperty uchar red\nproperty uchar green\n"
+               "property uchar blue\nend_header\n",
+               nv, nf);
+  for (std::uint32_t i = 0; i < object.num_vertices(); ++i) {
+    const geom::Vec3 v = object.vertex(i);
+    std::fprintf(f, "%.17g %.17g %.17g\n", v.x(), v.y(), v.z());
+  }
+  for (std::uint32_t i = 0; i < probe.num_vertices(); ++i) {
+    const geom::Vec3 v = pose * probe.vertex(i);
+    std::fprintf(f, "%.17g %.17g %.17g\n", v.x(), v.y(), v.z());
+  }
+  for (std::uint32_t i = 0; i < object.num_faces(); ++i) {
+    const geom::Tri& t = object.faces[i];
+    std::fprintf(f, "3 %u %u %u %s\n", t[0], t[1], t[2], hit_o[i] ? "230 30 30" : "180 180 180");
+  }
+  const auto off = static_cast<std::uint32_t>(object.num_vertices());
+  for (std::uint32_t i = 0; i < probe.num_faces(); ++i) {
+    const geom::Tri& t = probe.faces[i];
+    std::fprintf(f, "3 %u %u %u %s\n", t[0] + off, t[1] + off, t[2] + off, hit_p[i] ? "230 30 30" : "150 190 230");
+  }
+  const bool ok = std::ferror(f) == 0;
+  if (std::fclose(f) != 0 || !ok) return fail(path, ": write error");
+  return Ok{};
+}
+
+Status write_trace_json(const std::string& path, const std::string& tick_csv, const std::vector<RoundRecord>& rounds) {
+  std::ifstream in(tick_csv);
+  if (!in) return fail(tick_csv, ": cannot read the per-tick trace");
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (!f) return fail(path, ": cannot create");
+  std::fprintf(f, "{\"displayTimeUnit\":\"ms\",\"traceEvents\":[\n");
+  std::fprintf(f, "{\"name\":\"process_name\",\"ph\":\"M\",\"pid\":1,\"args\":{\"name\":\"spheretouch run\"}},\n");
+  std::fprintf(f, "{\"name\":\"thread_name\",\"ph\":\"M\",\"pid\":1,\"tid\":1,\"args\":{\"name\":\"haptic 1 kHz\"}},\n");
+  std::fprintf(f, "{\"name\":\"thread_name\",\"ph\":\"M\",\"pid\":1,\"tid\":2,\"args\":{\"name\":\"collision\"}}");
+  // Timestamps are CLOCK_MONOTONIC in microseconds, shared by both threads' events.
+  auto us = [](std::int64_t ns) { return double(ns) / 1000.0; };
+  std::string line;
+  std::vector<double> v;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#' || !std::isdigit(static_cast<unsigned char>(line[0]))) continue;
+    v.clear();
+    const char* p = line.data();
+    const char* end = p + line.size();
+    while (p < end) {
+      double d = 0;
+      auto r = std::from_chars(p, end, d);
+      if (r.ec != std::errc()) break;
+      v.push_back(d);
+      p = r.ptr + (r.ptr < end ? 1 : 0);
+    }
+    if (v.size() < 17) continue;
+    const auto t_ns = static_cast<std::int64_t>(v[1]);
+    const double force = std::sqrt(v[9] * v[9] + v[10] * v[10] + v[11] * v[11]);
+    std::fprintf(f, ",\n{\"name\":\"tick\",\"ph\":\"X\",\"pid\":1,\"tid\":1,\"ts\":%.3f,\"dur\":1,"
+                    "\"args\":{\"tick\":%.0f,\"latency_us\":%.3f,\"model\":%.0f,\"pd_mm\":%.4g}}",
+                 us(t_ns), v[0], v[2] / 1000.0, v[4], v[12]);
+    std::fprintf(f, ",\n{\"name\":\"force_N\",\"ph\":\"C\",\"pid\":1,\"ts\":%.3f,\"args\":{\"force\":%.5g}}", us(t_ns),
+                 force);
+  }
+  for (const RoundRecord& r : rounds)
+    std::fprintf(f, ",\n{\"name\":\"round\",\"ph\":\"X\",\"pid\":1,\"tid\":2,\"ts\":%.3f,\"dur\":%.3f,"
+                    "\"args\":{\"pose\":%llu,\"pairs\":%u,\"contacts\":%u,\"pd_mm\":%.4g,\"complete\":%s}}",
+                 us(r.start_ns), double(r.end_ns - r.start_ns) / 1000.0, static_cast<unsigned long long>(r.pose_seq),
+                 r.pairs, r.contacts, r.penetration_mm, r.complete ? "true" : "false");
+  std::fprintf(f, "\n]}\n");
+  const bool ok = std::ferror(f) == 0;
+  if (std::fclose(f) != 0 || !ok) return fail(path, ": write error");
+  return Ok{};
+}
+
+}  // namespace st::app

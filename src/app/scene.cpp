@@ -1,0 +1,262 @@
+// Scene file parsing: one TomlReader per section, defaults from the libraries' Default…().
+#include "app/scene.hpp"
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <unistd.h>
+
+#include "app/toml_reader.hpp"
+#include "geom/mesh_io.hpp"
+#include "geom/primitives.hpp"
+
+namespace st::app {
+namespace {
+
+constexpr double kMs = 1e6;  // ns per ms
+
+void read_body(TomlReader& r, BodySpec& b, const std::string& dir, const std::string& field) {
+  std::string mesh;
+  r.string("mesh", mesh);
+  r.string("builtin", b.builtin, {"icosphere", "box", "capsule"});
+  r.number("radius_mm", b.radius_mm, 1e-6, 1e9);
+  r.number("length_mm", b.length_mm, 0, 1e9);
+  r.number("size_mm", b.size_mm, 1e-6, 1e9);
+  r.integer("frequency", b.frequency, 1, 200);
+  r.integer("segments", b.segments, 3, 1000);
+  r.string("units", b.units, {"um", "mm", "cm", "m", "in"});
+  r.number("scale", b.scale, 1e-12, 1e12);
+  if (!mesh.empty() && !b.builtin.empty()) r.error("mesh", "give either mesh or builtin, not both");
+  if (mesh.empty() && b.builtin.empty()) r.error("mesh", "expected a mesh path (or \"model:NAME\") or a builtin shape");
+  if (mesh.rfind("model:", 0) == 0) b.mesh = model_dir() + "/" + mesh.substr(6);
+  else if (!mesh.empty()) b.mesh = std::filesystem::path(mesh).is_absolute() ? mesh : dir + "/" + mesh;
+  if (!b.mesh.empty() && !std::filesystem::exists(b.mesh))
+    r.error("mesh", "file " + b.mesh + " does not exist" +
+                        (mesh.rfind("model:", 0) == 0 ? " (run scripts/models.sh to build the model set)" : ""));
+  (void)field;
+}
+
+geom::Vec3 vec3(const std::vector<double>& v) { return geom::Vec3(v[0], v[1], v[2]); }
+
+}  // namespace
+
+std::string model_dir() {
+  if (const char* d = std::getenv("ST_MODEL_DIR"); d && *d) return d;
+  // The executable lives in <source>/build*/: look for <source>/.cache/models beside it.
+  char buf[4096];
+  const ssize_t n = ::readlink("/proc/self/exe", buf, sizeof buf - 1);
+  if (n > 0) {
+    std::filesystem::path p(std::string(buf, std::size_t(n)));
+    for (int up = 0; up < 3 && p.has_parent_path(); ++up) {
+      p = p.parent_path();
+      if (std::filesystem::exists(p / ".cache" / "models")) return (p / ".cache" / "models").string();
+    }
+  }
+  return ".cache/models";
+}
+
+Scene DefaultScene() {
+  Scene s;
+  s.probe.builtin = "capsule";
+  s.probe.radius_mm = 8;
+  s.probe.length_mm = 40;
+  s.object.builtin = "icosphere";
+  s.object.radius_mm = 50;
+  s.object.frequency = 40;
+  return s;
+}
+
+Result<Scene> parse_scene(const std::string& text, const std::string& name, const std::string& dir) {
+  toml::table root;
+  try {
+    root = toml::parse(text, name);
+  } catch (const toml::parse_error& e) {
+    return fail(name, ":", e.source().begin.line, ":", e.source().begin.column, ": TOML syntax: ", e.description());
+  }
+  Scene s = DefaultScene();
+  s.file = name;
+  TomlReader top(&root, "", name);
+  for (const char* sec : {"probe", "object", "tree", "workers", "collision", "haptic", "force", "interpolation",
+                          "device", "output", "run"})
+    top.known(sec);
+  if (Status st = top.finish(); !st) return Error{st.error()};
+  for (const char* sec : {"probe", "object"})
+    if (!root.contains(sec)) return fail(name, ": missing section [", sec, "] (every scene names its probe and object)");
+
+  auto section = [&](const char* key) { return root.get_as<toml::table>(key); };
+  auto check_table = [&](const char* key) -> Status {
+    if (root.contains(key) && !root.get_as<toml::table>(key)) return fail(name, ": ", key, ": expected a [", key, "] table");
+    return Ok{};
+  };
+  for (const char* sec : {"probe", "object", "tree", "workers", "collision", "haptic", "force", "interpolation", "device",
+                          "output", "run"})
+    if (Status st = check_table(sec); !st) return Error{st.error()};
+
+  {
+    s.probe = {};
+    TomlReader r(section("probe"), "probe", name);
+    read_body(r, s.probe, dir, "probe");
+    std::vector<double> tip, rot;
+    r.numbers("tip", tip, 3);
+    r.numbers("rotation_deg", rot, 3);
+    if (!tip.empty()) { s.probe_tip_auto = false; s.probe_tip = vec3(tip); }
+    if (!rot.empty()) s.probe_rotation_deg = vec3(rot);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    s.object = {};
+    TomlReader r(section("object"), "object", name);
+    read_body(r, s.object, dir, "object");
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("tree"), "tree", name);
+    r.integer("leaf_faces", s.tree.leaf_faces, 1, geom::kMaxLeafFaces);
+    r.integer("layer", s.layer, 0, 20);
+    r.integer("block_size", s.block_size, 1, 1 << 20);
+    r.boolean("cache", s.tree_cache);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("workers"), "workers", name);
+    r.integer("count", s.workers, 0, 64);
+    r.strings("endpoints", s.endpoints);
+    r.number("deadline_ms", s.deadline_ms, 0.1, 10000);
+    r.integer("down_after", s.down_after, 1, 1000);
+    for (const std::string& ep : s.endpoints)
+      if (ep.rfind("tcp://", 0) != 0 && ep.rfind("ipc://", 0) != 0)
+        r.error("endpoints", "expected tcp://HOST:PORT or ipc://PATH endpoints (found '" + ep + "')");
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("collision"), "collision", name);
+    r.number("rate_hz", s.collision_rate_hz, 0, 100000);
+    std::string mode = "exact";
+    r.string("mode", mode, {"exact", "approximate"});
+    int layer = geom::kLeafSpheres;
+    r.integer("approx_layer", layer, -1, 64);
+    if (mode == "approximate") s.approx_layer = layer;
+    else if (r.has("approx_layer")) r.error("approx_layer", "only meaningful with mode = \"approximate\"");
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("haptic"), "haptic", name);
+    r.number("rate_hz", s.haptic.rate_hz, rt::kMinRateHz, rt::kMaxRateHz);
+    r.integer("fifo_priority", s.haptic.fifo_priority, 0, 99);
+    r.integer("cpu", s.haptic.cpu, -1, 4095);
+    r.boolean("lock_memory", s.haptic.lock_memory);
+    std::size_t prefault_kb = s.haptic.prefault_stack_bytes / 1024;
+    r.integer("prefault_stack_kb", prefault_kb, 0, 65536);
+    s.haptic.prefault_stack_bytes = prefault_kb * 1024;
+    r.boolean("strict", s.haptic.strict);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("force"), "force", name);
+    std::string law = s.law.kind == rt::LawKind::log ? "log" : "linear";
+    r.string("law", law, {"log", "linear"});
+    s.law.kind = law == "log" ? rt::LawKind::log : rt::LawKind::linear;
+    r.number("a", s.law.a, -1e6, 1e6);
+    r.number("b_n", s.law.b_N, 1e-9, 1e6);
+    r.number("log_base", s.law.log_base, 1.000001, 1e6);
+    r.number("pd_unit_mm", s.law.pd_unit_mm, 1e-9, 1e9);
+    r.number("spring_n_per_mm", s.law.spring_N_per_mm, 1e-9, 1e6);
+    r.number("peak_n", s.saturation.peak_N, 1e-9, 1e4);
+    s.law.max_force_N = s.saturation.peak_N;
+    r.boolean("sustained_limit", s.saturation.sustained);
+    r.number("continuous_n", s.saturation.continuous_N, 1e-9, 1e4);
+    r.number("sustained_tau_s", s.saturation.tau_s, 1e-3, 1e5);
+    r.number("damping_n_s_per_mm", s.interp.damping_N_s_per_mm, 0, 1e3);
+    if (s.saturation.continuous_N > s.saturation.peak_N)
+      r.error("continuous_n", "must not exceed peak_n");
+    if (Status st = r.finish(); !st) return Error{st.error()};
+    if (Result<rt::ForceLaw> l = rt::ForceLaw::make(s.law); !l) return fail(name, ": [force] ", l.error());
+    if (std::string e = rt::Saturator::check(s.saturation); !e.empty()) return fail(name, ": [force] ", e);
+  }
+  {
+    TomlReader r(section("interpolation"), "interpolation", name);
+    std::string method = "plane";
+    r.string("method", method, {"hold", "paper", "plane"});
+    s.interp.mode = rt::parse_interp_mode(method).value();
+    double crossfade_ms = double(s.interp.crossfade_ns) / kMs, timeout_ms = double(s.interp.stale_timeout_ns) / kMs,
+           fade_ms = double(s.interp.fade_ns) / kMs;
+    r.number("crossfade_ms", crossfade_ms, 0, 10000);
+    r.number("timeout_ms", timeout_ms, 1, 100000);
+    r.number("fade_ms", fade_ms, 0, 100000);
+    r.number("paper_gain_n_per_mm", s.interp.paper_gain_N_per_mm, 0, 1e3);
+    r.number("paper_max_move_mm", s.interp.paper_max_move_mm, 0, 1e3);
+    s.interp.crossfade_ns = std::int64_t(crossfade_ms * kMs);
+    s.interp.stale_timeout_ns = std::int64_t(timeout_ms * kMs);
+    s.interp.fade_ns = std::int64_t(fade_ms * kMs);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("device"), "device", name);
+    std::string kind = "simulated";
+    r.string("kind", kind, {"simulated"});
+    r.string("script", s.device.script);
+    if (s.device.script != "builtin" && !std::filesystem::path(s.device.script).is_absolute())
+      s.device.script = dir + "/" + s.device.script;
+    if (s.device.script != "builtin" && !std::filesystem::exists(s.device.script))
+      r.error("script", "trajectory file " + s.device.script + " does not exist (or use \"builtin\")");
+    std::vector<double> target, normal;
+    if (root["device"]["target"].is_string()) {
+      std::string t;
+      r.string("target", t, {"top"});
+    } else {
+      r.numbers("target", target, 3);
+      if (!target.empty()) { s.device.target_top = false; s.device.target = vec3(target); }
+    }
+    r.numbers("normal", normal, 3);
+    if (!normal.empty()) {
+      if (vec3(normal).norm() < 1e-9) r.error("normal", "must not be the zero vector");
+      else s.device.normal = vec3(normal).normalized();
+    }
+    r.number("press_mm", s.device.press_mm, 0, 1000);
+    r.number("slide_mm", s.device.slide_mm, 0, 10000);
+    r.boolean("virtual_user", s.device.user.enabled);
+    r.number("user_stiffness_n_per_mm", s.device.user.stiffness_N_per_mm, 1e-6, 100);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("output"), "output", name);
+    r.string("dir", s.out_dir);
+    r.boolean("trace", s.write_trace);
+    r.boolean("perfetto", s.write_perfetto);
+    r.boolean("ply", s.write_ply);
+    r.string("status", s.status, {"auto", "tty", "plain", "off"});
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("run"), "run", name);
+    r.number("duration_s", s.duration_s, 0.01, 1e6);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  if (std::string e = rt::HapticLoop::check(s.haptic); !e.empty()) return fail(name, ": [haptic] ", e);
+  return s;
+}
+
+Result<Scene> load_scene(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return fail(path, ": cannot open scene file");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string dir = std::filesystem::path(path).parent_path().string();
+  return parse_scene(ss.str(), path, dir.empty() ? "." : dir);
+}
+
+Result<geom::Mesh> load_body(const BodySpec& b, const std::string& field) {
+  if (!b.builtin.empty()) {
+    if (b.builtin == "icosphere") return geom::make_icosphere(b.radius_mm, b.frequency);
+    if (b.builtin == "box") return geom::make_box(geom::Vec3::Constant(b.size_mm));
+    return geom::make_capsule(b.radius_mm, b.length_mm, b.segments);
+  }
+  geom::LoadOptions o;
+  o.units = b.units;
+  o.scale = b.scale;
+  Result<geom::LoadedMesh> r = geom::load_mesh(b.mesh, o);
+  if (!r) return fail("[", field, "] ", r.error());
+  return std::move(r.value().mesh);
+}
+
+}  // namespace st::app

@@ -1,0 +1,82 @@
+// Scene files (configs/*.toml): what `spheretouch run` touches and with which knobs. Every field
+// is checked where it is read, unknown keys are rejected, and only the bodies named are loaded.
+// configs/demo.toml documents every field.
+#pragma once
+#include <string>
+#include <vector>
+
+#include "geom/collide.hpp"
+#include "geom/mesh.hpp"
+#include "geom/sphere_tree.hpp"
+#include "rt/force_law.hpp"
+#include "rt/haptic_loop.hpp"
+#include "rt/interpolator.hpp"
+#include "rt/saturation.hpp"
+#include "rt/simulated_device.hpp"
+
+namespace st::app {
+
+/// One body: a mesh file, the model set ("model:NAME") or a generated shape.
+struct BodySpec {
+  std::string mesh;            ///< resolved file path; empty for a generated body
+  std::string builtin;         ///< "icosphere", "box", "capsule" when generated
+  double radius_mm = 10, length_mm = 30, size_mm = 40;  ///< generated shape dimensions
+  int frequency = 7, segments = 24;                     ///< generated shape resolution
+  std::string units = "mm";    ///< unit of the file's coordinates
+  double scale = 1;            ///< extra factor
+};
+
+/// The simulated device's script.
+struct DeviceSpec {
+  std::string script = "builtin";  ///< "builtin" or a trajectory file (t + 16 numbers a line)
+  bool target_top = true;          ///< builtin: touch the object's highest point along +z
+  geom::Vec3 target{geom::Vec3::Zero()};  ///< builtin: surface point, object frame, mm (target_top false)
+  geom::Vec3 normal{geom::Vec3::UnitZ()}; ///< builtin: approach against this outward normal
+  double press_mm = 3, slide_mm = 20;     ///< builtin: press depth and slide length, mm
+  rt::VirtualUser user;                   ///< spring-damper hand reacting to the force
+};
+
+/// Everything a run needs, with defaults from the libraries' Default…() functions.
+struct Scene {
+  std::string file;                    ///< the scene file (for messages)
+  BodySpec probe, object;              ///< the hand and the touched object
+  bool probe_tip_auto = true;          ///< fingertip = probe's lowest vertex along the approach
+  geom::Vec3 probe_tip{geom::Vec3::Zero()};   ///< fingertip, probe file coordinates, mm
+  geom::Vec3 probe_rotation_deg{geom::Vec3::Zero()};  ///< probe orientation (XYZ Euler, about the tip)
+  geom::TreeParams tree = geom::DefaultTreeParams();  ///< leaf size
+  bool tree_cache = true;              ///< read/write trees in the tree cache
+  std::uint32_t layer = 2, block_size = 1;  ///< distribution: sphere layer and blocks per worker
+  int workers = 2;                     ///< in-process workers (0 = collide in the collision thread)
+  std::vector<std::string> endpoints;  ///< worker daemons (overrides `workers`)
+  double deadline_ms = 50;             ///< scatter-gather round deadline, ms
+  int down_after = 3;                  ///< missed deadlines before a worker is marked down
+  double collision_rate_hz = 0;        ///< cap on collision rounds per second (0 = as fast as possible)
+  int approx_layer = geom::kExact;     ///< kExact, or a sphere layer for the approximate mode
+  rt::HapticLoopConfig haptic = rt::DefaultHapticLoopConfig();      ///< servo loop
+  rt::ForceLawConfig law = rt::DefaultForceLawConfig();             ///< eq. (1) or spring
+  rt::SaturationConfig saturation = rt::DefaultSaturationConfig();  ///< device limits
+  rt::InterpolatorConfig interp = rt::DefaultInterpolatorConfig();  ///< between contact updates
+  DeviceSpec device;                   ///< simulated device
+  double duration_s = 6;               ///< run length (the built-in script takes 5 s)
+  std::string out_dir;                 ///< run directory ("" = runs/<timestamp>)
+  bool write_trace = true, write_perfetto = true, write_ply = true;  ///< outputs
+  std::string status = "auto";         ///< status line: auto, tty, plain, off
+};
+
+/// The defaults (a capsule fingertip against an icosphere: needs no download).
+Scene DefaultScene();
+
+/// Reads and checks a scene file; errors name the file, line and field.
+Result<Scene> load_scene(const std::string& path);
+
+/// Parses scene text; `name` is used in messages and `dir` resolves relative mesh paths.
+Result<Scene> parse_scene(const std::string& text, const std::string& name, const std::string& dir);
+
+/// Directory of the model set: $ST_MODEL_DIR, else .cache/models next to the executable's
+/// source tree, else ./.cache/models.
+std::string model_dir();
+
+/// Loads (or generates) a body; errors name the scene field.
+Result<geom::Mesh> load_body(const BodySpec& spec, const std::string& field);
+
+}  // namespace st::app

@@ -1,0 +1,54 @@
+// BlockSet: what one worker needs in memory to answer queries (paper §3.4) — self-contained
+// geometry, not tree internals. The whole probe mesh, plus the worker's share of the object:
+// the faces of its blocks (block-cyclic over the object's layer-n spheres) with their GLOBAL
+// face indices and only the vertices they use, and the tree parameters the worker builds its own
+// sphere tree with. Exact results do not depend on the tree's shape, so the union of the
+// workers' pairs equals the single-process result. The canonical encoding is hashed (FNV-1a 64)
+// to address block sets by content: a worker that already holds a hash is not sent it again.
+#pragma once
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "geom/mesh.hpp"
+#include "net/protocol.hpp"
+
+namespace st::net {
+
+/// One worker's share of the work, as geometry.
+struct BlockSet {
+  std::uint32_t leaf_faces = 8;            ///< sphere-tree leaf size the worker builds with
+  std::uint32_t object_faces_total = 0;    ///< faces of the whole object (global ids are below it)
+  std::uint32_t blocks_total = 0;          ///< blocks in the whole partition
+  std::vector<std::uint32_t> blocks;       ///< global block ids held, strictly ascending
+  geom::Mesh probe;                        ///< the whole probe: origin, local vertices, faces
+  geom::Mesh object;                       ///< the share: object origin, used vertices, faces into them
+  std::vector<std::uint32_t> object_face_ids;  ///< global index of each share face, strictly ascending
+};
+
+/// The object's faces grouped in blocks (global face ids per block); block b of the sphere
+/// tree's layer n becomes blocks[b].
+using Blocks = std::vector<std::vector<std::uint32_t>>;
+
+/// Builds the block set of `block_ids` (any order, no duplicates): their faces in ascending global
+/// order, the object vertices they use in ascending original order, the whole probe.
+Result<BlockSet> make_block_set(const geom::Mesh& probe, const geom::Mesh& object, const Blocks& blocks,
+                                std::span<const std::uint32_t> block_ids, std::uint32_t leaf_faces);
+
+/// Canonical little-endian encoding ("STBS" v1); equal block sets give equal bytes.
+std::vector<std::uint8_t> encode_block_set(const BlockSet& s);
+/// Content hash of an encoding (FNV-1a 64 over every byte).
+std::uint64_t block_set_hash(std::span<const std::uint8_t> encoded);
+/// Decodes and validates an encoding: counts against `limits`, every face index in range,
+/// ids strictly ascending and below their totals, every coordinate finite.
+Result<BlockSet> decode_block_set(std::span<const std::uint8_t> encoded, const Limits& limits);
+
+/// Block-cyclic mapping (paper §3.4, [10]): block b goes to worker b mod workers.
+std::vector<std::vector<std::uint32_t>> block_cyclic(std::uint32_t num_blocks, std::uint32_t workers);
+
+/// Stand-in for the sphere tree's layer-n blocks until the collision core lands: faces sorted
+/// along a Morton curve of their centroids and cut into runs of `faces_per_block` (spatially
+/// compact blocks, like the spheres of one layer).
+Blocks spatial_blocks(const geom::Mesh& object, std::uint32_t faces_per_block);
+
+}  // namespace st::net

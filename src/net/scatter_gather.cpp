@@ -1,0 +1,567 @@
+// ScatterGather (scatter_gather.hpp).
+#include "net/scatter_gather.hpp"
+
+#include <algorithm>
+#include <thread>
+#include <unordered_map>
+
+#include "net/worker_service.hpp"
+
+namespace st::net {
+
+namespace {
+
+/// An encoded block set the client may send: its blocks, content hash and bytes.
+struct EncodedSet {
+  std::vector<std::uint32_t> blocks;  // sorted
+  std::uint64_t hash = 0;
+  std::vector<std::uint8_t> bytes;
+};
+using SetPtr = std::shared_ptr<const EncodedSet>;
+
+struct SceneData {
+  geom::Mesh probe, object;
+  Blocks blocks;
+  std::uint32_t leaf_faces;
+};
+
+Result<SetPtr> encode_set(const SceneData& s, std::vector<std::uint32_t> blocks) {
+  auto bs = make_block_set(s.probe, s.object, s.blocks, blocks, s.leaf_faces);
+  if (!bs) return Error{bs.error()};
+  auto e = std::make_shared<EncodedSet>();
+  e->blocks = std::move(blocks);
+  e->bytes = encode_block_set(bs.value());
+  e->hash = block_set_hash(e->bytes);
+  return SetPtr(std::move(e));
+}
+
+bool is_superset(const std::vector<std::uint32_t>& big, const std::vector<std::uint32_t>& small) {
+  return std::includes(big.begin(), big.end(), small.begin(), small.end());
+}
+
+enum class Ask { None, Query, Heartbeat };
+
+}  // namespace
+
+struct ScatterGather::Impl {
+  struct Peer {
+    std::string endpoint;
+    zmq::socket_t sock;
+    bool up = true;
+    std::uint32_t worker_id = 0;
+    std::uint64_t epoch = 0;                 // 0 until the first Hello
+    std::uint32_t misses = 0;
+    std::vector<std::uint64_t> held;         // hashes from its last Hello, MRU first
+    std::vector<std::uint32_t> original;     // its own blocks (block-cyclic)
+    std::vector<std::uint32_t> target;       // blocks it should hold now
+    std::uint64_t target_hash = 0;           // 0 while the target is being encoded
+    SetPtr upload;                           // block set being sent, or null
+    std::size_t upload_off = 0;              // bytes of `upload` handed to ZeroMQ
+    Clock::time_point upload_progress{};     // last chunk sent
+    std::uint64_t failed_hash = 0;           // a set it refused to load (not retried until load_timeout)
+    Clock::time_point failed_at{};
+    Clock::time_point next_heartbeat{};
+    Clock::time_point last_heard{};          // last message received from it
+    Clock::time_point last_asked{};          // last Query or Heartbeat sent to it
+    Clock::time_point socket_opened{};
+    std::uint64_t nonce = 0;
+    // This round.
+    Ask ask = Ask::None;
+    bool replied = false;
+    SetPtr asked;                            // the block set the Query named
+    // Totals.
+    std::uint64_t bytes_sent = 0;
+    std::uint32_t loads_sent = 0;
+
+    bool holds(std::uint64_t h) const { return h && std::find(held.begin(), held.end(), h) != held.end(); }
+  };
+
+  zmq::context_t* ctx = nullptr;
+  ScatterConfig cfg;
+  std::shared_ptr<const SceneData> scene;
+  std::uint32_t probe_faces = 0, object_faces = 0;
+  std::vector<Peer> peers;
+  std::map<std::vector<std::uint32_t>, SetPtr> by_blocks;
+  std::unordered_map<std::uint64_t, SetPtr> by_hash;
+  std::map<std::vector<std::uint32_t>, std::future<Result<SetPtr>>> encoding;
+  bool dirty = false;                        // up/down changed: reassign
+  std::uint64_t cur_seq = 0;
+  bool in_round = false;
+  std::vector<std::uint8_t> covered;         // per block, this round
+  std::vector<std::uint8_t> buf;             // encode buffer
+  std::vector<zmq::pollitem_t> items;
+  RoundResult* out = nullptr;
+
+  // ---- block sets --------------------------------------------------------------------------
+
+  void remember(const SetPtr& s) { by_blocks[s->blocks] = s; by_hash[s->hash] = s; }
+
+  /// The encoded set of `blocks`, or null while it is being encoded in the background.
+  SetPtr get_set(const std::vector<std::uint32_t>& blocks) {
+    if (auto it = by_blocks.find(blocks); it != by_blocks.end()) return it->second;
+    auto f = encoding.find(blocks);
+    if (f == encoding.end()) {
+      // Encoding a multi-megabyte share takes milliseconds: never inside a round's deadline.
+      encoding.emplace(blocks, std::async(std::launch::async, [s = scene, blocks] { return encode_set(*s, blocks); }));
+      return nullptr;
+    }
+    if (f->second.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return nullptr;
+    Result<SetPtr> r = f->second.get();
+    encoding.erase(f);
+    if (!r) return nullptr;  // cannot happen: blocks come from our own partition
+    remember(r.value());
+    return r.value();
+  }
+
+  /// Drops encoded sets no worker is meant to hold, holds, or owns originally (memory stays
+  /// bounded however often workers come and go), and collects finished background encodings.
+  void prune_sets() {
+    for (auto it = encoding.begin(); it != encoding.end();) {
+      if (it->second.wait_for(std::chrono::seconds(0)) != std::future_status::ready) { ++it; continue; }
+      if (Result<SetPtr> r = it->second.get(); r) remember(r.value());
+      it = encoding.erase(it);
+    }
+    std::unordered_map<std::uint64_t, bool> keep;
+    for (const Peer& p : peers) {
+      for (std::uint64_t h : p.held) keep[h] = true;
+      if (p.target_hash) keep[p.target_hash] = true;
+      if (p.upload) keep[p.upload->hash] = true;
+    }
+    for (auto it = by_blocks.begin(); it != by_blocks.end();) {
+      const bool original = std::any_of(peers.begin(), peers.end(), [&](const Peer& p) { return p.original == it->first; });
+      const bool targeted = std::any_of(peers.begin(), peers.end(), [&](const Peer& p) { return p.target == it->first; });
+      if (original || targeted || keep.count(it->second->hash)) { ++it; continue; }
+      by_hash.erase(it->second->hash);
+      it = by_blocks.erase(it);
+    }
+  }
+
+  void refresh_targets() {
+    for (Peer& p : peers)
+      if (p.up && !p.target_hash && !p.target.empty())
+        if (SetPtr s = get_set(p.target)) p.target_hash = s->hash;
+  }
+
+  /// Deals the blocks of down workers block-cyclically over the live ones (paper §3.4).
+  void reassign() {
+    dirty = false;
+    std::vector<std::size_t> alive;
+    std::vector<std::uint32_t> orphans;
+    for (std::size_t i = 0; i < peers.size(); ++i) {
+      if (peers[i].up) alive.push_back(i);
+      else orphans.insert(orphans.end(), peers[i].original.begin(), peers[i].original.end());
+    }
+    std::sort(orphans.begin(), orphans.end());
+    for (Peer& p : peers) p.target = p.up ? p.original : std::vector<std::uint32_t>{};
+    if (!alive.empty())
+      for (std::size_t j = 0; j < orphans.size(); ++j) peers[alive[j % alive.size()]].target.push_back(orphans[j]);
+    for (Peer& p : peers) {
+      std::sort(p.target.begin(), p.target.end());
+      SetPtr s = p.target.empty() ? nullptr : get_set(p.target);
+      p.target_hash = s ? s->hash : 0;
+    }
+    prune_sets();
+  }
+
+  Status open_socket(Peer& p) {
+    p.socket_opened = Clock::now();
+    p.sock = zmq::socket_t(*ctx, zmq::socket_type::dealer);
+    set_common_options(p.sock, cfg.sndhwm, cfg.rcvhwm, cfg.limits.max_message_bytes);
+    p.sock.set(zmq::sockopt::immediate, 1);          // no queueing to a worker that is not connected
+    p.sock.set(zmq::sockopt::reconnect_ivl, 100);    // a restarted worker is found within 0.1 s
+    p.sock.set(zmq::sockopt::reconnect_ivl_max, 1000);
+    p.sock.set(zmq::sockopt::heartbeat_ivl, 500);    // ZMTP heartbeats drop half-open connections
+    p.sock.set(zmq::sockopt::heartbeat_timeout, 1500);
+    if (!cfg.curve_server_public.empty()) {
+      p.sock.set(zmq::sockopt::curve_serverkey, cfg.curve_server_public);
+      p.sock.set(zmq::sockopt::curve_publickey, cfg.curve_public);
+      p.sock.set(zmq::sockopt::curve_secretkey, cfg.curve_secret);
+    }
+    try {
+      p.sock.connect(p.endpoint);
+    } catch (const zmq::error_t& e) {
+      return fail("scatter-gather: connect ", p.endpoint, ": ", e.what());
+    }
+    return Ok{};
+  }
+
+  // ---- sending -----------------------------------------------------------------------------
+
+  bool send(Peer& p, const Message& m) {
+    encode(m, buf);
+    try {
+      return p.sock.send(zmq::buffer(buf), zmq::send_flags::dontwait).has_value();
+    } catch (const zmq::error_t&) {
+      return false;
+    }
+  }
+
+  void heartbeat(Peer& p, Clock::time_point now) {
+    p.next_heartbeat = now + cfg.heartbeat_period;
+    p.last_asked = now;
+    send(p, HeartbeatMsg{++p.nonce});
+  }
+
+  void maybe_start_upload(Peer& p, Clock::time_point now) {
+    if (!p.up || !p.epoch || !p.target_hash || p.holds(p.target_hash)) return;
+    if (p.upload && p.upload->hash == p.target_hash) return;
+    if (p.failed_hash == p.target_hash && now - p.failed_at < cfg.load_timeout) return;
+    p.upload = by_hash.at(p.target_hash);
+    p.upload_off = 0;
+    p.upload_progress = now;
+    ++p.loads_sent;
+  }
+
+  void pump_upload(Peer& p, Clock::time_point now) {
+    if (!p.upload || p.upload_off >= p.upload->bytes.size()) return;
+    const auto& bytes = p.upload->bytes;
+    const std::size_t chunk = std::max<std::size_t>(1, std::min(cfg.chunk_bytes, cfg.limits.max_chunk_bytes));
+    LoadBlocksMsg m{p.upload->hash, bytes.size(), 0, {}};
+    while (p.upload_off < bytes.size()) {
+      const std::size_t n = std::min(chunk, bytes.size() - p.upload_off);
+      m.offset = p.upload_off;
+      m.data.assign(bytes.begin() + static_cast<std::ptrdiff_t>(p.upload_off),
+                    bytes.begin() + static_cast<std::ptrdiff_t>(p.upload_off + n));
+      if (!send(p, m)) break;  // queue full or not connected: resume on POLLOUT / next round
+      p.upload_off += n;
+      p.bytes_sent += n;
+      p.upload_progress = now;
+    }
+  }
+
+  bool uploading(const Peer& p) const { return p.upload != nullptr; }
+
+  // ---- receiving ---------------------------------------------------------------------------
+
+  void on_hello(Peer& p, const HelloMsg& h, Clock::time_point now) {
+    if (p.epoch && h.epoch != p.epoch) p.upload = nullptr;  // restarted: whatever was sent is gone
+    p.epoch = h.epoch;
+    p.worker_id = h.worker_id;
+    p.held.clear();
+    for (const Held& x : h.held) p.held.push_back(x.hash);
+    if (p.upload && p.holds(p.upload->hash)) p.upload = nullptr;  // load acknowledged
+    if (!p.up) { p.up = true; p.misses = 0; dirty = true; }
+    if (p.ask == Ask::Heartbeat) p.replied = true;
+    maybe_start_upload(p, now);
+  }
+
+  void on_result(Peer& p, ResultMsg& r) {
+    if (!in_round || r.seq != cur_seq) { ++out->stale_dropped; return; }
+    if (p.ask != Ask::Query || p.replied || !p.asked || r.hash != p.asked->hash) { ++out->bad_messages; return; }
+    for (const FacePair& fp : r.pairs)
+      if (fp.probe >= probe_faces || fp.object >= object_faces) { ++out->bad_messages; return; }
+    p.replied = true;
+    p.misses = 0;
+    ++out->workers_replied;
+    out->pairs.insert(out->pairs.end(), r.pairs.begin(), r.pairs.end());
+    for (std::uint32_t b : p.asked->blocks) covered[b] = 1;
+    out->stats.sphere_tests += r.stats.sphere_tests;
+    out->stats.tri_tests += r.stats.tri_tests;
+    out->stats.compute_ns = std::max(out->stats.compute_ns, r.stats.compute_ns);
+  }
+
+  void on_error(Peer& p, const ErrorMsg& e, Clock::time_point now) {
+    if (e.code == ErrorCode::NotLoaded && in_round && e.ref == cur_seq && p.ask == Ask::Query) {
+      p.replied = true;  // alive, just not holding what we asked for; its Hello follows
+      p.held.erase(std::remove(p.held.begin(), p.held.end(), p.asked ? p.asked->hash : 0), p.held.end());
+    } else if (e.code == ErrorCode::LoadFailed || e.code == ErrorCode::TooLarge) {
+      if (p.upload && (e.ref == p.upload->hash || e.ref == 0)) {
+        p.failed_hash = p.upload->hash;
+        p.failed_at = now;
+        p.upload = nullptr;
+      }
+    } else if (out) {
+      ++out->bad_messages;
+    }
+  }
+
+  void drain(Peer& p, Clock::time_point now) {
+    for (int budget = 0; budget < 256; ++budget) {
+      zmq::message_t msg;
+      try {
+        if (!p.sock.recv(msg, zmq::recv_flags::dontwait)) return;
+      } catch (const zmq::error_t&) {
+        return;
+      }
+      if (msg.more()) {  // a worker sends one frame per message; drop the rest
+        for (bool more = true; more;) {
+          zmq::message_t junk;
+          try { (void)p.sock.recv(junk, zmq::recv_flags::dontwait); } catch (const zmq::error_t&) { return; }
+          more = junk.more();
+        }
+        if (out) ++out->bad_messages;
+        continue;
+      }
+      Result<Message> m = decode({static_cast<const std::uint8_t*>(msg.data()), msg.size()}, cfg.limits);
+      if (!m) { if (out) ++out->bad_messages; continue; }
+      p.last_heard = now;
+      if (auto* h = std::get_if<HelloMsg>(&m.value())) on_hello(p, *h, now);
+      else if (auto* r = std::get_if<ResultMsg>(&m.value())) { if (out) on_result(p, *r); }
+      else if (auto* e = std::get_if<ErrorMsg>(&m.value())) on_error(p, *e, now);
+      else if (out) ++out->bad_messages;
+    }
+  }
+
+  /// Waits until `until` (bounded) for replies or send room, then handles everything waiting.
+  void wait_and_service(Clock::time_point until) {
+    items.clear();
+    for (Peer& p : peers) {
+      short ev = ZMQ_POLLIN;
+      if (p.upload && p.upload_off < p.upload->bytes.size()) ev |= ZMQ_POLLOUT;
+      items.push_back({p.sock.handle(), 0, ev, 0});
+    }
+    const auto now = Clock::now();
+    const auto left_us = std::chrono::duration_cast<std::chrono::microseconds>(until - now).count();
+    // zmq_poll counts in ms: wait whole ms, and poll without waiting through the last fraction
+    // so the round never overshoots its deadline by a millisecond.
+    const long timeout_ms = left_us > 0 ? left_us / 1000 : 0;
+    try {
+      zmq::poll(items.data(), items.size(), std::chrono::milliseconds(timeout_ms));
+    } catch (const zmq::error_t&) {
+    }
+    if (timeout_ms == 0 && left_us > 0) std::this_thread::yield();
+    const auto t = Clock::now();
+    for (std::size_t i = 0; i < peers.size(); ++i) {
+      if (items[i].revents & ZMQ_POLLIN) drain(peers[i], t);
+      if (items[i].revents & ZMQ_POLLOUT) pump_upload(peers[i], t);
+    }
+  }
+
+  void service_now() {
+    const auto now = Clock::now();
+    for (Peer& p : peers) drain(p, now);
+  }
+
+  // ---- choosing what to ask -----------------------------------------------------------------
+
+  /// Picks the block set each live worker is queried with: its target if it holds it, otherwise
+  /// the largest set it holds; then, while blocks are uncovered, a held superset that covers
+  /// them (a survivor keeps answering for a returning worker's blocks until that one is loaded).
+  void choose_sets() {
+    std::fill(covered.begin(), covered.end(), 0);
+    for (Peer& p : peers) {
+      p.asked = nullptr;
+      if (!p.up || !p.epoch) continue;
+      if (p.holds(p.target_hash)) p.asked = by_hash.at(p.target_hash);
+      else
+        for (std::uint64_t h : p.held)
+          if (auto it = by_hash.find(h); it != by_hash.end() && (!p.asked || it->second->blocks.size() > p.asked->blocks.size()))
+            p.asked = it->second;
+      if (p.asked) for (std::uint32_t b : p.asked->blocks) covered[b] = 1;
+    }
+    if (std::all_of(covered.begin(), covered.end(), [](std::uint8_t c) { return c; })) return;
+    for (Peer& p : peers) {
+      if (!p.up || !p.epoch) continue;
+      SetPtr best;
+      std::size_t best_gain = 0;
+      for (std::uint64_t h : p.held) {
+        auto it = by_hash.find(h);
+        if (it == by_hash.end() || (p.asked && !is_superset(it->second->blocks, p.asked->blocks))) continue;
+        std::size_t gain = 0;
+        for (std::uint32_t b : it->second->blocks) gain += !covered[b];
+        if (gain > best_gain) { best_gain = gain; best = it->second; }
+      }
+      if (best) { p.asked = best; for (std::uint32_t b : best->blocks) covered[b] = 1; }
+    }
+  }
+
+  /// Gives a fresh socket to every worker that was asked but has been silent for
+  /// reconnect_after (unless it is busy loading what we sent).
+  void revive_silent(Clock::time_point now) {
+    for (Peer& p : peers) {
+      const auto since = std::max({p.last_heard, p.socket_opened});
+      if (p.last_asked <= since || now - since < cfg.reconnect_after) continue;
+      if (uploading(p) && now - p.upload_progress <= cfg.load_timeout) continue;
+      p.upload = nullptr;
+      (void)open_socket(p);
+    }
+  }
+
+  void begin_round_sends(const geom::Pose& pose, Clock::time_point now) {
+    revive_silent(now);
+    if (dirty) reassign();
+    refresh_targets();
+    for (Peer& p : peers) maybe_start_upload(p, now);
+    choose_sets();
+    std::fill(covered.begin(), covered.end(), 0);
+    for (Peer& p : peers) {
+      p.ask = Ask::None;
+      p.replied = false;
+      if (!p.up) {
+        if (now >= p.next_heartbeat) heartbeat(p, now);
+        continue;
+      }
+      if (p.asked) {
+        p.ask = Ask::Query;
+        ++out->workers_asked;
+        p.last_asked = now;
+        if (!send(p, QueryMsg{cur_seq, p.asked->hash, pose})) p.asked = nullptr;  // counts as a miss
+      } else if (!uploading(p)) {
+        p.ask = Ask::Heartbeat;  // unknown or empty: it must at least say hello by the deadline
+        if (now >= p.next_heartbeat || !p.epoch) heartbeat(p, now);
+      }
+      pump_upload(p, now);
+    }
+  }
+
+  bool all_replied() const {
+    bool any = false;
+    for (const Peer& p : peers) {
+      if (p.ask == Ask::Query && p.asked) any = true;
+      if (p.ask != Ask::None && !p.replied && !(p.ask == Ask::Query && !p.asked)) return false;
+    }
+    return any;  // nobody to wait for: wait out the deadline instead of spinning the caller
+  }
+
+  void end_round(Clock::time_point now) {
+    for (Peer& p : peers) {
+      if (!p.up) continue;
+      if (p.ask == Ask::None || p.replied) {
+        if (p.replied) p.misses = 0;
+        if (uploading(p) && now - p.upload_progress > cfg.load_timeout) mark_down(p);  // stuck load
+        continue;
+      }
+      if (uploading(p) && now - p.upload_progress <= cfg.load_timeout) continue;  // busy loading: exempt
+      if (++p.misses >= cfg.miss_limit) mark_down(p);
+    }
+  }
+
+  void mark_down(Peer& p) {
+    // A fresh socket drops whatever is queued for the dead worker, and re-arms the connection:
+    // libzmq reconnects tcp:// and ipc:// by itself, but not inproc:// once its binder is gone.
+    (void)open_socket(p);
+    p.up = false;
+    p.upload = nullptr;
+    p.misses = 0;
+    p.next_heartbeat = Clock::now();
+    dirty = true;
+  }
+};
+
+Result<std::unique_ptr<ScatterGather>> ScatterGather::create(zmq::context_t& ctx, ScatterConfig config, geom::Mesh probe,
+                                                              geom::Mesh object, Blocks blocks) {
+  if (config.endpoints.empty()) return fail("scatter-gather: no worker endpoints");
+  if (config.miss_limit == 0) return fail("scatter-gather: miss_limit must be at least 1");
+  if (!config.curve_server_public.empty() || !config.curve_public.empty() || !config.curve_secret.empty()) {
+    if (Status s = check_z85_key(config.curve_server_public, "curve_server_public"); !s) return Error{s.error()};
+    if (Status s = check_z85_key(config.curve_public, "curve_public"); !s) return Error{s.error()};
+    if (Status s = check_z85_key(config.curve_secret, "curve_secret"); !s) return Error{s.error()};
+  }
+  auto impl = std::make_unique<Impl>();
+  impl->ctx = &ctx;
+  impl->probe_faces = static_cast<std::uint32_t>(probe.faces.size());
+  impl->object_faces = static_cast<std::uint32_t>(object.faces.size());
+  const auto nblocks = static_cast<std::uint32_t>(blocks.size());
+  impl->scene = std::make_shared<const SceneData>(SceneData{std::move(probe), std::move(object), std::move(blocks), config.leaf_faces});
+  impl->covered.assign(nblocks, 0);
+  impl->cfg = std::move(config);
+  const auto share = block_cyclic(nblocks, static_cast<std::uint32_t>(impl->cfg.endpoints.size()));
+  for (std::size_t i = 0; i < impl->cfg.endpoints.size(); ++i) {
+    Impl::Peer p;
+    p.endpoint = impl->cfg.endpoints[i];
+    if (Status st = impl->open_socket(p); !st) return Error{st.error()};
+    p.original = share[i];
+    p.target = p.original;
+    impl->peers.push_back(std::move(p));
+  }
+  // The own shares are encoded up front (cold); reassigned variants later, in the background.
+  for (Impl::Peer& p : impl->peers) {
+    if (p.original.empty()) continue;
+    auto s = encode_set(*impl->scene, p.original);
+    if (!s) return Error{s.error()};
+    impl->remember(s.value());
+    p.target_hash = s.value()->hash;
+  }
+  const auto now = Clock::now();
+  for (Impl::Peer& p : impl->peers) impl->heartbeat(p, now);
+  return std::unique_ptr<ScatterGather>(new ScatterGather(std::move(impl)));
+}
+
+ScatterGather::ScatterGather(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+ScatterGather::~ScatterGather() = default;
+
+void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time_point deadline, RoundResult& out) {
+  Impl& m = *impl_;
+  out.seq = seq;
+  out.pairs.clear();
+  out.complete = false;
+  out.workers_asked = out.workers_replied = out.blocks_covered = 0;
+  out.blocks_total = static_cast<std::uint32_t>(m.covered.size());
+  out.stale_dropped = out.bad_messages = 0;
+  out.stats = {};
+  m.out = &out;
+  m.in_round = false;
+  m.service_now();  // old replies are dropped here, Hellos applied
+  m.cur_seq = seq;
+  m.in_round = true;
+  m.begin_round_sends(pose, Clock::now());
+  const auto spin_until = std::min(deadline, Clock::now() + std::chrono::microseconds(m.cfg.spin_us));
+  while (!m.all_replied()) {
+    const auto now = Clock::now();
+    if (now >= deadline) break;
+    m.wait_and_service(now < spin_until ? now : deadline);  // until == now: poll without waiting
+  }
+  m.in_round = false;
+  m.end_round(Clock::now());
+  m.out = nullptr;
+  std::sort(out.pairs.begin(), out.pairs.end());
+  out.pairs.erase(std::unique(out.pairs.begin(), out.pairs.end()), out.pairs.end());
+  // The same probe face collides on several workers: merge to distinct faces (paper §3.5).
+  out.probe_faces.clear();
+  out.object_faces.clear();
+  for (const FacePair& f : out.pairs) {
+    if (out.probe_faces.empty() || out.probe_faces.back() != f.probe) out.probe_faces.push_back(f.probe);
+    out.object_faces.push_back(f.object);
+  }
+  std::sort(out.object_faces.begin(), out.object_faces.end());
+  out.object_faces.erase(std::unique(out.object_faces.begin(), out.object_faces.end()), out.object_faces.end());
+  out.blocks_covered = static_cast<std::uint32_t>(std::count(m.covered.begin(), m.covered.end(), 1));
+  out.complete = out.blocks_covered == out.blocks_total;
+}
+
+RoundResult ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time_point deadline) {
+  RoundResult r;
+  round(seq, pose, deadline, r);
+  return r;
+}
+
+bool ScatterGather::wait_ready(Clock::time_point deadline) {
+  Impl& m = *impl_;
+  for (;;) {
+    const auto now = Clock::now();
+    m.revive_silent(now);
+    if (m.dirty) m.reassign();
+    m.refresh_targets();
+    bool ready = true;
+    for (Impl::Peer& p : m.peers) {
+      if (!p.up) { if (now >= p.next_heartbeat) m.heartbeat(p, now); continue; }
+      if (!p.epoch && now >= p.next_heartbeat) m.heartbeat(p, now);
+      m.maybe_start_upload(p, now);
+      m.pump_upload(p, now);
+      if (!p.epoch || (!p.target.empty() && !p.holds(p.target_hash))) ready = false;
+    }
+    if (ready && std::any_of(m.peers.begin(), m.peers.end(), [](const Impl::Peer& p) { return p.up; })) return true;
+    if (now >= deadline) return false;
+    m.wait_and_service(std::min(deadline, now + std::chrono::milliseconds(10)));
+  }
+}
+
+std::vector<WorkerStatus> ScatterGather::workers() const {
+  std::vector<WorkerStatus> v;
+  for (const Impl::Peer& p : impl_->peers)
+    v.push_back({p.endpoint, p.up, p.worker_id, p.epoch, p.misses, p.target, p.holds(p.target_hash), p.bytes_sent, p.loads_sent});
+  return v;
+}
+
+std::uint32_t ScatterGather::blocks_total() const { return static_cast<std::uint32_t>(impl_->covered.size()); }
+
+std::size_t count_contacts(const std::vector<FacePair>& pairs) {
+  std::vector<std::uint32_t> p, o;
+  for (const FacePair& f : pairs) { p.push_back(f.probe); o.push_back(f.object); }
+  std::sort(p.begin(), p.end());
+  std::sort(o.begin(), o.end());
+  return static_cast<std::size_t>(std::unique(p.begin(), p.end()) - p.begin()) +
+         static_cast<std::size_t>(std::unique(o.begin(), o.end()) - o.begin());
+}
+
+}  // namespace st::net

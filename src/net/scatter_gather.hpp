@@ -1,0 +1,114 @@
+// ScatterGather: the client side of the distributed collision (paper §3.4), owned by the
+// collision thread. One DEALER per worker, so every request is addressed to the worker that
+// holds the blocks (never round-robin). Each round sends one Query per live worker and gathers
+// until all have replied or the round's deadline passes; replies of older rounds are dropped by
+// sequence number, and the merged pairs are sorted and deduplicated. The client knows the whole
+// partition: a worker that misses `miss_limit` deadlines is marked down and its blocks are dealt
+// block-cyclically to the live workers, each of which is sent its enlarged block set (LoadBlocks,
+// content-addressed: never re-sent to a worker that already holds that hash). A worker that
+// answers again is given back its own blocks (reloaded if its epoch changed). A round says whether
+// it is complete: whether the block sets of the replies it merged cover every block.
+//
+// Never blocks without a timeout: sends are non-blocking (a full queue counts as a miss), and
+// every wait is bounded by the round's deadline. Not thread-safe: one thread owns it.
+#pragma once
+#include <chrono>
+#include <cstdint>
+#include <future>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+#include <zmq.hpp>
+
+#include "net/block_set.hpp"
+#include "net/protocol.hpp"
+
+namespace st::net {
+
+using Clock = std::chrono::steady_clock;
+
+/// How the client talks to its workers.
+struct ScatterConfig {
+  std::vector<std::string> endpoints;        ///< worker i is endpoints[i] (tcp://, ipc://, inproc://)
+  std::uint32_t miss_limit = 3;              ///< K: consecutive missed deadlines before a worker is down
+  std::chrono::milliseconds heartbeat_period{100};  ///< Heartbeats to down workers
+  std::chrono::milliseconds load_timeout{10000};    ///< an upload not acknowledged in this long fails
+  /// A worker asked but silent this long gets a fresh socket: libzmq gives up on a connection for
+  /// good after a protocol error (e.g. an oversized or garbled frame) and never reconnects it.
+  std::chrono::milliseconds reconnect_after{1000};
+  std::uint32_t chunk_bytes = 256u << 10;    ///< LoadBlocks chunk size (≤ limits.max_chunk_bytes)
+  std::uint32_t leaf_faces = 8;              ///< tree parameter sent with every block set
+  int sndhwm = 8;                            ///< per-worker send queue, messages (small: no stale backlog)
+  int rcvhwm = 64;                           ///< per-worker receive queue, messages
+  Limits limits = default_limits();          ///< decode limits for replies
+  /// Busy-poll for replies this long before blocking in poll(), us: trades CPU on the collision
+  /// thread's core for the wake-up latency of an idle core (tens of us on a VM). 0 = never spin.
+  std::uint32_t spin_us = 0;
+  /// CURVE: the workers' public key (one fleet key) and this client's key pair, Z85; all empty
+  /// for plain loopback / ipc.
+  std::string curve_server_public, curve_public, curve_secret;
+};
+
+/// What the collision thread gets back from one round.
+struct RoundResult {
+  std::uint64_t seq = 0;                 ///< the round's sequence number
+  std::vector<FacePair> pairs;           ///< colliding pairs, sorted by (probe, object), unique
+  std::vector<std::uint32_t> probe_faces;   ///< distinct colliding probe faces, ascending (merged over workers)
+  std::vector<std::uint32_t> object_faces;  ///< distinct colliding object faces, ascending
+  bool complete = false;                 ///< the merged replies cover every block: pairs are exact
+  std::uint32_t workers_asked = 0;       ///< Queries sent this round
+  std::uint32_t workers_replied = 0;     ///< Results merged this round
+  std::uint32_t blocks_covered = 0;      ///< blocks whose pairs are in `pairs`
+  std::uint32_t blocks_total = 0;        ///< blocks in the partition
+  std::uint32_t stale_dropped = 0;       ///< replies of older rounds dropped
+  std::uint32_t bad_messages = 0;        ///< undecodable or unexpected replies dropped
+  QueryStats stats;                      ///< summed counters; compute_ns is the slowest worker's
+  /// "Contacts" (paper §3.5): distinct colliding probe faces + distinct colliding object faces.
+  std::size_t contacts() const { return probe_faces.size() + object_faces.size(); }
+};
+
+/// A worker as the client sees it.
+struct WorkerStatus {
+  std::string endpoint;                  ///< where it is
+  bool up = true;                        ///< not marked down
+  std::uint32_t worker_id = 0;           ///< from its last Hello
+  std::uint64_t epoch = 0;               ///< from its last Hello (0: never heard)
+  std::uint32_t misses = 0;              ///< consecutive missed deadlines
+  std::vector<std::uint32_t> target_blocks;  ///< blocks it is meant to hold now
+  bool holds_target = false;             ///< it has acknowledged its target block set
+  std::uint64_t bytes_sent = 0;          ///< LoadBlocks bytes sent to it so far
+  std::uint32_t loads_sent = 0;          ///< block sets sent to it so far
+};
+
+/// The collision thread's client to the worker fleet.
+class ScatterGather {
+ public:
+  /// Connects to every endpoint and prepares the block-cyclic partition of `blocks` (the object's
+  /// layer-n blocks, global face ids) over them. Fails on bad endpoints or block ids.
+  static Result<std::unique_ptr<ScatterGather>> create(zmq::context_t& ctx, ScatterConfig config, geom::Mesh probe,
+                                                       geom::Mesh object, Blocks blocks);
+  ~ScatterGather();
+
+  /// One round: Query every live worker with `pose`, gather until all replied or `deadline`.
+  /// `seq` must grow from round to round. Returns by the deadline (plus the time to merge).
+  void round(std::uint64_t seq, const geom::Pose& pose, Clock::time_point deadline, RoundResult& out);
+  /// Same, returning a new RoundResult.
+  RoundResult round(std::uint64_t seq, const geom::Pose& pose, Clock::time_point deadline);
+  /// Services Hellos, heartbeats and uploads until every live worker holds its target block set
+  /// (true) or `deadline` passes (false). Call between rounds or before the first.
+  bool wait_ready(Clock::time_point deadline);
+
+  std::vector<WorkerStatus> workers() const;       ///< a snapshot of every worker
+  std::uint32_t blocks_total() const;              ///< blocks in the partition
+
+ private:
+  struct Impl;
+  explicit ScatterGather(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+/// "Contacts" (paper §3.5, DESIGN.md): distinct probe faces + distinct object faces in `pairs`.
+std::size_t count_contacts(const std::vector<FacePair>& pairs);
+
+}  // namespace st::net

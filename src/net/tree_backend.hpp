@@ -1,0 +1,18 @@
+// The production CollisionBackend: the worker builds sphere trees (SphereTree) over the whole
+// probe and over its share of the object, and answers each Query with collide() — exact, so the
+// union over workers equals the single-process result. Also cuts an object's sphere tree into
+// the layer-n blocks that ScatterGather deals block-cyclically (paper §3.4).
+#pragma once
+#include "geom/sphere_tree.hpp"
+#include "net/backend.hpp"
+
+namespace st::net {
+
+/// Factory of sphere-tree backends (the daemon's and the in-process workers' default).
+BackendFactory tree_backend_factory();
+
+/// The object's faces grouped by the partition of `tree`'s layer `layer` into runs of
+/// `block_size` consecutive layer spheres (geom::make_partition): blocks[b] = faces of block b.
+Result<Blocks> tree_blocks(const geom::SphereTree& tree, std::uint32_t layer, std::uint32_t block_size);
+
+}  // namespace st::net

@@ -1,0 +1,155 @@
+// Worker daemon configuration (worker_config.hpp).
+#include "net/worker_config.hpp"
+
+#include <fstream>
+#include <sstream>
+#include <toml++/toml.h>
+#include <sys/stat.h>
+
+#include <cctype>
+#include <cstdlib>
+
+#include "net/worker_service.hpp"
+
+namespace st::net {
+
+namespace {
+
+std::string where(const std::string& source, const toml::node& n) {
+  return source + ":" + std::to_string(n.source().begin.line);
+}
+
+template <class T>
+Status get_int(const toml::node& n, const std::string& key, const std::string& source, T lo, T hi, T& out) {
+  auto v = n.value<std::int64_t>();
+  if (!n.is_integer() || !v) return fail(where(source, n), ": ", key, ": expected an integer");
+  if (*v < static_cast<std::int64_t>(lo) || *v > static_cast<std::int64_t>(hi))
+    return fail(where(source, n), ": ", key, ": ", *v, " outside [", lo, ", ", hi, "]");
+  out = static_cast<T>(*v);
+  return Ok{};
+}
+
+Status get_string(const toml::node& n, const std::string& key, const std::string& source, std::string& out) {
+  if (!n.is_string()) return fail(where(source, n), ": ", key, ": expected a string");
+  out = *n.value<std::string>();
+  return Ok{};
+}
+
+}  // namespace
+
+Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::string& source, DaemonConfig c) {
+  toml::table t;
+  try {
+    t = toml::parse(text, source);
+  } catch (const toml::parse_error& e) {
+    return fail(source, ":", e.source().begin.line, ":", e.source().begin.column, ": ", e.description());
+  }
+  for (auto&& [k, node] : t) {
+    const std::string key(k.str());
+    Status s = Ok{};
+    if (key == "bind") s = get_string(node, key, source, c.bind);
+    else if (key == "worker_id") s = get_int<std::uint32_t>(node, key, source, 0, 1u << 20, c.worker_id);
+    else if (key == "log_level") s = get_string(node, key, source, c.log_level);
+    else if (key == "max_sets") s = get_int<std::uint32_t>(node, key, source, 1, 64, c.max_sets);
+    else if (key == "max_blockset_mb") s = get_int<std::uint64_t>(node, key, source, 1, 1u << 20, c.max_blockset_mb);
+    else if (key == "insecure") {
+      if (!node.is_boolean()) return fail(where(source, node), ": insecure: expected true or false");
+      c.insecure = *node.value<bool>();
+    } else if (key == "curve") {
+      const toml::table* ct = node.as_table();
+      if (!ct) return fail(where(source, node), ": curve: expected a table [curve]");
+      for (auto&& [ck, cn] : *ct) {
+        const std::string ckey = "curve." + std::string(ck.str());
+        if (ckey == "curve.secret_key_file") s = get_string(cn, ckey, source, c.curve_secret_key_file);
+        else if (ckey == "curve.allowed_clients") {
+          const toml::array* a = cn.as_array();
+          if (!a) return fail(where(source, cn), ": ", ckey, ": expected an array of Z85 public keys");
+          c.curve_allowed_clients.clear();
+          for (const toml::node& e : *a) {
+            if (!e.is_string() || e.value<std::string>()->size() != 40)
+              return fail(where(source, e), ": ", ckey, ": expected 40-character Z85 public keys");
+            c.curve_allowed_clients.push_back(*e.value<std::string>());
+          }
+        } else return fail(where(source, cn), ": unknown key '", ckey, "' (known: secret_key_file, allowed_clients)");
+        if (!s) return Error{s.error()};
+      }
+    } else {
+      return fail(where(source, node), ": unknown key '", key,
+                  "' (known: bind, worker_id, log_level, insecure, max_sets, max_blockset_mb, [curve])");
+    }
+    if (!s) return Error{s.error()};
+  }
+  return c;
+}
+
+Result<DaemonConfig> load_daemon_config(const std::string& path, DaemonConfig base) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return fail(path, ": cannot open");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return parse_daemon_config(ss.str(), path, std::move(base));
+}
+
+bool is_local_endpoint(const std::string& ep) {
+  if (ep.rfind("ipc://", 0) == 0 || ep.rfind("inproc://", 0) == 0) return true;
+  if (ep.rfind("tcp://", 0) != 0) return false;
+  std::string host = ep.substr(6);
+  if (host.find(';') != std::string::npos) return false;  // "src;dst" forms: refuse to guess
+  const auto colon = host.rfind(':');
+  if (colon == std::string::npos) return false;
+  host = host.substr(0, colon);
+  if (host == "localhost" || host == "[::1]") return true;
+  // 127.0.0.0/8 in dotted-quad form only.
+  unsigned a, b, cc, d;
+  char tail;
+  if (std::sscanf(host.c_str(), "%u.%u.%u.%u%c", &a, &b, &cc, &d, &tail) == 4) return a == 127 && b < 256 && cc < 256 && d < 256;
+  return false;
+}
+
+Status check_daemon_config(const DaemonConfig& c) {
+  if (log_priority(c.log_level) < 0) return fail("log_level: '", c.log_level, "' is not one of error, warning, info, debug");
+  if (c.bind.rfind("tcp://", 0) != 0 && c.bind.rfind("ipc://", 0) != 0)
+    return fail("bind: '", c.bind, "': expected tcp://HOST:PORT or ipc://PATH");
+  const bool curve = !c.curve_secret_key_file.empty();
+  if (curve && c.curve_allowed_clients.empty())
+    return fail("[curve]: secret_key_file is set but allowed_clients is empty: no client could connect");
+  if (!curve && !c.curve_allowed_clients.empty())
+    return fail("[curve]: allowed_clients is set but secret_key_file is not");
+  for (const std::string& k : c.curve_allowed_clients)
+    if (Status s = check_z85_key(k, "[curve] allowed_clients: '" + k + "'"); !s) return s;
+  if (c.bind.rfind("ipc://", 0) == 0 && curve) return fail("[curve]: CURVE over ipc:// is pointless; use file permissions");
+  if (!is_local_endpoint(c.bind) && !c.insecure && !curve)
+    return fail("bind: '", c.bind, "' is not a loopback address; refusing to serve unauthenticated on a network. "
+                "Configure [curve] keys, or pass --insecure (insecure = true) on a trusted network");
+  return Ok{};
+}
+
+Result<std::string> read_secret_key(const std::string& path_in) {
+  std::string path = path_in;
+  const std::string var = "$CREDENTIALS_DIRECTORY";
+  if (path.rfind(var, 0) == 0) {
+    const char* dir = std::getenv("CREDENTIALS_DIRECTORY");
+    if (!dir) return fail(path_in, ": $CREDENTIALS_DIRECTORY is not set (use LoadCredential= in the unit)");
+    path = dir + path.substr(var.size());
+  }
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return fail(path, ": cannot stat the CURVE secret key file");
+  if (st.st_mode & 077) return fail(path, ": the CURVE secret key file is readable by group or others (chmod 600)");
+  std::ifstream in(path);
+  std::string line;
+  if (!std::getline(in, line)) return fail(path, ": empty");
+  while (!line.empty() && std::isspace(static_cast<unsigned char>(line.back()))) line.pop_back();
+  while (!line.empty() && std::isspace(static_cast<unsigned char>(line.front()))) line.erase(line.begin());
+  if (Status s = check_z85_key(line, path + ": first line"); !s) return Error{s.error()};
+  return line;
+}
+
+int log_priority(const std::string& level) {
+  if (level == "error") return 3;
+  if (level == "warning") return 4;
+  if (level == "info") return 6;
+  if (level == "debug") return 7;
+  return -1;
+}
+
+}  // namespace st::net

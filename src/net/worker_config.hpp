@@ -1,0 +1,46 @@
+// Configuration of the spheretouch-worker daemon (TOML, `--config FILE`) and its bind policy:
+// safe by default — a worker binds loopback (or ipc://) unless told otherwise, and binding any
+// other address needs CURVE keys or an explicit `insecure = true` / `--insecure`.
+#pragma once
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "geom/result.hpp"
+
+namespace st::net {
+
+/// Everything a worker daemon is configured with; defaults are safe.
+struct DaemonConfig {
+  std::string bind = "tcp://127.0.0.1:5555";   ///< endpoint: tcp://HOST:PORT or ipc://PATH
+  std::uint32_t worker_id = 0;                 ///< reported in Hello and Result
+  std::string log_level = "info";              ///< error, warning, info or debug
+  bool insecure = false;                       ///< allow a non-loopback bind without CURVE
+  std::uint32_t max_sets = 3;                  ///< block sets kept in memory (LRU)
+  std::uint64_t max_blockset_mb = 1024;        ///< largest block set accepted, MiB (memory bound)
+  std::string curve_secret_key_file;           ///< [curve] secret_key_file (Z85), empty: no CURVE
+  std::vector<std::string> curve_allowed_clients;  ///< [curve] allowed_clients (Z85 public keys)
+};
+
+/// Default configuration (loopback, worker 0).
+inline DaemonConfig default_daemon_config() { return DaemonConfig{}; }
+
+/// Parses TOML text over `base`; unknown keys and wrong types are errors naming the key and line.
+Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::string& source, DaemonConfig base = {});
+/// Reads and parses a config file.
+Result<DaemonConfig> load_daemon_config(const std::string& path, DaemonConfig base = {});
+
+/// True for tcp:// on 127.0.0.0/8, [::1] or localhost, and for ipc:// and inproc:// (not on a network).
+bool is_local_endpoint(const std::string& endpoint);
+/// Refuses a non-local bind unless CURVE (secret key file and allowed clients) is configured or
+/// `insecure` is set; checks log_level, the endpoint scheme and the client keys.
+Status check_daemon_config(const DaemonConfig& c);
+/// Reads a Z85 CURVE secret key from the first line of `path`; a leading "$CREDENTIALS_DIRECTORY"
+/// is expanded (systemd LoadCredential=). Refuses files readable by group or others.
+Result<std::string> read_secret_key(const std::string& path);
+
+/// Syslog priority of a log level name (3 error, 4 warning, 6 info, 7 debug), or -1.
+int log_priority(const std::string& level);
+
+}  // namespace st::net

@@ -1,0 +1,183 @@
+#include "rt/haptic_loop.hpp"
+
+#include <alloca.h>
+#include <pthread.h>
+#include <sched.h>
+#include <sys/mman.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <future>
+#include <sstream>
+
+#include "rt/clock.hpp"
+#include "rt/constants.hpp"
+
+namespace st::rt {
+
+HapticLoopConfig DefaultHapticLoopConfig() {
+  HapticLoopConfig c;
+  c.rate_hz = kDefaultRateHz;
+  return c;
+}
+
+bool RtReport::all_applied() const {
+  for (const RtStep* s : {&fifo, &affinity, &mlock, &prefault})
+    if (s->requested && !s->applied) return false;
+  return true;
+}
+
+std::string RtReport::describe() const {
+  std::ostringstream os;
+  auto one = [&](const char* what, const RtStep& s) {
+    if (!s.requested) return;
+    if (os.tellp() > 0) os << "; ";
+    os << what << ": " << (s.applied ? "applied" : "refused");
+    if (!s.applied) os << " (" << std::strerror(s.error) << ")";
+  };
+  one("SCHED_FIFO", fifo);
+  one("CPU affinity", affinity);
+  one("mlockall", mlock);
+  one("stack pre-fault", prefault);
+  if (os.tellp() == 0) os << "no real-time settings requested";
+  return os.str();
+}
+
+std::string HapticLoop::check(const HapticLoopConfig& c) {
+  std::ostringstream os;
+  if (!(std::isfinite(c.rate_hz) && c.rate_hz >= kMinRateHz && c.rate_hz <= kMaxRateHz))
+    os << "haptic loop: rate_hz = " << c.rate_hz << ", expected " << kMinRateHz << ".." << kMaxRateHz;
+  else if (c.fifo_priority < 0 || c.fifo_priority > 99)
+    os << "haptic loop: fifo_priority = " << c.fifo_priority << ", expected 0 (off) or 1..99";
+  else if (c.cpu < -1 || c.cpu >= CPU_SETSIZE)
+    os << "haptic loop: cpu = " << c.cpu << ", expected -1 (off) or 0.." << CPU_SETSIZE - 1;
+  else if (c.prefault_stack_bytes > (std::size_t{4} << 20))
+    os << "haptic loop: prefault_stack_bytes = " << c.prefault_stack_bytes << ", expected <= 4 MiB (below the default stack size)";
+  return os.str();
+}
+
+namespace {
+// Touches n bytes of stack so the tick path does not page-fault on first use of it.
+__attribute__((noinline)) void prefault_stack(std::size_t n) {
+  auto* p = static_cast<volatile char*>(alloca(n));
+  for (std::size_t i = 0; i < n; i += 4096) p[i] = 0;
+  if (n) p[n - 1] = 0;
+}
+}  // namespace
+
+RtReport HapticLoop::apply_realtime(const HapticLoopConfig& c) {
+  RtReport r;
+  if (c.lock_memory) {
+    r.mlock.requested = true;
+    r.mlock.applied = mlockall(MCL_CURRENT | MCL_FUTURE) == 0;
+    if (!r.mlock.applied) r.mlock.error = errno;
+  }
+  if (c.cpu >= 0) {
+    r.affinity.requested = true;
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    CPU_SET(c.cpu, &set);
+    r.affinity.error = pthread_setaffinity_np(pthread_self(), sizeof set, &set);
+    r.affinity.applied = r.affinity.error == 0;
+  }
+  if (c.fifo_priority > 0) {
+    r.fifo.requested = true;
+    sched_param sp{};
+    sp.sched_priority = c.fifo_priority;
+    r.fifo.error = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+    r.fifo.applied = r.fifo.error == 0;
+  }
+  if (c.prefault_stack_bytes > 0) {
+    r.prefault.requested = true;
+    prefault_stack(c.prefault_stack_bytes);
+    r.prefault.applied = true;  // touching our own stack cannot be refused (it can only crash)
+  }
+  return r;
+}
+
+HapticLoop::HapticLoop(const HapticLoopConfig& config)
+    : config_(config), period_ns_(static_cast<std::int64_t>(std::llround(1e9 / config.rate_hz))) {}
+
+HapticLoop::~HapticLoop() { stop(); }
+
+void HapticLoop::loop(TickHandler& handler) {
+  // Everything below the first sleep is the tick path: no allocation, lock, log or syscall
+  // besides clock_nanosleep (clock reads go through the vDSO).
+  DeadlineSchedule sched(now_ns() + period_ns_, period_ns_);
+  TickInfo info;
+  info.period_ns = period_ns_;
+  std::uint64_t ticks = 0, misses = 0;
+  while (!stop_.load(std::memory_order_relaxed)) {
+    if (config_.max_periods && sched.index() >= config_.max_periods) break;
+    const timespec ts = to_timespec(sched.deadline_ns());
+    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+    }
+    const std::int64_t woke = now_ns();
+    stats_.wake_latency.record(woke - sched.deadline_ns());
+    const std::uint64_t skipped = sched.on_wake(woke);
+    if (skipped) {
+      misses += skipped;
+      misses_.store(misses, std::memory_order_relaxed);
+      if (config_.max_periods && sched.index() >= config_.max_periods) {
+        // Skipped past the end: the run is over; count only deadlines inside it.
+        misses -= sched.index() - config_.max_periods;
+        misses_.store(misses, std::memory_order_relaxed);
+        break;
+      }
+    }
+    info.tick = ticks;
+    info.deadline_index = sched.index();
+    info.deadline_ns = sched.deadline_ns();
+    info.woke_ns = woke;
+    handler.tick(info);
+    ++ticks;
+    ticks_.store(ticks, std::memory_order_relaxed);
+    sched.advance();
+    const std::int64_t done = now_ns();
+    if (done > sched.deadline_ns()) ++stats_.overruns;
+    stats_.tick_compute.record(done - woke);
+  }
+  stats_.ticks = ticks;
+  stats_.misses = misses;
+}
+
+Result<RtReport> HapticLoop::run(TickHandler& handler) {
+  if (std::string e = check(config_); !e.empty()) return Error{e};
+  RtReport r = apply_realtime(config_);
+  if (config_.strict && !r.all_applied()) return Error{"haptic loop: " + r.describe()};
+  running_.store(true, std::memory_order_release);
+  loop(handler);
+  running_.store(false, std::memory_order_release);
+  return r;
+}
+
+Result<RtReport> HapticLoop::start(TickHandler& handler) {
+  if (std::string e = check(config_); !e.empty()) return Error{e};
+  if (thread_.joinable()) return Error{"haptic loop: already started"};
+  stop_.store(false, std::memory_order_relaxed);
+  std::promise<RtReport> setup;
+  std::future<RtReport> report = setup.get_future();
+  running_.store(true, std::memory_order_release);
+  // The thread owns the promise: destroying it here while set_value() still runs would race.
+  thread_ = std::thread([this, &handler, setup = std::move(setup)]() mutable {
+    RtReport r = apply_realtime(config_);
+    const bool go = !(config_.strict && !r.all_applied());
+    setup.set_value(r);
+    if (go) loop(handler);
+    running_.store(false, std::memory_order_release);
+  });
+  RtReport r = report.get();
+  if (config_.strict && !r.all_applied()) {
+    thread_.join();
+    return Error{"haptic loop: " + r.describe()};
+  }
+  return r;
+}
+
+void HapticLoop::stop() {
+  stop_.store(true, std::memory_order_relaxed);
+  if (thread_.joinable()) thread_.join();
+}
+
+}  // namespace st::rt

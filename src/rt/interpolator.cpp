@@ -1,0 +1,173 @@
+#include "rt/interpolator.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "rt/constants.hpp"
+
+namespace st::rt {
+
+Result<InterpMode> parse_interp_mode(std::string_view name) {
+  if (name == "hold") return InterpMode::hold;
+  if (name == "paper") return InterpMode::paper;
+  if (name == "plane") return InterpMode::plane;
+  return fail("interpolation '", std::string(name), "': expected hold, paper or plane");
+}
+
+const char* to_string(InterpMode mode) {
+  switch (mode) {
+    case InterpMode::hold: return "hold";
+    case InterpMode::paper: return "paper";
+    case InterpMode::plane: return "plane";
+  }
+  return "?";
+}
+
+InterpolatorConfig DefaultInterpolatorConfig() {
+  InterpolatorConfig c;
+  c.mode = InterpMode::plane;
+  c.stale_timeout_ns = kDefaultStaleTimeoutNs;
+  c.fade_ns = kDefaultFadeNs;
+  c.crossfade_ns = kDefaultCrossfadeNs;
+  c.paper_gain_N_per_mm = kDefaultPaperGainNPerMm;
+  c.paper_max_move_mm = kDefaultPaperMaxMoveMm;
+  c.damping_N_s_per_mm = 0;
+  return c;
+}
+
+std::string Interpolator::check(const InterpolatorConfig& c) {
+  std::ostringstream os;
+  if (c.stale_timeout_ns <= 0) os << "interpolation: stale_timeout_ns = " << c.stale_timeout_ns << ", expected > 0";
+  else if (c.fade_ns < 0) os << "interpolation: fade_ns = " << c.fade_ns << ", expected >= 0";
+  else if (c.crossfade_ns < 0) os << "interpolation: crossfade_ns = " << c.crossfade_ns << ", expected >= 0";
+  else if (!(std::isfinite(c.paper_gain_N_per_mm) && c.paper_gain_N_per_mm >= 0))
+    os << "interpolation: paper_gain_N_per_mm = " << c.paper_gain_N_per_mm << ", expected a finite value >= 0";
+  else if (!(std::isfinite(c.paper_max_move_mm) && c.paper_max_move_mm >= 0))
+    os << "interpolation: paper_max_move_mm = " << c.paper_max_move_mm << ", expected a finite value >= 0";
+  else if (!(std::isfinite(c.damping_N_s_per_mm) && c.damping_N_s_per_mm >= 0))
+    os << "interpolation: damping_N_s_per_mm = " << c.damping_N_s_per_mm << ", expected a finite value >= 0";
+  return os.str();
+}
+
+Interpolator::Interpolator(const ForceLaw& law, const InterpolatorConfig& config) : law_(law), c_(config) {}
+
+namespace {
+bool model_ok(const geom::ContactModel& m) {
+  if (!geom::finite(m.pose) || !std::isfinite(m.penetration_mm) || m.penetration_mm < 0) return false;
+  if (!m.in_contact()) return true;
+  if (!geom::finite(m.force_dir) || !geom::finite(m.probe_point) || !geom::finite(m.plane_point)) return false;
+  const double n = geom::to_eigen(m.force_dir).norm();
+  return std::abs(n - 1.0) <= 1e-6;
+}
+}  // namespace
+
+void Interpolator::on_model(const geom::ContactModel& model, std::int64_t now_ns) noexcept {
+  model_ = model;
+  if (!model_ok(model)) {
+    ++rejected_;
+    model_.flags &= ~geom::kInContact;  // garbage from the collision side renders as no contact
+  }
+  have_model_ = true;
+  received_ns_ = now_ns;
+  contact_ = model_.in_contact();
+  pending_offset_ = true;
+  if (!contact_) {
+    fd_.setZero();
+    force_a_.setZero();
+    return;
+  }
+  fd_ = geom::to_eigen(model_.force_dir).normalized();
+  probe_point_ = geom::to_eigen(model_.probe_point);
+  plane_point_ = geom::to_eigen(model_.plane_point);
+  anchor_ = geom::to_eigen(model_.pose) * probe_point_;
+  force_a_ = law_.magnitude_N(model_.penetration_mm) * fd_;
+}
+
+Eigen::Vector3d Interpolator::force(const Eigen::Isometry3d& pose, std::int64_t now_ns) noexcept {
+  const double dt_s = last_ns_ ? static_cast<double>(now_ns - last_ns_) * 1e-9 : 0.0;
+  last_ns_ = now_ns;
+  state_ = InterpState{};
+  if (!pose.matrix().allFinite()) {
+    ++bad_poses_;
+    last_out_.setZero();
+    return Eigen::Vector3d::Zero();
+  }
+  if (!have_model_) return Eigen::Vector3d::Zero();
+
+  // Staleness: measured from the local arrival of the newest model.
+  const std::int64_t idle = now_ns - received_ns_;
+  double fade = 1.0;
+  if (idle > c_.stale_timeout_ns) {
+    fade = c_.fade_ns > 0 ? 1.0 - static_cast<double>(idle - c_.stale_timeout_ns) / static_cast<double>(c_.fade_ns) : 0.0;
+    fade = std::clamp(fade, 0.0, 1.0);
+  }
+
+  Eigen::Vector3d f = Eigen::Vector3d::Zero();
+  double pd = 0;
+  Eigen::Vector3d p = Eigen::Vector3d::Zero();
+  if (contact_) {
+    p = pose * probe_point_;
+    switch (c_.mode) {
+      case InterpMode::hold:
+        f = force_a_;
+        pd = model_.penetration_mm;
+        break;
+      case InterpMode::paper: {
+        Eigen::Vector3d d = p - anchor_;  // §3.7 D: movement of the probe since the model's pose
+        const double dn = d.norm();
+        if (dn > c_.paper_max_move_mm) d *= c_.paper_max_move_mm / dn;
+        f = force_a_ - c_.paper_gain_N_per_mm * d;  // moving into the surface (against FD) pushes harder
+        const double along = f.dot(fd_);
+        if (along < 0) f -= along * fd_;           // never pull the probe into the object
+        pd = model_.penetration_mm - d.dot(fd_);
+        break;
+      }
+      case InterpMode::plane:
+        pd = (plane_point_ - p).dot(fd_);
+        f = law_.magnitude_N(pd) * fd_;
+        break;
+    }
+  }
+  if (c_.mode == InterpMode::plane) {
+    // Cross-fade: the jump a new model would cause decays linearly over crossfade_ns.
+    if (pending_offset_) {
+      offset_ = c_.crossfade_ns > 0 ? Eigen::Vector3d(last_out_ - f) : Eigen::Vector3d::Zero();
+      pending_offset_ = false;
+    }
+    // The fade counts the current tick too (idle + dt): a model arriving every tick must still
+    // let the output move. Otherwise the offset is re-taken at full weight on each arrival and
+    // the force freezes at its old value while updates stream in (found in `spheretouch run`).
+    // With arrivals every tick this is exponential smoothing with time constant ~crossfade_ns.
+    const double faded = static_cast<double>(std::max<std::int64_t>(idle, 0)) + dt_s * 1e9;
+    if (c_.crossfade_ns > 0 && faded < static_cast<double>(c_.crossfade_ns))
+      f += offset_ * (1.0 - faded / static_cast<double>(c_.crossfade_ns));
+  } else {
+    pending_offset_ = false;
+  }
+  if (contact_ && c_.damping_N_s_per_mm > 0) {
+    if (!have_last_point_) velocity_fd_ = 0;
+    if (dt_s > 0 && dt_s < 0.1 && have_last_point_) {
+      const double v = (p - last_point_).dot(fd_) / dt_s;  // mm/s, + = leaving the surface
+      velocity_fd_ += 0.3 * (v - velocity_fd_);             // one-pole low-pass, ~57 Hz at 1 kHz
+    }
+    const double along = f.dot(fd_);
+    if (along > 0) {
+      double fd_damp = -c_.damping_N_s_per_mm * velocity_fd_;
+      if (along + fd_damp < 0) fd_damp = -along;  // damping never pulls
+      f += fd_damp * fd_;
+    }
+  }
+  last_point_ = p;
+  have_last_point_ = contact_;
+  if (!f.allFinite()) f.setZero();
+  if ((f * fade).norm() < kMinRenderedForceN) f.setZero();  // a released force reaches exactly 0
+  last_out_ = f * fade;  // what was commanded: the next cross-fade starts from it (even after a stall)
+  state_.penetration_mm = std::isfinite(pd) ? pd : 0.0;
+  state_.fade = fade;
+  state_.raw_force_N = f.norm();
+  state_.in_contact = contact_;
+  return f * fade;
+}
+
+}  // namespace st::rt

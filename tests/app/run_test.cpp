@@ -1,0 +1,227 @@
+// Tests for `spheretouch run` and scene files: a short run of a generated scene asserting counts
+// (never timing precision), the force profile of the built-in script, the outputs' formats, and
+// an error naming the field for each kind of bad scene file.
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+#include "app/scene.hpp"
+#include "test_util.hpp"
+
+using st::test::run_command;
+using st::test::spheretouch_exe;
+
+namespace {
+
+bool has(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+/// Minimal JSON syntax check (RFC 8259 grammar, no semantic checks): true when `s` is one value.
+struct Json {
+  const std::string& s;
+  std::size_t i = 0;
+  void ws() { while (i < s.size() && std::isspace(static_cast<unsigned char>(s[i]))) ++i; }
+  bool lit(const char* w) { const std::size_t n = std::strlen(w); if (s.compare(i, n, w) != 0) return false; i += n; return true; }
+  bool str() {
+    if (s[i] != '"') return false;
+    for (++i; i < s.size(); ++i) {
+      if (s[i] == '\\') { ++i; continue; }
+      if (s[i] == '"') { ++i; return true; }
+      if (static_cast<unsigned char>(s[i]) < 0x20) return false;
+    }
+    return false;
+  }
+  bool num() {
+    const std::size_t b = i;
+    if (s[i] == '-') ++i;
+    while (i < s.size() && (std::isdigit(static_cast<unsigned char>(s[i])) || s[i] == '.' || s[i] == 'e' || s[i] == 'E' || s[i] == '+' || s[i] == '-')) ++i;
+    return i > b && std::isdigit(static_cast<unsigned char>(s[i - 1]));
+  }
+  bool value() {
+    ws();
+    if (i >= s.size()) return false;
+    bool ok;
+    if (s[i] == '{') {
+      ++i; ws();
+      if (s[i] == '}') { ++i; return true; }
+      do { ws(); ok = str(); ws(); if (!ok || s[i] != ':') return false; ++i; if (!value()) return false; ws(); } while (s[i] == ',' && ++i);
+      if (s[i] != '}') return false;
+      ++i;
+      return true;
+    }
+    if (s[i] == '[') {
+      ++i; ws();
+      if (s[i] == ']') { ++i; return true; }
+      do { if (!value()) return false; ws(); } while (s[i] == ',' && ++i);
+      if (s[i] != ']') return false;
+      ++i;
+      return true;
+    }
+    if (s[i] == '"') return str();
+    if (lit("true") || lit("false") || lit("null")) return true;
+    return num();
+  }
+  bool document() { const bool ok = value(); ws(); return ok && i == s.size(); }
+};
+
+std::string slurp(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+const char* kScene = R"(
+[probe]
+builtin = "capsule"
+radius_mm = 6.0
+length_mm = 30.0
+[object]
+builtin = "icosphere"
+radius_mm = 40.0
+frequency = 20
+[workers]
+count = 0
+[output]
+status = "plain"
+[run]
+duration_s = 5.5
+)";
+
+struct TickRow { double t_s, force_N; int flags; };
+
+std::vector<TickRow> read_ticks(const std::string& csv) {
+  std::ifstream in(csv);
+  std::vector<TickRow> rows;
+  std::string line;
+  std::getline(in, line);  // header
+  double t0 = -1;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::vector<double> v;
+    std::stringstream ss(line);
+    for (std::string cell; std::getline(ss, cell, ',');) v.push_back(std::stod(cell));
+    REQUIRE(v.size() == 17);
+    if (t0 < 0) t0 = v[1];
+    rows.push_back({(v[1] - t0) * 1e-9, std::sqrt(v[9] * v[9] + v[10] * v[10] + v[11] * v[11]), int(v[15])});
+  }
+  return rows;
+}
+
+}  // namespace
+
+TEST_CASE("run: a short scene ticks at its rate, presses with force, releases to zero, writes its outputs") {
+  st::test::TempDir d;
+  st::test::write_file(d.file("scene.toml"), kScene);
+  const std::string out = d.file("run");
+  const auto r = run_command(spheretouch_exe() + " run " + d.file("scene.toml") + " --out " + out);
+  INFO(r.output);
+  REQUIRE(r.exit_code == 0);
+  CHECK(has(r.output, "summary"));
+  CHECK(has(r.output, " 0 dropped"));
+
+  // Ticks ≈ rate × duration: counts, with room for a loaded machine (misses are counted, not ticks).
+  const std::vector<TickRow> ticks = read_ticks(out + "/ticks.csv");
+  CHECK(ticks.size() > 5500 * 8 / 10);
+  CHECK(ticks.size() <= 5500 + 50);
+
+  // The built-in script: approach 1 s, press 0.5 s, hold 0.5 s, slide 2 s, release 0.5 s, rest.
+  double press_max = 0, rest_max = 0;
+  int contact_ticks = 0;
+  for (const TickRow& t : ticks) {
+    CHECK(std::isfinite(t.force_N));
+    CHECK(t.force_N <= 3.3 + 1e-9);
+    if (t.t_s > 1.6 && t.t_s < 2.0) press_max = std::max(press_max, t.force_N);
+    if (t.t_s > 4.9) rest_max = std::max(rest_max, t.force_N);
+    contact_ticks += t.flags & 1;
+  }
+  CHECK(contact_ticks > 0);  // contact updates reached the haptic side
+  CHECK(press_max > 0.1);
+  CHECK(rest_max == 0.0);
+
+  const std::string trace = slurp(out + "/trace.json");
+  CHECK(Json{trace}.document());
+  CHECK(has(trace, "\"name\":\"round\""));
+  CHECK(has(trace, "\"name\":\"tick\""));
+
+  // PLY header consistent with its body: object then probe, counts and lines agree.
+  std::ifstream ply(out + "/contact.ply");
+  std::string line;
+  std::size_t nv = 0, nf = 0, red = 0;
+  while (std::getline(ply, line) && line != "end_header") {
+    if (line.rfind("element vertex ", 0) == 0) nv = std::stoul(line.substr(15));
+    if (line.rfind("element face ", 0) == 0) nf = std::stoul(line.substr(13));
+  }
+  st::app::BodySpec ball, finger;
+  ball.builtin = "icosphere"; ball.radius_mm = 40; ball.frequency = 20;
+  finger.builtin = "capsule"; finger.radius_mm = 6; finger.length_mm = 30;
+  const st::geom::Mesh ball_mesh = st::app::load_body(ball, "object").value();
+  const st::geom::Mesh finger_mesh = st::app::load_body(finger, "probe").value();
+  CHECK(nf == ball_mesh.num_faces() + finger_mesh.num_faces());
+  CHECK(nv == ball_mesh.num_vertices() + finger_mesh.num_vertices());
+  std::size_t vlines = 0, flines = 0;
+  for (; vlines < nv && std::getline(ply, line); ++vlines) {
+    std::istringstream in(line);
+    double x, y, z;
+    CHECK(static_cast<bool>(in >> x >> y >> z));
+  }
+  while (std::getline(ply, line)) {
+    std::istringstream in(line);
+    int n, a, b, c, cr, cg, cb;
+    CHECK(static_cast<bool>(in >> n >> a >> b >> c >> cr >> cg >> cb));
+    CHECK(n == 3);
+    CHECK((a >= 0 && std::size_t(a) < nv && std::size_t(b) < nv && std::size_t(c) < nv));
+    red += cr == 230;
+    ++flines;
+  }
+  CHECK(vlines == nv);
+  CHECK(flines == nf);
+  CHECK(red > 0);
+}
+
+TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
+  const std::pair<const char*, const char*> cases[] = {
+      {"[probe]\nbuiltin = \"capsule\"\n", "missing section [object]"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\npeak_n = \"lots\"\n", "force.peak_n: expected a number"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\npeak_n = -1\n", "force.peak_n: expected a value in"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[haptic]\nrate = 1000\n", "haptic.rate: unknown key"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[telepathy]\n", "telepathy: unknown key"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nmesh = \"nowhere.off\"\n", "object.mesh: file"},
+      {"[probe]\nbuiltin = \"sphere\"\n[object]\nbuiltin = \"box\"\n", "probe.builtin: expected one of icosphere, box, capsule"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[interpolation]\nmethod = \"magic\"\n", "interpolation.method"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nendpoints = [\"http://x\"]\n", "workers.endpoints"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\ncount = 1.5\n", "workers.count: expected an integer"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[device]\ntarget = [1, 2]\n", "device.target: expected an array of 3 numbers"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\ncontinuous_n = 5\n", "force.continuous_n: must not exceed peak_n"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object\n", "TOML syntax"},
+      {"[probe]\nbuiltin = \"capsule\"\nmesh = \"a.off\"\n[object]\nbuiltin = \"box\"\n", "probe.mesh"},
+  };
+  for (const auto& [text, want] : cases) {
+    auto r = st::app::parse_scene(text, "bad.toml", ".");
+    INFO(text);
+    REQUIRE_FALSE(r.ok());
+    INFO(r.error());
+    CHECK(has(r.error(), want));
+    CHECK(has(r.error(), "bad.toml"));
+  }
+  // And through the command: exit code 2 with the message.
+  st::test::TempDir d;
+  st::test::write_file(d.file("s.toml"), "[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\npeak_n = -1\n");
+  const auto r = run_command(spheretouch_exe() + " run " + d.file("s.toml") + " --out " + d.file("o"));
+  CHECK(r.exit_code == 2);
+  CHECK(has(r.output, "s.toml:6: force.peak_n: expected a value in"));
+}
+
+TEST_CASE("scene files: configs/demo.toml and configs/small.toml parse, with the documented values") {
+  const std::string root = std::getenv("ST_SOURCE_ROOT") ? std::getenv("ST_SOURCE_ROOT") : ".";
+  auto demo = st::app::load_scene(root + "/configs/demo.toml");
+  REQUIRE_MESSAGE(demo.ok(), demo.error());
+  CHECK(demo.value().haptic.rate_hz == 1000.0);
+  CHECK(demo.value().law.a == 3.0);
+  CHECK(demo.value().law.b_N == 0.8);
+  CHECK(demo.value().saturation.peak_N == 3.3);
+  CHECK(demo.value().tree.leaf_faces == 8);
+  auto small = st::app::load_scene(root + "/configs/small.toml");
+  REQUIRE_MESSAGE(small.ok(), small.error());
+  CHECK(small.value().object.builtin == "icosphere");
+}

@@ -1,0 +1,224 @@
+// Tests src/net/protocol.*: round trips of every message, and hostile decoding (truncation at
+// every byte offset, oversized counts, wrong version, bit flips, random garbage).
+#include <doctest/doctest.h>
+
+#include <random>
+
+#include "net/protocol.hpp"
+#include "net/wire.hpp"
+
+using namespace st;
+using namespace st::net;
+
+namespace {
+
+geom::Pose some_pose() {
+  geom::Pose p = geom::Pose::Identity();
+  p.linear() = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  p.translation() = Eigen::Vector3d(1e6, -2.5, 0.125);
+  return p;
+}
+
+std::vector<Message> samples() {
+  std::vector<Message> v;
+  v.push_back(HelloMsg{7, 0x1234567890abcdefull, 42, {{0xdeadbeefull, 1000}, {0x1ull, 0}}});
+  v.push_back(HelloMsg{0, 1, 0, {}});
+  LoadBlocksMsg lb{0xfeedull, 10, 4, {1, 2, 3, 4, 5, 6}};
+  v.push_back(lb);
+  v.push_back(QueryMsg{99, 0xabcull, some_pose()});
+  ResultMsg r{99, 3, 0xabcull, {10, 20, 30}, {{1, 2}, {3, 4}, {0xffffffffu, 0}}};
+  v.push_back(r);
+  v.push_back(ResultMsg{1, 0, 0, {}, {}});
+  v.push_back(HeartbeatMsg{0x55aa});
+  v.push_back(ErrorMsg{ErrorCode::NotLoaded, 17, "block set 0x11 not held"});
+  return v;
+}
+
+}  // namespace
+
+TEST_CASE("fnv1a64 matches the published test vectors") {
+  const std::string a = "a", foobar = "foobar";
+  CHECK(fnv1a64({}) == 0xcbf29ce484222325ull);
+  CHECK(fnv1a64({reinterpret_cast<const std::uint8_t*>(a.data()), a.size()}) == 0xaf63dc4c8601ec8cull);
+  CHECK(fnv1a64({reinterpret_cast<const std::uint8_t*>(foobar.data()), foobar.size()}) == 0x85944171f73967e8ull);
+}
+
+TEST_CASE("every message survives encode/decode unchanged") {
+  for (const Message& m : samples()) {
+    CAPTURE(type_name(m));
+    const auto bytes = encode(m);
+    auto d = decode(bytes, default_limits());
+    REQUIRE_MESSAGE(d.ok(), d.error());
+    CHECK(d.value().index() == m.index());
+    CHECK(d.value() == m);
+  }
+}
+
+TEST_CASE("header layout is pinned: magic, version, type, flags, body length, little-endian") {
+  const auto b = encode(HeartbeatMsg{0x0102030405060708ull});
+  REQUIRE(b.size() == kHeaderBytes + 8);
+  const std::vector<std::uint8_t> want{'S', 'T', 'N', 'P', 1, 0, 5, 0, 8, 0, 0, 0, 8, 7, 6, 5, 4, 3, 2, 1};
+  CHECK(b == want);
+}
+
+TEST_CASE("a message truncated at every byte offset is rejected with a message") {
+  for (const Message& m : samples()) {
+    const auto full = encode(m);
+    for (std::size_t n = 0; n < full.size(); ++n) {
+      CAPTURE(type_name(m));
+      CAPTURE(n);
+      auto d = decode(std::span(full).first(n), default_limits());
+      REQUIRE_FALSE(d.ok());
+      CHECK_FALSE(d.error().empty());
+    }
+  }
+}
+
+TEST_CASE("truncating the body but fixing the length field still fails inside the body, naming the field") {
+  auto b = encode(ResultMsg{5, 1, 2, {}, {{1, 2}, {3, 4}}});
+  b.resize(b.size() - 3);
+  const std::uint32_t body = static_cast<std::uint32_t>(b.size() - kHeaderBytes);
+  std::memcpy(b.data() + 8, &body, 4);
+  auto d = decode(b, default_limits());
+  REQUIRE_FALSE(d.ok());
+  CHECK(d.error().find("Result at byte") != std::string::npos);
+  CHECK(d.error().find("pair count") != std::string::npos);
+}
+
+TEST_CASE("trailing bytes are rejected") {
+  auto b = encode(HeartbeatMsg{1});
+  b.push_back(0);
+  b[8] += 1;
+  auto d = decode(b, default_limits());
+  REQUIRE_FALSE(d.ok());
+  CHECK(d.error().find("trailing") != std::string::npos);
+}
+
+TEST_CASE("wrong magic, version, type and flags are rejected, naming the field") {
+  const auto good = encode(HeartbeatMsg{1});
+  struct Case { std::size_t at; std::uint8_t v; const char* word; };
+  for (Case c : {Case{0, 'X', "magic"}, Case{4, 2, "version"}, Case{5, 1, "version"}, Case{6, 0, "type"},
+                 Case{6, 7, "type"}, Case{7, 1, "flags"}}) {
+    auto b = good;
+    b[c.at] = c.v;
+    auto d = decode(b, default_limits());
+    REQUIRE_FALSE(d.ok());
+    CHECK_MESSAGE(d.error().find(c.word) != std::string::npos, d.error());
+  }
+}
+
+TEST_CASE("oversized counts are refused before allocating") {
+  Limits L = default_limits();
+  SUBCASE("pair count over the limit") {
+    auto b = encode(ResultMsg{1, 1, 1, {}, {}});
+    const std::uint32_t huge = 0xffffffffu;
+    std::memcpy(b.data() + b.size() - 4, &huge, 4);
+    auto d = decode(b, L);
+    REQUIRE_FALSE(d.ok());
+    CHECK(d.error().find("exceeds the limit") != std::string::npos);
+  }
+  SUBCASE("pair count under the limit but more than the bytes present") {
+    auto b = encode(ResultMsg{1, 1, 1, {}, {}});
+    const std::uint32_t n = L.max_pairs;
+    std::memcpy(b.data() + b.size() - 4, &n, 4);
+    auto d = decode(b, L);
+    REQUIRE_FALSE(d.ok());
+    CHECK(d.error().find("does not fit") != std::string::npos);
+  }
+  SUBCASE("held count") {
+    auto b = encode(HelloMsg{1, 1, 0, {}});
+    const std::uint32_t n = 1000;
+    std::memcpy(b.data() + b.size() - 4, &n, 4);
+    CHECK_FALSE(decode(b, L).ok());
+  }
+  SUBCASE("error text") {
+    ErrorMsg e{ErrorCode::BadMessage, 0, std::string(L.max_text + 1, 'x')};
+    auto d = decode(encode(e), L);
+    REQUIRE_FALSE(d.ok());
+    CHECK(d.error().find("text length") != std::string::npos);
+  }
+  SUBCASE("chunk over max_chunk_bytes") {
+    L.max_chunk_bytes = 4;
+    auto d = decode(encode(LoadBlocksMsg{1, 100, 0, std::vector<std::uint8_t>(5, 0)}), L);
+    REQUIRE_FALSE(d.ok());
+    CHECK(d.error().find("chunk length") != std::string::npos);
+  }
+  SUBCASE("block set larger than max_blockset_bytes") {
+    L.max_blockset_bytes = 64;
+    auto d = decode(encode(LoadBlocksMsg{1, 65, 0, {1}}), L);
+    REQUIRE_FALSE(d.ok());
+    CHECK(d.error().find("total_bytes") != std::string::npos);
+  }
+  SUBCASE("chunk outside the block set") {
+    auto d = decode(encode(LoadBlocksMsg{1, 10, 8, {1, 2, 3}}), L);
+    REQUIRE_FALSE(d.ok());
+    CHECK(d.error().find("outside") != std::string::npos);
+  }
+  SUBCASE("frame over max_message_bytes") {
+    L.max_message_bytes = 16;
+    CHECK_FALSE(decode(encode(QueryMsg{}), L).ok());
+  }
+}
+
+TEST_CASE("non-finite and non-rigid poses are refused") {
+  auto b = encode(QueryMsg{1, 2, some_pose()});
+  const std::size_t pose_at = kHeaderBytes + 16;
+  SUBCASE("NaN") {
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    std::memcpy(b.data() + pose_at + 8 * 3, &nan, 8);
+    auto d = decode(b, default_limits());
+    REQUIRE_FALSE(d.ok());
+    CHECK(d.error().find("finite") != std::string::npos);
+  }
+  SUBCASE("scaled rotation") {
+    const double two = 2.0;
+    std::memcpy(b.data() + pose_at, &two, 8);
+    auto d = decode(b, default_limits());
+    REQUIRE_FALSE(d.ok());
+    CHECK(d.error().find("rigid") != std::string::npos);
+  }
+  SUBCASE("reflection") {
+    geom::Pose p = geom::Pose::Identity();
+    p.matrix()(0, 0) = -1;
+    CHECK_FALSE(decode(encode(QueryMsg{1, 2, p}), default_limits()).ok());
+  }
+}
+
+TEST_CASE("unknown error codes are refused") {
+  auto b = encode(ErrorMsg{ErrorCode::BadMessage, 0, ""});
+  b[kHeaderBytes] = 99;
+  CHECK_FALSE(decode(b, default_limits()).ok());
+}
+
+TEST_CASE("bit flips and random garbage never crash and never decode into out-of-limit values") {
+  std::mt19937_64 rng(12345);
+  const Limits L = default_limits();
+  int decoded = 0, refused = 0;
+  for (const Message& m : samples()) {
+    const auto good = encode(m);
+    for (int trial = 0; trial < 2000; ++trial) {
+      auto b = good;
+      const int flips = 1 + static_cast<int>(rng() % 4);
+      for (int f = 0; f < flips; ++f) b[rng() % b.size()] ^= static_cast<std::uint8_t>(1u << (rng() % 8));
+      auto d = decode(b, L);
+      if (!d.ok()) { ++refused; continue; }
+      ++decoded;
+      if (auto* r = std::get_if<ResultMsg>(&d.value())) CHECK(r->pairs.size() <= L.max_pairs);
+      if (auto* h = std::get_if<HelloMsg>(&d.value())) CHECK(h->held.size() <= L.max_held);
+    }
+  }
+  for (int trial = 0; trial < 20000; ++trial) {
+    std::vector<std::uint8_t> b(rng() % 200);
+    for (auto& c : b) c = static_cast<std::uint8_t>(rng());
+    if (trial % 2 && b.size() >= kHeaderBytes) {  // valid header, garbage body: reaches the body decoders
+      const std::uint32_t magic = kMagic, body = static_cast<std::uint32_t>(b.size() - kHeaderBytes);
+      std::memcpy(b.data(), &magic, 4);
+      b[4] = kVersion; b[5] = 0; b[6] = static_cast<std::uint8_t>(1 + rng() % 6); b[7] = 0;
+      std::memcpy(b.data() + 8, &body, 4);
+    }
+    auto d = decode(b, L);
+    if (d.ok()) ++decoded; else ++refused;
+  }
+  CHECK(refused > 0);
+  MESSAGE("garbage: " << decoded << " decoded (harmless), " << refused << " refused");
+}

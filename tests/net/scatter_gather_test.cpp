@@ -1,0 +1,268 @@
+// Tests src/net/scatter_gather.* and src/net/worker_service.* in one process over inproc://:
+// exact merged results for 1..8 workers, content-addressed loading, a worker stopped while
+// rounds stream (rounds return, are marked incomplete, blocks are reassigned, results are exact
+// again) and restarted (reloaded), and hostile messages to a worker.
+#include <doctest/doctest.h>
+
+#include <thread>
+
+#include "net/local_workers.hpp"
+#include "net/reference_backend.hpp"
+#include "net/scatter_gather.hpp"
+#include "net_test_util.hpp"
+
+using namespace st;
+using namespace st::net;
+using namespace std::chrono_literals;
+
+namespace {
+
+std::string tag() {
+  static int n = 0;
+  return "sg" + std::to_string(++n);
+}
+
+std::unique_ptr<ScatterGather> client(zmq::context_t& ctx, const LocalWorkers& w, const test::NetScene& s,
+                                      std::uint32_t miss_limit = 3) {
+  ScatterConfig cfg;
+  cfg.endpoints = w.endpoints();
+  cfg.miss_limit = miss_limit;
+  cfg.heartbeat_period = 20ms;
+  auto c = ScatterGather::create(ctx, cfg, s.probe, s.object, s.blocks);
+  REQUIRE_MESSAGE(c.ok(), c.error());
+  return std::move(c.value());
+}
+
+}  // namespace
+
+TEST_CASE("merged pairs equal the single-process reference for 1, 2, 4 and 8 inproc workers") {
+  zmq::context_t ctx;
+  const test::NetScene s = test::small_scene(10, 24);
+  const auto poses = test::contact_poses(s, 10);
+  for (int n : {1, 2, 4, 8}) {
+    CAPTURE(n);
+    const std::string t = tag();
+    auto w = LocalWorkers::start(ctx, n, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); });
+    REQUIRE_MESSAGE(w.ok(), w.error());
+    auto c = client(ctx, *w.value(), s);
+    REQUIRE(c->wait_ready(Clock::now() + 10s));
+    std::uint64_t seq = 0;
+    for (const geom::Pose& pose : poses) {
+      RoundResult r = c->round(++seq, pose, Clock::now() + 5s);
+      CHECK(r.complete);
+      CHECK(r.workers_asked == static_cast<std::uint32_t>(n));
+      CHECK(r.workers_replied == static_cast<std::uint32_t>(n));
+      CHECK(r.blocks_covered == s.blocks.size());
+      CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+      CHECK(std::is_sorted(r.pairs.begin(), r.pairs.end()));
+      CHECK(r.contacts() == count_contacts(r.pairs));
+      CHECK(std::adjacent_find(r.probe_faces.begin(), r.probe_faces.end()) == r.probe_faces.end());
+    }
+  }
+}
+
+TEST_CASE("a worker that already holds a block set is not sent it again") {
+  zmq::context_t ctx;
+  const test::NetScene s = test::small_scene(6);
+  const std::string t = tag();
+  auto w = LocalWorkers::start(ctx, 3, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); });
+  REQUIRE(w.ok());
+  {
+    auto c = client(ctx, *w.value(), s);
+    REQUIRE(c->wait_ready(Clock::now() + 10s));
+    for (const auto& ws : c->workers()) CHECK(ws.loads_sent == 1);
+  }
+  auto c2 = client(ctx, *w.value(), s);  // a second client (e.g. a restarted app): same hashes
+  REQUIRE(c2->wait_ready(Clock::now() + 10s));
+  for (const auto& ws : c2->workers()) {
+    CHECK(ws.loads_sent == 0);
+    CHECK(ws.bytes_sent == 0);
+    CHECK(ws.holds_target);
+  }
+  CHECK(c2->round(1, test::contact_poses(s, 1)[0], Clock::now() + 5s).complete);
+}
+
+TEST_CASE("a stopped worker: rounds return by their deadline, incomplete until reassigned, then exact; restart reloads") {
+  zmq::context_t ctx;
+  const test::NetScene s = test::small_scene(10, 24);
+  const auto poses = test::contact_poses(s, 6);
+  const std::string t = tag();
+  auto wr = LocalWorkers::start(ctx, 4, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); });
+  REQUIRE(wr.ok());
+  LocalWorkers& w = *wr.value();
+  const std::uint32_t K = 3;
+  auto c = client(ctx, w, s, K);
+  REQUIRE(c->wait_ready(Clock::now() + 10s));
+  std::uint64_t seq = 0;
+  const auto deadline_for = [] { return Clock::now() + 50ms; };
+  for (const auto& pose : poses) REQUIRE(c->round(++seq, pose, deadline_for()).complete);
+
+  w.stop(2);
+  // Rounds keep returning; the first K miss worker 2 and are incomplete.
+  int incomplete = 0, rounds = 0;
+  bool exact_again = false;
+  const auto give_up = Clock::now() + 20s;
+  while (Clock::now() < give_up) {
+    const auto& pose = poses[rounds % poses.size()];
+    const auto d = deadline_for();
+    RoundResult r = c->round(++seq, pose, d);
+    CHECK(Clock::now() < d + 500ms);  // liveness: returned, not 10x after its deadline
+    ++rounds;
+    if (!r.complete) { ++incomplete; CHECK(r.blocks_covered < r.blocks_total); continue; }
+    CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+    exact_again = true;
+    break;
+  }
+  CHECK(exact_again);
+  CHECK(incomplete >= static_cast<int>(K));
+  auto ws = c->workers();
+  CHECK_FALSE(ws[2].up);
+  CHECK(ws[2].target_blocks.empty());
+  std::size_t reassigned = 0;
+  for (int i : {0, 1, 3}) { CHECK(ws[i].up); reassigned += ws[i].target_blocks.size(); }
+  CHECK(reassigned == s.blocks.size());
+  for (int k = 0; k < 5; ++k) {
+    const auto& pose = poses[k % poses.size()];
+    RoundResult r = c->round(++seq, pose, deadline_for());
+    CHECK(r.complete);
+    CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+  }
+
+  // Restart: a new epoch with empty memory; it is given back its blocks and reloaded.
+  REQUIRE(w.restart(2).ok());
+  std::vector<std::uint32_t> loads_before;
+  for (const auto& x : c->workers()) loads_before.push_back(x.loads_sent);
+  for (int i : {0, 1, 3}) CHECK(loads_before[i] == 2);  // own share, then the enlarged one
+  bool back = false;
+  for (int k = 0; k < 400 && !back; ++k) {
+    const auto& pose = poses[k % poses.size()];
+    RoundResult r = c->round(++seq, pose, deadline_for());
+    if (r.complete) CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+    ws = c->workers();
+    back = ws[2].up && ws[2].holds_target && r.workers_replied == 4 && r.complete;
+  }
+  REQUIRE(back);
+  CHECK(ws[2].loads_sent == loads_before[2] + 1);
+  for (int i = 0; i < 4; ++i) CHECK(ws[i].target_blocks == block_cyclic(static_cast<std::uint32_t>(s.blocks.size()), 4)[i]);
+  // Survivors kept their own share in memory: only the returning worker was sent anything.
+  for (int i : {0, 1, 3}) CHECK(ws[i].loads_sent == loads_before[i]);
+}
+
+TEST_CASE("a worker answers hostile messages with an Error or drops them, and keeps serving") {
+  zmq::context_t ctx;
+  const test::NetScene s = test::small_scene(6);
+  const std::string t = tag();
+  auto w = LocalWorkers::start(ctx, 1, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); });
+  REQUIRE(w.ok());
+  zmq::socket_t d(ctx, zmq::socket_type::dealer);
+  d.set(zmq::sockopt::linger, 0);
+  d.set(zmq::sockopt::rcvtimeo, 2000);
+  d.connect(w.value()->endpoints()[0]);
+  auto expect_error = [&](const std::vector<std::uint8_t>& bytes, ErrorCode code) {
+    d.send(zmq::buffer(bytes), zmq::send_flags::none);
+    zmq::message_t m;
+    REQUIRE(d.recv(m));
+    auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, default_limits());
+    REQUIRE(r.ok());
+    auto* e = std::get_if<ErrorMsg>(&r.value());
+    REQUIRE(e);
+    CHECK(e->code == code);
+    return e->text;
+  };
+  CHECK(expect_error({1, 2, 3}, ErrorCode::BadMessage).find("header") != std::string::npos);
+  auto q = encode(QueryMsg{1, 2, geom::Pose::Identity()});
+  auto bad_version = q; bad_version[4] = 9;
+  CHECK(expect_error(bad_version, ErrorCode::BadMessage).find("version") != std::string::npos);
+  auto truncated = q; truncated.resize(q.size() - 1);
+  expect_error(truncated, ErrorCode::BadMessage);
+  expect_error(encode(ResultMsg{}), ErrorCode::Unexpected);
+  expect_error(q, ErrorCode::NotLoaded);
+  { zmq::message_t hello; REQUIRE(d.recv(hello)); }  // the Hello that follows NotLoaded
+  // A chunk out of order, and a block set whose bytes do not match the hash.
+  expect_error(encode(LoadBlocksMsg{7, 10, 4, {1, 2}}), ErrorCode::LoadFailed);
+  expect_error(encode(LoadBlocksMsg{7, 3, 0, {1, 2, 3}}), ErrorCode::LoadFailed);
+  // A set with the right hash but garbage content fails to decode.
+  std::vector<std::uint8_t> junk(40, 0xab);
+  expect_error(encode(LoadBlocksMsg{block_set_hash(junk), junk.size(), 0, junk}), ErrorCode::LoadFailed);
+  // Two frames in one message.
+  d.send(zmq::buffer(q), zmq::send_flags::sndmore);
+  d.send(zmq::buffer(q), zmq::send_flags::none);
+  {
+    zmq::message_t m;
+    REQUIRE(d.recv(m));
+    auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, default_limits());
+    REQUIRE(r.ok());
+    CHECK(std::get<ErrorMsg>(r.value()).code == ErrorCode::BadMessage);
+  }
+  // Random garbage: every message is answered (an Error) or dropped; the worker stays alive.
+  std::mt19937_64 rng(3);
+  for (int i = 0; i < 500; ++i) {
+    std::vector<std::uint8_t> g(1 + rng() % 64);
+    for (auto& c : g) c = static_cast<std::uint8_t>(rng());
+    d.send(zmq::buffer(g), zmq::send_flags::dontwait);
+  }
+  // Still serving: a real client works afterwards.
+  auto c = client(ctx, *w.value(), s);
+  REQUIRE(c->wait_ready(Clock::now() + 10s));
+  const auto pose = test::contact_poses(s, 1)[0];
+  RoundResult r = c->round(1, pose, Clock::now() + 5s);
+  CHECK(r.complete);
+  CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+}
+
+TEST_CASE("an oversized frame is cut off by ZMQ_MAXMSGSIZE before it is buffered") {
+  zmq::context_t ctx;
+  const std::string t = tag();
+  WorkerConfig wc;
+  wc.limits.max_chunk_bytes = 1024;
+  auto w = LocalWorkers::start(ctx, 1, reference_backend_factory(), [&](int) { return std::string("tcp://127.0.0.1:*"); }, wc);
+  REQUIRE(w.ok());
+  zmq::socket_t d(ctx, zmq::socket_type::dealer);
+  d.set(zmq::sockopt::linger, 0);
+  d.set(zmq::sockopt::rcvtimeo, 300);
+  d.connect(w.value()->endpoints()[0]);
+  std::vector<std::uint8_t> big(1 << 20, 0);
+  d.send(zmq::buffer(big), zmq::send_flags::none);
+  zmq::message_t m;
+  CHECK_FALSE(d.recv(m));  // dropped with the connection: no reply, no crash
+  // The worker still answers a fresh connection.
+  zmq::socket_t d2(ctx, zmq::socket_type::dealer);
+  d2.set(zmq::sockopt::linger, 0);
+  d2.set(zmq::sockopt::rcvtimeo, 2000);
+  d2.connect(w.value()->endpoints()[0]);
+  d2.send(zmq::buffer(encode(HeartbeatMsg{5})), zmq::send_flags::none);
+  REQUIRE(d2.recv(m));
+  auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, default_limits());
+  REQUIRE(r.ok());
+  CHECK(std::get<HelloMsg>(r.value()).echo == 5);
+}
+
+TEST_CASE("a worker restarted before it is marked down (new epoch) is reloaded; the others are left alone") {
+  zmq::context_t ctx;
+  const test::NetScene s = test::small_scene(8, 24);
+  const auto poses = test::contact_poses(s, 4);
+  auto wr = LocalWorkers::start(ctx, 3, reference_backend_factory(), [](int) { return std::string("tcp://127.0.0.1:*"); });
+  REQUIRE(wr.ok());
+  LocalWorkers& w = *wr.value();
+  auto c = client(ctx, w, s, 1u << 30);  // never marked down: only the epoch tells
+  REQUIRE(c->wait_ready(Clock::now() + 10s));
+  const std::uint64_t epoch0 = c->workers()[1].epoch;
+  std::uint64_t seq = 0;
+  REQUIRE(c->round(++seq, poses[0], Clock::now() + 1s).complete);
+  REQUIRE(w.restart(1).ok());
+  bool reloaded = false;
+  const auto give_up = Clock::now() + 20s;  // rounds that skip the reconnecting worker are fast: bound by time
+  for (int k = 0; Clock::now() < give_up && !reloaded; ++k) {
+    const auto& pose = poses[k % poses.size()];
+    RoundResult r = c->round(++seq, pose, Clock::now() + 50ms);
+    if (r.complete) CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+    const auto ws = c->workers();
+    reloaded = r.complete && ws[1].epoch != epoch0 && ws[1].holds_target;
+  }
+  REQUIRE(reloaded);
+  const auto ws = c->workers();
+  CHECK(ws[1].loads_sent == 2);
+  CHECK(ws[0].loads_sent == 1);
+  CHECK(ws[2].loads_sent == 1);
+  for (const auto& x : ws) CHECK(x.up);
+}

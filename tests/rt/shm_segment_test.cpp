@@ -1,0 +1,186 @@
+// Tests src/rt/shm_segment.*: two processes (fork) exchanging through a segment, header checks,
+// and a segment left by a dead process being detected (attach refuses) and replaced (create).
+#include "rt/shm_segment.hpp"
+
+#include <doctest/doctest.h>
+
+#include "rt_test_util.hpp"
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstring>
+#include <string>
+
+#include "rt/clock.hpp"
+
+using namespace st::rt;
+
+namespace {
+std::string unique_name(const char* tag) {
+  return "/spheretouch-test-" + std::string(tag) + "-" + std::to_string(getpid());
+}
+int wait_child(pid_t pid) {
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+}  // namespace
+
+TEST_CASE("ShmSegment: create, attach in a forked child, exchange both ways") {
+  const std::string name = unique_name("xchg");
+  auto seg = ShmSegment::create(name);
+  REQUIRE_MESSAGE(seg.ok(), err_of(seg));
+  CHECK(seg.value()->creator());
+  CHECK(seg.value()->header().creator_pid == getpid());
+  constexpr std::uint64_t kModels = 200'000;
+
+  const pid_t child = fork();
+  REQUIRE(child >= 0);
+  if (child == 0) {
+    // Child: the collision side. Attach by name (not the inherited mapping), publish models,
+    // and check the poses it reads from the parent. Exit code = number of faults.
+    int faults = 0;
+    auto att = ShmSegment::attach(name);
+    if (!att.ok()) _exit(100);
+    ShmSegment& s = *att.value();
+    std::uint64_t last_pose = 0;
+    for (std::uint64_t i = 1; i <= kModels; ++i) {
+      st::geom::ContactModel& m = s.models().input();
+      m = st::geom::ContactModel{};
+      m.seq = i;
+      m.penetration_mm = static_cast<double>(i);
+      m.pairs = static_cast<std::uint32_t>(i);
+      m.published_ns = now_ns();
+      s.models().publish();
+      if (s.poses().update()) {
+        const PoseSample& p = s.poses().output();
+        if (p.seq < last_pose || p.pose.t[0] != static_cast<double>(p.seq)) ++faults;
+        last_pose = p.seq;
+      }
+    }
+    _exit(faults > 99 ? 99 : faults);
+  }
+  // Parent: the haptic side.
+  ShmSegment& s = *seg.value();
+  std::uint64_t last = 0, torn = 0, backwards = 0, pose_seq = 0;
+  int child_status = -1;
+  auto take = [&] {
+    if (s.models().update()) {
+      const auto& m = s.models().output();
+      if (m.penetration_mm != static_cast<double>(m.seq) || m.pairs != static_cast<std::uint32_t>(m.seq)) ++torn;
+      if (m.seq <= last) ++backwards;
+      last = m.seq;
+    }
+  };
+  while (last < kModels && child_status < 0) {
+    PoseSample ps;
+    ps.seq = ++pose_seq;
+    ps.sampled_ns = now_ns();
+    ps.pose.t[0] = static_cast<double>(ps.seq);
+    s.poses().write(ps);
+    take();
+    int status = 0;
+    if (waitpid(child, &status, WNOHANG) == child) {
+      child_status = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+      take();  // the child's last model was published before it exited
+    }
+  }
+  if (child_status < 0) child_status = wait_child(child);
+  CHECK(child_status == 0);
+  CHECK(torn == 0);
+  CHECK(backwards == 0);
+  CHECK(last == kModels);
+}
+
+TEST_CASE("ShmSegment: a live creator's segment is refused by create, accepted by attach") {
+  const std::string name = unique_name("live");
+  auto a = ShmSegment::create(name);
+  REQUIRE(a.ok());
+  auto b = ShmSegment::create(name);
+  REQUIRE_FALSE(b.ok());
+  CHECK_MESSAGE(b.error().find("in use") != std::string::npos, b.error());
+  auto c = ShmSegment::attach(name);
+  CHECK(c.ok());
+}
+
+TEST_CASE("ShmSegment: a segment left by a dead process is refused by attach and replaced by create") {
+  const std::string name = unique_name("dead");
+  const pid_t child = fork();
+  REQUIRE(child >= 0);
+  if (child == 0) {
+    auto seg = ShmSegment::create(name);
+    if (!seg.ok()) _exit(1);
+    (void)seg.value().release();  // leak the mapping: die without unlinking, like a crash
+    _exit(0);
+  }
+  REQUIRE(wait_child(child) == 0);
+  auto att = ShmSegment::attach(name);
+  REQUIRE_FALSE(att.ok());
+  CHECK_MESSAGE(att.error().find("dead") != std::string::npos, att.error());
+  auto seg = ShmSegment::create(name);
+  REQUIRE_MESSAGE(seg.ok(), err_of(seg));
+  CHECK(seg.value()->header().creator_pid == getpid());
+  CHECK(ShmSegment::attach(name).ok());
+}
+
+TEST_CASE("ShmSegment: header mismatches are refused with a clear error") {
+  const std::string name = unique_name("hdr");
+  auto seg = ShmSegment::create(name);
+  REQUIRE(seg.ok());
+  const int fd = shm_open(name.c_str(), O_RDWR, 0);
+  REQUIRE(fd >= 0);
+  void* p = mmap(nullptr, sizeof(ShmLayout), PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+  close(fd);
+  REQUIRE(p != MAP_FAILED);
+  auto* h = static_cast<ShmHeader*>(p);
+
+  h->layout_version = kShmLayoutVersion + 1;
+  auto r = ShmSegment::attach(name);
+  REQUIRE_FALSE(r.ok());
+  CHECK_MESSAGE(r.error().find("layout version") != std::string::npos, r.error());
+  h->layout_version = kShmLayoutVersion;
+
+  h->model_size += 8;
+  r = ShmSegment::attach(name);
+  REQUIRE_FALSE(r.ok());
+  CHECK_MESSAGE(r.error().find("layout mismatch") != std::string::npos, r.error());
+  h->model_size -= 8;
+
+  h->magic ^= 1;
+  r = ShmSegment::attach(name);
+  REQUIRE_FALSE(r.ok());
+  CHECK_MESSAGE(r.error().find("magic") != std::string::npos, r.error());
+  h->magic ^= 1;
+
+  CHECK(ShmSegment::attach(name).ok());
+  munmap(p, sizeof(ShmLayout));
+}
+
+TEST_CASE("ShmSegment: foreign segments are not replaced; bad names refused") {
+  const std::string name = unique_name("foreign");
+  const int fd = shm_open(name.c_str(), O_RDWR | O_CREAT | O_EXCL, 0600);
+  REQUIRE(fd >= 0);
+  const char junk[256] = "not a spheretouch segment";
+  REQUIRE(ftruncate(fd, sizeof junk) == 0);
+  REQUIRE(pwrite(fd, junk, sizeof junk, 0) == static_cast<ssize_t>(sizeof junk));
+  close(fd);
+  auto c = ShmSegment::create(name);
+  REQUIRE_FALSE(c.ok());
+  CHECK_MESSAGE(c.error().find("not a spheretouch segment") != std::string::npos, c.error());
+  auto a = ShmSegment::attach(name);
+  REQUIRE_FALSE(a.ok());
+  CHECK(ShmSegment::remove(name).ok());
+  CHECK_FALSE(ShmSegment::attach("/no-such-spheretouch-segment-xyz").ok());
+  CHECK_FALSE(ShmSegment::create("/a/b").ok());
+  CHECK_FALSE(ShmSegment::create("").ok());
+}
+
+TEST_CASE("process_alive: self alive, pid reuse detected") {
+  const auto start = process_start_ticks(getpid());
+  CHECK(start > 0);
+  CHECK(process_alive(getpid(), start));
+  CHECK_FALSE(process_alive(getpid(), start + 1));
+  CHECK_FALSE(process_alive(-1, 0));
+}
