@@ -7,12 +7,16 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <memory>
 #include <random>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "bench.hpp"
+#ifdef ST_HAVE_FCL
+#include "fcl_peer.hpp"
+#endif
 #include "geom/collide.hpp"
 #include "geom/mesh_io.hpp"
 #include "geom/sphere_tree.hpp"
@@ -104,14 +108,37 @@ std::vector<std::pair<Pose, std::string>> read_poses(const std::string& path) {
   return out;
 }
 
+double percentile(std::vector<double> v, double q) {
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size())))];
+}
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+/// One pose's figures (times in microseconds).
+struct PoseRow {
+  std::string comment;
+  std::uint32_t contacts = 0;
+  std::size_t pairs = 0;
+  geom::CollideStats stats;
+  double p50_us = 0, p95_us = 0, min_us = 0;
+  bool fcl = false;
+  double fcl_p50_us = 0, fcl_p95_us = 0, fcl_min_us = 0;
+  std::size_t fcl_pairs = 0, only_ours = 0, only_fcl = 0;
+  std::vector<std::string> diffs;  ///< first few disagreements, with FCL's triangle distance
+};
+
 }  // namespace
 
 void add_collide(CLI::App& app) {
   struct Args {
-    std::string probe, object, poses, find_out, targets = "100,500,1000,1500";
+    std::string probe, object, poses, find_out, build_mesh, targets = "100,500,1000,1500";
     int runs = 200;
     unsigned leaf = geom::DefaultTreeParams().leaf_faces;
     std::uint64_t seed = 1;
+    bool fcl = false, json = false;
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("collide", "Exact collide() median query time at the poses of a pose file (single thread)");
@@ -123,15 +150,28 @@ void add_collide(CLI::App& app) {
   cmd->add_option("--seed", a->seed, "site choice for --find-poses")->capture_default_str();
   cmd->add_option("--runs", a->runs, "queries per pose")->check(CLI::Range(1, 100000))->capture_default_str();
   cmd->add_option("--leaf-faces", a->leaf, "faces per leaf (both trees)")->check(CLI::Range(1u, geom::kMaxLeafFaces))->capture_default_str();
+  cmd->add_flag("--fcl", a->fcl, "also time FCL 0.7 (BVHModel<OBBRSS>, all contacts) on the same poses and compare pair sets");
+  cmd->add_option("--build-mesh", a->build_mesh, "also time our tree build and FCL's OBBRSS build of this mesh")->check(CLI::ExistingFile);
+  cmd->add_flag("--json", a->json, "print one JSON object instead of the table");
   cmd->callback([a] {
+#ifndef ST_HAVE_FCL
+    if (a->fcl || !a->build_mesh.empty()) {
+      std::fprintf(stderr, "--fcl/--build-mesh: this spheretouch-bench was built without FCL (libfcl-dev)\n");
+      throw CLI::RuntimeError(2);
+    }
+#endif
     Scene s;
     for (auto [path, mesh] : {std::pair{&a->probe, &s.probe}, std::pair{&a->object, &s.object}}) {
       auto m = geom::load_mesh(*path);
       if (!m) { std::fprintf(stderr, "%s\n", m.error().c_str()); throw CLI::RuntimeError(2); }
       *mesh = std::move(m.value().mesh);
     }
+    auto t0 = std::chrono::steady_clock::now();
     s.pt = geom::SphereTree::build(s.probe, {a->leaf}).value();
+    const double probe_build_s = seconds_since(t0);
+    t0 = std::chrono::steady_clock::now();
     s.ot = geom::SphereTree::build(s.object, {a->leaf}).value();
+    const double object_build_s = seconds_since(t0);
     if (!a->find_out.empty()) {
       std::ofstream out(a->find_out);
       out << "# " << a->probe << " x " << a->object << ": fingertip pushed along the surface normal; "
@@ -156,26 +196,153 @@ void add_collide(CLI::App& app) {
         std::printf("target %5u: contacts %u\n", target, got);
       }
     }
-    if (a->poses.empty()) return;
-    geom::CollideScratch sc;
-    geom::CollideResult r;
-    std::printf("leaf_faces %u; probe %zu faces, object %zu faces\n", a->leaf, s.probe.num_faces(), s.object.num_faces());
-    std::printf("%8s %8s %10s %10s %10s %10s %10s\n", "contacts", "pairs", "node_pairs", "leaf_pairs", "tri_pairs", "median_ms", "min_ms");
-    for (const auto& [pose, comment] : read_poses(a->poses)) {
-      std::vector<double> t;
-      t.reserve(a->runs);
-      geom::collide(s.probe, s.pt, s.object, s.ot, pose, {}, sc, r);  // warm
-      for (int i = 0; i < a->runs; ++i) {
-        const auto t0 = std::chrono::steady_clock::now();
-        geom::collide(s.probe, s.pt, s.object, s.ot, pose, {}, sc, r);
-        t.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    if (a->poses.empty() && a->build_mesh.empty()) return;
+
+    // Build of a large mesh (issue 3: 832,000 faces in at most 1 s), ours vs FCL's OBBRSS.
+    double big_build_s = 0, big_fcl_build_s = 0, big_bytes_per_face = 0;
+    std::size_t big_faces = 0;
+    if (!a->build_mesh.empty()) {
+      auto m = geom::load_mesh(a->build_mesh);
+      if (!m) { std::fprintf(stderr, "%s\n", m.error().c_str()); throw CLI::RuntimeError(2); }
+      const geom::Mesh& big = m.value().mesh;
+      big_faces = big.num_faces();
+      std::vector<double> bs;
+      for (int r = 0; r < 3; ++r) {
+        t0 = std::chrono::steady_clock::now();
+        const geom::SphereTree t = geom::SphereTree::build(big, {a->leaf}).value();
+        bs.push_back(seconds_since(t0));
+        big_bytes_per_face = double(t.bytes()) / double(big_faces);
       }
-      std::sort(t.begin(), t.end());
-      std::printf("%8u %8zu %10llu %10llu %10llu %10.4f %10.4f\n", r.contacts(), r.pairs.size(),
-                  static_cast<unsigned long long>(r.stats.node_pairs), static_cast<unsigned long long>(r.stats.leaf_pairs),
-                  static_cast<unsigned long long>(r.stats.tri_pairs),
-                  t[t.size() / 2], t.front());
+      big_build_s = *std::min_element(bs.begin(), bs.end());
+#ifdef ST_HAVE_FCL
+      big_fcl_build_s = fcl_build_seconds(big);
+#endif
     }
+
+    std::vector<PoseRow> rows;
+    double fcl_build_s = 0;
+    std::size_t scratch_bytes = 0;
+    if (!a->poses.empty()) {
+#ifdef ST_HAVE_FCL
+      std::unique_ptr<FclPeer> peer;
+      if (a->fcl) { peer = std::make_unique<FclPeer>(s.probe, s.object); fcl_build_s = peer->build_seconds(); }
+#endif
+      geom::CollideScratch sc;
+      geom::CollideResult r;
+      for (const auto& [pose, comment] : read_poses(a->poses)) {
+        PoseRow row;
+        row.comment = comment;
+        std::vector<double> ours, theirs;
+        ours.reserve(a->runs);
+        geom::collide(s.probe, s.pt, s.object, s.ot, pose, {}, sc, r);  // warm
+        // Ours and FCL's in alternating blocks of 10 queries, so a change of machine load during
+        // the run affects both alike while each still runs warm, back to back.
+        for (int done = 0; done < a->runs;) {
+          const int block = std::min(10, a->runs - done);
+          for (int i = 0; i < block; ++i) {
+            t0 = std::chrono::steady_clock::now();
+            geom::collide(s.probe, s.pt, s.object, s.ot, pose, {}, sc, r);
+            ours.push_back(1e6 * seconds_since(t0));
+          }
+#ifdef ST_HAVE_FCL
+          for (int i = 0; peer && i < block; ++i) {
+            double q = 0;
+            (void)peer->collide(pose, &q);
+            theirs.push_back(1e6 * q);
+          }
+#endif
+          done += block;
+        }
+        row.contacts = r.contacts();
+        row.pairs = r.pairs.size();
+        row.stats = r.stats;
+        row.p50_us = percentile(ours, 0.5);
+        row.p95_us = percentile(ours, 0.95);
+        row.min_us = percentile(ours, 0.0);
+#ifdef ST_HAVE_FCL
+        if (peer) {
+          row.fcl = true;
+          row.fcl_p50_us = percentile(theirs, 0.5);
+          row.fcl_p95_us = percentile(theirs, 0.95);
+          row.fcl_min_us = percentile(theirs, 0.0);
+          const auto fp = peer->collide(pose);
+          geom::CollideOptions o;
+          o.sort_pairs = true;
+          geom::collide(s.probe, s.pt, s.object, s.ot, pose, o, sc, r);
+          row.fcl_pairs = fp.size();
+          std::size_t i = 0, j = 0;
+          auto note = [&](const char* who, std::uint32_t pf, std::uint32_t of) {
+            if (row.diffs.size() >= 5) return;
+            char buf[160];
+            std::snprintf(buf, sizeof buf, "only %s: probe %u object %u (FCL tri distance %.3g mm)", who, pf, of,
+                          peer->tri_distance(pose, pf, of));
+            row.diffs.emplace_back(buf);
+          };
+          while (i < r.pairs.size() || j < fp.size()) {
+            const bool take_ours = j == fp.size() || (i < r.pairs.size() && std::pair{r.pairs[i].probe, r.pairs[i].object} < fp[j]);
+            const bool take_fcl = i == r.pairs.size() || (j < fp.size() && fp[j] < std::pair{r.pairs[i].probe, r.pairs[i].object});
+            if (take_ours) { ++row.only_ours; note("ours", r.pairs[i].probe, r.pairs[i].object); ++i; }
+            else if (take_fcl) { ++row.only_fcl; note("FCL", fp[j].first, fp[j].second); ++j; }
+            else { ++i; ++j; }
+          }
+        }
+#endif
+        rows.push_back(std::move(row));
+      }
+      scratch_bytes = sc.bytes();
+    }
+
+    const double bpf_probe = double(s.pt.bytes()) / double(s.probe.num_faces());
+    const double bpf_object = double(s.ot.bytes()) / double(s.object.num_faces());
+    if (a->json) {
+      std::printf("{\"probe\": \"%s\", \"object\": \"%s\", \"probe_faces\": %zu, \"object_faces\": %zu, \"leaf_faces\": %u, "
+                  "\"runs\": %d,\n \"build\": {\"probe_s\": %.4f, \"object_s\": %.4f, \"probe_bytes_per_face\": %.1f, "
+                  "\"object_bytes_per_face\": %.1f, \"scratch_bytes\": %zu, \"fcl_both_s\": %.4f",
+                  a->probe.c_str(), a->object.c_str(), s.probe.num_faces(), s.object.num_faces(), a->leaf, a->runs,
+                  probe_build_s, object_build_s, bpf_probe, bpf_object, scratch_bytes, fcl_build_s);
+      if (!a->build_mesh.empty())
+        std::printf(", \"big_mesh\": \"%s\", \"big_faces\": %zu, \"big_s\": %.4f, \"big_bytes_per_face\": %.1f, \"big_fcl_s\": %.4f",
+                    a->build_mesh.c_str(), big_faces, big_build_s, big_bytes_per_face, big_fcl_build_s);
+      std::printf("},\n \"poses\": [");
+      for (std::size_t i = 0; i < rows.size(); ++i) {
+        const PoseRow& w = rows[i];
+        std::printf("%s\n  {\"contacts\": %u, \"pairs\": %zu, \"p50_us\": %.2f, \"p95_us\": %.2f, \"min_us\": %.2f, "
+                    "\"node_pairs\": %llu, \"leaf_pairs\": %llu, \"tri_tests\": %llu",
+                    i ? "," : "", w.contacts, w.pairs, w.p50_us, w.p95_us, w.min_us,
+                    static_cast<unsigned long long>(w.stats.node_pairs), static_cast<unsigned long long>(w.stats.leaf_pairs),
+                    static_cast<unsigned long long>(w.stats.tri_pairs));
+        if (w.fcl)
+          std::printf(", \"fcl_p50_us\": %.2f, \"fcl_p95_us\": %.2f, \"fcl_min_us\": %.2f, \"ratio\": %.4f, \"fcl_pairs\": %zu, "
+                      "\"only_ours\": %zu, \"only_fcl\": %zu",
+                      w.fcl_p50_us, w.fcl_p95_us, w.fcl_min_us, w.p50_us / w.fcl_p50_us, w.fcl_pairs, w.only_ours, w.only_fcl);
+        std::printf("}");
+      }
+      std::printf("]}\n");
+      return;
+    }
+    std::printf("leaf_faces %u; probe %zu faces (tree %.3f s, %.1f B/face), object %zu faces (tree %.3f s, %.1f B/face)",
+                a->leaf, s.probe.num_faces(), probe_build_s, bpf_probe, s.object.num_faces(), object_build_s, bpf_object);
+    if (a->fcl) std::printf("; FCL OBBRSS build of both %.3f s", fcl_build_s);
+    std::printf("; %d runs per pose; query scratch %.1f MB\n", a->runs, double(scratch_bytes) / 1e6);
+    if (!rows.empty()) {
+      std::printf("%8s %8s %10s %10s %10s %9s %9s %9s", "contacts", "pairs", "node_pairs", "leaf_pairs", "tri_tests", "p50_ms",
+                  "p95_ms", "min_ms");
+      if (a->fcl) std::printf(" %9s %9s %7s %9s %9s %8s", "fcl_p50", "fcl_min", "ratio", "fcl_pairs", "only_ours", "only_fcl");
+      std::printf("\n");
+    }
+    for (const PoseRow& w : rows) {
+      std::printf("%8u %8zu %10llu %10llu %10llu %9.4f %9.4f %9.4f", w.contacts, w.pairs,
+                  static_cast<unsigned long long>(w.stats.node_pairs), static_cast<unsigned long long>(w.stats.leaf_pairs),
+                  static_cast<unsigned long long>(w.stats.tri_pairs), w.p50_us / 1e3, w.p95_us / 1e3, w.min_us / 1e3);
+      if (w.fcl)
+        std::printf(" %9.4f %9.4f %7.3f %9zu %9zu %8zu", w.fcl_p50_us / 1e3, w.fcl_min_us / 1e3, w.p50_us / w.fcl_p50_us,
+                    w.fcl_pairs, w.only_ours, w.only_fcl);
+      std::printf("\n");
+      for (const std::string& d : w.diffs) std::printf("           %s\n", d.c_str());
+    }
+    if (!a->build_mesh.empty())
+      std::printf("build %s (%zu faces): ours %.3f s (min of 3, %.1f B/face), FCL OBBRSS %.3f s (1 run)\n",
+                  a->build_mesh.c_str(), big_faces, big_build_s, big_bytes_per_face, big_fcl_build_s);
   });
 }
 

@@ -3,6 +3,7 @@
 
 #include <fcl/narrowphase/collision.h>
 #include <fcl/geometry/bvh/BVH_model.h>
+#include <fcl/narrowphase/detail/primitive_shape_algorithm/triangle_distance.h>
 
 #include <algorithm>
 #include <chrono>
@@ -40,16 +41,39 @@ FclPeer::FclPeer(const geom::Mesh& probe, const geom::Mesh& object) : impl_(std:
 
 FclPeer::~FclPeer() = default;
 
-std::vector<std::pair<std::uint32_t, std::uint32_t>> FclPeer::collide(const geom::Pose& pose) const {
-  // Same relative transform as ours: probe-local -> object-local.
+namespace {
+// Same relative transform as ours: probe-local -> object-local.
+fcl::Transform3d relative(const geom::Pose& pose, const geom::Vec3& probe_origin, const geom::Vec3& object_origin) {
   fcl::Transform3d rel = fcl::Transform3d::Identity();
   rel.linear() = pose.linear();
-  rel.translation() = pose.linear() * impl_->probe_origin + pose.translation() - impl_->object_origin;
+  rel.translation() = pose.linear() * probe_origin + pose.translation() - object_origin;
+  return rel;
+}
+}  // namespace
+
+double FclPeer::tri_distance(const geom::Pose& pose, std::uint32_t pf, std::uint32_t of) const {
+  const fcl::Transform3d rel = relative(pose, impl_->probe_origin, impl_->object_origin);
+  const auto& P = *impl_->probe;
+  const auto& O = *impl_->object;
+  const fcl::Triangle& tp = P.tri_indices[pf];
+  const fcl::Triangle& to = O.tri_indices[of];
+  fcl::Vector3d a[3], b[3], x, y;
+  for (int k = 0; k < 3; ++k) {
+    a[k] = rel * P.vertices[tp[k]];
+    b[k] = O.vertices[to[k]];
+  }
+  return fcl::detail::TriangleDistance<double>::triDistance(a, b, x, y);
+}
+
+std::vector<std::pair<std::uint32_t, std::uint32_t>> FclPeer::collide(const geom::Pose& pose, double* query_s) const {
+  const fcl::Transform3d rel = relative(pose, impl_->probe_origin, impl_->object_origin);
   fcl::CollisionObjectd a(impl_->probe, rel);
   fcl::CollisionObjectd b(impl_->object, fcl::Transform3d::Identity());
   fcl::CollisionRequestd req(std::numeric_limits<int>::max() / 2, false);
   fcl::CollisionResultd res;
+  const auto t0 = std::chrono::steady_clock::now();
   fcl::collide(&a, &b, req, res);
+  if (query_s) *query_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::vector<fcl::Contactd> contacts;
   res.getContacts(contacts);
   std::vector<std::pair<std::uint32_t, std::uint32_t>> out;

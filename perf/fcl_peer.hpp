@@ -16,8 +16,12 @@ class FclPeer {
   FclPeer(const geom::Mesh& probe, const geom::Mesh& object);  ///< builds both BVHs
   ~FclPeer();
   /// All colliding (probe face, object face) pairs for a pose mapping probe file coordinates to
-  /// object file coordinates, sorted.
-  std::vector<std::pair<std::uint32_t, std::uint32_t>> collide(const geom::Pose& pose) const;
+  /// object file coordinates, sorted. `query_s`, if given, receives the wall time of fcl::collide
+  /// alone (the per-pose query; BVH construction and the copy/sort of contacts are not in it).
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> collide(const geom::Pose& pose, double* query_s = nullptr) const;
+  /// FCL's own triangle distance (mm) between probe face pf (posed) and object face of, to show
+  /// how close the pairs where FCL and the exact test disagree are.
+  double tri_distance(const geom::Pose& pose, std::uint32_t pf, std::uint32_t of) const;
   double build_seconds() const { return build_s_; }  ///< time to build both BVHs
 
  private:

@@ -1,5 +1,5 @@
 // Simultaneous descent of two SphereTrees (paper §3.3; traversal after Coal/FCL: relative
-// transform, larger node first, explicit stack).
+// transform, larger node first, explicit stack), then a leaf-pair stage of box masks.
 //
 // Why no pair is ever missed. Let x be a point common to probe triangle P' (the fl-transformed
 // vertices apply(rt, v)) and object triangle O. Every filter tests a convex set that contains x:
@@ -7,20 +7,38 @@
 //  * probe node sphere: each apply(rt, v) lies within s·r_p of R c_p + t, where s >= ||R||_2
 //    (Gershgorin bound on R^T R, so slightly non-orthonormal poses are covered) — hence within
 //    s·r_p + (rounding of apply and of the centre) of the computed centre;
-//  * probe face box: min/max of the very doubles tri_tri_overlap sees (exact);
-//  * object face box: float rounded outward from the doubles (exact containment).
-// Sphere-sphere and sphere-box distances are computed in double; every rounding error above is
-// below 1e-14·M where M bounds the magnitudes (|t|, centres, radii), and each test is widened by
-// eps = 1e-9·M. So a filter rejects only when the true sets are disjoint, and the final set equals
-// {(p, o) : tri_tri_overlap(same doubles)}. Each face is in exactly one leaf and each leaf pair is
-// reached at most once, so no pair is reported twice.
+//  * probe face box: min/max of the very doubles tri_tri_overlap sees, widened to float (exact
+//    containment, float_below/float_above); a probe leaf box is the union of its face boxes;
+//  * object face box: float rounded outward from the doubles (exact containment); an object leaf
+//    box is the union of its face boxes.
+// Box against box is pure comparison (no arithmetic), so it rejects only disjoint boxes.
+// Sphere-sphere (sphere_mask) and leaf box-sphere tests run in float. Let M bound every centre,
+// radius and coordinate involved (M = |t| + s(|c_p root| + r_p root) + |c_o root| + r_o root:
+// every node's centre lies in the hull of its vertices, hence in the root sphere). The float
+// probe centre is within 2^-24·M·√3 + 1e-14·M of the exact R c_p + t; radii are rounded once;
+// the differences, squares and sums lose at most a few 2^-24 relative. Together that is below
+// 4e-7·M in distance, and the probe radius (or, box-sphere, the object radius) is widened by
+// slack = 1e-5·M, 25x that. So a filter rejects only when the true sets are disjoint, and the final
+// set equals {(p, o) : tri_tri_overlap(same doubles)}. Each face is in exactly one leaf and each
+// leaf pair is reached at most once, so no pair is reported twice.
 #include "geom/collide.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cassert>
 #include <limits>
 
 #include "geom/tri_tri.hpp"
+
+// SIMD: AVX2 with -march=native, SSE2 on any other x86-64, scalar elsewhere or with -Dsimd=false
+// (ST_NO_SIMD). All three give the same masks.
+#if !defined(ST_NO_SIMD) && defined(__AVX2__)
+#define ST_COLLIDE_AVX2 1
+#include <immintrin.h>
+#elif !defined(ST_NO_SIMD) && defined(__SSE2__)
+#define ST_COLLIDE_SSE2 1
+#include <emmintrin.h>
+#endif
 
 namespace st::geom {
 namespace {
@@ -52,16 +70,123 @@ double accurate_sum(const double* prod_a, const double* prod_b, int np, const do
 
 inline Vec3 centre_of(const SphereNode& n) { return Vec3(n.centre[0], n.centre[1], n.centre[2]); }
 
-inline double box_dist2(const Vec3& c, const double* lo, const double* hi) {
-  double d2 = 0;
-  for (int k = 0; k < 3; ++k) {
-    const double a = lo[k] - c[k], b = c[k] - hi[k];
-    const double d = std::max(0.0, std::max(a, b));
-    d2 += d * d;
+// Bit k (k < n <= 8) set when sphere k of a float SoA block (x at c[0], y at c[st], z at c[2 st],
+// radius at c[3 st]) meets the sphere (qx, qy, qz; qr): |c_k - q|^2 <= (r_k + qr)^2 in float.
+// Conservative by the slack in the probe radii (see the top of this file). Reads 8 lanes: the
+// SoA arrays are padded by kMaxChildren.
+inline std::uint32_t sphere_mask(const float* c, std::size_t st, std::uint32_t n, float qx, float qy, float qz, float qr) {
+#if defined(ST_COLLIDE_AVX2)
+  const __m256 dx = _mm256_sub_ps(_mm256_loadu_ps(c), _mm256_set1_ps(qx));
+  const __m256 dy = _mm256_sub_ps(_mm256_loadu_ps(c + st), _mm256_set1_ps(qy));
+  const __m256 dz = _mm256_sub_ps(_mm256_loadu_ps(c + 2 * st), _mm256_set1_ps(qz));
+  const __m256 rr = _mm256_add_ps(_mm256_loadu_ps(c + 3 * st), _mm256_set1_ps(qr));
+  const __m256 d2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)), _mm256_mul_ps(dz, dz));
+  const auto m = static_cast<std::uint32_t>(_mm256_movemask_ps(_mm256_cmp_ps(d2, _mm256_mul_ps(rr, rr), _CMP_LE_OQ)));
+  return m & ((1u << n) - 1u);
+#elif defined(ST_COLLIDE_SSE2)
+  std::uint32_t m = 0;
+  for (std::uint32_t k = 0; k < n; k += 4) {
+    const __m128 dx = _mm_sub_ps(_mm_loadu_ps(c + k), _mm_set1_ps(qx));
+    const __m128 dy = _mm_sub_ps(_mm_loadu_ps(c + st + k), _mm_set1_ps(qy));
+    const __m128 dz = _mm_sub_ps(_mm_loadu_ps(c + 2 * st + k), _mm_set1_ps(qz));
+    const __m128 rr = _mm_add_ps(_mm_loadu_ps(c + 3 * st + k), _mm_set1_ps(qr));
+    const __m128 d2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy)), _mm_mul_ps(dz, dz));
+    m |= static_cast<std::uint32_t>(_mm_movemask_ps(_mm_cmple_ps(d2, _mm_mul_ps(rr, rr)))) << k;
   }
-  return d2;
+  return m & ((1u << n) - 1u);
+#else
+  std::uint32_t m = 0;
+  for (std::uint32_t k = 0; k < n; ++k) {
+    const float dx = c[k] - qx, dy = c[st + k] - qy, dz = c[2 * st + k] - qz, rr = c[3 * st + k] + qr;
+    m |= static_cast<std::uint32_t>(dx * dx + dy * dy + dz * dz <= rr * rr) << k;
+  }
+  return m;
+#endif
 }
 
+
+// Bit i (i < n <= 64) set when box i of a float SoA block (lo x at c[i], lo y at c[st + i], ...,
+// hi z at c[5 st + i]) meets box b (lo xyz, hi xyz). Pure comparisons, exact. Reads whole
+// 8-lane vectors past n: the SoA arrays are padded by kMaxLeafFaces.
+inline std::uint64_t soa_box_mask(const float* c, std::size_t st, std::uint32_t n, const float* b) {
+  std::uint64_t m = 0;
+#if defined(ST_COLLIDE_AVX2)
+  const __m256 blx = _mm256_set1_ps(b[0]), bly = _mm256_set1_ps(b[1]), blz = _mm256_set1_ps(b[2]);
+  const __m256 bhx = _mm256_set1_ps(b[3]), bhy = _mm256_set1_ps(b[4]), bhz = _mm256_set1_ps(b[5]);
+  for (std::uint32_t i = 0; i < n; i += 8) {
+    __m256 h = _mm256_and_ps(_mm256_cmp_ps(_mm256_loadu_ps(c + i), bhx, _CMP_LE_OQ),
+                             _mm256_cmp_ps(_mm256_loadu_ps(c + st + i), bhy, _CMP_LE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(_mm256_loadu_ps(c + 2 * st + i), bhz, _CMP_LE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(_mm256_loadu_ps(c + 3 * st + i), blx, _CMP_GE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(_mm256_loadu_ps(c + 4 * st + i), bly, _CMP_GE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(_mm256_loadu_ps(c + 5 * st + i), blz, _CMP_GE_OQ));
+    m |= static_cast<std::uint64_t>(static_cast<std::uint32_t>(_mm256_movemask_ps(h))) << i;
+  }
+  return n >= 64 ? m : m & ((std::uint64_t{1} << n) - 1);
+#elif defined(ST_COLLIDE_SSE2)
+  const __m128 blx = _mm_set1_ps(b[0]), bly = _mm_set1_ps(b[1]), blz = _mm_set1_ps(b[2]);
+  const __m128 bhx = _mm_set1_ps(b[3]), bhy = _mm_set1_ps(b[4]), bhz = _mm_set1_ps(b[5]);
+  for (std::uint32_t i = 0; i < n; i += 4) {
+    __m128 h = _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(c + i), bhx), _mm_cmple_ps(_mm_loadu_ps(c + st + i), bhy));
+    h = _mm_and_ps(h, _mm_cmple_ps(_mm_loadu_ps(c + 2 * st + i), bhz));
+    h = _mm_and_ps(h, _mm_cmpge_ps(_mm_loadu_ps(c + 3 * st + i), blx));
+    h = _mm_and_ps(h, _mm_cmpge_ps(_mm_loadu_ps(c + 4 * st + i), bly));
+    h = _mm_and_ps(h, _mm_cmpge_ps(_mm_loadu_ps(c + 5 * st + i), blz));
+    m |= static_cast<std::uint64_t>(static_cast<std::uint32_t>(_mm_movemask_ps(h))) << i;
+  }
+  return n >= 64 ? m : m & ((std::uint64_t{1} << n) - 1);
+#else
+  for (std::uint32_t i = 0; i < n; ++i) {
+    const bool hit = (c[i] <= b[3]) & (c[st + i] <= b[4]) & (c[2 * st + i] <= b[5]) & (c[3 * st + i] >= b[0]) &
+                     (c[4 * st + i] >= b[1]) & (c[5 * st + i] >= b[2]);
+    m |= static_cast<std::uint64_t>(hit) << i;
+  }
+  return m;
+#endif
+}
+
+// Bit j (j < n <= 64) set when face box fb[j] meets box b (lo xyz, hi xyz). Exact.
+inline std::uint64_t face_box_mask(const FaceBox* fb, std::uint32_t n, const float* b) {
+  static_assert(sizeof(FaceBox) == 6 * sizeof(float), "face boxes are read as 6 packed floats");
+  std::uint64_t m = 0;
+#if defined(ST_COLLIDE_AVX2)
+  // 8 boxes at a time, gathered from the 24-byte AoS (masked: never reads past fb[n - 1]).
+  const __m256i idx = _mm256_setr_epi32(0, 6, 12, 18, 24, 30, 36, 42);
+  const float* base = fb[0].lo;
+  for (std::uint32_t j = 0; j < n; j += 8) {
+    const std::uint32_t left = n - j;
+    const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    const __m256 live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32(static_cast<int>(std::min(left, 8u))), lane));
+    const float* p = base + 6 * j;
+    auto g = [&](int k) { return _mm256_mask_i32gather_ps(_mm256_setzero_ps(), p + k, idx, live, 4); };
+    __m256 h = _mm256_and_ps(live, _mm256_cmp_ps(g(0), _mm256_set1_ps(b[3]), _CMP_LE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(g(1), _mm256_set1_ps(b[4]), _CMP_LE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(g(2), _mm256_set1_ps(b[5]), _CMP_LE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(g(3), _mm256_set1_ps(b[0]), _CMP_GE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(g(4), _mm256_set1_ps(b[1]), _CMP_GE_OQ));
+    h = _mm256_and_ps(h, _mm256_cmp_ps(g(5), _mm256_set1_ps(b[2]), _CMP_GE_OQ));
+    m |= static_cast<std::uint64_t>(static_cast<std::uint32_t>(_mm256_movemask_ps(h))) << j;
+  }
+#elif defined(ST_COLLIDE_SSE2)
+  // One box per step from the AoS: (lo x, lo y, lo z, hi x) <= (b hi xyz, +inf) and
+  // (lo z, hi x, hi y, hi z) >= (-inf, b lo xyz); both loads stay inside the 24-byte box.
+  const float inf = std::numeric_limits<float>::infinity();
+  const __m128 hi_b = _mm_setr_ps(b[3], b[4], b[5], inf);
+  const __m128 lo_b = _mm_setr_ps(-inf, b[0], b[1], b[2]);
+  const float* f = reinterpret_cast<const float*>(fb);
+  for (std::uint32_t j = 0; j < n; ++j, f += 6) {
+    const __m128 h = _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(f), hi_b), _mm_cmpge_ps(_mm_loadu_ps(f + 2), lo_b));
+    m |= static_cast<std::uint64_t>(_mm_movemask_ps(h) == 0xf) << j;
+  }
+#else
+  for (std::uint32_t j = 0; j < n; ++j) {
+    const bool hit = (fb[j].lo[0] <= b[3]) & (fb[j].lo[1] <= b[4]) & (fb[j].lo[2] <= b[5]) & (fb[j].hi[0] >= b[0]) &
+                     (fb[j].hi[1] >= b[1]) & (fb[j].hi[2] >= b[2]);
+    m |= static_cast<std::uint64_t>(hit) << j;
+  }
+#endif
+  return m;
+}
 }  // namespace
 
 RelTransform transform_to_object(const Pose& pose, const Mesh& probe, const Mesh& object) {
@@ -78,8 +203,8 @@ RelTransform transform_to_object(const Pose& pose, const Mesh& probe, const Mesh
 
 std::uint32_t CollideScratch::next_generation() {
   if (++gen_ == 0) {
-    std::fill(vstamp_.begin(), vstamp_.end(), 0u);
-    std::fill(fstamp_.begin(), fstamp_.end(), 0u);
+    std::fill(cstamp_.begin(), cstamp_.end(), 0u);
+    std::fill(lstamp_.begin(), lstamp_.end(), 0u);
     std::fill(pmark_.begin(), pmark_.end(), 0u);
     std::fill(omark_.begin(), omark_.end(), 0u);
     gen_ = 1;
@@ -92,16 +217,77 @@ void CollideScratch::prepare(const Mesh& probe, const SphereTree& probe_tree, co
   auto fit = [](auto& v, std::size_t n) {
     if (v.size() != n) v.assign(n, {});
   };
-  fit(vstamp_, probe.local.size());
-  vx_.resize(probe.local.size());
-  fit(fstamp_, probe.faces.size());
-  fbox_.resize(probe.faces.size());
+  // Probe leaves as little meshes (distinct vertices per leaf, faces as indices into them).
+  lvrange_.assign(probe_tree.nodes.size(), {0, 0});
+  lverts_.clear();
+  lidx_.assign(probe_tree.face_order.size(), {0, 0, 0});
+  {
+    std::vector<std::uint32_t> at(probe.local.size(), kNoNode), stamp(probe.local.size(), kNoNode);
+    for (std::uint32_t i = 0; i < probe_tree.num_nodes(); ++i) {
+      const SphereNode& h = probe_tree.nodes[i];
+      if (!h.leaf) continue;
+      const auto begin = static_cast<std::uint32_t>(lverts_.size());
+      for (std::uint32_t slot = h.first; slot < h.first + h.count; ++slot) {
+        const Tri& t = probe.faces[probe_tree.face_order[slot]];
+        for (int k = 0; k < 3; ++k) {
+          const std::uint32_t v = t[k];
+          if (stamp[v] != i) {
+            stamp[v] = i;
+            at[v] = static_cast<std::uint32_t>(lverts_.size());
+            lverts_.push_back(probe.local[v]);
+          }
+          lidx_[slot][k] = at[v];
+        }
+      }
+      lvrange_[i] = {begin, static_cast<std::uint32_t>(lverts_.size())};
+    }
+  }
+  lverts_.shrink_to_fit();
+  ptx_.resize(lverts_.size());
+  pkey_ = probe_tree.nodes.data();
+  phash_ = probe_tree.mesh_hash;
+  fit(cstamp_, probe_tree.nodes.size());
+  nstride_p_ = probe_tree.nodes.size() + kMaxChildren;
+  psph_.assign(4 * nstride_p_, 0.0f);
+  // Object spheres as float SoA, so the children of a node (contiguous) load as whole vectors.
+  nstride_o_ = object_tree.nodes.size() + kMaxChildren;
+  osph_.assign(4 * nstride_o_, 0.0f);
+  for (std::size_t i = 0; i < object_tree.nodes.size(); ++i) {
+    const SphereNode& h = object_tree.nodes[i];
+    for (int k = 0; k < 3; ++k) osph_[k * nstride_o_ + i] = h.centre[k];
+    osph_[3 * nstride_o_ + i] = h.radius;
+  }
+  obox_.assign(object_tree.nodes.size(), {});
+  for (std::size_t i = 0; i < object_tree.nodes.size(); ++i) {
+    const SphereNode& h = object_tree.nodes[i];
+    if (!h.leaf) continue;
+    const float inf = std::numeric_limits<float>::infinity();
+    std::array<float, 8> b = {inf, inf, inf, -inf, -inf, -inf, 0, 0};
+    for (std::uint32_t slot = h.first; slot < h.first + h.count; ++slot)
+      for (int k = 0; k < 3; ++k) {
+        b[k] = std::min(b[k], object_tree.face_boxes[slot].lo[k]);
+        b[3 + k] = std::max(b[3 + k], object_tree.face_boxes[slot].hi[k]);
+      }
+    obox_[i] = b;
+  }
+  osph_key_ = object_tree.nodes.data();
+  osph_hash_ = object_tree.mesh_hash;
+  fit(lstamp_, probe_tree.nodes.size());
+  lbox_.resize(probe_tree.nodes.size());
+  pstride_ = probe_tree.face_order.size() + kMaxLeafFaces;  // whole-vector loads past a leaf's end stay inside
+  pbox_.assign(6 * pstride_, 0.0f);
   fit(pmark_, probe.faces.size());
   fit(omark_, object.faces.size());
   // DFS with "replace one entry by at most 8": depth of the stack <= 1 + 7 (Dp + Do).
   const std::uint32_t cap = 8 * (probe_tree.num_depths + object_tree.num_depths) + 8;
   if (stack_.size() < cap) stack_.resize(cap);
   stack_cap_ = static_cast<std::uint32_t>(stack_.size());
+}
+
+std::size_t CollideScratch::bytes() const {
+  auto b = [](const auto& v) { return v.capacity() * sizeof(v[0]); };
+  return b(lvrange_) + b(lverts_) + b(lidx_) + b(ptx_) + b(cstamp_) + b(psph_) + b(osph_) + b(obox_) + b(lstamp_) +
+         b(lbox_) + b(pbox_) + b(pmark_) + b(omark_) + b(stack_);
 }
 
 struct CollideQuery {
@@ -115,43 +301,67 @@ struct CollideQuery {
   RelTransform rt;
   double s = 1;    // >= ||R||_2
   double eps = 0;  // absolute slack of every distance test, mm
+  float slack = 0;  // absolute slack of the float sphere tests, mm (see sphere_mask)
   std::uint32_t gen = 0;
   bool exact = true;
   std::uint32_t stop = 0;  // approximate mode: layer at which nodes become terminal
 
-  Vec3 pcentre(const SphereNode& n) const { return apply(rt, centre_of(n)); }
+  // Probe node i's sphere in object-local into the float SoA: centre apply(rt, c) rounded to
+  // float, radius s·r + slack.
+  void put_probe_sphere(std::uint32_t i) {
+    const SphereNode& h = PT.nodes[i];
+    const Vec3 c = apply(rt, centre_of(h));
+    float* ps = sc.psph_.data();
+    const std::size_t st = sc.nstride_p_;
+    for (int k = 0; k < 3; ++k) ps[k * st + i] = static_cast<float>(c[k]);
+    ps[3 * st + i] = static_cast<float>(s * h.radius + slack);
+  }
+  // The children of probe node p, transformed once per query.
+  void probe_children(std::uint32_t p) {
+    if (sc.cstamp_[p] == gen) return;
+    sc.cstamp_[p] = gen;
+    const SphereNode& h = PT.nodes[p];
+    for (std::uint32_t k = 0; k < h.count; ++k) put_probe_sphere(h.first + k);
+  }
 
   bool terminal_p(const SphereNode& n) const { return n.leaf || (!exact && n.depth >= stop); }
   bool terminal_o(const SphereNode& n) const { return n.leaf || (!exact && n.depth >= stop); }
 
-  bool overlap(const Vec3& cp, const SphereNode& hp, const SphereNode& ho) {
-    ++res.stats.node_pairs;
-    const double rr = s * hp.radius + ho.radius + eps;
-    return (cp - centre_of(ho)).squaredNorm() <= rr * rr;
-  }
+  // Float bounds of a double, branch-free: x ∓ |x|·2^-22 ∓ 1e-30 is at least 2^-22·|x| away from x
+  // on the wide side, and float conversion moves it by at most 2^-24 of itself, so the result is
+  // still on the wide side (x = 0 included: ±1e-30 is a normal float).
+  static float float_below(double x) { return static_cast<float>(x - std::abs(x) * 0x1p-22 - 1e-30); }
+  static float float_above(double x) { return static_cast<float>(x + std::abs(x) * 0x1p-22 + 1e-30); }
 
-  const Vec3& vertex(std::uint32_t v) {
-    if (sc.vstamp_[v] != gen) {
-      sc.vstamp_[v] = gen;
-      sc.vx_[v] = apply(rt, P.local[v]);
-    }
-    return sc.vx_[v];
-  }
-
-  const std::array<double, 6>& probe_box(std::uint32_t f) {
-    if (sc.fstamp_[f] != gen) {
-      sc.fstamp_[f] = gen;
-      const Tri& t = P.faces[f];
-      const Vec3& a = vertex(t[0]);
-      const Vec3& b = vertex(t[1]);
-      const Vec3& c = vertex(t[2]);
-      auto& bx = sc.fbox_[f];
+  // Probe leaf p's face boxes (float, enclosing the transformed doubles) in SoA by slot, and their
+  // union, computed once per query.
+  const std::array<float, 8>& probe_leaf(std::uint32_t p) {
+    std::array<float, 8>& u = sc.lbox_[p];
+    if (sc.lstamp_[p] == gen) return u;
+    sc.lstamp_[p] = gen;
+    const SphereNode& hp = PT.nodes[p];
+    const float inf = std::numeric_limits<float>::infinity();
+    u = {inf, inf, inf, -inf, -inf, -inf, 0, 0};
+    float* pb = sc.pbox_.data();
+    const std::size_t st = sc.pstride_;
+    // The very doubles tri_tri_overlap will see: apply(rt, v) of the same local vertices.
+    const auto [v0, v1] = sc.lvrange_[p];
+    for (std::uint32_t v = v0; v < v1; ++v) sc.ptx_[v] = apply(rt, sc.lverts_[v]);
+    for (std::uint32_t slot = hp.first, e = hp.first + hp.count; slot < e; ++slot) {
+      const auto& ix = sc.lidx_[slot];
+      const Vec3& a = sc.ptx_[ix[0]];
+      const Vec3& b = sc.ptx_[ix[1]];
+      const Vec3& c = sc.ptx_[ix[2]];
       for (int k = 0; k < 3; ++k) {
-        bx[k] = std::min(a[k], std::min(b[k], c[k]));
-        bx[3 + k] = std::max(a[k], std::max(b[k], c[k]));
+        const float lo = float_below(std::min(a[k], std::min(b[k], c[k])));
+        const float hi = float_above(std::max(a[k], std::max(b[k], c[k])));
+        pb[k * st + slot] = lo;
+        pb[(3 + k) * st + slot] = hi;
+        u[k] = std::min(u[k], lo);
+        u[3 + k] = std::max(u[3 + k], hi);
       }
     }
-    return sc.fbox_[f];
+    return u;
   }
 
   void emit(std::uint32_t pf, std::uint32_t of) {
@@ -160,50 +370,65 @@ struct CollideQuery {
     if (sc.omark_[of] != gen) { sc.omark_[of] = gen; ++res.object_faces; }
   }
 
-  void leaf_leaf(std::uint32_t p, std::uint32_t o, const Vec3& cp) {
+  // Bit i set when probe face box at slot first + i (i < n) meets box b (lo xyz, hi xyz).
+  std::uint64_t probe_mask(std::uint32_t first, std::uint32_t n, const float* b) const {
+    return soa_box_mask(sc.pbox_.data() + first, sc.pstride_, n, b);
+  }
+
+  // Leaf pair: object faces against the probe leaf's box, probe faces against the survivors'
+  // union box, then face box against face box, then the exact triangle test. Boxes are compared
+  // without arithmetic, so every rejection is exact (see the top of this file).
+  void leaf_leaf(std::uint32_t p, std::uint32_t o) {
     const SphereNode& hp = PT.nodes[p];
     const SphereNode& ho = OT.nodes[o];
     ++res.stats.leaf_pairs;
-    const Vec3 co = centre_of(ho);
-    const double ro = ho.radius + eps;
-    const double rp = s * hp.radius + eps;
-    std::uint32_t keep[kMaxLeafFaces];
-    const std::array<double, 6>* kbox[kMaxLeafFaces];
-    int nk = 0;
-    // Probe faces whose (exact) box meets the object leaf sphere; their union box.
-    double ulo[3] = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
-                     std::numeric_limits<double>::infinity()};
-    double uhi[3] = {-ulo[0], -ulo[1], -ulo[2]};
-    for (std::uint32_t slot = hp.first, e = hp.first + hp.count; slot < e; ++slot) {
-      const std::uint32_t f = PT.face_order[slot];
-      const auto& bx = probe_box(f);
-      if (box_dist2(co, bx.data(), bx.data() + 3) <= ro * ro) {
-        keep[nk] = f;
-        kbox[nk] = &bx;
-        ++nk;
-        for (int k = 0; k < 3; ++k) { ulo[k] = std::min(ulo[k], bx[k]); uhi[k] = std::max(uhi[k], bx[3 + k]); }
+    const std::array<float, 8>& u = probe_leaf(p);
+    // Probe leaf box against the object leaf sphere (float, radius widened by the slack) before
+    // the object's face boxes are touched: most leaf pairs end here.
+    {
+      const float* os = sc.osph_.data();
+      const std::size_t so = sc.nstride_o_;
+      float d2 = 0;
+      for (int k = 0; k < 3; ++k) {
+        const float c = os[k * so + o];
+        const float d = std::max(0.0f, std::max(u[k] - c, c - u[3 + k]));
+        d2 += d * d;
       }
+      const float r = os[3 * so + o] + slack;
+      if (d2 > r * r) return;
     }
-    if (nk == 0) return;
-    (void)cp;
-    (void)rp;
-    // Object faces whose (outward-rounded) box meets that union box, then face box vs face box.
-    for (std::uint32_t slot = ho.first, e = ho.first + ho.count; slot < e; ++slot) {
-      const FaceBox& fb = OT.face_boxes[slot];
-      const double lo[3] = {fb.lo[0], fb.lo[1], fb.lo[2]};
-      const double hi[3] = {fb.hi[0], fb.hi[1], fb.hi[2]};
-      if ((ulo[0] > hi[0]) | (ulo[1] > hi[1]) | (ulo[2] > hi[2]) | (uhi[0] < lo[0]) | (uhi[1] < lo[1]) | (uhi[2] < lo[2]))
-        continue;
-      const std::uint32_t of = OT.face_order[slot];
+    // Probe leaf box against the object leaf box (union of its face boxes).
+    {
+      const std::array<float, 8>& v = sc.obox_[o];
+      if ((v[0] > u[3]) | (v[1] > u[4]) | (v[2] > u[5]) | (v[3] < u[0]) | (v[4] < u[1]) | (v[5] < u[2])) return;
+    }
+    const FaceBox* ob = OT.face_boxes.data() + ho.first;
+    const std::uint64_t mo = face_box_mask(ob, ho.count, u.data());
+    if (mo == 0) return;
+    const float inf = std::numeric_limits<float>::infinity();
+    float ou[6] = {inf, inf, inf, -inf, -inf, -inf};
+    for (std::uint64_t m = mo; m != 0; m &= m - 1) {
+      const FaceBox& fb = ob[std::countr_zero(m)];
+      for (int k = 0; k < 3; ++k) { ou[k] = std::min(ou[k], fb.lo[k]); ou[3 + k] = std::max(ou[3 + k], fb.hi[k]); }
+    }
+    const std::uint64_t mp = probe_mask(hp.first, hp.count, ou);
+    if (mp == 0) return;
+    for (std::uint64_t m = mo; m != 0; m &= m - 1) {
+      const unsigned j = static_cast<unsigned>(std::countr_zero(m));
+      const FaceBox& fb = ob[j];
+      const float b[6] = {fb.lo[0], fb.lo[1], fb.lo[2], fb.hi[0], fb.hi[1], fb.hi[2]};
+      std::uint64_t mf = std::popcount(mp) == 1 ? mp : (probe_mask(hp.first, hp.count, b) & mp);
+      if (mf == 0) continue;
+      const std::uint32_t of = OT.face_order[ho.first + j];
       const Tri& ot = O.faces[of];
-      for (int k = 0; k < nk; ++k) {
-        const auto& pb = *kbox[k];
-        if ((pb[0] > hi[0]) | (pb[1] > hi[1]) | (pb[2] > hi[2]) | (pb[3] < lo[0]) | (pb[4] < lo[1]) | (pb[5] < lo[2])) continue;
+      const Vec3& o0 = O.local[ot[0]];
+      const Vec3& o1 = O.local[ot[1]];
+      const Vec3& o2 = O.local[ot[2]];
+      for (; mf != 0; mf &= mf - 1) {
+        const std::uint32_t slot = hp.first + static_cast<unsigned>(std::countr_zero(mf));
         ++res.stats.tri_pairs;
-        const Tri& pt = P.faces[keep[k]];
-        if (tri_tri_overlap(sc.vx_[pt[0]], sc.vx_[pt[1]], sc.vx_[pt[2]], O.local[ot[0]], O.local[ot[1]],
-                            O.local[ot[2]]))
-          emit(keep[k], of);
+        const auto& ix = sc.lidx_[slot];
+        if (tri_tri_overlap(sc.ptx_[ix[0]], sc.ptx_[ix[1]], sc.ptx_[ix[2]], o0, o1, o2)) emit(PT.face_order[slot], of);
       }
     }
   }
@@ -216,10 +441,24 @@ struct CollideQuery {
       for (const std::uint32_t* of = OT.faces_begin(o); of != OT.faces_end(o); ++of) emit(*pf, *of);
   }
 
+  void push_children(std::uint32_t mask, std::uint32_t first, std::uint32_t other, bool probe_side,
+                     std::pair<std::uint32_t, std::uint32_t>* stack, std::uint32_t& n) const {
+    // Highest child first, so the first child is popped first (depth-first in child order).
+    for (; mask != 0; mask &= ~(1u << (31 - std::countl_zero(mask)))) {
+      const std::uint32_t c = first + static_cast<std::uint32_t>(31 - std::countl_zero(mask));
+      stack[n++] = probe_side ? std::pair{c, other} : std::pair{other, c};
+    }
+  }
+
   void descend(std::uint32_t proot, std::uint32_t oroot) {
     auto* stack = sc.stack_.data();
+    const float* ps = sc.psph_.data();
+    const float* os = sc.osph_.data();
+    const std::size_t sp = sc.nstride_p_, so = sc.nstride_o_;
     std::uint32_t n = 0;
-    if (!overlap(pcentre(PT.nodes[proot]), PT.nodes[proot], OT.nodes[oroot])) return;
+    put_probe_sphere(proot);
+    res.stats.node_pairs += 1;
+    if (sphere_mask(os + oroot, so, 1, ps[proot], ps[sp + proot], ps[2 * sp + proot], ps[3 * sp + proot]) == 0) return;
     stack[n++] = {proot, oroot};
     while (n > 0) {
       const auto [p, o] = stack[--n];
@@ -227,24 +466,21 @@ struct CollideQuery {
       const SphereNode& ho = OT.nodes[o];
       const bool tp = terminal_p(hp), to = terminal_o(ho);
       if (tp && to) {
-        if (exact) leaf_leaf(p, o, pcentre(hp));
+        if (exact) leaf_leaf(p, o);
         else approx_pair(p, o);
         continue;
       }
       assert(n + kMaxChildren <= sc.stack_cap_);
+      // Descend the larger sphere; test all its children against the other sphere at once.
       if (!to && (tp || ho.radius >= s * hp.radius)) {
-        // Descend the object node (the larger sphere).
-        const Vec3 cp = pcentre(hp);
-        for (std::uint32_t k = ho.count; k-- > 0;) {
-          const std::uint32_t c = ho.first + k;
-          if (overlap(cp, hp, OT.nodes[c])) stack[n++] = {p, c};
-        }
+        res.stats.node_pairs += ho.count;
+        const std::uint32_t m = sphere_mask(os + ho.first, so, ho.count, ps[p], ps[sp + p], ps[2 * sp + p], ps[3 * sp + p]);
+        push_children(m, ho.first, p, false, stack, n);
       } else {
-        for (std::uint32_t k = hp.count; k-- > 0;) {
-          const std::uint32_t c = hp.first + k;
-          const SphereNode& hc = PT.nodes[c];
-          if (overlap(pcentre(hc), hc, ho)) stack[n++] = {c, o};
-        }
+        probe_children(p);
+        res.stats.node_pairs += hp.count;
+        const std::uint32_t m = sphere_mask(ps + hp.first, sp, hp.count, os[o], os[so + o], os[2 * so + o], os[3 * so + o]);
+        push_children(m, hp.first, o, true, stack, n);
       }
     }
   }
@@ -255,8 +491,10 @@ void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object
   result.clear();
   if (probe_tree.nodes.empty() || object_tree.nodes.empty()) return;
   if (!pose.matrix().allFinite()) return;  // boundaries validate poses; never crash here
-  if (scratch.vstamp_.size() != probe.local.size() || scratch.omark_.size() != object.faces.size() ||
-      scratch.fstamp_.size() != probe.faces.size() ||
+  if (scratch.pkey_ != probe_tree.nodes.data() || scratch.phash_ != probe_tree.mesh_hash ||
+      scratch.lidx_.size() != probe_tree.face_order.size() || scratch.omark_.size() != object.faces.size() ||
+      scratch.cstamp_.size() != probe_tree.nodes.size() || scratch.osph_key_ != object_tree.nodes.data() ||
+      scratch.osph_hash_ != object_tree.mesh_hash || scratch.nstride_o_ != object_tree.nodes.size() + kMaxChildren ||
       scratch.stack_cap_ < 8 * (probe_tree.num_depths + object_tree.num_depths) + 8)
     scratch.prepare(probe, probe_tree, object, object_tree);
 
@@ -272,6 +510,7 @@ void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object
   const SphereNode& ro = object_tree.nodes[0];
   const double mag = q.rt.t.norm() + q.s * (centre_of(rp).norm() + rp.radius) + centre_of(ro).norm() + ro.radius;
   q.eps = 1e-9 * mag + 1e-300;
+  q.slack = static_cast<float>(1e-5 * mag) + 1e-30f;
 
   if (!options.restrict_object) {
     q.descend(0, 0);

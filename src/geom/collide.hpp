@@ -78,22 +78,40 @@ struct CollideResult {
   void clear() { pairs.clear(); sphere_pairs.clear(); probe_faces = object_faces = 0; stats = {}; }
 };
 
-/// Per-caller scratch: transformed-vertex cache with generation stamps, contact stamps, explicit
-/// stack. Sized on first use for a (probe, object) pair; later queries allocate nothing.
+/// Per-caller scratch: per-query caches of transformed probe vertices, centres and leaf face boxes
+/// (generation stamps), contact stamps, explicit stack. Sized on first use for a (probe, object) pair; later queries allocate nothing.
 class CollideScratch {
  public:
   /// Sizes everything for these meshes/trees (also done lazily by collide()).
   void prepare(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree);
+  /// Heap bytes held (the per-query caches and what is derived from the two trees).
+  std::size_t bytes() const;
 
  private:
   friend struct CollideQuery;
   friend void collide(const Mesh&, const SphereTree&, const Mesh&, const SphereTree&, const Pose&,
                       const CollideOptions&, CollideScratch&, CollideResult&);
   std::uint32_t gen_ = 0;
-  std::vector<std::uint32_t> vstamp_;       // probe vertex -> generation of its cached transform
-  std::vector<Vec3> vx_;                    // probe vertex transformed into object-local
-  std::vector<std::uint32_t> fstamp_;       // probe face -> generation of its cached box
-  std::vector<std::array<double, 6>> fbox_; // probe face box in object-local (lo xyz, hi xyz)
+  // Probe leaves as little meshes, so a query transforms a leaf's vertices in one sequential pass
+  // (derived from the probe tree once, keyed by pkey_/phash_):
+  std::vector<std::array<std::uint32_t, 2>> lvrange_;  // probe leaf node -> its vertices [begin, end) in lverts_
+  std::vector<Vec3> lverts_;                // distinct vertices of each leaf, leaves one after another, probe-local
+  std::vector<std::array<std::uint32_t, 3>> lidx_;  // probe slot -> its face's vertices as indices into lverts_
+  std::vector<Vec3> ptx_;                   // lverts_ transformed into object-local (valid for leaves stamped this query)
+  const void* pkey_ = nullptr;              // probe tree the above was derived from (nodes.data()) ...
+  std::uint64_t phash_ = 0;                 // ... and its mesh_hash
+  std::vector<std::uint32_t> cstamp_;       // probe node -> generation its CHILDREN's spheres were transformed
+  std::vector<float> psph_;                 // probe node spheres in object-local, SoA (x, y, z, s·r + slack) by node, stride nstride_p_
+  std::size_t nstride_p_ = 0;               // probe nodes + padding for 8-wide loads
+  std::vector<float> osph_;                 // object node spheres, SoA (x, y, z, r) by node, stride nstride_o_
+  std::size_t nstride_o_ = 0;               // object nodes + padding for 8-wide loads
+  std::vector<std::array<float, 8>> obox_;  // object leaf: union of its face boxes (lo xyz, hi xyz, pad)
+  const void* osph_key_ = nullptr;          // object tree osph_ was filled from (nodes.data()) ...
+  std::uint64_t osph_hash_ = 0;             // ... and its mesh_hash
+  std::vector<std::uint32_t> lstamp_;       // probe leaf node -> generation of its cached face boxes
+  std::vector<std::array<float, 8>> lbox_;  // probe leaf: union of its face boxes (lo xyz, hi xyz, pad)
+  std::vector<float> pbox_;                 // probe face boxes by slot, SoA: component k at k * pstride_
+  std::size_t pstride_ = 0;                 // slots + padding for whole-vector loads
   std::vector<std::uint32_t> pmark_;        // probe face -> generation it was counted as a contact
   std::vector<std::uint32_t> omark_;        // object face -> generation it was counted
   std::vector<std::pair<std::uint32_t, std::uint32_t>> stack_;

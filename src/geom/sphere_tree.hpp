@@ -12,13 +12,14 @@ namespace st::geom {
 /// How a SphereTree is built. Part of the tree file's hash (tree_io.hpp).
 struct TreeParams {
   /// Upper bound on faces per leaf; leaves hold floor(F/M) or ceil(F/M) faces, M = ceil(F/leaf_faces),
-  /// so every leaf is in (leaf_faces/2, leaf_faces] once F >= leaf_faces. Default 8: for hand_L2 x
-  /// elephant at 100..1,500 contacts, 8, 12 and 16 time the same within noise and 4 is ~15% slower
-  /// (`spheretouch-bench collide --leaf-faces N`); 8 keeps leaf spheres (approximate mode) small.
-  std::uint32_t leaf_faces = 8;
+  /// so every leaf is in (leaf_faces/2, leaf_faces] once F >= leaf_faces. Default 24: since collide()
+  /// filters a leaf pair's faces with 8-wide box masks, exact queries of hand_L2 x elephant at
+  /// 100..1,500 contacts time best at 24..48 (8 is 30..45% slower, 16 about 10%), and 24 keeps
+  /// leaf spheres (approximate mode) the smallest of those (perf/RESULTS.md, "Collision core").
+  std::uint32_t leaf_faces = 24;
 };
 inline TreeParams DefaultTreeParams() { return {}; }  ///< Box2D-style default config
-inline constexpr std::uint32_t kMaxLeafFaces = 64;    ///< leaf-leaf scratch is sized for this
+inline constexpr std::uint32_t kMaxLeafFaces = 64;    ///< collide() keeps a leaf's faces in 64-bit masks
 inline constexpr int kMaxChildren = 8;                ///< octree: up to 8 children per node
 
 /// Hot node: the fields the descent touches, 24 bytes (Box2D v3 hot/cold split).
