@@ -18,7 +18,8 @@ namespace st::app {
 struct FleetSpec {
   int workers = 0;                     ///< in-process workers (ignored when endpoints are given)
   std::vector<std::string> endpoints;  ///< worker daemons
-  std::uint32_t layer = 2, block_size = 1, leaf_faces = 8;  ///< distribution and tree knobs
+  std::uint32_t layer = 2, block_size = 1;  ///< distribution: sphere layer, layer spheres per block
+  std::uint32_t leaf_faces = geom::DefaultTreeParams().leaf_faces;  ///< tree knob sent to workers
   std::uint32_t miss_limit = 3;        ///< missed deadlines before a worker is marked down
   std::chrono::milliseconds ready_timeout{30000};  ///< time allowed for the first upload
 };

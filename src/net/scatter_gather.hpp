@@ -38,7 +38,7 @@ struct ScatterConfig {
   /// good after a protocol error (e.g. an oversized or garbled frame) and never reconnects it.
   std::chrono::milliseconds reconnect_after{1000};
   std::uint32_t chunk_bytes = 256u << 10;    ///< LoadBlocks chunk size (≤ limits.max_chunk_bytes)
-  std::uint32_t leaf_faces = 8;              ///< tree parameter sent with every block set
+  std::uint32_t leaf_faces = geom::DefaultTreeParams().leaf_faces;  ///< tree parameter sent with every block set
   int sndhwm = 8;                            ///< per-worker send queue, messages (small: no stale backlog)
   int rcvhwm = 64;                           ///< per-worker receive queue, messages
   Limits limits = default_limits();          ///< decode limits for replies

@@ -220,7 +220,7 @@ TEST_CASE("scene files: configs/demo.toml and configs/small.toml parse, with the
   CHECK(demo.value().law.a == 3.0);
   CHECK(demo.value().law.b_N == 0.8);
   CHECK(demo.value().saturation.peak_N == 3.3);
-  CHECK(demo.value().tree.leaf_faces == 8);
+  CHECK(demo.value().tree.leaf_faces == st::geom::DefaultTreeParams().leaf_faces);
   auto small = st::app::load_scene(root + "/configs/small.toml");
   REQUIRE_MESSAGE(small.ok(), small.error());
   CHECK(small.value().object.builtin == "icosphere");
