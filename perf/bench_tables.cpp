@@ -440,7 +440,7 @@ void add_table2(CLI::App& app) {
   struct Args {
     std::string probe, csv;
     std::vector<std::string> objects;
-    double seconds = 5;
+    double seconds = 5, press_mm = 3;
     int workers = 0;
   };
   auto a = std::make_shared<Args>();
@@ -450,19 +450,21 @@ void add_table2(CLI::App& app) {
   cmd->add_option("objects", a->objects, "object meshes, or icosphere[:R[:FREQ]]")->required();
   cmd->add_option("--seconds", a->seconds, "run length per variant (the press/slide script is time-scaled to it)")
       ->check(CLI::Range(0.2, 600.0))->capture_default_str();
+  cmd->add_option("--press-mm", a->press_mm, "press depth below the object's top, mm (built-in script: 3)")
+      ->check(CLI::Range(0.0, 100.0))->capture_default_str();
   cmd->add_option("--workers", a->workers, "spheretouch variant: in-process workers (0 = collide in the collision thread)")
       ->capture_default_str();
   cmd->add_option("--csv", a->csv, "append rows to this CSV");
   cmd->callback([a] {
     const Body probe = load_body(a->probe);
     const std::string header =
-        "table,probe,object,object_faces,variant,workers,seconds,haptic_hz,collision_hz,round_p50_ms,ticks,misses,rounds,"
+        "table,probe,object,object_faces,press_mm,variant,workers,seconds,haptic_hz,collision_hz,round_p50_ms,ticks,misses,rounds,"
         "max_contacts,peak_force_N";
     std::printf("%-14s %9s %-12s %10s %12s %12s %9s %9s\n", "object", "faces", "variant", "haptic_Hz", "collision_Hz",
                 "round_p50_ms", "contacts", "peak_N");
     for (const std::string& spec : a->objects) {
       const Body object = load_body(spec);
-      const rt::Trajectory script = press_slide_script(probe.mesh, object.mesh, a->seconds);
+      const rt::Trajectory script = press_slide_script(probe.mesh, object.mesh, a->seconds, a->press_mm);
       for (const char* variant : {"single_thread", "spheretouch"}) {
         const bool single = variant[0] == 's' && variant[1] == 'i';
         const RateResult r = single ? single_thread(probe, object, script, a->seconds)
@@ -472,8 +474,8 @@ void add_table2(CLI::App& app) {
                     r.peak_force_N);
         std::fflush(stdout);
         append_csv(a->csv, header,
-                   fmt("table2,%s,%s,%zu,%s,%d,%.2f,%.2f,%.2f,%.4f,%llu,%llu,%llu,%u,%.4f", probe.label.c_str(),
-                       object.label.c_str(), object.mesh.num_faces(), variant, single ? 0 : a->workers, a->seconds,
+                   fmt("table2,%s,%s,%zu,%.1f,%s,%d,%.2f,%.2f,%.2f,%.4f,%llu,%llu,%llu,%u,%.4f", probe.label.c_str(),
+                       object.label.c_str(), object.mesh.num_faces(), a->press_mm, variant, single ? 0 : a->workers, a->seconds,
                        r.haptic_hz, r.collision_hz, r.round_p50_ms, static_cast<unsigned long long>(r.ticks),
                        static_cast<unsigned long long>(r.misses), static_cast<unsigned long long>(r.rounds),
                        r.max_contacts, r.peak_force_N));

@@ -66,12 +66,14 @@ hand="$models/hand_L2.off"
 
 # Counts: full | quick.
 if [ $quick = 1 ]; then
-  t1_targets=100,1000; t3_targets=100; workers=0,1,2; rounds1=5; rounds3=3; t2_seconds=0.4
+  t1_targets=100,1000; t3_targets=100; ico_targets=100; workers=0,1,2; rounds1=5; rounds3=3; t2_seconds=0.4
   peer_runs=2; rt_seconds=1; trade_seconds=0.6; trade_samples=20; trade_probe="$models/hand.off"
   t2_models=(icosphere "$models/elephant.off")
   t3_models=(icosphere "$models/elephant.off")
 else
-  t1_targets=100,200,300,400,500,1000,1500; t3_targets=100,1500; workers=0,1,2,4,8; rounds1=100; rounds3=50
+  # The 980-face ball tops out near 300 contacts with the fingertip push (its faces are ~8 mm wide,
+  # so contacts are mostly hand faces along the intersection curve): 100 and 300 there.
+  t1_targets=100,200,300,400,500,1000,1500; t3_targets=100,1500; ico_targets=100,300; workers=0,1,2,4,8; rounds1=100; rounds3=50
   t2_seconds=5; peer_runs=20; rt_seconds=10; trade_seconds=5; trade_samples=200; trade_probe="$hand"
   t2_models=(icosphere "$models/elephant.off" "$models/armadillo_L1.off" "$models/armadillo_L2.off")
   t3_models=("${t2_models[@]}")
@@ -90,17 +92,23 @@ find_poses() {  # object targets
 log "finding poses"
 find_poses "$models/elephant.off" "$t1_targets"
 for m in "${t3_models[@]}"; do
-  [ "$(objname "$(objpath "$m")")" = elephant ] && continue
-  find_poses "$m" "$t3_targets"
+  case "$(objname "$(objpath "$m")")" in
+    elephant) ;;
+    icosphere) find_poses "$m" "$ico_targets" ;;
+    *) find_poses "$m" "$t3_targets" ;;
+  esac
 done
 
 log "table 1: hand x elephant, contacts x workers ($workers)"
 "$bench" table1 --probe "$hand" --object "$models/elephant.off" --poses "$out/poses/hand_elephant.txt" \
   --workers "$workers" --worker-bin "$worker" --rounds "$rounds1" --csv "$out/table1.csv" > "$out/table1.txt"
 
-log "table 2: haptic and collision rates, single thread vs spheretouch"
+log "table 2: haptic and collision rates, single thread vs spheretouch (press 3 mm and 30 mm)"
 objs=(); for m in "${t2_models[@]}"; do objs+=("$(objpath "$m")"); done
-"$bench" table2 --probe "$hand" "${objs[@]}" --seconds "$t2_seconds" --csv "$out/table2.csv" > "$out/table2.txt"
+for press in 3 30; do
+  "$bench" table2 --probe "$hand" "${objs[@]}" --seconds "$t2_seconds" --press-mm "$press" --csv "$out/table2.csv" \
+    >> "$out/table2.txt"
+done
 
 log "table 3: rounds/s vs workers x contacts x models"
 for m in "${t3_models[@]}"; do
