@@ -2,7 +2,8 @@
 //  table1/table3: time of one collision round (median, p95, mean, rounds/s) at the poses of a
 //                 pose file, with 0 workers (collide() in the calling thread, as the collision
 //                 thread does) and N spheretouch-worker daemons over tcp loopback (scatter-gather
-//                 round incl. merge). table1 is hand x elephant at 100..1,500 contacts (paper
+//                 round incl. merge); all worker counts run at once and take turns round by
+//                 round, so load drift on the shared machine hits them alike. table1 is hand x elephant at 100..1,500 contacts (paper
 //                 §3.5); table3 the same measurement at 100 and 1,500 contacts on four models (§4).
 //  table2:        haptic and collision rates along the built-in press/slide script for (a) a
 //                 single-thread loop that does collision then force each iteration at most at
@@ -238,57 +239,77 @@ void add_rounds(CLI::App& app, const char* name, const char* what) {
                 probe.mesh.num_faces(), object.label.c_str(), object.mesh.num_faces(), poses.size(), a->rounds);
     std::printf("%7s %8s %8s %10s %10s %10s %10s %6s\n", "workers", "target", "contacts", "median_ms", "p95_ms",
                 "mean_ms", "rounds/s", "incompl");
-    for (const int w : parse_int_list(a->workers)) {
+    // Every worker count's fleet runs at once and the configurations take turns round by round,
+    // so a change in the shared machine's load hits all of them alike (ratios from the same run).
+    struct Config {
+      int workers = 0;
       std::unique_ptr<Daemons> daemons;
       std::unique_ptr<app::Fleet> fleet;
+      geom::CollideScratch scratch;
+      geom::CollideResult result;
+      net::RoundResult round;
+      std::uint64_t seq = 0;
+    };
+    std::vector<std::unique_ptr<Config>> configs;
+    for (const int w : parse_int_list(a->workers)) {
+      auto c = std::make_unique<Config>();
+      c->workers = w;
       if (w > 0) {
-        daemons = std::make_unique<Daemons>(a->worker_bin, w);
+        c->daemons = std::make_unique<Daemons>(a->worker_bin, w);
         app::FleetSpec spec;
-        spec.endpoints = daemons->endpoints();
+        spec.endpoints = c->daemons->endpoints();
         spec.layer = a->layer;
         spec.leaf_faces = a->leaf;
         spec.ready_timeout = std::chrono::milliseconds(120000);
         auto f = app::start_fleet(spec, probe.mesh, object.mesh, object.tree);
         if (!f) die(f.error());
-        fleet = std::move(f).value();
+        c->fleet = std::move(f).value();
       }
-      geom::CollideScratch scratch;
-      geom::CollideResult result;
-      net::RoundResult round;
-      std::uint64_t seq = 0;
-      for (const TaggedPose& tp : poses) {
-        std::vector<double> ms;
-        ms.reserve(a->rounds);
-        std::uint32_t contacts = 0;
-        int incomplete = 0;
-        for (int i = 0; i < a->warmup + a->rounds; ++i) {
+      configs.push_back(std::move(c));
+    }
+    struct Cell {
+      std::vector<double> ms;
+      std::uint32_t contacts = 0;
+      int incomplete = 0;
+    };
+    std::vector<std::vector<Cell>> cells(poses.size(), std::vector<Cell>(configs.size()));
+    for (std::size_t p = 0; p < poses.size(); ++p) {
+      for (int i = 0; i < a->warmup + a->rounds; ++i) {
+        for (std::size_t k = 0; k < configs.size(); ++k) {
+          Config& c = *configs[k];
+          Cell& cell = cells[p][k];
           const auto t0 = std::chrono::steady_clock::now();
-          if (fleet) {
-            fleet->client->round(++seq, tp.pose, net::Clock::now() + std::chrono::seconds(10), round);
-          } else {
-            geom::collide(probe.mesh, probe.tree, object.mesh, object.tree, tp.pose, {}, scratch, result);
-          }
+          if (c.fleet)
+            c.fleet->client->round(++c.seq, poses[p].pose, net::Clock::now() + std::chrono::seconds(10), c.round);
+          else
+            geom::collide(probe.mesh, probe.tree, object.mesh, object.tree, poses[p].pose, {}, c.scratch, c.result);
           const auto t1 = std::chrono::steady_clock::now();
           if (i < a->warmup) continue;
-          ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
-          if (fleet) {
-            contacts = static_cast<std::uint32_t>(round.contacts());
-            incomplete += !round.complete;
+          cell.ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+          if (c.fleet) {
+            cell.contacts = static_cast<std::uint32_t>(c.round.contacts());
+            cell.incomplete += !c.round.complete;
           } else {
-            contacts = result.contacts();
+            cell.contacts = c.result.contacts();
           }
         }
+      }
+    }
+    for (std::size_t k = 0; k < configs.size(); ++k) {
+      const int w = configs[k]->workers;
+      for (std::size_t p = 0; p < poses.size(); ++p) {
+        Cell& cell = cells[p][k];
         double mean = 0;
-        for (double v : ms) mean += v;
-        mean /= double(ms.size());
-        const double med = quantile(ms, 0.5), p95 = quantile(ms, 0.95);
-        std::printf("%7d %8u %8u %10.3f %10.3f %10.3f %10.1f %6d\n", w, tp.target, contacts, med, p95, mean, 1000.0 / mean,
-                    incomplete);
-        std::fflush(stdout);
+        for (double v : cell.ms) mean += v;
+        mean /= double(cell.ms.size());
+        const double med = quantile(cell.ms, 0.5), p95 = quantile(cell.ms, 0.95);
+        const TaggedPose& tp = poses[p];
+        std::printf("%7d %8u %8u %10.3f %10.3f %10.3f %10.1f %6d\n", w, tp.target, cell.contacts, med, p95, mean,
+                    1000.0 / mean, cell.incomplete);
         append_csv(a->csv, header,
                    fmt("%s,%s,%s,%zu,%u,%u,%d,%s,%d,%.4f,%.4f,%.4f,%.2f,%d", table.c_str(), probe.label.c_str(),
-                       object.label.c_str(), object.mesh.num_faces(), tp.target, contacts, w, w ? "tcp" : "thread",
-                       a->rounds, med, p95, mean, 1000.0 / mean, incomplete));
+                       object.label.c_str(), object.mesh.num_faces(), tp.target, cell.contacts, w, w ? "tcp" : "thread",
+                       a->rounds, med, p95, mean, 1000.0 / mean, cell.incomplete));
       }
     }
   });

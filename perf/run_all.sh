@@ -73,7 +73,7 @@ if [ $quick = 1 ]; then
 else
   # The 980-face ball tops out near 300 contacts with the fingertip push (its faces are ~8 mm wide,
   # so contacts are mostly hand faces along the intersection curve): 100 and 300 there.
-  t1_targets=100,200,300,400,500,1000,1500; t3_targets=100,1500; ico_targets=100,300; workers=0,1,2,4,8; rounds1=100; rounds3=50
+  t1_targets=100,200,300,400,500,1000,1500; t3_targets=100,1500; ico_targets=100,300; workers=0,1,2,4,8; rounds1=300; rounds3=150
   t2_seconds=5; peer_runs=20; rt_seconds=10; trade_seconds=5; trade_samples=200; trade_probe="$hand"
   t2_models=(icosphere "$models/elephant.off" "$models/armadillo_L1.off" "$models/armadillo_L2.off")
   t3_models=("${t2_models[@]}")
