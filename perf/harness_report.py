@@ -317,7 +317,7 @@ def trade(out, md, summary):
                     de = num(c["hold"]["force_rms_err_N"]) - num(c[mode]["force_rms_err_N"])
                     rd[f"interp_{mode}_at_{lo:.0f}Hz"] = {"d_cost_us": 0.0, "d_rms_N": de}
                     lines.append(f"interpolation hold → {mode} at {lo:.0f} Hz: no collision cost (a few ns in the "
-                                 f"haptic tick) for {1000 * de:+.1f} mN RMS")
+                                 f"haptic tick); it {'lowers' if de > 0 else 'raises'} the RMS error by {abs(1000 * de):.1f} mN")
     leafs = get("leaf", lambda r: True)
     if leafs:
         best = min(leafs, key=lambda r: num(r["query_us"]))
