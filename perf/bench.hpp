@@ -11,5 +11,6 @@ void add_collide(CLI::App& app);  ///< collide() query time at contact buckets, 
 void add_exchange(CLI::App& app);  ///< TripleBuffer vs mutex take-newest latency (rt issue)
 void add_haptic(CLI::App& app);    ///< HapticLoop vs bare clock_nanosleep wake-up latency (rt issue)
 void add_scatter(CLI::App& app);  ///< scatter-gather round trip of an empty query, N workers × transport
+void add_tables(CLI::App& app);   ///< issue 7: table1, table2, table3, peers, trade, icosphere (bench_tables.cpp)
 
 }  // namespace st::bench
