@@ -36,6 +36,12 @@ configure() {  # build-dir meson-args...
 ninja -C build -j"$jobs" || exit 1
 run_suites build
 
+# Every benchmark once, small (perf/run_all.sh --quick): proves they run; asserts nothing about speed.
+if [ "${ST_PERF_QUICK:-1}" != 0 ]; then
+  echo "== perf/run_all.sh --quick"
+  perf/run_all.sh --quick || { echo "perf smoke run failed"; status=1; }
+fi
+
 if [ "${ST_SANITIZERS:-1}" != 0 ]; then
   # Sanitizer builds compile only the test programs and the executables the tests start.
   if configure build-asan --buildtype=debugoptimized -Db_sanitize=address,undefined -Db_lundef=false -Dnative=false; then
