@@ -5,6 +5,9 @@
 
 namespace st::bench {
 
+/// A TCP port on 127.0.0.1 that was free a moment ago (for workers the benchmarks start).
+int free_tcp_port();
+
 void add_load(CLI::App& app);  ///< mesh loading time (issue 2: the 832k-face armadillo)
 void add_tree(CLI::App& app);  ///< sphere-tree build time and bytes/face (issue 3)
 void add_collide(CLI::App& app);  ///< collide() query time at contact buckets, pose finder (issue 3)

@@ -47,6 +47,14 @@ Stats summarise(std::vector<double> us) {
   return s;
 }
 
+std::string endpoint_for(const std::string& transport, int i) {
+  if (transport == "inproc") return net::inproc_endpoint(i, "bench");
+  if (transport == "ipc") return "ipc:///tmp/spheretouch-bench-" + std::to_string(::getpid()) + "-" + std::to_string(i) + ".sock";
+  return "tcp://127.0.0.1:*";
+}
+
+}  // namespace
+
 int free_tcp_port() {
   const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
   sockaddr_in addr{};
@@ -58,14 +66,6 @@ int free_tcp_port() {
   ::close(fd);
   return ntohs(addr.sin_port);
 }
-
-std::string endpoint_for(const std::string& transport, int i) {
-  if (transport == "inproc") return net::inproc_endpoint(i, "bench");
-  if (transport == "ipc") return "ipc:///tmp/spheretouch-bench-" + std::to_string(::getpid()) + "-" + std::to_string(i) + ".sock";
-  return "tcp://127.0.0.1:*";
-}
-
-}  // namespace
 
 void add_scatter(CLI::App& app) {
   struct Args {

@@ -28,6 +28,7 @@
 
 #include "app/collision_loop.hpp"
 #include "app/distributed.hpp"
+#include "app/scene.hpp"
 #include "bench.hpp"
 #include "bench_tables_common.hpp"
 #include "geom/collide.hpp"
@@ -110,36 +111,15 @@ std::vector<TaggedPose> read_tagged_poses(const std::string& path) {
 
 rt::Trajectory press_slide_script(const geom::Mesh& probe, const geom::Mesh& object, double duration_s,
                                   double press_mm, double slide_mm) {
-  const geom::Vec3 n = geom::Vec3::UnitZ();
-  geom::Vec3 target = object.vertex(0), tip = probe.vertex(0);
-  for (std::uint32_t i = 0; i < object.num_vertices(); ++i)
-    if (object.vertex(i).dot(n) > target.dot(n)) target = object.vertex(i);
-  for (std::uint32_t i = 0; i < probe.num_vertices(); ++i)
-    if (probe.vertex(i).dot(n) < tip.dot(n)) tip = probe.vertex(i);
-  rt::Trajectory t = rt::builtin_press_slide(target, n, press_mm, slide_mm);
+  app::Scene s = app::DefaultScene();  // fingertip along -z onto the object's top, identity orientation
+  s.device.press_mm = press_mm;
+  s.device.slide_mm = slide_mm;
+  rt::Trajectory t = app::builtin_script(s, probe, object);
   const double scale = duration_s / t.duration_s();
-  for (rt::TimedPose& k : t.keys) {
-    k.t_s *= scale;
-    geom::Pose p = geom::Pose::Identity();
-    p.translate(k.pose.translation() - tip);
-    k.pose = p;
-  }
+  for (rt::TimedPose& k : t.keys) k.t_s *= scale;
   return t;
 }
 
-namespace {
-int free_tcp_port() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  ::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
-  socklen_t len = sizeof addr;
-  ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
-  ::close(fd);
-  return ntohs(addr.sin_port);
-}
-}  // namespace
 
 Daemons::Daemons(const std::string& binary, int n) {
   if (::access(binary.c_str(), X_OK) != 0) die(binary + ": not an executable (--worker-bin)");

@@ -43,14 +43,15 @@ if [ "${ST_PERF_QUICK:-1}" != 0 ]; then
 fi
 
 if [ "${ST_SANITIZERS:-1}" != 0 ]; then
-  # Sanitizer builds compile only the test programs and the executables the tests start.
-  if configure build-asan --buildtype=debugoptimized -Db_sanitize=address,undefined -Db_lundef=false -Dnative=false; then
+  # Sanitizer builds compile only the test programs and the executables the tests start, at -O1
+  # without debug info to keep CI within its time on 2 cores (reports keep function names).
+  if configure build-asan --buildtype=plain -Doptimization=1 -Db_sanitize=address,undefined -Db_lundef=false -Dnative=false; then
     build_targets build-asan spheretouch daemons/spheretouch-worker tests/test_geom tests/test_rt tests/test_net tests/test_app
     UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 ASAN_OPTIONS=detect_leaks=1 LSAN_OPTIONS=suppressions=$PWD/tests/lsan.supp run_suites build-asan
   fi
-  if configure build-tsan --buildtype=debugoptimized -Db_sanitize=thread -Db_lundef=false -Dnative=false; then
+  if configure build-tsan --buildtype=plain -Doptimization=1 -Db_sanitize=thread -Db_lundef=false -Dnative=false; then
     build_targets build-tsan spheretouch daemons/spheretouch-worker tests/test_rt tests/test_net
-    TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1 run_suites build-tsan rt net
+    TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1:suppressions=$PWD/tests/tsan.supp run_suites build-tsan rt net
   fi
 fi
 

@@ -45,36 +45,6 @@ struct RunArgs {
   throw CLI::RuntimeError(code);
 }
 
-/// The built-in script: the probe's fingertip approaches the object's surface point along the
-/// normal, presses, slides and releases (rt::builtin_press_slide moves the fingertip).
-rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, const geom::Mesh& object) {
-  const geom::Vec3 n = s.device.normal;
-  geom::Vec3 target = s.device.target;
-  if (s.device.target_top) {  // the object's extreme vertex along the normal
-    double best = -std::numeric_limits<double>::infinity();
-    for (std::uint32_t i = 0; i < object.num_vertices(); ++i)
-      if (const double d = object.vertex(i).dot(n); d > best) { best = d; target = object.vertex(i); }
-  }
-  const geom::Vec3 r = s.probe_rotation_deg * (M_PI / 180.0);
-  const Eigen::Matrix3d R = (Eigen::AngleAxisd(r.x(), geom::Vec3::UnitX()) * Eigen::AngleAxisd(r.y(), geom::Vec3::UnitY()) *
-                             Eigen::AngleAxisd(r.z(), geom::Vec3::UnitZ())).toRotationMatrix();
-  geom::Vec3 tip = s.probe_tip;
-  if (s.probe_tip_auto) {  // the probe's lowest vertex along the approach direction
-    double best = std::numeric_limits<double>::infinity();
-    for (std::uint32_t i = 0; i < probe.num_vertices(); ++i)
-      if (const double d = (R * probe.vertex(i)).dot(n); d < best) { best = d; tip = probe.vertex(i); }
-  }
-  rt::Trajectory t = rt::builtin_press_slide(target, n, s.device.press_mm, s.device.slide_mm);
-  for (rt::TimedPose& k : t.keys) {
-    geom::Pose p = geom::Pose::Identity();
-    p.translate(k.pose.translation());
-    p.rotate(R);
-    p.translate(-tip);
-    k.pose = p;
-  }
-  return t;
-}
-
 std::string new_run_dir(const std::string& wanted) {
   if (!wanted.empty()) return wanted;
   char stamp[32];

@@ -1,7 +1,9 @@
 // Scene file parsing: one TomlReader per section, defaults from the libraries' Default…().
 #include "app/scene.hpp"
 
+#include <cmath>
 #include <filesystem>
+#include <limits>
 #include <fstream>
 #include <sstream>
 #include <unistd.h>
@@ -243,6 +245,34 @@ Result<Scene> load_scene(const std::string& path) {
   ss << in.rdbuf();
   const std::string dir = std::filesystem::path(path).parent_path().string();
   return parse_scene(ss.str(), path, dir.empty() ? "." : dir);
+}
+
+rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, const geom::Mesh& object) {
+  const geom::Vec3 n = s.device.normal;
+  geom::Vec3 target = s.device.target;
+  if (s.device.target_top) {  // the object's extreme vertex along the normal
+    double best = -std::numeric_limits<double>::infinity();
+    for (std::uint32_t i = 0; i < object.num_vertices(); ++i)
+      if (const double d = object.vertex(i).dot(n); d > best) { best = d; target = object.vertex(i); }
+  }
+  const geom::Vec3 r = s.probe_rotation_deg * (M_PI / 180.0);
+  const Eigen::Matrix3d R = (Eigen::AngleAxisd(r.x(), geom::Vec3::UnitX()) * Eigen::AngleAxisd(r.y(), geom::Vec3::UnitY()) *
+                             Eigen::AngleAxisd(r.z(), geom::Vec3::UnitZ())).toRotationMatrix();
+  geom::Vec3 tip = s.probe_tip;
+  if (s.probe_tip_auto) {  // the probe's lowest vertex along the approach direction
+    double best = std::numeric_limits<double>::infinity();
+    for (std::uint32_t i = 0; i < probe.num_vertices(); ++i)
+      if (const double d = (R * probe.vertex(i)).dot(n); d < best) { best = d; tip = probe.vertex(i); }
+  }
+  rt::Trajectory t = rt::builtin_press_slide(target, n, s.device.press_mm, s.device.slide_mm);
+  for (rt::TimedPose& k : t.keys) {
+    geom::Pose p = geom::Pose::Identity();
+    p.translate(k.pose.translation());
+    p.rotate(R);
+    p.translate(-tip);
+    k.pose = p;
+  }
+  return t;
 }
 
 Result<geom::Mesh> load_body(const BodySpec& b, const std::string& field) {

@@ -76,6 +76,11 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
 /// source tree, else ./.cache/models.
 std::string model_dir();
 
+/// The built-in script: the probe's fingertip (scene tip, or its lowest vertex along the approach)
+/// approaches the object's surface point (scene target, or its extreme vertex along the normal)
+/// against the normal, presses, slides and releases (rt::builtin_press_slide moves the fingertip).
+rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, const geom::Mesh& object);
+
 /// Loads (or generates) a body; errors name the scene field.
 Result<geom::Mesh> load_body(const BodySpec& spec, const std::string& field);
 

@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "app/scene.hpp"
+#include "app/process_util.hpp"
 #include "test_util.hpp"
 
 using st::test::run_command;
@@ -88,26 +89,6 @@ status = "plain"
 duration_s = 5.5
 )";
 
-struct TickRow { double t_s, force_N; int flags; };
-
-std::vector<TickRow> read_ticks(const std::string& csv) {
-  std::ifstream in(csv);
-  std::vector<TickRow> rows;
-  std::string line;
-  std::getline(in, line);  // header
-  double t0 = -1;
-  while (std::getline(in, line)) {
-    if (line.empty() || line[0] == '#') continue;
-    std::vector<double> v;
-    std::stringstream ss(line);
-    for (std::string cell; std::getline(ss, cell, ',');) v.push_back(std::stod(cell));
-    REQUIRE(v.size() == 17);
-    if (t0 < 0) t0 = v[1];
-    rows.push_back({(v[1] - t0) * 1e-9, std::sqrt(v[9] * v[9] + v[10] * v[10] + v[11] * v[11]), int(v[15])});
-  }
-  return rows;
-}
-
 }  // namespace
 
 TEST_CASE("run: a short scene ticks at its rate, presses with force, releases to zero, writes its outputs") {
@@ -121,14 +102,14 @@ TEST_CASE("run: a short scene ticks at its rate, presses with force, releases to
   CHECK(has(r.output, " 0 dropped"));
 
   // Ticks ≈ rate × duration: counts, with room for a loaded machine (misses are counted, not ticks).
-  const std::vector<TickRow> ticks = read_ticks(out + "/ticks.csv");
+  const std::vector<st::test::TickCsvRow> ticks = st::test::read_tick_csv(out + "/ticks.csv");
   CHECK(ticks.size() > 5500 * 8 / 10);
   CHECK(ticks.size() <= 5500 + 50);
 
   // The built-in script: approach 1 s, press 0.5 s, hold 0.5 s, slide 2 s, release 0.5 s, rest.
   double press_max = 0, rest_max = 0;
   int contact_ticks = 0;
-  for (const TickRow& t : ticks) {
+  for (const st::test::TickCsvRow& t : ticks) {
     CHECK(std::isfinite(t.force_N));
     CHECK(t.force_N <= 3.3 + 1e-9);
     if (t.t_s > 1.6 && t.t_s < 2.0) press_max = std::max(press_max, t.force_N);

@@ -147,15 +147,13 @@ TEST_CASE("collide equals brute force: generated meshes, touching cases") {
   }
 }
 
-TEST_CASE("collide equals brute force: hand x elephant (all pairs)") {
+TEST_CASE("collide equals brute force: hand x hand (literal all pairs)") {
+  // The literal loop over every face pair (no culling at all) checks the grid-accelerated
+  // reference used below; hand x hand keeps it at 5.7e6 exact tests per pose (sanitizer builds).
   const Mesh* hand = st::test::model_mesh("hand.off");
-  const Mesh* ele = st::test::model_mesh("elephant.off");
-  Body probe(*hand), object(*ele);
-  auto poses = poses_for(*hand, *ele, 4, 1);
-  // One near pose: the literal loop is 2e8 exact triangle tests per pose (the grid-accelerated
-  // reference, identical by construction, covers the other poses below).
-  poses.erase(poses.begin());
-  poses.resize(1);
+  Body probe(*hand), object(*hand);
+  auto poses = poses_for(*hand, *hand, 4, 1);
+  poses.resize(4);  // far and three near poses
   compare_at(probe, object, poses, true);
 }
 
