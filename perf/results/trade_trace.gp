@@ -7,4 +7,4 @@ set title 'Force along the press/slide script (armadillo): reference vs configur
 set xlabel 't, s'
 set ylabel '|F|, N'
 set key inside top left
-plot 'perf/results/trade_trace.csv' using 1:2 with lines lw 2 title 'reference', 'perf/results/trade_trace.csv' using 1:3 with lines lw 1 title 'armadillo leaf8 1000Hz hold', 'perf/results/trade_trace.csv' using 1:15 with lines lw 1 title 'armadillo\_L2 leaf8 25Hz hold', 'perf/results/trade_trace.csv' using 1:16 with lines lw 1 title 'armadillo\_L2 leaf8 25Hz paper', 'perf/results/trade_trace.csv' using 1:17 with lines lw 1 title 'armadillo\_L2 leaf8 25Hz plane'
+plot 'perf/results/trade_trace.csv' using 1:2 with lines lw 2 title 'reference', 'perf/results/trade_trace.csv' using 1:3 with lines lw 1 title 'armadillo leaf24 1000Hz hold', 'perf/results/trade_trace.csv' using 1:15 with lines lw 1 title 'armadillo\_L2 leaf24 25Hz hold', 'perf/results/trade_trace.csv' using 1:16 with lines lw 1 title 'armadillo\_L2 leaf24 25Hz paper', 'perf/results/trade_trace.csv' using 1:17 with lines lw 1 title 'armadillo\_L2 leaf24 25Hz plane'
