@@ -55,13 +55,6 @@ std::string new_run_dir(const std::string& wanted) {
   return dir;
 }
 
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  const auto k = static_cast<std::size_t>(q * double(v.size() - 1));
-  std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(k), v.end());
-  return v[k];
-}
-
 void run(const RunArgs& a) {
   Result<Scene> sr = load_scene(a.scene);
   if (!sr) die(2, sr.error());
@@ -170,8 +163,9 @@ void run(const RunArgs& a) {
   std::unique_ptr<rt::HapticServo> servo;
   rt::HapticLoop loop(s.haptic);
   if (!a.split) {
-    const std::size_t ticks_expected = std::size_t(s.haptic.rate_hz * (s.duration_s + 2));
-    sim = std::make_unique<rt::SimulatedDevice>(script, s.device.user, ticks_expected, s.saturation.peak_N);
+    // Commanded forces go to the per-tick trace, not into device records: memory stays flat however long the run.
+    sim = std::make_unique<rt::SimulatedDevice>(script, s.device.user, 0, s.saturation.peak_N);
+    sim->set_repeat(s.device.repeat);
     if (s.write_trace || s.write_perfetto) {
       Result<std::unique_ptr<rt::Telemetry>> t = rt::Telemetry::open(csv);
       if (!t) die(2, t.error());
@@ -181,9 +175,11 @@ void run(const RunArgs& a) {
                                               telemetry.get());
     servo->publish_status_to(&status.servo);
   }
-  CollisionLoop collision(probe, object, shm.poses(), shm.models(), collide_fn, s.collision_rate_hz,
-                          std::size_t(std::max(1.0, s.duration_s) * 20000));
+  CollisionLoop collision(probe, object, shm.poses(), shm.models(), collide_fn, s.collision_rate_hz, 0);
   collision.publish_status_to(&status.collision);
+  const std::string rounds_csv = dir + "/rounds.csv";
+  if (s.write_trace || s.write_perfetto)
+    if (Status st = collision.write_rounds_csv(rounds_csv); !st) die(2, st.error());
 
   struct sigaction sa {};
   sa.sa_handler = on_signal;
@@ -249,10 +245,14 @@ void run(const RunArgs& a) {
   bool forwarded = false;     // split: a signal was passed on to the servo
   std::int64_t forwarded_ns = 0;
   SilenceWatch silence(s.interp.stale_timeout_ns);
+  // Resident memory after one second of running (trees, buffers and connections in place) and at
+  // the end: a long run must not grow (the soak test's target is < 1 MB).
+  std::uint64_t rss_start = 0, rss_end = 0;
   while (true) {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
     const std::int64_t now = rt::now_ns();
     const double elapsed = double(now - t_start) * 1e-9;
+    if (rss_start == 0 && elapsed >= std::min(1.0, s.duration_s / 2)) rss_start = rt::resident_bytes();
     if (a.split) {
       // The servo ends the run (its duration, or a signal we forward); never wait forever.
       int ws = 0;
@@ -299,6 +299,7 @@ void run(const RunArgs& a) {
     }
   }
   const std::int64_t t_end = rt::now_ns();
+  rss_end = rt::resident_bytes();
   ServoResults sres;
   if (!a.split) {
     loop.stop();
@@ -334,8 +335,7 @@ void run(const RunArgs& a) {
   }
 
   // Summary.
-  std::vector<double> lat_ms;
-  for (const RoundRecord& r : collision.records()) lat_ms.push_back(double(r.end_ns - r.start_ns) * 1e-6);
+  const rt::LatencyHistogram& lat = collision.latency();
   std::string summary;
   char buf[512];
   auto add = [&](const char* fmt, auto... v) {
@@ -350,8 +350,9 @@ void run(const RunArgs& a) {
       static_cast<unsigned long long>(sres.misses), static_cast<unsigned long long>(sres.overruns), sres.wake_p99_us,
       servo_where.c_str());
   add("  collision       %llu rounds (%.1f Hz), latency p50 %.3f ms, p99 %.3f ms, %llu incomplete; %s\n",
-      static_cast<unsigned long long>(collision.rounds()), double(collision.rounds()) / secs, percentile(lat_ms, 0.5),
-      percentile(lat_ms, 0.99), static_cast<unsigned long long>(collision.incomplete()), backend.c_str());
+      static_cast<unsigned long long>(collision.rounds()), double(collision.rounds()) / secs,
+      double(lat.percentile_ns(0.5)) * 1e-6, double(lat.percentile_ns(0.99)) * 1e-6,
+      static_cast<unsigned long long>(collision.incomplete()), backend.c_str());
   if (sres.silences)
     add("  silences        %llu: no contact model for the stale timeout, force faded to zero (longest %.0f ms)\n",
         static_cast<unsigned long long>(sres.silences), sres.longest_silence_ms);
@@ -360,13 +361,16 @@ void run(const RunArgs& a) {
   add("  telemetry       %llu samples, %llu dropped\n", static_cast<unsigned long long>(sres.telemetry_pushed),
       static_cast<unsigned long long>(sres.telemetry_dropped));
   if (sres.device_dropped) add("  device records  %llu dropped\n", static_cast<unsigned long long>(sres.device_dropped));
+  if (rss_start && rss_end)
+    add("  memory          RSS %.1f MB after %.0f s, %.1f MB at the end (%+.2f MB)\n", double(rss_start) / 1e6,
+        std::min(1.0, s.duration_s / 2), double(rss_end) / 1e6, (double(rss_end) - double(rss_start)) / 1e6);
   add("  outputs         %s/\n", dir.c_str());
   const bool have_csv = (s.write_trace || s.write_perfetto) && std::filesystem::exists(csv);
   if (s.write_perfetto && have_csv) {
-    if (Status st = write_trace_json(dir + "/trace.json", csv, collision.records()); !st) add("  trace.json: %s\n", st.error().c_str());
+    if (Status st = write_trace_json(dir + "/trace.json", csv, rounds_csv); !st) add("  trace.json: %s\n", st.error().c_str());
     else add("    trace.json    haptic ticks and collision rounds (open in ui.perfetto.dev or chrome://tracing)\n");
   }
-  if (s.write_trace) add("    ticks.csv     one line per haptic tick\n");
+  if (s.write_trace) add("    ticks.csv     one line per haptic tick; rounds.csv one line per collision round\n");
   if (a.split) add("    servo.txt     the servo process's counters; script.txt its trajectory\n");
   if (s.write_ply) {
     if (collision.peak_pairs().empty()) {
@@ -382,7 +386,10 @@ void run(const RunArgs& a) {
     std::fputs(summary.c_str(), f);
     std::fclose(f);
   }
-  if (!s.write_trace && have_csv) std::filesystem::remove(csv, ec);
+  if (!s.write_trace && have_csv) {
+    std::filesystem::remove(csv, ec);
+    std::filesystem::remove(rounds_csv, ec);
+  }
 }
 
 }  // namespace

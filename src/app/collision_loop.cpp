@@ -18,11 +18,22 @@ CollisionLoop::CollisionLoop(const geom::Mesh& probe, const geom::Mesh& object, 
 
 CollisionLoop::~CollisionLoop() { stop(); }
 
+Status CollisionLoop::write_rounds_csv(const std::string& path) {
+  rounds_csv_ = std::fopen(path.c_str(), "w");
+  if (!rounds_csv_) return fail(path, ": cannot create the per-round trace");
+  std::fputs("start_ns,end_ns,pose_seq,pairs,contacts,pd_mm,complete\n", rounds_csv_);
+  return Ok{};
+}
+
 void CollisionLoop::start() { thread_ = std::thread([this] { run(); }); }
 
 void CollisionLoop::stop() {
   stop_.store(true, std::memory_order_release);
   if (thread_.joinable()) thread_.join();
+  if (rounds_csv_) {
+    std::fclose(rounds_csv_);
+    rounds_csv_ = nullptr;
+  }
 }
 
 void CollisionLoop::run() {
@@ -76,8 +87,13 @@ void CollisionLoop::run() {
       st.incomplete = static_cast<std::uint32_t>(incomplete_.load(std::memory_order_relaxed));
       status_->store(st);
     }
-    if (records_.size() < max_rounds_)
-      records_.push_back({t0, t1, sample.seq, m.pairs, m.contacts, m.penetration_mm, out.complete});
+    latency_.record(t1 - t0);
+    const RoundRecord rec{t0, t1, sample.seq, m.pairs, m.contacts, m.penetration_mm, out.complete};
+    if (records_.size() < max_rounds_) records_.push_back(rec);
+    if (rounds_csv_)
+      std::fprintf(rounds_csv_, "%lld,%lld,%llu,%u,%u,%.6g,%d\n", static_cast<long long>(rec.start_ns),
+                   static_cast<long long>(rec.end_ns), static_cast<unsigned long long>(rec.pose_seq), rec.pairs,
+                   rec.contacts, rec.penetration_mm, rec.complete ? 1 : 0);
     if (m.in_contact() && m.penetration_mm > peak_pd_) {
       peak_pd_ = m.penetration_mm;
       peak_pose_ = pose;

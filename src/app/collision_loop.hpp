@@ -3,11 +3,15 @@
 // → publish. It runs as fast as it can, or at a capped rate.
 #pragma once
 #include <atomic>
+#include <cstdio>
 #include <functional>
+#include <string>
 #include <thread>
 #include <vector>
 
 #include "geom/contact.hpp"
+#include "geom/result.hpp"
+#include "rt/histogram.hpp"
 #include "rt/pose_sample.hpp"
 #include "rt/shm_status.hpp"
 #include "rt/triple_buffer.hpp"
@@ -32,16 +36,22 @@ struct RoundOutput {
 /// Computes the pairs for a pose; set up by the caller (direct collide() or scatter-gather).
 using CollideFn = std::function<void(std::uint64_t seq, const geom::Pose& pose, RoundOutput& out)>;
 
-/// The collision thread.
+/// The collision thread. Its memory does not grow with the run's length: rounds are kept in memory
+/// only up to `max_rounds` (0 = none) and streamed to a CSV file if asked (write_rounds_csv);
+/// latencies go into a fixed-size histogram.
 class CollisionLoop {
  public:
-  /// `rate_hz` 0 = uncapped. `max_rounds` bounds the stored records (later rounds are counted only).
+  /// `rate_hz` 0 = uncapped. `max_rounds` bounds the records kept in memory (later rounds are
+  /// counted, streamed to the rounds CSV and in the latency histogram, not stored).
   CollisionLoop(const geom::Mesh& probe, const geom::Mesh& object, rt::TripleBuffer<rt::PoseSample>& poses,
                 rt::TripleBuffer<geom::ContactModel>& models, CollideFn collide, double rate_hz,
                 std::size_t max_rounds);
   ~CollisionLoop();
   /// Publish a CollisionStatus after every round into `status` (null = off); before start().
   void publish_status_to(rt::SeqLock<rt::CollisionStatus>* status) { status_ = status; }
+  /// Streams one line per round (RoundRecord's fields) to `path`; before start(). The file is
+  /// flushed and closed by stop().
+  Status write_rounds_csv(const std::string& path);
   void start();  ///< starts the thread
   void stop();   ///< stops and joins it (idempotent)
 
@@ -49,7 +59,8 @@ class CollisionLoop {
   std::uint64_t incomplete() const { return incomplete_.load(std::memory_order_relaxed); }         ///< rounds missing a worker
   std::int64_t last_latency_ns() const { return last_latency_ns_.load(std::memory_order_relaxed); }  ///< newest round's time
   std::uint32_t last_contacts() const { return last_contacts_.load(std::memory_order_relaxed); }    ///< newest round's contacts
-  const std::vector<RoundRecord>& records() const { return records_; }  ///< after stop()
+  const std::vector<RoundRecord>& records() const { return records_; }  ///< the first max_rounds, after stop()
+  const rt::LatencyHistogram& latency() const { return latency_; }      ///< every round's latency, after stop()
   /// The round with the deepest penetration (the peak of the force law): its pose and pairs.
   const geom::Pose& peak_pose() const { return peak_pose_; }
   const std::vector<geom::FacePair>& peak_pairs() const { return peak_pairs_; }  ///< after stop()
@@ -70,6 +81,8 @@ class CollisionLoop {
   std::atomic<std::int64_t> last_latency_ns_{0};
   std::atomic<std::uint32_t> last_contacts_{0};
   std::vector<RoundRecord> records_;
+  rt::LatencyHistogram latency_;
+  std::FILE* rounds_csv_ = nullptr;
   geom::Pose peak_pose_ = geom::Pose::Identity();
   std::vector<geom::FacePair> peak_pairs_;
   double peak_pd_ = -1;

@@ -49,9 +49,31 @@ Status write_contact_ply(const std::string& path, const geom::Mesh& probe, const
   return Ok{};
 }
 
-Status write_trace_json(const std::string& path, const std::string& tick_csv, const std::vector<RoundRecord>& rounds) {
+namespace {
+
+/// Reads the comma-separated numbers of one CSV line into `v`; false for headers and comments.
+bool csv_numbers(const std::string& line, std::vector<double>& v) {
+  if (line.empty() || !std::isdigit(static_cast<unsigned char>(line[0]))) return false;
+  v.clear();
+  const char* p = line.data();
+  const char* end = p + line.size();
+  while (p < end) {
+    double d = 0;
+    auto r = std::from_chars(p, end, d);
+    if (r.ec != std::errc()) break;
+    v.push_back(d);
+    p = r.ptr + (r.ptr < end ? 1 : 0);
+  }
+  return true;
+}
+
+}  // namespace
+
+Status write_trace_json(const std::string& path, const std::string& tick_csv, const std::string& rounds_csv) {
   std::ifstream in(tick_csv);
   if (!in) return fail(tick_csv, ": cannot read the per-tick trace");
+  std::ifstream rin(rounds_csv);
+  if (!rin) return fail(rounds_csv, ": cannot read the per-round trace");
   std::FILE* f = std::fopen(path.c_str(), "w");
   if (!f) return fail(path, ": cannot create");
   std::fprintf(f, "{\"displayTimeUnit\":\"ms\",\"traceEvents\":[\n");
@@ -59,35 +81,25 @@ Status write_trace_json(const std::string& path, const std::string& tick_csv, co
   std::fprintf(f, "{\"name\":\"thread_name\",\"ph\":\"M\",\"pid\":1,\"tid\":1,\"args\":{\"name\":\"haptic 1 kHz\"}},\n");
   std::fprintf(f, "{\"name\":\"thread_name\",\"ph\":\"M\",\"pid\":1,\"tid\":2,\"args\":{\"name\":\"collision\"}}");
   // Timestamps are CLOCK_MONOTONIC in microseconds, shared by both threads' events.
-  auto us = [](std::int64_t ns) { return double(ns) / 1000.0; };
+  auto us = [](double ns) { return ns / 1000.0; };
   std::string line;
   std::vector<double> v;
   while (std::getline(in, line)) {
-    if (line.empty() || line[0] == '#' || !std::isdigit(static_cast<unsigned char>(line[0]))) continue;
-    v.clear();
-    const char* p = line.data();
-    const char* end = p + line.size();
-    while (p < end) {
-      double d = 0;
-      auto r = std::from_chars(p, end, d);
-      if (r.ec != std::errc()) break;
-      v.push_back(d);
-      p = r.ptr + (r.ptr < end ? 1 : 0);
-    }
-    if (v.size() < 17) continue;
-    const auto t_ns = static_cast<std::int64_t>(v[1]);
+    if (!csv_numbers(line, v) || v.size() < 17) continue;
     const double force = std::sqrt(v[9] * v[9] + v[10] * v[10] + v[11] * v[11]);
     std::fprintf(f, ",\n{\"name\":\"tick\",\"ph\":\"X\",\"pid\":1,\"tid\":1,\"ts\":%.3f,\"dur\":1,"
                     "\"args\":{\"tick\":%.0f,\"latency_us\":%.3f,\"model\":%.0f,\"pd_mm\":%.4g}}",
-                 us(t_ns), v[0], v[2] / 1000.0, v[4], v[12]);
-    std::fprintf(f, ",\n{\"name\":\"force_N\",\"ph\":\"C\",\"pid\":1,\"ts\":%.3f,\"args\":{\"force\":%.5g}}", us(t_ns),
+                 us(v[1]), v[0], v[2] / 1000.0, v[4], v[12]);
+    std::fprintf(f, ",\n{\"name\":\"force_N\",\"ph\":\"C\",\"pid\":1,\"ts\":%.3f,\"args\":{\"force\":%.5g}}", us(v[1]),
                  force);
   }
-  for (const RoundRecord& r : rounds)
+  // rounds.csv: start_ns,end_ns,pose_seq,pairs,contacts,pd_mm,complete
+  while (std::getline(rin, line)) {
+    if (!csv_numbers(line, v) || v.size() < 7) continue;
     std::fprintf(f, ",\n{\"name\":\"round\",\"ph\":\"X\",\"pid\":1,\"tid\":2,\"ts\":%.3f,\"dur\":%.3f,"
-                    "\"args\":{\"pose\":%llu,\"pairs\":%u,\"contacts\":%u,\"pd_mm\":%.4g,\"complete\":%s}}",
-                 us(r.start_ns), double(r.end_ns - r.start_ns) / 1000.0, static_cast<unsigned long long>(r.pose_seq),
-                 r.pairs, r.contacts, r.penetration_mm, r.complete ? "true" : "false");
+                    "\"args\":{\"pose\":%.0f,\"pairs\":%.0f,\"contacts\":%.0f,\"pd_mm\":%.4g,\"complete\":%s}}",
+                 us(v[0]), us(v[1] - v[0]), v[2], v[3], v[4], v[5], v[6] != 0 ? "true" : "false");
+  }
   std::fprintf(f, "\n]}\n");
   const bool ok = std::ferror(f) == 0;
   if (std::fclose(f) != 0 || !ok) return fail(path, ": write error");

@@ -16,7 +16,8 @@ Status write_contact_ply(const std::string& path, const geom::Mesh& probe, const
                          const geom::Pose& pose, const std::vector<geom::FacePair>& pairs);
 
 /// Writes a Chrome trace-event JSON: one complete event per haptic tick (from the per-tick CSV),
-/// a force counter track, and one complete event per collision round.
-Status write_trace_json(const std::string& path, const std::string& tick_csv, const std::vector<RoundRecord>& rounds);
+/// a force counter track, and one complete event per collision round (from the per-round CSV of
+/// CollisionLoop::write_rounds_csv). Both files are streamed: memory does not grow with the run.
+Status write_trace_json(const std::string& path, const std::string& tick_csv, const std::string& rounds_csv);
 
 }  // namespace st::app

@@ -218,6 +218,7 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     r.number("slide_mm", s.device.slide_mm, 0, 10000);
     r.boolean("virtual_user", s.device.user.enabled);
     r.number("user_stiffness_n_per_mm", s.device.user.stiffness_N_per_mm, 1e-6, 100);
+    r.boolean("repeat", s.device.repeat);
     if (Status st = r.finish(); !st) return Error{st.error()};
   }
   {

@@ -34,6 +34,7 @@ struct DeviceSpec {
   geom::Vec3 normal{geom::Vec3::UnitZ()}; ///< builtin: approach against this outward normal
   double press_mm = 3, slide_mm = 20;     ///< builtin: press depth and slide length, mm
   rt::VirtualUser user;                   ///< spring-damper hand reacting to the force
+  bool repeat = false;                    ///< replay the script from its start each time it ends
 };
 
 /// Everything a run needs, with defaults from the libraries' Default…() functions.

@@ -166,8 +166,9 @@ void run_servo(const ServoArgs& a) {
 
   Result<rt::ForceLaw> law = rt::ForceLaw::make(s.law);
   if (!law) servo_die(2, s.file + ": " + law.error());
-  const std::size_t ticks_expected = std::size_t(s.haptic.rate_hz * (s.duration_s + 2));
-  rt::SimulatedDevice sim(std::move(script).value(), s.device.user, ticks_expected, s.saturation.peak_N);
+  // Commanded forces go to the per-tick trace, not into device records: memory stays flat.
+  rt::SimulatedDevice sim(std::move(script).value(), s.device.user, 0, s.saturation.peak_N);
+  sim.set_repeat(s.device.repeat);
   std::unique_ptr<rt::Telemetry> telemetry;
   if (s.write_trace || s.write_perfetto) {
     Result<std::unique_ptr<rt::Telemetry>> t = rt::Telemetry::open(a.out + "/ticks.csv");

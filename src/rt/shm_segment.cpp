@@ -41,6 +41,13 @@ std::uint64_t process_start_ticks(int pid) {
   }
 }
 
+std::uint64_t resident_bytes(int pid) {
+  std::ifstream f(pid > 0 ? "/proc/" + std::to_string(pid) + "/statm" : std::string("/proc/self/statm"));
+  std::uint64_t size = 0, resident = 0;
+  if (!(f >> size >> resident)) return 0;
+  return resident * static_cast<std::uint64_t>(::sysconf(_SC_PAGESIZE));
+}
+
 bool process_alive(int pid, std::uint64_t start_ticks) {
   if (pid <= 0) return false;
   if (kill(pid, 0) != 0 && errno != EPERM) return false;  // ESRCH: gone

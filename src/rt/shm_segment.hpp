@@ -94,5 +94,7 @@ class ShmSegment {
 std::uint64_t process_start_ticks(int pid);
 /// True when pid names a live process started at start_ticks (guards against pid reuse).
 bool process_alive(int pid, std::uint64_t start_ticks);
+/// Resident set size of a process in bytes (/proc/pid/statm; pid 0 = this process); 0 if unknown.
+std::uint64_t resident_bytes(int pid = 0);
 
 }  // namespace st::rt

@@ -96,7 +96,7 @@ Trajectory builtin_press_slide(const Eigen::Vector3d& surface, const Eigen::Vect
 }
 
 SimulatedDevice::SimulatedDevice(Trajectory script, VirtualUser user, std::size_t capacity, double max_force_N)
-    : script_(std::move(script)), user_(user), max_force_(max_force_N) {
+    : script_(std::move(script)), user_(user), max_force_(max_force_N), record_(capacity > 0) {
   records_.reserve(capacity);
   pose_ = script_.at(0);
   x_ = pose_.translation();
@@ -132,6 +132,7 @@ bool SimulatedDevice::read_pose(std::int64_t now_ns, Eigen::Isometry3d& pose) no
 
 void SimulatedDevice::command_force(std::int64_t now_ns, const Eigen::Vector3d& force_N) noexcept {
   last_force_ = force_N.allFinite() ? force_N : Eigen::Vector3d::Zero();
+  if (!record_) return;
   if (records_.size() < records_.capacity()) {
     ForceRecord r;
     r.t_ns = now_ns;

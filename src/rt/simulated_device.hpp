@@ -63,7 +63,8 @@ struct ForceRecord {
 /// Scripted device.
 class SimulatedDevice final : public Device {
  public:
-  /// `capacity` records are preallocated; start time is the first read_pose() call.
+  /// `capacity` records are preallocated (0: commands are not recorded, nothing counts as
+  /// dropped; long runs whose trace goes to telemetry); start time is the first read_pose() call.
   SimulatedDevice(Trajectory script, VirtualUser user = {}, std::size_t capacity = 1 << 16,
                   double max_force_N = kOmniPeakForceN);
   bool read_pose(std::int64_t now_ns, Eigen::Isometry3d& pose) noexcept override;
@@ -85,6 +86,7 @@ class SimulatedDevice final : public Device {
   Trajectory script_;
   VirtualUser user_;
   double max_force_;
+  bool record_;
   std::vector<ForceRecord> records_;
   std::uint64_t dropped_ = 0;
   std::int64_t start_ns_ = -1, last_ns_ = -1;

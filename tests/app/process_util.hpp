@@ -69,6 +69,8 @@ inline rt::ServoStatus wait_for_ticks(const std::string& name, std::uint64_t tic
 
 /// One per-tick CSV row (rt::Telemetry's columns).
 struct TickCsvRow {
+  std::uint64_t tick = 0;    ///< tick number (consecutive when no sample was dropped)
+  std::uint64_t misses = 0;  ///< loop misses so far
   double t_s = 0;            ///< since the first row
   std::uint64_t model_seq = 0;
   double force_N = 0;        ///< |force|
@@ -89,8 +91,9 @@ inline std::vector<TickCsvRow> read_tick_csv(const std::string& csv) {
     for (std::string cell; std::getline(ss, cell, ',');) v.push_back(std::stod(cell));
     REQUIRE(v.size() == 17);
     if (t0 < 0) t0 = v[1];
-    rows.push_back({(v[1] - t0) * 1e-9, static_cast<std::uint64_t>(v[4]),
-                    std::sqrt(v[9] * v[9] + v[10] * v[10] + v[11] * v[11]), int(v[15])});
+    rows.push_back({static_cast<std::uint64_t>(v[0]), static_cast<std::uint64_t>(v[16]), (v[1] - t0) * 1e-9,
+                    static_cast<std::uint64_t>(v[4]), std::sqrt(v[9] * v[9] + v[10] * v[10] + v[11] * v[11]),
+                    int(v[15])});
   }
   return rows;
 }

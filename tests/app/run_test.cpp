@@ -100,6 +100,7 @@ TEST_CASE("run: a short scene ticks at its rate, presses with force, releases to
   REQUIRE(r.exit_code == 0);
   CHECK(has(r.output, "summary"));
   CHECK(has(r.output, " 0 dropped"));
+  CHECK(has(r.output, "memory          RSS "));
 
   // Ticks ≈ rate × duration: counts, with room for a loaded machine (misses are counted, not ticks).
   const std::vector<st::test::TickCsvRow> ticks = st::test::read_tick_csv(out + "/ticks.csv");
@@ -119,6 +120,18 @@ TEST_CASE("run: a short scene ticks at its rate, presses with force, releases to
   CHECK(contact_ticks > 0);  // contact updates reached the haptic side
   CHECK(press_max > 0.1);
   CHECK(rest_max == 0.0);
+
+  // rounds.csv: one line per collision round, as many as the summary counts.
+  {
+    std::ifstream in(out + "/rounds.csv");
+    std::string line;
+    std::getline(in, line);
+    CHECK(line == "start_ns,end_ns,pose_seq,pairs,contacts,pd_mm,complete");
+    std::size_t n = 0;
+    while (std::getline(in, line)) ++n;
+    CHECK(n > 100);
+    CHECK(has(r.output, "collision       " + std::to_string(n) + " rounds"));
+  }
 
   const std::string trace = slurp(out + "/trace.json");
   CHECK(Json{trace}.document());
