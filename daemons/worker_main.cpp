@@ -53,7 +53,7 @@ int main(int argc, char** argv) {
   std::string config_file, bind, log_level;
   std::int64_t worker_id = -1;
   bool insecure = false, keygen = false;
-  app.add_option("--config", config_file, "TOML config (bind, worker_id, log_level, insecure, max_sets, max_blockset_mb)")
+  app.add_option("--config", config_file, "TOML config (bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb)")
       ->check(CLI::ExistingFile);
   app.add_option("--bind", bind, "endpoint to bind: tcp://HOST:PORT or ipc://PATH (overrides the config; default tcp://127.0.0.1:5555)");
   app.add_option("--id", worker_id, "worker id (overrides the config)")->check(CLI::Range(0, 1 << 20));
@@ -93,6 +93,7 @@ int main(int argc, char** argv) {
   st::net::WorkerConfig wc;
   wc.worker_id = cfg.worker_id;
   wc.max_sets = cfg.max_sets;
+  wc.idle_set_ttl = std::chrono::seconds(cfg.idle_set_s);
   wc.limits.max_blockset_bytes = cfg.max_blockset_mb << 20;
   wc.log = log_line;
   if (!cfg.curve_secret_key_file.empty()) {

@@ -1,6 +1,8 @@
 // ScatterGather (scatter_gather.hpp).
 #include "net/scatter_gather.hpp"
 
+#include <malloc.h>
+
 #include <algorithm>
 #include <thread>
 #include <unordered_map>
@@ -61,6 +63,7 @@ struct ScatterGather::Impl {
     std::uint64_t failed_hash = 0;           // a set it refused to load (not retried until load_timeout)
     Clock::time_point failed_at{};
     Clock::time_point next_heartbeat{};
+    Clock::time_point next_refresh{};        // next Heartbeat to a busy worker (held sets)
     Clock::time_point last_heard{};          // last message received from it
     Clock::time_point last_asked{};          // last Query or Heartbeat sent to it
     Clock::time_point socket_opened{};
@@ -85,6 +88,7 @@ struct ScatterGather::Impl {
   std::unordered_map<std::uint64_t, SetPtr> by_hash;
   std::map<std::vector<std::uint32_t>, std::future<Result<SetPtr>>> encoding;
   bool dirty = false;                        // up/down changed: reassign
+  bool prune_pending = false;                // a worker dropped a set: prune_sets()
   std::uint64_t cur_seq = 0;
   bool in_round = false;
   std::vector<std::uint8_t> covered;         // per block, this round
@@ -127,13 +131,17 @@ struct ScatterGather::Impl {
       if (p.target_hash) keep[p.target_hash] = true;
       if (p.upload) keep[p.upload->hash] = true;
     }
+    prune_pending = false;
+    std::size_t dropped = 0;
     for (auto it = by_blocks.begin(); it != by_blocks.end();) {
       const bool original = std::any_of(peers.begin(), peers.end(), [&](const Peer& p) { return p.original == it->first; });
       const bool targeted = std::any_of(peers.begin(), peers.end(), [&](const Peer& p) { return p.target == it->first; });
       if (original || targeted || keep.count(it->second->hash)) { ++it; continue; }
       by_hash.erase(it->second->hash);
       it = by_blocks.erase(it);
+      ++dropped;
     }
+    if (dropped) ::malloc_trim(0);  // encoded sets are megabytes: give them back to the system
   }
 
   void refresh_targets() {
@@ -237,8 +245,10 @@ struct ScatterGather::Impl {
     if (p.epoch && h.epoch != p.epoch) p.upload = nullptr;  // restarted: whatever was sent is gone
     p.epoch = h.epoch;
     p.worker_id = h.worker_id;
+    const std::size_t had = p.held.size();
     p.held.clear();
     for (const Held& x : h.held) p.held.push_back(x.hash);
+    if (p.held.size() < had) prune_pending = true;  // it dropped a set: maybe ours can go too
     if (p.upload && p.holds(p.upload->hash)) p.upload = nullptr;  // load acknowledged
     if (!p.up) { p.up = true; p.misses = 0; dirty = true; }
     if (p.ask == Ask::Heartbeat) p.replied = true;
@@ -380,6 +390,7 @@ struct ScatterGather::Impl {
   void begin_round_sends(const geom::Pose& pose, Clock::time_point now) {
     revive_silent(now);
     if (dirty) reassign();
+    else if (prune_pending) prune_sets();
     refresh_targets();
     for (Peer& p : peers) maybe_start_upload(p, now);
     choose_sets();
@@ -396,6 +407,10 @@ struct ScatterGather::Impl {
         ++out->workers_asked;
         p.last_asked = now;
         if (!send(p, QueryMsg{cur_seq, p.asked->hash, pose})) p.asked = nullptr;  // counts as a miss
+        if (now >= p.next_refresh) {  // the Hello it answers with may arrive in any later round
+          p.next_refresh = now + cfg.held_refresh_period;
+          send(p, HeartbeatMsg{++p.nonce});
+        }
       } else if (!uploading(p)) {
         p.ask = Ask::Heartbeat;  // unknown or empty: it must at least say hello by the deadline
         if (now >= p.next_heartbeat || !p.epoch) heartbeat(p, now);
@@ -549,9 +564,12 @@ bool ScatterGather::wait_ready(Clock::time_point deadline) {
 std::vector<WorkerStatus> ScatterGather::workers() const {
   std::vector<WorkerStatus> v;
   for (const Impl::Peer& p : impl_->peers)
-    v.push_back({p.endpoint, p.up, p.worker_id, p.epoch, p.misses, p.target, p.holds(p.target_hash), p.bytes_sent, p.loads_sent});
+    v.push_back({p.endpoint, p.up, p.worker_id, p.epoch, p.misses, p.target, p.holds(p.target_hash), p.bytes_sent,
+                 p.loads_sent, p.held.size()});
   return v;
 }
+
+std::size_t ScatterGather::encoded_sets() const { return impl_->by_blocks.size(); }
 
 std::uint32_t ScatterGather::blocks_total() const { return static_cast<std::uint32_t>(impl_->covered.size()); }
 

@@ -33,6 +33,9 @@ struct ScatterConfig {
   std::vector<std::string> endpoints;        ///< worker i is endpoints[i] (tcp://, ipc://, inproc://)
   std::uint32_t miss_limit = 3;              ///< K: consecutive missed deadlines before a worker is down
   std::chrono::milliseconds heartbeat_period{100};  ///< Heartbeats to down workers
+  /// Heartbeats to busy workers too, this often: their Hello says which block sets they still
+  /// hold (they drop idle ones), so the client can drop its copies and memory stays flat.
+  std::chrono::milliseconds held_refresh_period{5000};
   std::chrono::milliseconds load_timeout{10000};    ///< an upload not acknowledged in this long fails
   /// A worker asked but silent this long gets a fresh socket: libzmq gives up on a connection for
   /// good after a protocol error (e.g. an oversized or garbled frame) and never reconnects it.
@@ -79,6 +82,7 @@ struct WorkerStatus {
   bool holds_target = false;             ///< it has acknowledged its target block set
   std::uint64_t bytes_sent = 0;          ///< LoadBlocks bytes sent to it so far
   std::uint32_t loads_sent = 0;          ///< block sets sent to it so far
+  std::size_t sets_held = 0;             ///< block sets it holds, from its last Hello
 };
 
 /// The collision thread's client to the worker fleet.
@@ -100,6 +104,7 @@ class ScatterGather {
   bool wait_ready(Clock::time_point deadline);
 
   std::vector<WorkerStatus> workers() const;       ///< a snapshot of every worker
+  std::size_t encoded_sets() const;                ///< block sets this client keeps encoded (memory)
   std::uint32_t blocks_total() const;              ///< blocks in the partition
 
  private:

@@ -51,6 +51,7 @@ Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::strin
     else if (key == "worker_id") s = get_int<std::uint32_t>(node, key, source, 0, 1u << 20, c.worker_id);
     else if (key == "log_level") s = get_string(node, key, source, c.log_level);
     else if (key == "max_sets") s = get_int<std::uint32_t>(node, key, source, 1, 64, c.max_sets);
+    else if (key == "idle_set_s") s = get_int<std::uint32_t>(node, key, source, 0, 86400, c.idle_set_s);
     else if (key == "max_blockset_mb") s = get_int<std::uint64_t>(node, key, source, 1, 1u << 20, c.max_blockset_mb);
     else if (key == "insecure") {
       if (!node.is_boolean()) return fail(where(source, node), ": insecure: expected true or false");
@@ -75,7 +76,7 @@ Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::strin
       }
     } else {
       return fail(where(source, node), ": unknown key '", key,
-                  "' (known: bind, worker_id, log_level, insecure, max_sets, max_blockset_mb, [curve])");
+                  "' (known: bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb, [curve])");
     }
     if (!s) return Error{s.error()};
   }

@@ -18,6 +18,7 @@ struct DaemonConfig {
   std::string log_level = "info";              ///< error, warning, info or debug
   bool insecure = false;                       ///< allow a non-loopback bind without CURVE
   std::uint32_t max_sets = 3;                  ///< block sets kept in memory (LRU)
+  std::uint32_t idle_set_s = 30;               ///< drop a set not queried for this long (0 = never; not the newest)
   std::uint64_t max_blockset_mb = 1024;        ///< largest block set accepted, MiB (memory bound)
   std::string curve_secret_key_file;           ///< [curve] secret_key_file (Z85), empty: no CURVE
   std::vector<std::string> curve_allowed_clients;  ///< [curve] allowed_clients (Z85 public keys)

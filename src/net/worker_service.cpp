@@ -1,6 +1,8 @@
 // WorkerService (worker_service.hpp).
 #include "net/worker_service.hpp"
 
+#include <malloc.h>
+
 #include <algorithm>
 #include <random>
 #include <stdexcept>
@@ -154,11 +156,15 @@ bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
   zmq::pollitem_t items[2] = {{sock_.handle(), 0, ZMQ_POLLIN, 0}, {zap_.handle(), 0, ZMQ_POLLIN, 0}};
   const int n = zap_ ? 2 : 1;
   try {
-    if (zmq::poll(items, n, timeout) <= 0) return true;
+    if (zmq::poll(items, n, timeout) <= 0) {
+      drop_idle_sets();
+      return true;
+    }
   } catch (const zmq::error_t& e) {
     return e.num() != ETERM;  // EINTR (a signal): let the caller look at its stop flag
   }
   if (n == 2 && (items[1].revents & ZMQ_POLLIN)) handle_zap();
+  drop_idle_sets();
   if (!(items[0].revents & ZMQ_POLLIN)) return true;
   // Handle what is queued now, then return so the caller can tick (watchdog, stop flag).
   for (int budget = 0; budget < 1024; ++budget) {
@@ -184,6 +190,21 @@ bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
     }
   }
   return true;
+}
+
+void WorkerService::drop_idle_sets() {
+  const auto now = std::chrono::steady_clock::now();
+  if (cfg_.idle_set_ttl.count() <= 0 || now < next_idle_check_ || sets_.size() < 2) return;
+  next_idle_check_ = now + std::chrono::seconds(1);
+  std::size_t dropped = 0;
+  for (auto it = std::next(sets_.begin()); it != sets_.end();) {  // never the most recently used
+    if (now - it->last_used < cfg_.idle_set_ttl) { ++it; continue; }
+    log(6, st::fail("dropped block set ", std::hex, it->hash, std::dec, ": not queried for ",
+                    std::chrono::duration_cast<std::chrono::seconds>(now - it->last_used).count(), " s").message);
+    it = sets_.erase(it);
+    ++dropped;
+  }
+  if (dropped) ::malloc_trim(0);  // give the freed trees back to the system, not just to malloc
 }
 
 void WorkerService::run(const std::atomic<bool>& stop, std::chrono::milliseconds period, const std::function<void()>& tick) {
@@ -219,6 +240,7 @@ void WorkerService::on_query(const zmq::message_t& peer, const QueryMsg& q) {
     return;
   }
   sets_.splice(sets_.begin(), sets_, it);  // most recently used first
+  it->last_used = std::chrono::steady_clock::now();
   pairs_.clear();
   const QueryStats st = it->backend->query(q.pose, pairs_);
   std::sort(pairs_.begin(), pairs_.end());
@@ -272,7 +294,8 @@ void WorkerService::on_load(const zmq::message_t& peer, const LoadBlocksMsg& m) 
   }
   sets_.remove_if([&](const Loaded& l) { return l.hash == done.hash; });
   while (!sets_.empty() && sets_.size() >= std::max<std::uint32_t>(cfg_.max_sets, 1)) sets_.pop_back();
-  sets_.push_front(Loaded{done.hash, static_cast<std::uint32_t>(set.value().object.faces.size()), std::move(backend)});
+  sets_.push_front(Loaded{done.hash, static_cast<std::uint32_t>(set.value().object.faces.size()), std::move(backend),
+                          std::chrono::steady_clock::now()});
   ++counters_.loads;
   const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   log(6, st::fail("loaded block set ", std::hex, done.hash, std::dec, ": ", set.value().blocks.size(), " blocks, ",

@@ -32,6 +32,10 @@ struct CurveServer {
 struct WorkerConfig {
   std::uint32_t worker_id = 0;     ///< reported in Hello and Result
   std::uint32_t max_sets = 3;      ///< block sets kept in memory (LRU): own share + reassigned variants
+  /// A held set not queried for this long is dropped and its memory returned to the system (the
+  /// most recently used set is always kept). Reassigned variants live through a fault and go
+  /// once it is over; a variant needed again is sent again. Zero: keep sets until LRU evicts them.
+  std::chrono::milliseconds idle_set_ttl{30'000};
   /// Decode limits. Memory is bounded by (max_sets + 1) · max_blockset_bytes for block sets plus
   /// rcvhwm frames of at most max_chunk_bytes queued per client connection.
   Limits limits = default_limits();
@@ -79,6 +83,7 @@ class WorkerService {
     std::uint64_t hash;
     std::uint32_t faces;
     std::unique_ptr<CollisionBackend> backend;
+    std::chrono::steady_clock::time_point last_used;
   };
   struct Assembly {
     std::uint64_t hash = 0, total = 0;
@@ -94,6 +99,7 @@ class WorkerService {
   HelloMsg hello(std::uint64_t echo) const;
   void log(int priority, const std::string& text) const { if (cfg_.log) cfg_.log(priority, text); }
   void note_bad(const std::string& why);
+  void drop_idle_sets();  ///< at most once a second: idle_set_ttl
 
   WorkerConfig cfg_;
   BackendFactory factory_;
@@ -108,6 +114,7 @@ class WorkerService {
   std::vector<FacePair> pairs_;   // reused per query
   std::vector<std::uint8_t> out_; // reused encode buffer
   std::chrono::steady_clock::time_point bad_logged_{};
+  std::chrono::steady_clock::time_point next_idle_check_{};
   std::uint64_t bad_unlogged_ = 0;
 };
 

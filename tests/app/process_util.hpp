@@ -25,6 +25,7 @@ inline pid_t spawn_spheretouch(const std::vector<std::string>& args, const std::
   const pid_t pid = fork();
   REQUIRE(pid >= 0);
   if (pid == 0) {
+    prctl(PR_SET_PDEATHSIG, SIGKILL);  // a test that dies leaves no run behind
     if (!std::freopen(log.c_str(), "a", stdout) || dup2(fileno(stdout), 2) < 0) _exit(120);
     std::vector<char*> argv;
     for (std::string& s : all) argv.push_back(s.data());

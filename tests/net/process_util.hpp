@@ -4,6 +4,7 @@
 #include <fcntl.h>
 #include <netinet/in.h>
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -42,13 +43,15 @@ inline int free_port() {
   return ntohs(a.sin_port);
 }
 
-/// A child process whose stdout and stderr go to `log`; killed (SIGKILL) and reaped on destruction.
+/// A child process whose stdout and stderr go to `log`; killed (SIGKILL) and reaped on destruction,
+/// and killed by the kernel if the test process dies first.
 class Process {
  public:
   Process(const std::vector<std::string>& argv, std::string log) : log_(std::move(log)) {
     pid_ = ::fork();
     REQUIRE(pid_ >= 0);
     if (pid_ == 0) {
+      ::prctl(PR_SET_PDEATHSIG, SIGKILL);  // a test that dies (crash, SIGPIPE) leaves no worker behind
       const int fd = ::open(log_.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
       if (fd >= 0) { ::dup2(fd, 1); ::dup2(fd, 2); }
       std::vector<char*> a;

@@ -266,3 +266,66 @@ TEST_CASE("a worker restarted before it is marked down (new epoch) is reloaded; 
   CHECK(ws[2].loads_sent == 1);
   for (const auto& x : ws) CHECK(x.up);
 }
+
+TEST_CASE("after a fault, idle reassigned sets are dropped by workers and client; a second fault reloads them") {
+  zmq::context_t ctx;
+  const test::NetScene s = test::small_scene(10, 24);
+  const auto poses = test::contact_poses(s, 6);
+  const std::string t = tag();
+  WorkerConfig base;
+  base.idle_set_ttl = 300ms;
+  auto wr = LocalWorkers::start(ctx, 4, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, base);
+  REQUIRE(wr.ok());
+  LocalWorkers& w = *wr.value();
+  ScatterConfig cfg;
+  cfg.endpoints = w.endpoints();
+  cfg.heartbeat_period = 20ms;
+  cfg.held_refresh_period = 50ms;
+  auto cr = ScatterGather::create(ctx, cfg, s.probe, s.object, s.blocks);
+  REQUIRE_MESSAGE(cr.ok(), cr.error());
+  ScatterGather& c = *cr.value();
+  REQUIRE(c.wait_ready(Clock::now() + 10s));
+  std::uint64_t seq = 0;
+  // Rounds until `done` holds (or 20 s): every complete round is exact.
+  auto rounds_until = [&](auto done) {
+    const auto give_up = Clock::now() + 20s;
+    for (int k = 0; Clock::now() < give_up; ++k) {
+      const auto& pose = poses[std::size_t(k) % poses.size()];
+      RoundResult r = c.round(++seq, pose, Clock::now() + 50ms);
+      if (r.complete) CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+      if (done(r)) return true;
+      std::this_thread::sleep_for(1ms);
+    }
+    return false;
+  };
+  const std::size_t originals = c.encoded_sets();
+  CHECK(originals == 4);
+
+  // Fault: worker 2 stops; the survivors load enlarged sets (2 held each), the client encodes them.
+  w.stop(2);
+  REQUIRE(rounds_until([&](const RoundResult& r) { return r.complete && !c.workers()[2].up; }));
+  REQUIRE(rounds_until([&](const RoundResult&) {
+    const auto ws = c.workers();
+    return ws[0].sets_held == 2 && ws[1].sets_held == 2 && ws[3].sets_held == 2;
+  }));
+  CHECK(c.encoded_sets() == originals + 3);
+  std::vector<std::uint32_t> loads;
+  for (const WorkerStatus& x : c.workers()) loads.push_back(x.loads_sent);
+
+  // Back: worker 2 restarts and is reloaded; 300 ms later the survivors drop their idle enlarged
+  // sets, say so in their next Hello, and the client drops its copies.
+  REQUIRE(w.restart(2).ok());
+  REQUIRE(rounds_until([&](const RoundResult& r) {
+    const auto ws = c.workers();
+    return r.complete && r.workers_replied == 4 && ws[0].sets_held == 1 && ws[1].sets_held == 1 &&
+           ws[3].sets_held == 1 && c.encoded_sets() == originals;
+  }));
+
+  // The same fault again: the enlarged sets are encoded and sent again, results exact again.
+  w.stop(2);
+  REQUIRE(rounds_until([&](const RoundResult& r) {
+    const auto ws = c.workers();
+    return r.complete && !ws[2].up && ws[0].holds_target && ws[1].holds_target && ws[3].holds_target;
+  }));
+  for (int i : {0, 1, 3}) CHECK(c.workers()[std::size_t(i)].loads_sent == loads[std::size_t(i)] + 1);
+}
