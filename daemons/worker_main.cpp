@@ -52,19 +52,35 @@ int main(int argc, char** argv) {
                "(binds loopback unless told otherwise)"};
   std::string config_file, bind, log_level;
   std::int64_t worker_id = -1;
-  bool insecure = false, keygen = false;
-  app.add_option("--config", config_file, "TOML config (bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb)")
+  std::string key_out;
+  bool insecure = false, keygen = false, force = false;
+  app.add_option("--config", config_file,
+                 "TOML config (bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb, [curve])")
       ->check(CLI::ExistingFile);
   app.add_option("--bind", bind, "endpoint to bind: tcp://HOST:PORT or ipc://PATH (overrides the config; default tcp://127.0.0.1:5555)");
   app.add_option("--id", worker_id, "worker id (overrides the config)")->check(CLI::Range(0, 1 << 20));
   app.add_option("--log-level", log_level, "error, warning, info or debug (overrides the config)");
   app.add_flag("--insecure", insecure, "allow binding a non-loopback address without CURVE (trusted networks only)");
-  app.add_flag("--keygen", keygen, "print a new CURVE key pair (Z85) and exit");
+  auto* kg = app.add_flag("--keygen", keygen,
+                          "make a new CURVE key pair and exit: with --out, write PREFIX.key (mode 0600) and PREFIX.pub "
+                          "(as `spheretouch keygen`); without, print 'public <Z85>' and 'secret <Z85>'");
+  app.add_option("--out", key_out, "--keygen: write the pair to PREFIX.key and PREFIX.pub")->needs(kg);
+  app.add_flag("--force", force, "--keygen --out: replace an existing pair")->needs(kg);
   CLI11_PARSE(app, argc, argv);
   if (keygen) {
-    char pub[41] = {}, sec[41] = {};
-    if (zmq_curve_keypair(pub, sec) != 0) { std::fprintf(stderr, "libzmq has no CURVE support\n"); return 1; }
-    std::printf("public %s\nsecret %s\n", pub, sec);
+    auto keys = st::net::generate_curve_key_pair();
+    if (!keys) { std::fprintf(stderr, "spheretouch-worker: %s\n", keys.error().c_str()); return 1; }
+    if (key_out.empty()) {
+      std::printf("public %s\nsecret %s\n", keys.value().public_z85.c_str(), keys.value().secret_z85.c_str());
+      return 0;
+    }
+    if (auto s = st::net::write_key_pair(key_out, keys.value(), force); !s) {
+      std::fprintf(stderr, "spheretouch-worker: %s\n", s.error().c_str());
+      return 2;
+    }
+    const st::net::KeyFiles f = st::net::key_files(key_out);
+    std::printf("wrote %s (secret key, mode 0600: keep it private)\nwrote %s (public key)\npublic key: %s\n",
+                f.secret_file.c_str(), f.public_file.c_str(), keys.value().public_z85.c_str());
     return 0;
   }
 
@@ -99,9 +115,12 @@ int main(int argc, char** argv) {
   if (!cfg.curve_secret_key_file.empty()) {
     auto key = st::net::read_secret_key(cfg.curve_secret_key_file);
     if (!key) { log_line(3, key.error()); return 2; }
-    wc.curve = st::net::CurveServer{key.value(), cfg.curve_allowed_clients};
+    auto clients = st::net::allowed_client_keys(cfg);
+    if (!clients) { log_line(3, clients.error()); return 2; }
+    for (const std::string& k : clients.value()) log_line(7, "allowed CURVE client " + k);
+    wc.curve = st::net::CurveServer{key.value(), clients.value()};
     log_line(6, "CURVE on: public key " + st::net::curve_public_of(key.value()).value() + ", " +
-                    std::to_string(cfg.curve_allowed_clients.size()) + " allowed client key(s)");
+                    std::to_string(clients.value().size()) + " allowed client key(s)");
   }
   int rc = 0;
   {
@@ -131,7 +150,8 @@ int main(int argc, char** argv) {
     notify("STOPPING=1");
     const auto& c = svc.counters();
     log_line(6, "stopping: " + std::to_string(c.queries) + " queries, " + std::to_string(c.loads) + " loads, " +
-                    std::to_string(c.bad_messages) + " bad messages");
+                    std::to_string(c.bad_messages) + " bad messages" +
+                    (wc.curve ? ", " + std::to_string(c.refused) + " CURVE clients refused" : std::string()));
   }
   return rc;
 }

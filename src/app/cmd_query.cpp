@@ -25,6 +25,7 @@ struct QueryArgs {
   int repeat = 1;
   int workers = 0;
   std::string connect;
+  std::string server_key, client_key;  ///< CURVE key files for --connect
   int approx_layer = geom::kExact;
   bool count_only = false, stats = false, no_cache = false;
 };
@@ -52,6 +53,12 @@ std::uint32_t count_contacts(const std::vector<geom::FacePair>& pairs, std::vect
 }
 
 void run_query(const QueryArgs& a) {
+  // CURVE keys first: a bad key file fails before any mesh is loaded.
+  Result<ClientCurve> curve = load_client_curve(a.server_key, a.client_key, "--server-key", "--client-key");
+  if (!curve) {
+    std::fprintf(stderr, "spheretouch: %s\n", curve.error().c_str());
+    throw CLI::RuntimeError(2);
+  }
   const geom::LoadedMesh probe = load_or_exit(a.probe, a.load);
   const geom::LoadedMesh object = load_or_exit(a.object, a.load);
   Result<std::vector<geom::Pose>> poses = geom::read_poses(a.poses);
@@ -78,6 +85,8 @@ void run_query(const QueryArgs& a) {
     spec.layer = a.layer;
     spec.block_size = a.block_size;
     spec.leaf_faces = a.leaf_faces;
+    spec.curve = curve.value();
+    spec.note = [](const std::string& m) { std::fprintf(stderr, "spheretouch: %s\n", m.c_str()); };
     Result<std::unique_ptr<Fleet>> f = start_fleet(spec, probe.mesh, object.mesh, otree);
     if (!f) {
       std::fprintf(stderr, "spheretouch: %s\n", f.error().c_str());
@@ -202,7 +211,21 @@ void add_query(CLI::App& app) {
                   "run the query over N in-process workers (inproc://), the object's layer-n sphere blocks dealt "
                   "block-cyclically; same output")
       ->check(CLI::Range(1, 64));
-  cmd->add_option("--connect", a->connect, "run the query over worker daemons EP1,EP2,... (tcp:// or ipc://); same output");
+  CLI::Option* connect =
+      cmd->add_option("--connect", a->connect, "run the query over worker daemons EP1,EP2,... (tcp:// or ipc://); same output");
+  CLI::Option* server_key =
+      cmd->add_option("--server-key", a->server_key,
+                      "CURVE (with --connect): the workers' public key file, PREFIX.pub from `spheretouch keygen`")
+          ->type_name("FILE")
+          ->needs(connect);
+  CLI::Option* client_key =
+      cmd->add_option("--client-key", a->client_key,
+                      "CURVE (with --connect): this client's key pair PREFIX: PREFIX.key (mode 0600) and PREFIX.pub; "
+                      "its public key must be in the workers' allowed_clients")
+          ->type_name("PREFIX")
+          ->needs(connect);
+  server_key->needs(client_key);
+  client_key->needs(server_key);
   cmd->add_option("--tree-cache", a->cache_dir, "directory of cached sphere trees")->capture_default_str();
   cmd->add_flag("--no-cache", a->no_cache, "build trees in memory only");
   cmd->callback([a] { run_query(*a); });

@@ -36,6 +36,7 @@ struct RunArgs {
   double duration_s = -1;
   int workers = -1;
   std::string connect, out;
+  std::string server_key, client_key;  ///< CURVE key files (override [workers] server_key, client_key)
   bool split = false;       ///< the servo as its own process
   std::string shm_name;     ///< segment name ("" = /spheretouch-<pid>)
 };
@@ -70,6 +71,16 @@ void run(const RunArgs& a) {
       s.endpoints.push_back(rest.substr(0, p));
     }
   }
+  // CURVE keys for worker daemons: the flags override the scene; read now, so a bad key file
+  // fails before any mesh is loaded. Errors name the flag or the scene field.
+  std::string server_what = s.file + ": workers.server_key", client_what = s.file + ": workers.client_key";
+  if (!a.server_key.empty()) { s.server_key = a.server_key; server_what = "--server-key"; }
+  if (!a.client_key.empty()) { s.client_key = a.client_key; client_what = "--client-key"; }
+  Result<ClientCurve> curve = load_client_curve(s.server_key, s.client_key, server_what, client_what);
+  if (!curve) die(2, curve.error());
+  if (curve.value().enabled() && s.endpoints.empty())
+    die(2, "CURVE keys (" + server_what + ", " + client_what + ") are for worker daemons: give their endpoints "
+           "([workers] endpoints or --connect)");
   const bool tty = s.status == "tty" || (s.status == "auto" && ::isatty(STDOUT_FILENO));
   const bool show = s.status != "off";
 
@@ -123,6 +134,8 @@ void run(const RunArgs& a) {
     spec.block_size = s.block_size;
     spec.leaf_faces = s.tree.leaf_faces;
     spec.miss_limit = std::uint32_t(s.down_after);
+    spec.curve = curve.value();
+    spec.note = [](const std::string& m) { std::fprintf(stderr, "%s\n", m.c_str()); };
     std::fprintf(stderr, "starting workers and loading their blocks ...\n");
     Result<std::unique_ptr<Fleet>> f = start_fleet(spec, probe, object, otree);
     if (!f) die(2, f.error());
@@ -408,6 +421,14 @@ void add_run(CLI::App& app) {
   cmd->add_option("--workers", a->workers, "in-process workers (overrides [workers] count; 0 = collide in the collision thread)")
       ->check(CLI::Range(0, 64));
   cmd->add_option("--connect", a->connect, "worker daemons EP1,EP2,... (tcp:// or ipc://; overrides [workers])");
+  cmd->add_option("--server-key", a->server_key,
+                  "CURVE: the workers' public key file, PREFIX.pub from `spheretouch keygen` (overrides [workers] "
+                  "server_key)")
+      ->type_name("FILE");
+  cmd->add_option("--client-key", a->client_key,
+                  "CURVE: this client's key pair PREFIX: PREFIX.key (mode 0600) and PREFIX.pub; its public key must be "
+                  "in the workers' allowed_clients (overrides [workers] client_key)")
+      ->type_name("PREFIX");
   cmd->add_option("--out", a->out, "run directory (default: a new runs/<timestamp>)");
   cmd->add_flag("--split", a->split,
                 "run the haptic servo as its own process on the shared-memory segment: it keeps the device\n"

@@ -12,5 +12,6 @@ void add_build(CLI::App& app);   ///< spheretouch build MESH -o FILE (sphere-tre
 void add_run(CLI::App& app);     ///< spheretouch run SCENE [--split] (the main job)
 void add_servo(CLI::App& app);   ///< spheretouch servo ... (hidden: the servo process of run --split)
 void add_monitor(CLI::App& app); ///< spheretouch monitor [--name SEGMENT] (watch a live run)
+void add_keygen(CLI::App& app);  ///< spheretouch keygen --out PREFIX (CURVE key pair files)
 
 }  // namespace st::app

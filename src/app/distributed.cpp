@@ -3,6 +3,11 @@
 
 #include <unistd.h>
 
+#include <algorithm>
+#include <cstdio>
+#include <map>
+
+#include "net/endpoint_probe.hpp"
 #include "net/tree_backend.hpp"
 
 namespace st::app {
@@ -11,6 +16,85 @@ int Fleet::up() const {
   int n = 0;
   for (const net::WorkerStatus& w : client->workers()) n += w.up;
   return n;
+}
+
+namespace {
+
+/// Seconds as the user reads them ("2 s", "0.5 s").
+std::string seconds(std::chrono::milliseconds ms) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%g s", double(ms.count()) / 1000.0);
+  return b;
+}
+
+/// What to do about a probe's finding, for the error message.
+std::string advice(const net::ProbeResult& p, const FleetSpec& spec) {
+  switch (p.outcome) {
+    case net::ProbeOutcome::auth_refused:
+      return "; this client's public key " + spec.curve.client.public_z85 +
+             " is not in the worker's [curve] allowed_clients (or allowed_clients_files): add it there, or use a "
+             "client key that is (the worker logs the refusal)";
+    case net::ProbeOutcome::security_mismatch:
+      return spec.curve.enabled() ? "; remove the client keys, or configure the worker's [curve]"
+                                  : "; give the workers' public key and a client key pair (--server-key FILE "
+                                    "--client-key PREFIX, or [workers] server_key / client_key)";
+    default:
+      return "";
+  }
+}
+
+}  // namespace
+
+Result<ClientCurve> load_client_curve(const std::string& server_key_file, const std::string& client_prefix,
+                                      const std::string& server_what, const std::string& client_what) {
+  ClientCurve c;
+  if (server_key_file.empty() && client_prefix.empty()) return c;
+  if (server_key_file.empty()) return fail(client_what, " is given but ", server_what, " is not: CURVE needs both");
+  if (client_prefix.empty()) return fail(server_what, " is given but ", client_what, " is not: CURVE needs both");
+  Result<std::string> server = net::read_public_key(server_key_file);
+  if (!server) return fail(server_what, ": ", server.error());
+  Result<net::CurveKeyPair> client = net::read_key_pair(client_prefix);
+  if (!client) return fail(client_what, ": ", client.error());
+  c.server_public = std::move(server).value();
+  c.client = std::move(client).value();
+  return c;
+}
+
+Status wait_for_fleet(Fleet& fleet, const FleetSpec& spec, const net::ScatterConfig& cfg) {
+  const auto start = net::Clock::now();
+  const auto until = start + spec.ready_timeout;
+  // First wait briefly: a daemon that has not said Hello by then is probed, and a refused key or
+  // a security mismatch ends the start now instead of after ready_timeout.
+  if (fleet.client->wait_ready(std::min(until, start + spec.hello_timeout))) return Ok{};
+  std::map<std::string, net::ProbeResult> probed;
+  auto probe_silent = [&] {
+    for (const net::WorkerStatus& w : fleet.client->workers())
+      if (w.epoch == 0 && !fleet.local)
+        probed[w.endpoint] = net::probe_endpoint(fleet.ctx, w.endpoint, cfg.curve_server_public, cfg.curve_public,
+                                                 cfg.curve_secret, std::chrono::milliseconds(2000));
+  };
+  probe_silent();
+  for (const auto& [ep, p] : probed)
+    if (p.definitive())
+      return fail("worker ", ep, " did not answer Hello within ", seconds(spec.hello_timeout), ": ", p.detail,
+                  advice(p, spec));
+  if (spec.note)
+    for (const auto& [ep, p] : probed)
+      spec.note("worker " + ep + " has not answered Hello after " + seconds(spec.hello_timeout) + " (" + p.detail +
+                "); waiting up to " + seconds(spec.ready_timeout));
+  if (fleet.client->wait_ready(until)) return Ok{};
+  probed.clear();
+  probe_silent();
+  std::string who;
+  for (const net::WorkerStatus& w : fleet.client->workers()) {
+    if (w.holds_target) continue;
+    who += (who.empty() ? "" : "; ") + w.endpoint;
+    if (auto it = probed.find(w.endpoint); it != probed.end())
+      who += " never answered Hello: " + it->second.detail + advice(it->second, spec);
+    else
+      who += " answered but did not acknowledge its block set";
+  }
+  return fail("workers did not load their blocks within ", seconds(spec.ready_timeout), ": ", who);
 }
 
 Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Mesh& probe, const geom::Mesh& object,
@@ -22,8 +106,16 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
   net::ScatterConfig cfg;
   cfg.miss_limit = spec.miss_limit;
   cfg.leaf_faces = spec.leaf_faces;
+  if (spec.curve.enabled() && spec.endpoints.empty())
+    return fail("CURVE keys (server key, client key) are for worker daemons; in-process workers need none "
+                "(give the daemons' endpoints with --connect or [workers] endpoints)");
   if (!spec.endpoints.empty()) {
     cfg.endpoints = spec.endpoints;
+    if (spec.curve.enabled()) {
+      cfg.curve_server_public = spec.curve.server_public;
+      cfg.curve_public = spec.curve.client.public_z85;
+      cfg.curve_secret = spec.curve.client.secret_z85;
+    }
     fleet->description = std::to_string(spec.endpoints.size()) + " worker daemon" + (spec.endpoints.size() == 1 ? "" : "s");
   } else {
     if (spec.workers < 1) return fail("distribution: no workers (use --workers N or --connect EP,...)");
@@ -44,12 +136,7 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
       net::ScatterGather::create(fleet->ctx, cfg, probe, object, std::move(blocks).value());
   if (!sg) return fail("scatter-gather: ", sg.error());
   fleet->client = std::move(sg).value();
-  if (!fleet->client->wait_ready(net::Clock::now() + spec.ready_timeout)) {
-    std::string who;
-    for (const net::WorkerStatus& w : fleet->client->workers())
-      if (!w.holds_target) who += (who.empty() ? "" : ", ") + w.endpoint;
-    return fail("workers did not load their blocks within ", spec.ready_timeout.count(), " ms: ", who);
-  }
+  if (Status s = wait_for_fleet(*fleet, spec, cfg); !s) return Error{s.error()};
   return fleet;
 }
 

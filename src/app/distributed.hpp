@@ -1,18 +1,35 @@
 // The app's side of distribution: start N in-process workers (inproc://, the embedded default)
 // or connect to worker daemons, deal the object's layer-n sphere blocks over them and wait until
-// every worker holds its share. Used by `query --workers/--connect` and by `run`.
+// every worker holds its share; with CURVE keys for daemons that require them, and a clear error
+// (endpoint, reason, what to fix) when a daemon refuses this client. Used by `query
+// --workers/--connect` and by `run`.
 #pragma once
 #include <chrono>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
 #include <zmq.hpp>
 
 #include "geom/sphere_tree.hpp"
+#include "net/curve_keys.hpp"
 #include "net/local_workers.hpp"
 #include "net/scatter_gather.hpp"
 
 namespace st::app {
+
+/// A client's CURVE settings: the workers' public key and this client's key pair, Z85.
+struct ClientCurve {
+  std::string server_public;  ///< the workers' (fleet's) public key; empty: no CURVE
+  net::CurveKeyPair client;   ///< this client's pair; its public key is in the workers' allow-list
+  bool enabled() const { return !server_public.empty(); }  ///< keys were given
+};
+
+/// Reads a client's CURVE settings from the workers' public key file and this client's PREFIX
+/// (PREFIX.key, mode 0600, and PREFIX.pub if present). Both or neither: two empty paths give
+/// plain settings. Errors name the file and `server_what` / `client_what` (the flag or field).
+Result<ClientCurve> load_client_curve(const std::string& server_key_file, const std::string& client_prefix,
+                                      const std::string& server_what, const std::string& client_what);
 
 /// How to reach the workers.
 struct FleetSpec {
@@ -22,6 +39,12 @@ struct FleetSpec {
   std::uint32_t leaf_faces = geom::DefaultTreeParams().leaf_faces;  ///< tree knob sent to workers
   std::uint32_t miss_limit = 3;        ///< missed deadlines before a worker is marked down
   std::chrono::milliseconds ready_timeout{30000};  ///< time allowed for the first upload
+  /// A daemon silent this long is probed: a refused CURVE key or a security mismatch fails the
+  /// start at once (waiting cannot help); anything else waits out ready_timeout.
+  std::chrono::milliseconds hello_timeout{2000};
+  ClientCurve curve;                   ///< CURVE keys for worker daemons (empty: plain)
+  /// Progress notes while the start waits (a daemon still silent after hello_timeout); may be empty.
+  std::function<void(const std::string&)> note;
 };
 
 /// A running fleet: its context, the in-process workers (if any) and the client.
@@ -34,6 +57,12 @@ struct Fleet {
   /// Workers currently up (not marked down).
   int up() const;
 };
+
+/// Waits until every worker of a started fleet holds its blocks. A daemon silent after
+/// hello_timeout is probed (net::probe_endpoint); a refused CURVE key or a security mismatch
+/// fails at once, naming the endpoint and what to fix; otherwise it waits out ready_timeout and
+/// says, per worker, what went wrong.
+Status wait_for_fleet(Fleet& fleet, const FleetSpec& spec, const net::ScatterConfig& cfg);
 
 /// Starts the fleet and waits until every worker holds its blocks; errors say which step failed.
 Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Mesh& probe, const geom::Mesh& object,

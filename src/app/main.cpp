@@ -17,6 +17,7 @@ int main(int argc, char** argv) {
   st::app::add_run(app);
   st::app::add_monitor(app);
   st::app::add_servo(app);
+  st::app::add_keygen(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

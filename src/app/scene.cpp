@@ -11,6 +11,7 @@
 #include "app/toml_reader.hpp"
 #include "geom/mesh_io.hpp"
 #include "geom/primitives.hpp"
+#include "net/curve_keys.hpp"
 
 namespace st::app {
 namespace {
@@ -128,6 +129,24 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     for (const std::string& ep : s.endpoints)
       if (ep.rfind("tcp://", 0) != 0 && ep.rfind("ipc://", 0) != 0)
         r.error("endpoints", "expected tcp://HOST:PORT or ipc://PATH endpoints (found '" + ep + "')");
+    // CURVE keys: paths relative to the scene; read (and the secret's mode checked) when the run
+    // connects, so the servo process that re-reads the scene never touches them.
+    auto resolve = [&](const std::string& p) {
+      return p.empty() || std::filesystem::path(p).is_absolute() ? p : dir + "/" + p;
+    };
+    r.string("server_key", s.server_key);
+    r.string("client_key", s.client_key);
+    s.server_key = resolve(s.server_key);
+    s.client_key = resolve(s.client_key);
+    if (!s.server_key.empty() && s.client_key.empty())
+      r.error("client_key", "server_key is set but client_key is not: CURVE needs this client's key pair too");
+    else if (s.server_key.empty() && !s.client_key.empty())
+      r.error("server_key", "client_key is set but server_key is not: CURVE needs the workers' public key too");
+    if (!s.server_key.empty() && !std::filesystem::exists(s.server_key))
+      r.error("server_key", "file " + s.server_key + " does not exist (the workers' PREFIX.pub from `spheretouch keygen`)");
+    if (!s.client_key.empty() && !std::filesystem::exists(net::key_files(s.client_key).secret_file))
+      r.error("client_key", "file " + net::key_files(s.client_key).secret_file +
+                                " does not exist (make the pair with `spheretouch keygen --out PREFIX`)");
     if (Status st = r.finish(); !st) return Error{st.error()};
   }
   {

@@ -49,6 +49,8 @@ struct Scene {
   std::uint32_t layer = 2, block_size = 1;  ///< distribution: sphere layer and blocks per worker
   int workers = 2;                     ///< in-process workers (0 = collide in the collision thread)
   std::vector<std::string> endpoints;  ///< worker daemons (overrides `workers`)
+  std::string server_key;              ///< CURVE: the workers' public key file (resolved path; "" = plain)
+  std::string client_key;              ///< CURVE: this client's key pair PREFIX (PREFIX.key, PREFIX.pub)
   double deadline_ms = 50;             ///< scatter-gather round deadline, ms
   int down_after = 3;                  ///< missed deadlines before a worker is marked down
   double collision_rate_hz = 0;        ///< cap on collision rounds per second (0 = as fast as possible)

@@ -1,10 +1,10 @@
 // Worker daemon configuration (worker_config.hpp).
 #include "net/worker_config.hpp"
 
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <toml++/toml.h>
-#include <sys/stat.h>
 
 #include <cctype>
 #include <cstdlib>
@@ -71,7 +71,17 @@ Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::strin
               return fail(where(source, e), ": ", ckey, ": expected 40-character Z85 public keys");
             c.curve_allowed_clients.push_back(*e.value<std::string>());
           }
-        } else return fail(where(source, cn), ": unknown key '", ckey, "' (known: secret_key_file, allowed_clients)");
+        } else if (ckey == "curve.allowed_clients_files") {
+          const toml::array* a = cn.as_array();
+          if (!a) return fail(where(source, cn), ": ", ckey, ": expected an array of public key file paths");
+          c.curve_allowed_clients_files.clear();
+          for (const toml::node& e : *a) {
+            if (!e.is_string() || e.value<std::string>()->empty())
+              return fail(where(source, e), ": ", ckey, ": expected public key file paths (PREFIX.pub)");
+            c.curve_allowed_clients_files.push_back(*e.value<std::string>());
+          }
+        } else return fail(where(source, cn), ": unknown key '", ckey,
+                           "' (known: secret_key_file, allowed_clients, allowed_clients_files)");
         if (!s) return Error{s.error()};
       }
     } else {
@@ -88,7 +98,16 @@ Result<DaemonConfig> load_daemon_config(const std::string& path, DaemonConfig ba
   if (!in) return fail(path, ": cannot open");
   std::ostringstream ss;
   ss << in.rdbuf();
-  return parse_daemon_config(ss.str(), path, std::move(base));
+  Result<DaemonConfig> c = parse_daemon_config(ss.str(), path, std::move(base));
+  if (!c) return c;
+  // Key files named relative to the config (not to whatever directory the daemon starts in).
+  const std::filesystem::path dir = std::filesystem::path(path).parent_path();
+  auto resolve = [&](std::string& f) {
+    if (!f.empty() && f[0] != '$' && std::filesystem::path(f).is_relative()) f = (dir / f).string();
+  };
+  resolve(c.value().curve_secret_key_file);
+  for (std::string& f : c.value().curve_allowed_clients_files) resolve(f);
+  return c;
 }
 
 bool is_local_endpoint(const std::string& ep) {
@@ -112,10 +131,11 @@ Status check_daemon_config(const DaemonConfig& c) {
   if (c.bind.rfind("tcp://", 0) != 0 && c.bind.rfind("ipc://", 0) != 0)
     return fail("bind: '", c.bind, "': expected tcp://HOST:PORT or ipc://PATH");
   const bool curve = !c.curve_secret_key_file.empty();
-  if (curve && c.curve_allowed_clients.empty())
-    return fail("[curve]: secret_key_file is set but allowed_clients is empty: no client could connect");
-  if (!curve && !c.curve_allowed_clients.empty())
-    return fail("[curve]: allowed_clients is set but secret_key_file is not");
+  const bool clients = !c.curve_allowed_clients.empty() || !c.curve_allowed_clients_files.empty();
+  if (curve && !clients)
+    return fail("[curve]: secret_key_file is set but allowed_clients and allowed_clients_files are empty: "
+                "no client could connect");
+  if (!curve && clients) return fail("[curve]: allowed clients are set but secret_key_file is not");
   for (const std::string& k : c.curve_allowed_clients)
     if (Status s = check_z85_key(k, "[curve] allowed_clients: '" + k + "'"); !s) return s;
   if (c.bind.rfind("ipc://", 0) == 0 && curve) return fail("[curve]: CURVE over ipc:// is pointless; use file permissions");
@@ -125,24 +145,14 @@ Status check_daemon_config(const DaemonConfig& c) {
   return Ok{};
 }
 
-Result<std::string> read_secret_key(const std::string& path_in) {
-  std::string path = path_in;
-  const std::string var = "$CREDENTIALS_DIRECTORY";
-  if (path.rfind(var, 0) == 0) {
-    const char* dir = std::getenv("CREDENTIALS_DIRECTORY");
-    if (!dir) return fail(path_in, ": $CREDENTIALS_DIRECTORY is not set (use LoadCredential= in the unit)");
-    path = dir + path.substr(var.size());
+Result<std::vector<std::string>> allowed_client_keys(const DaemonConfig& c) {
+  std::vector<std::string> keys = c.curve_allowed_clients;
+  for (const std::string& f : c.curve_allowed_clients_files) {
+    Result<std::string> k = read_public_key(f);
+    if (!k) return fail("[curve] allowed_clients_files: ", k.error());
+    keys.push_back(std::move(k).value());
   }
-  struct stat st {};
-  if (::stat(path.c_str(), &st) != 0) return fail(path, ": cannot stat the CURVE secret key file");
-  if (st.st_mode & 077) return fail(path, ": the CURVE secret key file is readable by group or others (chmod 600)");
-  std::ifstream in(path);
-  std::string line;
-  if (!std::getline(in, line)) return fail(path, ": empty");
-  while (!line.empty() && std::isspace(static_cast<unsigned char>(line.back()))) line.pop_back();
-  while (!line.empty() && std::isspace(static_cast<unsigned char>(line.front()))) line.erase(line.begin());
-  if (Status s = check_z85_key(line, path + ": first line"); !s) return Error{s.error()};
-  return line;
+  return keys;
 }
 
 int log_priority(const std::string& level) {

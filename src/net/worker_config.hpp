@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "geom/result.hpp"
+#include "net/curve_keys.hpp"
 
 namespace st::net {
 
@@ -22,6 +23,7 @@ struct DaemonConfig {
   std::uint64_t max_blockset_mb = 1024;        ///< largest block set accepted, MiB (memory bound)
   std::string curve_secret_key_file;           ///< [curve] secret_key_file (Z85), empty: no CURVE
   std::vector<std::string> curve_allowed_clients;  ///< [curve] allowed_clients (Z85 public keys)
+  std::vector<std::string> curve_allowed_clients_files;  ///< [curve] allowed_clients_files (PREFIX.pub paths)
 };
 
 /// Default configuration (loopback, worker 0).
@@ -29,7 +31,7 @@ inline DaemonConfig default_daemon_config() { return DaemonConfig{}; }
 
 /// Parses TOML text over `base`; unknown keys and wrong types are errors naming the key and line.
 Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::string& source, DaemonConfig base = {});
-/// Reads and parses a config file.
+/// Reads and parses a config file; relative key file paths are taken relative to its directory.
 Result<DaemonConfig> load_daemon_config(const std::string& path, DaemonConfig base = {});
 
 /// True for tcp:// on 127.0.0.0/8, [::1] or localhost, and for ipc:// and inproc:// (not on a network).
@@ -37,9 +39,9 @@ bool is_local_endpoint(const std::string& endpoint);
 /// Refuses a non-local bind unless CURVE (secret key file and allowed clients) is configured or
 /// `insecure` is set; checks log_level, the endpoint scheme and the client keys.
 Status check_daemon_config(const DaemonConfig& c);
-/// Reads a Z85 CURVE secret key from the first line of `path`; a leading "$CREDENTIALS_DIRECTORY"
-/// is expanded (systemd LoadCredential=). Refuses files readable by group or others.
-Result<std::string> read_secret_key(const std::string& path);
+/// The admitted client public keys: allowed_clients, then the key of each allowed_clients_files
+/// entry (read_public_key; errors name the file).
+Result<std::vector<std::string>> allowed_client_keys(const DaemonConfig& c);
 
 /// Syslog priority of a log level name (3 error, 4 warning, 6 info, 7 debug), or -1.
 int log_priority(const std::string& level);

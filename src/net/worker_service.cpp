@@ -104,19 +104,6 @@ void WorkerService::send_error(const zmq::message_t& peer, ErrorCode code, std::
   send(peer, ErrorMsg{code, ref, std::move(text)});
 }
 
-Status check_z85_key(const std::string& z85, const std::string& what) {
-  std::uint8_t raw[32];
-  if (z85.size() != 40 || !zmq_z85_decode(raw, z85.c_str())) return fail(what, ": not a 40-character Z85 CURVE key");
-  return Ok{};
-}
-
-Result<std::string> curve_public_of(const std::string& secret_z85) {
-  if (Status s = check_z85_key(secret_z85, "secret key"); !s) return Error{s.error()};
-  char pub[41] = {};
-  if (zmq_curve_public(pub, secret_z85.c_str()) != 0) return fail("secret key: libzmq has no CURVE support");
-  return std::string(pub);
-}
-
 void WorkerService::handle_zap() {
   // Request frames: version, request id, domain, address, routing id, mechanism, credentials.
   std::vector<zmq::message_t> f;
@@ -134,9 +121,23 @@ void WorkerService::handle_zap() {
     const std::string key(static_cast<const char*>(f[6].data()), 32);
     ok = std::find(allowed_.begin(), allowed_.end(), key) != allowed_.end();
     if (!ok) {
-      char z85[41] = {};
-      zmq_z85_encode(z85, static_cast<const std::uint8_t*>(f[6].data()), 32);
-      log(4, std::string("refused CURVE client ") + z85 + " from " + std::string(f[3].to_string_view()) + ": not in allowed_clients");
+      ++counters_.refused;
+      constexpr std::size_t kMaxRefusedKeys = 1024;             // bounds the map under a key-rotating flood
+      constexpr auto kRefusalLogInterval = std::chrono::seconds(60);  // a retrying client: one line a minute
+      if (refusals_.size() >= kMaxRefusedKeys && !refusals_.count(key)) refusals_.clear();
+      Refusal& r = refusals_[key];
+      const auto now = std::chrono::steady_clock::now();
+      if (r.logged == std::chrono::steady_clock::time_point{} || now - r.logged >= kRefusalLogInterval) {
+        char z85[41] = {};
+        zmq_z85_encode(z85, static_cast<const std::uint8_t*>(f[6].data()), 32);
+        log(4, std::string("refused CURVE client ") + z85 + " from " + std::string(f[3].to_string_view()) +
+                   ": not in allowed_clients" +
+                   (r.unlogged ? " (" + std::to_string(r.unlogged) + " more refusals of this key not logged)" : ""));
+        r.logged = now;
+        r.unlogged = 0;
+      } else {
+        ++r.unlogged;
+      }
     }
   }
   const std::string request_id = f.size() > 1 ? f[1].to_string() : std::string();

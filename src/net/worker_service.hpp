@@ -13,10 +13,12 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <unordered_map>
 #include <vector>
 #include <zmq.hpp>
 
 #include "net/backend.hpp"
+#include "net/curve_keys.hpp"
 #include "net/protocol.hpp"
 
 namespace st::net {
@@ -57,6 +59,7 @@ struct WorkerCounters {
   std::uint64_t bad_messages = 0;  ///< undecodable or misframed messages
   std::uint64_t errors_sent = 0;   ///< Error replies sent
   std::uint64_t heartbeats = 0;    ///< Heartbeats answered
+  std::uint64_t refused = 0;       ///< CURVE handshakes refused (client key not allowed)
 };
 
 /// One worker; not thread-safe: construct, bind and run it on one thread.
@@ -116,12 +119,14 @@ class WorkerService {
   std::chrono::steady_clock::time_point bad_logged_{};
   std::chrono::steady_clock::time_point next_idle_check_{};
   std::uint64_t bad_unlogged_ = 0;
+  // Refused client keys (raw): each is logged when first seen, then at most once a minute with a
+  // count, so a client retrying with a wrong key cannot flood the log. Bounded: cleared when full.
+  struct Refusal {
+    std::chrono::steady_clock::time_point logged{};
+    std::uint64_t unlogged = 0;
+  };
+  std::unordered_map<std::string, Refusal> refusals_;
 };
-
-/// Checks a Z85 CURVE key (40 characters that decode to 32 bytes); the error names `what`.
-Status check_z85_key(const std::string& z85, const std::string& what);
-/// The public key of a Z85 secret key, Z85.
-Result<std::string> curve_public_of(const std::string& secret_z85);
 
 /// Sets the socket options every spheretouch socket uses: LINGER 0, the given high-water marks,
 /// ZMQ_MAXMSGSIZE = max_message_bytes (libzmq drops a peer that sends more).

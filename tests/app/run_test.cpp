@@ -189,6 +189,13 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\ncontinuous_n = 5\n", "force.continuous_n: must not exceed peak_n"},
       {"[probe]\nbuiltin = \"capsule\"\n[object\n", "TOML syntax"},
       {"[probe]\nbuiltin = \"capsule\"\nmesh = \"a.off\"\n[object]\nbuiltin = \"box\"\n", "probe.mesh"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nserver_key = \"/nowhere/fleet.pub\"\n",
+       "workers.client_key: server_key is set but client_key is not"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nclient_key = \"c\"\n",
+       "workers.server_key: client_key is set but server_key is not"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nserver_key = \"/nowhere/fleet.pub\"\n"
+       "client_key = \"/nowhere/c\"\n", "workers.server_key: file /nowhere/fleet.pub does not exist"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nserver_key = 3\n", "workers.server_key: expected a string"},
   };
   for (const auto& [text, want] : cases) {
     auto r = st::app::parse_scene(text, "bad.toml", ".");

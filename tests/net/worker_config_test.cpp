@@ -1,7 +1,7 @@
 // Tests src/net/worker_config.*: TOML parsing (unknown keys named), and the safe-by-default bind policy.
 #include <doctest/doctest.h>
 
-#include <sys/stat.h>
+#include <filesystem>
 
 #include "net/worker_config.hpp"
 #include "test_util.hpp"
@@ -73,7 +73,7 @@ TEST_CASE("CURVE config: a secret key file needs allowed clients with valid keys
   DaemonConfig c;
   c.bind = "tcp://0.0.0.0:5555";
   c.curve_secret_key_file = "/etc/spheretouch/worker.key";
-  CHECK(check_daemon_config(c).error().find("allowed_clients is empty") != std::string::npos);
+  CHECK(check_daemon_config(c).error().find("allowed_clients and allowed_clients_files are empty") != std::string::npos);
   c.curve_allowed_clients = {"not a key"};
   CHECK(check_daemon_config(c).error().find("Z85") != std::string::npos);
   c.curve_allowed_clients = {k40};
@@ -83,14 +83,38 @@ TEST_CASE("CURVE config: a secret key file needs allowed clients with valid keys
   CHECK_FALSE(check_daemon_config(d).ok());
 }
 
-TEST_CASE("read_secret_key refuses world-readable files and reads the first line") {
+TEST_CASE("allowed_clients_files: parsed, resolved against the config's directory, read as public key files") {
   st::test::TempDir dir;
-  const std::string f = dir.file("k");
-  st::test::write_file(f, "JTKVSB%%)wK0E.X)V>+}o?pNmC{O&4W4b!Ni{Lh6\n");  // libzmq test vector secret key
-  ::chmod(f.c_str(), 0644);
-  CHECK(read_secret_key(f).error().find("chmod 600") != std::string::npos);
-  ::chmod(f.c_str(), 0600);
-  auto k = read_secret_key(f);
-  REQUIRE_MESSAGE(k.ok(), k.error());
-  CHECK(k.value() == "JTKVSB%%)wK0E.X)V>+}o?pNmC{O&4W4b!Ni{Lh6");
+  const std::string k40 = "Yne@$w-vo<fVvi]a<NY6T1ed:M$fCG*[IaLV{hID";
+  const std::string other = "rq:rM>}U?@Lns47E1%kR.o@n%FcmmsL/@{H8]yf7";
+  std::filesystem::create_directories(dir.file("clients"));
+  st::test::write_file(dir.file("clients/alice.pub"), other + "\n");
+  st::test::write_file(dir.file("w.toml"), "[curve]\nsecret_key_file = \"fleet.key\"\nallowed_clients = ['" + k40 +
+                                                "']\nallowed_clients_files = [\"clients/alice.pub\"]\n");
+  auto c = load_daemon_config(dir.file("w.toml"));
+  REQUIRE_MESSAGE(c.ok(), c.error());
+  CHECK(c.value().curve_secret_key_file == dir.file("fleet.key"));
+  REQUIRE(c.value().curve_allowed_clients_files.size() == 1);
+  CHECK(c.value().curve_allowed_clients_files[0] == dir.file("clients/alice.pub"));
+  CHECK(check_daemon_config(c.value()).ok());
+  auto keys = allowed_client_keys(c.value());
+  REQUIRE_MESSAGE(keys.ok(), keys.error());
+  CHECK(keys.value() == std::vector<std::string>{k40, other});
+
+  // Files alone are enough; a missing or malformed file is an error naming it.
+  DaemonConfig d;
+  d.curve_secret_key_file = "/etc/k";
+  d.curve_allowed_clients_files = {dir.file("clients/bob.pub")};
+  CHECK(check_daemon_config(d).ok());
+  auto missing = allowed_client_keys(d);
+  REQUIRE_FALSE(missing.ok());
+  CHECK(missing.error().find("allowed_clients_files: " + dir.file("clients/bob.pub")) != std::string::npos);
+  d.curve_allowed_clients_files = {dir.file("fleet.key")};
+  CHECK(allowed_client_keys(d).error().find("not a secret key file") != std::string::npos);
+  d.curve_secret_key_file.clear();
+  CHECK_FALSE(check_daemon_config(d).ok());  // clients without a server key
+
+  auto bad = parse_daemon_config("[curve]\nallowed_clients_files = \"x.pub\"\n", "w.toml");
+  REQUIRE_FALSE(bad.ok());
+  CHECK(bad.error().find("w.toml:2: curve.allowed_clients_files: expected an array") != std::string::npos);
 }
