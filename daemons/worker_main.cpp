@@ -3,6 +3,8 @@
 // Logs to stderr (with <N> syslog prefixes when journald reads it); under systemd it sends
 // READY=1 once bound and WATCHDOG=1 pings; SIGTERM/SIGINT stop it within 0.1 s.
 #include <CLI/CLI.hpp>
+#include <malloc.h>
+
 #include <atomic>
 #include <chrono>
 #include <csignal>
@@ -48,6 +50,10 @@ void notify(const char* state) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // One malloc arena: block-set chunks arrive in buffers allocated by ZeroMQ's I/O thread; in a
+  // per-thread arena their freed memory stays resident, in the main one malloc_trim() returns it
+  // when idle sets are dropped (perf/soak.sh: worker memory flat across reassignments).
+  mallopt(M_ARENA_MAX, 1);
   CLI::App app{"spheretouch-worker: holds sphere blocks in memory and answers collision queries "
                "(binds loopback unless told otherwise)"};
   std::string config_file, bind, log_level;

@@ -81,9 +81,8 @@ class TcpProxy {
         fds.push_back({l.upstream, POLLIN, 0});
       }
       if (::poll(fds.data(), fds.size(), 10) <= 0) continue;
-      if (fds[0].revents & POLLIN) accept_one();
       std::vector<std::size_t> dead;
-      for (std::size_t i = 0; i < links_.size(); ++i) {
+      for (std::size_t i = 0; i < (fds.size() - 1) / 2; ++i) {  // the links that were polled
         for (int side = 0; side < 2; ++side) {
           const pollfd& p = fds[1 + 2 * i + std::size_t(side)];
           if (!(p.revents & (POLLIN | POLLHUP | POLLERR))) continue;
@@ -101,6 +100,7 @@ class TcpProxy {
         ::close(links_[*it].upstream);
         links_.erase(links_.begin() + std::ptrdiff_t(*it));
       }
+      if (fds[0].revents & POLLIN) accept_one();  // after the loop: fds and links_ stay in step
     }
   }
 
