@@ -193,6 +193,25 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
   CHECK(has(r.output, "s.toml:6: force.peak_n: expected a value in"));
 }
 
+TEST_CASE("scene files: a path the system cannot look up is an error, not an exception (fuzz finding)") {
+  // fuzz_scene: a 300-character file name made std::filesystem::exists throw (ENAMETOOLONG) out of
+  // parse_scene, killing the program instead of naming the field.
+  const std::string long_name(300, 'a');
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"[probe]\nmesh = \"" + long_name + "\"\n[object]\nbuiltin = \"box\"\n", "probe.mesh: cannot look up"},
+      {"[probe]\nbuiltin = \"box\"\n[object]\nmesh = \"model:" + long_name + "\"\n", "object.mesh: cannot look up"},
+      {"[probe]\nbuiltin = \"box\"\n[object]\nbuiltin = \"box\"\n[device]\nscript = \"" + long_name + "\"\n",
+       "device.script: trajectory cannot look up"},
+  };
+  for (const auto& [text, want] : cases) {
+    st::Result<st::app::Scene> r = st::app::parse_scene(text, "long.toml", ".");
+    REQUIRE_FALSE(r.ok());
+    INFO(r.error());
+    CHECK(has(r.error(), want));
+    CHECK(has(r.error(), "File name too long"));
+  }
+}
+
 TEST_CASE("scene files: configs/demo.toml and configs/small.toml parse, with the documented values") {
   const std::string root = std::getenv("ST_SOURCE_ROOT") ? std::getenv("ST_SOURCE_ROOT") : ".";
   auto demo = st::app::load_scene(root + "/configs/demo.toml");
