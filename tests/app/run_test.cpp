@@ -177,7 +177,9 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
       {"[probe]\nbuiltin = \"capsule\"\n[object\n", "TOML syntax"},
       {"[probe]\nbuiltin = \"capsule\"\nmesh = \"a.off\"\n[object]\nbuiltin = \"box\"\n", "probe.mesh"},
   };
-  for (const auto& [text, want] : cases) {
+  for (const auto& item : cases) {
+    const auto& text = item.first;  // not a structured binding: INFO captures it (clang < 16)
+    const auto& want = item.second;
     auto r = st::app::parse_scene(text, "bad.toml", ".");
     INFO(text);
     REQUIRE_FALSE(r.ok());

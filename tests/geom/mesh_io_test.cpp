@@ -264,9 +264,11 @@ TEST_CASE("hostile PLY: truncated or inconsistent files are refused with a messa
     return r.error();
   };
   // fuzz_mesh's first finding: a binary header cut off before end_header crashed assimp 5.2.5
-  // (read past the buffer); our reader stops at the end of the text.
+  // (read past the buffer); our reader refuses the broken line, and a header without
+  // end_header ends where the text ends.
   CHECK(contains(error("ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty flo\0\0\0\0@\0\0"s),
-                 "h.ply: file ends inside the header"));
+                 "h.ply:4: property without a name"));
+  CHECK(contains(error("ply\nformat binary_little_endian 1.0\nelement vertex 5\n"), "h.ply: file ends inside the header"));
   const std::string head = "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
                            "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
   CHECK(contains(error(head + std::string(35, '\0')), "h.ply: byte 169: element 'vertex': 3 items of at least 12 bytes do not fit in the 35 bytes left"));
@@ -306,7 +308,8 @@ TEST_CASE("STL (ours): ASCII in double precision, several solids, hostile files 
   // our reader names the line.
   CHECK(contains(error("solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 0\n"), "h.stl:4: facet 0: '' is not a number"));
   CHECK(contains(error("solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\n"), "h.stl: file ends inside facet 0"));
-  CHECK(contains(error("solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nendloop\n"), "h.stl: file ends inside facet 0"));
+  CHECK(contains(error("solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\n"),
+                 "h.stl: file ends inside facet 0"));
   CHECK(contains(error("solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nendloop\nendfacet\n"),
                  "h.stl:6: facet 0: has 2 vertices (expected at least 3)"));
   CHECK(contains(error("solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 inf 0\n"), "h.stl:4: facet 0: coordinate 'inf' is not finite"));
