@@ -385,7 +385,9 @@ void add_haptic_impl(CLI::App& app) {
       std::printf("wake-up latency at %.0f Hz, %.0f s per variant, %s; real-time: %s\n", a->rate_hz, a->seconds,
                   a->no_load ? "no load" : "other core saturated", rt_report.c_str());
       std::printf("%-6s %10s %10s %10s %10s %10s %8s\n", "", "p50", "p99", "p99.9", "max", "ticks", "misses");
-      for (auto [name, s] : {std::pair<const char*, const LatencyStats*>{"bare", &bare}, {"loop", &loop}}) {
+      for (const auto& row : {std::pair<const char*, const LatencyStats*>{"bare", &bare}, {"loop", &loop}}) {
+        const char* name = row.first;
+        const LatencyStats* s = row.second;  // not a structured binding: the lambda below captures it (clang < 16)
         auto us = [&](double q) { return static_cast<double>(s->wake->percentile_ns(q)) / 1000.0; };
         std::printf("%-6s %7.1f us %7.1f us %7.1f us %7.1f us %10llu %8llu\n", name, us(0.5), us(0.99), us(0.999),
                     static_cast<double>(s->wake->max_ns()) / 1000.0, static_cast<unsigned long long>(s->ticks),

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs every doctest suite: the release build, then (unless ST_SANITIZERS=0) the whole suite
-# under ASan+UBSan and the concurrent suites (rt, net) under TSan. Closes with one line
-# "tests: N passed, N failed" (doctest test cases summed over every run).
+# under ASan+UBSan and the concurrent suites (rt, net) under TSan, then each libFuzzer target for
+# ST_FUZZ seconds (default 30, 0 skips). Closes with one line "tests: N passed, N failed"
+# (doctest test cases summed over every run).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 jobs="${ST_JOBS:-2}"
@@ -50,7 +51,8 @@ if [ "${ST_SANITIZERS:-1}" != 0 ]; then
   # Sanitizer builds compile only the test programs and the executables the tests start, at -O1
   # without debug info to keep CI within its time on 2 cores (reports keep function names).
   if configure build-asan --buildtype=plain -Doptimization=1 -Db_sanitize=address,undefined -Db_lundef=false -Dnative=false; then
-    build_targets build-asan spheretouch daemons/spheretouch-worker tests/test_geom tests/test_rt tests/test_net tests/test_app
+    build_targets build-asan spheretouch daemons/spheretouch-worker tests/test_geom tests/test_rt tests/test_net tests/test_app \
+      tests/fuzz/fuzz_wire_replay tests/fuzz/fuzz_mesh_replay tests/fuzz/fuzz_scene_replay tests/fuzz/fuzz_pose_replay
     UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 ASAN_OPTIONS=detect_leaks=1 LSAN_OPTIONS=suppressions=$PWD/tests/lsan.supp run_suites build-asan
   fi
   # -Wno-tsan: gcc warns that TSan does not model atomic_thread_fence (SeqLock); its payload words
@@ -58,6 +60,14 @@ if [ "${ST_SANITIZERS:-1}" != 0 ]; then
   if configure build-tsan --buildtype=plain -Doptimization=1 -Db_sanitize=thread -Db_lundef=false -Dnative=false -Dcpp_args=-Wno-tsan; then
     build_targets build-tsan spheretouch daemons/spheretouch-worker tests/test_rt tests/test_net
     TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1:suppressions=$PWD/tests/tsan.supp run_suites build-tsan rt net
+  fi
+  # libFuzzer targets (clang, ASan+UBSan, LeakSanitizer): each runs ST_FUZZ seconds (default 30;
+  # 0 skips) from a copy of its committed corpus, two at a time; any crash, leak, UBSan report,
+  # timeout or violated property fails the run (tests/fuzz/run_fuzz.sh).
+  fuzz_secs="${ST_FUZZ:-30}"
+  if [ "$fuzz_secs" != 0 ]; then
+    echo "== tests/fuzz/run_fuzz.sh $fuzz_secs"
+    ST_JOBS="$jobs" tests/fuzz/run_fuzz.sh "$fuzz_secs" || { echo "fuzzing failed (reproducers and logs named above)"; status=1; }
   fi
 fi
 

@@ -18,6 +18,15 @@ namespace {
 
 constexpr double kMs = 1e6;  // ns per ms
 
+/// Empty when `path` exists, else why not. Only asks (a stat): parsing loads no file. A path the
+/// system refuses to look up (a name too long, no permission) is an error here, never an exception.
+std::string lookup(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec)) return {};
+  if (ec) return "cannot look up " + path + ": " + ec.message();
+  return "file " + path + " does not exist";
+}
+
 void read_body(TomlReader& r, BodySpec& b, const std::string& dir, const std::string& field) {
   std::string mesh;
   r.string("mesh", mesh);
@@ -33,9 +42,9 @@ void read_body(TomlReader& r, BodySpec& b, const std::string& dir, const std::st
   if (mesh.empty() && b.builtin.empty()) r.error("mesh", "expected a mesh path (or \"model:NAME\") or a builtin shape");
   if (mesh.rfind("model:", 0) == 0) b.mesh = model_dir() + "/" + mesh.substr(6);
   else if (!mesh.empty()) b.mesh = std::filesystem::path(mesh).is_absolute() ? mesh : dir + "/" + mesh;
-  if (!b.mesh.empty() && !std::filesystem::exists(b.mesh))
-    r.error("mesh", "file " + b.mesh + " does not exist" +
-                        (mesh.rfind("model:", 0) == 0 ? " (run scripts/models.sh to build the model set)" : ""));
+  if (!b.mesh.empty())
+    if (std::string why = lookup(b.mesh); !why.empty())
+      r.error("mesh", why + (mesh.rfind("model:", 0) == 0 ? " (run scripts/models.sh to build the model set)" : ""));
   (void)field;
 }
 
@@ -52,7 +61,8 @@ std::string model_dir() {
     std::filesystem::path p(std::string(buf, std::size_t(n)));
     for (int up = 0; up < 3 && p.has_parent_path(); ++up) {
       p = p.parent_path();
-      if (std::filesystem::exists(p / ".cache" / "models")) return (p / ".cache" / "models").string();
+      std::error_code ec;
+      if (std::filesystem::exists(p / ".cache" / "models", ec)) return (p / ".cache" / "models").string();
     }
   }
   return ".cache/models";
@@ -218,8 +228,9 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     r.string("script", s.device.script);
     if (s.device.script != "builtin" && !std::filesystem::path(s.device.script).is_absolute())
       s.device.script = dir + "/" + s.device.script;
-    if (s.device.script != "builtin" && !std::filesystem::exists(s.device.script))
-      r.error("script", "trajectory file " + s.device.script + " does not exist (or use \"builtin\")");
+    if (s.device.script != "builtin")
+      if (std::string why = lookup(s.device.script); !why.empty())
+        r.error("script", "trajectory " + why + " (or use \"builtin\")");
     std::vector<double> target, normal;
     if (root["device"]["target"].is_string()) {
       std::string t;

@@ -6,6 +6,7 @@
 #include <assimp/scene.h>
 
 #include <algorithm>
+#include <bit>
 #include <charconv>
 #include <chrono>
 #include <cmath>
@@ -64,6 +65,8 @@ class Lines {
     return false;
   }
   std::size_t line_no() const { return line_no_; }  ///< 1-based number of the last line returned
+  /// Byte offset just past the last line returned (where a binary PLY body starts).
+  std::size_t offset() const { return std::min(pos_, text_.size()); }
 
  private:
   std::string_view text_;
@@ -115,18 +118,21 @@ Result<LoadedMesh> finish(const std::string& name, const std::vector<Vec3>& pos,
   return out;
 }
 
-Result<LoadedMesh> load_with_assimp(const std::string& path) {
-  Assimp::Importer importer;
-  // No post-processing at all: every aiProcess step may reorder, split or merge faces.
-  const aiScene* scene = importer.ReadFile(path, 0);
-  if (!scene || !scene->mRootNode) return fail(path, ": assimp could not read it: ", importer.GetErrorString());
-  LoadReport rep;
-  rep.reader = "assimp";
-  rep.precision = "float (Debian's assimp has single-precision ai_real: ~7 significant digits)";
-  std::vector<Vec3> pos;
-  std::vector<Tri> faces;
-  // Exact-duplicate vertices are welded (formats like STL repeat them per face), so closedness
-  // and subdivision see the real topology. Welding never reorders faces.
+/// Welds exact-duplicate vertices (formats like STL repeat them per face), so closedness and
+/// subdivision see the real topology; +0 and -0 weld together. Welding never reorders faces.
+class Welder {
+ public:
+  /// Index of `q` among the distinct vertices so far, adding it if new.
+  std::uint32_t add(const Vec3& q) {
+    ++raw_;
+    auto [slot, fresh] = index_of_.try_emplace(q, static_cast<std::uint32_t>(pos_.size()));
+    if (fresh) pos_.push_back(q);
+    return slot->second;
+  }
+  const std::vector<Vec3>& positions() const { return pos_; }  ///< distinct vertices, first-seen order
+  std::size_t welded() const { return raw_ - pos_.size(); }     ///< duplicates merged
+
+ private:
   struct Hash {
     std::size_t operator()(const Vec3& v) const {
       std::size_t h = 1469598103934665603ull;
@@ -139,13 +145,26 @@ Result<LoadedMesh> load_with_assimp(const std::string& path) {
       return h;
     }
   };
-  std::unordered_map<Vec3, std::uint32_t, Hash> index_of;
+  std::unordered_map<Vec3, std::uint32_t, Hash> index_of_;
+  std::vector<Vec3> pos_;
+  std::size_t raw_ = 0;
+};
+
+Result<LoadedMesh> load_with_assimp(const std::string& path) {
+  Assimp::Importer importer;
+  // No post-processing at all: every aiProcess step may reorder, split or merge faces.
+  const aiScene* scene = importer.ReadFile(path, 0);
+  if (!scene || !scene->mRootNode) return fail(path, ": assimp could not read it: ", importer.GetErrorString());
+  LoadReport rep;
+  rep.reader = "assimp";
+  rep.precision = "float (Debian's assimp has single-precision ai_real: ~7 significant digits)";
+  Welder weld;
+  std::vector<Tri> faces;
   std::vector<std::uint32_t> poly;
   // Depth-first over the node tree in child order: meshes in the order nodes reference them,
   // each with its accumulated node transform (applied in double).
   struct Item { const aiNode* node; Eigen::Matrix4d xf; };
   std::vector<Item> stack{{scene->mRootNode, Eigen::Matrix4d::Identity()}};
-  std::size_t raw_vertices = 0;
   while (!stack.empty()) {
     Item it = stack.back();
     stack.pop_back();
@@ -156,14 +175,10 @@ Result<LoadedMesh> load_with_assimp(const std::string& path) {
     for (unsigned mi = 0; mi < it.node->mNumMeshes; ++mi) {
       const aiMesh* mesh = scene->mMeshes[it.node->mMeshes[mi]];
       std::vector<std::uint32_t> remap(mesh->mNumVertices);
-      raw_vertices += mesh->mNumVertices;
       for (unsigned v = 0; v < mesh->mNumVertices; ++v) {
         const aiVector3D& a = mesh->mVertices[v];
         const Eigen::Vector4d p = xf * Eigen::Vector4d(a.x, a.y, a.z, 1.0);
-        const Vec3 q = p.head<3>();
-        auto [slot, fresh] = index_of.try_emplace(q, static_cast<std::uint32_t>(pos.size()));
-        if (fresh) pos.push_back(q);
-        remap[v] = slot->second;
+        remap[v] = weld.add(p.head<3>());
       }
       for (unsigned f = 0; f < mesh->mNumFaces; ++f) {
         const aiFace& face = mesh->mFaces[f];
@@ -180,9 +195,9 @@ Result<LoadedMesh> load_with_assimp(const std::string& path) {
     }
     for (unsigned c = it.node->mNumChildren; c-- > 0;) stack.push_back({it.node->mChildren[c], xf});
   }
-  rep.welded_vertices = raw_vertices - pos.size();
+  rep.welded_vertices = weld.welded();
   if (faces.empty()) return fail(path, ": no triangles (", rep.skipped_primitives, " points/lines ignored)");
-  return finish(path, pos, std::move(faces), std::move(rep));
+  return finish(path, weld.positions(), std::move(faces), std::move(rep));
 }
 
 }  // namespace
@@ -310,15 +325,84 @@ Result<LoadedMesh> parse_obj(std::string_view text, const std::string& name) {
   return finish(name, pos, std::move(faces), std::move(rep));
 }
 
-Result<LoadedMesh> parse_ply_ascii(std::string_view text, const std::string& name) {
-  // Header: element/property declarations; body: whitespace-separated values in element order.
+namespace {
+
+/// PLY scalar types (the PLY 1.0 names and their sized aliases); Unknown is accepted in ASCII
+/// files only, where every value is just a token.
+enum class PlyType { Unknown, I8, U8, I16, U16, I32, U32, F32, F64 };
+
+PlyType ply_type(std::string_view t) {
+  if (t == "char" || t == "int8") return PlyType::I8;
+  if (t == "uchar" || t == "uint8") return PlyType::U8;
+  if (t == "short" || t == "int16") return PlyType::I16;
+  if (t == "ushort" || t == "uint16") return PlyType::U16;
+  if (t == "int" || t == "int32") return PlyType::I32;
+  if (t == "uint" || t == "uint32") return PlyType::U32;
+  if (t == "float" || t == "float32") return PlyType::F32;
+  if (t == "double" || t == "float64") return PlyType::F64;
+  return PlyType::Unknown;
+}
+
+std::size_t ply_size(PlyType t) {
+  switch (t) {
+    case PlyType::I8: case PlyType::U8: return 1;
+    case PlyType::I16: case PlyType::U16: return 2;
+    case PlyType::I32: case PlyType::U32: case PlyType::F32: return 4;
+    case PlyType::F64: return 8;
+    case PlyType::Unknown: break;
+  }
+  return 0;
+}
+
+bool ply_integral(PlyType t) { return t != PlyType::F32 && t != PlyType::F64 && t != PlyType::Unknown; }
+
+/// Reads binary PLY values of a declared type, in the file's byte order, never past the end.
+class PlyBinary {
+ public:
+  PlyBinary(std::string_view body, bool big_endian) : d_(body), big_(big_endian) {}
+  std::size_t left() const { return d_.size() - pos_; }  ///< bytes not yet read
+  std::size_t offset() const { return pos_; }            ///< bytes read
+  /// One value as a double (integers exactly); false at the end of the data.
+  bool read(PlyType t, double& out) {
+    const std::size_t n = ply_size(t);
+    if (n == 0 || n > left()) return false;
+    unsigned char b[8];
+    std::memcpy(b, d_.data() + pos_, n);
+    pos_ += n;
+    static_assert(std::endian::native == std::endian::little, "PlyBinary swaps big-endian data only");
+    if (big_) std::reverse(b, b + n);
+    switch (t) {
+      case PlyType::I8: { std::int8_t v; std::memcpy(&v, b, 1); out = v; break; }
+      case PlyType::U8: out = b[0]; break;
+      case PlyType::I16: { std::int16_t v; std::memcpy(&v, b, 2); out = v; break; }
+      case PlyType::U16: { std::uint16_t v; std::memcpy(&v, b, 2); out = v; break; }
+      case PlyType::I32: { std::int32_t v; std::memcpy(&v, b, 4); out = v; break; }
+      case PlyType::U32: { std::uint32_t v; std::memcpy(&v, b, 4); out = v; break; }
+      case PlyType::F32: { float v; std::memcpy(&v, b, 4); out = v; break; }
+      case PlyType::F64: std::memcpy(&out, b, 8); break;
+      case PlyType::Unknown: return false;
+    }
+    return true;
+  }
+
+ private:
+  std::string_view d_;
+  bool big_;
+  std::size_t pos_ = 0;
+};
+
+}  // namespace
+
+Result<LoadedMesh> parse_ply(std::string_view text, const std::string& name) {
+  // Header: element/property declarations; body: the values in element order, as
+  // whitespace-separated tokens (ascii) or packed in the declared types (binary).
   Lines lines(text);
   std::string_view line;
   if (!lines.next(line, false) || line != "ply") return fail(name, ":1: expected the 'ply' magic line");
-  struct Property { std::string name; bool list = false; };
+  struct Property { std::string name; bool list = false; PlyType type = PlyType::Unknown, count_type = PlyType::Unknown; };
   struct Element { std::string name; long long count = 0; std::vector<Property> props; };
   std::vector<Element> elements;
-  bool format_seen = false;
+  enum class Format { None, Ascii, Little, Big } format = Format::None;
   for (;;) {
     if (!lines.next(line, false)) return fail(name, ": file ends inside the header (no 'end_header')");
     std::string_view rest = line;
@@ -327,8 +411,10 @@ Result<LoadedMesh> parse_ply_ascii(std::string_view text, const std::string& nam
     if (kw == "comment" || kw == "obj_info") continue;
     if (kw == "format") {
       const std::string_view f = token(rest);
-      if (f != "ascii") return fail(name, ":", lines.line_no(), ": format ", quote(f), " is not ascii (binary PLY is read by assimp)");
-      format_seen = true;
+      if (f == "ascii") format = Format::Ascii;
+      else if (f == "binary_little_endian") format = Format::Little;
+      else if (f == "binary_big_endian") format = Format::Big;
+      else return fail(name, ":", lines.line_no(), ": format ", quote(f), " is not ascii, binary_little_endian or binary_big_endian");
     } else if (kw == "element") {
       Element e;
       e.name = std::string(token(rest));
@@ -341,7 +427,12 @@ Result<LoadedMesh> parse_ply_ascii(std::string_view text, const std::string& nam
       if (elements.empty()) return fail(name, ":", lines.line_no(), ": property before any element");
       Property p;
       std::string_view t = token(rest);
-      if (t == "list") { p.list = true; token(rest); token(rest); }
+      if (t == "list") {
+        p.list = true;
+        p.count_type = ply_type(token(rest));
+        t = token(rest);
+      }
+      p.type = ply_type(t);
       p.name = std::string(token(rest));
       if (p.name.empty()) return fail(name, ":", lines.line_no(), ": property without a name");
       elements.back().props.push_back(p);
@@ -349,14 +440,25 @@ Result<LoadedMesh> parse_ply_ascii(std::string_view text, const std::string& nam
       return fail(name, ":", lines.line_no(), ": unknown header line ", quote(line));
     }
   }
-  if (!format_seen) return fail(name, ": header has no 'format' line");
-  // The body is a stream of tokens; line numbers are tracked for messages.
+  if (format == Format::None) return fail(name, ": header has no 'format' line");
+  const bool binary = format != Format::Ascii;
+  if (binary)  // ASCII values are tokens whatever their type; binary ones need a size
+    for (const Element& e : elements)
+      for (const Property& p : e.props)
+        if (p.type == PlyType::Unknown || (p.list && !ply_integral(p.count_type)))
+          return fail(name, ": element '", e.name, "' property '", p.name, "': ", p.list ? "list types" : "type",
+                      " must be one of char, uchar, short, ushort, int, uint, float, double (or int8 ... float64)",
+                      p.list ? " with an integer count type" : "");
   LoadReport rep;
-  rep.reader = "spheretouch PLY (ascii) reader";
-  rep.precision = "double (correctly rounded)";
+  rep.reader = binary ? "spheretouch PLY (binary) reader" : "spheretouch PLY (ascii) reader";
+  rep.precision = binary ? "double (float properties widened exactly)" : "double (correctly rounded)";
   std::vector<Vec3> pos;
   std::vector<Tri> faces;
   std::vector<std::uint32_t> poly;
+  // The ASCII body is a stream of tokens (line numbers tracked for messages); the binary body
+  // starts right after the end_header line, its errors name the byte offset in the file.
+  const std::size_t body_at = lines.offset();
+  PlyBinary bin(text.substr(body_at), format == Format::Big);
   std::string_view rest;
   auto next_token = [&](std::string_view& t) -> bool {
     for (;;) {
@@ -366,47 +468,87 @@ Result<LoadedMesh> parse_ply_ascii(std::string_view text, const std::string& nam
       rest = line;
     }
   };
+  auto where = [&]() {
+    return binary ? name + ": byte " + std::to_string(body_at + bin.offset()) : name + ":" + std::to_string(lines.line_no());
+  };
+  // Next value of type `type` as a double; for ASCII `integer` asks for an integer token.
+  // Returns an empty string, or what went wrong.
+  auto next_value = [&](PlyType type, bool integer, double& out) -> std::string {
+    if (binary) return bin.read(type, out) ? std::string() : std::string("end");
+    std::string_view t;
+    if (!next_token(t)) return "end";
+    if (integer) {
+      long long v = 0;
+      if (!to_int(t, v)) return quote(t) + " is not an integer";
+      if (v < -(1ll << 53) || v > (1ll << 53)) return quote(t) + " is out of range";
+      out = double(v);
+      return {};
+    }
+    if (!to_double(t, out)) return quote(t) + " is not a number";
+    return {};
+  };
   bool vertices_done = false;
   for (const Element& e : elements) {
+    if (e.props.empty()) continue;  // nothing to read, however many items it declares
     const bool is_vertex = e.name == "vertex", is_face = e.name == "face";
     int axis_of[64];
     for (std::size_t k = 0; k < e.props.size() && k < 64; ++k)
       axis_of[k] = e.props[k].name == "x" ? 0 : e.props[k].name == "y" ? 1 : e.props[k].name == "z" ? 2 : -1;
     if (is_vertex) {
-      int found = 0;
-      for (std::size_t k = 0; k < e.props.size() && k < 64; ++k) found += axis_of[k] >= 0;
-      if (found != 3) return fail(name, ": element 'vertex' lacks x, y and z properties");
-      pos.reserve(std::size_t(e.count));
+      bool have[3] = {false, false, false};
+      for (std::size_t k = 0; k < e.props.size() && k < 64; ++k)
+        if (axis_of[k] >= 0) {
+          if (e.props[k].list) return fail(name, ": element 'vertex': property '", e.props[k].name, "' is a list");
+          if (have[axis_of[k]]) return fail(name, ": element 'vertex' declares property '", e.props[k].name, "' twice");
+          have[axis_of[k]] = true;
+        }
+      if (!(have[0] && have[1] && have[2])) return fail(name, ": element 'vertex' lacks x, y and z properties");
     }
+    if (binary) {  // every item takes at least one byte per property: refuse counts the data cannot hold
+      std::size_t min_bytes = 0;
+      for (const Property& p : e.props) min_bytes += p.list ? ply_size(p.count_type) : ply_size(p.type);
+      if (std::size_t(e.count) > bin.left() / min_bytes)
+        return fail(where(), ": element '", e.name, "': ", e.count, " items of at least ", min_bytes, " bytes do not fit in the ",
+                    bin.left(), " bytes left");
+    }
+    if (is_vertex) pos.reserve(pos.size() + std::size_t(e.count));
     for (long long i = 0; i < e.count; ++i) {
       Vec3 p = Vec3::Zero();
       for (std::size_t k = 0; k < e.props.size(); ++k) {
         const Property& prop = e.props[k];
-        std::string_view t;
-        if (!next_token(t)) return fail(name, ": file ends inside element '", e.name, "' ", i, " of ", e.count);
+        double d = 0;
         if (prop.list) {
-          long long n = 0;
-          if (!to_int(t, n) || n < 0 || std::size_t(n) > text.size())
-            return fail(name, ":", lines.line_no(), ": ", e.name, " ", i, ": list length ", quote(t), " is not valid");
+          std::string why = next_value(prop.count_type, true, d);
+          if (why == "end") return fail(name, ": file ends inside element '", e.name, "' ", i, " of ", e.count);
+          if (!why.empty() || d < 0 || d > double(text.size()))
+            return fail(where(), ": ", e.name, " ", i, ": list length ", why.empty() ? std::to_string(static_cast<long long>(d)) : why, " is not valid");
+          const auto n = static_cast<std::size_t>(d);
+          if (binary && n > bin.left() / ply_size(prop.type))
+            return fail(where(), ": ", e.name, " ", i, ": list of ", n, " values does not fit in the ", bin.left(), " bytes left");
           const bool indices = is_face && (prop.name == "vertex_indices" || prop.name == "vertex_index");
+          if (binary && indices && !ply_integral(prop.type))
+            return fail(where(), ": face ", i, ": vertex indices of a floating-point type");
           poly.clear();
-          for (long long j = 0; j < n; ++j) {
-            if (!next_token(t)) return fail(name, ": file ends inside ", e.name, " ", i);
+          for (std::size_t j = 0; j < n; ++j) {
+            why = next_value(prop.type, indices, d);
+            if (why == "end") return fail(name, ": file ends inside ", e.name, " ", i);
             if (!indices) continue;
-            long long v = -1;
-            if (!to_int(t, v)) return fail(name, ":", lines.line_no(), ": face ", i, ": index ", quote(t), " is not an integer");
-            if (!vertices_done || v < 0 || v >= static_cast<long long>(pos.size()))
-              return fail(name, ":", lines.line_no(), ": face ", i, ": vertex index ", v, " out of range [0, ", pos.size(), ")");
-            poly.push_back(static_cast<std::uint32_t>(v));
+            if (!why.empty()) return fail(where(), ": face ", i, ": index ", why);
+            if (!vertices_done || d < 0 || d >= static_cast<double>(pos.size()))
+              return fail(where(), ": face ", i, ": vertex index ", static_cast<long long>(d), " out of range [0, ", pos.size(), ")");
+            poly.push_back(static_cast<std::uint32_t>(d));
           }
           if (indices) {
-            if (poly.size() < 3) return fail(name, ":", lines.line_no(), ": face ", i, ": has ", poly.size(), " corners (expected at least 3)");
+            if (poly.size() < 3) return fail(where(), ": face ", i, ": has ", poly.size(), " corners (expected at least 3)");
             fan(poly, faces, rep);
           }
-        } else if (is_vertex && k < 64 && axis_of[k] >= 0) {
-          double d;
-          if (!to_double(t, d)) return fail(name, ":", lines.line_no(), ": vertex ", i, ": ", quote(t), " is not a number");
-          if (!std::isfinite(d)) return fail(name, ":", lines.line_no(), ": vertex ", i, ": coordinate ", quote(t), " is not finite");
+        } else {
+          const bool axis = is_vertex && k < 64 && axis_of[k] >= 0;
+          std::string why = next_value(prop.type, false, d);
+          if (why == "end") return fail(name, ": file ends inside element '", e.name, "' ", i, " of ", e.count);
+          if (!axis) continue;  // other properties (colour, normal, ...) are skipped
+          if (!why.empty()) return fail(where(), ": vertex ", i, ": ", why);
+          if (!std::isfinite(d)) return fail(where(), ": vertex ", i, ": coordinate ", d, " is not finite");
           p[axis_of[k]] = d;
         }
       }
@@ -419,7 +561,7 @@ Result<LoadedMesh> parse_ply_ascii(std::string_view text, const std::string& nam
 }
 
 std::vector<std::string> supported_extensions() {
-  std::vector<std::string> out{".off", ".obj", ".ply"};
+  std::vector<std::string> out{".off", ".obj", ".ply", ".stl"};
   Assimp::Importer importer;
   std::string list;
   importer.GetExtensionList(list);  // "*.3ds;*.obj;..."
@@ -429,6 +571,120 @@ std::vector<std::string> supported_extensions() {
     if (std::find(out.begin(), out.end(), item) == out.end()) out.push_back(item);
   }
   return out;
+}
+
+Result<LoadedMesh> parse_stl(std::string_view bytes, const std::string& name) {
+  LoadReport rep;
+  Welder weld;
+  std::vector<Tri> faces;
+  std::vector<std::uint32_t> poly;
+  // Binary: 80-byte header, u32 facet count N, N x {normal, 3 vertices: 12 float32; u16
+  // attribute}, little-endian; recognised by its exact size (an ASCII file can't match it by
+  // chance in practice, and binary headers often start with "solid" too).
+  if (bytes.size() >= 84) {
+    std::uint32_t n = 0;
+    std::memcpy(&n, bytes.data() + 80, 4);
+    static_assert(std::endian::native == std::endian::little, "binary STL is read with memcpy");
+    if (bytes.size() == 84 + 50 * std::uint64_t{n}) {
+      rep.reader = "spheretouch STL (binary) reader";
+      rep.precision = "float (binary STL stores float32; widened exactly)";
+      faces.reserve(n);
+      for (std::uint32_t f = 0; f < n; ++f) {
+        float c[9];
+        std::memcpy(c, bytes.data() + 84 + 50 * std::size_t{f} + 12, sizeof c);  // skip the normal
+        poly.clear();
+        for (int k = 0; k < 3; ++k) {
+          const Vec3 q(c[3 * k], c[3 * k + 1], c[3 * k + 2]);
+          if (!q.allFinite()) return fail(name, ": facet ", f, " (byte ", 84 + 50 * std::size_t{f} + 12 + 12 * k, "): vertex ", k, " is not finite");
+          poly.push_back(weld.add(q));
+        }
+        fan(poly, faces, rep);
+      }
+      rep.welded_vertices = weld.welded();
+      if (faces.empty()) return fail(name, ": no triangles (0 facets)");
+      return finish(name, weld.positions(), std::move(faces), std::move(rep));
+    }
+  }
+  // ASCII: solid NAME { facet normal n n n / outer loop / vertex x y z (3 or more) / endloop /
+  // endfacet } endsolid NAME, possibly several solids; keywords are matched per line.
+  rep.reader = "spheretouch STL (ascii) reader";
+  rep.precision = "double (correctly rounded)";
+  Lines lines(bytes);
+  std::string_view line;
+  enum class At { Outside, Solid, Facet, Loop, EndLoop } at = At::Outside;
+  std::size_t facet = 0;
+  while (lines.next(line, false)) {
+    std::string_view rest = line;
+    const std::string_view kw = token(rest);
+    auto expected = [&](const char* what) {
+      return fail(name, ":", lines.line_no(), ": expected ", what, ", found ", quote(line));
+    };
+    switch (at) {
+      case At::Outside:
+        if (kw != "solid" && facet == 0 && bytes.size() >= 84) {
+          std::uint32_t n = 0;
+          std::memcpy(&n, bytes.data() + 80, 4);
+          return fail(name, ": not an ASCII STL (no 'solid' line) and not a binary one either (", n, " facets take ",
+                      84 + 50 * std::uint64_t{n}, " bytes, the file has ", bytes.size(), ")");
+        }
+        if (kw != "solid") return expected("'solid'");
+        at = At::Solid;
+        break;
+      case At::Solid:
+        if (kw == "endsolid") { at = At::Outside; break; }
+        if (kw != "facet") return expected("'facet' or 'endsolid'");
+        if (const std::string_view n = token(rest); !n.empty()) {
+          if (n != "normal") return expected("'facet normal NX NY NZ'");
+          for (int k = 0; k < 3; ++k) {  // the normal is not used, but must be well formed
+            double d;
+            if (!to_double(token(rest), d)) return expected("'facet normal NX NY NZ'");
+          }
+        }
+        at = At::Facet;
+        break;
+      case At::Facet:
+        if (kw != "outer" || token(rest) != "loop") return expected("'outer loop'");
+        poly.clear();
+        at = At::Loop;
+        break;
+      case At::Loop:
+        if (kw == "endloop") {
+          if (poly.size() < 3) return fail(name, ":", lines.line_no(), ": facet ", facet, ": has ", poly.size(), " vertices (expected at least 3)");
+          fan(poly, faces, rep);
+          at = At::EndLoop;
+          break;
+        }
+        if (kw != "vertex") return expected("'vertex X Y Z' or 'endloop'");
+        {
+          Vec3 q;
+          for (int k = 0; k < 3; ++k) {
+            const std::string_view t = token(rest);
+            if (!to_double(t, q[k])) return fail(name, ":", lines.line_no(), ": facet ", facet, ": ", quote(t), " is not a number");
+            if (!std::isfinite(q[k])) return fail(name, ":", lines.line_no(), ": facet ", facet, ": coordinate ", quote(t), " is not finite");
+          }
+          poly.push_back(weld.add(q));
+        }
+        break;
+      case At::EndLoop:
+        if (kw != "endfacet") return expected("'endfacet'");
+        ++facet;
+        at = At::Solid;
+        break;
+    }
+  }
+  if (at == At::Outside && facet == 0 && lines.line_no() == 0) return fail(name, ": empty file");
+  if (at != At::Outside && at != At::Solid) return fail(name, ": file ends inside facet ", facet);
+  rep.welded_vertices = weld.welded();
+  if (faces.empty()) return fail(name, ": no triangles (no complete facet)");
+  return finish(name, weld.positions(), std::move(faces), std::move(rep));
+}
+
+Result<LoadedMesh> parse_mesh(std::string_view bytes, const std::string& ext, const std::string& name) {
+  if (ext == ".off") return parse_off(bytes, name);
+  if (ext == ".obj") return parse_obj(bytes, name);
+  if (ext == ".ply") return parse_ply(bytes, name);
+  if (ext == ".stl") return parse_stl(bytes, name);
+  return fail(name, ": parse_mesh reads .off, .obj, .ply and .stl, not '", ext, "'");
 }
 
 Result<LoadedMesh> load_mesh(const std::string& path, const LoadOptions& options) {
@@ -441,14 +697,10 @@ Result<LoadedMesh> load_mesh(const std::string& path, const LoadOptions& options
   probe.close();
   const std::string ext = lower_ext(path);
   Result<LoadedMesh> r = Error{""};
-  if (ext == ".off" || ext == ".obj" || ext == ".ply") {
+  if (ext == ".off" || ext == ".obj" || ext == ".ply" || ext == ".stl") {
     Result<std::string> text = slurp(path);
     if (!text) return Error{text.error()};
-    const std::string_view t = text.value();
-    if (ext == ".off") r = parse_off(t, path);
-    else if (ext == ".obj") r = parse_obj(t, path);
-    else if (t.substr(0, 200).find("format ascii") != std::string_view::npos) r = parse_ply_ascii(t, path);
-    else r = load_with_assimp(path);  // binary PLY
+    r = parse_mesh(text.value(), ext, path);
   } else {
     Assimp::Importer importer;
     if (ext.empty() || !importer.IsExtensionSupported(ext))

@@ -1,6 +1,8 @@
-// Mesh import and export. OFF, OBJ and ASCII PLY are read by our own parsers in double
-// precision (correctly rounded std::from_chars), because Debian's assimp rounds to float;
-// every other format goes through assimp with no post-processing, so face order is kept.
+// Mesh import and export. OFF, OBJ, PLY and STL (ASCII and binary) are read by our own parsers
+// in double precision (correctly rounded std::from_chars), because Debian's assimp rounds to
+// float, and because assimp 5.2.5 crashes on a truncated binary PLY header and leaks on a
+// truncated ASCII STL (found by tests/fuzz); every other format goes through assimp with no
+// post-processing, so face order is kept.
 #pragma once
 #include <string>
 #include <string_view>
@@ -45,10 +47,22 @@ Result<double> unit_to_mm(std::string_view units);
 /// polygons fan-triangulated in order: (v0, v1, v2), (v0, v2, v3), ...
 Result<LoadedMesh> load_mesh(const std::string& path, const LoadOptions& options = {});
 
-/// Parses OFF / OBJ / ASCII PLY text already in memory; `name` is used in messages.
+/// Parses OFF / OBJ / PLY already in memory; `name` is used in messages.
 Result<LoadedMesh> parse_off(std::string_view text, const std::string& name);
 Result<LoadedMesh> parse_obj(std::string_view text, const std::string& name);  ///< OBJ text
-Result<LoadedMesh> parse_ply_ascii(std::string_view text, const std::string& name);  ///< ASCII PLY
+/// PLY, ASCII or binary (either byte order): vertex x, y, z of any scalar type, faces from the
+/// face element's vertex_indices (or vertex_index) list; other elements and properties are skipped.
+Result<LoadedMesh> parse_ply(std::string_view text, const std::string& name);
+
+/// STL, binary (recognised by its exact size, 84 + 50 x facets bytes) or ASCII ("solid ...",
+/// several solids allowed); exact-duplicate vertices are welded, facets keep file order.
+Result<LoadedMesh> parse_stl(std::string_view bytes, const std::string& name);
+
+/// Parses a whole mesh file already in memory, exactly as load_mesh reads a file with extension
+/// `ext` (lower case with the dot): ".off", ".obj", ".ply" or ".stl". Other formats go through
+/// assimp and may reference companion files, so they are read from a path only (load_mesh).
+/// No unit conversion or scaling.
+Result<LoadedMesh> parse_mesh(std::string_view bytes, const std::string& ext, const std::string& name);
 
 /// Writes OFF with shortest round-trip doubles (reads back to the same coordinates).
 Status write_off(const Mesh& mesh, const std::string& path);

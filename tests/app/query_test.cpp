@@ -111,7 +111,9 @@ TEST_CASE("query: pose-file errors name the line and what is wrong") {
       {"2 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\n", ":1:"},
       {"1 0 0 nan 0 1 0 0 0 0 1 0 0 0 0 1\n", ":1:"},
   };
-  for (const auto& [text, where] : cases) {
+  for (const auto& item : cases) {
+    const auto& text = item.first;  // not a structured binding: INFO captures it (clang < 16)
+    const auto& where = item.second;
     st::test::write_file(f.poses, text);
     const auto r = run_command(f.query(""));
     INFO(text << " -> " << r.output);

@@ -197,7 +197,9 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
        "client_key = \"/nowhere/c\"\n", "workers.server_key: file /nowhere/fleet.pub does not exist"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nserver_key = 3\n", "workers.server_key: expected a string"},
   };
-  for (const auto& [text, want] : cases) {
+  for (const auto& item : cases) {
+    const auto& text = item.first;  // not a structured binding: INFO captures it (clang < 16)
+    const auto& want = item.second;
     auto r = st::app::parse_scene(text, "bad.toml", ".");
     INFO(text);
     REQUIRE_FALSE(r.ok());
@@ -211,6 +213,25 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
   const auto r = run_command(spheretouch_exe() + " run " + d.file("s.toml") + " --out " + d.file("o"));
   CHECK(r.exit_code == 2);
   CHECK(has(r.output, "s.toml:6: force.peak_n: expected a value in"));
+}
+
+TEST_CASE("scene files: a path the system cannot look up is an error, not an exception (fuzz finding)") {
+  // fuzz_scene: a 300-character file name made std::filesystem::exists throw (ENAMETOOLONG) out of
+  // parse_scene, killing the program instead of naming the field.
+  const std::string long_name(300, 'a');
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"[probe]\nmesh = \"" + long_name + "\"\n[object]\nbuiltin = \"box\"\n", "probe.mesh: cannot look up"},
+      {"[probe]\nbuiltin = \"box\"\n[object]\nmesh = \"model:" + long_name + "\"\n", "object.mesh: cannot look up"},
+      {"[probe]\nbuiltin = \"box\"\n[object]\nbuiltin = \"box\"\n[device]\nscript = \"" + long_name + "\"\n",
+       "device.script: trajectory cannot look up"},
+  };
+  for (const auto& [text, want] : cases) {
+    st::Result<st::app::Scene> r = st::app::parse_scene(text, "long.toml", ".");
+    REQUIRE_FALSE(r.ok());
+    INFO(r.error());
+    CHECK(has(r.error(), want));
+    CHECK(has(r.error(), "File name too long"));
+  }
 }
 
 TEST_CASE("scene files: configs/demo.toml and configs/small.toml parse, with the documented values") {

@@ -79,7 +79,10 @@ std::vector<std::pair<std::string, Pose>> poses_for(const Mesh& probe, const Mes
 
 void compare_at(const Body& probe, const Body& object, const std::vector<std::pair<std::string, Pose>>& poses,
                 bool all_pairs = false) {
-  for (const auto& [name, pose] : poses) {
+  for (const auto& named : poses) {
+    // Not a structured binding: CAPTURE's lambda cannot capture one before clang 16.
+    const std::string& name = named.first;
+    const Pose& pose = named.second;
     CAPTURE(name);
     const auto got = run(probe, object, pose);
     const auto want = brute_force(probe.mesh, object.mesh, pose, all_pairs);
@@ -187,7 +190,9 @@ TEST_CASE("approximate mode is a superset of exact") {
   Body probe(*hand), object(*ele);
   const auto poses = poses_for(*hand, *ele, 6, 3);
   for (int stop : {kLeafSpheres, static_cast<int>(object.tree.num_depths) - 2}) {
-    for (const auto& [name, pose] : poses) {
+    for (const auto& named : poses) {
+      const std::string& name = named.first;  // not a structured binding: CAPTURE captures it
+      const Pose& pose = named.second;
       CAPTURE(name); CAPTURE(stop);
       const auto exact = run(probe, object, pose);
       CollideOptions o;

@@ -1,0 +1,130 @@
+// Writes the generated part of the fuzz seed corpus: wire frames made by our own encoder (every
+// message type, empty and non-empty lists, a LoadBlocks carrying a whole small block set) for
+// fuzz_wire, and tiny meshes in every format fuzz_mesh reads (its first byte selects the format).
+// Scene and pose seeds are copies of real files (configs/*.toml, perf/poses/). Usage:
+//   build-fuzz/tests/fuzz/fuzz_seeds tests/fuzz/corpus
+// (overwrites the seed_* files it writes; run from any build, it needs no libFuzzer).
+#include <cstdint>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "geom/primitives.hpp"
+#include "net/block_set.hpp"
+#include "net/protocol.hpp"
+
+namespace {
+
+using namespace st;
+using namespace st::net;
+namespace fs = std::filesystem;
+
+void write(const fs::path& path, const void* data, std::size_t size) {
+  fs::create_directories(path.parent_path());
+  std::ofstream o(path, std::ios::binary | std::ios::trunc);
+  o.write(static_cast<const char*>(data), static_cast<std::streamsize>(size));
+  if (!o) { std::fprintf(stderr, "cannot write %s\n", path.c_str()); std::exit(1); }
+}
+
+void write_frame(const fs::path& dir, const std::string& name, const Message& m) {
+  const std::vector<std::uint8_t> b = encode(m);
+  write(dir / ("seed_" + name + ".bin"), b.data(), b.size());
+}
+
+geom::Pose some_pose() {
+  geom::Pose p = geom::Pose::Identity();
+  p.linear() = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  p.translation() = Eigen::Vector3d(1e6, -2.5, 0.125);
+  return p;
+}
+
+void wire_seeds(const fs::path& dir) {
+  write_frame(dir, "hello", HelloMsg{7, 0x1234567890abcdefull, 42, {{0xdeadbeefull, 1000}, {0x1ull, 0}}});
+  write_frame(dir, "hello_empty", HelloMsg{0, 1, 0, {}});
+  write_frame(dir, "loadblocks_chunk", LoadBlocksMsg{0xfeedull, 10, 4, {1, 2, 3, 4, 5, 6}});
+  write_frame(dir, "query", QueryMsg{99, 0xabcull, some_pose()});
+  write_frame(dir, "query_identity", QueryMsg{1, 2, geom::Pose::Identity()});
+  write_frame(dir, "result", ResultMsg{99, 3, 0xabcull, {10, 20, 30}, {{1, 2}, {3, 4}, {0xffffffffu, 0}}});
+  write_frame(dir, "result_empty", ResultMsg{1, 0, 0, {}, {}});
+  write_frame(dir, "heartbeat", HeartbeatMsg{0x55aa});
+  write_frame(dir, "error", ErrorMsg{ErrorCode::NotLoaded, 17, "block set 0x11 not held"});
+  // A whole block set in one chunk, as a client sends a small one: a box probe against an
+  // icosphere cut into blocks, this worker holding every other block.
+  const geom::Mesh probe = geom::make_box(geom::Vec3(4, 4, 4));
+  const geom::Mesh object = geom::make_icosphere(10.0, 1);
+  const Blocks blocks = spatial_blocks(object, 4);
+  std::vector<std::uint32_t> mine;
+  for (std::uint32_t b = 0; b < blocks.size(); b += 2) mine.push_back(b);
+  Result<BlockSet> set = make_block_set(probe, object, blocks, mine, 4);
+  if (!set) { std::fprintf(stderr, "%s\n", set.error().c_str()); std::exit(1); }
+  const std::vector<std::uint8_t> enc = encode_block_set(set.value());
+  write_frame(dir, "loadblocks_whole_set", LoadBlocksMsg{block_set_hash(enc), enc.size(), 0, enc});
+}
+
+// A square pyramid (the mesh_io tests' shape) in each format; the first byte picks the reader.
+const std::vector<geom::Vec3> kPos = {{0, 0, 0}, {2, 0, 0}, {2, 2, 0}, {0, 2, 0}, {1, 1, 1.5}};
+const std::vector<geom::Tri> kTris = {{0, 2, 1}, {0, 3, 2}, {0, 1, 4}, {1, 2, 4}, {2, 3, 4}, {3, 0, 4}};
+
+void write_mesh(const fs::path& dir, const std::string& name, char format, const std::string& body) {
+  const std::string bytes = std::string(1, format) + body;
+  write(dir / ("seed_" + name), bytes.data(), bytes.size());
+}
+
+void mesh_seeds(const fs::path& dir) {
+  write_mesh(dir, "off", 0,
+             "OFF\n# a pyramid\n5 5 0\n0 0 0\n2 0 0\n2 2 0\n0 2 0\n1 1 1.5\n4 0 3 2 1\n3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 4\n");
+  write_mesh(dir, "obj", 1,
+             "# pyramid\nv 0 0 0\nv 2 0 0\nv 2 2 0\nv 0 2 0\nv 1 1 1.5\nvn 0 0 1\nvt 0 0\ng base\nusemtl a\n"
+             "f 1/1/1 3/1/1 2/1/1\nf -5//1 -2//1 -3//1\ng sides\nf 1 2 5\nf 2 3 5\nf 3 4 5\nf 4 1 5\nl 1 2\n");
+  write_mesh(dir, "ply_ascii", 2,
+             "ply\nformat ascii 1.0\ncomment pyramid\nelement vertex 5\nproperty float x\nproperty float y\n"
+             "property float z\nproperty uchar red\nelement face 5\nproperty list uchar int vertex_indices\n"
+             "end_header\n0 0 0 1\n2 0 0 2\n2 2 0 3\n0 2 0 4\n1 1 1.5 5\n4 0 3 2 1\n3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 4\n");
+  {
+    std::string ply = "ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+                      "property float z\nelement face 6\nproperty list uchar int vertex_indices\nend_header\n";
+    for (const geom::Vec3& p : kPos)
+      for (int c = 0; c < 3; ++c) { const float f = float(p[c]); ply.append(reinterpret_cast<const char*>(&f), 4); }
+    for (const geom::Tri& t : kTris) {
+      ply += char(3);
+      for (std::uint32_t i : t) { const std::int32_t v = std::int32_t(i); ply.append(reinterpret_cast<const char*>(&v), 4); }
+    }
+    write_mesh(dir, "ply_binary", 2, ply);
+  }
+  std::string ascii = "solid pyramid\n", binary(80, ' ');
+  const auto n = static_cast<std::uint32_t>(kTris.size());
+  binary.append(reinterpret_cast<const char*>(&n), 4);
+  for (const geom::Tri& t : kTris) {
+    const geom::Vec3 nrm = (kPos[t[1]] - kPos[t[0]]).cross(kPos[t[2]] - kPos[t[0]]).normalized();
+    ascii += " facet normal " + std::to_string(nrm.x()) + " " + std::to_string(nrm.y()) + " " + std::to_string(nrm.z()) +
+             "\n  outer loop\n";
+    float f[12] = {float(nrm.x()), float(nrm.y()), float(nrm.z())};
+    for (int k = 0; k < 3; ++k) {
+      ascii += "   vertex";
+      for (int c = 0; c < 3; ++c) {
+        f[3 + 3 * k + c] = float(kPos[t[k]][c]);
+        ascii += " " + std::to_string(kPos[t[k]][c]);
+      }
+      ascii += "\n";
+    }
+    ascii += "  endloop\n endfacet\n";
+    binary.append(reinterpret_cast<const char*>(f), sizeof f);
+    binary.append(2, '\0');
+  }
+  ascii += "endsolid pyramid\n";
+  write_mesh(dir, "stl_ascii", 3, ascii);
+  write_mesh(dir, "stl_binary", 3, binary);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc != 2) { std::fprintf(stderr, "usage: %s CORPUS_DIR (tests/fuzz/corpus)\n", argv[0]); return 2; }
+  const fs::path root(argv[1]);
+  wire_seeds(root / "fuzz_wire");
+  mesh_seeds(root / "fuzz_mesh");
+  std::printf("wrote wire and mesh seeds under %s\n", root.c_str());
+  return 0;
+}
