@@ -87,9 +87,13 @@ void Mesh::scale(double s) {
 Status Mesh::validate() const {
   if (faces.empty()) return fail(name, ": no triangles");
   for (std::size_t i = 0; i < local.size(); ++i) {
-    if (!local[i].allFinite() || !std::isfinite((origin + local[i]).squaredNorm()))
-      return fail(name, ": vertex ", i, ": coordinate is NaN or infinite (", local[i].x() + origin.x(), ", ",
-                  local[i].y() + origin.y(), ", ", local[i].z() + origin.z(), ")");
+    const Vec3 p = origin + local[i];
+    if (!local[i].allFinite() || !p.allFinite())
+      return fail(name, ": vertex ", i, ": coordinate is NaN or infinite (", p.x(), ", ", p.y(), ", ", p.z(), ")");
+    // Distances are computed from squared norms: a finite coordinate past ~1e154 mm overflows them.
+    if (!std::isfinite(p.squaredNorm()))
+      return fail(name, ": vertex ", i, ": coordinate too large (", p.x(), ", ", p.y(), ", ", p.z(),
+                  "): its squared norm overflows a double");
   }
   for (std::size_t i = 0; i < faces.size(); ++i)
     for (int k = 0; k < 3; ++k)

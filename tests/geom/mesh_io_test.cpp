@@ -200,6 +200,8 @@ TEST_CASE("bad input: each error names the file and the item") {
   CHECK(contains(error_of(d.file("nan.off")), "nan.off:4: vertex 1: coordinate 'nan' is not finite"));
   write_file(d.file("inf.obj"), "v 0 0 0\nv 1 0 inf\nv 0 1 0\nf 1 2 3\n");
   CHECK(contains(error_of(d.file("inf.obj")), "inf.obj:2: vertex 1: coordinate 'inf' is not finite"));
+  write_file(d.file("big.off"), "OFF\n3 1 0\n1e200 0 0\n0 1 0\n0 0 1\n3 0 1 2\n");  // finite, but not usable
+  CHECK(contains(error_of(d.file("big.off")), "big.off: vertex 0: coordinate too large (9.9999999999999997e+199, 0, 0)"));
   write_file(d.file("word.off"), "OFF\n3 1 0\n0 0 0\n1 zero 0\n0 1 0\n3 0 1 2\n");
   CHECK(contains(error_of(d.file("word.off")), "word.off:4: vertex 1: 'zero' is not a number"));
   write_file(d.file("short.off"), "OFF\n3 1 0\n0 0 0\n1 0 0\n");
