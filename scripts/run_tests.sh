@@ -7,7 +7,7 @@ set -uo pipefail
 cd "$(dirname "$0")/.."
 jobs="${ST_JOBS:-2}"
 passed=0; failed=0; status=0
-failures=$(mktemp); trap 'rm -f "$failures"' EXIT
+failures=$(mktemp); bg=$(mktemp -d); trap 'rm -rf "$failures" "$bg"' EXIT
 
 run_suites() {  # build-dir [suite...]
   local dir=$1; shift
@@ -30,7 +30,7 @@ build_targets() {  # build-dir target... (targets this build does not define are
   local have want=()
   have=$(ninja -C "$dir" -t targets all 2>/dev/null | cut -d: -f1)
   for t in "$@"; do grep -qx "$t" <<<"$have" && want+=("$t"); done
-  ninja -C "$dir" -j"$jobs" "${want[@]}" || status=1
+  ninja -C "$dir" -j"$jobs" "${want[@]}"
 }
 
 configure() {  # build-dir meson-args...
@@ -39,6 +39,40 @@ configure() {  # build-dir meson-args...
 }
 
 ninja -C build -j"$jobs" || exit 1
+
+# The sanitizer and fuzz builds compile in the background at the lowest CPU priority while the
+# suites before them run (those mostly wait on sleeps and child processes); each suite waits for
+# its own build. Build logs are printed when the suite that needs them starts.
+fuzz_secs="${ST_FUZZ:-30}"
+sanitizers="${ST_SANITIZERS:-1}"
+asan_args=(--buildtype=plain -Doptimization=1 -Db_sanitize=address,undefined -Db_lundef=false -Dnative=false)
+# -Wno-tsan: gcc warns that TSan does not model atomic_thread_fence (SeqLock); its payload words
+# are relaxed atomics, so TSan has no data race to miss there, only orderings it cannot check.
+tsan_args=(--buildtype=plain -Doptimization=1 -Db_sanitize=thread -Db_lundef=false -Dnative=false -Dcpp_args=-Wno-tsan)
+if [ "$sanitizers" != 0 ]; then
+  (
+    renice -n 19 -p "$BASHPID" >/dev/null 2>&1
+    # Sanitizer builds compile only the test programs and the executables the tests start, at -O1
+    # without debug info to keep CI within its time on 2 cores (reports keep function names).
+    { configure build-asan "${asan_args[@]}" &&
+      build_targets build-asan spheretouch daemons/spheretouch-worker tests/test_geom tests/test_rt tests/test_net tests/test_app \
+        tests/fuzz/fuzz_wire_replay tests/fuzz/fuzz_mesh_replay tests/fuzz/fuzz_scene_replay tests/fuzz/fuzz_pose_replay
+    } >"$bg/asan.log" 2>&1
+    echo $? >"$bg/asan.rc"
+    { configure build-tsan "${tsan_args[@]}" &&
+      build_targets build-tsan spheretouch daemons/spheretouch-worker tests/test_rt tests/test_net
+    } >"$bg/tsan.log" 2>&1
+    echo $? >"$bg/tsan.rc"
+    if [ "$fuzz_secs" != 0 ]; then ST_JOBS="$jobs" tests/fuzz/run_fuzz.sh 0 >"$bg/fuzz.log" 2>&1; echo $? >"$bg/fuzz.rc"; fi
+  ) &
+fi
+built() {  # name: waits for the background build, prints its log; false if it failed
+  while [ ! -f "$bg/$1.rc" ]; do sleep 2; done
+  echo "== $1 build (in the background)"
+  cat "$bg/$1.log"
+  [ "$(cat "$bg/$1.rc")" = 0 ] || { echo "$1 build failed"; status=1; return 1; }
+}
+
 run_suites build
 
 # Every benchmark once, small (perf/run_all.sh --quick): proves they run; asserts nothing about speed.
@@ -47,29 +81,22 @@ if [ "${ST_PERF_QUICK:-1}" != 0 ]; then
   perf/run_all.sh --quick || { echo "perf smoke run failed"; status=1; }
 fi
 
-if [ "${ST_SANITIZERS:-1}" != 0 ]; then
-  # Sanitizer builds compile only the test programs and the executables the tests start, at -O1
-  # without debug info to keep CI within its time on 2 cores (reports keep function names).
-  if configure build-asan --buildtype=plain -Doptimization=1 -Db_sanitize=address,undefined -Db_lundef=false -Dnative=false; then
-    build_targets build-asan spheretouch daemons/spheretouch-worker tests/test_geom tests/test_rt tests/test_net tests/test_app \
-      tests/fuzz/fuzz_wire_replay tests/fuzz/fuzz_mesh_replay tests/fuzz/fuzz_scene_replay tests/fuzz/fuzz_pose_replay
+if [ "$sanitizers" != 0 ]; then
+  if built asan; then
     UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 ASAN_OPTIONS=detect_leaks=1 LSAN_OPTIONS=suppressions=$PWD/tests/lsan.supp run_suites build-asan
   fi
-  # -Wno-tsan: gcc warns that TSan does not model atomic_thread_fence (SeqLock); its payload words
-  # are relaxed atomics, so TSan has no data race to miss there, only orderings it cannot check.
-  if configure build-tsan --buildtype=plain -Doptimization=1 -Db_sanitize=thread -Db_lundef=false -Dnative=false -Dcpp_args=-Wno-tsan; then
-    build_targets build-tsan spheretouch daemons/spheretouch-worker tests/test_rt tests/test_net
+  if built tsan; then
     TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1:suppressions=$PWD/tests/tsan.supp run_suites build-tsan rt net
   fi
   # libFuzzer targets (clang, ASan+UBSan, LeakSanitizer): each runs ST_FUZZ seconds (default 30;
   # 0 skips) from a copy of its committed corpus, two at a time; any crash, leak, UBSan report,
   # timeout or violated property fails the run (tests/fuzz/run_fuzz.sh).
-  fuzz_secs="${ST_FUZZ:-30}"
-  if [ "$fuzz_secs" != 0 ]; then
+  if [ "$fuzz_secs" != 0 ] && built fuzz; then
     echo "== tests/fuzz/run_fuzz.sh $fuzz_secs"
     ST_JOBS="$jobs" tests/fuzz/run_fuzz.sh "$fuzz_secs" || { echo "fuzzing failed (reproducers and logs named above)"; status=1; }
   fi
 fi
+wait
 
 if [ $status -ne 0 ] && [ $failed -eq 0 ]; then failed=1; fi  # a suite crashed before its summary
 if [ -s "$failures" ]; then

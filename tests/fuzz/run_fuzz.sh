@@ -3,7 +3,7 @@
 # each from a copy of its committed corpus (tests/fuzz/corpus/TARGET; the repo is never written),
 # with ASan + UBSan (halting on the first report) and LeakSanitizer. Configures and builds
 # build-fuzz with clang when needed, building only the fuzz targets.
-#   tests/fuzz/run_fuzz.sh SECONDS [TARGET...]     (default: every target)
+#   tests/fuzz/run_fuzz.sh SECONDS [TARGET...]     (default: every target; SECONDS 0: build only)
 # Prints one line per target (runs, coverage, corpus, ok or CRASH with the reproducer's path)
 # and exits non-zero if any target crashed, leaked, hit a UBSan report, a timeout or OOM.
 # Work directories (logs, grown corpus, artifacts): build-fuzz/fuzz-runs/<time>/<target>/.
@@ -28,6 +28,7 @@ if [ ! -f "$dir/build.ninja" ]; then
     -Dfcl=disabled -Dsystemd=disabled >/dev/null || { echo "run_fuzz: meson setup $dir failed"; exit 1; }
 fi
 ninja -C "$dir" -j"$jobs" "${targets[@]/#/tests/fuzz/}" || { echo "run_fuzz: build failed"; exit 1; }
+[ "$secs" = 0 ] && exit 0  # build only (scripts/run_tests.sh builds ahead, runs later)
 
 runs="$dir/fuzz-runs/$(date +%Y%m%d-%H%M%S)"
 mkdir -p "$runs"
