@@ -8,6 +8,7 @@
 
 #include "geom/mesh_io.hpp"
 #include "geom/primitives.hpp"
+#include "app/query_meshes.hpp"
 #include "net/curve_keys.hpp"
 #include "net/process_util.hpp"
 #include "test_util.hpp"
@@ -41,16 +42,8 @@ void keygen(const std::string& prefix) {
   REQUIRE(r.exit_code == 0);
 }
 
-/// Small meshes (query_test.cpp's) and poses: far, pressed in, rotated.
-struct Meshes {
-  st::test::TempDir dir;
-  std::string probe = dir.file("probe.off"), object = dir.file("object.off"), poses = dir.file("poses.txt");
-  Meshes() {
-    REQUIRE(geom::write_off(geom::make_capsule(4, 20, 24), probe).ok());
-    REQUIRE(geom::write_off(geom::make_icosphere(10, 12), object).ok());
-    st::test::write_file(poses, "1 0 0 100 0 1 0 0 0 0 1 0 0 0 0 1\n1 0 0 0 0 1 0 0 0 0 1 -22 0 0 0 1\n"
-                                "0 -1 0 3 1 0 0 1 0 0 1 -20 0 0 0 1\n");
-  }
+/// query_test.cpp's small meshes and poses, queried without the tree cache.
+struct Meshes : st::test::QueryMeshes {
   std::string query(const std::string& extra) const {
     return spheretouch_exe() + " query " + probe + " " + object + " --poses " + poses + " --no-cache " + extra;
   }

@@ -7,6 +7,7 @@
 #include "geom/mesh_io.hpp"
 #include "geom/pose_io.hpp"
 #include "geom/primitives.hpp"
+#include "app/query_meshes.hpp"
 #include "net/process_util.hpp"
 #include "test_util.hpp"
 
@@ -17,20 +18,7 @@ using st::test::spheretouch_exe;
 namespace {
 bool has(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
 
-// Poses of the capsule (probe) against the icosphere written as OFF files: far, touching, deep.
-const char* kPoses =
-    "# far apart\n1 0 0 100 0 1 0 0 0 0 1 0 0 0 0 1\n"
-    "# fingertip pressed into the sphere\n1 0 0 0 0 1 0 0 0 0 1 -22 0 0 0 1\n"
-    "\n0 -1 0 3 1 0 0 1 0 0 1 -20 0 0 0 1   # rotated about z\n";
-
-struct Fixture {
-  st::test::TempDir dir;
-  std::string probe = dir.file("probe.off"), object = dir.file("object.off"), poses = dir.file("poses.txt");
-  Fixture() {
-    REQUIRE(geom::write_off(geom::make_capsule(4, 20, 24), probe).ok());
-    REQUIRE(geom::write_off(geom::make_icosphere(10, 12), object).ok());
-    st::test::write_file(poses, kPoses);
-  }
+struct Fixture : st::test::QueryMeshes {
   std::string query(const std::string& extra) const {
     return spheretouch_exe() + " query " + probe + " " + object + " --poses " + poses + " --tree-cache " +
            dir.file("trees") + " " + extra;
