@@ -8,12 +8,15 @@ cd "$(dirname "$0")/.."
 jobs="${ST_JOBS:-2}"
 passed=0; failed=0; status=0
 failures=$(mktemp); bg=$(mktemp -d); trap 'rm -rf "$failures" "$bg"' EXIT
+# Section headers carry the time since this script started (m:ss), so a slow CI run shows
+# which step the time went to.
+say() { printf '== [%d:%02d] %s\n' $((SECONDS / 60)) $((SECONDS % 60)) "$*"; }
 
 run_suites() {  # build-dir [suite...]
   local dir=$1; shift
   local args=()
   for s in "$@"; do args+=(--suite "$s"); done
-  echo "== meson test -C $dir ${*:-(all suites)}"
+  say "meson test -C $dir ${*:-(all suites)}"
   meson test -C "$dir" --print-errorlogs --num-processes 1 --no-rebuild "${args[@]}" || status=1
   local log="$dir/meson-logs/testlog.txt" p f
   if [ -f "$log" ]; then
@@ -38,6 +41,7 @@ configure() {  # build-dir meson-args...
   [ -f "$dir/build.ninja" ] || meson setup "$dir" "$@" >/dev/null || { echo "meson setup $dir failed"; status=1; return 1; }
 }
 
+say "release build"
 ninja -C build -j"$jobs" || exit 1
 
 # The sanitizer and fuzz builds compile in the background at the lowest CPU priority while the
@@ -49,6 +53,10 @@ asan_args=(--buildtype=plain -Doptimization=1 -Db_sanitize=address,undefined -Db
 # -Wno-tsan: gcc warns that TSan does not model atomic_thread_fence (SeqLock); its payload words
 # are relaxed atomics, so TSan has no data race to miss there, only orderings it cannot check.
 tsan_args=(--buildtype=plain -Doptimization=1 -Db_sanitize=thread -Db_lundef=false -Dnative=false -Dcpp_args=-Wno-tsan)
+finished() {  # name rc: records when a background build ended, then its exit status
+  printf '%d:%02d' $((SECONDS / 60)) $((SECONDS % 60)) >"$bg/$1.done"
+  echo "$2" >"$bg/$1.rc"
+}
 if [ "$sanitizers" != 0 ]; then
   (
     renice -n 19 -p "$BASHPID" >/dev/null 2>&1
@@ -58,17 +66,22 @@ if [ "$sanitizers" != 0 ]; then
       build_targets build-asan spheretouch daemons/spheretouch-worker tests/test_geom tests/test_rt tests/test_net tests/test_app \
         tests/fuzz/fuzz_wire_replay tests/fuzz/fuzz_mesh_replay tests/fuzz/fuzz_scene_replay tests/fuzz/fuzz_pose_replay
     } >"$bg/asan.log" 2>&1
-    echo $? >"$bg/asan.rc"
+    finished asan $?
     { configure build-tsan "${tsan_args[@]}" &&
-      build_targets build-tsan spheretouch daemons/spheretouch-worker tests/test_rt tests/test_net
+      build_targets build-tsan daemons/spheretouch-worker tests/test_rt tests/test_net
     } >"$bg/tsan.log" 2>&1
-    echo $? >"$bg/tsan.rc"
-    if [ "$fuzz_secs" != 0 ]; then ST_JOBS="$jobs" tests/fuzz/run_fuzz.sh 0 >"$bg/fuzz.log" 2>&1; echo $? >"$bg/fuzz.rc"; fi
+    finished tsan $?
+    if [ "$fuzz_secs" != 0 ]; then ST_JOBS="$jobs" tests/fuzz/run_fuzz.sh 0 >"$bg/fuzz.log" 2>&1; finished fuzz $?; fi
   ) &
+  bg_pid=$!
 fi
 built() {  # name: waits for the background build, prints its log; false if it failed
-  while [ ! -f "$bg/$1.rc" ]; do sleep 2; done
-  echo "== $1 build (in the background)"
+  say "waiting for the $1 build"
+  while [ ! -f "$bg/$1.rc" ]; do
+    kill -0 "$bg_pid" 2>/dev/null || [ -f "$bg/$1.rc" ] || { echo "$1 build: the background builder died"; status=1; return 1; }
+    sleep 2
+  done
+  say "$1 build (in the background, done at $(cat "$bg/$1.done"))"
   cat "$bg/$1.log"
   [ "$(cat "$bg/$1.rc")" = 0 ] || { echo "$1 build failed"; status=1; return 1; }
 }
@@ -77,7 +90,7 @@ run_suites build
 
 # Every benchmark once, small (perf/run_all.sh --quick): proves they run; asserts nothing about speed.
 if [ "${ST_PERF_QUICK:-1}" != 0 ]; then
-  echo "== perf/run_all.sh --quick"
+  say "perf/run_all.sh --quick"
   perf/run_all.sh --quick || { echo "perf smoke run failed"; status=1; }
 fi
 
@@ -92,7 +105,7 @@ if [ "$sanitizers" != 0 ]; then
   # 0 skips) from a copy of its committed corpus, two at a time; any crash, leak, UBSan report,
   # timeout or violated property fails the run (tests/fuzz/run_fuzz.sh).
   if [ "$fuzz_secs" != 0 ] && built fuzz; then
-    echo "== tests/fuzz/run_fuzz.sh $fuzz_secs"
+    say "tests/fuzz/run_fuzz.sh $fuzz_secs"
     ST_JOBS="$jobs" tests/fuzz/run_fuzz.sh "$fuzz_secs" || { echo "fuzzing failed (reproducers and logs named above)"; status=1; }
   fi
 fi
@@ -100,7 +113,7 @@ wait
 
 if [ $status -ne 0 ] && [ $failed -eq 0 ]; then failed=1; fi  # a suite crashed before its summary
 if [ -s "$failures" ]; then
-  echo "== failures (repeated from the logs above)"
+  say "failures (repeated from the logs above)"
   cat "$failures"
 fi
 echo "tests: $passed passed, $failed failed"

@@ -23,6 +23,9 @@ struct TempDir {
 };
 
 /// Writes `data` to `path` (binary).
+/// True when `part` occurs in `s` (for checking messages).
+inline bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
 inline void write_file(const std::string& path, const std::string& data) {
   std::ofstream o(path, std::ios::binary);
   o.write(data.data(), static_cast<std::streamsize>(data.size()));

@@ -29,11 +29,6 @@ struct MonitorArgs {
   int count = 0;
 };
 
-[[noreturn]] void die(int code, const std::string& msg) {
-  std::fprintf(stderr, "spheretouch monitor: %s\n", msg.c_str());
-  throw CLI::RuntimeError(code);
-}
-
 /// Segments named /dev/shm/spheretouch-* that attach read-only and whose servo has not finished.
 std::vector<std::string> live_sessions() {
   std::vector<std::string> out;
@@ -97,16 +92,18 @@ void monitor(const MonitorArgs& a) {
   std::string name = a.name;
   if (name.empty()) {
     const std::vector<std::string> live = live_sessions();
-    if (live.empty()) die(2, "no running spheretouch session in /dev/shm (start `spheretouch run`, or give --name)");
+    if (live.empty())
+      fail_command("spheretouch monitor", 2,
+                   "no running spheretouch session in /dev/shm (start `spheretouch run`, or give --name)");
     if (live.size() > 1) {
       std::string list;
       for (const std::string& n : live) list += " " + n;
-      die(2, "several running sessions, choose one with --name:" + list);
+      fail_command("spheretouch monitor", 2, "several running sessions, choose one with --name:" + list);
     }
     name = live.front();
   }
   Result<std::unique_ptr<const rt::ShmSegment>> r = rt::ShmSegment::attach_read_only(name);
-  if (!r) die(2, r.error());
+  if (!r) fail_command("spheretouch monitor", 2, r.error());
   const rt::ShmSegment& seg = *r.value();
   const bool tty = ::isatty(STDOUT_FILENO);
   struct sigaction sa {};

@@ -41,10 +41,7 @@ struct RunArgs {
   std::string shm_name;     ///< segment name ("" = /spheretouch-<pid>)
 };
 
-[[noreturn]] void die(int code, const std::string& msg) {
-  std::fprintf(stderr, "spheretouch: %s\n", msg.c_str());
-  throw CLI::RuntimeError(code);
-}
+[[noreturn]] void die(int code, const std::string& msg) { fail_command("spheretouch", code, msg); }
 
 std::string new_run_dir(const std::string& wanted) {
   if (!wanted.empty()) return wanted;

@@ -2,6 +2,8 @@
 // root CLI11 app; a failing command throws CLI::RuntimeError(exit_code) after printing why.
 #pragma once
 #include <CLI/CLI.hpp>
+#include <cstdio>
+#include <string>
 
 namespace st::app {
 
@@ -13,5 +15,11 @@ void add_run(CLI::App& app);     ///< spheretouch run SCENE [--split] (the main 
 void add_servo(CLI::App& app);   ///< spheretouch servo ... (hidden: the servo process of run --split)
 void add_monitor(CLI::App& app); ///< spheretouch monitor [--name SEGMENT] (watch a live run)
 void add_keygen(CLI::App& app);  ///< spheretouch keygen --out PREFIX (CURVE key pair files)
+
+/// Prints "<who>: <msg>" on stderr and ends the command with exit status `code`.
+[[noreturn]] inline void fail_command(const char* who, int code, const std::string& msg) {
+  std::fprintf(stderr, "%s: %s\n", who, msg.c_str());
+  throw CLI::RuntimeError(code);
+}
 
 }  // namespace st::app

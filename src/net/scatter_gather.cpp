@@ -4,6 +4,10 @@
 #include <malloc.h>
 
 #include <algorithm>
+#include <condition_variable>
+#include <deque>
+#include <functional>
+#include <mutex>
 #include <thread>
 #include <unordered_map>
 
@@ -42,6 +46,56 @@ bool is_superset(const std::vector<std::uint32_t>& big, const std::vector<std::u
 }
 
 enum class Ask { None, Query, Heartbeat };
+
+/// One long-lived thread that encodes block sets off the collision thread, jobs in order.
+/// A thread per job (std::async) maps a fresh stack for every fault, and a process that asked
+/// for mlockall(MCL_FUTURE) (`lock_memory`) keeps each one resident: +8 MB per encoding.
+class Encoder {
+ public:
+  Encoder() : thread_([this] { loop(); }) {}
+  Encoder(const Encoder&) = delete;
+  Encoder& operator=(const Encoder&) = delete;
+  ~Encoder() {
+    {
+      std::lock_guard<std::mutex> g(m_);
+      stop_ = true;  // pending jobs are dropped: their futures report a broken promise
+    }
+    cv_.notify_one();
+    thread_.join();
+  }
+
+  std::future<Result<SetPtr>> submit(std::function<Result<SetPtr>()> job) {
+    std::packaged_task<Result<SetPtr>()> task(std::move(job));
+    auto done = task.get_future();
+    {
+      std::lock_guard<std::mutex> g(m_);
+      jobs_.push_back(std::move(task));
+    }
+    cv_.notify_one();
+    return done;
+  }
+
+ private:
+  void loop() {
+    for (;;) {
+      std::packaged_task<Result<SetPtr>()> task;
+      {
+        std::unique_lock<std::mutex> l(m_);
+        cv_.wait(l, [this] { return stop_ || !jobs_.empty(); });
+        if (stop_) return;
+        task = std::move(jobs_.front());
+        jobs_.pop_front();
+      }
+      task();
+    }
+  }
+
+  std::mutex m_;
+  std::condition_variable cv_;
+  std::deque<std::packaged_task<Result<SetPtr>()>> jobs_;
+  bool stop_ = false;
+  std::thread thread_;  // last: starts once the members above exist
+};
 
 }  // namespace
 
@@ -87,6 +141,7 @@ struct ScatterGather::Impl {
   std::map<std::vector<std::uint32_t>, SetPtr> by_blocks;
   std::unordered_map<std::uint64_t, SetPtr> by_hash;
   std::map<std::vector<std::uint32_t>, std::future<Result<SetPtr>>> encoding;
+  std::unique_ptr<Encoder> encoder = std::make_unique<Encoder>();  // started with the client
   bool dirty = false;                        // up/down changed: reassign
   bool prune_pending = false;                // a worker dropped a set: prune_sets()
   std::uint64_t cur_seq = 0;
@@ -106,7 +161,7 @@ struct ScatterGather::Impl {
     auto f = encoding.find(blocks);
     if (f == encoding.end()) {
       // Encoding a multi-megabyte share takes milliseconds: never inside a round's deadline.
-      encoding.emplace(blocks, std::async(std::launch::async, [s = scene, blocks] { return encode_set(*s, blocks); }));
+      encoding.emplace(blocks, encoder->submit([s = scene, blocks] { return encode_set(*s, blocks); }));
       return nullptr;
     }
     if (f->second.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return nullptr;

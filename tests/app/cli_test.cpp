@@ -3,22 +3,19 @@
 
 using st::test::run_command;
 using st::test::spheretouch_exe;
-
-namespace {
-bool has(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
-}  // namespace
+using st::test::contains;
 
 TEST_CASE("--help explains the command and every subcommand") {
   const auto top = run_command(spheretouch_exe() + " --help");
   CHECK(top.exit_code == 0);
-  CHECK(has(top.output, "info"));
-  CHECK(has(top.output, "export"));
+  CHECK(contains(top.output, "info"));
+  CHECK(contains(top.output, "export"));
   for (const char* sub : {"info", "export"}) {
     const auto r = run_command(spheretouch_exe() + " " + sub + " --help");
     INFO(sub << ": " << r.output);
     CHECK(r.exit_code == 0);
-    CHECK(has(r.output, "Usage"));
-    CHECK(has(r.output, "--units"));
+    CHECK(contains(r.output, "Usage"));
+    CHECK(contains(r.output, "--units"));
   }
   const auto none = run_command(spheretouch_exe());
   CHECK(none.exit_code != 0);
@@ -30,10 +27,10 @@ TEST_CASE("info on a generated and a real mesh reports reader, topology and coun
   const auto r = run_command(spheretouch_exe() + " info " + d.file("t.off") + " " + st::test::model("hand_L2.off"));
   INFO(r.output);
   CHECK(r.exit_code == 0);
-  CHECK(has(r.output, "faces       4 "));
-  CHECK(has(r.output, "faces       38240 "));
-  CHECK(has(r.output, "closed, manifold"));
-  CHECK(has(r.output, "precision double"));
+  CHECK(contains(r.output, "faces       4 "));
+  CHECK(contains(r.output, "faces       38240 "));
+  CHECK(contains(r.output, "closed, manifold"));
+  CHECK(contains(r.output, "precision double"));
 }
 
 TEST_CASE("info and export fail with the file named, exit code 2") {
@@ -41,11 +38,11 @@ TEST_CASE("info and export fail with the file named, exit code 2") {
   st::test::write_file(d.file("bad.off"), "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n");
   auto r = run_command(spheretouch_exe() + " info " + d.file("bad.off"));
   CHECK(r.exit_code == 2);
-  CHECK(has(r.output, "bad.off:6: face 0: vertex index 5 out of range [0, 3)"));
+  CHECK(contains(r.output, "bad.off:6: face 0: vertex index 5 out of range [0, 3)"));
   st::test::write_file(d.file("open.off"), "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
   r = run_command(spheretouch_exe() + " export " + d.file("open.off") + " -o " + d.file("o.off") + " --subdivide 1");
   CHECK(r.exit_code == 2);
-  CHECK(has(r.output, "open mesh"));
+  CHECK(contains(r.output, "open mesh"));
 }
 
 TEST_CASE("export: rescale then subdivide, readable again with the same face count") {
@@ -55,5 +52,5 @@ TEST_CASE("export: rescale then subdivide, readable again with the same face cou
   INFO(r.output);
   REQUIRE(r.exit_code == 0);
   const auto info = run_command(spheretouch_exe() + " info " + d.file("h.off"));
-  CHECK(has(info.output, "faces       9560 "));
+  CHECK(contains(info.output, "faces       9560 "));
 }

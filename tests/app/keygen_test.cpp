@@ -16,11 +16,11 @@
 using namespace st;
 using st::test::run_command;
 using st::test::spheretouch_exe;
+using st::test::contains;
 using namespace std::chrono_literals;
 
 namespace {
 
-bool has(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
 
 mode_t mode_of(const std::string& path) {
   struct stat st {};
@@ -70,12 +70,12 @@ struct CurveWorker {
     proc = std::make_unique<st::test::Process>(
         std::vector<std::string>{st::test::worker_binary(), "--config", dir.file("worker.toml")}, log);
     // Ready once it logs the bind (or it died: the caller's checks say why).
-    for (int i = 0; i < 500 && !has(proc->log(), "listening on"); ++i) {
+    for (int i = 0; i < 500 && !contains(proc->log(), "listening on"); ++i) {
       if (proc->wait(0ms) != -1) break;
       std::this_thread::sleep_for(10ms);
     }
     INFO(proc->log());
-    REQUIRE(has(proc->log(), "listening on " + endpoint));
+    REQUIRE(contains(proc->log(), "listening on " + endpoint));
   }
   std::string keys(const std::string& client_prefix) const {
     return "--connect " + endpoint + " --server-key " + fleet + ".pub --client-key " + client_prefix;
@@ -94,10 +94,10 @@ TEST_CASE("keygen --out writes a 0600 .key and a .pub, refuses to overwrite, --f
   CHECK(mode_of(prefix + ".pub") == 0644);
   const std::string pub = first_line(prefix + ".pub");
   CHECK(pub.size() == 40);
-  CHECK(has(r.output, prefix + ".key"));
-  CHECK(has(r.output, prefix + ".pub"));
-  CHECK(has(r.output, "public key: " + pub));
-  CHECK_FALSE(has(r.output, first_line(prefix + ".key")));  // the secret is never printed
+  CHECK(contains(r.output, prefix + ".key"));
+  CHECK(contains(r.output, prefix + ".pub"));
+  CHECK(contains(r.output, "public key: " + pub));
+  CHECK_FALSE(contains(r.output, first_line(prefix + ".key")));  // the secret is never printed
   auto pair = net::read_key_pair(prefix);
   REQUIRE_MESSAGE(pair.ok(), pair.error());
   CHECK(pair.value().public_z85 == pub);
@@ -105,7 +105,7 @@ TEST_CASE("keygen --out writes a 0600 .key and a .pub, refuses to overwrite, --f
   const std::string secret = first_line(prefix + ".key");
   r = run_command(spheretouch_exe() + " keygen --out " + prefix);
   CHECK(r.exit_code == 2);
-  CHECK(has(r.output, prefix + ".key: already exists"));
+  CHECK(contains(r.output, prefix + ".key: already exists"));
   CHECK(first_line(prefix + ".key") == secret);
 
   ::chmod((prefix + ".key").c_str(), 0644);
@@ -136,9 +136,9 @@ TEST_CASE("a worker whose secret key file is group-readable refuses to start, na
   CHECK(WIFEXITED(st));
   CHECK(WEXITSTATUS(st) == 2);
   INFO(p.log());
-  CHECK(has(p.log(), w.fleet + ".key"));
-  CHECK(has(p.log(), "chmod 600"));
-  CHECK_FALSE(has(p.log(), "listening"));
+  CHECK(contains(p.log(), w.fleet + ".key"));
+  CHECK(contains(p.log(), "chmod 600"));
+  CHECK_FALSE(contains(p.log(), "listening"));
 }
 
 TEST_CASE("query --connect to a CURVE worker: an allowed client gets the single-process pairs") {
@@ -147,18 +147,18 @@ TEST_CASE("query --connect to a CURVE worker: an allowed client gets the single-
   w.start();
   const auto single = run_command(m.query(""));
   REQUIRE(single.exit_code == 0);
-  CHECK_FALSE(has(single.output, "pose 1 pairs 0 "));  // pressed in: there are pairs
+  CHECK_FALSE(contains(single.output, "pose 1 pairs 0 "));  // pressed in: there are pairs
   const auto r = run_command(m.query(w.keys(w.client)));
   INFO(r.output.substr(0, 400));
   CHECK(r.exit_code == 0);
   CHECK(r.output == single.output);
-  CHECK_FALSE(has(w.proc->log(), "refused"));
+  CHECK_FALSE(contains(w.proc->log(), "refused"));
   // The keys are needed: without them the worker gives no service (a security mismatch).
   const auto plain = run_command(m.query("--connect " + w.endpoint));
   INFO(plain.output);
   CHECK(plain.exit_code == 2);
-  CHECK(has(plain.output, "worker " + w.endpoint + " did not answer Hello"));
-  CHECK(has(plain.output, "CURVE"));
+  CHECK(contains(plain.output, "worker " + w.endpoint + " did not answer Hello"));
+  CHECK(contains(plain.output, "CURVE"));
 }
 
 TEST_CASE("query --connect with an unknown client key: no service, a clear error naming the endpoint, the refusal logged") {
@@ -173,14 +173,14 @@ TEST_CASE("query --connect with an unknown client key: no service, a clear error
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   INFO(r.output);
   CHECK(r.exit_code == 2);
-  CHECK(has(r.output, "worker " + w.endpoint + " did not answer Hello within 2 s"));
-  CHECK(has(r.output, "refused this client's CURVE key"));
-  CHECK(has(r.output, rogue_pub));  // what to add to allowed_clients
-  CHECK(has(r.output, "allowed_clients"));
-  CHECK_FALSE(has(r.output, "pose 0"));  // no service
+  CHECK(contains(r.output, "worker " + w.endpoint + " did not answer Hello within 2 s"));
+  CHECK(contains(r.output, "refused this client's CURVE key"));
+  CHECK(contains(r.output, rogue_pub));  // what to add to allowed_clients
+  CHECK(contains(r.output, "allowed_clients"));
+  CHECK_FALSE(contains(r.output, "pose 0"));  // no service
   CHECK(secs < 15);  // fails fast, well before the 30 s ready timeout
   INFO(w.proc->log());
-  CHECK(has(w.proc->log(), "refused CURVE client " + rogue_pub + " from 127.0.0.1"));
+  CHECK(contains(w.proc->log(), "refused CURVE client " + rogue_pub + " from 127.0.0.1"));
   CHECK(w.proc->wait(0ms) == -1);  // the worker is still serving
   // The allowed client is still served afterwards.
   CHECK(run_command(m.query(w.keys(w.client) + " --count-only")).exit_code == 0);
@@ -193,13 +193,13 @@ TEST_CASE("the client side refuses a group-readable client key, a .key given as 
   auto r = run_command(m.query(w.keys(w.client)));
   INFO(r.output);
   CHECK(r.exit_code == 2);
-  CHECK(has(r.output, "--client-key: " + w.client + ".key"));
-  CHECK(has(r.output, "chmod 600"));
+  CHECK(contains(r.output, "--client-key: " + w.client + ".key"));
+  CHECK(contains(r.output, "chmod 600"));
   ::chmod((w.client + ".key").c_str(), 0600);
 
   r = run_command(m.query("--connect " + w.endpoint + " --server-key " + w.fleet + ".key --client-key " + w.client));
   CHECK(r.exit_code == 2);
-  CHECK(has(r.output, "--server-key: " + w.fleet + ".key: expected a public key file"));
+  CHECK(contains(r.output, "--server-key: " + w.fleet + ".key: expected a public key file"));
   r = run_command(m.query("--connect " + w.endpoint + " --server-key " + w.fleet + ".pub"));
   CHECK(r.exit_code != 0);  // --server-key needs --client-key (CLI11)
   r = run_command(m.query("--server-key " + w.fleet + ".pub --client-key " + w.client));
@@ -219,17 +219,17 @@ TEST_CASE("run with [workers] server_key and client_key (relative to the scene) 
   auto r = run_command(spheretouch_exe() + " run " + scene + " --out " + w.dir.file("run1"));
   INFO(r.output);
   CHECK(r.exit_code == 0);
-  CHECK(has(r.output, "1 worker daemon"));
-  CHECK_FALSE(has(w.proc->log(), "refused"));
+  CHECK(contains(r.output, "1 worker daemon"));
+  CHECK_FALSE(contains(w.proc->log(), "refused"));
 
   const std::string rogue = w.dir.file("rogue");
   keygen(rogue);
   r = run_command(spheretouch_exe() + " run " + scene + " --client-key " + rogue + " --out " + w.dir.file("run2"));
   INFO(r.output);
   CHECK(r.exit_code == 2);
-  CHECK(has(r.output, "worker " + w.endpoint + " did not answer Hello"));
-  CHECK(has(r.output, first_line(rogue + ".pub")));
-  CHECK(has(w.proc->log(), "refused CURVE client " + first_line(rogue + ".pub")));
+  CHECK(contains(r.output, "worker " + w.endpoint + " did not answer Hello"));
+  CHECK(contains(r.output, first_line(rogue + ".pub")));
+  CHECK(contains(w.proc->log(), "refused CURVE client " + first_line(rogue + ".pub")));
 
   // Keys without daemons are a mistake, said as such.
   st::test::write_file(w.dir.file("inproc.toml"),
@@ -237,5 +237,5 @@ TEST_CASE("run with [workers] server_key and client_key (relative to the scene) 
                        "server_key = \"fleet.pub\"\nclient_key = \"client\"\n");
   r = run_command(spheretouch_exe() + " run " + w.dir.file("inproc.toml") + " --out " + w.dir.file("run3"));
   CHECK(r.exit_code == 2);
-  CHECK(has(r.output, "are for worker daemons"));
+  CHECK(contains(r.output, "are for worker daemons"));
 }

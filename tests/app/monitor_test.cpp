@@ -9,10 +9,6 @@
 
 using namespace st::test;
 
-namespace {
-bool has(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
-}  // namespace
-
 TEST_CASE("monitor: refuses a segment with a bad magic or layout version, and a missing one") {
   const std::string name = "/spheretouch-test-mon-" + std::to_string(getpid());
   // Not ours: a segment of the right size full of zeros.
@@ -24,7 +20,7 @@ TEST_CASE("monitor: refuses a segment with a bad magic or layout version, and a 
     const CommandResult r = run_command(spheretouch_exe() + " monitor --name " + name + " --count 1");
     INFO(r.output);
     CHECK(r.exit_code == 2);
-    CHECK(has(r.output, "bad magic"));
+    CHECK(contains(r.output, "bad magic"));
     shm_unlink(name.c_str());
   }
   // Ours, but another layout version.
@@ -40,16 +36,16 @@ TEST_CASE("monitor: refuses a segment with a bad magic or layout version, and a 
     const CommandResult r = run_command(spheretouch_exe() + " monitor --name " + name + " --count 1");
     INFO(r.output);
     CHECK(r.exit_code == 2);
-    CHECK(has(r.output, "layout version " + std::to_string(st::rt::kShmLayoutVersion + 7)));
+    CHECK(contains(r.output, "layout version " + std::to_string(st::rt::kShmLayoutVersion + 7)));
     static_cast<st::rt::ShmHeader*>(p)->layout_version = st::rt::kShmLayoutVersion;
     // Restored: now it attaches and prints a line (no servo has ticked in it).
     const CommandResult ok = run_command(spheretouch_exe() + " monitor --name " + name + " --count 1");
     INFO(ok.output);
     CHECK(ok.exit_code == 0);
-    CHECK(has(ok.output, "no ticks yet"));
+    CHECK(contains(ok.output, "no ticks yet"));
     munmap(p, sizeof(st::rt::ShmLayout));
   }
   const CommandResult missing = run_command(spheretouch_exe() + " monitor --name " + name + "-absent --count 1");
   CHECK(missing.exit_code == 2);
-  CHECK(has(missing.output, "cannot attach"));
+  CHECK(contains(missing.output, "cannot attach"));
 }

@@ -14,9 +14,9 @@
 using namespace st;
 using st::test::run_command;
 using st::test::spheretouch_exe;
+using st::test::contains;
 
 namespace {
-bool has(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
 
 struct Fixture : st::test::QueryMeshes {
   std::string query(const std::string& extra) const {
@@ -49,8 +49,8 @@ TEST_CASE("query prints the sorted exact pair set per pose") {
   const auto r = run_command(f.query(""));
   REQUIRE(r.exit_code == 0);
   CHECK(r.output == expected_output(f));
-  CHECK(has(r.output, "pose 0 pairs 0 contacts 0\n"));
-  CHECK_FALSE(has(r.output, "pose 1 pairs 0 "));  // pressed in: there are pairs
+  CHECK(contains(r.output, "pose 0 pairs 0 contacts 0\n"));
+  CHECK_FALSE(contains(r.output, "pose 1 pairs 0 "));  // pressed in: there are pairs
 }
 
 TEST_CASE("query --blocks W gives the same output as the single query, for W = 1..6") {
@@ -73,9 +73,9 @@ TEST_CASE("query --count-only and --stats") {
   for (std::string l; std::getline(in, l); ++lines) CHECK(l.rfind("pose ", 0) == 0);
   CHECK(lines == 3);
   const auto s = run_command(f.query("--count-only --stats >/dev/null"));
-  CHECK(has(s.output, "stats pose 1 query_us "));
-  CHECK(has(s.output, " node_pairs "));
-  CHECK(has(s.output, " tri_tests "));
+  CHECK(contains(s.output, "stats pose 1 query_us "));
+  CHECK(contains(s.output, " node_pairs "));
+  CHECK(contains(s.output, " tri_tests "));
 }
 
 TEST_CASE("query --approx-layer reports a superset of the exact pairs") {
@@ -106,7 +106,7 @@ TEST_CASE("query: pose-file errors name the line and what is wrong") {
     const auto r = run_command(f.query(""));
     INFO(text << " -> " << r.output);
     CHECK(r.exit_code == 2);
-    CHECK(has(r.output, "poses.txt" + std::string(where)));
+    CHECK(contains(r.output, "poses.txt" + std::string(where)));
   }
 }
 
@@ -116,7 +116,7 @@ TEST_CASE("build writes a tree file; a stale or corrupt cache file is rebuilt, n
   auto r = run_command(spheretouch_exe() + " build " + f.object + " -o " + f.dir.file("o.stree"));
   INFO(r.output);
   REQUIRE(r.exit_code == 0);
-  CHECK(has(r.output, "bytes/face"));
+  CHECK(contains(r.output, "bytes/face"));
   CHECK(std::filesystem::file_size(f.dir.file("o.stree")) > 0);
 
   const std::string good = run_command(f.query("")).output;  // fills the cache
@@ -131,11 +131,11 @@ TEST_CASE("build writes a tree file; a stale or corrupt cache file is rebuilt, n
   }
   r = run_command(f.query(""));
   CHECK(r.exit_code == 0);
-  CHECK(has(r.output, "tree cache: "));
-  CHECK(has(r.output, ": corrupt: "));
+  CHECK(contains(r.output, "tree cache: "));
+  CHECK(contains(r.output, ": corrupt: "));
   std::filesystem::copy_file(files[1], files[0], std::filesystem::copy_options::overwrite_existing);
   r = run_command(f.query(""));
-  CHECK(has(r.output, ": stale: "));
+  CHECK(contains(r.output, ": stale: "));
   // After rebuilding, the output is the same and the cache is silent again.
   r = run_command(f.query(""));
   CHECK(r.output == good);
@@ -147,8 +147,8 @@ TEST_CASE("query over in-process workers and over worker daemons gives the singl
                            st::test::model("elephant.off") + " --poses " + root + "/perf/poses/hand_elephant.txt --no-cache";
   const auto single = run_command(base);
   REQUIRE(single.exit_code == 0);
-  CHECK(has(single.output, "pose 2 pairs "));
-  CHECK_FALSE(has(single.output, "pose 2 pairs 0 "));
+  CHECK(contains(single.output, "pose 2 pairs "));
+  CHECK_FALSE(contains(single.output, "pose 2 pairs 0 "));
   for (int w : {1, 2, 4, 8}) {
     const auto r = run_command(base + " --workers " + std::to_string(w));
     INFO("workers " << w);

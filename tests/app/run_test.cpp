@@ -12,10 +12,10 @@
 
 using st::test::run_command;
 using st::test::spheretouch_exe;
+using st::test::contains;
 
 namespace {
 
-bool has(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
 
 /// Minimal JSON syntax check (RFC 8259 grammar, no semantic checks): true when `s` is one value.
 struct Json {
@@ -98,9 +98,9 @@ TEST_CASE("run: a short scene ticks at its rate, presses with force, releases to
   const auto r = run_command(spheretouch_exe() + " run " + d.file("scene.toml") + " --out " + out);
   INFO(r.output);
   REQUIRE(r.exit_code == 0);
-  CHECK(has(r.output, "summary"));
-  CHECK(has(r.output, " 0 dropped"));
-  CHECK(has(r.output, "memory          RSS "));
+  CHECK(contains(r.output, "summary"));
+  CHECK(contains(r.output, " 0 dropped"));
+  CHECK(contains(r.output, "memory          RSS "));
 
   // Ticks ≈ rate × duration: counts, with room for a loaded machine (misses are counted, not ticks).
   const std::vector<st::test::TickCsvRow> ticks = st::test::read_tick_csv(out + "/ticks.csv");
@@ -130,13 +130,13 @@ TEST_CASE("run: a short scene ticks at its rate, presses with force, releases to
     std::size_t n = 0;
     while (std::getline(in, line)) ++n;
     CHECK(n > 100);
-    CHECK(has(r.output, "collision       " + std::to_string(n) + " rounds"));
+    CHECK(contains(r.output, "collision       " + std::to_string(n) + " rounds"));
   }
 
   const std::string trace = slurp(out + "/trace.json");
   CHECK(Json{trace}.document());
-  CHECK(has(trace, "\"name\":\"round\""));
-  CHECK(has(trace, "\"name\":\"tick\""));
+  CHECK(contains(trace, "\"name\":\"round\""));
+  CHECK(contains(trace, "\"name\":\"tick\""));
 
   // PLY header consistent with its body: object then probe, counts and lines agree.
   std::ifstream ply(out + "/contact.ply");
@@ -204,15 +204,15 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
     INFO(text);
     REQUIRE_FALSE(r.ok());
     INFO(r.error());
-    CHECK(has(r.error(), want));
-    CHECK(has(r.error(), "bad.toml"));
+    CHECK(contains(r.error(), want));
+    CHECK(contains(r.error(), "bad.toml"));
   }
   // And through the command: exit code 2 with the message.
   st::test::TempDir d;
   st::test::write_file(d.file("s.toml"), "[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\npeak_n = -1\n");
   const auto r = run_command(spheretouch_exe() + " run " + d.file("s.toml") + " --out " + d.file("o"));
   CHECK(r.exit_code == 2);
-  CHECK(has(r.output, "s.toml:6: force.peak_n: expected a value in"));
+  CHECK(contains(r.output, "s.toml:6: force.peak_n: expected a value in"));
 }
 
 TEST_CASE("scene files: a path the system cannot look up is an error, not an exception (fuzz finding)") {
@@ -229,8 +229,8 @@ TEST_CASE("scene files: a path the system cannot look up is an error, not an exc
     st::Result<st::app::Scene> r = st::app::parse_scene(text, "long.toml", ".");
     REQUIRE_FALSE(r.ok());
     INFO(r.error());
-    CHECK(has(r.error(), want));
-    CHECK(has(r.error(), "File name too long"));
+    CHECK(contains(r.error(), want));
+    CHECK(contains(r.error(), "File name too long"));
   }
 }
 

@@ -14,7 +14,6 @@
 using namespace st::test;
 
 namespace {
-bool has(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
 bool shm_exists(const std::string& name) {
   const int fd = shm_open(name.c_str(), O_RDONLY, 0);
   if (fd >= 0) close(fd);
@@ -45,9 +44,9 @@ TEST_CASE("run --split: the servo process ticks at the rate, presses with force,
     if (at == std::string::npos) continue;
     const auto colon = line.rfind(": ", at);
     ticks.push_back(std::stoull(line.substr(colon + 2, at - colon - 2)));
-    CHECK(has(line, "servo process " + std::to_string(servo_pid)));
-    CHECK(has(line, "model #"));
-    CHECK(has(line, "contacts"));
+    CHECK(contains(line, "servo process " + std::to_string(servo_pid)));
+    CHECK(contains(line, "model #"));
+    CHECK(contains(line, "contacts"));
   }
   REQUIRE(ticks.size() == 5);
   for (std::size_t i = 1; i < ticks.size(); ++i) CHECK(ticks[i] > ticks[i - 1]);
@@ -56,10 +55,10 @@ TEST_CASE("run --split: the servo process ticks at the rate, presses with force,
   const std::string output = slurp_file(log);
   INFO(output);
   REQUIRE(code == 0);
-  CHECK(has(output, "servo process pid " + std::to_string(servo_pid)));
-  CHECK(has(output, "shm " + name));
-  CHECK(has(output, "summary"));
-  CHECK(has(output, " 0 dropped"));
+  CHECK(contains(output, "servo process pid " + std::to_string(servo_pid)));
+  CHECK(contains(output, "shm " + name));
+  CHECK(contains(output, "summary"));
+  CHECK(contains(output, " 0 dropped"));
   CHECK_FALSE(shm_exists(name));  // a clean run removes its segment
 
   const std::vector<TickCsvRow> rows = read_tick_csv(out + "/ticks.csv");
@@ -85,7 +84,7 @@ TEST_CASE("run --split: the servo process ticks at the rate, presses with force,
   // After the run the name is gone: monitor says it cannot attach.
   const CommandResult gone = run_command(spheretouch_exe() + " monitor --name " + name + " --count 1");
   CHECK(gone.exit_code == 2);
-  CHECK(has(gone.output, "cannot attach"));
+  CHECK(contains(gone.output, "cannot attach"));
 }
 
 TEST_CASE("run --split: collision process SIGKILLed mid-press, the servo fades the force to zero, says so, runs to its end") {
@@ -111,9 +110,9 @@ TEST_CASE("run --split: collision process SIGKILLed mid-press, the servo fades t
   const std::string output = slurp_file(log);
   INFO(output);
   REQUIRE(code == 0);
-  CHECK(has(output, "collision process (pid " + std::to_string(run) + ") died"));
-  CHECK(has(output, "force faded to zero"));
-  CHECK(has(output, "summary (servo process only: the collision process died)"));
+  CHECK(contains(output, "collision process (pid " + std::to_string(run) + ") died"));
+  CHECK(contains(output, "force faded to zero"));
+  CHECK(contains(output, "summary (servo process only: the collision process died)"));
   CHECK_FALSE(shm_exists(name));  // the survivor removed the orphaned name
 
   auto res = st::app::read_servo_results(out + "/servo.txt");

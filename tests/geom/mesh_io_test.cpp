@@ -12,6 +12,7 @@ using namespace st;
 using namespace st::geom;
 using st::test::TempDir;
 using st::test::write_file;
+using st::test::contains;
 using namespace std::string_literals;
 
 namespace {
@@ -87,13 +88,11 @@ std::string gltf_text() {
 {"bufferView":1,"componentType":5123,"count":18,"type":"SCALAR"}]})";
 }
 
-std::string error_of(const std::string& path, const LoadOptions& o = {}) {
+std::string load_error(const std::string& path, const LoadOptions& o = {}) {
   Result<LoadedMesh> r = load_mesh(path, o);
   REQUIRE_FALSE(r.ok());
   return r.error();
 }
-
-bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
 
 }  // namespace
 
@@ -187,44 +186,44 @@ TEST_CASE("binary PLY, ASCII and binary STL (ours), glTF (assimp) keep face orde
 
 TEST_CASE("bad input: each error names the file and the item") {
   TempDir d;
-  CHECK(contains(error_of(d.file("missing.off")), "missing.off: cannot open"));
+  CHECK(contains(load_error(d.file("missing.off")), "missing.off: cannot open"));
   write_file(d.file("x.xyzzy"), "hello");
-  CHECK(contains(error_of(d.file("x.xyzzy")), "unknown mesh format '.xyzzy'"));
+  CHECK(contains(load_error(d.file("x.xyzzy")), "unknown mesh format '.xyzzy'"));
   write_file(d.file("noext"), "hello");
-  CHECK(contains(error_of(d.file("noext")), "unknown mesh format"));
+  CHECK(contains(load_error(d.file("noext")), "unknown mesh format"));
   write_file(d.file("empty.off"), "OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n");
-  CHECK(contains(error_of(d.file("empty.off")), "empty.off: no triangles"));
+  CHECK(contains(load_error(d.file("empty.off")), "empty.off: no triangles"));
   write_file(d.file("range.off"), "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n");
-  CHECK(contains(error_of(d.file("range.off")), "range.off:6: face 0: vertex index 3 out of range [0, 3)"));
+  CHECK(contains(load_error(d.file("range.off")), "range.off:6: face 0: vertex index 3 out of range [0, 3)"));
   write_file(d.file("nan.off"), "OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n");
-  CHECK(contains(error_of(d.file("nan.off")), "nan.off:4: vertex 1: coordinate 'nan' is not finite"));
+  CHECK(contains(load_error(d.file("nan.off")), "nan.off:4: vertex 1: coordinate 'nan' is not finite"));
   write_file(d.file("inf.obj"), "v 0 0 0\nv 1 0 inf\nv 0 1 0\nf 1 2 3\n");
-  CHECK(contains(error_of(d.file("inf.obj")), "inf.obj:2: vertex 1: coordinate 'inf' is not finite"));
+  CHECK(contains(load_error(d.file("inf.obj")), "inf.obj:2: vertex 1: coordinate 'inf' is not finite"));
   write_file(d.file("big.off"), "OFF\n3 1 0\n1e200 0 0\n0 1 0\n0 0 1\n3 0 1 2\n");  // finite, but not usable
-  CHECK(contains(error_of(d.file("big.off")), "big.off: vertex 0: coordinate too large (9.9999999999999997e+199, 0, 0)"));
+  CHECK(contains(load_error(d.file("big.off")), "big.off: vertex 0: coordinate too large (9.9999999999999997e+199, 0, 0)"));
   write_file(d.file("word.off"), "OFF\n3 1 0\n0 0 0\n1 zero 0\n0 1 0\n3 0 1 2\n");
-  CHECK(contains(error_of(d.file("word.off")), "word.off:4: vertex 1: 'zero' is not a number"));
+  CHECK(contains(load_error(d.file("word.off")), "word.off:4: vertex 1: 'zero' is not a number"));
   write_file(d.file("short.off"), "OFF\n3 1 0\n0 0 0\n1 0 0\n");
-  CHECK(contains(error_of(d.file("short.off")), "short.off: file ends after 2 of 3 vertices"));
+  CHECK(contains(load_error(d.file("short.off")), "short.off: file ends after 2 of 3 vertices"));
   write_file(d.file("header.off"), "PLY\n3 1 0\n");
-  CHECK(contains(error_of(d.file("header.off")), "header.off:1: expected an 'OFF' header"));
+  CHECK(contains(load_error(d.file("header.off")), "header.off:1: expected an 'OFF' header"));
   write_file(d.file("huge.off"), "OFF\n999999999999 1 0\n");
-  CHECK(contains(error_of(d.file("huge.off")), "exceed what a"));
+  CHECK(contains(load_error(d.file("huge.off")), "exceed what a"));
   write_file(d.file("obj0.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n");
-  CHECK(contains(error_of(d.file("obj0.obj")), "obj0.obj:4: face 0: vertex reference '0' is not a non-zero integer"));
+  CHECK(contains(load_error(d.file("obj0.obj")), "obj0.obj:4: face 0: vertex reference '0' is not a non-zero integer"));
   write_file(d.file("objr.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n");
-  CHECK(contains(error_of(d.file("objr.obj")), "objr.obj:4: face 0: vertex index 4 out of range"));
+  CHECK(contains(load_error(d.file("objr.obj")), "objr.obj:4: face 0: vertex index 4 out of range"));
   write_file(d.file("line.obj"), "v 0 0 0\nv 1 0 0\nf 1 2\n");
-  CHECK(contains(error_of(d.file("line.obj")), "line.obj:3: face 0: has 2 corners"));
+  CHECK(contains(load_error(d.file("line.obj")), "line.obj:3: face 0: has 2 corners"));
   write_file(d.file("p.ply"), "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
                               "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n");
-  CHECK(contains(error_of(d.file("p.ply")), "p.ply:13: face 0: vertex index 9 out of range [0, 3)"));
+  CHECK(contains(load_error(d.file("p.ply")), "p.ply:13: face 0: vertex index 9 out of range [0, 3)"));
   write_file(d.file("bad.stl"), "solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 0\n");
-  CHECK(contains(error_of(d.file("bad.stl")), "bad.stl"));
+  CHECK(contains(load_error(d.file("bad.stl")), "bad.stl"));
   write_file(d.file("u.off"), off_text());
   LoadOptions bad_units;
   bad_units.units = "furlong";
-  CHECK(contains(error_of(d.file("u.off"), bad_units), "units 'furlong' not known"));
+  CHECK(contains(load_error(d.file("u.off"), bad_units), "units 'furlong' not known"));
 }
 
 TEST_CASE("binary PLY: either byte order, any scalar type, doubles kept exactly") {
