@@ -215,6 +215,9 @@ def peers(out, md, summary):
         md.append("|---|---:|---:|---:|")
         md.append(f"| TripleBuffer | {ex['triple_ns_p50']:.0f} | {ex['triple_ns_p99']:.0f} | {ex['triple_ns_max']} |")
         md.append(f"| std::mutex | {ex['mutex_ns_p50']:.0f} | {ex['mutex_ns_p99']:.0f} | {ex['mutex_ns_max']} |")
+        if "line_floor_ns_p50" in ex:
+            md.append(f"| floor (one cache line the writer stores flat out) | {ex['line_floor_ns_p50']:.0f} "
+                      f"| {ex['line_floor_ns_p99']:.0f} | |")
         md.append(f"\nmutex / triple: {ex['ratio_p50']:.1f}x at p50, {ex['ratio_p99']:.1f}x at p99.\n")
         rt_rows += [{"peer": "exchange", "variant": "triple_buffer", "p50": ex["triple_ns_p50"] / 1000,
                      "p99": ex["triple_ns_p99"] / 1000, "p999": "", "max": ex["triple_ns_max"] / 1000},

@@ -20,6 +20,9 @@ seconds=$((minutes * 60 + 20))
 
 free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
 rss_kb() { awk '/^VmRSS:/ {print $2}' "/proc/$1/status" 2>/dev/null || echo 0; }
+# CPU time of the whole VM so far, "total steal" in clock ticks (/proc/stat): on a shared host
+# the hypervisor runs other guests on our vCPUs (steal), and no priority inside can help that.
+cpu_ticks() { awk '/^cpu / { t = 0; for (i = 2; i <= 9; i++) t += $i; print t, $9 }' /proc/stat; }
 
 declare -a ports pids born life
 for i in 0 1 2 3; do ports[$i]=$(free_port); life[$i]=0; done
@@ -45,6 +48,7 @@ cleanup() { for i in 0 1 2 3; do kill -9 "${pids[$i]}" 2>/dev/null || true; done
 trap cleanup EXIT
 
 for i in 0 1 2 3; do start_worker "$i"; done
+read -r cpu0 steal0 < <(cpu_ticks)
 sleep 1
 eps="tcp://127.0.0.1:${ports[0]},tcp://127.0.0.1:${ports[1]},tcp://127.0.0.1:${ports[2]},tcp://127.0.0.1:${ports[3]}"
 echo "soak: $minutes min, 4 workers ($eps), one killed and restarted every minute; output $out"
@@ -76,9 +80,11 @@ while kill -0 "$run" 2>/dev/null; do
 done
 wait "$run" || { echo "soak: spheretouch run failed (see $out/run.log)"; tail -20 "$out/run.log"; exit 1; }
 for i in 0 1 2 3; do end_worker "$i"; done
+read -r cpu1 steal1 < <(cpu_ticks)
 echo "run,1,$run,$run_rss_start,$run_rss_end,$((SECONDS - t0))" >>"$out/rss.csv"
 {
   echo "soak: $minutes min, scene $scene, 4 workers, $(grep -c 'kill -9' "$out/events.txt") kills and restarts"
+  echo "host: load average $(cut -d' ' -f1-3 /proc/loadavg) at the end; steal $(awk -v c="$((cpu1 - cpu0))" -v s="$((steal1 - steal0))" 'BEGIN { printf "%.1f", c > 0 ? 100 * s / c : 0 }') % of CPU time during the soak (the hypervisor ran others on our vCPUs)"
   sed -n '/^summary/,$p' "$out/run.log"
   echo "memory (rss.csv, KiB; start = 10 s after start, end = just before kill or end):"
   awk -F, 'NR > 1 { d = $5 - $4; printf "  %-8s #%-3s start %7d end %7d growth %+6d KiB over %5d s\n", $1, $2, $4, $5, d, $6;

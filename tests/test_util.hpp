@@ -10,6 +10,21 @@
 
 namespace st::test {
 
+/// True in AddressSanitizer and ThreadSanitizer builds. There the brute-force references run
+/// 20–50× slower than in the release build, so the tests that loop over many poses take fewer
+/// of them (same code paths, fewer repetitions); the release build runs them all.
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+inline constexpr bool kSanitizerBuild = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
+inline constexpr bool kSanitizerBuild = true;
+#else
+inline constexpr bool kSanitizerBuild = false;
+#endif
+#else
+inline constexpr bool kSanitizerBuild = false;
+#endif
+
 /// A fresh directory under the system temp dir, removed when the object dies.
 struct TempDir {
   std::filesystem::path path;

@@ -23,8 +23,9 @@ par="${ST_FUZZ_PARALLEL:-2}"
 if [ ! -f "$dir/build.ninja" ]; then
   command -v clang++ >/dev/null || { echo "run_fuzz: clang++ not found (scripts/setup.sh installs clang)"; exit 1; }
   # -O1 with line tables only: fast enough to build in CI, stack traces still name file:line.
+  # -Dunity=on as in the other sanitizer builds (scripts/run_tests.sh).
   CC=clang CXX=clang++ meson setup "$dir" -Dfuzz=true -Db_sanitize=address,undefined -Db_lundef=false \
-    -Dnative=false --buildtype=plain -Doptimization=1 -Dcpp_args=-gline-tables-only \
+    -Dnative=false --buildtype=plain -Doptimization=1 -Dcpp_args=-gline-tables-only -Dunity=on \
     -Dfcl=disabled -Dsystemd=disabled >/dev/null || { echo "run_fuzz: meson setup $dir failed"; exit 1; }
 fi
 ninja -C "$dir" -j"$jobs" "${targets[@]/#/tests/fuzz/}" || { echo "run_fuzz: build failed"; exit 1; }
