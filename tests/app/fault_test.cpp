@@ -97,7 +97,26 @@ std::string fleet_scene(const Fleet& f, double duration_s) {
          "[run]\nduration_s = " + std::to_string(duration_s) + "\n";
 }
 
+/// Steal time of the whole VM so far and all CPU time, in clock ticks (/proc/stat "cpu" line).
+struct CpuTicks {
+  std::uint64_t total = 0, steal = 0;
+};
+CpuTicks cpu_ticks() {
+  std::ifstream in("/proc/stat");
+  std::string cpu;
+  CpuTicks t;
+  in >> cpu;
+  for (int i = 0; i < 8 && in; ++i) {  // user nice system idle iowait irq softirq steal
+    std::uint64_t v = 0;
+    in >> v;
+    t.total += v;
+    if (i == 7) t.steal = v;
+  }
+  return t;
+}
+
 struct RunResult {
+  double steal_pct = 0;  ///< share of the VM's CPU time the hypervisor gave to other guests
   Summary summary;
   std::vector<st::test::TickCsvRow> ticks;
   std::vector<std::vector<double>> rounds;  ///< rounds.csv rows
@@ -110,6 +129,7 @@ RunResult run_scene(Fleet& f, const std::string& name, double duration_s, Faults
   const std::string scene = f.dir.file(name + ".toml"), out = f.dir.file(name), log = f.dir.file(name + ".log");
   st::test::write_file(scene, fleet_scene(f, duration_s));
   const std::string shm = "/st-fault-" + std::to_string(::getpid()) + "-" + name;
+  const CpuTicks before = cpu_ticks();
   const pid_t pid = st::test::spawn_spheretouch({"run", scene, "--out", out, "--shm-name", shm}, log);
   struct Reaper {  // a failed REQUIRE below must not leave the run behind
     pid_t pid;
@@ -125,6 +145,9 @@ RunResult run_scene(Fleet& f, const std::string& name, double duration_s, Faults
   const int code = st::test::wait_for(pid, duration_s + 30);
   if (code >= 0) reaper.pid = 0;  // reaped
   RunResult r;
+  const CpuTicks after = cpu_ticks();
+  if (after.total > before.total)
+    r.steal_pct = 100.0 * double(after.steal - before.steal) / double(after.total - before.total);
   r.log = st::test::slurp_file(log);
   INFO(r.log);
   REQUIRE(code == 0);
@@ -183,14 +206,15 @@ TEST_CASE("run with 4 daemons survives kill -9, SIGSTOP, a dropped link and a re
   // the network would miss >= 50 ticks (one round deadline) per fault in every pair. Under a
   // sanitizer every process runs several times slower and the misses of two runs differ by
   // hundreds either way: there one pair runs and its counts are reported, not compared (the
-  // release build asserts them).
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-  constexpr int kPairs = 1;
-#else
-  constexpr int kPairs = 3;
-#endif
+  // release build asserts them). On a shared host the hypervisor also runs other guests on our
+  // vCPUs (steal time): a 9 s run then loses hundreds of ticks at random (15 vs 602 seen in two
+  // fault-free runs), which no comparison of two runs can tell from a fault. A pair counts as
+  // judged when both runs had under kStealLimitPct of steal; the comparison fails the test only
+  // when some pair was judged, and otherwise is reported with the steal it saw.
+  constexpr int kPairs = st::test::kSanitizerBuild ? 1 : 3;
+  constexpr double kStealLimitPct = 1.0;
   RunResult clean, faulted;
-  bool quiet = false;
+  bool quiet = false, judged = false;
   for (int pair = 1; pair <= kPairs && !quiet; ++pair) {
     std::uint64_t relayed_before_drop = 0, relayed_during_drop = 0;
     clean = run_scene(f, "clean" + std::to_string(pair), kSeconds, [](auto) {});
@@ -201,14 +225,16 @@ TEST_CASE("run with 4 daemons survives kill -9, SIGSTOP, a dropped link and a re
     CHECK(faulted.summary.incomplete > 0);  // the faults were seen by the collision side
     const std::uint64_t kMissNoise = std::max<std::uint64_t>(3, clean.summary.ticks / 1000);
     quiet = faulted.summary.misses <= clean.summary.misses + kMissNoise;
+    judged = judged || (clean.steal_pct < kStealLimitPct && faulted.steal_pct < kStealLimitPct);
     MESSAGE("pair " << pair << ": haptic misses " << faulted.summary.misses << " with faults, " << clean.summary.misses
-                    << " without");
+                    << " without; host steal " << faulted.steal_pct << " % and " << clean.steal_pct << " %");
   }
   INFO("fault-free run: " << clean.log);
   INFO("faulted run: " << faulted.log);
-#if !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)
-  CHECK(quiet);
-#endif
+  if (!st::test::kSanitizerBuild) {
+    if (judged || quiet) CHECK(quiet);
+    else MESSAGE("every pair ran with host steal >= " << kStealLimitPct << " %: misses reported, not compared");
+  }
   CHECK(faulted.summary.ticks + faulted.summary.misses >= std::uint64_t(kSeconds * 1000 * 0.95));
 
   for (const RunResult* r : {&clean, &faulted}) {
