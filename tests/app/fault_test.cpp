@@ -201,9 +201,11 @@ TEST_CASE("run with 4 daemons survives kill -9, SIGSTOP, a dropped link and a re
   // than a fault-free run of the same scene on the same fleet just before. Both runs share a
   // 2-core machine with 5 other processes and SCHED_FIFO is asked for, not guaranteed: under
   // other load the misses of two identical runs differ by scheduler noise (55 vs 136 seen with a
-  // compiler and two fuzzers running). kMissNoise (0.1 % of ticks, at least 3) bounds the noise
-  // of a quiet machine; a noisy pair is run again, up to 3 pairs. A haptic loop that waited on
-  // the network would miss >= 50 ticks (one round deadline) per fault in every pair. Under a
+  // compiler and two fuzzers running). Even without steal (below) the faults cost a few ticks:
+  // +13, +19 and +5 in three pairs of one CI run, from the restarted worker and the reloads
+  // competing for the 2 vCPUs. kMissNoise (30 ticks, or 0.33 % of ticks if more) allows that;
+  // a haptic loop that waited on the network would miss >= 50 ticks (one round deadline) per
+  // fault, >= 150 per faulted run, in every pair. A noisy pair is run again, up to 3. Under a
   // sanitizer every process runs several times slower and the misses of two runs differ by
   // hundreds either way: there one pair runs and its counts are reported, not compared (the
   // release build asserts them). On a shared host the hypervisor also runs other guests on our
@@ -223,7 +225,7 @@ TEST_CASE("run with 4 daemons survives kill -9, SIGSTOP, a dropped link and a re
     CHECK(relayed_before_drop > 0);     // worker 2 was served through the relay
     CHECK(relayed_during_drop == 0);    // and cut off while the link was down
     CHECK(faulted.summary.incomplete > 0);  // the faults were seen by the collision side
-    const std::uint64_t kMissNoise = std::max<std::uint64_t>(3, clean.summary.ticks / 1000);
+    const std::uint64_t kMissNoise = std::max<std::uint64_t>(30, clean.summary.ticks / 300);
     quiet = faulted.summary.misses <= clean.summary.misses + kMissNoise;
     judged = judged || (clean.steal_pct < kStealLimitPct && faulted.steal_pct < kStealLimitPct);
     MESSAGE("pair " << pair << ": haptic misses " << faulted.summary.misses << " with faults, " << clean.summary.misses
