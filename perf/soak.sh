@@ -84,7 +84,7 @@ read -r cpu1 steal1 < <(cpu_ticks)
 echo "run,1,$run,$run_rss_start,$run_rss_end,$((SECONDS - t0))" >>"$out/rss.csv"
 {
   echo "soak: $minutes min, scene $scene, 4 workers, $(grep -c 'kill -9' "$out/events.txt") kills and restarts"
-  echo "host: load average $(cut -d' ' -f1-3 /proc/loadavg) at the end; steal $(awk -v c="$((cpu1 - cpu0))" -v s="$((steal1 - steal0))" 'BEGIN { printf "%.1f", c > 0 ? 100 * s / c : 0 }') % of CPU time during the soak (the hypervisor ran others on our vCPUs)"
+  echo "host: load average $(cut -d' ' -f1-3 /proc/loadavg) at the end; steal $(awk -v c="$((cpu1 - cpu0))" -v s="$((steal1 - steal0))" 'BEGIN { printf "%.1f", (c > 0 ? 100 * s / c : 0) }') % of CPU time during the soak (the hypervisor ran others on our vCPUs)"
   sed -n '/^summary/,$p' "$out/run.log"
   echo "memory (rss.csv, KiB; start = 10 s after start, end = just before kill or end):"
   awk -F, 'NR > 1 { d = $5 - $4; printf "  %-8s #%-3s start %7d end %7d growth %+6d KiB over %5d s\n", $1, $2, $4, $5, d, $6;

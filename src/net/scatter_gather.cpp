@@ -6,10 +6,10 @@
 #include <algorithm>
 #include <condition_variable>
 #include <deque>
-#include <functional>
 #include <mutex>
 #include <thread>
 #include <unordered_map>
+#include <utility>
 
 #include "net/worker_service.hpp"
 
@@ -64,8 +64,9 @@ class Encoder {
     thread_.join();
   }
 
-  std::future<Result<SetPtr>> submit(std::function<Result<SetPtr>()> job) {
-    std::packaged_task<Result<SetPtr>()> task(std::move(job));
+  template <class Job>
+  std::future<Result<SetPtr>> submit(Job&& job) {
+    std::packaged_task<Result<SetPtr>()> task(std::forward<Job>(job));
     auto done = task.get_future();
     {
       std::lock_guard<std::mutex> g(m_);
@@ -141,7 +142,7 @@ struct ScatterGather::Impl {
   std::map<std::vector<std::uint32_t>, SetPtr> by_blocks;
   std::unordered_map<std::uint64_t, SetPtr> by_hash;
   std::map<std::vector<std::uint32_t>, std::future<Result<SetPtr>>> encoding;
-  std::unique_ptr<Encoder> encoder = std::make_unique<Encoder>();  // started with the client
+  Encoder encoder;  // started with the client
   bool dirty = false;                        // up/down changed: reassign
   bool prune_pending = false;                // a worker dropped a set: prune_sets()
   std::uint64_t cur_seq = 0;
@@ -161,7 +162,7 @@ struct ScatterGather::Impl {
     auto f = encoding.find(blocks);
     if (f == encoding.end()) {
       // Encoding a multi-megabyte share takes milliseconds: never inside a round's deadline.
-      encoding.emplace(blocks, encoder->submit([s = scene, blocks] { return encode_set(*s, blocks); }));
+      encoding.emplace(blocks, encoder.submit([s = scene, blocks] { return encode_set(*s, blocks); }));
       return nullptr;
     }
     if (f->second.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return nullptr;
