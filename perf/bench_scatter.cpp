@@ -2,10 +2,15 @@
 // overhead), over inproc, ipc or tcp loopback. Rounds are spaced like the collision loop spaces
 // them (--gap-us between the end of one round and the start of the next): ZeroMQ latency rises
 // when sends are spaced out (wake-ups from idle), so back-to-back bursts would flatter it.
-// Baseline, measured in the same run and spaced the same way: one plain request-reply
-// (Heartbeat → Hello) with worker 0 over the same transport.
+// Two references, measured in the same run, spaced the same way and alternating with it in
+// blocks of 100 rounds:
+//  * baseline: one plain request-reply (Heartbeat -> Hello) with worker 0 over the same transport;
+//  * floor: the same N-way fan-out and gather done with raw ZeroMQ sockets (N ROUTER echo
+//    threads, one 8-byte frame each), i.e. what the machine and libzmq cost before any of ours.
 #include <algorithm>
+#include <atomic>
 #include <chrono>
+#include <cstring>
 #include <cstdio>
 #include <fstream>
 #include <string>
@@ -52,6 +57,75 @@ std::string endpoint_for(const std::string& transport, int i) {
   if (transport == "ipc") return "ipc:///tmp/spheretouch-bench-" + std::to_string(::getpid()) + "-" + std::to_string(i) + ".sock";
   return "tcp://127.0.0.1:*";
 }
+
+/// N ROUTER echo threads and N DEALERs: the cost of a ZeroMQ fan-out and gather on its own.
+class FanOutFloor {
+ public:
+  FanOutFloor(zmq::context_t& ctx, const std::string& transport, int n) {
+    for (int i = 0; i < n; ++i) {
+      zmq::socket_t s(ctx, zmq::socket_type::router);
+      s.set(zmq::sockopt::linger, 0);
+      const std::string ep = transport == "inproc" ? net::inproc_endpoint(i, "bench-floor")
+                             : transport == "ipc"  ? "ipc:///tmp/spheretouch-bench-floor-" + std::to_string(::getpid()) + "-" +
+                                                        std::to_string(i) + ".sock"
+                                                   : "tcp://127.0.0.1:*";
+      s.bind(ep);
+      const std::string bound = s.get(zmq::sockopt::last_endpoint);
+      echoes_.emplace_back([this, s = std::move(s)]() mutable { echo(s); });
+      zmq::socket_t dl(ctx, zmq::socket_type::dealer);
+      dl.set(zmq::sockopt::linger, 0);
+      dl.connect(bound);
+      dealers_.push_back(std::move(dl));
+    }
+    items_.resize(dealers_.size());
+  }
+  ~FanOutFloor() {
+    stop_ = true;
+    for (std::thread& t : echoes_) t.join();
+  }
+
+  /// One frame to every echo, then wait for all of them; false if the deadline passed first.
+  bool round(std::chrono::milliseconds deadline) {
+    const std::uint64_t word = ++seq_;
+    for (zmq::socket_t& dl : dealers_) dl.send(zmq::buffer(&word, sizeof word), zmq::send_flags::dontwait);
+    std::size_t got = 0;
+    const auto end = Clock::now() + deadline;
+    while (got < dealers_.size()) {
+      for (std::size_t i = 0; i < dealers_.size(); ++i) items_[i] = {dealers_[i].handle(), 0, ZMQ_POLLIN, 0};
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(end - Clock::now());
+      if (left.count() <= 0 || zmq::poll(items_.data(), items_.size(), left) <= 0) return false;
+      for (std::size_t i = 0; i < dealers_.size(); ++i) {
+        zmq::message_t m;
+        while ((items_[i].revents & ZMQ_POLLIN) && dealers_[i].recv(m, zmq::recv_flags::dontwait)) {
+          std::uint64_t back = 0;
+          if (m.size() == sizeof back) std::memcpy(&back, m.data(), sizeof back);
+          got += back == word;  // an echo of a round that timed out earlier is not this round's
+        }
+      }
+    }
+    return true;
+  }
+
+ private:
+  void echo(zmq::socket_t& s) {
+    while (!stop_) {
+      zmq::pollitem_t it{s.handle(), 0, ZMQ_POLLIN, 0};
+      if (zmq::poll(&it, 1, std::chrono::milliseconds(20)) <= 0) continue;
+      zmq::message_t id, body;
+      while (s.recv(id, zmq::recv_flags::dontwait)) {
+        if (!id.more() || !s.recv(body, zmq::recv_flags::dontwait)) break;
+        s.send(id, zmq::send_flags::sndmore | zmq::send_flags::dontwait);
+        s.send(body, zmq::send_flags::dontwait);
+      }
+    }
+  }
+
+  std::vector<std::thread> echoes_;
+  std::vector<zmq::socket_t> dealers_;
+  std::vector<zmq::pollitem_t> items_;
+  std::atomic<bool> stop_{false};
+  std::uint64_t seq_ = 0;
+};
 
 }  // namespace
 
@@ -147,58 +221,85 @@ void add_scatter(CLI::App& app) {
     const auto gap = std::chrono::microseconds(a->gap_us);
     const auto deadline = std::chrono::milliseconds(a->deadline_ms);
 
-    std::vector<double> us;
-    us.reserve(a->rounds);
+    // The three variants alternate in blocks of kBlock rounds, so a change of machine load
+    // (this is a shared 2-vCPU VM) hits all of them alike.
     int incomplete = 0;
     net::RoundResult r;
     std::uint64_t seq = 0;
-    for (int i = 0; i < a->warmup + a->rounds; ++i) {
-      const auto t0 = Clock::now();
-      c.value()->round(++seq, far, t0 + deadline, r);
-      const auto t1 = Clock::now();
-      if (i >= a->warmup) {
-        us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
-        incomplete += !r.complete;
-      }
-      if (gap.count()) std::this_thread::sleep_until(t1 + gap);
-    }
-    const Stats s = summarise(us);
+    auto scatter_round = [&](bool measured) {
+      c.value()->round(++seq, far, Clock::now() + deadline, r);
+      if (measured) incomplete += !r.complete;
+      return true;
+    };
 
-    // Baseline: one plain request-reply with worker 0, same transport, same spacing.
+    // Baseline: one plain request-reply (Heartbeat -> Hello) with worker 0.
     zmq::socket_t d(ctx, zmq::socket_type::dealer);
     d.set(zmq::sockopt::linger, 0);
     d.connect(endpoints[0]);
-    std::vector<double> base;
     const auto hb = net::encode(net::HeartbeatMsg{1});
-    const int base_rounds = std::min(a->rounds, 2000);
-    for (int i = 0; i < a->warmup + base_rounds; ++i) {
-      const auto t0 = Clock::now();
+    auto baseline_round = [&](bool) {
       d.send(zmq::buffer(hb), zmq::send_flags::none);
       zmq::message_t m;
       zmq::pollitem_t it{d.handle(), 0, ZMQ_POLLIN, 0};
-      if (zmq::poll(&it, 1, std::chrono::milliseconds(a->deadline_ms)) > 0) (void)d.recv(m, zmq::recv_flags::dontwait);
-      const auto t1 = Clock::now();
-      if (i >= a->warmup) base.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
-      if (gap.count()) std::this_thread::sleep_until(t1 + gap);
+      return zmq::poll(&it, 1, deadline) > 0 && d.recv(m, zmq::recv_flags::dontwait).has_value();
+    };
+
+    // Floor: the same fan-out with nothing of ours in it: N raw ROUTER echo threads on the same
+    // transport and context, and N DEALERs sending one 8-byte frame each and waiting for all N
+    // echoes. No ZeroMQ scatter-gather to N separate workers can be cheaper on this machine.
+    FanOutFloor floor(ctx, a->transport, a->workers);
+    auto floor_round = [&](bool) { return floor.round(deadline); };
+
+    std::vector<double> us, base, flo;
+    int lost = 0;  // baseline or floor rounds with no reply by the deadline (counted, not timed)
+    auto run_block = [&](auto& one, std::vector<double>* into, int n, bool measured) {
+      for (int i = 0; i < n; ++i) {
+        const auto t0 = Clock::now();
+        const bool ok = one(measured);
+        const auto t1 = Clock::now();
+        if (measured && into) {
+          if (ok) into->push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+          else ++lost;
+        }
+        if (gap.count()) std::this_thread::sleep_until(t1 + gap);
+      }
+    };
+    run_block(scatter_round, nullptr, a->warmup, false);
+    run_block(baseline_round, nullptr, a->warmup, false);
+    run_block(floor_round, nullptr, a->warmup, false);
+    constexpr int kBlock = 100;
+    for (int done = 0; done < a->rounds; done += kBlock) {
+      const int n = std::min(kBlock, a->rounds - done);
+      run_block(scatter_round, &us, n, true);
+      run_block(baseline_round, &base, n, true);
+      run_block(floor_round, &flo, n, true);
     }
+    const Stats s = summarise(us);
     const Stats b = summarise(base);
+    const Stats f = summarise(flo);
 
     if (a->json)
       std::printf("{\"bench\": \"scatter\", \"workers\": %d, \"transport\": \"%s\", \"gap_us\": %d, \"rounds\": %d, "
                   "\"incomplete\": %d, \"p50_us\": %.1f, \"p99_us\": %.1f, \"max_us\": %.1f, \"mean_us\": %.1f, "
-                  "\"baseline_p50_us\": %.1f, \"baseline_p99_us\": %.1f}\n",
-                  a->workers, a->transport.c_str(), a->gap_us, a->rounds, incomplete, s.p50, s.p99, s.max, s.mean, b.p50, b.p99);
+                  "\"baseline_p50_us\": %.1f, \"baseline_p99_us\": %.1f, \"floor_p50_us\": %.1f, \"floor_p99_us\": %.1f, "
+                  "\"lost\": %d}\n",
+                  a->workers, a->transport.c_str(), a->gap_us, a->rounds, incomplete, s.p50, s.p99, s.max, s.mean, b.p50, b.p99,
+                  f.p50, f.p99, lost);
     else
       std::printf("scatter  %d workers  %-6s gap %5d us  %d rounds (%d incomplete)  p50 %7.1f us  p99 %7.1f us  max %8.1f us"
-                  "   | baseline 1 req-rep: p50 %6.1f us  p99 %6.1f us  (p50 x%.2f)\n",
+                  "\n  baseline 1 req-rep: p50 %6.1f us  p99 %6.1f us\n  floor, raw %d-way fan-out: p50 %6.1f us  p99 %6.1f us"
+                  "  (ours / floor: p50 x%.2f, p99 x%.2f)%s\n",
                   a->workers, a->transport.c_str(), a->gap_us, a->rounds, incomplete, s.p50, s.p99, s.max, b.p50, b.p99,
-                  b.p50 > 0 ? s.p50 / b.p50 : 0.0);
+                  a->workers, f.p50, f.p99, f.p50 > 0 ? s.p50 / f.p50 : 0.0, f.p99 > 0 ? s.p99 / f.p99 : 0.0,
+                  lost ? "  (some baseline/floor rounds lost: see --json)" : "");
     if (!a->csv.empty()) {
       const bool fresh = !std::ifstream(a->csv).good();
       std::ofstream o(a->csv, std::ios::app);
-      if (fresh) o << "bench,workers,transport,gap_us,rounds,incomplete,p50_us,p99_us,max_us,mean_us,baseline_p50_us,baseline_p99_us\n";
+      if (fresh) o << "bench,workers,transport,gap_us,rounds,incomplete,p50_us,p99_us,max_us,mean_us,baseline_p50_us,baseline_p99_us,"
+                    "floor_p50_us,floor_p99_us\n";
       o << "scatter," << a->workers << ',' << a->transport << ',' << a->gap_us << ',' << a->rounds << ',' << incomplete << ','
-        << s.p50 << ',' << s.p99 << ',' << s.max << ',' << s.mean << ',' << b.p50 << ',' << b.p99 << '\n';
+        << s.p50 << ',' << s.p99 << ',' << s.max << ',' << s.mean << ',' << b.p50 << ',' << b.p99 << ',' << f.p50 << ','
+        << f.p99 << '\n';
     }
   });
 }
