@@ -68,6 +68,9 @@ void run(const RunArgs& a) {
       s.endpoints.push_back(rest.substr(0, p));
     }
   }
+  // Before any thread exists (ours, libzmq's): lock_memory keeps every thread's stack resident whole.
+  if (s.thread_stack_bytes)
+    if (Status st = rt::set_default_thread_stack(s.thread_stack_bytes); !st) die(2, s.file + ": haptic.thread_stack_kb: " + st.error());
   // CURVE keys for worker daemons: the flags override the scene; read now, so a bad key file
   // fails before any mesh is loaded. Errors name the flag or the scene field.
   std::string server_what = s.file + ": workers.server_key", client_what = s.file + ": workers.client_key";

@@ -179,6 +179,14 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     std::size_t prefault_kb = s.haptic.prefault_stack_bytes / 1024;
     r.integer("prefault_stack_kb", prefault_kb, 0, 65536);
     s.haptic.prefault_stack_bytes = prefault_kb * 1024;
+    std::size_t stack_kb = s.thread_stack_bytes / 1024;
+    r.integer("thread_stack_kb", stack_kb, 0, 1 << 20);
+    if (stack_kb != 0 && stack_kb < 64) r.error("thread_stack_kb", "expected 0 (glibc's default) or at least 64");
+    s.thread_stack_bytes = stack_kb * 1024;
+    const std::size_t margin_kb = rt::kPrefaultStackMargin / 1024;
+    if (stack_kb != 0 && prefault_kb > 0 && prefault_kb + margin_kb > stack_kb)
+      r.error("prefault_stack_kb", std::to_string(prefault_kb) + " KiB does not fit the haptic thread's stack (thread_stack_kb = " +
+                                       std::to_string(stack_kb) + ", of which " + std::to_string(margin_kb) + " KiB stay free)");
     r.boolean("strict", s.haptic.strict);
     if (Status st = r.finish(); !st) return Error{st.error()};
   }

@@ -56,6 +56,7 @@ struct Scene {
   double collision_rate_hz = 0;        ///< cap on collision rounds per second (0 = as fast as possible)
   int approx_layer = geom::kExact;     ///< kExact, or a sphere layer for the approximate mode
   rt::HapticLoopConfig haptic = rt::DefaultHapticLoopConfig();      ///< servo loop
+  std::size_t thread_stack_bytes = 1 << 20;  ///< stack of every thread run starts ([haptic] thread_stack_kb); 0 = glibc's default
   rt::ForceLawConfig law = rt::DefaultForceLawConfig();             ///< eq. (1) or spring
   rt::SaturationConfig saturation = rt::DefaultSaturationConfig();  ///< device limits
   rt::InterpolatorConfig interp = rt::DefaultInterpolatorConfig();  ///< between contact updates

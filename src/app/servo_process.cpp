@@ -153,6 +153,8 @@ void run_servo(const ServoArgs& a) {
   if (!sr) servo_die(2, sr.error());
   Scene s = std::move(sr).value();
   if (a.duration_s > 0) s.duration_s = a.duration_s;
+  if (s.thread_stack_bytes)
+    if (Status st = rt::set_default_thread_stack(s.thread_stack_bytes); !st) servo_die(2, s.file + ": haptic.thread_stack_kb: " + st.error());
   Result<rt::Trajectory> script = rt::load_trajectory(a.script);
   if (!script) servo_die(2, script.error());
   Result<std::unique_ptr<rt::ShmSegment>> seg = rt::ShmSegment::attach(a.shm);

@@ -6,6 +6,8 @@
 #include <sys/mman.h>
 
 #include <cerrno>
+#include <climits>
+#include <cstdint>
 #include <cmath>
 #include <cstring>
 #include <future>
@@ -40,6 +42,8 @@ std::string RtReport::describe() const {
   one("CPU affinity", affinity);
   one("mlockall", mlock);
   one("stack pre-fault", prefault);
+  if (prefault.requested && !prefault.applied && stack_left)
+    os << " [" << stack_left / 1024 << " KiB of stack left, " << kPrefaultStackMargin / 1024 << " KiB of it kept free]";
   if (os.tellp() == 0) os << "no real-time settings requested";
   return os.str();
 }
@@ -52,8 +56,6 @@ std::string HapticLoop::check(const HapticLoopConfig& c) {
     os << "haptic loop: fifo_priority = " << c.fifo_priority << ", expected 0 (off) or 1..99";
   else if (c.cpu < -1 || c.cpu >= CPU_SETSIZE)
     os << "haptic loop: cpu = " << c.cpu << ", expected -1 (off) or 0.." << CPU_SETSIZE - 1;
-  else if (c.prefault_stack_bytes > (std::size_t{4} << 20))
-    os << "haptic loop: prefault_stack_bytes = " << c.prefault_stack_bytes << ", expected <= 4 MiB (below the default stack size)";
   return os.str();
 }
 
@@ -64,7 +66,45 @@ __attribute__((noinline)) void prefault_stack(std::size_t n) {
   for (std::size_t i = 0; i < n; i += 4096) p[i] = 0;
   if (n) p[n - 1] = 0;
 }
+
+// Bytes of the calling thread's stack below this frame (0 if the bounds cannot be read).
+__attribute__((noinline)) std::size_t stack_left_here() {
+  pthread_attr_t attr;
+  if (pthread_getattr_np(pthread_self(), &attr) != 0) return 0;
+  void* low = nullptr;
+  std::size_t size = 0;
+  const int e = pthread_attr_getstack(&attr, &low, &size);
+  pthread_attr_destroy(&attr);
+  if (e != 0) return 0;
+  char here;
+  const auto sp = reinterpret_cast<std::uintptr_t>(&here), base = reinterpret_cast<std::uintptr_t>(low);
+  return sp > base && sp - base <= size ? sp - base : 0;
+}
 }  // namespace
+
+Status set_default_thread_stack(std::size_t bytes) {
+  if (bytes < static_cast<std::size_t>(PTHREAD_STACK_MIN))
+    return Error{"thread stack of " + std::to_string(bytes) + " bytes is below PTHREAD_STACK_MIN (" +
+                 std::to_string(PTHREAD_STACK_MIN) + ")"};
+  pthread_attr_t attr;
+  int e = pthread_getattr_default_np(&attr);
+  if (e == 0) {
+    e = pthread_attr_setstacksize(&attr, bytes);
+    if (e == 0) e = pthread_setattr_default_np(&attr);
+    pthread_attr_destroy(&attr);
+  }
+  if (e != 0) return Error{"cannot set the default thread stack to " + std::to_string(bytes) + " bytes: " + std::strerror(e)};
+  return Ok{};
+}
+
+std::size_t default_thread_stack() {
+  pthread_attr_t attr;
+  if (pthread_getattr_default_np(&attr) != 0) return 0;
+  std::size_t size = 0;
+  pthread_attr_getstacksize(&attr, &size);
+  pthread_attr_destroy(&attr);
+  return size;
+}
 
 RtReport HapticLoop::apply_realtime(const HapticLoopConfig& c) {
   RtReport r;
@@ -90,8 +130,15 @@ RtReport HapticLoop::apply_realtime(const HapticLoopConfig& c) {
   }
   if (c.prefault_stack_bytes > 0) {
     r.prefault.requested = true;
-    prefault_stack(c.prefault_stack_bytes);
-    r.prefault.applied = true;  // touching our own stack cannot be refused (it can only crash)
+    // Touching more stack than the thread has would crash: refuse instead, and say how much is left.
+    const std::size_t left = stack_left_here();
+    if (left >= kPrefaultStackMargin && c.prefault_stack_bytes <= left - kPrefaultStackMargin) {
+      prefault_stack(c.prefault_stack_bytes);
+      r.prefault.applied = true;
+    } else {
+      r.prefault.error = ENOMEM;
+      r.stack_left = left;
+    }
   }
   return r;
 }

@@ -57,7 +57,19 @@ struct RtReport {
   RtStep fifo, affinity, mlock, prefault;  ///< one per request
   bool all_applied() const;                ///< no requested step was refused
   std::string describe() const;            ///< "SCHED_FIFO 80: refused (Operation not permitted); ..."
+  std::size_t stack_left = 0;              ///< bytes of the loop thread's stack below its frame, when a pre-fault was refused
 };
+
+/// Stack kept free below a pre-fault for the tick path and signal delivery.
+inline constexpr std::size_t kPrefaultStackMargin = 64 * 1024;
+
+/// Sets the stack size of every thread the process creates from now on with default attributes
+/// (std::thread, libzmq's I/O threads): pthread_setattr_default_np. Under mlockall each thread's
+/// stack is resident whole, so the glibc default (RLIMIT_STACK, 8 MiB) costs 8 MiB per thread.
+/// Fails (naming the size) below PTHREAD_STACK_MIN or if glibc refuses.
+Status set_default_thread_stack(std::size_t bytes);
+/// The current default stack size for new threads, bytes.
+std::size_t default_thread_stack();
 
 /// Deadline bookkeeping, separate from the clock so tests can drive it with synthetic times.
 class DeadlineSchedule {

@@ -196,6 +196,10 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nserver_key = \"/nowhere/fleet.pub\"\n"
        "client_key = \"/nowhere/c\"\n", "workers.server_key: file /nowhere/fleet.pub does not exist"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nserver_key = 3\n", "workers.server_key: expected a string"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[haptic]\nthread_stack_kb = 16\n",
+       "haptic.thread_stack_kb: expected 0 (glibc's default) or at least 64"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[haptic]\nthread_stack_kb = 256\nprefault_stack_kb = 200\n",
+       "haptic.prefault_stack_kb: 200 KiB does not fit the haptic thread's stack (thread_stack_kb = 256"},
   };
   for (const auto& item : cases) {
     const auto& text = item.first;  // not a structured binding: INFO captures it (clang < 16)

@@ -62,8 +62,12 @@ TEST_CASE("run --split: the servo process ticks at the rate, presses with force,
   CHECK_FALSE(shm_exists(name));  // a clean run removes its segment
 
   const std::vector<TickCsvRow> rows = read_tick_csv(out + "/ticks.csv");
-  CHECK(rows.size() > 3000 * 8 / 10);
-  CHECK(rows.size() <= 3000 + 50);
+  // Counts, not timing: every 1 ms period of the 3 s run is a tick or a counted miss (a busy
+  // host turns ticks into misses, but the schedule holds).
+  REQUIRE_FALSE(rows.empty());
+  CHECK(rows.size() + rows.back().misses >= 3000 - 50);
+  CHECK(rows.size() + rows.back().misses <= 3000 + 50);
+  CHECK(rows.size() > 3000 / 10);
   double press_max = 0;
   int contact = 0;
   for (const TickCsvRow& r : rows) {
@@ -123,8 +127,10 @@ TEST_CASE("run --split: collision process SIGKILLed mid-press, the servo fades t
   // ticks.csv: the servo ran its whole duration; after the last contact model arrived plus the
   // stale timeout (200 ms) and fade (100 ms), every tick commands exactly zero force.
   const std::vector<TickCsvRow> rows = read_tick_csv(out + "/ticks.csv");
-  CHECK(rows.size() > std::size_t(duration * 1000 * 8 / 10));
-  CHECK(rows.size() <= std::size_t(duration * 1000 + 50));
+  REQUIRE_FALSE(rows.empty());
+  CHECK(rows.size() + rows.back().misses >= std::size_t(duration * 1000 - 50));  // periods: ticks + counted misses
+  CHECK(rows.size() + rows.back().misses <= std::size_t(duration * 1000 + 50));
+  CHECK(rows.size() > std::size_t(duration * 1000 / 10));
   CHECK(res.value().ticks == rows.size());
   const std::uint64_t last_model = rows.back().model_seq;
   std::size_t arrived = 0;

@@ -137,6 +137,46 @@ TEST_CASE("HapticLoop: real-time requests are reported, refusals never silent") 
   MESSAGE("SCHED_FIFO request here: " << rf.value().describe());
 }
 
+TEST_CASE("HapticLoop: a pre-fault larger than the loop thread's stack is refused, not a crash") {
+  const std::size_t old_default = default_thread_stack();
+  REQUIRE(old_default > 0);
+  REQUIRE(set_default_thread_stack(256 * 1024).ok());
+  CHECK(default_thread_stack() == 256 * 1024);
+  CountingHandler h;
+  HapticLoopConfig c = DefaultHapticLoopConfig();
+  c.max_periods = 3;
+  c.prefault_stack_bytes = 1 << 20;  // four times the thread's stack: touching it would crash
+  auto big = std::make_unique<HapticLoop>(c);
+  auto r = big->start(h);
+  REQUIRE(r.ok());
+  big->stop();
+  CHECK(r.value().prefault.requested);
+  CHECK_FALSE(r.value().prefault.applied);
+  CHECK(r.value().prefault.error == ENOMEM);
+  CHECK(r.value().stack_left > 0);
+  CHECK(r.value().stack_left < 256 * 1024);
+  INFO(r.value().describe());
+  CHECK(r.value().describe().find("stack pre-fault: refused") != std::string::npos);
+  CHECK(r.value().describe().find("KiB of stack left") != std::string::npos);
+
+  c.prefault_stack_bytes = 128 * 1024;  // fits, with the margin kept free
+  auto fits = std::make_unique<HapticLoop>(c);
+  auto rf = fits->start(h);
+  REQUIRE(rf.ok());
+  fits->stop();
+  CHECK(rf.value().prefault.applied);
+
+  c.strict = true;  // strict: the refusal stops the start
+  c.prefault_stack_bytes = 1 << 20;
+  auto strict_loop = std::make_unique<HapticLoop>(c);
+  auto rs = strict_loop->start(h);
+  CHECK_FALSE(rs.ok());
+
+  CHECK_FALSE(set_default_thread_stack(1024).ok());  // below PTHREAD_STACK_MIN: an error, nothing changed
+  CHECK(default_thread_stack() == 256 * 1024);
+  REQUIRE(set_default_thread_stack(old_default).ok());
+}
+
 TEST_CASE("HapticLoop: config validation names the field") {
   HapticLoopConfig c = DefaultHapticLoopConfig();
   c.rate_hz = 0;
