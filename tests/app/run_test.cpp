@@ -102,10 +102,13 @@ TEST_CASE("run: a short scene ticks at its rate, presses with force, releases to
   CHECK(contains(r.output, " 0 dropped"));
   CHECK(contains(r.output, "memory          RSS "));
 
-  // Ticks ≈ rate × duration: counts, with room for a loaded machine (misses are counted, not ticks).
+  // Counts, not timing: every 1 ms period of the 5.5 s run is a tick or a counted miss (a busy
+  // host turns ticks into misses, but the schedule holds).
   const std::vector<st::test::TickCsvRow> ticks = st::test::read_tick_csv(out + "/ticks.csv");
-  CHECK(ticks.size() > 5500 * 8 / 10);
-  CHECK(ticks.size() <= 5500 + 50);
+  REQUIRE_FALSE(ticks.empty());
+  CHECK(ticks.size() + ticks.back().misses >= 5500 - 50);
+  CHECK(ticks.size() + ticks.back().misses <= 5500 + 50);
+  CHECK(ticks.size() > 5500 / 10);
 
   // The built-in script: approach 1 s, press 0.5 s, hold 0.5 s, slide 2 s, release 0.5 s, rest.
   double press_max = 0, rest_max = 0;
