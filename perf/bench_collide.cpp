@@ -271,11 +271,11 @@ void add_collide(CLI::App& app) {
           geom::collide(s.probe, s.pt, s.object, s.ot, pose, o, sc, r);
           row.fcl_pairs = fp.size();
           std::size_t i = 0, j = 0;
-          auto note = [&](const char* who, std::uint32_t pf, std::uint32_t of) {
+          auto note = [&, &at = pose](const char* who, std::uint32_t pf, std::uint32_t of) {  // clang < 16: no binding captures
             if (row.diffs.size() >= 5) return;
             char buf[160];
             std::snprintf(buf, sizeof buf, "only %s: probe %u object %u (FCL tri distance %.3g mm)", who, pf, of,
-                          peer->tri_distance(pose, pf, of));
+                          peer->tri_distance(at, pf, of));
             row.diffs.emplace_back(buf);
           };
           while (i < r.pairs.size() || j < fp.size()) {

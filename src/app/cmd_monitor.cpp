@@ -56,36 +56,33 @@ std::string status_line(const rt::ShmSegment& seg, std::int64_t now) {
   rt::ServoStatus sv;
   rt::CollisionStatus co;
   const bool have_sv = st.servo.load(sv), have_co = st.collision.load(co);
-  char buf[512];
-  int n = std::snprintf(buf, sizeof buf, "t %6.2f s | ", double(now - seg.header().created_ns) * 1e-9);
-  auto add = [&](const char* fmt, auto... v) {
-    if (n < int(sizeof buf)) n += std::snprintf(buf + n, sizeof buf - std::size_t(n), fmt, v...);
-  };
+  std::string line;
+  appendf(line, "t %6.2f s | ", double(now - seg.header().created_ns) * 1e-9);
   const char* state_name = state == rt::ServoState::running    ? ""
                            : state == rt::ServoState::starting ? " starting"
                            : state == rt::ServoState::finished ? " finished"
                                                                : " not started";
-  add("servo %s %d%s: ", split ? "process" : "thread of", servo_pid, state_name);
+  appendf(line, "servo %s %d%s: ", split ? "process" : "thread of", servo_pid, state_name);
   if (have_sv) {
     const double f = std::sqrt(sv.force_N[0] * sv.force_N[0] + sv.force_N[1] * sv.force_N[1] + sv.force_N[2] * sv.force_N[2]);
-    add("%llu ticks, %llu misses | pose #%llu age %.1f ms | ", static_cast<unsigned long long>(sv.ticks),
+    appendf(line, "%llu ticks, %llu misses | pose #%llu age %.1f ms | ", static_cast<unsigned long long>(sv.ticks),
         static_cast<unsigned long long>(sv.misses), static_cast<unsigned long long>(sv.pose_seq),
         ms(now - sv.pose_sampled_ns));
-    add("force %.3f N (peak %.3f), PD %.3f mm, fade %.2f | ", f, sv.peak_force_N, sv.penetration_mm, sv.fade);
+    appendf(line, "force %.3f N (peak %.3f), PD %.3f mm, fade %.2f | ", f, sv.peak_force_N, sv.penetration_mm, sv.fade);
   } else {
-    add("no ticks yet | ");
+    appendf(line, "no ticks yet | ");
   }
   if (have_co)
-    add("model #%llu age %.1f ms, %u contacts, %llu rounds, %.2f ms", static_cast<unsigned long long>(co.model_seq),
+    appendf(line, "model #%llu age %.1f ms, %u contacts, %llu rounds, %.2f ms", static_cast<unsigned long long>(co.model_seq),
         ms(now - co.updated_ns), co.contacts, static_cast<unsigned long long>(co.rounds), ms(co.latency_ns));
   else
-    add("no contact model yet");
+    appendf(line, "no contact model yet");
   const std::uint32_t lost = st.collision_lost.load(std::memory_order_relaxed);
   if (lost == 2 || !seg.creator_alive())
-    add(" | collision process %d DEAD", seg.header().creator_pid);
+    appendf(line, " | collision process %d DEAD", seg.header().creator_pid);
   else if (lost == 1)
-    add(" | collision side SILENT");
-  return buf;
+    appendf(line, " | collision side SILENT");
+  return line;
 }
 
 void monitor(const MonitorArgs& a) {

@@ -350,48 +350,43 @@ void run(const RunArgs& a) {
   // Summary.
   const rt::LatencyHistogram& lat = collision.latency();
   std::string summary;
-  char buf[512];
-  auto add = [&](const char* fmt, auto... v) {
-    std::snprintf(buf, sizeof buf, fmt, v...);
-    summary += buf;
-  };
   const double servo_secs = sres.seconds > 0 ? sres.seconds : secs;
-  add("summary\n");
-  add("  duration        %.2f s\n", secs);
-  add("  haptic          %llu ticks (%.1f Hz), %llu misses, %llu overruns, wake-up p99 %.1f us; %s\n",
+  appendf(summary, "summary\n");
+  appendf(summary, "  duration        %.2f s\n", secs);
+  appendf(summary, "  haptic          %llu ticks (%.1f Hz), %llu misses, %llu overruns, wake-up p99 %.1f us; %s\n",
       static_cast<unsigned long long>(sres.ticks), double(sres.ticks) / servo_secs,
       static_cast<unsigned long long>(sres.misses), static_cast<unsigned long long>(sres.overruns), sres.wake_p99_us,
       servo_where.c_str());
-  add("  collision       %llu rounds (%.1f Hz), latency p50 %.3f ms, p99 %.3f ms, %llu incomplete; %s\n",
+  appendf(summary, "  collision       %llu rounds (%.1f Hz), latency p50 %.3f ms, p99 %.3f ms, %llu incomplete; %s\n",
       static_cast<unsigned long long>(collision.rounds()), double(collision.rounds()) / secs,
       double(lat.percentile_ns(0.5)) * 1e-6, double(lat.percentile_ns(0.99)) * 1e-6,
       static_cast<unsigned long long>(collision.incomplete()), backend.c_str());
   if (sres.silences)
-    add("  silences        %llu: no contact model for the stale timeout, force faded to zero (longest %.0f ms)\n",
+    appendf(summary, "  silences        %llu: no contact model for the stale timeout, force faded to zero (longest %.0f ms)\n",
         static_cast<unsigned long long>(sres.silences), sres.longest_silence_ms);
-  add("  force           peak %.3f N (limit %.2f N), peak penetration %.3f mm\n", sres.peak_force_N, s.saturation.peak_N,
+  appendf(summary, "  force           peak %.3f N (limit %.2f N), peak penetration %.3f mm\n", sres.peak_force_N, s.saturation.peak_N,
       std::max(0.0, collision.peak_penetration_mm()));
-  add("  telemetry       %llu samples, %llu dropped\n", static_cast<unsigned long long>(sres.telemetry_pushed),
+  appendf(summary, "  telemetry       %llu samples, %llu dropped\n", static_cast<unsigned long long>(sres.telemetry_pushed),
       static_cast<unsigned long long>(sres.telemetry_dropped));
-  if (sres.device_dropped) add("  device records  %llu dropped\n", static_cast<unsigned long long>(sres.device_dropped));
+  if (sres.device_dropped) appendf(summary, "  device records  %llu dropped\n", static_cast<unsigned long long>(sres.device_dropped));
   if (rss_start && rss_end)
-    add("  memory          RSS %.1f MB after %.0f s, %.1f MB at the end (%+.2f MB)\n", double(rss_start) / 1e6,
+    appendf(summary, "  memory          RSS %.1f MB after %.1f s, %.1f MB at the end (%+.2f MB)\n", double(rss_start) / 1e6,
         std::min(1.0, s.duration_s / 2), double(rss_end) / 1e6, (double(rss_end) - double(rss_start)) / 1e6);
-  add("  outputs         %s/\n", dir.c_str());
+  appendf(summary, "  outputs         %s/\n", dir.c_str());
   const bool have_csv = (s.write_trace || s.write_perfetto) && std::filesystem::exists(csv);
   if (s.write_perfetto && have_csv) {
-    if (Status st = write_trace_json(dir + "/trace.json", csv, rounds_csv); !st) add("  trace.json: %s\n", st.error().c_str());
-    else add("    trace.json    haptic ticks and collision rounds (open in ui.perfetto.dev or chrome://tracing)\n");
+    if (Status st = write_trace_json(dir + "/trace.json", csv, rounds_csv); !st) appendf(summary, "  trace.json: %s\n", st.error().c_str());
+    else appendf(summary, "    trace.json    haptic ticks and collision rounds (open in ui.perfetto.dev or chrome://tracing)\n");
   }
-  if (s.write_trace) add("    ticks.csv     one line per haptic tick; rounds.csv one line per collision round\n");
-  if (a.split) add("    servo.txt     the servo process's counters; script.txt its trajectory\n");
+  if (s.write_trace) appendf(summary, "    ticks.csv     one line per haptic tick; rounds.csv one line per collision round\n");
+  if (a.split) appendf(summary, "    servo.txt     the servo process's counters; script.txt its trajectory\n");
   if (s.write_ply) {
     if (collision.peak_pairs().empty()) {
-      add("    contact.ply   not written: the probe never touched the object\n");
+      appendf(summary, "    contact.ply   not written: the probe never touched the object\n");
     } else if (Status st = write_contact_ply(dir + "/contact.ply", probe, object, collision.peak_pose(), collision.peak_pairs()); !st) {
-      add("    contact.ply: %s\n", st.error().c_str());
+      appendf(summary, "    contact.ply: %s\n", st.error().c_str());
     } else {
-      add("    contact.ply   contact state at peak penetration, colliding faces red (MeshLab, Blender)\n");
+      appendf(summary, "    contact.ply   contact state at peak penetration, colliding faces red (MeshLab, Blender)\n");
     }
   }
   std::fputs(summary.c_str(), stdout);

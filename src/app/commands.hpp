@@ -2,6 +2,7 @@
 // root CLI11 app; a failing command throws CLI::RuntimeError(exit_code) after printing why.
 #pragma once
 #include <CLI/CLI.hpp>
+#include <cstdarg>
 #include <cstdio>
 #include <string>
 
@@ -20,6 +21,16 @@ void add_keygen(CLI::App& app);  ///< spheretouch keygen --out PREFIX (CURVE key
 [[noreturn]] inline void fail_command(const char* who, int code, const std::string& msg) {
   std::fprintf(stderr, "%s: %s\n", who, msg.c_str());
   throw CLI::RuntimeError(code);
+}
+
+/// Appends printf-style text to `out`; the compiler checks the format against the arguments.
+[[gnu::format(printf, 2, 3)]] inline void appendf(std::string& out, const char* fmt, ...) {
+  char buf[512];
+  va_list ap;
+  va_start(ap, fmt);
+  const int n = std::vsnprintf(buf, sizeof buf, fmt, ap);
+  va_end(ap);
+  if (n > 0) out.append(buf, std::min<std::size_t>(std::size_t(n), sizeof buf - 1));
 }
 
 }  // namespace st::app

@@ -400,7 +400,8 @@ struct CollideQuery {
     // Probe leaf box against the object leaf box (union of its face boxes).
     {
       const std::array<float, 8>& v = sc.obox_[o];
-      if ((v[0] > u[3]) | (v[1] > u[4]) | (v[2] > u[5]) | (v[3] < u[0]) | (v[4] < u[1]) | (v[5] < u[2])) return;
+      // Branch-free on purpose: int-valued | of all six comparisons, one branch at the end.
+      if (int(v[0] > u[3]) | int(v[1] > u[4]) | int(v[2] > u[5]) | int(v[3] < u[0]) | int(v[4] < u[1]) | int(v[5] < u[2])) return;
     }
     const FaceBox* ob = OT.face_boxes.data() + ho.first;
     const std::uint64_t mo = face_box_mask(ob, ho.count, u.data());
