@@ -76,8 +76,8 @@ __attribute__((noinline)) std::size_t stack_left_here() {
   const int e = pthread_attr_getstack(&attr, &low, &size);
   pthread_attr_destroy(&attr);
   if (e != 0) return 0;
-  char here;
-  const auto sp = reinterpret_cast<std::uintptr_t>(&here), base = reinterpret_cast<std::uintptr_t>(low);
+  // The frame address, not a local's: under ASan a local may live on a fake stack in the heap.
+  const auto sp = reinterpret_cast<std::uintptr_t>(__builtin_frame_address(0)), base = reinterpret_cast<std::uintptr_t>(low);
   return sp > base && sp - base <= size ? sp - base : 0;
 }
 }  // namespace
@@ -86,14 +86,27 @@ Status set_default_thread_stack(std::size_t bytes) {
   if (bytes < static_cast<std::size_t>(PTHREAD_STACK_MIN))
     return Error{"thread stack of " + std::to_string(bytes) + " bytes is below PTHREAD_STACK_MIN (" +
                  std::to_string(PTHREAD_STACK_MIN) + ")"};
-  pthread_attr_t attr;
-  int e = pthread_getattr_default_np(&attr);
+  const std::size_t before = default_thread_stack();
+  auto set = [](std::size_t size) {
+    pthread_attr_t attr;
+    int e = pthread_getattr_default_np(&attr);
+    if (e == 0) {
+      e = pthread_attr_setstacksize(&attr, size);
+      if (e == 0) e = pthread_setattr_default_np(&attr);
+      pthread_attr_destroy(&attr);
+    }
+    return e;
+  };
+  int e = set(bytes);
   if (e == 0) {
-    e = pthread_attr_setstacksize(&attr, bytes);
-    if (e == 0) e = pthread_setattr_default_np(&attr);
-    pthread_attr_destroy(&attr);
+    // glibc takes the static TLS of every loaded library out of each stack (ThreadSanitizer's is
+    // ~0.8 MB), so a size can be accepted here and still fail every pthread_create: try one now.
+    pthread_t t;
+    e = pthread_create(&t, nullptr, [](void*) -> void* { return nullptr; }, nullptr);
+    if (e == 0) pthread_join(t, nullptr);
+    else if (before) set(before);
   }
-  if (e != 0) return Error{"cannot set the default thread stack to " + std::to_string(bytes) + " bytes: " + std::strerror(e)};
+  if (e != 0) return Error{"cannot use a thread stack of " + std::to_string(bytes) + " bytes: " + std::strerror(e)};
   return Ok{};
 }
 
@@ -136,7 +149,7 @@ RtReport HapticLoop::apply_realtime(const HapticLoopConfig& c) {
       prefault_stack(c.prefault_stack_bytes);
       r.prefault.applied = true;
     } else {
-      r.prefault.error = ENOMEM;
+      r.prefault.error = left ? ENOMEM : ENOTSUP;  // ENOTSUP: the thread's stack bounds could not be read
       r.stack_left = left;
     }
   }
