@@ -23,14 +23,21 @@ void add_keygen(CLI::App& app);  ///< spheretouch keygen --out PREFIX (CURVE key
   throw CLI::RuntimeError(code);
 }
 
-/// Appends printf-style text to `out`; the compiler checks the format against the arguments.
+/// Appends printf-style text to `out`, whatever its length; the compiler checks the format
+/// against the arguments.
 [[gnu::format(printf, 2, 3)]] inline void appendf(std::string& out, const char* fmt, ...) {
-  char buf[512];
-  va_list ap;
+  va_list ap, again;
   va_start(ap, fmt);
-  const int n = std::vsnprintf(buf, sizeof buf, fmt, ap);
+  va_copy(again, ap);
+  const int n = std::vsnprintf(nullptr, 0, fmt, ap);
   va_end(ap);
-  if (n > 0) out.append(buf, std::min<std::size_t>(std::size_t(n), sizeof buf - 1));
+  if (n > 0) {
+    const std::size_t at = out.size();
+    out.resize(at + std::size_t(n) + 1);
+    std::vsnprintf(out.data() + at, std::size_t(n) + 1, fmt, again);
+    out.resize(at + std::size_t(n));
+  }
+  va_end(again);
 }
 
 }  // namespace st::app

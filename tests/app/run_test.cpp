@@ -6,6 +6,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "app/commands.hpp"
 #include "app/scene.hpp"
 #include "app/process_util.hpp"
 #include "test_util.hpp"
@@ -253,4 +254,16 @@ TEST_CASE("scene files: configs/demo.toml and configs/small.toml parse, with the
   auto small = st::app::load_scene(root + "/configs/small.toml");
   REQUIRE_MESSAGE(small.ok(), small.error());
   CHECK(small.value().object.builtin == "icosphere");
+}
+
+TEST_CASE("appendf: appends formatted text of any length") {
+  std::string out = "summary: ";
+  st::app::appendf(out, "%d ticks, %.1f Hz", 42, 999.5);
+  CHECK(out == "summary: 42 ticks, 999.5 Hz");
+  const std::string long_path(2000, 'x');  // longer than any fixed line buffer
+  st::app::appendf(out, " | %s/", long_path.c_str());
+  CHECK(out.size() == std::string("summary: 42 ticks, 999.5 Hz | ").size() + 2000 + 1);
+  CHECK(out.back() == '/');
+  st::app::appendf(out, "%s", "");  // nothing to add
+  CHECK(out.back() == '/');
 }
