@@ -52,9 +52,9 @@ Stats summarise(std::vector<double> us) {
   return s;
 }
 
-std::string endpoint_for(const std::string& transport, int i) {
-  if (transport == "inproc") return net::inproc_endpoint(i, "bench");
-  if (transport == "ipc") return "ipc:///tmp/spheretouch-bench-" + std::to_string(::getpid()) + "-" + std::to_string(i) + ".sock";
+std::string endpoint_for(const std::string& transport, int i, const std::string& tag = "bench") {
+  if (transport == "inproc") return net::inproc_endpoint(i, tag);
+  if (transport == "ipc") return "ipc:///tmp/spheretouch-" + tag + "-" + std::to_string(::getpid()) + "-" + std::to_string(i) + ".sock";
   return "tcp://127.0.0.1:*";
 }
 
@@ -65,10 +65,7 @@ class FanOutFloor {
     for (int i = 0; i < n; ++i) {
       zmq::socket_t s(ctx, zmq::socket_type::router);
       s.set(zmq::sockopt::linger, 0);
-      const std::string ep = transport == "inproc" ? net::inproc_endpoint(i, "bench-floor")
-                             : transport == "ipc"  ? "ipc:///tmp/spheretouch-bench-floor-" + std::to_string(::getpid()) + "-" +
-                                                        std::to_string(i) + ".sock"
-                                                   : "tcp://127.0.0.1:*";
+      const std::string ep = endpoint_for(transport, i, "bench-floor");
       s.bind(ep);
       const std::string bound = s.get(zmq::sockopt::last_endpoint);
       echoes_.emplace_back([this, s = std::move(s)]() mutable { echo(s); });

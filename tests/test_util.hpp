@@ -37,10 +37,10 @@ struct TempDir {
   std::string file(const std::string& name) const { return (path / name).string(); }  ///< path of a file inside
 };
 
-/// Writes `data` to `path` (binary).
 /// True when `part` occurs in `s` (for checking messages).
 inline bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
 
+/// Writes `data` to `path` (binary).
 inline void write_file(const std::string& path, const std::string& data) {
   std::ofstream o(path, std::ios::binary);
   o.write(data.data(), static_cast<std::streamsize>(data.size()));

@@ -99,6 +99,11 @@ inline std::vector<TickCsvRow> read_tick_csv(const std::string& csv) {
   return rows;
 }
 
+/// Loop periods a ticks.csv covers: every period is a tick (a row) or a counted miss.
+inline std::uint64_t tick_periods(const std::vector<TickCsvRow>& rows) {
+  return rows.empty() ? 0 : rows.size() + rows.back().misses;
+}
+
 inline std::string slurp_file(const std::string& path) {
   std::ifstream in(path);
   std::stringstream ss;
