@@ -143,7 +143,7 @@ void add_exchange_impl(CLI::App& app) {
       if (ms == 0) continue;
       exchange_round(ms, tri, [&](const geom::ContactModel& m) { tb->write(m); },
                      [&](geom::ContactModel& o) { return tb->read(o); }, a->reader_cpu, a->writer_cpu);
-      // update() alone: the index exchange without copying the 280 B payload out.
+      // update() alone: the index exchange without copying the 288 B payload out.
       exchange_round(ms, upd, [&](const geom::ContactModel& m) { tb->write(m); },
                      [&](geom::ContactModel&) { return tb->update(); }, a->reader_cpu, a->writer_cpu);
       exchange_round(ms, line, [&](const geom::ContactModel& m) { word->v.store(m.seq, std::memory_order_release); },

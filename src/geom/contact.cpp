@@ -1,20 +1,77 @@
-// Contact model from colliding face pairs, paper §3.6; definitions in contact.hpp.
+// Contact models from colliding face pairs: the builder, the configuration and the paper's model
+// (§3.6); the patch model is in contact_patch.cpp. Definitions in contact.hpp.
 #include "geom/contact.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <sstream>
+
+#include "geom/contact_patch.hpp"
 
 namespace st::geom {
 
+Result<ContactModelKind> parse_contact_model(std::string_view name) {
+  if (name == "paper") return ContactModelKind::paper;
+  if (name == "patch") return ContactModelKind::patch;
+  return fail("contact model '", std::string(name), "': expected patch or paper");
+}
+
+const char* to_string(ContactModelKind kind) {
+  switch (kind) {
+    case ContactModelKind::paper: return "paper";
+    case ContactModelKind::patch: return "patch";
+  }
+  return "?";
+}
+
 ContactConfig DefaultContactConfig() { return ContactConfig{}; }
 
-ContactBuilder::ContactBuilder(ContactConfig config) : config_(config) {}
+std::string check(const ContactConfig& c) {
+  std::ostringstream os;
+  if (c.model != ContactModelKind::paper && c.model != ContactModelKind::patch)
+    os << "contact: model = " << static_cast<unsigned>(c.model) << ", expected patch or paper";
+  else if (!(std::isfinite(c.replane_angle_deg) && c.replane_angle_deg >= 0 && c.replane_angle_deg <= 180))
+    os << "contact: replane_angle_deg = " << c.replane_angle_deg << ", expected a value in [0, 180]";
+  else if (!(std::isfinite(c.hold_margin_mm) && c.hold_margin_mm >= 0))
+    os << "contact: hold_margin_mm = " << c.hold_margin_mm << ", expected a finite value >= 0";
+  else if (c.max_inside_vertices < 1)
+    os << "contact: max_inside_vertices = 0, expected >= 1";
+  return os.str();
+}
+
+ContactBuilder::ContactBuilder(ContactConfig config)
+    : config_(config), patch_(std::make_unique<Patch>(config)) {}
+ContactBuilder::~ContactBuilder() = default;
+ContactBuilder::ContactBuilder(ContactBuilder&&) noexcept = default;
+ContactBuilder& ContactBuilder::operator=(ContactBuilder&&) noexcept = default;
 
 void ContactBuilder::reset() {
   first_face_ = UINT32_MAX;
   first_point_.setZero();
   first_normal_.setZero();
+  patch_->reset();
+}
+
+bool ContactBuilder::has_first_face() const {
+  return config_.model == ContactModelKind::paper ? first_face_ != UINT32_MAX : patch_->has_history();
+}
+
+void ContactBuilder::prepare(const Mesh& probe, const Mesh& object) {
+  if (config_.model == ContactModelKind::patch) patch_->prepare(probe, object);
+}
+
+std::size_t ContactBuilder::bytes() const {
+  return patch_->bytes() + (probe_faces_.capacity() + object_faces_.capacity() + probe_vertices_.capacity()) * 4 +
+         probe_points_.capacity() * sizeof(Vec3);
+}
+
+ContactModel ContactBuilder::build(const Mesh& probe, const Mesh& object, const Pose& pose,
+                                   std::span<const ContactPair> pairs) {
+  ContactModel m = config_.model == ContactModelKind::paper ? build_paper(probe, object, pose, pairs)
+                                                            : patch_->build(probe, object, pose, pairs);
+  m.kind = static_cast<std::uint32_t>(config_.model);
+  return m;
 }
 
 namespace {
@@ -22,6 +79,8 @@ void sort_unique(std::vector<std::uint32_t>& v) {
   std::sort(v.begin(), v.end());
   v.erase(std::unique(v.begin(), v.end()), v.end());
 }
+}  // namespace
+
 // Unit normal and centroid of face f, object-local; false when degenerate or non-finite.
 bool face_frame(const Mesh& m, std::uint32_t f, Vec3& centroid, Vec3& normal) {
   const Tri& t = m.faces[f];
@@ -36,10 +95,9 @@ bool face_frame(const Mesh& m, std::uint32_t f, Vec3& centroid, Vec3& normal) {
   normal = n / len;
   return true;
 }
-}  // namespace
 
-ContactModel ContactBuilder::build(const Mesh& probe, const Mesh& object, const Pose& pose,
-                                   std::span<const ContactPair> pairs) {
+ContactModel ContactBuilder::build_paper(const Mesh& probe, const Mesh& object, const Pose& pose,
+                                         std::span<const ContactPair> pairs) {
   ContactModel m;
   m.pose = to_pod(pose);
   m.pairs = static_cast<std::uint32_t>(std::min<std::size_t>(pairs.size(), UINT32_MAX));

@@ -16,12 +16,13 @@ SaturationConfig capped(SaturationConfig s, const Device& d) {
 
 HapticServo::HapticServo(Device& device, TripleBuffer<PoseSample>& poses, TripleBuffer<geom::ContactModel>& models,
                          const ForceLaw& law, const InterpolatorConfig& interp, SaturationConfig saturation,
-                         Telemetry* telemetry)
+                         Telemetry* telemetry, const PassivityConfig& passivity, double period_s)
     : device_(device),
       poses_(poses),
       models_(models),
       interp_(law, interp),
       sat_(capped(saturation, device)),
+      guard_(passivity, law.max_stiffness_N_per_mm(), period_s),
       telemetry_(telemetry) {}
 
 void HapticServo::tick(const TickInfo& info) noexcept {
@@ -49,7 +50,11 @@ void HapticServo::tick(const TickInfo& info) noexcept {
   const Eigen::Vector3d raw = have_pose ? interp_.force(pose, now) : Eigen::Vector3d::Zero();
   const double dt_s = last_ns_ ? static_cast<double>(now - last_ns_) * 1e-9 : 0.0;
   last_ns_ = now;
-  const Eigen::Vector3d f = sat_.apply(raw, dt_s);
+  // The passivity guard acts while the surface pushes (a contact cycle = force above zero).
+  const Eigen::Vector3d n = raw.squaredNorm() > 0 ? interp_.normal() : Eigen::Vector3d::Zero();
+  const Eigen::Vector3d guarded = have_pose ? guard_.apply(raw, pose.translation(), n, dt_s) : raw;
+  const Eigen::Vector3d f = sat_.apply(guarded, dt_s);
+  guard_.commanded(f);
   if (sat_.limited()) ++stats_.saturated;
   device_.command_force(now, f);
   ++stats_.ticks;

@@ -6,9 +6,11 @@
 #include <cstdint>
 
 #include "geom/contact.hpp"
+#include "rt/constants.hpp"
 #include "rt/device.hpp"
 #include "rt/haptic_loop.hpp"
 #include "rt/interpolator.hpp"
+#include "rt/passivity.hpp"
 #include "rt/pose_sample.hpp"
 #include "rt/saturation.hpp"
 #include "rt/shm_status.hpp"
@@ -29,10 +31,12 @@ struct ServoStats {
 class HapticServo final : public TickHandler {
  public:
   /// All references must outlive the servo; telemetry may be null. The saturation peak is
-  /// lowered to the device's max_force_N() if it is above it.
+  /// lowered to the device's max_force_N() if it is above it. `period_s` is the loop's period
+  /// (it sizes the passivity guard's minimum damping).
   HapticServo(Device& device, TripleBuffer<PoseSample>& poses, TripleBuffer<geom::ContactModel>& models,
               const ForceLaw& law, const InterpolatorConfig& interp, SaturationConfig saturation,
-              Telemetry* telemetry);
+              Telemetry* telemetry, const PassivityConfig& passivity = DefaultPassivityConfig(),
+              double period_s = 1.0 / kDefaultRateHz);
   void tick(const TickInfo& info) noexcept override;
   /// Publish a ServoStatus every kStatusEveryTicks ticks into `status` (null = off). Set before
   /// the loop starts; the servo is the SeqLock's only writer.
@@ -41,6 +45,7 @@ class HapticServo final : public TickHandler {
   double peak_force_N() const { return peak_force_N_; }          ///< largest |force| commanded (after the loop)
   const Interpolator& interpolator() const { return interp_; }   ///< for inspection
   const Saturator& saturator() const { return sat_; }            ///< for inspection
+  const PassivityGuard& passivity() const { return guard_; }     ///< for inspection
 
  private:
   Device& device_;
@@ -48,6 +53,7 @@ class HapticServo final : public TickHandler {
   TripleBuffer<geom::ContactModel>& models_;
   Interpolator interp_;
   Saturator sat_;
+  PassivityGuard guard_;
   Telemetry* telemetry_;
   SeqLock<ServoStatus>* status_ = nullptr;
   ServoStats stats_;

@@ -63,6 +63,19 @@ bool model_ok(const geom::ContactModel& m) {
 }  // namespace
 
 void Interpolator::on_model(const geom::ContactModel& model, std::int64_t now_ns) noexcept {
+  // The model in use until now, for the cross-fade (evaluated at the pose of the next tick).
+  if (!pending_offset_) {
+    prev_contact_ = contact_;
+    prev_fd_ = fd_;
+    prev_probe_point_ = probe_point_;
+    prev_plane_point_ = plane_point_;
+    prev_offset_ = offset_;
+    prev_fade_ = state_.fade;
+    const double faded = static_cast<double>(std::max<std::int64_t>(now_ns - received_ns_, 0));
+    prev_weight_ = (have_model_ && c_.crossfade_ns > 0 && faded < static_cast<double>(c_.crossfade_ns))
+                       ? 1.0 - faded / static_cast<double>(c_.crossfade_ns)
+                       : 0.0;
+  }
   model_ = model;
   if (!model_ok(model)) {
     ++rejected_;
@@ -132,7 +145,15 @@ Eigen::Vector3d Interpolator::force(const Eigen::Isometry3d& pose, std::int64_t 
   if (c_.mode == InterpMode::plane) {
     // Cross-fade: the jump a new model would cause decays linearly over crossfade_ns.
     if (pending_offset_) {
-      offset_ = c_.crossfade_ns > 0 ? Eigen::Vector3d(last_out_ - f) : Eigen::Vector3d::Zero();
+      // The old model at THIS pose (plus what was still left of its own cross-fade) minus the new
+      // one at this pose: only the models' disagreement is faded, never the probe's motion.
+      Eigen::Vector3d old = prev_weight_ * prev_offset_;
+      if (prev_contact_) {
+        const double old_pd = (prev_plane_point_ - pose * prev_probe_point_).dot(prev_fd_);
+        old += law_.magnitude_N(old_pd) * prev_fd_;
+      }
+      old *= prev_fade_;  // a stale, fading old model hands over what it was rendering
+      offset_ = c_.crossfade_ns > 0 && old.allFinite() ? Eigen::Vector3d(old - f) : Eigen::Vector3d::Zero();
       pending_offset_ = false;
     }
     // The fade counts the current tick too (idle + dt): a model arriving every tick must still

@@ -7,7 +7,9 @@
 //           updates stop) and B's component against FD removed (a surface never pulls).
 //  * plane: PD recomputed every tick against the newest local contact plane,
 //           PD(t) = (plane_point - pose(t)·probe_point)·FD, F = law(PD(t))·FD; a new model is
-//           cross-faded in: the force jump at its arrival decays linearly over crossfade_ns.
+//           cross-faded in: at its arrival the old and the new model are evaluated at the SAME
+//           pose (the current one), and their difference decays linearly over crossfade_ns, so
+//           the cross-fade hides only what the models disagree on, never the probe's motion.
 // In every mode: a model older than stale_timeout_ns (no update received) fades the force
 // linearly to zero over fade_ns; optional damping -c·(v·FD)·FD never makes the force pull;
 // every input is checked for finiteness and a bad one yields zero force, counted.
@@ -72,6 +74,8 @@ class Interpolator {
   std::uint64_t model_seq() const noexcept { return model_.seq; }         ///< newest model's seq
   std::int64_t received_ns() const noexcept { return received_ns_; }      ///< when it arrived
   const InterpolatorConfig& config() const noexcept { return c_; }        ///< settings
+  /// The contact normal FD of the model in use (unit, object frame), zero when not in contact.
+  const Eigen::Vector3d& normal() const noexcept { return fd_; }
 
  private:
   Eigen::Vector3d contact_force(const Eigen::Isometry3d& pose, double& pd_mm) const noexcept;
@@ -86,6 +90,13 @@ class Interpolator {
   Eigen::Vector3d anchor_{Eigen::Vector3d::Zero()};       ///< probe_point at the model's pose, object frame
   Eigen::Vector3d force_a_{Eigen::Vector3d::Zero()};      ///< A = law(PD)·FD
   Eigen::Vector3d offset_{Eigen::Vector3d::Zero()};       ///< plane: jump at the last arrival, decaying
+  // The model before the newest one (plane cross-fade: both are evaluated at the same pose).
+  bool prev_contact_ = false;
+  Eigen::Vector3d prev_fd_{Eigen::Vector3d::Zero()}, prev_probe_point_{Eigen::Vector3d::Zero()},
+      prev_plane_point_{Eigen::Vector3d::Zero()};
+  Eigen::Vector3d prev_offset_{Eigen::Vector3d::Zero()};  ///< offset_ still applied when the newest model arrived
+  double prev_weight_ = 0;                                ///< its remaining weight then
+  double prev_fade_ = 0;                                  ///< the stale fade of the last output
   Eigen::Vector3d last_out_{Eigen::Vector3d::Zero()};     ///< last force() output (after fade)
   Eigen::Vector3d last_point_{Eigen::Vector3d::Zero()};   ///< probe point, previous tick (damping)
   bool pending_offset_ = false;           ///< plane: offset_ to be taken at the next force()

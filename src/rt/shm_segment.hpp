@@ -37,8 +37,9 @@ struct alignas(kCacheLine) ShmHeader {
 /// "STSHMRT1" little-endian: identifies a spheretouch real-time segment.
 inline constexpr std::uint64_t kShmMagic = 0x3154524D48535453ull;
 /// Bump on any change of ShmHeader, ShmLayout, PoseSample, ContactModel or ShmStatus.
-/// 2: the status area (ShmStatus) after the triple buffers.
-inline constexpr std::uint32_t kShmLayoutVersion = 2;
+/// 2: the status area (ShmStatus) after the triple buffers. 3: ContactModel 288 B (contact model
+/// kind, inside vertex counts).
+inline constexpr std::uint32_t kShmLayoutVersion = 3;
 
 /// The whole segment.
 struct ShmLayout {

@@ -1,5 +1,6 @@
-// Tests src/geom/contact.*: FD/PD/plane on a flat wall, first-contact recording and re-recording,
-// zero contacts, degenerate faces, disagreeing normals, bad pairs, far-from-origin bodies.
+// Tests src/geom/contact.* for the paper's model (§3.6, [contact] model = "paper"): FD/PD/plane on
+// a flat wall, first-contact recording and re-recording, zero contacts, degenerate faces,
+// disagreeing normals, bad pairs, far-from-origin bodies. The patch model: contact_patch_test.cpp.
 #include "geom/contact.hpp"
 
 #include <doctest/doctest.h>
@@ -26,6 +27,11 @@ Mesh tip() {
   m.faces = {{0, 2, 1}, {0, 3, 2}, {0, 1, 3}, {1, 2, 3}};
   return m;
 }
+ContactConfig paper() {
+  ContactConfig c = DefaultContactConfig();
+  c.model = ContactModelKind::paper;
+  return c;
+}
 Pose at(const Vec3& t) {
   Pose p = Pose::Identity();
   p.translation() = t;
@@ -43,8 +49,8 @@ double plane_depth(const ContactModel& m, const Pose& p) {
 }
 }  // namespace
 
-TEST_CASE("contact: tip pressed into a wall gives FD = +z, PD = depth, plane consistent") {
-  ContactBuilder b;
+TEST_CASE("contact paper: tip pressed into a wall gives FD = +z, PD = depth, plane consistent") {
+  ContactBuilder b(paper());
   const Mesh w = wall(), t = tip();
   const auto pairs = tip_pairs({0, 1});
   // Tip right under face 1's centroid (-10/3, 10/3, 0): the tip is the nearest vertex.
@@ -72,8 +78,8 @@ TEST_CASE("contact: tip pressed into a wall gives FD = +z, PD = depth, plane con
   CHECK(m2.first_contact_face == m.first_contact_face);
 }
 
-TEST_CASE("contact: zero contacts end the contact; the next contact re-records the face") {
-  ContactBuilder b;
+TEST_CASE("contact paper: zero contacts end the contact; the next contact re-records the face") {
+  ContactBuilder b(paper());
   const Mesh w = wall(), t = tip();
   (void)b.build(t, w, at({-5, -5, -0.2}), tip_pairs({1}));
   CHECK(b.has_first_face());
@@ -89,8 +95,8 @@ TEST_CASE("contact: zero contacts end the contact; the next contact re-records t
   CHECK(again.first_contact_face == 0);
 }
 
-TEST_CASE("contact: bodies far from the origin keep their precision") {
-  ContactBuilder b;
+TEST_CASE("contact paper: bodies far from the origin keep their precision") {
+  ContactBuilder b(paper());
   const Vec3 far(1e6, -2e6, 3e5);
   const Mesh w = wall(far);
   const Mesh t = tip();
@@ -101,13 +107,13 @@ TEST_CASE("contact: bodies far from the origin keep their precision") {
   CHECK(plane_depth(m, p) == doctest::Approx(0.25).epsilon(1e-6));
 }
 
-TEST_CASE("contact: degenerate object faces are skipped; all degenerate = no contact") {
+TEST_CASE("contact paper: degenerate object faces are skipped; all degenerate = no contact") {
   Mesh w = wall();
   w.local.push_back({0, 0, 0});
   w.local.push_back({1, 0, 0});
   w.local.push_back({2, 0, 0});  // collinear: face 2 is degenerate
   w.faces.push_back({4, 5, 6});
-  ContactBuilder b;
+  ContactBuilder b(paper());
   const ContactModel m = b.build(tip(), w, at({0, 0, -0.1}), tip_pairs({0, 2}));
   REQUIRE(m.in_contact());
   CHECK((m.flags & kDegenerateSkipped) != 0);
@@ -120,14 +126,14 @@ TEST_CASE("contact: degenerate object faces are skipped; all degenerate = no con
   CHECK(d.contacts == 4);
 }
 
-TEST_CASE("contact: normals that disagree are flagged, FD follows the nearest face") {
+TEST_CASE("contact paper: normals that disagree are flagged, FD follows the nearest face") {
   Mesh w = wall();
   // A face right under the tip, pointing -z (the underside of a thin wall).
   w.local.push_back({-1, -1, -0.05});
   w.local.push_back({-1, 1, -0.05});
   w.local.push_back({1, 0, -0.05});
   w.faces.push_back({4, 5, 6});
-  ContactBuilder b;
+  ContactBuilder b(paper());
   const ContactModel m = b.build(tip(), w, at({-3, 3.5, -0.1}), tip_pairs({0, 1, 2}));
   REQUIRE(m.in_contact());
   CHECK((m.flags & kNormalsDisagree) != 0);
@@ -135,7 +141,7 @@ TEST_CASE("contact: normals that disagree are flagged, FD follows the nearest fa
   CHECK(m.force_dir.z == doctest::Approx(1.0));
 }
 
-TEST_CASE("contact: FD turning past the replane angle re-records the first face") {
+TEST_CASE("contact paper: FD turning past the replane angle re-records the first face") {
   Mesh w;
   // Two faces meeting at a 90-degree edge: top (normal +z) and side (normal +x).
   w.local = {{-10, -10, 0}, {0, -10, 0}, {0, 10, 0}, {0, -10, -10}, {0, 10, -10}};
@@ -147,7 +153,7 @@ TEST_CASE("contact: FD turning past the replane angle re-records the first face"
     REQUIRE(n.normalized().x() == doctest::Approx(1.0));
     (void)c;
   }
-  ContactBuilder b;
+  ContactBuilder b(paper());
   const ContactModel top = b.build(tip(), w, at({-3, 0, -0.2}), tip_pairs({0}));
   REQUIRE(top.in_contact());
   CHECK(top.first_contact_face == 0);
@@ -160,8 +166,8 @@ TEST_CASE("contact: FD turning past the replane angle re-records the first face"
   CHECK(side.penetration_mm >= 0.0);
 }
 
-TEST_CASE("contact: out-of-range pairs and non-finite poses are skipped and flagged") {
-  ContactBuilder b;
+TEST_CASE("contact paper: out-of-range pairs and non-finite poses are skipped and flagged") {
+  ContactBuilder b(paper());
   const std::vector<ContactPair> pairs = {{0, 0}, {99, 0}, {0, 99}};
   const ContactModel m = b.build(tip(), wall(), at({0, 0, -0.1}), pairs);
   CHECK(m.skipped_pairs == 2);

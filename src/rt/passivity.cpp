@@ -1,0 +1,82 @@
+#include "rt/passivity.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+namespace st::rt {
+
+PassivityConfig DefaultPassivityConfig() { return PassivityConfig{}; }
+
+std::string PassivityGuard::check(const PassivityConfig& c) {
+  std::ostringstream os;
+  if (!(std::isfinite(c.colgate_margin) && c.colgate_margin >= 0 && c.colgate_margin <= 100))
+    os << "passivity: colgate_margin = " << c.colgate_margin << ", expected a value in [0, 100]";
+  else if (!(std::isfinite(c.max_damping_N_s_per_mm) && c.max_damping_N_s_per_mm >= 0 && c.max_damping_N_s_per_mm <= 10))
+    os << "passivity: max_damping_n_s_per_mm = " << c.max_damping_N_s_per_mm << ", expected a value in [0, 10]";
+  return os.str();
+}
+
+PassivityGuard::PassivityGuard(const PassivityConfig& config, double stiffness_N_per_mm, double period_s)
+    : c_(config),
+      b_min_(config.colgate_margin * std::max(stiffness_N_per_mm, 0.0) * std::max(period_s, 0.0) / 2),
+      period_s_(period_s > 0 ? period_s : 1e-3) {}
+
+void PassivityGuard::reset() noexcept {
+  last_x_.setZero();
+  last_f_.setZero();
+  vn_ = 0;
+  energy_ = 0;
+  have_x_ = false;
+  contact_ = false;
+  state_ = PassivityState{};
+}
+
+Eigen::Vector3d PassivityGuard::apply(const Eigen::Vector3d& f, const Eigen::Vector3d& x_mm, const Eigen::Vector3d& n,
+                                      double dt_s) noexcept {
+  state_ = PassivityState{};
+  if (!c_.enabled) return f;
+  if (!x_mm.allFinite() || !f.allFinite()) {
+    have_x_ = false;
+    return f;
+  }
+  const double dt = (dt_s > 0 && dt_s < 0.1) ? dt_s : period_s_;
+  const bool contact = n.allFinite() && n.squaredNorm() > 0.25;
+  // Observer: what the force commanded last tick did over the motion since (zero-order hold).
+  Eigen::Vector3d dx = Eigen::Vector3d::Zero();
+  if (have_x_) {
+    dx = x_mm - last_x_;
+    energy_ += last_f_.dot(dx);
+  }
+  last_x_ = x_mm;
+  have_x_ = true;
+  if (contact != contact_) {
+    // A cycle ends or begins: the surface keeps no credit for what it absorbed, only a debt.
+    energy_ = std::max(energy_, 0.0);
+    vn_ = 0;
+    contact_ = contact;
+  }
+  state_.energy_mJ = energy_;
+  if (!contact) return f;
+
+  // Normal velocity, + = leaving the surface; a one-pole low-pass (~57 Hz at 1 kHz) so encoder
+  // quantisation on a real device does not turn into buzz.
+  const double vn_raw = dx.dot(n) / dt;
+  vn_ += 0.3 * (vn_raw - vn_);
+
+  double add = -b_min_ * vn_;  // stage 1: Colgate's minimum damping
+  if (energy_ > 0 && std::abs(vn_) > 1e-9) {
+    // Stage 2: dissipate the observed excess over the next tick, α·vn²·T = E, α capped.
+    const double alpha = std::min(energy_ / (dt * vn_ * vn_), c_.max_damping_N_s_per_mm);
+    add -= alpha * vn_;
+    state_.active = alpha > 0;
+    if (state_.active) ++active_ticks_;
+  }
+  Eigen::Vector3d out = f + add * n;
+  const double along = out.dot(n);
+  if (along < 0) out -= along * n;  // the guard never makes the surface pull
+  state_.damping_N = (out - f).dot(n);
+  return out;
+}
+
+}  // namespace st::rt

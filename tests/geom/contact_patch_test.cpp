@@ -1,0 +1,313 @@
+// Tests the patch contact model of src/geom/contact.* (contact_patch.cpp) against analytic
+// shapes with known depth and normal: a sphere pressed into a box's face, edge and corner, into a
+// sphere and into a concave crease; pulled out; slid over and around an edge; pushed through a
+// 1 mm plate (no pop-through); bad input. Pairs come from the exact brute-force reference.
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "geom/contact.hpp"
+#include "geom/primitives.hpp"
+#include "test_models.hpp"
+
+using namespace st::geom;
+
+namespace {
+constexpr double kPi = 3.14159265358979323846;
+
+Pose at(const Vec3& t) {
+  Pose p = Pose::Identity();
+  p.translation() = t;
+  return p;
+}
+ContactModel model_at(ContactBuilder& b, const Mesh& probe, const Mesh& object, const Pose& p) {
+  const std::vector<FacePair> pairs = st::test::brute_force(probe, object, p);
+  return b.build(probe, object, p, pairs);
+}
+double angle_deg(const Vec3& a, const Vec3& b) {
+  const double c = a.normalized().dot(b.normalized());
+  return std::acos(std::clamp(c, -1.0, 1.0)) * 180.0 / kPi;
+}
+Vec3 fd(const ContactModel& m) { return to_eigen(m.force_dir); }
+// Depth of the model's probe point below its local contact plane at pose p.
+double plane_depth(const ContactModel& m, const Pose& p) {
+  return (to_eigen(m.plane_point) - p * to_eigen(m.probe_point)).dot(to_eigen(m.force_dir));
+}
+bool finite_model(const ContactModel& m) {
+  return finite(m.force_dir) && finite(m.plane_point) && finite(m.probe_point) && finite(m.contact_point) &&
+         std::isfinite(m.penetration_mm) && m.penetration_mm >= 0;
+}
+// Meshes: a 40 mm box (faces at ±20), a 10 mm ball (5,120 faces: vertex spacing ~0.7 mm, so the
+// deepest vertex is within ~0.01 mm of the sphere's deepest point).
+const Mesh& box40() {
+  static const Mesh m = make_box({40, 40, 40});
+  return m;
+}
+const Mesh& ball10() {
+  static const Mesh m = make_icosphere(10, 16);
+  return m;
+}
+constexpr double kDepthTol = 0.05;  // mm: the target for analytic shapes
+}  // namespace
+
+TEST_CASE("contact patch: the default model is patch; names parse") {
+  CHECK(DefaultContactConfig().model == ContactModelKind::patch);
+  CHECK(parse_contact_model("paper").value() == ContactModelKind::paper);
+  CHECK(parse_contact_model("patch").value() == ContactModelKind::patch);
+  const auto bad = parse_contact_model("nearest");
+  REQUIRE_FALSE(bad.ok());
+  CHECK(st::test::contains(bad.error(), "expected patch or paper"));
+  ContactConfig c;
+  c.hold_margin_mm = -1;
+  CHECK(st::test::contains(check(c), "hold_margin_mm"));
+  CHECK(check(DefaultContactConfig()).empty());
+}
+
+TEST_CASE("contact patch: sphere pressed into a box face: FD = +z, PD = depth from 0.5 to 10 mm") {
+  for (const Vec3& offset : {Vec3(0, 0, 0), Vec3(1e6, -2e6, 3e5)}) {
+    Mesh box = box40();
+    box.origin += offset;  // the same box far from the origin: nothing may lose precision
+    for (double d : {0.5, 1.0, 2.0, 5.0, 10.0}) {
+      CAPTURE(d);
+      CAPTURE(offset.norm());
+      ContactBuilder b;
+      const Pose p = at(offset + Vec3(1.3, -2.1, 30.0 - d));
+      const ContactModel m = model_at(b, ball10(), box, p);
+      REQUIRE(m.in_contact());
+      CHECK(m.kind == std::uint32_t(ContactModelKind::patch));
+      CHECK(angle_deg(fd(m), Vec3::UnitZ()) < 1e-6);
+      CHECK(std::abs(m.penetration_mm - d) <= kDepthTol);
+      CHECK(m.penetration_mm <= d + 1e-9);  // vertices lie on the sphere: never deeper than it
+      CHECK(plane_depth(m, p) == doctest::Approx(m.penetration_mm).epsilon(1e-9));
+      CHECK(m.inside_probe_vertices > 0);
+      CHECK((m.flags & (kHeld | kNormalFallback | kBadInput)) == 0);
+    }
+  }
+}
+
+TEST_CASE("contact patch: box edge and corner: FD on the bisector, PD = depth") {
+  const Vec3 edge_dir = Vec3(1, 0, 1).normalized(), corner_dir = Vec3(1, 1, 1).normalized();
+  for (double d : {0.5, 2.0, 5.0}) {
+    CAPTURE(d);
+    {
+      ContactBuilder b;
+      const Pose p = at(Vec3(20, 0.37, 20) + (10 - d) * edge_dir);
+      const ContactModel m = model_at(b, ball10(), box40(), p);
+      REQUIRE(m.in_contact());
+      CHECK(angle_deg(fd(m), edge_dir) < 1.0);
+      CHECK(std::abs(m.penetration_mm - d) <= kDepthTol);
+    }
+    {
+      ContactBuilder b;
+      const Pose p = at(Vec3(20, 20, 20) + (10 - d) * corner_dir);
+      const ContactModel m = model_at(b, ball10(), box40(), p);
+      REQUIRE(m.in_contact());
+      CHECK(angle_deg(fd(m), corner_dir) < 1.0);
+      CHECK(std::abs(m.penetration_mm - d) <= kDepthTol);
+    }
+  }
+}
+
+TEST_CASE("contact patch: sphere into sphere: FD radial, PD = r1 + r2 - distance") {
+  const Mesh object = make_icosphere(20, 16);
+  const Vec3 u = Vec3(1, 2, 3).normalized();
+  for (double d : {0.5, 3.0, 10.0}) {
+    CAPTURE(d);
+    ContactBuilder b;
+    const Pose p = at((30.0 - d) * u);
+    const ContactModel m = model_at(b, ball10(), object, p);
+    REQUIRE(m.in_contact());
+    CHECK(angle_deg(fd(m), u) < 1.0);
+    CHECK(std::abs(m.penetration_mm - d) <= kDepthTol);
+  }
+}
+
+TEST_CASE("contact patch: force never rises while the probe is pulled out") {
+  ContactBuilder b;
+  double last = std::numeric_limits<double>::infinity();
+  int in_contact = 0;
+  for (double d = 8.0; d > -0.5; d -= 0.05) {
+    const ContactModel m = model_at(b, ball10(), box40(), at({0.2, 0.1, 30.0 - d}));
+    if (!m.in_contact()) {
+      CHECK(d < 0.05);  // contact ends only at the surface
+      last = 0;
+      continue;
+    }
+    ++in_contact;
+    CHECK(m.penetration_mm <= last + 1e-9);
+    last = m.penetration_mm;
+  }
+  CHECK(in_contact > 150);
+}
+
+TEST_CASE("contact patch: sliding over and around a box edge: no step, FD turns continuously") {
+  // Straight over the edge at constant height: the sphere loses the top face gradually.
+  {
+    ContactBuilder b;
+    ContactModel prev{};
+    int steps = 0;
+    for (double x = 10; x <= 27; x += 0.05) {
+      const ContactModel m = model_at(b, ball10(), box40(), at({x, 0, 27}));
+      if (!m.in_contact()) break;
+      REQUIRE(finite_model(m));
+      if (prev.in_contact()) {
+        CHECK(angle_deg(fd(m), fd(prev)) < 0.5);
+        CHECK(std::abs(m.penetration_mm - prev.penetration_mm) < 0.05);
+        ++steps;
+      }
+      prev = m;
+    }
+    CHECK(steps > 200);
+    CHECK(fd(prev).x() > 0.5);  // it has turned toward the side by the time contact ends
+  }
+  // Around the edge at constant depth 3 mm. Where the ball is symmetric about the edge (45°) FD
+  // is radial and PD exact; elsewhere FD is the intersection volume's gradient, which leans
+  // toward the face with the larger share of the patch (a rounded edge), and PD is the way out
+  // along it: never less than the shortest way out, and both turn without a step.
+  {
+    ContactBuilder b;
+    ContactModel prev{};
+    for (double a = 0; a <= 90.0; a += 0.5) {
+      const Vec3 dir(std::sin(a * kPi / 180), 0, std::cos(a * kPi / 180));
+      const ContactModel m = model_at(b, ball10(), box40(), at(Vec3(20, 0, 20) + 7.0 * dir));
+      REQUIRE(m.in_contact());
+      CAPTURE(a);
+      CHECK(m.penetration_mm >= 3.0 - kDepthTol);
+      CHECK(m.penetration_mm <= 3.0 / std::cos(angle_deg(fd(m), dir) * kPi / 180) + kDepthTol);
+      CHECK(angle_deg(fd(m), dir) < 35.0);
+      if (std::abs(a - 45.0) < 1e-9) {
+        CHECK(angle_deg(fd(m), dir) < 1.0);
+        CHECK(std::abs(m.penetration_mm - 3.0) <= kDepthTol);
+      }
+      if (prev.in_contact()) {
+        CHECK(angle_deg(fd(m), fd(prev)) < 1.5);
+        CHECK(std::abs(m.penetration_mm - prev.penetration_mm) < 0.05);
+      }
+      prev = m;
+    }
+  }
+}
+
+TEST_CASE("contact patch: concave crease: FD between the walls, continuous across the valley") {
+  // A V-shaped valley along y: walls z = |x| (normals (∓1, 0, 1)/√2), 40 mm long.
+  Mesh v;
+  v.name = "valley";
+  v.local = {{-20, -20, 20}, {0, -20, 0}, {20, -20, 20}, {-20, 20, 20}, {0, 20, 0}, {20, 20, 20}};
+  v.faces = {{0, 1, 4}, {0, 4, 3}, {1, 2, 5}, {1, 5, 4}};
+  ContactBuilder b;
+  ContactModel prev{};
+  for (double x = -3; x <= 3; x += 0.05) {
+    const ContactModel m = model_at(b, ball10(), v, at({x, 0, 10 * std::sqrt(2.0) - 1.0}));
+    REQUIRE(m.in_contact());
+    REQUIRE(finite_model(m));
+    CHECK(fd(m).z() > 0.7);
+    if (std::abs(x) < 1e-9) CHECK(angle_deg(fd(m), Vec3::UnitZ()) < 1.0);
+    // The walls' shares of the patch trade places within ~2 mm: FD turns up to ~55°/mm there,
+    // in proportion to the step (no jump).
+    if (prev.in_contact()) CHECK(angle_deg(fd(m), fd(prev)) < 4.0);
+    prev = m;
+  }
+}
+
+TEST_CASE("contact patch: pushed through a 1 mm plate and back: no pop-through, held past it") {
+  const Mesh plate = make_box({60, 60, 1});  // top at z = +0.5
+  const Mesh ball = make_icosphere(5, 12);
+  ContactBuilder b;
+  int held = 0, contacts = 0;
+  auto step = [&](double cz) {
+    const double depth = 0.5 - (cz - 5.0);  // below the plate's top (the side it entered by)
+    const ContactModel m = model_at(b, ball, plate, at({0.3, -0.2, cz}));
+    CAPTURE(cz);
+    REQUIRE(finite_model(m));
+    if (depth <= 0.02) return;  // at or above the top: contact may or may not be reported
+    REQUIRE(m.in_contact());  // never lost while below the entry surface
+    ++contacts;
+    CHECK(angle_deg(fd(m), Vec3::UnitZ()) < 1e-6);  // always out of the entry side
+    CHECK(std::abs(m.penetration_mm - depth) <= kDepthTol);
+    if (m.flags & kHeld) ++held;
+  };
+  for (double cz = 6.0; cz >= -20.0; cz -= 0.2) step(cz);
+  for (double cz = -20.0; cz <= 6.0; cz += 0.2) step(cz);
+  CHECK(contacts > 200);
+  CHECK(held > 100);  // fully through (cz < -5.5) no face collides: the held plane carries it
+}
+
+TEST_CASE("contact patch: bad input gives a finite model and a flag") {
+  ContactBuilder b;
+  const Pose good = at({0, 0, 27});
+  const std::vector<FacePair> pairs = st::test::brute_force(ball10(), box40(), good);
+  REQUIRE_FALSE(pairs.empty());
+  // Non-finite pose: no contact, flagged, history forgotten.
+  (void)b.build(ball10(), box40(), good, pairs);
+  REQUIRE(b.has_first_face());
+  const ContactModel nan = b.build(ball10(), box40(), at({0, 0, std::nan("")}), pairs);
+  CHECK_FALSE(nan.in_contact());
+  CHECK((nan.flags & kBadInput) != 0);
+  CHECK(finite_model(nan));
+  CHECK_FALSE(b.has_first_face());
+  // Out-of-range indices are skipped and flagged; the rest still renders.
+  std::vector<FacePair> bad = pairs;
+  bad.push_back({999999, 0});
+  bad.push_back({0, 999999});
+  const ContactModel m = b.build(ball10(), box40(), good, bad);
+  CHECK(m.in_contact());
+  CHECK(m.skipped_pairs == 2);
+  CHECK((m.flags & kBadInput) != 0);
+  CHECK(finite_model(m));
+  // Degenerate faces in the patch: a zero-area sliver lying in the top face.
+  Mesh box = box40();
+  const auto base = std::uint32_t(box.local.size());
+  box.local.push_back({-15, 0, 20});  // crosses the ball's 7.1 mm circle in the top face
+  box.local.push_back({0, 0, 20});
+  box.local.push_back({15, 0, 20});
+  box.faces.push_back({base, base + 1, base + 2});
+  ContactBuilder b2;
+  const std::vector<FacePair> with_sliver = st::test::brute_force(ball10(), box, good);
+  const ContactModel s = b2.build(ball10(), box, good, with_sliver);
+  REQUIRE(s.in_contact());
+  CHECK((s.flags & kDegenerateSkipped) != 0);
+  CHECK(finite_model(s));
+  CHECK(angle_deg(fd(s), Vec3::UnitZ()) < 1e-6);
+  CHECK(std::abs(s.penetration_mm - 3.0) <= kDepthTol);
+  // Only degenerate faces colliding, no history: no direction to render.
+  ContactBuilder b3;
+  std::vector<FacePair> only_sliver;
+  for (const FacePair& p : with_sliver)
+    if (p.object == box.faces.size() - 1) only_sliver.push_back(p);
+  REQUIRE_FALSE(only_sliver.empty());
+  const ContactModel o = b3.build(ball10(), box, good, only_sliver);
+  CHECK_FALSE(o.in_contact());
+  CHECK(finite_model(o));
+}
+
+TEST_CASE("contact patch: a hand on the elephant: finite, PD and FD consistent with the paper's contact set") {
+  const Mesh& hand = *st::test::model_mesh("hand_L2.off");
+  const Mesh& elephant = *st::test::model_mesh("elephant.off");
+  // The hand's lowest vertex 2 mm below the elephant's highest, as in the built-in script.
+  double hand_low = std::numeric_limits<double>::infinity(), top = -hand_low;
+  Vec3 top_v = Vec3::Zero();
+  for (std::uint32_t i = 0; i < hand.local.size(); ++i) hand_low = std::min(hand_low, hand.vertex(i).z());
+  for (std::uint32_t i = 0; i < elephant.local.size(); ++i)
+    if (elephant.vertex(i).z() > top) top = elephant.vertex(i).z(), top_v = elephant.vertex(i);
+  Vec3 hand_tip = Vec3::Zero();
+  for (std::uint32_t i = 0; i < hand.local.size(); ++i)
+    if (hand.vertex(i).z() == hand_low) hand_tip = hand.vertex(i);
+  ContactBuilder b;
+  b.prepare(hand, elephant);
+  ContactModel prev{};
+  for (double s = 0; s <= 2.0; s += 0.1) {
+    const Pose p = at(top_v - hand_tip + Vec3(s, 0, -2.0));
+    const ContactModel m = model_at(b, hand, elephant, p);
+    REQUIRE(m.in_contact());
+    REQUIRE(finite_model(m));
+    CHECK(fd(m).z() > 0.5);  // the elephant's back faces up
+    CHECK(m.penetration_mm > 0.5);
+    CHECK(m.penetration_mm < 4.0);
+    CHECK(plane_depth(m, p) == doctest::Approx(m.penetration_mm).epsilon(1e-9));
+    if (prev.in_contact()) CHECK(angle_deg(fd(m), fd(prev)) < 3.0);
+    prev = m;
+  }
+  CHECK(b.bytes() > 0);
+}
