@@ -185,10 +185,10 @@ void run(const RunArgs& a) {
       telemetry = std::move(t).value();
     }
     servo = std::make_unique<rt::HapticServo>(*sim, shm.poses(), shm.models(), law.value(), s.interp, s.saturation,
-                                              telemetry.get());
+                                              telemetry.get(), s.passivity, 1.0 / s.haptic.rate_hz);
     servo->publish_status_to(&status.servo);
   }
-  CollisionLoop collision(probe, object, shm.poses(), shm.models(), collide_fn, s.collision_rate_hz, 0);
+  CollisionLoop collision(probe, object, shm.poses(), shm.models(), collide_fn, s.collision_rate_hz, 0, s.contact);
   collision.publish_status_to(&status.collision);
   const std::string rounds_csv = dir + "/rounds.csv";
   if (s.write_trace || s.write_perfetto)
@@ -366,6 +366,13 @@ void run(const RunArgs& a) {
         static_cast<unsigned long long>(sres.silences), sres.longest_silence_ms);
   appendf(summary, "  force           peak %.3f N (limit %.2f N), peak penetration %.3f mm\n", sres.peak_force_N, s.saturation.peak_N,
       std::max(0.0, collision.peak_penetration_mm()));
+  {
+    std::string guard = s.passivity.enabled ? "passivity guard on" : "passivity guard off";
+    if (s.passivity.enabled && !a.split)
+      appendf(guard, " (controller acted on %llu ticks)", static_cast<unsigned long long>(servo->passivity().active_ticks()));
+    appendf(summary, "  contact         model %s, interpolation %s, %s\n", geom::to_string(s.contact.model),
+        rt::to_string(s.interp.mode), guard.c_str());
+  }
   appendf(summary, "  telemetry       %llu samples, %llu dropped\n", static_cast<unsigned long long>(sres.telemetry_pushed),
       static_cast<unsigned long long>(sres.telemetry_dropped));
   if (sres.device_dropped) appendf(summary, "  device records  %llu dropped\n", static_cast<unsigned long long>(sres.device_dropped));

@@ -10,10 +10,11 @@ namespace st::app {
 
 CollisionLoop::CollisionLoop(const geom::Mesh& probe, const geom::Mesh& object, rt::TripleBuffer<rt::PoseSample>& poses,
                              rt::TripleBuffer<geom::ContactModel>& models, CollideFn collide, double rate_hz,
-                             std::size_t max_rounds)
-    : probe_(probe), object_(object), poses_(poses), models_(models), collide_(std::move(collide)), rate_hz_(rate_hz),
-      max_rounds_(max_rounds) {
+                             std::size_t max_rounds, const geom::ContactConfig& contact)
+    : probe_(probe), object_(object), poses_(poses), models_(models), collide_(std::move(collide)), builder_(contact),
+      rate_hz_(rate_hz), max_rounds_(max_rounds) {
   records_.reserve(max_rounds_);
+  builder_.prepare(probe_, object_);
 }
 
 CollisionLoop::~CollisionLoop() { stop(); }
@@ -37,7 +38,7 @@ void CollisionLoop::stop() {
 }
 
 void CollisionLoop::run() {
-  geom::ContactBuilder builder;
+  geom::ContactBuilder& builder = builder_;
   RoundOutput out;
   std::uint64_t last_pose_seq = 0, model_seq = 0;
   const std::int64_t min_period_ns = rate_hz_ > 0 ? std::int64_t(1e9 / rate_hz_) : 0;

@@ -43,9 +43,11 @@ class CollisionLoop {
  public:
   /// `rate_hz` 0 = uncapped. `max_rounds` bounds the records kept in memory (later rounds are
   /// counted, streamed to the rounds CSV and in the latency histogram, not stored).
+  /// `contact` selects the contact model (the builder is prepared for the meshes here, not in
+  /// the first round).
   CollisionLoop(const geom::Mesh& probe, const geom::Mesh& object, rt::TripleBuffer<rt::PoseSample>& poses,
                 rt::TripleBuffer<geom::ContactModel>& models, CollideFn collide, double rate_hz,
-                std::size_t max_rounds);
+                std::size_t max_rounds, const geom::ContactConfig& contact = geom::DefaultContactConfig());
   ~CollisionLoop();
   /// Publish a CollisionStatus after every round into `status` (null = off); before start().
   void publish_status_to(rt::SeqLock<rt::CollisionStatus>* status) { status_ = status; }
@@ -73,6 +75,7 @@ class CollisionLoop {
   rt::TripleBuffer<rt::PoseSample>& poses_;
   rt::TripleBuffer<geom::ContactModel>& models_;
   CollideFn collide_;
+  geom::ContactBuilder builder_;
   rt::SeqLock<rt::CollisionStatus>* status_ = nullptr;
   double rate_hz_;
   std::size_t max_rounds_;

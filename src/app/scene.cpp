@@ -90,7 +90,7 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
   s.file = name;
   TomlReader top(&root, "", name);
   for (const char* sec : {"probe", "object", "tree", "workers", "collision", "haptic", "force", "interpolation",
-                          "device", "output", "run"})
+                          "contact", "passivity", "device", "output", "run"})
     top.known(sec);
   if (Status st = top.finish(); !st) return Error{st.error()};
   for (const char* sec : {"probe", "object"})
@@ -101,8 +101,8 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     if (root.contains(key) && !root.get_as<toml::table>(key)) return fail(name, ": ", key, ": expected a [", key, "] table");
     return Ok{};
   };
-  for (const char* sec : {"probe", "object", "tree", "workers", "collision", "haptic", "force", "interpolation", "device",
-                          "output", "run"})
+  for (const char* sec : {"probe", "object", "tree", "workers", "collision", "haptic", "force", "interpolation",
+                          "contact", "passivity", "device", "output", "run"})
     if (Status st = check_table(sec); !st) return Error{st.error()};
 
   {
@@ -228,6 +228,25 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     s.interp.stale_timeout_ns = std::int64_t(timeout_ms * kMs);
     s.interp.fade_ns = std::int64_t(fade_ms * kMs);
     if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("contact"), "contact", name);
+    std::string model = geom::to_string(s.contact.model);
+    r.string("model", model, {"patch", "paper"});
+    s.contact.model = geom::parse_contact_model(model).value();
+    r.number("hold_margin_mm", s.contact.hold_margin_mm, 0, 1e4);
+    r.number("replane_angle_deg", s.contact.replane_angle_deg, 0, 180);
+    r.integer("max_inside_vertices", s.contact.max_inside_vertices, 1, 1 << 26);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+    if (std::string e = geom::check(s.contact); !e.empty()) return fail(name, ": [contact] ", e);
+  }
+  {
+    TomlReader r(section("passivity"), "passivity", name);
+    r.boolean("enabled", s.passivity.enabled);
+    r.number("colgate_margin", s.passivity.colgate_margin, 0, 100);
+    r.number("max_damping_n_s_per_mm", s.passivity.max_damping_N_s_per_mm, 0, 10);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+    if (std::string e = rt::PassivityGuard::check(s.passivity); !e.empty()) return fail(name, ": [passivity] ", e);
   }
   {
     TomlReader r(section("device"), "device", name);

@@ -6,11 +6,13 @@
 #include <vector>
 
 #include "geom/collide.hpp"
+#include "geom/contact.hpp"
 #include "geom/mesh.hpp"
 #include "geom/sphere_tree.hpp"
 #include "rt/force_law.hpp"
 #include "rt/haptic_loop.hpp"
 #include "rt/interpolator.hpp"
+#include "rt/passivity.hpp"
 #include "rt/saturation.hpp"
 #include "rt/simulated_device.hpp"
 
@@ -60,6 +62,8 @@ struct Scene {
   rt::ForceLawConfig law = rt::DefaultForceLawConfig();             ///< eq. (1) or spring
   rt::SaturationConfig saturation = rt::DefaultSaturationConfig();  ///< device limits
   rt::InterpolatorConfig interp = rt::DefaultInterpolatorConfig();  ///< between contact updates
+  geom::ContactConfig contact = geom::DefaultContactConfig();       ///< contact model (patch or paper)
+  rt::PassivityConfig passivity = rt::DefaultPassivityConfig();     ///< energy guard in the servo
   DeviceSpec device;                   ///< simulated device
   double duration_s = 6;               ///< run length (the built-in script takes 5 s)
   std::string out_dir;                 ///< run directory ("" = runs/<timestamp>)

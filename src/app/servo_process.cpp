@@ -177,7 +177,8 @@ void run_servo(const ServoArgs& a) {
     if (!t) servo_die(2, t.error());
     telemetry = std::move(t).value();
   }
-  rt::HapticServo servo(sim, shm.poses(), shm.models(), law.value(), s.interp, s.saturation, telemetry.get());
+  rt::HapticServo servo(sim, shm.poses(), shm.models(), law.value(), s.interp, s.saturation, telemetry.get(),
+                        s.passivity, 1.0 / s.haptic.rate_hz);
   servo.publish_status_to(&status.servo);
 
   struct sigaction sa {};

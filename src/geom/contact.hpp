@@ -180,6 +180,8 @@ struct VertexFaces {
   std::size_t bytes() const { return (first.size() + faces.size()) * sizeof(std::uint32_t); }  ///< memory held
 };
 
+struct SurfaceWalk;  // contact_patch.hpp
+
 /// Builds ContactModels from face pairs, remembering the model's history between calls (paper:
 /// the first contact face; patch: the previous FD and the held plane). Not thread-safe; owned by
 /// the collision thread. Reuses its scratch memory between calls.
@@ -212,6 +214,7 @@ class ContactBuilder {
   std::vector<std::uint32_t> probe_faces_, object_faces_, probe_vertices_;  ///< scratch
   std::vector<Vec3> probe_points_;         ///< scratch: probe vertices in object-local coordinates
   struct Patch;                            ///< the patch model's state and scratch (contact_patch.cpp)
+  friend struct SurfaceWalk;
   std::unique_ptr<Patch> patch_;
 };
 

@@ -1,8 +1,9 @@
 // The patch contact model (definitions in contact.hpp): FD from the vector area of the object
 // surface inside the probe, computed from the pairs' intersection segments (Stokes), PD as the
-// directional penetration depth along FD over both bodies' inside vertices (flood fill over mesh
-// edges, exit distances from a height field of the facing faces), history for thin features and
-// wedges, and a held plane when the probe has passed through a feature it entered.
+// directional penetration depth along FD over both bodies (a steepest-ascent climb over each
+// body's vertices from the colliding pairs, exit distances found by walking over the other
+// body's facing faces, edge crossings near the top), history for thin features, and a held
+// plane when the probe has passed through a feature it entered.
 //
 // References: the vector area of a surface patch is ½∮x×dx over its boundary (Stokes); the
 // gradient of the intersection volume of two bodies with respect to a translation is the vector
@@ -39,143 +40,67 @@ VertexFaces VertexFaces::build(const Mesh& mesh) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Height field.
+// Surface walk.
 
-void HeightField::begin(const Vec3& d) {
-  d_ = d;
-  // Any orthonormal basis of the plane ⊥ d (Frisvad-style choice of the helper axis).
+void SurfaceWalk::set_direction(const Vec3& dir) {
+  d = dir;
+  // Any orthonormal basis of the plane ⊥ d with u × w = d.
   const Vec3 helper = std::abs(d.x()) < 0.6 ? Vec3::UnitX() : (std::abs(d.y()) < 0.6 ? Vec3::UnitY() : Vec3::UnitZ());
-  u_ = d.cross(helper).normalized();
-  w_ = d.cross(u_);
-  faces_.clear();
+  u = d.cross(helper).normalized();
+  w = d.cross(u);
 }
 
-void HeightField::add(const Vec3& a, const Vec3& b, const Vec3& c, std::uint32_t id) {
-  Face f;
-  const Vec3* p[3] = {&a, &b, &c};
-  for (int k = 0; k < 3; ++k) {
-    f.u[k] = p[k]->dot(u_);
-    f.w[k] = p[k]->dot(w_);
-    f.h[k] = p[k]->dot(d_);
+Vec3 SurfaceWalk::at(std::uint32_t v) { return patch ? patch->probe_point(v, *mesh) : mesh->local[v]; }
+
+std::uint32_t SurfaceWalk::across(std::uint32_t f, std::uint32_t a, std::uint32_t b) const {
+  for (std::uint32_t k = vf->first[a]; k < vf->first[a + 1]; ++k) {
+    const std::uint32_t g = vf->faces[k];
+    if (g == f) continue;
+    const Tri& t = mesh->faces[g];
+    if (t[0] == b || t[1] == b || t[2] == b) return g;
   }
-  f.id = id;
-  faces_.push_back(f);
+  return UINT32_MAX;
 }
 
-void HeightField::finish() {
-  cell_start_.clear();
-  cell_faces_.clear();
-  if (faces_.empty()) return;
-  double lu = std::numeric_limits<double>::infinity(), hu = -lu, lw = lu, hw = -lu, extent_sum = 0;
-  for (const Face& f : faces_) {
-    const auto [u0, u1] = std::minmax({f.u[0], f.u[1], f.u[2]});
-    const auto [w0, w1] = std::minmax({f.w[0], f.w[1], f.w[2]});
-    lu = std::min(lu, u0), hu = std::max(hu, u1), lw = std::min(lw, w0), hw = std::max(hw, w1);
-    extent_sum += std::max(u1 - u0, w1 - w0);
-  }
-  // Cells about one face across (each face lands in a few cells), at most 128 per axis.
-  const double span = std::max({hu - lu, hw - lw, 1e-300});
-  double cell = std::max(extent_sum / double(faces_.size()), span / 128.0);
-  if (!(cell > 0) || !std::isfinite(cell)) cell = span;
-  inv_cell_ = 1.0 / cell;
-  lo_u_ = lu;
-  lo_w_ = lw;
-  nu_ = std::clamp(int((hu - lu) * inv_cell_) + 1, 1, 129);
-  nw_ = std::clamp(int((hw - lw) * inv_cell_) + 1, 1, 129);
-  cell_start_.assign(std::size_t(nu_) * nw_ + 1, 0);
-  auto range = [&](const Face& f, int& iu0, int& iu1, int& iw0, int& iw1) {
-    const auto [u0, u1] = std::minmax({f.u[0], f.u[1], f.u[2]});
-    const auto [w0, w1] = std::minmax({f.w[0], f.w[1], f.w[2]});
-    iu0 = std::clamp(int((u0 - lo_u_) * inv_cell_), 0, nu_ - 1);
-    iu1 = std::clamp(int((u1 - lo_u_) * inv_cell_), 0, nu_ - 1);
-    iw0 = std::clamp(int((w0 - lo_w_) * inv_cell_), 0, nw_ - 1);
-    iw1 = std::clamp(int((w1 - lo_w_) * inv_cell_), 0, nw_ - 1);
-  };
-  int iu0, iu1, iw0, iw1;
-  for (const Face& f : faces_) {
-    range(f, iu0, iu1, iw0, iw1);
-    for (int iw = iw0; iw <= iw1; ++iw)
-      for (int iu = iu0; iu <= iu1; ++iu) ++cell_start_[std::size_t(iw) * nu_ + iu + 1];
-  }
-  for (std::size_t i = 1; i < cell_start_.size(); ++i) cell_start_[i] += cell_start_[i - 1];
-  cell_faces_.resize(cell_start_.back());
-  std::vector<std::uint32_t>& fill = scratch_fill_;
-  fill.assign(cell_start_.begin(), cell_start_.end() - 1);
-  for (std::uint32_t k = 0; k < faces_.size(); ++k) {
-    range(faces_[k], iu0, iu1, iw0, iw1);
-    for (int iw = iw0; iw <= iw1; ++iw)
-      for (int iu = iu0; iu <= iu1; ++iu) cell_faces_[fill[std::size_t(iw) * nu_ + iu]++] = k;
-  }
-}
-
-double HeightField::exit(const Vec3& x, std::uint32_t& face) const {
-  if (faces_.empty()) return -1;
-  const double pu = x.dot(u_), pw = x.dot(w_), ph = x.dot(d_);
-  const double fu = (pu - lo_u_) * inv_cell_, fw = (pw - lo_w_) * inv_cell_;
-  if (!(fu > -1e-9 * nu_ && fw > -1e-9 * nw_ && fu < nu_ + 1e-9 * nu_ && fw < nw_ + 1e-9 * nw_)) return -1;
-  const int iu = std::clamp(int(fu), 0, nu_ - 1), iw = std::clamp(int(fw), 0, nw_ - 1);
-  const std::size_t c = std::size_t(iw) * nu_ + iu;
-  double best = std::numeric_limits<double>::infinity();
-  for (std::uint32_t k = cell_start_[c]; k < cell_start_[c + 1]; ++k) {
-    const Face& f = faces_[cell_faces_[k]];
-    // Barycentric coordinates in the projection; closed triangles with a relative tolerance so
-    // that a point over a shared edge finds a face on either side.
-    const double e1u = f.u[1] - f.u[0], e1w = f.w[1] - f.w[0], e2u = f.u[2] - f.u[0], e2w = f.w[2] - f.w[0];
+bool SurfaceWalk::exit(const Vec3& x, std::uint32_t& face, double& dist, int max_steps) {
+  const std::size_t nv = mesh->local.size();
+  const double qu = x.dot(u), qw = x.dot(w), qh = x.dot(d);
+  std::uint32_t f = face, prev = UINT32_MAX;
+  for (int step = 0; step < max_steps && f != UINT32_MAX; ++step) {
+    const Tri& t = mesh->faces[f];
+    if (t[0] >= nv || t[1] >= nv || t[2] >= nv) return false;
+    const Vec3 a = at(t[0]), b = at(t[1]), c = at(t[2]);
+    const double au = a.dot(u), aw = a.dot(w), bu = b.dot(u), bw = b.dot(w), cu = c.dot(u), cw = c.dot(w);
+    const double e1u = bu - au, e1w = bw - aw, e2u = cu - au, e2w = cw - aw;
+    // det = (b−a)×(c−a)·d (u × w = d): the projected area, > 0 when the face faces d. Only faces
+    // turned less than acos(kFrontCos) from d are walked (never a silhouette or a back face).
     const double det = e1u * e2w - e2u * e1w;
-    if (!(std::abs(det) > 0)) continue;
-    const double qu = pu - f.u[0], qw = pw - f.w[0];
-    const double b1 = (qu * e2w - e2u * qw) / det, b2 = (e1u * qw - qu * e1w) / det, b0 = 1 - b1 - b2;
-    constexpr double kTol = 1e-9;
-    if (b0 < -kTol || b1 < -kTol || b2 < -kTol) continue;
-    const double h = b0 * f.h[0] + b1 * f.h[1] + b2 * f.h[2];
-    const double up = h - ph;
-    if (up > 0 && up < best) {
-      best = up;
-      face = f.id;
+    if (!(det > 0) || det * det <= kFrontCos * kFrontCos * (b - a).cross(c - a).squaredNorm()) return false;
+    const double pu = qu - au, pw = qw - aw;
+    const double b1 = (pu * e2w - e2u * pw) / det, b2 = (e1u * pw - pu * e1w) / det, b0 = 1 - b1 - b2;
+    constexpr double kTol = 1e-9;  // closed triangles: a point over a shared edge is found from either side
+    if (b0 >= -kTol && b1 >= -kTol && b2 >= -kTol) {
+      face = f;
+      const double h = b0 * a.dot(d) + b1 * b.dot(d) + b2 * c.dot(d);
+      dist = h - qh;
+      return true;
     }
+    // Cross the edge facing the point (opposite the most negative coordinate), never straight
+    // back; the second most negative if that one leads back.
+    const double bc[3] = {b0, b1, b2};
+    int i0 = 0;
+    if (bc[1] < bc[i0]) i0 = 1;
+    if (bc[2] < bc[i0]) i0 = 2;
+    std::uint32_t next = across(f, t[(i0 + 1) % 3], t[(i0 + 2) % 3]);
+    if (next == prev && next != UINT32_MAX) {
+      const int j1 = (i0 + 1) % 3, j2 = (i0 + 2) % 3;
+      const int i1 = bc[j1] < bc[j2] ? j1 : j2;
+      next = bc[i1] < -kTol ? across(f, t[(i1 + 1) % 3], t[(i1 + 2) % 3]) : UINT32_MAX;
+    }
+    prev = f;
+    f = next;
   }
-  return std::isfinite(best) ? best : -1;
-}
-
-double HeightField::refine(const Vec3& a, const Vec3& b, Vec3& at, std::uint32_t& face) const {
-  if (faces_.empty()) return -1;
-  const double au = a.dot(u_), aw = a.dot(w_), bu = b.dot(u_), bw = b.dot(w_);
-  const int iu0 = std::clamp(int((std::min(au, bu) - lo_u_) * inv_cell_), 0, nu_ - 1);
-  const int iu1 = std::clamp(int((std::max(au, bu) - lo_u_) * inv_cell_), 0, nu_ - 1);
-  const int iw0 = std::clamp(int((std::min(aw, bw) - lo_w_) * inv_cell_), 0, nw_ - 1);
-  const int iw1 = std::clamp(int((std::max(aw, bw) - lo_w_) * inv_cell_), 0, nw_ - 1);
-  if ((iu1 - iu0 + 1) * (iw1 - iw0 + 1) > 64) return -1;  // a long edge: not a local refinement
-  const double ru = bu - au, rw = bw - aw;
-  double best = -1;
-  for (int iw = iw0; iw <= iw1; ++iw)
-    for (int iu = iu0; iu <= iu1; ++iu) {
-      const std::size_t c = std::size_t(iw) * nu_ + iu;
-      for (std::uint32_t k = cell_start_[c]; k < cell_start_[c + 1]; ++k) {
-        const Face& f = faces_[cell_faces_[k]];
-        for (int e = 0; e < 3; ++e) {
-          const int e1 = (e + 1) % 3;
-          const double su = f.u[e1] - f.u[e], sw = f.w[e1] - f.w[e];
-          const double den = ru * sw - rw * su;
-          if (!(std::abs(den) > 0)) continue;  // parallel
-          const double qu = f.u[e] - au, qw = f.w[e] - aw;
-          const double s = (qu * sw - qw * su) / den, t = (qu * rw - qw * ru) / den;
-          if (s < 0 || s > 1 || t < 0 || t > 1) continue;
-          const Vec3 x = a + s * (b - a);
-          std::uint32_t fx = UINT32_MAX;
-          const double d = exit(x, fx);
-          if (d > best) {
-            best = d;
-            at = x;
-            face = fx;
-          }
-        }
-      }
-    }
-  return best;
-}
-
-std::size_t HeightField::bytes() const {
-  return faces_.capacity() * sizeof(Face) + (cell_start_.capacity() + cell_faces_.capacity() + scratch_fill_.capacity()) * 4;
+  return false;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -183,14 +108,10 @@ std::size_t HeightField::bytes() const {
 
 namespace {
 
-void sort_unique(std::vector<std::uint32_t>& v) {
-  std::sort(v.begin(), v.end());
-  v.erase(std::unique(v.begin(), v.end()), v.end());
-}
 
 /// Where triangle (p0, p1, p2), with signed distances d[] to the other triangle's plane, crosses
-/// that plane, as an interval [t0, t1] along the unit line direction L from origin o (the points
-/// x0, x1 at its ends). False when it does not cross (all distances of one strict sign) or lies
+/// that plane, as an interval [t0, t1] of x·L along the line direction L (the points x0, x1 at its
+/// ends). False when it does not cross (all distances of one strict sign) or lies
 /// in the plane.
 //
 /// A vertex exactly on the plane (d = 0) counts as on its positive side (a symbolic perturbation,
@@ -224,10 +145,8 @@ bool crossing(const Vec3* p[3], const double d[3], const Vec3& L, double& t0, do
 /// normal nb), oriented along na × nb (the boundary of the object surface inside the probe runs
 /// that way, with the inside on its left seen from outside). False when there is no segment.
 bool segment(const Vec3* a[3], const Vec3& na, const Vec3* b[3], const Vec3& nb, Vec3& s0, Vec3& s1) {
-  const Vec3 cr = na.cross(nb);
-  const double len = cr.norm();
-  if (!(len > 1e-12)) return false;  // parallel planes: touching or coplanar, no curve
-  const Vec3 L = cr / len;
+  const Vec3 L = na.cross(nb);  // unit normals: |L| = sin of the angle between the planes
+  if (!(L.squaredNorm() > 1e-24)) return false;  // parallel planes: touching or coplanar, no curve
   double db[3], da[3];
   for (int k = 0; k < 3; ++k) db[k] = na.dot(*b[k] - *a[0]);
   for (int k = 0; k < 3; ++k) da[k] = nb.dot(*a[k] - *b[0]);
@@ -241,9 +160,22 @@ bool segment(const Vec3* a[3], const Vec3& na, const Vec3* b[3], const Vec3& nb,
   return true;
 }
 
-/// Colliding faces up to which every edge is tried against the other side's edges (edge–edge
-/// depth): 64 faces × 3 edges × a few faces per grid cell stays within a few microseconds.
-constexpr std::size_t kRefineAllFaces = 64;
+/// Colliding pairs up to which every pair's edges are crossed with each other along FD (edge–edge
+/// depth): 64 pairs × 9 edge crossings stay within a few microseconds.
+constexpr std::size_t kRefineAllPairs = 64;
+/// Colliding pairs sampled as starts of the depth climb (plus last round's deepest vertex): the
+/// climb from any inside vertex of a contact region reaches its deepest point, so a few dozen
+/// starts spread over the pairs find every region that is not tiny.
+constexpr std::size_t kSeedPairs = 8;
+/// Colliding pairs' vertices lowest along the exit direction tried as climb starts.
+constexpr int kLowSeeds = 8;
+/// Fans visited when following a ridge from the deepest vertex (each ~2 edge lengths on).
+constexpr int kRidgeSteps = 8;
+/// Rounds between searches for new contact regions while the remembered ones still hold.
+constexpr std::uint32_t kDiscoverEvery = 4;
+/// Steps a walk may take from its start face: neighbouring vertices land within a face or two of
+/// each other; a longer walk means the point is not over the patch.
+constexpr int kMaxWalkSteps = 16;
 
 /// Unit normal of a triangle; false when degenerate (kDegenerateRel) or non-finite.
 bool unit_normal(const Vec3& a, const Vec3& b, const Vec3& c, Vec3& n) {
@@ -266,7 +198,12 @@ void ContactBuilder::Patch::prepare(const Mesh& probe, const Mesh& object) {
     probe_world.assign(probe_nv, Vec3::Zero());
     probe_xform_stamp.assign(probe_nv, 0);
     probe_visit_stamp.assign(probe_nv, 0);
+    probe_path_stamp.assign(probe_nv, 0);
     probe_face_stamp.assign(probe_nf, 0);
+    probe_face_slot.assign(probe_nf, 0);
+    probe_depth.assign(probe_nv, 0);
+    probe_exit_face.assign(probe_nv, UINT32_MAX);
+    probe_memory = {};
     epoch = 0;
   }
   if (object_mesh != &object || object_nv != object.local.size() || object_nf != object.faces.size()) {
@@ -275,7 +212,12 @@ void ContactBuilder::Patch::prepare(const Mesh& probe, const Mesh& object) {
     object_nv = object.local.size();
     object_nf = object.faces.size();
     object_visit_stamp.assign(object_nv, 0);
+    object_path_stamp.assign(object_nv, 0);
     object_face_stamp.assign(object_nf, 0);
+    object_face_slot.assign(object_nf, 0);
+    object_depth.assign(object_nv, 0);
+    object_exit_face.assign(object_nv, UINT32_MAX);
+    object_memory = {};
     epoch = 0;
   }
 }
@@ -284,14 +226,20 @@ void ContactBuilder::Patch::reset() {
   have_prev = false;
   prev_n.setZero();
   held_valid = false;
+  probe_memory = {};
+  object_memory = {};
 }
 
 std::size_t ContactBuilder::Patch::bytes() const {
   return probe_vf.bytes() + object_vf.bytes() + (probe_world.capacity() + curve.capacity()) * sizeof(Vec3) +
+         (probe_depth.capacity() + object_depth.capacity()) * sizeof(double) +
          (probe_xform_stamp.capacity() + probe_visit_stamp.capacity() + object_visit_stamp.capacity() +
-          probe_face_stamp.capacity() + object_face_stamp.capacity() + probe_faces.capacity() +
-          object_faces.capacity() + queue.capacity()) * 4 +
-         valid.capacity() * sizeof(ContactPair) + field.bytes();
+          probe_exit_face.capacity() + object_exit_face.capacity() + probe_path_stamp.capacity() +
+          object_path_stamp.capacity() + probe_face_stamp.capacity() + object_face_stamp.capacity() +
+          probe_face_slot.capacity() + object_face_slot.capacity() +
+          probe_faces.capacity() + object_faces.capacity() +
+          queue.capacity() + climb.capacity()) * 4 +
+         (probe_normals.capacity() + object_normals.capacity()) * sizeof(Vec3) + valid.capacity() * sizeof(ContactPair);
 }
 
 const Vec3& ContactBuilder::Patch::probe_point(std::uint32_t v, const Mesh& probe) {
@@ -308,123 +256,246 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   const Mesh& test = probe_side ? probe : object;        // whose points may be inside
   const Mesh& surface = probe_side ? object : probe;     // whose faces they leave through
   const VertexFaces& test_vf = probe_side ? probe_vf : object_vf;
-  const VertexFaces& surf_vf = probe_side ? object_vf : probe_vf;
   std::vector<std::uint32_t>& visit = probe_side ? probe_visit_stamp : object_visit_stamp;
-  std::vector<std::uint32_t>& fstamp = probe_side ? object_face_stamp : probe_face_stamp;
-  const std::vector<std::uint32_t>& test_seeds = probe_side ? probe_faces : object_faces;
-  const std::vector<std::uint32_t>& surf_seeds = probe_side ? object_faces : probe_faces;
-  const std::size_t test_nv = probe_side ? probe_nv : object_nv, surf_nv = probe_side ? object_nv : probe_nv;
+  std::vector<double>& depth = probe_side ? probe_depth : object_depth;
+  std::vector<std::uint32_t>& exitf = probe_side ? probe_exit_face : object_exit_face;
+  Memory& memory = probe_side ? probe_memory : object_memory;
+  const std::size_t test_nv = probe_side ? probe_nv : object_nv;
   auto test_pos = [&](std::uint32_t v) -> Vec3 { return probe_side ? probe_point(v, probe) : object.local[v]; };
-  auto surf_pos = [&](std::uint32_t v) -> Vec3 { return probe_side ? object.local[v] : probe_point(v, probe); };
-  auto tri_ok = [](const Tri& t, std::size_t nv) { return t[0] < nv && t[1] < nv && t[2] < nv; };
+  SurfaceWalk walk;
+  walk.mesh = &surface;
+  walk.vf = probe_side ? &object_vf : &probe_vf;
+  walk.patch = probe_side ? nullptr : this;
+  walk.set_direction(d);
 
-  // The faces a point can leave through: facing d, connected to the colliding ones, over the
-  // contact's footprint (the intersection curve's extent seen along d).
-  field.begin(d);
-  double lu = std::numeric_limits<double>::infinity(), hu = -lu, lw = lu, hw = -lu;
-  for (const Vec3& x : curve) {
-    double u, w;
-    field.project(x, u, w);
-    lu = std::min(lu, u), hu = std::max(hu, u), lw = std::min(lw, w), hw = std::max(hw, w);
-  }
-  const double margin = 1e-6 * std::max(hu - lu, hw - lw) + 1e-9;
-  lu -= margin, hu += margin, lw -= margin, hw += margin;
-  queue.clear();
-  for (std::uint32_t f : surf_seeds) {
-    fstamp[f] = epoch;
-    queue.push_back(f);
-  }
-  std::uint32_t budget = config.max_inside_vertices;
-  Vec3 nf;
-  for (std::size_t qi = 0; qi < queue.size(); ++qi) {
-    const std::uint32_t f = queue[qi];
-    const Tri& t = surface.faces[f];
-    if (!tri_ok(t, surf_nv)) continue;
-    const Vec3 a = surf_pos(t[0]), b = surf_pos(t[1]), c = surf_pos(t[2]);
-    bool keep = false;
-    if (unit_normal(a, b, c, nf) && nf.dot(d) > kFrontCos) {
-      double u[3], w[3];
-      field.project(a, u[0], w[0]);
-      field.project(b, u[1], w[1]);
-      field.project(c, u[2], w[2]);
-      keep = std::max({u[0], u[1], u[2]}) >= lu && std::min({u[0], u[1], u[2]}) <= hu &&
-             std::max({w[0], w[1], w[2]}) >= lw && std::min({w[0], w[1], w[2]}) <= hw;
-      if (keep) field.add(a, b, c, f);
-    }
-    const bool seed = qi < surf_seeds.size();
-    if (!keep && !seed) continue;
-    for (std::uint32_t v : t)
-      for (std::uint32_t k = surf_vf.first[v]; k < surf_vf.first[v + 1]; ++k) {
-        const std::uint32_t g = surf_vf.faces[k];
-        if (fstamp[g] == epoch) continue;
-        fstamp[g] = epoch;
-        if (budget == 0) {
-          best.capped = true;
-          continue;
-        }
-        --budget;
-        queue.push_back(g);
-      }
-  }
-  field.finish();
+  std::vector<std::uint32_t>& path = probe_side ? probe_path_stamp : object_path_stamp;
 
-  // Points inside: the colliding faces' vertices, then flood fill through inside vertices.
-  queue.clear();
-  std::uint32_t visited = 0;
-  auto visit_vertex = [&](std::uint32_t v) {
-    if (v >= test_nv || visit[v] == epoch) return;
+  // Exit distance of a vertex, walking from a face near it; once per vertex and round.
+  std::uint32_t evaluated = 0;
+  auto eval = [&](std::uint32_t v, std::uint32_t hint) -> double {
+    if (visit[v] == epoch) return depth[v];
     visit[v] = epoch;
-    if (++visited > config.max_inside_vertices) {
+    depth[v] = -std::numeric_limits<double>::infinity();
+    exitf[v] = UINT32_MAX;
+    if (hint == UINT32_MAX) return depth[v];
+    if (++evaluated > config.max_inside_vertices) {
       best.capped = true;
-      return;
+      return depth[v];
     }
-    std::uint32_t face = UINT32_MAX;
-    const Vec3 x = test_pos(v);
-    const double dep = field.exit(x, face);
-    if (!(dep > 0)) return;
-    ++best.inside;
-    queue.push_back(v);
-    if (dep > best.depth) {
-      best.depth = dep;
-      best.vertex = v;
-      best.point = x;
-      best.face = face;
+    std::uint32_t f = hint;
+    double dist = 0;
+    if (!walk.exit(test_pos(v), f, dist, kMaxWalkSteps)) return depth[v];
+    depth[v] = dist;
+    exitf[v] = f;
+    if (dist > 0) {
+      ++best.inside;
+      if (dist > best.depth) {
+        best.depth = dist;
+        best.vertex = v;
+        best.face = f;
+      }
+    }
+    return dist;
+  };
+  // Ascent over the vertex graph: the exit distance grows toward the deepest point, so the work
+  // is the length of the climb, not the number of vertices inside. Neighbours are tried in the
+  // order of their height along -d (the cheap part of the exit distance: exact over a flat
+  // surface), and the climb moves to the first that is deeper; it stops at a local maximum, or
+  // where it comes next to the path of an earlier climb (from there on that climb's result stands).
+  std::uint32_t maxima[Memory::kSize];
+  double maxima_depth[Memory::kSize];
+  int n_maxima = 0;
+  if (climb_serial > 0xF0000000u) {  // serials about to wrap: forget every path (once per ~4e9 climbs)
+    std::fill(probe_path_stamp.begin(), probe_path_stamp.end(), 0);
+    std::fill(object_path_stamp.begin(), object_path_stamp.end(), 0);
+    climb_serial = 0;
+  }
+  const std::uint32_t round_first = climb_serial + 1;
+  auto climb_from = [&](std::uint32_t v) {
+    if (path[v] >= round_first) return;
+    const std::uint32_t serial = ++climb_serial;
+    for (;;) {
+      path[v] = serial;
+      std::uint32_t cand[32];
+      double key[32];
+      int n = 0;
+      for (std::uint32_t k = test_vf.first[v]; k < test_vf.first[v + 1]; ++k)
+        for (std::uint32_t u : test.faces[test_vf.faces[k]]) {
+          if (u == v || u >= test_nv || n == 32) continue;
+          bool dup = false;
+          for (int i = 0; i < n; ++i) dup |= cand[i] == u;
+          if (dup) continue;
+          cand[n] = u;
+          key[n++] = -test_pos(u).dot(d);
+        }
+      for (int i = 1; i < n; ++i)  // insertion sort, deepest along -d first (n is ~6)
+        for (int j = i; j > 0 && key[j] > key[j - 1]; --j) std::swap(key[j], key[j - 1]), std::swap(cand[j], cand[j - 1]);
+      std::uint32_t next = UINT32_MAX;
+      bool joined = false;
+      for (int i = 0; i < n && next == UINT32_MAX; ++i) {
+        joined |= path[cand[i]] >= round_first && path[cand[i]] != serial;
+        if (eval(cand[i], exitf[v]) > depth[v]) next = cand[i];
+      }
+      if (best.capped) return;
+      // A vertex higher than all its neighbours may still sit below a ridge or plateau between
+      // vertices: look one ring further before calling it a maximum.
+      for (int i = 0; i < n && next == UINT32_MAX; ++i) {
+        const std::uint32_t c = cand[i];
+        if (exitf[c] == UINT32_MAX) continue;
+        for (std::uint32_t k = test_vf.first[c]; k < test_vf.first[c + 1] && next == UINT32_MAX; ++k)
+          for (std::uint32_t u : test.faces[test_vf.faces[k]])
+            if (u != v && u < test_nv && eval(u, exitf[c]) > depth[v]) {
+              next = u;
+              break;
+            }
+      }
+      if (next == UINT32_MAX) {  // a local maximum: remember it (deepest first)
+        int i = n_maxima < Memory::kSize ? n_maxima++ : Memory::kSize - 1;
+        if (i == Memory::kSize - 1 && n_maxima == Memory::kSize && maxima_depth[i] >= depth[v]) return;
+        maxima[i] = v;
+        maxima_depth[i] = depth[v];
+        for (; i > 0 && maxima_depth[i] > maxima_depth[i - 1]; --i)
+          std::swap(maxima[i], maxima[i - 1]), std::swap(maxima_depth[i], maxima_depth[i - 1]);
+        return;
+      }
+      // Next to an earlier climb's path: that climb has been up this slope already.
+      if (joined) return;
+      v = next;
     }
   };
-  for (std::uint32_t f : test_seeds)
-    for (std::uint32_t v : test.faces[f]) visit_vertex(v);
-  for (std::size_t qi = 0; qi < queue.size() && !best.capped; ++qi) {
-    const std::uint32_t v = queue[qi];
-    for (std::uint32_t k = test_vf.first[v]; k < test_vf.first[v + 1]; ++k)
-      for (std::uint32_t u : test.faces[test_vf.faces[k]]) visit_vertex(u);
+  // Starts: last round's local maxima (from the faces they left through); the colliding pairs'
+  // vertices lowest along d (over a flat surface the deepest; from the pair's face on the other
+  // side); and a sample of the pairs whose offset turns every round, so a separate contact region
+  // that neither found is found within a few rounds.
+  climb.clear();
+  bool remembered = false;
+  for (int i = 0; i < Memory::kSize; ++i) {
+    const std::uint32_t v = memory.vertex[i];
+    if (v < test_nv && memory.face[i] < surface.faces.size() && eval(v, memory.face[i]) > 0) {
+      climb_from(v);
+      remembered = true;
+    }
   }
+  // While the remembered maxima hold, new regions are looked for every kDiscoverEvery rounds
+  // (a region starts at depth 0, so one found a few rounds late has not grown much).
+  const bool discover = !remembered || epoch % kDiscoverEvery == 0;
+  std::uint32_t low_v[kLowSeeds], low_f[kLowSeeds];
+  double low_key[kLowSeeds];
+  int n_low = 0;
+  const std::span<const ContactPair> seed_pairs = discover ? std::span<const ContactPair>(valid) : std::span<const ContactPair>();
+  for (const ContactPair& p : seed_pairs) {
+    const std::uint32_t tf = probe_side ? p.probe : p.object, sf = probe_side ? p.object : p.probe;
+    for (std::uint32_t v : test.faces[tf]) {
+      if (v >= test_nv) continue;
+      const double key = -test_pos(v).dot(d);
+      if (n_low == kLowSeeds && key <= low_key[n_low - 1]) continue;
+      bool dup = false;
+      for (int i = 0; i < n_low; ++i) dup |= low_v[i] == v;
+      if (dup) continue;
+      int i = n_low < kLowSeeds ? n_low++ : kLowSeeds - 1;
+      low_v[i] = v, low_f[i] = sf, low_key[i] = key;
+      for (; i > 0 && low_key[i] > low_key[i - 1]; --i)
+        std::swap(low_v[i], low_v[i - 1]), std::swap(low_f[i], low_f[i - 1]), std::swap(low_key[i], low_key[i - 1]);
+    }
+  }
+  for (int i = 0; i < n_low; ++i)
+    if (visit[low_v[i]] != epoch && eval(low_v[i], low_f[i]) > 0) climb.push_back(low_v[i]);
+  const std::size_t stride = std::max<std::size_t>(1, valid.size() / kSeedPairs);
+  for (std::size_t i = (epoch / kDiscoverEvery) % stride; discover && i < valid.size(); i += stride) {
+    const ContactPair& p = valid[i];
+    const std::uint32_t tf = probe_side ? p.probe : p.object, sf = probe_side ? p.object : p.probe;
+    for (std::uint32_t v : test.faces[tf])
+      if (v < test_nv && visit[v] != epoch && eval(v, sf) > 0) climb.push_back(v);
+  }
+  std::sort(climb.begin(), climb.end(), [&](std::uint32_t a, std::uint32_t b) { return depth[a] > depth[b]; });
+  for (std::uint32_t v : climb) climb_from(v);
+  const std::uint32_t deepest_vertex = best.vertex;
+  memory = Memory{};
+  for (int i = 0; i < n_maxima; ++i) {
+    memory.vertex[i] = maxima[i];
+    memory.face[i] = exitf[maxima[i]];
+  }
+  if (deepest_vertex != UINT32_MAX) best.point = test_pos(deepest_vertex);
 
   // Between vertices: the maximum of two piecewise-linear heights lies on a vertex of their
-  // overlay, so also try where edges of this side cross the surface's edges along d: around the
-  // deepest vertex, or over every colliding face when the patch is small or no vertex is inside
-  // (a convex edge of one body pressed into a face of the other between its vertices).
-  Vec3 at;
-  auto refine_face = [&](std::uint32_t f) {
-    const Tri& t = test.faces[f];
-    if (!tri_ok(t, test_nv)) return;
+  // overlay, so also try where edges of this side cross the other side's edges along d: around
+  // the deepest vertex, and over every colliding pair when the patch is small or no vertex is
+  // inside (a convex edge of one body pressed into a face of the other between its vertices).
+  std::uint32_t won_a = UINT32_MAX, won_b = UINT32_MAX;  // the test edge whose crossing won last
+  auto refine_edge = [&](std::uint32_t ia, std::uint32_t ib, std::uint32_t sface) {
+    const Vec3 a = test_pos(ia), b = test_pos(ib);
+    const Tri& t = surface.faces[sface];
+    const double au = a.dot(walk.u), aw = a.dot(walk.w), ru = b.dot(walk.u) - au, rw = b.dot(walk.w) - aw;
     for (int e = 0; e < 3; ++e) {
-      std::uint32_t face = UINT32_MAX;
-      const double dep = field.refine(test_pos(t[e]), test_pos(t[(e + 1) % 3]), at, face);
-      if (dep > best.depth) {
-        best.depth = dep;
-        best.point = at;
-        best.face = face;
+      if (t[e] >= surface.local.size() || t[(e + 1) % 3] >= surface.local.size()) return;
+      const Vec3 p0 = walk.at(t[e]), p1 = walk.at(t[(e + 1) % 3]);
+      const double su = p1.dot(walk.u) - p0.dot(walk.u), sw = p1.dot(walk.w) - p0.dot(walk.w);
+      const double den = ru * sw - rw * su;
+      if (!(std::abs(den) > 0)) continue;  // parallel
+      const double qu = p0.dot(walk.u) - au, qw = p0.dot(walk.w) - aw;
+      const double s = (qu * sw - qw * su) / den, r = (qu * rw - qw * ru) / den;
+      if (s < 0 || s > 1 || r < 0 || r > 1) continue;
+      const Vec3 x = a + s * (b - a);
+      std::uint32_t f = sface;
+      double dist = 0;
+      if (walk.exit(x, f, dist, 4) && dist > best.depth) {
+        best.depth = dist;
+        best.point = x;
+        best.face = f;
         best.vertex = UINT32_MAX;  // an edge point
+        won_a = ia, won_b = ib;
       }
     }
   };
-  const std::uint32_t deepest_vertex = best.vertex;
-  if (deepest_vertex == UINT32_MAX || test_seeds.size() <= kRefineAllFaces) {
-    for (std::uint32_t f : test_seeds) refine_face(f);
+  // Every edge of the faces around vertex c against the faces its neighbourhood leaves through.
+  auto refine_around = [&](std::uint32_t c) {
+    std::uint32_t near[16];
+    int n_near = 0;
+    auto add_near = [&](std::uint32_t f) {
+      if (f == UINT32_MAX || n_near == 16) return;
+      for (int i = 0; i < n_near; ++i)
+        if (near[i] == f) return;
+      near[n_near++] = f;
+    };
+    add_near(exitf[c]);
+    for (std::uint32_t k = test_vf.first[c]; k < test_vf.first[c + 1]; ++k)
+      for (std::uint32_t u : test.faces[test_vf.faces[k]])
+        if (u < test_nv) {
+          eval(u, exitf[c]);
+          add_near(exitf[u]);
+        }
+    for (std::uint32_t k = test_vf.first[c]; k < test_vf.first[c + 1]; ++k) {
+      const Tri& t = test.faces[test_vf.faces[k]];
+      if (t[0] >= test_nv || t[1] >= test_nv || t[2] >= test_nv) continue;
+      for (int e = 0; e < 3; ++e)
+        for (int i = 0; i < n_near; ++i) refine_edge(t[e], t[(e + 1) % 3], near[i]);
+    }
+  };
+  if (deepest_vertex != UINT32_MAX) {
+    // Along a ridge (a convex edge of the other body seen along d), the deepest point moves
+    // between vertices: follow the winning crossings from fan to fan while they improve.
+    std::uint32_t c = deepest_vertex;
+    for (int it = 0; it < kRidgeSteps; ++it) {
+      const double before = best.depth;
+      refine_around(c);
+      if (!(best.depth > before) || won_a == UINT32_MAX) break;
+      const std::uint32_t next = (won_a == c || (won_b != c && depth[won_b] > depth[won_a])) ? won_b : won_a;
+      if (next == c || next >= test_nv || exitf[next] == UINT32_MAX) break;
+      c = next;
+    }
+    if (c != deepest_vertex) {  // start next round's climb where the ridge search ended
+      memory.vertex[0] = c;
+      memory.face[0] = exitf[c];
+    }
   }
-  if (deepest_vertex != UINT32_MAX)
-    for (std::uint32_t k = test_vf.first[deepest_vertex]; k < test_vf.first[deepest_vertex + 1]; ++k)
-      refine_face(test_vf.faces[k]);
+  if (deepest_vertex == UINT32_MAX || valid.size() <= kRefineAllPairs) {
+    for (const ContactPair& p : valid) {
+      const std::uint32_t tf = probe_side ? p.probe : p.object, sf = probe_side ? p.object : p.probe;
+      const Tri& t = test.faces[tf];
+      if (t[0] >= test_nv || t[1] >= test_nv || t[2] >= test_nv) continue;
+      for (int e = 0; e < 3; ++e) refine_edge(t[e], t[(e + 1) % 3], sf);
+    }
+  }
   return best;
 }
 
@@ -451,12 +522,18 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
       continue;
     }
     valid.push_back(p);
-    probe_faces.push_back(p.probe);
-    object_faces.push_back(p.object);
+    if (probe_face_stamp[p.probe] != epoch) {
+      probe_face_stamp[p.probe] = epoch;
+      probe_face_slot[p.probe] = std::uint32_t(probe_faces.size());
+      probe_faces.push_back(p.probe);
+    }
+    if (object_face_stamp[p.object] != epoch) {
+      object_face_stamp[p.object] = epoch;
+      object_face_slot[p.object] = std::uint32_t(object_faces.size());
+      object_faces.push_back(p.object);
+    }
   }
   if (m.skipped_pairs) m.flags |= kBadInput;
-  sort_unique(probe_faces);
-  sort_unique(object_faces);
   m.probe_faces = static_cast<std::uint32_t>(probe_faces.size());
   m.object_faces = static_cast<std::uint32_t>(object_faces.size());
   m.contacts = m.probe_faces + m.object_faces;
@@ -472,21 +549,33 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   const Eigen::Matrix3d& R = rot;
   auto tri_ok = [](const Tri& t, std::size_t nv) { return t[0] < nv && t[1] < nv && t[2] < nv; };
 
-  // Degenerate colliding object faces count as contacts but give no direction.
+  // Unit normals of the colliding faces, once per face (zero: degenerate, no direction); the
+  // probe's are rotated into the object frame. Degenerate object faces count as contacts but
+  // give no direction.
   Vec3 n_faces = Vec3::Zero();  // Σ unnormalised normals: 2 × the area-weighted mean normal (fallback)
   double n_faces_abs = 0;       // Σ of their lengths
   Vec3 nf;
-  for (std::uint32_t f : object_faces) {
-    const Tri& t = object.faces[f];
+  object_normals.resize(object_faces.size());
+  for (std::size_t i = 0; i < object_faces.size(); ++i) {
+    const Tri& t = object.faces[object_faces[i]];
+    object_normals[i].setZero();
     if (!tri_ok(t, object_nv) || !unit_normal(object.local[t[0]], object.local[t[1]], object.local[t[2]], nf)) {
       ++m.degenerate_faces;
       continue;
     }
+    object_normals[i] = nf;
     const Vec3 cr = (object.local[t[1]] - object.local[t[0]]).cross(object.local[t[2]] - object.local[t[0]]);
     n_faces += cr;
     n_faces_abs += cr.norm();
   }
   if (m.degenerate_faces) m.flags |= kDegenerateSkipped;
+  probe_normals.resize(probe_faces.size());
+  for (std::size_t i = 0; i < probe_faces.size(); ++i) {
+    const Tri& t = probe.faces[probe_faces[i]];
+    probe_normals[i].setZero();
+    if (tri_ok(t, probe_nv) && unit_normal(probe.local[t[0]], probe.local[t[1]], probe.local[t[2]], nf))
+      probe_normals[i] = R * nf;
+  }
 
   // The vector area of the object surface inside the probe, from the intersection curve:
   // A = ½ Σ (s0 − o) × (s1 − o) over the pairs' segments (o: any point; near the patch for
@@ -498,17 +587,18 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   double abs_all = 0, abs_front = 0;
   bool any_front_face = false;
   curve.clear();
-  Vec3 na, nb, s0, s1;
+  Vec3 s0, s1;
   for (const ContactPair& p : valid) {
     const Tri& to = object.faces[p.object];
     const Tri& tp = probe.faces[p.probe];
     if (!tri_ok(to, object_nv) || !tri_ok(tp, probe_nv)) continue;
+    const Vec3& na = object_normals[object_face_slot[p.object]];
+    const Vec3& nb = probe_normals[probe_face_slot[p.probe]];
+    if (na.squaredNorm() == 0 || nb.squaredNorm() == 0) continue;  // degenerate: no direction
     const Vec3* a[3] = {&object.local[to[0]], &object.local[to[1]], &object.local[to[2]]};
-    if (!unit_normal(*a[0], *a[1], *a[2], na)) continue;
     const bool front = have_prev && na.dot(prev_n) > kBackCos;
     any_front_face |= front;
     const Vec3* b[3] = {&probe_point(tp[0], probe), &probe_point(tp[1], probe), &probe_point(tp[2], probe)};
-    if (!unit_normal(*b[0], *b[1], *b[2], nb)) continue;
     if (!segment(a, na, b, nb, s0, s1)) continue;
     const Vec3 piece = 0.5 * (s0 - origin).cross(s1 - origin);
     const double piece_abs = piece.norm();

@@ -12,41 +12,24 @@ namespace st::geom {
 /// Unit normal and centroid of face f of m, m's local frame; false when degenerate or non-finite.
 bool face_frame(const Mesh& m, std::uint32_t f, Vec3& centroid, Vec3& normal);
 
-/// A height field over the faces of one side that face a direction d: faces projected on the
-/// plane ⊥ d, binned in a uniform 2D grid. exit() answers how far a point must travel along d to
-/// leave through the nearest of them. Reused between rounds (no allocation once warm).
-class HeightField {
- public:
-  /// One face: 2D corners (u, w) and the heights along d of its corners.
-  struct Face {
-    double u[3], w[3], h[3];
-    std::uint32_t id;  ///< face index in its mesh
-  };
-  /// Starts a new field for direction d (unit): basis vectors are derived from it.
-  void begin(const Vec3& d);
-  /// Adds a triangle (corners in the common frame) whose normal faces d.
-  void add(const Vec3& a, const Vec3& b, const Vec3& c, std::uint32_t id);
-  /// Bins the faces; call after the last add().
-  void finish();
-  /// Distance along d from x to the nearest face above it (> 0), or -1 when no face is above x.
-  /// `face` receives the face's id.
-  double exit(const Vec3& x, std::uint32_t& face) const;
-  /// The most an exit distance grows where segment a–b (the other side's edge) crosses this
-  /// field's face edges, seen along d: returns the largest exit() at those crossings (-1: none)
-  /// and the crossing point in `at`.
-  double refine(const Vec3& a, const Vec3& b, Vec3& at, std::uint32_t& face) const;
-  /// x projected on the plane ⊥ d: (u, w).
-  void project(const Vec3& x, double& u, double& w) const { u = x.dot(u_), w = x.dot(w_); }
-  bool empty() const { return faces_.empty(); }  ///< no face added
-  std::size_t size() const { return faces_.size(); }  ///< faces added
-  std::size_t bytes() const;  ///< scratch held
-
- private:
-  Vec3 d_{Vec3::UnitZ()}, u_{Vec3::UnitX()}, w_{Vec3::UnitY()};
-  std::vector<Face> faces_;
-  double lo_u_ = 0, lo_w_ = 0, inv_cell_ = 1;
-  int nu_ = 1, nw_ = 1;
-  std::vector<std::uint32_t> cell_start_, cell_faces_, scratch_fill_;
+/// Point location on one body's surface seen along a direction d: walks from a start face across
+/// edges (Guibas & Stolfi's walk) over the faces that face d, to the face above a point, and
+/// answers how far the point must travel along d to leave through it.
+struct SurfaceWalk {
+  const Mesh* mesh = nullptr;           ///< the surface's body
+  const VertexFaces* vf = nullptr;      ///< its faces around each vertex
+  ContactBuilder::Patch* patch = nullptr;  ///< set when the surface is the probe (vertices move with the pose)
+  Vec3 d{Vec3::UnitZ()}, u{Vec3::UnitX()}, w{Vec3::UnitY()};  ///< direction and the plane ⊥ d
+  /// Sets the direction (unit) and derives the plane basis.
+  void set_direction(const Vec3& dir);
+  /// Vertex v in the common frame.
+  Vec3 at(std::uint32_t v);
+  /// Walks from `face` to the face above (or below) x seen along d; on success `face` is that
+  /// face and `dist` how far x must travel along d to reach it (<= 0: x is outside, above it).
+  /// False when the walk would leave the faces that face d, or takes more than max_steps.
+  bool exit(const Vec3& x, std::uint32_t& face, double& dist, int max_steps = 48);
+  /// The face across edge (a, b) of face f, or UINT32_MAX.
+  std::uint32_t across(std::uint32_t f, std::uint32_t a, std::uint32_t b) const;
 };
 
 /// ContactBuilder's patch model (see contact.hpp for what it computes).
@@ -69,6 +52,13 @@ struct ContactBuilder::Patch {
   };
   /// One side's pass: points of `test` inside `surface`, leaving along d.
   Deepest side(bool probe_side, const Vec3& d, const Mesh& probe, const Mesh& object);
+  /// What one side remembers between rounds: its deepest vertex and the face it left through
+  /// (the next round's climb starts there).
+  struct Memory {
+    static constexpr int kSize = 4;  ///< local maxima remembered (separate contact regions)
+    std::uint32_t vertex[kSize] = {UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX};
+    std::uint32_t face[kSize] = {UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX};
+  };
 
   ContactConfig config;
   // Per-mesh data (prepare()).
@@ -86,16 +76,23 @@ struct ContactBuilder::Patch {
   double held_radius = 0;                 ///< the patch footprint around held_point, mm
   // Scratch.
   std::vector<ContactPair> valid;
-  std::vector<std::uint32_t> probe_faces, object_faces, queue;
+  std::vector<std::uint32_t> probe_faces, object_faces, queue;  ///< scratch
   std::vector<Vec3> probe_world;          ///< probe vertices, object-local (valid where stamped)
+  std::vector<double> probe_depth, object_depth;  ///< per-vertex exit distance this round (where visited)
+  std::vector<std::uint32_t> probe_exit_face, object_exit_face;  ///< and the face it was found on
+  Memory probe_memory, object_memory;     ///< last round's deepest vertices
   std::vector<Vec3> curve;                ///< intersection segment end points, object-local
   std::vector<std::uint32_t> probe_xform_stamp, probe_visit_stamp, object_visit_stamp;
-  std::vector<std::uint32_t> probe_face_stamp, object_face_stamp;
+  std::vector<std::uint32_t> probe_path_stamp, object_path_stamp;  ///< serial of the climb that stood on a vertex
+  std::uint32_t climb_serial = 0;         ///< climbs so far (path stamps)
+  std::vector<std::uint32_t> probe_face_stamp, object_face_stamp;  ///< faces counted this round
+  std::vector<std::uint32_t> probe_face_slot, object_face_slot;    ///< their index in probe_faces / object_faces
+  std::vector<Vec3> probe_normals, object_normals;  ///< unit normals of those faces, object-local (zero: degenerate)
   Eigen::Matrix3d rot{Eigen::Matrix3d::Identity()};  ///< this round's pose rotation
   Vec3 shift{Vec3::Zero()};               ///< and translation, probe-local → object-local
   const Vec3& probe_point(std::uint32_t v, const Mesh& probe);  ///< probe vertex v, object-local
   std::uint32_t epoch = 0;
-  HeightField field;
+  std::vector<std::uint32_t> climb;        ///< scratch: vertices to climb from
 };
 
 }  // namespace st::geom
