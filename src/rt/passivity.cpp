@@ -20,6 +20,7 @@ std::string PassivityGuard::check(const PassivityConfig& c) {
 PassivityGuard::PassivityGuard(const PassivityConfig& config, double stiffness_N_per_mm, double period_s)
     : c_(config),
       b_min_(config.colgate_margin * std::max(stiffness_N_per_mm, 0.0) * std::max(period_s, 0.0) / 2),
+      k_(std::isfinite(stiffness_N_per_mm) ? std::max(stiffness_N_per_mm, 0.0) : 0.0),
       period_s_(period_s > 0 ? period_s : 1e-3) {}
 
 void PassivityGuard::reset() noexcept {
@@ -65,9 +66,15 @@ Eigen::Vector3d PassivityGuard::apply(const Eigen::Vector3d& f, const Eigen::Vec
   vn_ += 0.3 * (vn_raw - vn_);
 
   double add = -b_min_ * vn_;  // stage 1: Colgate's minimum damping
-  if (energy_ > 0 && std::abs(vn_) > 1e-9) {
-    // Stage 2: dissipate the observed excess over the next tick, α·vn²·T = E, α capped.
-    const double alpha = std::min(energy_ / (dt * vn_ * vn_), c_.max_damping_N_s_per_mm);
+  // Stage 2 acts on the energy the cycle would end with if the surface gave back what it holds
+  // now: E + U, U = F_n²/(2k) (exact on the law's linear part, where every release ends; below the
+  // stored energy on the log part). Acting on E alone would notice the excess only in the last
+  // ticks of a release, when the force left is too small to take it back without pulling.
+  const double fn = std::max(f.dot(n), 0.0);
+  const double predicted = energy_ + (k_ > 0 ? fn * fn / (2 * k_) : 0.0);
+  if (predicted > 0 && std::abs(vn_) > 1e-9) {
+    // Dissipate the predicted excess over the next tick, α·vn²·T = E + U, α capped.
+    const double alpha = std::min(predicted / (dt * vn_ * vn_), c_.max_damping_N_s_per_mm);
     add -= alpha * vn_;
     state_.active = alpha > 0;
     if (state_.active) ++active_ticks_;

@@ -8,10 +8,11 @@
 //  2. Time-domain passivity control (Hannaford & Ryu 2002, "Time-domain passivity control of
 //     haptic interfaces", IEEE T-RA 18(1)): an observer sums the energy the commanded force put
 //     into the device, E = Σ F_k·(x_{k+1} − x_k) (exactly what a zero-order-hold force does on
-//     the moving end effector). When E > 0 (the surface has given back more than it took since
-//     contact began), a damper α = E / (T·v_n²), capped at max_damping, dissipates the excess
-//     over the next tick. When contact ends, E keeps only a positive debt (it restarts at 0
-//     otherwise), so every contact cycle starts with no credit.
+//     the moving end effector). Ours acts on the energy the cycle would end with, E + F_n²/(2k)
+//     (the surface still holds at least F_n²/(2k) to give back): when it is > 0 a damper
+//     α = (E + F_n²/2k) / (T·v_n²), capped at max_damping, dissipates the excess over the next
+//     tick, while there is still force to take it from. When contact ends, E keeps only a
+//     positive debt (it restarts at 0 otherwise), so every contact cycle starts with no credit.
 // The guard never makes the force pull the probe into the object (the normal component stays
 // >= 0) and never raises it above the saturator's ceiling (it runs before the Saturator, and the
 // observer is fed the force actually commanded, after saturation). Tick-path safe: noexcept, no
@@ -65,6 +66,7 @@ class PassivityGuard {
  private:
   PassivityConfig c_;
   double b_min_;             ///< stage 1 damping, N·s/mm
+  double k_;                 ///< the law's steepest slope, N/mm (stored-energy estimate)
   double period_s_;          ///< nominal period, s (fallback for dt)
   Eigen::Vector3d last_x_{Eigen::Vector3d::Zero()};  ///< previous position, mm
   Eigen::Vector3d last_f_{Eigen::Vector3d::Zero()};  ///< previous commanded force, N
