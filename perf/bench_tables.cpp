@@ -8,7 +8,8 @@
 //  table2:        haptic and collision rates along the built-in press/slide script for (a) a
 //                 single-thread loop that does collision then force each iteration at most at
 //                 1 kHz (the OpenHaptics sample's structure, paper §4) and (b) spheretouch's
-//                 HapticLoop + HapticServo + CollisionLoop.
+//                 HapticLoop + HapticServo + CollisionLoop. Both use the paper's contact model
+//                 ([contact] model = "paper", §3.6): this table reproduces the paper's system.
 //  peers:         FCL 0.7 OBBRSS all-contacts vs our collide() on the same poses, same run.
 //  icosphere:     writes the ~960-face ball as OFF (for --find-poses).
 #include <signal.h>
@@ -309,6 +310,13 @@ void sleep_until_ns(std::int64_t t) {
   }
 }
 
+// Table 2 reproduces the paper's system: its contact model (§3.6).
+geom::ContactConfig paper_contact() {
+  geom::ContactConfig c = geom::DefaultContactConfig();
+  c.model = geom::ContactModelKind::paper;
+  return c;
+}
+
 // (a) One thread: read pose, collide, build the contact model, force (hold), command; at most
 // one iteration per 1 ms deadline, a late iteration skips the deadlines it overran (the
 // OpenHaptics servo callback doing collision detection itself).
@@ -318,7 +326,7 @@ RateResult single_thread(const Body& probe, const Body& object, const rt::Trajec
   ic.mode = rt::InterpMode::hold;
   rt::Interpolator interp(rt::ForceLaw{}, ic);
   rt::Saturator sat(rt::DefaultSaturationConfig());
-  geom::ContactBuilder builder;
+  geom::ContactBuilder builder(paper_contact());
   geom::CollideScratch sc;
   geom::CollideResult r;
   RateResult out;
@@ -408,7 +416,8 @@ RateResult spheretouch(const Body& probe, const Body& object, const rt::Trajecto
   auto models = std::make_unique<rt::TripleBuffer<geom::ContactModel>>();
   rt::HapticServo servo(dev, *poses, *models, rt::ForceLaw{}, rt::DefaultInterpolatorConfig(),
                         rt::DefaultSaturationConfig(), nullptr);
-  app::CollisionLoop collision(probe.mesh, object.mesh, *poses, *models, fn, 0, std::size_t(seconds * 20000) + 1000);
+  app::CollisionLoop collision(probe.mesh, object.mesh, *poses, *models, fn, 0, std::size_t(seconds * 20000) + 1000,
+                               paper_contact());
   rt::HapticLoop loop(rt::DefaultHapticLoopConfig());
   collision.start();
   const std::int64_t t0 = rt::now_ns();

@@ -171,6 +171,9 @@ constexpr std::size_t kSeedPairs = 8;
 constexpr int kLowSeeds = 8;
 /// Fans visited when following a ridge from the deepest vertex (each ~2 edge lengths on).
 constexpr int kRidgeSteps = 8;
+/// A ridge is followed further only while each fan adds more than this to the depth, mm (a
+/// smooth surface gives ever smaller gains).
+constexpr double kRidgeGainMm = 1e-4;
 /// Rounds between searches for new contact regions while the remembered ones still hold.
 constexpr std::uint32_t kDiscoverEvery = 4;
 /// Steps a walk may take from its start face: neighbouring vertices land within a face or two of
@@ -338,8 +341,9 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
       }
       if (best.capped) return;
       // A vertex higher than all its neighbours may still sit below a ridge or plateau between
-      // vertices: look one ring further before calling it a maximum.
-      for (int i = 0; i < n && next == UINT32_MAX; ++i) {
+      // vertices: look one ring further before calling it the deepest (other maxima are only
+      // kept for next round's starts, they need not be exact).
+      for (int i = 0; i < n && next == UINT32_MAX && depth[v] >= best.depth; ++i) {
         const std::uint32_t c = cand[i];
         if (exitf[c] == UINT32_MAX) continue;
         for (std::uint32_t k = test_vf.first[c]; k < test_vf.first[c + 1] && next == UINT32_MAX; ++k)
@@ -449,10 +453,10 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   };
   // Every edge of the faces around vertex c against the faces its neighbourhood leaves through.
   auto refine_around = [&](std::uint32_t c) {
-    std::uint32_t near[16];
+    std::uint32_t near[8];
     int n_near = 0;
     auto add_near = [&](std::uint32_t f) {
-      if (f == UINT32_MAX || n_near == 16) return;
+      if (f == UINT32_MAX || n_near == 8) return;
       for (int i = 0; i < n_near; ++i)
         if (near[i] == f) return;
       near[n_near++] = f;
@@ -464,6 +468,8 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
           eval(u, exitf[c]);
           add_near(exitf[u]);
         }
+    // Over one face of the other side both heights are linear: no crossing can beat the vertices.
+    if (n_near < 2) return;
     for (std::uint32_t k = test_vf.first[c]; k < test_vf.first[c + 1]; ++k) {
       const Tri& t = test.faces[test_vf.faces[k]];
       if (t[0] >= test_nv || t[1] >= test_nv || t[2] >= test_nv) continue;
@@ -478,7 +484,7 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
     for (int it = 0; it < kRidgeSteps; ++it) {
       const double before = best.depth;
       refine_around(c);
-      if (!(best.depth > before) || won_a == UINT32_MAX) break;
+      if (!(best.depth > before + kRidgeGainMm) || won_a == UINT32_MAX) break;
       const std::uint32_t next = (won_a == c || (won_b != c && depth[won_b] > depth[won_a])) ? won_b : won_a;
       if (next == c || next >= test_nv || exitf[next] == UINT32_MAX) break;
       c = next;
