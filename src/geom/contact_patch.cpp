@@ -579,8 +579,9 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   for (std::size_t i = 0; i < probe_faces.size(); ++i) {
     const Tri& t = probe.faces[probe_faces[i]];
     probe_normals[i].setZero();
-    if (tri_ok(t, probe_nv) && unit_normal(probe.local[t[0]], probe.local[t[1]], probe.local[t[2]], nf))
-      probe_normals[i] = R * nf;
+    if (!tri_ok(t, probe_nv)) continue;
+    for (std::uint32_t v : t) (void)probe_point(v, probe);  // transform each vertex once, in face order
+    if (unit_normal(probe.local[t[0]], probe.local[t[1]], probe.local[t[2]], nf)) probe_normals[i] = R * nf;
   }
 
   // The vector area of the object surface inside the probe, from the intersection curve:
@@ -604,7 +605,7 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     const Vec3* a[3] = {&object.local[to[0]], &object.local[to[1]], &object.local[to[2]]};
     const bool front = have_prev && na.dot(prev_n) > kBackCos;
     any_front_face |= front;
-    const Vec3* b[3] = {&probe_point(tp[0], probe), &probe_point(tp[1], probe), &probe_point(tp[2], probe)};
+    const Vec3* b[3] = {&probe_world[tp[0]], &probe_world[tp[1]], &probe_world[tp[2]]};  // transformed above
     if (!segment(a, na, b, nb, s0, s1)) continue;
     const Vec3 piece = 0.5 * (s0 - origin).cross(s1 - origin);
     const double piece_abs = piece.norm();
