@@ -6,6 +6,13 @@
 
 namespace st::rt {
 
+namespace {
+/// Energy over which the passivity controller fades in before the predicted end-of-cycle energy
+/// reaches zero, mJ: a few percent of a light press's stored energy (a 1 mm press on the default
+/// law holds ~0.3 mJ), so the controller is fully on by the time it is needed.
+constexpr double kRampMJ = 0.02;
+}  // namespace
+
 PassivityConfig DefaultPassivityConfig() { return PassivityConfig{}; }
 
 std::string PassivityGuard::check(const PassivityConfig& c) {
@@ -69,12 +76,16 @@ Eigen::Vector3d PassivityGuard::apply(const Eigen::Vector3d& f, const Eigen::Vec
   // Stage 2 acts on the energy the cycle would end with if the surface gave back what it holds
   // now: E + U, U = F_n²/(2k) (exact on the law's linear part, where every release ends; below the
   // stored energy on the log part). Acting on E alone would notice the excess only in the last
-  // ticks of a release, when the force left is too small to take it back without pulling.
+  // ticks of a release, when the force left is too small to take it back without pulling. The
+  // damper fades in over the last kRampMJ before that energy reaches zero, and never takes more
+  // than the excess over one tick, so it switches on and off without a force step (an on/off
+  // passivity controller buzzes).
   const double fn = std::max(f.dot(n), 0.0);
   const double predicted = energy_ + (k_ > 0 ? fn * fn / (2 * k_) : 0.0);
-  if (predicted > 0 && std::abs(vn_) > 1e-9) {
-    // Dissipate the predicted excess over the next tick, α·vn²·T = E + U, α capped.
-    const double alpha = std::min(predicted / (dt * vn_ * vn_), c_.max_damping_N_s_per_mm);
+  const double excess = predicted + kRampMJ;
+  if (excess > 0 && std::abs(vn_) > 1e-9) {
+    const double ramp = std::min(excess / kRampMJ, 1.0);
+    const double alpha = std::min(c_.max_damping_N_s_per_mm * ramp, excess / (dt * vn_ * vn_));
     add -= alpha * vn_;
     state_.active = alpha > 0;
     if (state_.active) ++active_ticks_;

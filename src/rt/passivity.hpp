@@ -28,10 +28,11 @@ namespace st::rt {
 struct PassivityConfig {
   bool enabled = true;                   ///< false: the force passes unchanged
   double colgate_margin = 2.0;           ///< minimum damping = margin · k·T/2 (0 = no minimum damping)
-  double max_damping_N_s_per_mm = 0.02;  ///< cap on the passivity controller's damper α, N·s/mm
+  double max_damping_N_s_per_mm = 0.05;  ///< cap on the passivity controller's damper α, N·s/mm
 };
-/// Enabled, margin 2 (twice Colgate's bound), controller damping capped at 0.02 N·s/mm (about a
-/// quarter of critical damping for 0.1 kg on a 0.6 N/mm surface).
+/// Enabled, margin 2 (twice Colgate's bound), controller damping capped at 0.05 N·s/mm (about 3×
+/// critical damping of a 0.1 kg hand on the law's steepest 0.59 N/mm: enough to take an excess
+/// back within a few ticks; it acts only while there is one).
 PassivityConfig DefaultPassivityConfig();
 
 /// What the guard did on the last tick, for telemetry.
