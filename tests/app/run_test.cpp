@@ -192,6 +192,14 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[device]\ntarget = [1, 2]\n", "device.target: expected an array of 3 numbers"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\ncontinuous_n = 5\n", "force.continuous_n: must not exceed peak_n"},
       {"[probe]\nbuiltin = \"capsule\"\n[object\n", "TOML syntax"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[contact]\nmodel = \"nearest\"\n",
+       "contact.model: expected one of patch, paper"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[contact]\nhold_margin_mm = -1\n", "contact.hold_margin_mm"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[contact]\nmax_inside_vertices = 0\n",
+       "contact.max_inside_vertices"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[passivity]\ncolgate_margin = -2\n", "passivity.colgate_margin"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[passivity]\nenabled = 1\n", "passivity.enabled"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[passivity]\ndamping = 1\n", "passivity.damping: unknown key"},
       {"[probe]\nbuiltin = \"capsule\"\nmesh = \"a.off\"\n[object]\nbuiltin = \"box\"\n", "probe.mesh"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nserver_key = \"/nowhere/fleet.pub\"\n",
        "workers.client_key: server_key is set but client_key is not"},
@@ -251,6 +259,18 @@ TEST_CASE("scene files: configs/demo.toml and configs/small.toml parse, with the
   CHECK(demo.value().law.b_N == 0.8);
   CHECK(demo.value().saturation.peak_N == 3.3);
   CHECK(demo.value().tree.leaf_faces == st::geom::DefaultTreeParams().leaf_faces);
+  // The documented contact and passivity values are the defaults.
+  CHECK(demo.value().contact.model == st::geom::DefaultContactConfig().model);
+  CHECK(demo.value().contact.hold_margin_mm == st::geom::DefaultContactConfig().hold_margin_mm);
+  CHECK(demo.value().contact.max_inside_vertices == st::geom::DefaultContactConfig().max_inside_vertices);
+  CHECK(demo.value().passivity.enabled == st::rt::DefaultPassivityConfig().enabled);
+  CHECK(demo.value().passivity.colgate_margin == st::rt::DefaultPassivityConfig().colgate_margin);
+  CHECK(demo.value().passivity.max_damping_N_s_per_mm == st::rt::DefaultPassivityConfig().max_damping_N_s_per_mm);
+  auto paper = st::app::parse_scene("[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[contact]\nmodel = \"paper\"\n"
+                                    "[passivity]\nenabled = false\n", "paper.toml", ".");
+  REQUIRE_MESSAGE(paper.ok(), paper.error());
+  CHECK(paper.value().contact.model == st::geom::ContactModelKind::paper);
+  CHECK_FALSE(paper.value().passivity.enabled);
   auto small = st::app::load_scene(root + "/configs/small.toml");
   REQUIRE_MESSAGE(small.ok(), small.error());
   CHECK(small.value().object.builtin == "icosphere");
