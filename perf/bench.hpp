@@ -15,5 +15,6 @@ void add_exchange(CLI::App& app);  ///< TripleBuffer vs mutex take-newest latenc
 void add_haptic(CLI::App& app);    ///< HapticLoop vs bare clock_nanosleep wake-up latency (rt issue)
 void add_scatter(CLI::App& app);  ///< scatter-gather round trip of an empty query, N workers × transport
 void add_tables(CLI::App& app);   ///< issue 7: table1, table2, table3, peers, trade, icosphere (bench_tables.cpp)
+void add_force(CLI::App& app);    ///< force rendering quality per contact model, simulated time (bench_force.cpp)
 
 }  // namespace st::bench

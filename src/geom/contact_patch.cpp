@@ -160,6 +160,9 @@ bool segment(const Vec3* a[3], const Vec3& na, const Vec3* b[3], const Vec3& nb,
   return true;
 }
 
+/// Vector area below this fraction of the colliding object faces' area is noise, not a direction.
+constexpr double kTinyArea = 1e-9;
+
 /// Colliding pairs up to which every pair's edges are crossed with each other along FD (edge–edge
 /// depth): 64 pairs × 9 edge crossings stay within a few microseconds.
 constexpr std::size_t kRefineAllPairs = 64;
@@ -628,11 +631,15 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     const Vec3& a = have_prev ? a_front : a_all;
     const double abs_sum = have_prev ? abs_front : abs_all;
     const double a_norm = a.norm();
-    if (abs_sum > 0 && a_norm > kCancelRatio * abs_sum && std::isfinite(a_norm)) {
+    // A curve of (nearly) no area is rounding noise (faces touching at a vertex or an edge): its
+    // direction is arbitrary. kTinyArea of the colliding faces' area is far below any real
+    // penetration (a ball pressed 1e-6 of its radius already has ~1e-5 of its face area inside).
+    const bool tiny = !(a_norm > kTinyArea * 0.5 * n_faces_abs);
+    if (abs_sum > 0 && a_norm > kCancelRatio * abs_sum && std::isfinite(a_norm) && !tiny) {
       n = a / a_norm;
     } else {
       m.flags |= kNormalFallback;
-      if (abs_sum > 0) m.flags |= kNormalsDisagree;
+      if (abs_sum > 0 && !tiny) m.flags |= kNormalsDisagree;
       if (have_prev) n = prev_n;
       else if (n_faces.norm() > kCancelRatio * n_faces_abs) n = n_faces.normalized();
       else in_contact = false;

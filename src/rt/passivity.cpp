@@ -83,7 +83,10 @@ Eigen::Vector3d PassivityGuard::apply(const Eigen::Vector3d& f, const Eigen::Vec
   const double fn = std::max(f.dot(n), 0.0);
   const double predicted = energy_ + (k_ > 0 ? fn * fn / (2 * k_) : 0.0);
   const double excess = predicted + kRampMJ;
-  if (excess > 0 && std::abs(vn_) > 1e-9) {
+  // Only while leaving the surface: a zero-order hold gives energy back on the way out. On the
+  // way in the prediction runs a tick ahead of the observer (it already counts the new force's
+  // stored energy), and damping there would only stiffen a fast press.
+  if (excess > 0 && vn_ > 1e-9) {
     const double ramp = std::min(excess / kRampMJ, 1.0);
     const double alpha = std::min(c_.max_damping_N_s_per_mm * ramp, excess / (dt * vn_ * vn_));
     add -= alpha * vn_;
