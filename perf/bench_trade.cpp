@@ -4,6 +4,9 @@
 // The probe follows the built-in press/slide script on the finest level's top, one pose per
 // 1 ms tick. Reference: exact collide() on the finest level at EVERY tick, contact model built
 // and force computed at that same tick (hold: F = law(PD)·FD of the current pose, no delay).
+// Both use the contact model chosen by --contact (default patch, the shipped model: its force is
+// continuous in the pose, so the reference does not jitter and smoothing is not counted as error;
+// --contact paper gives the paper's nearest-face model, as in the first harness runs).
 // A test configuration (mesh level, collision rate cap, interpolation) runs the same code paths
 // as the servo: collide() on its level at the pose of every k-th tick (k = 1000 Hz / rate), the
 // ContactModel (ContactBuilder) delivered one tick later to an rt::Interpolator of the chosen
@@ -77,13 +80,13 @@ struct Trace {
 
 /// Forces of one configuration over the script (see the file comment). k = ticks per round;
 /// `exact_every_tick` = the reference (model built and used at the same tick).
-Trace simulate(const Body& probe, const LevelRun& lv, const std::vector<geom::Pose>& poses, int k, rt::InterpMode mode,
+Trace simulate(const geom::ContactConfig& contact, const Body& probe, const LevelRun& lv, const std::vector<geom::Pose>& poses, int k, rt::InterpMode mode,
                bool exact_every_tick, const LevelRun* finest) {
   rt::InterpolatorConfig ic = rt::DefaultInterpolatorConfig();
   ic.mode = mode;
   rt::Interpolator interp(rt::ForceLaw{}, ic);
   rt::Saturator sat(rt::DefaultSaturationConfig());
-  geom::ContactBuilder builder;
+  geom::ContactBuilder builder(contact);
   Trace out;
   out.force.resize(poses.size());
   geom::ContactModel pending{};
@@ -128,6 +131,7 @@ Trace simulate(const Body& probe, const LevelRun& lv, const std::vector<geom::Po
 
 void add_trade(CLI::App& app) {
   struct Args {
+    std::string contact = "patch";
     std::string probe, levels, csv, trace_csv, leafs = "4,8,16,32,64", rates = "1000,250,60,25",
                                                interps = "hold,paper,plane";
     double seconds = 5;
@@ -138,6 +142,9 @@ void add_trade(CLI::App& app) {
       "trade", "Speed/accuracy trade: leaf size, mesh level, collision rate cap, interpolation vs an exact "
                "every-tick reference (offline, simulated time)");
   cmd->add_option("--probe", a->probe, "probe mesh (the hand)")->required();
+  cmd->add_option("--contact", a->contact, "contact model of the reference and the configurations: patch or paper")
+      ->check(CLI::IsMember({"patch", "paper"}))
+      ->capture_default_str();
   cmd->add_option("--levels", a->levels, "object meshes coarse to fine, one Loop level apart, comma-separated; the "
                                          "last is the reference")->required();
   cmd->add_option("--seconds", a->seconds, "script length (the press/slide script time-scaled), s")
@@ -149,6 +156,8 @@ void add_trade(CLI::App& app) {
   cmd->add_option("--csv", a->csv, "append one row per configuration");
   cmd->add_option("--trace-csv", a->trace_csv, "write per-tick force magnitudes of the reference and a few configurations");
   cmd->callback([a] {
+    geom::ContactConfig contact = geom::DefaultContactConfig();
+    contact.model = geom::parse_contact_model(a->contact).value();
     const std::uint32_t default_leaf = geom::DefaultTreeParams().leaf_faces;
     const Body probe = load_body(a->probe, default_leaf);
     std::vector<std::string> paths;
@@ -202,7 +211,7 @@ void add_trade(CLI::App& app) {
     std::fprintf(stderr, "trade: %zu ticks (%zu in contact) on %zu levels in %.1f s\n", ticks, in_contact.size(), lv.size(),
                  std::chrono::duration<double>(std::chrono::steady_clock::now() - w0).count());
 
-    const Trace ref = simulate(probe, fine, poses, 1, rt::InterpMode::hold, true, &fine);
+    const Trace ref = simulate(contact, probe, fine, poses, 1, rt::InterpMode::hold, true, &fine);
     double ref_rms = 0;
     for (const auto& f : ref.force) ref_rms += f.squaredNorm();
     ref_rms = std::sqrt(ref_rms / double(ticks));
@@ -248,7 +257,7 @@ void add_trade(CLI::App& app) {
     std::vector<std::pair<std::string, Trace>> traces;  // for --trace-csv
     auto run_config = [&](const std::string& knob, std::size_t l, int rate, rt::InterpMode mode) {
       const int k = std::max(1, int(std::lround(1000.0 / rate)));
-      const Trace t = simulate(probe, lv[l], poses, k, mode, false, &fine);
+      const Trace t = simulate(contact, probe, lv[l], poses, k, mode, false, &fine);
       Row r{knob, "", stem(paths[l]), rt::to_string(mode), lv[l].body.mesh.num_faces(), default_leaf, 1000.0 / k, k,
             lv[l].latency_us, lv[l].latency_us / k, double(lv[l].memory) / 1048576.0, 0, 0, 0, t.recall, true};
       err(t, r.rms, r.max, r.mag_rms);

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The perf harness (issue 7): regenerates the paper's Tables 1-3, the peers, the speed/accuracy
-# trade, their CSVs, PNG plots, a JSON summary and the harness sections of perf/RESULTS.md.
+# trade, the force rendering quality (paper vs patch contact model), their CSVs, PNG plots, a JSON
+# summary and the harness sections of perf/RESULTS.md.
 #   perf/run_all.sh            full run (<= 15 min on the 2-core dev VM): perf/results/, perf/RESULTS.md
 #   perf/run_all.sh --quick    every benchmark with tiny counts (<= 2 min), for CI; asserts nothing
 #                              about speed; writes build/perf-quick/ and leaves perf/ untouched
@@ -48,7 +49,7 @@ for m in hand_L2 elephant armadillo armadillo_L1 armadillo_L2; do
 done
 
 mkdir -p "$out/poses"
-rm -f "$out"/*.csv "$out"/*.json "$out"/*.png
+rm -f "$out"/*.csv "$out"/*.json "$out"/*.png; rm -rf "$out/force"
 hand="$models/hand_L2.off"
 
 # Machine and load, for the report.
@@ -135,6 +136,11 @@ log "speed/accuracy trade (offline, simulated time)"
   --levels "$models/armadillo.off,$models/armadillo_L1.off,$models/armadillo_L2.off" \
   --seconds "$trade_seconds" --samples "$trade_samples" --csv "$out/trade.csv" --trace-csv "$out/trade_trace.csv" \
   > "$out/trade.txt"
+
+log "force rendering quality: paper vs patch contact model, open and closed loop (simulated time)"
+force_args=(--json --trace-dir "$out/force" --poses "$out/poses/hand_elephant.txt")
+[ $quick = 1 ] && force_args+=(--quick --scenes box,plate,hand_elephant)
+"$bench" force "${force_args[@]}" > "$out/force.json"
 
 echo "load_end=$(cut -d' ' -f1-3 /proc/loadavg)" >> "$out/machine.txt"
 echo "elapsed_s=$(( $(date +%s) - t_start ))" >> "$out/machine.txt"
