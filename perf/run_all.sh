@@ -138,6 +138,7 @@ log "speed/accuracy trade (offline, simulated time)"
   > "$out/trade.txt"
 
 log "force rendering quality: paper vs patch contact model, open and closed loop (simulated time)"
+# Per-tick traces (perf/results/force/, not committed: 8 MB) feed force_slide.png.
 force_args=(--json --trace-dir "$out/force" --poses "$out/poses/hand_elephant.txt")
 [ $quick = 1 ] && force_args+=(--quick --scenes box,plate,hand_elephant)
 "$bench" force "${force_args[@]}" > "$out/force.json"

@@ -21,18 +21,20 @@
 //    previous FD (n·FD_prev < kBackCos) do not count in A, and the depth is measured through the
 //    faces that face FD. A probe pushed into a thin plate keeps being pushed out of the side it
 //    entered, however deep it goes.
-//  * PD = the directional penetration depth along FD: the largest distance, along FD, that a
-//    probe vertex inside the object must travel to leave through the object's front faces, and
-//    the same for object vertices inside the probe along -FD through the probe's faces, and at
-//    the points where the deepest vertices' edges cross the other side's edges (seen along FD:
-//    the ridge of a box edge pressed into a finely meshed probe lies there). The faces a point
-//    can leave through are the facing faces connected to the colliding ones over the contact's
-//    footprint (so faces wholly inside the other body count); "inside" vertices are found from
-//    the colliding faces' vertices by flood fill, so vertices wholly inside count too. Exact for
-//    a face, and for a symmetric press on an edge or corner of a box or on a sphere (up to the
-//    meshes' vertex spacing); continuous in the pose. Where the patch is not symmetric (a ball
-//    half over an edge) FD is the volume gradient, not the shortest way out, and PD is the way
-//    out along FD: the force stays conservative and continuous rather than turning to the
+//  * PD = the directional penetration depth along FD: how far the probe must move along FD to
+//    come out. Measured at probe vertices inside the object (the distance along FD to the
+//    object's faces that face FD, found by walking across them from a colliding face), at object
+//    vertices inside the probe (along -FD to the probe's faces), and where the deepest vertex's
+//    edges cross the other body's edges seen along FD (the ridge of a box edge pressed into a
+//    finely meshed probe lies between vertices; the search follows a ridge from fan to fan).
+//    The deepest vertex is found by a climb over the mesh graph from the colliding faces'
+//    vertices (the distance grows toward the deepest point), so vertices wholly inside count
+//    and the cost is the length of the climb, not the number of vertices inside; last round's
+//    local maxima start the next round, and new contact regions are searched every few rounds.
+//    Exact for a face, and for a symmetric press on an edge or corner of a box or on a sphere (up
+//    to the meshes' vertex spacing); continuous in the pose. Where the patch is not symmetric (a
+//    ball half over an edge) FD is the volume gradient, not the shortest way out, and PD is the
+//    way out along FD: the force stays conservative and continuous rather than turning to the
 //    nearest feature.
 //  * Held contact (a surface-constrained proxy): when the probe has passed through a thin
 //    feature, so that no front face collides any more, the last contact plane is kept while the
@@ -108,7 +110,7 @@ enum ContactFlag : std::uint32_t {
   kBadInput = 1u << 4,           ///< non-finite pose or out-of-range pair indices (skipped)
   kHeld = 1u << 5,               ///< patch: held contact, the probe is past a feature it entered (proxy)
   kNormalFallback = 1u << 6,     ///< patch: FD from face normals or history, not from the intersection curve
-  kInsideCapped = 1u << 7,       ///< patch: the flood fill hit ContactConfig::max_inside_vertices
+  kInsideCapped = 1u << 7,       ///< patch: the depth search hit ContactConfig::max_inside_vertices
 };
 
 /// Which contact model a builder computes.
@@ -146,8 +148,8 @@ struct ContactModel {
   std::uint32_t degenerate_faces = 0; ///< distinct degenerate colliding object faces
   std::uint32_t flags = 0;            ///< ContactFlag bits
   std::uint32_t kind = 0;             ///< ContactModelKind that built it
-  std::uint32_t inside_probe_vertices = 0;   ///< patch: probe vertices found inside the object
-  std::uint32_t inside_object_vertices = 0;  ///< patch: object vertices found inside the probe
+  std::uint32_t inside_probe_vertices = 0;   ///< patch: probe vertices the depth search found inside the object
+  std::uint32_t inside_object_vertices = 0;  ///< patch: object vertices the depth search found inside the probe
 
   bool in_contact() const { return (flags & kInContact) != 0; }  ///< FD/PD/plane are meaningful
   /// Where the probe is shown (the proxy): the probe moved out of the object by PD along FD, mm.
@@ -161,7 +163,7 @@ struct ContactConfig {
   ContactModelKind model = ContactModelKind::patch;  ///< which model
   double replane_angle_deg = 60.0;        ///< paper: re-record the first contact face when FD turns further than this
   double hold_margin_mm = 1.0;            ///< patch: a held contact lasts while the probe is this close to the patch's footprint
-  std::uint32_t max_inside_vertices = 1u << 18;  ///< patch: flood-fill bound per side (kInsideCapped past it)
+  std::uint32_t max_inside_vertices = 1u << 18;  ///< patch: vertices the depth search may visit per body and round (kInsideCapped past it)
 };
 /// patch model, paper replane angle 60°, hold margin 1 mm, 262,144 inside vertices per side.
 ContactConfig DefaultContactConfig();
@@ -169,8 +171,8 @@ ContactConfig DefaultContactConfig();
 std::string check(const ContactConfig& config);
 
 /// The faces around each vertex of a mesh (compressed rows): the faces of vertex v are
-/// faces[first[v]] .. faces[first[v + 1] - 1]. Built once per mesh for the patch model's flood
-/// fills (neighbouring vertices and faces are found through it); 4 bytes per vertex plus 12 per
+/// faces[first[v]] .. faces[first[v + 1] - 1]. Built once per mesh for the patch model's climbs
+/// and surface walks (neighbouring vertices and faces are found through it); 4 bytes per vertex plus 12 per
 /// face (about 28 bytes per vertex on a closed mesh).
 struct VertexFaces {
   std::vector<std::uint32_t> first;  ///< row starts, num_vertices + 1

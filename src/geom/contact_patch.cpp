@@ -244,7 +244,7 @@ std::size_t ContactBuilder::Patch::bytes() const {
           object_path_stamp.capacity() + probe_face_stamp.capacity() + object_face_stamp.capacity() +
           probe_face_slot.capacity() + object_face_slot.capacity() +
           probe_faces.capacity() + object_faces.capacity() +
-          queue.capacity() + climb.capacity()) * 4 +
+          climb.capacity()) * 4 +
          (probe_normals.capacity() + object_normals.capacity()) * sizeof(Vec3) + valid.capacity() * sizeof(ContactPair);
 }
 

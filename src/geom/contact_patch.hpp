@@ -41,14 +41,14 @@ struct ContactBuilder::Patch {
   bool has_history() const { return have_prev; }
   std::size_t bytes() const;
 
-  /// Result of one side's flood fill.
+  /// Result of one side's depth search.
   struct Deepest {
     double depth = 0;                 ///< largest exit distance found, mm (0: none inside)
     std::uint32_t vertex = UINT32_MAX;  ///< the vertex it belongs to (UINT32_MAX: an edge point)
     Vec3 point{Vec3::Zero()};         ///< the deepest point, common (object-local) frame
     std::uint32_t face = UINT32_MAX;  ///< the surface face it leaves through
     std::uint32_t inside = 0;         ///< vertices found inside
-    bool capped = false;              ///< a fill stopped at max_inside_vertices
+    bool capped = false;              ///< the search stopped at max_inside_vertices
   };
   /// One side's pass: points of `test` inside `surface`, leaving along d.
   Deepest side(bool probe_side, const Vec3& d, const Mesh& probe, const Mesh& object);
@@ -76,7 +76,7 @@ struct ContactBuilder::Patch {
   double held_radius = 0;                 ///< the patch footprint around held_point, mm
   // Scratch.
   std::vector<ContactPair> valid;
-  std::vector<std::uint32_t> probe_faces, object_faces, queue;  ///< scratch
+  std::vector<std::uint32_t> probe_faces, object_faces;  ///< distinct colliding faces this round
   std::vector<Vec3> probe_world;          ///< probe vertices, object-local (valid where stamped)
   std::vector<double> probe_depth, object_depth;  ///< per-vertex exit distance this round (where visited)
   std::vector<std::uint32_t> probe_exit_face, object_exit_face;  ///< and the face it was found on
