@@ -139,6 +139,7 @@ log "speed/accuracy trade (offline, simulated time)"
 
 log "force rendering quality: paper vs patch contact model, open and closed loop (simulated time)"
 # Per-tick traces (perf/results/force/, not committed: 8 MB) feed force_slide.png.
+# Per-tick traces go to $out/force/ (8 MB, not committed); force_slide.png is drawn from them.
 force_args=(--json --trace-dir "$out/force" --poses "$out/poses/hand_elephant.txt")
 [ $quick = 1 ] && force_args+=(--quick --scenes box,plate,hand_elephant)
 "$bench" force "${force_args[@]}" > "$out/force.json"
