@@ -17,7 +17,7 @@ using namespace st::geom;
 namespace {
 constexpr double kPi = 3.14159265358979323846;
 
-Pose at(const Vec3& t) {
+Pose pose_at(const Vec3& t) {
   Pose p = Pose::Identity();
   p.translation() = t;
   return p;
@@ -32,7 +32,7 @@ double angle_deg(const Vec3& a, const Vec3& b) {
 }
 Vec3 fd(const ContactModel& m) { return to_eigen(m.force_dir); }
 // Depth of the model's probe point below its local contact plane at pose p.
-double plane_depth(const ContactModel& m, const Pose& p) {
+double depth_below_plane(const ContactModel& m, const Pose& p) {
   return (to_eigen(m.plane_point) - p * to_eigen(m.probe_point)).dot(to_eigen(m.force_dir));
 }
 bool finite_model(const ContactModel& m) {
@@ -73,14 +73,14 @@ TEST_CASE("contact patch: sphere pressed into a box face: FD = +z, PD = depth fr
       CAPTURE(d);
       CAPTURE(offset.norm());
       ContactBuilder b;
-      const Pose p = at(offset + Vec3(1.3, -2.1, 30.0 - d));
+      const Pose p = pose_at(offset + Vec3(1.3, -2.1, 30.0 - d));
       const ContactModel m = model_at(b, ball10(), box, p);
       REQUIRE(m.in_contact());
       CHECK(m.kind == std::uint32_t(ContactModelKind::patch));
       CHECK(angle_deg(fd(m), Vec3::UnitZ()) < 1e-6);
       CHECK(std::abs(m.penetration_mm - d) <= kDepthTol);
       CHECK(m.penetration_mm <= d + 1e-9);  // vertices lie on the sphere: never deeper than it
-      CHECK(plane_depth(m, p) == doctest::Approx(m.penetration_mm).epsilon(1e-9));
+      CHECK(depth_below_plane(m, p) == doctest::Approx(m.penetration_mm).epsilon(1e-9));
       CHECK(m.inside_probe_vertices > 0);
       CHECK((m.flags & (kHeld | kNormalFallback | kBadInput)) == 0);
     }
@@ -93,7 +93,7 @@ TEST_CASE("contact patch: box edge and corner: FD on the bisector, PD = depth") 
     CAPTURE(d);
     {
       ContactBuilder b;
-      const Pose p = at(Vec3(20, 0.37, 20) + (10 - d) * edge_dir);
+      const Pose p = pose_at(Vec3(20, 0.37, 20) + (10 - d) * edge_dir);
       const ContactModel m = model_at(b, ball10(), box40(), p);
       REQUIRE(m.in_contact());
       CHECK(angle_deg(fd(m), edge_dir) < 1.0);
@@ -101,7 +101,7 @@ TEST_CASE("contact patch: box edge and corner: FD on the bisector, PD = depth") 
     }
     {
       ContactBuilder b;
-      const Pose p = at(Vec3(20, 20, 20) + (10 - d) * corner_dir);
+      const Pose p = pose_at(Vec3(20, 20, 20) + (10 - d) * corner_dir);
       const ContactModel m = model_at(b, ball10(), box40(), p);
       REQUIRE(m.in_contact());
       CHECK(angle_deg(fd(m), corner_dir) < 1.0);
@@ -116,7 +116,7 @@ TEST_CASE("contact patch: sphere into sphere: FD radial, PD = r1 + r2 - distance
   for (double d : {0.5, 3.0, 10.0}) {
     CAPTURE(d);
     ContactBuilder b;
-    const Pose p = at((30.0 - d) * u);
+    const Pose p = pose_at((30.0 - d) * u);
     const ContactModel m = model_at(b, ball10(), object, p);
     REQUIRE(m.in_contact());
     CHECK(angle_deg(fd(m), u) < 1.0);
@@ -129,7 +129,7 @@ TEST_CASE("contact patch: force never rises while the probe is pulled out") {
   double last = std::numeric_limits<double>::infinity();
   int in_contact = 0;
   for (double d = 8.0; d > -0.5; d -= 0.05) {
-    const ContactModel m = model_at(b, ball10(), box40(), at({0.2, 0.1, 30.0 - d}));
+    const ContactModel m = model_at(b, ball10(), box40(), pose_at({0.2, 0.1, 30.0 - d}));
     if (!m.in_contact()) {
       CHECK(d < 0.05);  // contact ends only at the surface
       last = 0;
@@ -149,7 +149,7 @@ TEST_CASE("contact patch: sliding over and around a box edge: no step, FD turns 
     ContactModel prev{};
     int steps = 0;
     for (double x = 10; x <= 27; x += 0.05) {
-      const ContactModel m = model_at(b, ball10(), box40(), at({x, 0, 27}));
+      const ContactModel m = model_at(b, ball10(), box40(), pose_at({x, 0, 27}));
       if (!m.in_contact()) break;
       REQUIRE(finite_model(m));
       if (prev.in_contact()) {
@@ -171,7 +171,7 @@ TEST_CASE("contact patch: sliding over and around a box edge: no step, FD turns 
     ContactModel prev{};
     for (double a = 0; a <= 90.0; a += 0.5) {
       const Vec3 dir(std::sin(a * kPi / 180), 0, std::cos(a * kPi / 180));
-      const ContactModel m = model_at(b, ball10(), box40(), at(Vec3(20, 0, 20) + 7.0 * dir));
+      const ContactModel m = model_at(b, ball10(), box40(), pose_at(Vec3(20, 0, 20) + 7.0 * dir));
       REQUIRE(m.in_contact());
       CAPTURE(a);
       CHECK(m.penetration_mm >= 3.0 - kDepthTol);
@@ -199,7 +199,7 @@ TEST_CASE("contact patch: concave crease: FD between the walls, continuous acros
   ContactBuilder b;
   ContactModel prev{};
   for (double x = -3; x <= 3; x += 0.05) {
-    const ContactModel m = model_at(b, ball10(), v, at({x, 0, 10 * std::sqrt(2.0) - 1.0}));
+    const ContactModel m = model_at(b, ball10(), v, pose_at({x, 0, 10 * std::sqrt(2.0) - 1.0}));
     REQUIRE(m.in_contact());
     REQUIRE(finite_model(m));
     CHECK(fd(m).z() > 0.7);
@@ -218,7 +218,7 @@ TEST_CASE("contact patch: pushed through a 1 mm plate and back: no pop-through, 
   int held = 0, contacts = 0;
   auto step = [&](double cz) {
     const double depth = 0.5 - (cz - 5.0);  // below the plate's top (the side it entered by)
-    const ContactModel m = model_at(b, ball, plate, at({0.3, -0.2, cz}));
+    const ContactModel m = model_at(b, ball, plate, pose_at({0.3, -0.2, cz}));
     CAPTURE(cz);
     REQUIRE(finite_model(m));
     if (depth <= 0.02) return;  // at or above the top: contact may or may not be reported
@@ -240,13 +240,13 @@ TEST_CASE("contact patch: pushed through a 1 mm plate and back: no pop-through, 
 
 TEST_CASE("contact patch: bad input gives a finite model and a flag") {
   ContactBuilder b;
-  const Pose good = at({0, 0, 27});
+  const Pose good = pose_at({0, 0, 27});
   const std::vector<FacePair> pairs = st::test::brute_force(ball10(), box40(), good);
   REQUIRE_FALSE(pairs.empty());
   // Non-finite pose: no contact, flagged, history forgotten.
   (void)b.build(ball10(), box40(), good, pairs);
   REQUIRE(b.has_first_face());
-  const ContactModel nan = b.build(ball10(), box40(), at({0, 0, std::nan("")}), pairs);
+  const ContactModel nan = b.build(ball10(), box40(), pose_at({0, 0, std::nan("")}), pairs);
   CHECK_FALSE(nan.in_contact());
   CHECK((nan.flags & kBadInput) != 0);
   CHECK(finite_model(nan));
@@ -302,14 +302,14 @@ TEST_CASE("contact patch: a hand on the elephant: finite, PD and FD consistent w
   b.prepare(hand, elephant);
   ContactModel prev{};
   for (double s = 0; s <= 2.0; s += 0.1) {
-    const Pose p = at(top_v - hand_tip + Vec3(s, 0, -2.0));
+    const Pose p = pose_at(top_v - hand_tip + Vec3(s, 0, -2.0));
     const ContactModel m = model_at(b, hand, elephant, p);
     REQUIRE(m.in_contact());
     REQUIRE(finite_model(m));
     CHECK(fd(m).z() > 0.5);  // the elephant's back faces up
     CHECK(m.penetration_mm > 0.5);
     CHECK(m.penetration_mm < 4.0);
-    CHECK(plane_depth(m, p) == doctest::Approx(m.penetration_mm).epsilon(1e-9));
+    CHECK(depth_below_plane(m, p) == doctest::Approx(m.penetration_mm).epsilon(1e-9));
     if (prev.in_contact()) CHECK(angle_deg(fd(m), fd(prev)) < 3.0);
     prev = m;
   }
