@@ -471,7 +471,12 @@ struct CollideQuery {
         else approx_pair(p, o);
         continue;
       }
-      assert(n + kMaxChildren <= sc.stack_cap_);
+      // A tree deeper than its num_depths claims (never one built or read by tree_io, which
+      // checks; a hand-made one could) would overflow the stack: stop, and say so.
+      if (n + kMaxChildren > sc.stack_cap_) [[unlikely]] {
+        ++res.stats.truncated;
+        return;
+      }
       // Descend the larger sphere; test all its children against the other sphere at once.
       if (!to && (tp || ho.radius >= s * hp.radius)) {
         res.stats.node_pairs += ho.count;
@@ -492,6 +497,10 @@ void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object
   result.clear();
   if (probe_tree.nodes.empty() || object_tree.nodes.empty()) return;
   if (!pose.matrix().allFinite()) return;  // boundaries validate poses; never crash here
+  if (probe_tree.num_depths > kMaxTreeDepth || object_tree.num_depths > kMaxTreeDepth) {
+    result.stats.truncated = 1;  // the stack is sized from num_depths: never from an unchecked value
+    return;
+  }
   if (scratch.pkey_ != probe_tree.nodes.data() || scratch.phash_ != probe_tree.mesh_hash ||
       scratch.lidx_.size() != probe_tree.face_order.size() || scratch.omark_.size() != object.faces.size() ||
       scratch.cstamp_.size() != probe_tree.nodes.size() || scratch.osph_key_ != object_tree.nodes.data() ||

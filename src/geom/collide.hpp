@@ -65,6 +65,7 @@ struct CollideStats {
   std::uint64_t tri_pairs = 0;        ///< exact tri_tri_overlap calls
   std::uint64_t exact_fallbacks = 0;  ///< not exposed by tri_tri.hpp: always 0
   std::uint64_t sphere_pairs = 0;     ///< approximate mode: overlapping sphere pairs reported
+  std::uint64_t truncated = 0;        ///< traversals stopped: a tree deeper than its num_depths (or > kMaxTreeDepth); 0 for valid trees
 };
 
 /// Output of a query; caller-owned, reused across queries (clear() keeps capacity).
