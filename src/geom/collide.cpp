@@ -366,6 +366,7 @@ struct CollideQuery {
 
   void emit(std::uint32_t pf, std::uint32_t of) {
     res.pairs.push_back({pf, of});
+    if (res.pairs.size() > opt.max_pairs) [[unlikely]] res.stats.pair_limit_hit = true;
     if (sc.pmark_[pf] != gen) { sc.pmark_[pf] = gen; ++res.probe_faces; }
     if (sc.omark_[of] != gen) { sc.omark_[of] = gen; ++res.object_faces; }
   }
@@ -438,7 +439,7 @@ struct CollideQuery {
     ++res.stats.sphere_pairs;
     res.sphere_pairs.emplace_back(p, o);
     if (!opt.approx_face_pairs) return;
-    for (const std::uint32_t* pf = PT.faces_begin(p); pf != PT.faces_end(p); ++pf)
+    for (const std::uint32_t* pf = PT.faces_begin(p); pf != PT.faces_end(p) && !res.stats.pair_limit_hit; ++pf)
       for (const std::uint32_t* of = OT.faces_begin(o); of != OT.faces_end(o); ++of) emit(*pf, *of);
   }
 
@@ -461,7 +462,7 @@ struct CollideQuery {
     res.stats.node_pairs += 1;
     if (sphere_mask(os + oroot, so, 1, ps[proot], ps[sp + proot], ps[2 * sp + proot], ps[3 * sp + proot]) == 0) return;
     stack[n++] = {proot, oroot};
-    while (n > 0) {
+    while (n > 0 && !res.stats.pair_limit_hit) {
       const auto [p, o] = stack[--n];
       const SphereNode& hp = PT.nodes[p];
       const SphereNode& ho = OT.nodes[o];
@@ -471,7 +472,12 @@ struct CollideQuery {
         else approx_pair(p, o);
         continue;
       }
-      assert(n + kMaxChildren <= sc.stack_cap_);
+      // A tree deeper than its num_depths claims (never one built or read by tree_io, which
+      // checks; a hand-made one could) would overflow the stack: stop, and say so.
+      if (n + kMaxChildren > sc.stack_cap_) [[unlikely]] {
+        ++res.stats.truncated;
+        return;
+      }
       // Descend the larger sphere; test all its children against the other sphere at once.
       if (!to && (tp || ho.radius >= s * hp.radius)) {
         res.stats.node_pairs += ho.count;
@@ -492,6 +498,10 @@ void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object
   result.clear();
   if (probe_tree.nodes.empty() || object_tree.nodes.empty()) return;
   if (!pose.matrix().allFinite()) return;  // boundaries validate poses; never crash here
+  if (probe_tree.num_depths > kMaxTreeDepth || object_tree.num_depths > kMaxTreeDepth) {
+    result.stats.truncated = 1;  // the stack is sized from num_depths: never from an unchecked value
+    return;
+  }
   if (scratch.pkey_ != probe_tree.nodes.data() || scratch.phash_ != probe_tree.mesh_hash ||
       scratch.lidx_.size() != probe_tree.face_order.size() || scratch.omark_.size() != object.faces.size() ||
       scratch.cstamp_.size() != probe_tree.nodes.size() || scratch.osph_key_ != object_tree.nodes.data() ||
@@ -517,7 +527,7 @@ void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object
     q.descend(0, 0);
   } else {
     for (const std::uint32_t r : options.object_roots)
-      if (r < object_tree.num_nodes()) q.descend(0, r);
+      if (r < object_tree.num_nodes() && !result.stats.pair_limit_hit) q.descend(0, r);
   }
   if (options.sort_pairs) std::sort(result.pairs.begin(), result.pairs.end());
 }

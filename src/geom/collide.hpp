@@ -3,6 +3,7 @@
 // Nothing is transformed wholesale: sphere centres and probe vertices are mapped as visited.
 #pragma once
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -55,6 +56,10 @@ struct CollideOptions {
   std::span<const std::uint32_t> object_roots{};
   bool restrict_object = false;  ///< use object_roots instead of the whole object
   bool approx_face_pairs = true;  ///< approximate mode: also expand sphere pairs into face pairs
+  /// Stop the traversal once more than this many pairs are found (stats.pair_limit_hit); the result
+  /// then holds at most max_pairs plus one leaf pair's worth (64 × 64). A worker answering a
+  /// hostile block set (every face on top of every other) must not compute N² pairs first.
+  std::size_t max_pairs = SIZE_MAX;
 };
 inline CollideOptions DefaultCollideOptions() { return {}; }  ///< exact, unsorted, whole object
 
@@ -65,6 +70,8 @@ struct CollideStats {
   std::uint64_t tri_pairs = 0;        ///< exact tri_tri_overlap calls
   std::uint64_t exact_fallbacks = 0;  ///< not exposed by tri_tri.hpp: always 0
   std::uint64_t sphere_pairs = 0;     ///< approximate mode: overlapping sphere pairs reported
+  std::uint64_t truncated = 0;        ///< traversals stopped: a tree deeper than its num_depths (or > kMaxTreeDepth); 0 for valid trees
+  bool pair_limit_hit = false;        ///< the traversal stopped at CollideOptions::max_pairs
 };
 
 /// Output of a query; caller-owned, reused across queries (clear() keeps capacity).

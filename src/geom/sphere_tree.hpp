@@ -21,6 +21,9 @@ struct TreeParams {
 inline TreeParams DefaultTreeParams() { return {}; }  ///< Box2D-style default config
 inline constexpr std::uint32_t kMaxLeafFaces = 64;    ///< collide() keeps a leaf's faces in 64-bit masks
 inline constexpr int kMaxChildren = 8;                ///< octree: up to 8 children per node
+/// Deepest tree a file may hold: build() splits each node's leaves in up to 8 equal groups, so
+/// 2^32 faces need at most 12 layers; 64 leaves room and keeps collide()'s stack small.
+inline constexpr std::uint32_t kMaxTreeDepth = 64;
 
 /// Hot node: the fields the descent touches, 24 bytes (Box2D v3 hot/cold split).
 /// Sphere in the body-local frame, float, padded so it encloses every vertex below it EXACTLY

@@ -8,6 +8,7 @@
 #include "geom/tree_io.hpp"
 
 #include <bit>
+#include <cmath>
 #include <cstring>
 #include <fstream>
 
@@ -60,25 +61,97 @@ std::uint64_t payload_size(std::uint64_t nodes, std::uint64_t faces) {
   return nodes * (sizeof(SphereNode) + sizeof(SphereNodeCold)) + faces * (sizeof(std::uint32_t) + sizeof(FaceBox));
 }
 
-// Structural checks so a hostile file with a valid checksum still cannot make collide() read out of bounds.
+// Structural checks, so that a file whose checksum and hash were forged (they are not
+// cryptographic) still cannot make collide() read or write out of bounds or run forever: the nodes
+// must form exactly the tree SphereTree::build() makes. From the root, every node is reached once
+// (a tree: no shared children, no cycles, nothing unreachable); a child's depth is its parent's
+// plus one and the file's num_depths is the deepest depth plus one, at most kMaxTreeDepth (collide()
+// sizes its stack from it); children are contiguous, after their parent, and their face ranges
+// split the parent's range in order; a leaf holds 1..kMaxLeafFaces faces; face_order is a
+// permutation.
 Status check_structure(const SphereTree& t, const std::string& path) {
   const std::uint32_t N = t.num_nodes(), F = t.num_faces();
+  if (t.num_depths == 0 || t.num_depths > kMaxTreeDepth)
+    return fail(path, ": corrupt: num_depths ", t.num_depths, ", expected 1..", kMaxTreeDepth);
+  const SphereNodeCold& root = t.cold[0];
+  if (root.parent != kNoNode || t.nodes[0].depth != 0 || root.face_begin != 0 || root.face_end != F)
+    return fail(path, ": corrupt: root node (parent, depth 0, faces [0, ", F, ")) expected");
+  std::vector<std::uint8_t> reached(N, 0);
+  reached[0] = 1;
+  std::uint32_t max_depth = 0, count = 1;
+  // Children always follow their parent, so one pass in index order visits parents first.
   for (std::uint32_t i = 0; i < N; ++i) {
+    if (!reached[i]) return fail(path, ": corrupt: node ", i, " is not reachable from the root");
     const SphereNode& h = t.nodes[i];
     const SphereNodeCold& c = t.cold[i];
-    if (c.face_begin > c.face_end || c.face_end > F) return fail(path, ": corrupt: node ", i, " face range");
+    if (!(std::isfinite(h.radius) && h.radius >= 0 && std::isfinite(h.centre[0]) && std::isfinite(h.centre[1]) &&
+          std::isfinite(h.centre[2])))
+      return fail(path, ": corrupt: node ", i, " sphere is not finite");
+    if (c.face_begin >= c.face_end || c.face_end > F) return fail(path, ": corrupt: node ", i, " face range");
+    max_depth = std::max<std::uint32_t>(max_depth, h.depth);
     if (h.leaf) {
-      if (h.first != c.face_begin || h.count != c.face_end - c.face_begin || h.count > kMaxLeafFaces)
+      if (h.leaf != 1 || h.first != c.face_begin || h.count != c.face_end - c.face_begin || h.count > kMaxLeafFaces)
         return fail(path, ": corrupt: leaf ", i, " face range");
-    } else if (h.count < 1 || h.count > kMaxChildren || h.first <= i || std::uint64_t{h.first} + h.count > N) {
-      return fail(path, ": corrupt: node ", i, " child range");
+      continue;
     }
-    if (h.depth >= t.num_depths) return fail(path, ": corrupt: node ", i, " depth");
+    if (h.count < 1 || h.count > kMaxChildren || h.first <= i || std::uint64_t{h.first} + h.count > N)
+      return fail(path, ": corrupt: node ", i, " child range");
+    std::uint32_t next_face = c.face_begin;
+    for (std::uint32_t k = h.first; k < h.first + h.count; ++k) {
+      if (reached[k]) return fail(path, ": corrupt: node ", k, " has two parents");
+      reached[k] = 1;
+      ++count;
+      const SphereNodeCold& ck = t.cold[k];
+      if (ck.parent != i) return fail(path, ": corrupt: node ", k, " names parent ", ck.parent, ", not ", i);
+      if (t.nodes[k].depth != h.depth + 1) return fail(path, ": corrupt: node ", k, " depth ", unsigned(t.nodes[k].depth), ", expected ", h.depth + 1);
+      if (ck.face_begin != next_face) return fail(path, ": corrupt: node ", k, " face range does not follow its sibling's");
+      next_face = ck.face_end;
+    }
+    if (next_face != c.face_end) return fail(path, ": corrupt: node ", i, " children do not cover its faces");
+  }
+  if (count != N) return fail(path, ": corrupt: ", N - count, " nodes are not in the tree");
+  if (t.num_depths != max_depth + 1)
+    return fail(path, ": corrupt: num_depths ", t.num_depths, " but the deepest node is at depth ", max_depth);
+  // Descendants of an inner node are the contiguous range [first, desc_end) (partition.cpp ships
+  // subtrees by it): children come after their parent, so a backward pass gives each subtree's end.
+  std::vector<std::uint32_t> sub_end(N);
+  for (std::uint32_t i = N; i-- > 0;) {
+    const SphereNode& h = t.nodes[i];
+    sub_end[i] = i + 1;
+    if (h.leaf) continue;
+    for (std::uint32_t k = h.first; k < h.first + h.count; ++k) sub_end[i] = std::max(sub_end[i], sub_end[k]);
+    if (t.cold[i].desc_end != sub_end[i]) return fail(path, ": corrupt: node ", i, " descendant range");
   }
   std::vector<bool> seen(F, false);
   for (std::uint32_t f : t.face_order) {
     if (f >= F || seen[f]) return fail(path, ": corrupt: face_order is not a permutation");
     seen[f] = true;
+  }
+  return Ok{};
+}
+
+// Every vertex below a node lies in its (padded) sphere, and every face box contains its face:
+// what collide() relies on to skip a node. A forged file could otherwise hide collisions.
+Status check_bounds(const SphereTree& t, const Mesh& mesh, const std::string& path) {
+  const std::uint32_t N = t.num_nodes();
+  for (std::uint32_t i = 0; i < N; ++i) {
+    const SphereNode& h = t.nodes[i];
+    const SphereNodeCold& c = t.cold[i];
+    const Vec3 centre(h.centre[0], h.centre[1], h.centre[2]);
+    const double r = double(h.radius) * (1 + 1e-6) + 1e-9;
+    for (std::uint32_t s = c.face_begin; s < c.face_end; ++s) {
+      const std::uint32_t f = t.face_order[s];
+      for (std::uint32_t v : mesh.faces[f])
+        if (!(v < mesh.local.size()) || (mesh.local[v] - centre).norm() > r)
+          return fail(path, ": corrupt: node ", i, " sphere does not hold face ", f);
+    }
+  }
+  for (std::uint32_t s = 0; s < t.num_faces(); ++s) {
+    const FaceBox& b = t.face_boxes[s];
+    for (std::uint32_t v : mesh.faces[t.face_order[s]])
+      for (int k = 0; k < 3; ++k)
+        if (!(double(b.lo[k]) <= mesh.local[v][k] && mesh.local[v][k] <= double(b.hi[k])))
+          return fail(path, ": corrupt: face box of face ", t.face_order[s], " does not hold it");
   }
   return Ok{};
 }
@@ -147,6 +220,7 @@ Result<SphereTree> read_tree(const std::string& path, const Mesh& mesh, const Tr
     return fail(path, ": stale: built for another mesh or parameters (hash/leaf_faces/sizes differ from ", mesh.name,
                 " with leaf_faces ", params.leaf_faces, ")");
   if (Status s = check_structure(t, path); !s) return Error{s.error()};
+  if (Status s = check_bounds(t, mesh, path); !s) return Error{s.error()};
   return t;
 }
 

@@ -19,8 +19,10 @@ class CollisionBackend {
   /// Builds the backend's structures (e.g. its own sphere tree with set.leaf_faces) for `set`.
   virtual Status load(const BlockSet& set) = 0;
   /// Appends every colliding (probe face, GLOBAL object face) pair at `pose` (probe file coords →
-  /// object file coords) to `out`, in any order, each pair once; returns the work counters.
-  virtual QueryStats query(const geom::Pose& pose, std::vector<FacePair>& out) = 0;
+  /// object file coords) to `out`, in any order, each pair once; returns the work counters. Stops
+  /// as soon as more than `max_pairs` pairs were appended (then out holds more than max_pairs, at
+  /// most a few thousand more): the caller answers "too many pairs" without computing them all.
+  virtual QueryStats query(const geom::Pose& pose, std::vector<FacePair>& out, std::size_t max_pairs) = 0;
 };
 
 /// Makes an empty backend; a worker calls it once per block set it loads.

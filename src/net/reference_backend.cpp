@@ -68,7 +68,8 @@ class GridBackend final : public CollisionBackend {
     return Ok{};
   }
 
-  QueryStats query(const geom::Pose& pose, std::vector<FacePair>& out) override {
+  QueryStats query(const geom::Pose& pose, std::vector<FacePair>& out, std::size_t max_pairs) override {
+    const std::size_t start = out.size();
     const auto t0 = std::chrono::steady_clock::now();
     QueryStats st;
     // Relative transform probe-local → object-local, composed once in double (DESIGN.md: large
@@ -100,6 +101,7 @@ class GridBackend final : public CollisionBackend {
               ++st.tri_tests;
               if (sat_tri_overlap(p0, p1, p2, object_.local[u[0]], object_.local[u[1]], object_.local[u[2]]))
                 out.push_back({pf, ids_[of]});
+              if (out.size() - start > max_pairs) return st;  // the caller refuses the query
             }
           }
     }
@@ -169,7 +171,7 @@ std::vector<FacePair> reference_collide(const geom::Mesh& probe, const geom::Mes
   if (!set) return out;
   GridBackend b;
   (void)b.load(set.value());
-  b.query(pose, out);
+  b.query(pose, out, SIZE_MAX);
   std::sort(out.begin(), out.end());
   return out;
 }

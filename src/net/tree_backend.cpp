@@ -29,14 +29,15 @@ class TreeBackend final : public CollisionBackend {
     return Ok{};
   }
 
-  QueryStats query(const geom::Pose& pose, std::vector<FacePair>& out) override {
+  QueryStats query(const geom::Pose& pose, std::vector<FacePair>& out, std::size_t max_pairs) override {
     QueryStats st;
     if (empty_) return st;
     const auto t0 = std::chrono::steady_clock::now();
     // The share keeps the object's origin and local coordinates bit for bit, so collide()
     // computes the same transformed doubles as a single-process query.
-    geom::collide(set_.probe, probe_tree_, set_.object, object_tree_, pose, geom::DefaultCollideOptions(), scratch_,
-                  result_);
+    geom::CollideOptions opt = geom::DefaultCollideOptions();
+    opt.max_pairs = max_pairs;
+    geom::collide(set_.probe, probe_tree_, set_.object, object_tree_, pose, opt, scratch_, result_);
     out.reserve(out.size() + result_.pairs.size());
     for (const geom::FacePair& p : result_.pairs) out.push_back({p.probe, set_.object_face_ids[p.object]});
     st.sphere_tests = result_.stats.node_pairs;

@@ -243,13 +243,19 @@ void WorkerService::on_query(const zmq::message_t& peer, const QueryMsg& q) {
   sets_.splice(sets_.begin(), sets_, it);  // most recently used first
   it->last_used = std::chrono::steady_clock::now();
   pairs_.clear();
-  const QueryStats st = it->backend->query(q.pose, pairs_);
-  std::sort(pairs_.begin(), pairs_.end());
-  pairs_.erase(std::unique(pairs_.begin(), pairs_.end()), pairs_.end());
+  // The backend stops past max_pairs: a block set of faces piled on each other cannot make the
+  // worker compute (and hold) N² pairs before refusing.
+  const QueryStats st = it->backend->query(q.pose, pairs_, cfg_.limits.max_pairs);
   if (pairs_.size() > cfg_.limits.max_pairs) {
-    send_error(peer, ErrorCode::TooLarge, q.seq, st::fail(pairs_.size(), " pairs exceed max_pairs ", cfg_.limits.max_pairs).message);
+    ++counters_.too_many_pairs;
+    send_error(peer, ErrorCode::TooLarge, q.seq,
+               st::fail("more than max_pairs = ", cfg_.limits.max_pairs, " colliding pairs: query refused").message);
+    pairs_.clear();
+    if (pairs_.capacity() > (std::size_t{1} << 20)) pairs_.shrink_to_fit();  // do not keep an attacker's peak
     return;
   }
+  std::sort(pairs_.begin(), pairs_.end());
+  pairs_.erase(std::unique(pairs_.begin(), pairs_.end()), pairs_.end());
   ++counters_.queries;
   ResultMsg r{q.seq, cfg_.worker_id, q.hash, st, {}};
   r.pairs.swap(pairs_);

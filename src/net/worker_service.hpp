@@ -60,6 +60,7 @@ struct WorkerCounters {
   std::uint64_t errors_sent = 0;   ///< Error replies sent
   std::uint64_t heartbeats = 0;    ///< Heartbeats answered
   std::uint64_t refused = 0;       ///< CURVE handshakes refused (client key not allowed)
+  std::uint64_t too_many_pairs = 0;  ///< queries refused at max_pairs (the traversal stopped there)
 };
 
 /// One worker; not thread-safe: construct, bind and run it on one thread.

@@ -1,13 +1,17 @@
 // Tests src/net/scatter_gather.* and src/net/worker_service.* in one process over inproc://:
 // exact merged results for 1..8 workers, content-addressed loading, a worker stopped while
 // rounds stream (rounds return, are marked incomplete, blocks are reassigned, results are exact
-// again) and restarted (reloaded), and hostile messages to a worker.
+// again) and restarted (reloaded), hostile messages to a worker, and a block set built to make a
+// worker compute N² pairs (refused at max_pairs, collide() stops its traversal there).
 #include <doctest/doctest.h>
 
 #include <thread>
 
+#include "geom/collide.hpp"
+#include "geom/sphere_tree.hpp"
 #include "net/local_workers.hpp"
 #include "net/reference_backend.hpp"
+#include "net/tree_backend.hpp"
 #include "net/scatter_gather.hpp"
 #include "net_test_util.hpp"
 
@@ -328,4 +332,79 @@ TEST_CASE("after a fault, idle reassigned sets are dropped by workers and client
     return r.complete && !ws[2].up && ws[0].holds_target && ws[1].holds_target && ws[3].holds_target;
   }));
   for (int i : {0, 1, 3}) CHECK(c.workers()[std::size_t(i)].loads_sent == loads[std::size_t(i)] + 1);
+}
+
+TEST_CASE("a block set of faces piled on each other: the worker refuses the query at max_pairs, then serves") {
+  // The attack of issue 14: every probe face overlaps every object face (1,000 identical triangles
+  // on each side: 10^6 pairs). With max_pairs = 50,000 the traversal must stop near the cap and
+  // the worker answer TooLarge at once, not compute and hold the million pairs first.
+  zmq::context_t ctx;
+  for (const bool tree : {true, false}) {
+    CAPTURE(tree);
+    WorkerConfig base;
+    base.limits.max_pairs = 50'000;
+    const std::string t = tag();
+    auto w = LocalWorkers::start(ctx, 1, tree ? tree_backend_factory() : reference_backend_factory(),
+                                 [&](int i) { return inproc_endpoint(i, t); }, base);
+    REQUIRE(w.ok());
+    geom::Mesh pile;
+    pile.name = "pile";
+    pile.local = {{0, 0, 0}, {10, 0, 0}, {0, 10, 0}};
+    pile.faces.assign(1000, geom::Tri{0, 1, 2});
+    Blocks one_block(1);
+    for (std::uint32_t f = 0; f < 1000; ++f) one_block[0].push_back(f);
+    auto set = make_block_set(pile, pile, one_block, std::vector<std::uint32_t>{0}, 24);
+    REQUIRE(set.ok());
+    const std::vector<std::uint8_t> bytes = encode_block_set(set.value());
+    const std::uint64_t hash = block_set_hash(bytes);
+    zmq::socket_t d(ctx, zmq::socket_type::dealer);
+    d.set(zmq::sockopt::linger, 0);
+    d.set(zmq::sockopt::rcvtimeo, 10000);
+    d.connect(w.value()->endpoints()[0]);
+    auto reply = [&](const std::vector<std::uint8_t>& msg) {
+      d.send(zmq::buffer(msg), zmq::send_flags::none);
+      zmq::message_t m;
+      REQUIRE(d.recv(m));
+      auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, default_limits());
+      REQUIRE(r.ok());
+      return r.value();
+    };
+    Message loaded = reply(encode(LoadBlocksMsg{hash, bytes.size(), 0, bytes}));
+    REQUIRE(std::holds_alternative<HelloMsg>(loaded));
+    geom::Pose shifted = geom::Pose::Identity();
+    shifted.translation() = geom::Vec3(1, 1, 0);  // coplanar and overlapping: every pair collides
+    Message refused = reply(encode(QueryMsg{5, hash, shifted}));
+    auto* e = std::get_if<ErrorMsg>(&refused);
+    REQUIRE(e);
+    CHECK(e->code == ErrorCode::TooLarge);
+    CHECK(e->ref == 5);
+    CHECK(e->text.find("max_pairs") != std::string::npos);
+    // It keeps answering (how far the traversal got is checked on collide() itself, below).
+    geom::Pose apart = geom::Pose::Identity();
+    apart.translation() = geom::Vec3(0, 0, 50);
+    Message answered = reply(encode(QueryMsg{6, hash, apart}));
+    auto* res = std::get_if<ResultMsg>(&answered);
+    REQUIRE(res);
+    CHECK(res->pairs.empty());
+  }
+}
+
+TEST_CASE("collide() stops its traversal at max_pairs") {
+  geom::Mesh pile;
+  pile.local = {{0, 0, 0}, {10, 0, 0}, {0, 10, 0}};
+  pile.faces.assign(2000, geom::Tri{0, 1, 2});
+  const geom::SphereTree tree = geom::SphereTree::build(pile).value();
+  geom::CollideScratch sc;
+  geom::CollideResult r;
+  geom::CollideOptions opt;
+  opt.max_pairs = 10'000;
+  geom::collide(pile, tree, pile, tree, geom::Pose::Identity(), opt, sc, r);
+  CHECK(r.stats.pair_limit_hit);
+  CHECK(r.pairs.size() > opt.max_pairs);
+  CHECK(r.pairs.size() <= opt.max_pairs + std::size_t{geom::kMaxLeafFaces} * geom::kMaxLeafFaces);
+  CHECK(r.stats.tri_pairs < 100'000);  // nowhere near the 4 million pairs of the whole pile
+  opt.max_pairs = SIZE_MAX;
+  geom::collide(pile, tree, pile, tree, geom::Pose::Identity(), opt, sc, r);
+  CHECK_FALSE(r.stats.pair_limit_hit);
+  CHECK(r.pairs.size() == 2000u * 2000u);
 }
