@@ -3,6 +3,8 @@
 // contact models; telemetry goes to a per-tick CSV. See DESIGN.md "Data flow".
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
+#include <cstring>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
@@ -324,11 +326,17 @@ void run(const RunArgs& a) {
   if (g_signal.load()) std::fprintf(stderr, "stopped by signal %d\n", g_signal.load());
 
   const double secs = double(t_end - t_start) * 1e-9;
+  // Every failure to write an output is collected and reported after the summary, which is always
+  // printed; the exit status is then 1 (a full disk must not look like a good run).
+  std::vector<std::string> failures;
   if (a.split) {
-    if (servo_exit != 0) die(1, "servo process (pid " + std::to_string(servo_pid) + ") ended with exit " + std::to_string(servo_exit));
+    // The summary is printed even when the servo's results cannot be read (its process failed, or
+    // the disk was full when it wrote servo.txt): with the collision side's figures and a note.
+    if (servo_exit != 0)
+      failures.push_back("servo process (pid " + std::to_string(servo_pid) + ") ended with exit " + std::to_string(servo_exit));
     Result<ServoResults> r = read_servo_results(dir + "/servo.txt");
-    if (!r) die(1, r.error());
-    sres = r.value();
+    if (r) sres = r.value();
+    else failures.push_back(r.error() + " (the servo's figures below are missing)");
   } else {
     const rt::LoopStats& ls = loop.stats();
     sres.seconds = secs;
@@ -343,6 +351,7 @@ void run(const RunArgs& a) {
       sres.telemetry_dropped = telemetry->stats().dropped;
     }
     sres.device_dropped = sim->dropped_records();
+    if (telemetry && !telemetry->error().empty()) failures.push_back(telemetry->error());
     sres.silences = silence.episodes();
     sres.longest_silence_ms = silence.longest_ms();
   }
@@ -380,9 +389,17 @@ void run(const RunArgs& a) {
     appendf(summary, "  memory          RSS %.1f MB after %.1f s, %.1f MB at the end (%+.2f MB)\n", double(rss_start) / 1e6,
         std::min(1.0, s.duration_s / 2), double(rss_end) / 1e6, (double(rss_end) - double(rss_start)) / 1e6);
   appendf(summary, "  outputs         %s/\n", dir.c_str());
+  if (!collision.rounds_csv_error().empty()) failures.push_back(collision.rounds_csv_error());
+  // ticks.csv is whole when its writer saw no error (in this process, or the servo process's exit).
+  const bool ticks_whole = telemetry ? telemetry->error().empty() : !(a.split && servo_exit != 0);
   const bool have_csv = (s.write_trace || s.write_perfetto) && std::filesystem::exists(csv);
-  if (s.write_perfetto && have_csv) {
-    if (Status st = write_trace_json(dir + "/trace.json", csv, rounds_csv); !st) appendf(summary, "  trace.json: %s\n", st.error().c_str());
+  if (s.write_perfetto && have_csv && !ticks_whole) {
+    appendf(summary, "    trace.json    not written: ticks.csv is incomplete\n");
+  } else if (s.write_perfetto && have_csv) {
+    if (Status st = write_trace_json(dir + "/trace.json", csv, rounds_csv); !st) {
+      appendf(summary, "  trace.json: %s\n", st.error().c_str());
+      failures.push_back(st.error());
+    }
     else appendf(summary, "    trace.json    haptic ticks and collision rounds (open in ui.perfetto.dev or chrome://tracing)\n");
   }
   if (s.write_trace) appendf(summary, "    ticks.csv     one line per haptic tick; rounds.csv one line per collision round\n");
@@ -392,18 +409,29 @@ void run(const RunArgs& a) {
       appendf(summary, "    contact.ply   not written: the probe never touched the object\n");
     } else if (Status st = write_contact_ply(dir + "/contact.ply", probe, object, collision.peak_pose(), collision.peak_pairs()); !st) {
       appendf(summary, "    contact.ply: %s\n", st.error().c_str());
+      failures.push_back(st.error());
     } else {
       appendf(summary, "    contact.ply   contact state at peak penetration, colliding faces red (MeshLab, Blender)\n");
     }
   }
+  if (!failures.empty()) appendf(summary, "  FAILED          %zu output(s) not written whole; first: %s\n", failures.size(), failures[0].c_str());
   std::fputs(summary.c_str(), stdout);
-  if (std::FILE* f = std::fopen((dir + "/summary.txt").c_str(), "w")) {
-    std::fputs(summary.c_str(), f);
-    std::fclose(f);
+  std::fflush(stdout);
+  const std::string summary_path = dir + "/summary.txt";
+  if (std::FILE* f = std::fopen(summary_path.c_str(), "w")) {
+    const bool wrote = std::fputs(summary.c_str(), f) >= 0 && std::fflush(f) == 0;
+    const int err = errno;
+    if ((std::fclose(f) != 0 || !wrote)) failures.push_back(summary_path + ": write failed: " + std::strerror(wrote ? errno : err));
+  } else {
+    failures.push_back(summary_path + ": cannot create: " + std::strerror(errno));
   }
-  if (!s.write_trace && have_csv) {
+  if (!s.write_trace && have_csv && std::filesystem::is_regular_file(csv)) {
     std::filesystem::remove(csv, ec);
     std::filesystem::remove(rounds_csv, ec);
+  }
+  if (!failures.empty()) {
+    for (const std::string& f : failures) std::fprintf(stderr, "spheretouch run: %s\n", f.c_str());
+    throw CLI::RuntimeError(1);  // unwinds: workers stop, the shared-memory segment is removed
   }
 }
 

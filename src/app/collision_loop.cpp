@@ -1,7 +1,9 @@
 // Collision thread: see collision_loop.hpp.
 #include "app/collision_loop.hpp"
 
+#include <cerrno>
 #include <chrono>
+#include <cstring>
 
 #include "geom/pod.hpp"
 #include "rt/clock.hpp"
@@ -22,6 +24,7 @@ CollisionLoop::~CollisionLoop() { stop(); }
 Status CollisionLoop::write_rounds_csv(const std::string& path) {
   rounds_csv_ = std::fopen(path.c_str(), "w");
   if (!rounds_csv_) return fail(path, ": cannot create the per-round trace");
+  rounds_path_ = path;
   std::fputs("start_ns,end_ns,pose_seq,pairs,contacts,pd_mm,complete\n", rounds_csv_);
   return Ok{};
 }
@@ -32,7 +35,11 @@ void CollisionLoop::stop() {
   stop_.store(true, std::memory_order_release);
   if (thread_.joinable()) thread_.join();
   if (rounds_csv_) {
-    std::fclose(rounds_csv_);
+    const bool flushed = std::fflush(rounds_csv_) == 0 && std::ferror(rounds_csv_) == 0;
+    const int flush_errno = errno;
+    const bool closed = std::fclose(rounds_csv_) == 0;
+    if (rounds_error_.empty() && (!flushed || !closed))
+      rounds_error_ = rounds_path_ + ": write failed: " + std::strerror(flushed ? errno : flush_errno);
     rounds_csv_ = nullptr;
   }
 }
@@ -91,10 +98,11 @@ void CollisionLoop::run() {
     latency_.record(t1 - t0);
     const RoundRecord rec{t0, t1, sample.seq, m.pairs, m.contacts, m.penetration_mm, out.complete};
     if (records_.size() < max_rounds_) records_.push_back(rec);
-    if (rounds_csv_)
-      std::fprintf(rounds_csv_, "%lld,%lld,%llu,%u,%u,%.6g,%d\n", static_cast<long long>(rec.start_ns),
+    if (rounds_csv_ && rounds_error_.empty() &&
+        std::fprintf(rounds_csv_, "%lld,%lld,%llu,%u,%u,%.6g,%d\n", static_cast<long long>(rec.start_ns),
                    static_cast<long long>(rec.end_ns), static_cast<unsigned long long>(rec.pose_seq), rec.pairs,
-                   rec.contacts, rec.penetration_mm, rec.complete ? 1 : 0);
+                   rec.contacts, rec.penetration_mm, rec.complete ? 1 : 0) < 0)
+      rounds_error_ = rounds_path_ + ": write failed: " + std::strerror(errno);  // a full disk: once, then stop
     if (m.in_contact() && m.penetration_mm > peak_pd_) {
       peak_pd_ = m.penetration_mm;
       peak_pose_ = pose;

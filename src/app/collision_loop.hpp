@@ -56,6 +56,9 @@ class CollisionLoop {
   Status write_rounds_csv(const std::string& path);
   void start();  ///< starts the thread
   void stop();   ///< stops and joins it (idempotent)
+  /// After stop(): empty when every line of the rounds CSV and its close succeeded, else the first
+  /// failure naming the file (a full disk); the loop stops writing the CSV after it.
+  const std::string& rounds_csv_error() const { return rounds_error_; }
 
   std::uint64_t rounds() const { return rounds_.load(std::memory_order_relaxed); }                 ///< rounds so far
   std::uint64_t incomplete() const { return incomplete_.load(std::memory_order_relaxed); }         ///< rounds missing a worker
@@ -86,6 +89,7 @@ class CollisionLoop {
   std::vector<RoundRecord> records_;
   rt::LatencyHistogram latency_;
   std::FILE* rounds_csv_ = nullptr;
+  std::string rounds_path_, rounds_error_;
   geom::Pose peak_pose_ = geom::Pose::Identity();
   std::vector<geom::FacePair> peak_pairs_;
   double peak_pd_ = -1;

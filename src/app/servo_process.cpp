@@ -245,6 +245,9 @@ void run_servo(const ServoArgs& a) {
   res.silences = silence.episodes();
   res.longest_silence_ms = silence.longest_ms();
   res.signal = g_servo_signal.load();
+  // A full disk: ticks.csv incomplete is an error (exit 1, named on stderr) once servo.txt is
+  // written, so the collision process still prints the run's summary with the servo's figures.
+  const std::string ticks_error = telemetry ? telemetry->error() : std::string();
   if (Status w = write_servo_results(a.out + "/servo.txt", res); !w) servo_die(1, w.error());
   if (parent_dead) {
     // Nobody else will report this run: the servo's own summary, and the segment's name removed.
@@ -270,6 +273,7 @@ void run_servo(const ServoArgs& a) {
     }
     if (shm.unlink_if_orphaned()) std::fprintf(stderr, "spheretouch servo: removed the orphaned segment %s\n", shm.name().c_str());
   }
+  if (!ticks_error.empty()) servo_die(1, ticks_error);
 }
 
 }  // namespace

@@ -16,6 +16,7 @@ Result<std::unique_ptr<Telemetry>> Telemetry::open(const std::string& path, std:
   std::fputs("tick,t_ns,latency_ns,pose_seq,model_seq,model_age_ns,x_mm,y_mm,z_mm,fx_N,fy_N,fz_N,pd_mm,fade,ceiling_N,flags,misses\n", f);
   auto t = std::make_unique<Telemetry>(capacity);
   t->file_ = f;
+  t->path_ = path;
   t->writer_ = std::thread([p = t.get()] { p->writer_loop(); });
   return t;
 }
@@ -29,14 +30,22 @@ std::size_t Telemetry::drain_to(TelemetrySample* out, std::size_t max) noexcept 
 }
 
 void Telemetry::write(const TelemetrySample& s) {
-  std::fprintf(file_, "%llu,%lld,%lld,%llu,%llu,%lld,%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.4g,%.4g,%u,%u\n",
+  if (failed_.load(std::memory_order_relaxed)) return;
+  const int n = std::fprintf(file_, "%llu,%lld,%lld,%llu,%llu,%lld,%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.4g,%.4g,%u,%u\n",
                static_cast<unsigned long long>(s.tick), static_cast<long long>(s.t_ns),
                static_cast<long long>(s.latency_ns), static_cast<unsigned long long>(s.pose_seq),
                static_cast<unsigned long long>(s.model_seq),
                static_cast<long long>(s.model_age_ns), s.position_mm[0], s.position_mm[1], s.position_mm[2],
                s.force_N[0], s.force_N[1], s.force_N[2], s.penetration_mm, s.fade, s.ceiling_N, s.flags, s.misses);
+  if (n < 0) {  // a full disk: say which file and why, once, and stop writing
+    error_ = path_ + ": write failed: " + std::strerror(errno);
+    failed_.store(true, std::memory_order_release);
+    return;
+  }
   written_.fetch_add(1, std::memory_order_relaxed);
 }
+
+std::string Telemetry::error() const { return failed_.load(std::memory_order_acquire) ? error_ : std::string(); }
 
 void Telemetry::writer_loop() {
   TelemetrySample s;
@@ -62,7 +71,14 @@ void Telemetry::close() {
     std::fprintf(file_, "# samples pushed %llu, written %llu, dropped %llu (queue full)\n",
                  static_cast<unsigned long long>(st.pushed), static_cast<unsigned long long>(st.written),
                  static_cast<unsigned long long>(st.dropped));
-    std::fclose(file_);
+    // Buffered bytes reach the disk only now: a full disk shows up in the flush or the close.
+    const bool flushed = std::fflush(file_) == 0 && std::ferror(file_) == 0;
+    const int flush_errno = errno;
+    const bool closed = std::fclose(file_) == 0;
+    if (!failed_.load(std::memory_order_relaxed) && (!flushed || !closed)) {
+      error_ = path_ + ": write failed: " + std::strerror(flushed ? errno : flush_errno);
+      failed_.store(true, std::memory_order_release);
+    }
     file_ = nullptr;
   }
 }

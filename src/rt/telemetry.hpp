@@ -62,6 +62,10 @@ class Telemetry {
   std::size_t drain_to(TelemetrySample* out, std::size_t max) noexcept;
   /// Stops the writer thread after it has drained the queue, closes the file. Idempotent.
   void close();
+  /// Empty while every write, the flush and the close succeeded; else the first failure, naming
+  /// the file and the system's reason ("runs/x/ticks.csv: write failed: No space left on device").
+  /// After a failure the writer stops writing (samples are then counted as not written).
+  std::string error() const;
   /// Counters (any thread).
   TelemetryStats stats() const;
 
@@ -72,6 +76,9 @@ class Telemetry {
   std::atomic<std::uint64_t> pushed_{0}, dropped_{0}, written_{0};
   std::atomic<bool> stop_{false};
   std::FILE* file_ = nullptr;
+  std::string path_;
+  std::string error_;              ///< first failure (written by the writer thread, read after close())
+  std::atomic<bool> failed_{false};
   std::thread writer_;
 };
 

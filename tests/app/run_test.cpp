@@ -3,6 +3,7 @@
 // an error naming the field for each kind of bad scene file.
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -175,6 +176,36 @@ TEST_CASE("run: a short scene ticks at its rate, presses with force, releases to
   CHECK(vlines == nv);
   CHECK(flines == nf);
   CHECK(red > 0);
+}
+
+TEST_CASE("run: a full disk is an error naming the file, and the summary is printed whatever happens") {
+  // /dev/full accepts the open and fails every write with ENOSPC, as a full disk does.
+  REQUIRE(std::filesystem::exists("/dev/full"));
+  st::test::TempDir d;
+  std::string scene = kScene;
+  scene.replace(scene.find("duration_s = 5.5"), 16, "duration_s = 1.0");
+  st::test::write_file(d.file("scene.toml"), scene);
+  struct Case {
+    const char* file;
+    bool split;
+  };
+  for (const Case c : {Case{"ticks.csv", false}, Case{"rounds.csv", false}, Case{"summary.txt", false},
+                       Case{"ticks.csv", true}}) {
+    const std::string what = std::string(c.file) + (c.split ? " (split)" : "");
+    CAPTURE(what);
+    const std::string out = d.file(std::string("run-") + c.file + (c.split ? "-split" : ""));
+    std::filesystem::create_directories(out);
+    std::filesystem::create_symlink("/dev/full", out + "/" + c.file);
+    const auto r = run_command(spheretouch_exe() + " run " + d.file("scene.toml") + " --out " + out +
+                               (c.split ? " --split" : ""));
+    INFO(r.output);
+    CHECK(r.exit_code == 1);
+    CHECK(contains(r.output, "summary\n"));          // on stdout, whatever happened to the files
+    CHECK(contains(r.output, "haptic          "));
+    CHECK(contains(r.output, "No space left on device"));
+    if (!c.split) CHECK(contains(r.output, "spheretouch run: " + out + "/" + c.file + ": write failed"));
+    else CHECK(contains(r.output, out + "/ticks.csv: write failed"));  // from the servo process
+  }
 }
 
 TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
