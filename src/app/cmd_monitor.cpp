@@ -7,6 +7,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <csetjmp>
 #include <csignal>
 #include <cstdio>
 #include <string>
@@ -22,6 +23,25 @@ namespace {
 
 std::atomic<int> g_monitor_signal{0};
 extern "C" void on_monitor_signal(int sig) { g_monitor_signal.store(sig); }
+
+// A segment truncated under the monitor (by its creator going away oddly, or by anyone who can
+// write it) turns the next read of the mapping into SIGBUS. The reads of one status line run
+// with this jump armed: the handler returns to the loop, which reports the segment and stops.
+sigjmp_buf g_bus_jump;
+volatile std::sig_atomic_t g_bus_armed = 0;
+extern "C" void on_monitor_bus(int sig) {
+  if (g_bus_armed) siglongjmp(g_bus_jump, 1);
+  std::signal(sig, SIG_DFL);  // not ours: die of it as before
+  std::raise(sig);
+}
+
+/// What one status line needs from the segment.
+struct Reading {
+  std::string line;
+  rt::ServoState state = rt::ServoState::starting;
+  int servo_pid = 0;
+  std::uint64_t servo_start_ticks = 0;
+};
 
 struct MonitorArgs {
   std::string name;
@@ -85,6 +105,24 @@ std::string status_line(const rt::ShmSegment& seg, std::int64_t now) {
   return line;
 }
 
+// Reads one status line's worth from the mapping with the SIGBUS jump armed; false when the
+// mapping had shrunk (the reads that faulted are abandoned; the string's storage is reserved
+// first so the guarded code does not allocate).
+bool read_status(const rt::ShmSegment& seg, Reading& rd) {
+  rd.line.reserve(512);
+  g_bus_armed = 1;
+  if (sigsetjmp(g_bus_jump, 1) != 0) {
+    g_bus_armed = 0;
+    return false;
+  }
+  rd.line = status_line(seg, rt::now_ns());
+  rd.state = rt::ServoState(seg.status().servo_state.load(std::memory_order_acquire));
+  rd.servo_pid = seg.status().servo_pid.load(std::memory_order_relaxed);
+  rd.servo_start_ticks = seg.status().servo_start_ticks.load();
+  g_bus_armed = 0;
+  return true;
+}
+
 void monitor(const MonitorArgs& a) {
   std::string name = a.name;
   if (name.empty()) {
@@ -108,19 +146,28 @@ void monitor(const MonitorArgs& a) {
   sigemptyset(&sa.sa_mask);
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
+  struct sigaction bus {};
+  bus.sa_handler = on_monitor_bus;
+  sigemptyset(&bus.sa_mask);
+  sigaction(SIGBUS, &bus, nullptr);
   std::fprintf(stderr, "monitoring %s (created by pid %d, layout version %u)%s\n", seg.name().c_str(),
                seg.header().creator_pid, seg.header().layout_version, tty ? "; Ctrl-C stops" : "");
   const auto interval = std::chrono::microseconds(std::int64_t(a.interval_ms * 1000));
   for (int i = 0; a.count == 0 || i < a.count; ++i) {
     if (i > 0) std::this_thread::sleep_for(interval);
     if (g_monitor_signal.load()) break;
-    const std::string line = status_line(seg, rt::now_ns());
-    if (tty) std::printf("\r\033[K%s", line.c_str());
-    else std::printf("%s\n", line.c_str());
+    Reading rd;
+    if (!read_status(seg, rd)) {
+      if (tty) std::printf("\n");
+      fail_command("spheretouch monitor", 1, seg.name() + ": the segment shrank under the monitor (truncated by another "
+                                             "process): its contents are gone, stopped");
+    }
+    if (tty) std::printf("\r\033[K%s", rd.line.c_str());
+    else std::printf("%s\n", rd.line.c_str());
     std::fflush(stdout);
-    const auto state = rt::ServoState(seg.status().servo_state.load(std::memory_order_acquire));
-    const int servo_pid = seg.status().servo_pid.load(std::memory_order_relaxed);
-    const bool servo_gone = servo_pid > 0 && !rt::process_alive(servo_pid, seg.status().servo_start_ticks.load());
+    const auto state = rd.state;
+    const int servo_pid = rd.servo_pid;
+    const bool servo_gone = servo_pid > 0 && !rt::process_alive(servo_pid, rd.servo_start_ticks);
     if (state == rt::ServoState::finished || servo_gone) {
       if (tty) std::printf("\n");
       std::printf("session %s\n", state == rt::ServoState::finished ? "finished" : "gone (servo process dead)");

@@ -37,12 +37,12 @@ class TripleBuffer {
   TripleBuffer& operator=(const TripleBuffer&) = delete;  ///< shared state: not assignable
 
   /// Writer: the slot to fill before publish(); only the writer touches it.
-  T& input() noexcept { return slots_[writer_.index].value; }
+  T& input() noexcept { return slots_[bounded(writer_.index)].value; }
   /// Writer: makes input() the newest value and takes the old back slot as the next input. Wait-free.
   void publish() noexcept {
-    const std::uint8_t former = back_.exchange(static_cast<std::uint8_t>(writer_.index | kDirty),
+    const std::uint8_t former = back_.exchange(static_cast<std::uint8_t>(bounded(writer_.index) | kDirty),
                                            std::memory_order_acq_rel);
-    writer_.index = static_cast<std::uint8_t>(former & kIndexMask);
+    writer_.index = bounded(former & kIndexMask);
   }
   /// Writer: copy v into the input slot and publish it.
   void write(const T& v) noexcept {
@@ -57,12 +57,12 @@ class TripleBuffer {
     // Relaxed is enough for the check: a stale "clean" only delays us by one call, and the
     // acq_rel swap below is what orders the payload.
     if ((back_.load(std::memory_order_relaxed) & kDirty) == 0) return false;
-    const std::uint8_t former = back_.exchange(reader_.index, std::memory_order_acq_rel);
-    reader_.index = static_cast<std::uint8_t>(former & kIndexMask);
+    const std::uint8_t former = back_.exchange(bounded(reader_.index), std::memory_order_acq_rel);
+    reader_.index = bounded(former & kIndexMask);
     return true;
   }
   /// Reader: the value taken by the last update() (value-initialised T before the first).
-  const T& output() const noexcept { return slots_[reader_.index].value; }
+  const T& output() const noexcept { return slots_[bounded(reader_.index)].value; }
   /// Reader: update() then copy output() into out; returns update()'s answer.
   bool read(T& out) noexcept {
     const bool fresh = update();
@@ -73,6 +73,11 @@ class TripleBuffer {
  private:
   static constexpr std::uint8_t kIndexMask = 0x3;  ///< low two bits: slot index 0..2
   static constexpr std::uint8_t kDirty = 0x4;      ///< set by publish, cleared by update
+  /// Every index read from the (possibly shared, possibly corrupted) state is mapped into 0..2
+  /// before it addresses a slot: a stray byte written into a shared-memory segment can garble
+  /// values but never make either side read or write outside the three slots. One compare and a
+  /// conditional move.
+  static std::uint8_t bounded(std::uint8_t i) noexcept { return i < 3 ? i : 0; }
 
   struct alignas(kCacheLine) Slot {
     T value{};

@@ -4,6 +4,11 @@
 #include <sys/mman.h>
 #include <unistd.h>
 
+#include <fstream>
+#include <iterator>
+#include <thread>
+
+#include "process_util.hpp"
 #include "rt/shm_segment.hpp"
 #include "test_util.hpp"
 
@@ -48,4 +53,25 @@ TEST_CASE("monitor: refuses a segment with a bad magic or layout version, and a 
   const CommandResult missing = run_command(spheretouch_exe() + " monitor --name " + name + "-absent --count 1");
   CHECK(missing.exit_code == 2);
   CHECK(contains(missing.output, "cannot attach"));
+}
+
+TEST_CASE("monitor: a segment truncated under it is reported and stops it, not SIGBUS") {
+  const std::string name = "/spheretouch-test-mon-trunc-" + std::to_string(getpid());
+  auto seg = st::rt::ShmSegment::create(name);
+  REQUIRE(seg.ok());
+  TempDir d;
+  const std::string log = d.file("monitor.log");
+  const pid_t pid = spawn_spheretouch({"monitor", "--name", name, "--interval", "20", "--count", "1000"}, log);
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));  // it is printing lines by now
+  const int fd = shm_open(name.c_str(), O_RDWR, 0);
+  REQUIRE(fd >= 0);
+  REQUIRE(ftruncate(fd, 0) == 0);  // what anyone who can write the segment can do
+  close(fd);
+  const int code = wait_for(pid, 20.0);
+  std::ifstream in(log);
+  const std::string out((std::istreambuf_iterator<char>(in)), {});
+  INFO(out);
+  CHECK(code == 1);  // not 128 + SIGBUS
+  CHECK(contains(out, "the segment shrank under the monitor"));
+  shm_unlink(name.c_str());
 }
