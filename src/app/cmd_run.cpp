@@ -158,6 +158,8 @@ void run(const RunArgs& a) {
   const std::string dir = new_run_dir(s.out_dir);
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
+  // Run outputs (poses, forces, the contact state) are the user's: the directory is private.
+  if (!ec) std::filesystem::permissions(dir, std::filesystem::perms::owner_all, std::filesystem::perm_options::replace, ec);
   if (ec) die(2, dir + ": cannot create the run directory (" + ec.message() + ")");
 
   Result<rt::ForceLaw> law = rt::ForceLaw::make(s.law);
@@ -201,6 +203,7 @@ void run(const RunArgs& a) {
   sigemptyset(&sa.sa_mask);
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
+  sigaction(SIGHUP, &sa, nullptr);  // a closed terminal ends the run like Ctrl-C: summary kept, segment removed
 
   pid_t servo_pid = 0;
   if (a.split) {

@@ -9,6 +9,7 @@
 
 #include "net/endpoint_probe.hpp"
 #include "net/tree_backend.hpp"
+#include "net/worker_config.hpp"
 
 namespace st::app {
 
@@ -117,6 +118,13 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
       cfg.curve_secret = spec.curve.client.secret_z85;
     }
     fleet->description = std::to_string(spec.endpoints.size()) + " worker daemon" + (spec.endpoints.size() == 1 ? "" : "s");
+    // Plaintext to another host: say so (the daemons refuse it unless started --insecure).
+    if (!spec.curve.enabled())
+      for (const std::string& ep : spec.endpoints)
+        if (!net::is_local_endpoint(ep))
+          std::fprintf(stderr, "warning: %s is not a loopback or ipc:// endpoint and no CURVE keys are set: poses, block "
+                               "sets and results cross the network in plaintext, unauthenticated (set server_key and "
+                               "client_key, README \"Securing a fleet\")\n", ep.c_str());
   } else {
     if (spec.workers < 1) return fail("distribution: no workers (use --workers N or --connect EP,...)");
     // A tag unique to this fleet keeps inproc names apart when several fleets share a process.

@@ -186,6 +186,7 @@ void run_servo(const ServoArgs& a) {
   sigemptyset(&sa.sa_mask);
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
+  sigaction(SIGHUP, &sa, nullptr);  // a closed terminal ends the run like Ctrl-C: summary kept, segment removed
 
   rt::HapticLoop loop(s.haptic);
   Result<rt::RtReport> rep = loop.start(servo);

@@ -7,7 +7,11 @@
 //                  FaceBox[num_faces]
 #include "geom/tree_io.hpp"
 
+#include <unistd.h>
+
 #include <bit>
+#include <cerrno>
+#include <cstdio>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -170,18 +174,29 @@ Status write_tree(const SphereTree& t, const std::string& path) {
   h.num_depths = t.num_depths;
   h.payload_bytes = payload_size(h.num_nodes, h.num_faces);
   h.checksum = payload_checksum(t);
+  // Written to a temporary file, flushed to the disk, then renamed over the old one: a crash or a
+  // full disk leaves either the old file or the new one, never half of one, and no temporary.
   const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) return fail(path, ": cannot open for writing");
-    out.write(reinterpret_cast<const char*>(&h), sizeof h);
-    out.write(reinterpret_cast<const char*>(t.nodes.data()), static_cast<std::streamsize>(t.nodes.size() * sizeof(SphereNode)));
-    out.write(reinterpret_cast<const char*>(t.cold.data()), static_cast<std::streamsize>(t.cold.size() * sizeof(SphereNodeCold)));
-    out.write(reinterpret_cast<const char*>(t.face_order.data()), static_cast<std::streamsize>(t.face_order.size() * 4));
-    out.write(reinterpret_cast<const char*>(t.face_boxes.data()), static_cast<std::streamsize>(t.face_boxes.size() * sizeof(FaceBox)));
-    if (!out.flush()) return fail(path, ": write failed");
+  std::FILE* out = std::fopen(tmp.c_str(), "wb");
+  if (!out) return fail(path, ": cannot open ", tmp, " for writing: ", std::strerror(errno));
+  bool ok = std::fwrite(&h, sizeof h, 1, out) == 1;
+  auto put = [&](const void* p, std::size_t n) { ok = ok && (n == 0 || std::fwrite(p, n, 1, out) == 1); };
+  put(t.nodes.data(), t.nodes.size() * sizeof(SphereNode));
+  put(t.cold.data(), t.cold.size() * sizeof(SphereNodeCold));
+  put(t.face_order.data(), t.face_order.size() * 4);
+  put(t.face_boxes.data(), t.face_boxes.size() * sizeof(FaceBox));
+  ok = ok && std::fflush(out) == 0 && ::fsync(::fileno(out)) == 0;
+  const int err = errno;
+  ok = (std::fclose(out) == 0) && ok;
+  if (!ok) {
+    std::remove(tmp.c_str());
+    return fail(path, ": write failed: ", std::strerror(err ? err : errno));
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) return fail(path, ": cannot rename ", tmp, " into place");
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    const int e = errno;
+    std::remove(tmp.c_str());
+    return fail(path, ": cannot rename ", tmp, " into place: ", std::strerror(e));
+  }
   return Ok{};
 }
 

@@ -30,7 +30,11 @@ struct Trajectory {
   double duration_s() const { return keys.empty() ? 0.0 : keys.back().t_s; }
 };
 
-/// Reads a trajectory file: one pose per line, 17 numbers: t_s then a row-major 4×4 rigid
+/// Largest trajectory file read, bytes: 256 MiB holds ~1.5 million timed poses (an hour at
+/// 400 Hz); anything larger is a mistake or an attack (/dev/zero).
+inline constexpr std::uint64_t kMaxTrajectoryBytes = 256ull << 20;
+
+/// Reads a trajectory file (a regular file of at most kMaxTrajectoryBytes): one pose per line, 17 numbers: t_s then a row-major 4×4 rigid
 /// transform (DESIGN.md pose-file layout with a leading time); '#' starts a comment. Errors
 /// name the file and line (non-finite values, last row not 0 0 0 1, rotation not orthonormal
 /// within 1e-6, times not strictly increasing).

@@ -205,7 +205,30 @@ TEST_CASE("run: a full disk is an error naming the file, and the summary is prin
     CHECK(contains(r.output, "No space left on device"));
     if (!c.split) CHECK(contains(r.output, "spheretouch run: " + out + "/" + c.file + ": write failed"));
     else CHECK(contains(r.output, out + "/ticks.csv: write failed"));  // from the servo process
+    // The run directory is private to its user (poses and forces are the user's data).
+    const auto perms = std::filesystem::status(out).permissions();
+    CHECK((perms & (std::filesystem::perms::group_all | std::filesystem::perms::others_all)) == std::filesystem::perms::none);
   }
+}
+
+TEST_CASE("run: SIGHUP (a closed terminal) ends the run like Ctrl-C: summary printed, segment removed") {
+  st::test::TempDir d;
+  std::string scene = kScene;
+  scene.replace(scene.find("duration_s = 5.5"), 16, "duration_s = 30.0");
+  st::test::write_file(d.file("scene.toml"), scene);
+  const std::string log = d.file("run.log");
+  const pid_t pid = st::test::spawn_spheretouch({"run", d.file("scene.toml"), "--out", d.file("run")}, log);
+  const std::string seg = "/spheretouch-" + std::to_string(pid);
+  const st::rt::ServoStatus st = st::test::wait_for_ticks(seg, 200, pid, 30.0);
+  REQUIRE(st.ticks >= 200);
+  REQUIRE(kill(pid, SIGHUP) == 0);
+  const int code = st::test::wait_for(pid, 20.0);
+  const std::string out = slurp(log);
+  INFO(out);
+  CHECK(code == 0);
+  CHECK(contains(out, "stopped by signal " + std::to_string(SIGHUP)));
+  CHECK(contains(out, "summary\n"));
+  CHECK_FALSE(std::filesystem::exists("/dev/shm" + seg));
 }
 
 TEST_CASE("scene files: each kind of mistake gets an error naming the field") {

@@ -124,3 +124,18 @@ TEST_CASE("collide: a tree lying about its depth stops the traversal instead of 
   CHECK(huge.stats.truncated == 1);
   CHECK(huge.pairs.empty());
 }
+
+TEST_CASE("write_tree: a full disk is an error naming the file, and leaves no temporary behind") {
+  const Mesh m = make_icosphere(20, 6);
+  const SphereTree t = SphereTree::build(m).value();
+  const std::string path = (std::filesystem::temp_directory_path() / "st_tree_full.sttree").string();
+  std::filesystem::remove(path);
+  std::filesystem::remove(path + ".tmp");
+  std::filesystem::create_symlink("/dev/full", path + ".tmp");  // the temporary lands on a full "disk"
+  const st::Status s = write_tree(t, path);
+  REQUIRE_FALSE(s.ok());
+  CHECK(st::test::contains(s.error(), path));
+  CHECK(st::test::contains(s.error(), "No space left on device"));
+  CHECK_FALSE(std::filesystem::exists(std::filesystem::symlink_status(path + ".tmp")));
+  CHECK_FALSE(std::filesystem::exists(path));
+}

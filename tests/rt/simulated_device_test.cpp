@@ -4,6 +4,9 @@
 
 #include <doctest/doctest.h>
 
+#include <filesystem>
+#include <fstream>
+
 #include "rt_test_util.hpp"
 
 using namespace st::rt;
@@ -77,4 +80,23 @@ TEST_CASE("simulated device: the virtual user yields to the commanded force; rec
   CHECK(dev.records().size() == 100);
   CHECK(dev.dropped_records() == 1900);
   CHECK(dev.records()[5].t_ns == 5 * kMs);
+}
+
+TEST_CASE("load_trajectory: /dev/zero, a directory and an oversized file are refused before reading") {
+  auto z = st::rt::load_trajectory("/dev/zero");
+  REQUIRE_FALSE(z.ok());
+  CHECK(z.error().find("not a regular file") != std::string::npos);
+  auto d = st::rt::load_trajectory("/tmp");
+  REQUIRE_FALSE(d.ok());
+  CHECK(d.error().find("not a regular file") != std::string::npos);
+  const std::string big = (std::filesystem::temp_directory_path() / "st_big_trajectory.txt").string();
+  {
+    std::ofstream o(big);
+    REQUIRE(o.good());
+  }
+  std::filesystem::resize_file(big, st::rt::kMaxTrajectoryBytes + 1);  // sparse: costs no disk
+  auto b = st::rt::load_trajectory(big);
+  std::filesystem::remove(big);
+  REQUIRE_FALSE(b.ok());
+  CHECK(b.error().find("limit for a trajectory file") != std::string::npos);
 }
