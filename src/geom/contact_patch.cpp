@@ -195,35 +195,40 @@ bool unit_normal(const Vec3& a, const Vec3& b, const Vec3& c, Vec3& n) {
 
 }  // namespace
 
+void ContactBuilder::Patch::BodyState::reset(const Mesh& m) {
+  vf = VertexFaces::build(m);
+  mesh = &m;
+  nv = m.local.size();
+  nf = m.faces.size();
+  visit_stamp.assign(nv, 0);
+  path_stamp.assign(nv, 0);
+  depth.assign(nv, 0);
+  exit_face.assign(nv, UINT32_MAX);
+  face_stamp.assign(nf, 0);
+  face_slot.assign(nf, 0);
+  memory = {};
+}
+
+void ContactBuilder::Patch::BodyState::clear_stamps() {
+  std::fill(visit_stamp.begin(), visit_stamp.end(), 0);
+  std::fill(face_stamp.begin(), face_stamp.end(), 0);
+}
+
+std::size_t ContactBuilder::Patch::BodyState::bytes() const {
+  return vf.bytes() + (visit_stamp.capacity() + path_stamp.capacity() + exit_face.capacity() + face_stamp.capacity() +
+                       face_slot.capacity() + faces.capacity()) * 4 +
+         depth.capacity() * sizeof(double) + normals.capacity() * sizeof(Vec3);
+}
+
 void ContactBuilder::Patch::prepare(const Mesh& probe, const Mesh& object) {
-  if (probe_mesh != &probe || probe_nv != probe.local.size() || probe_nf != probe.faces.size()) {
-    probe_vf = VertexFaces::build(probe);
-    probe_mesh = &probe;
-    probe_nv = probe.local.size();
-    probe_nf = probe.faces.size();
-    probe_world.assign(probe_nv, Vec3::Zero());
-    probe_xform_stamp.assign(probe_nv, 0);
-    probe_visit_stamp.assign(probe_nv, 0);
-    probe_path_stamp.assign(probe_nv, 0);
-    probe_face_stamp.assign(probe_nf, 0);
-    probe_face_slot.assign(probe_nf, 0);
-    probe_depth.assign(probe_nv, 0);
-    probe_exit_face.assign(probe_nv, UINT32_MAX);
-    probe_memory = {};
+  if (!probe_s.sized_for(probe)) {
+    probe_s.reset(probe);
+    probe_world.assign(probe_s.nv, Vec3::Zero());
+    probe_xform_stamp.assign(probe_s.nv, 0);
     epoch = 0;
   }
-  if (object_mesh != &object || object_nv != object.local.size() || object_nf != object.faces.size()) {
-    object_vf = VertexFaces::build(object);
-    object_mesh = &object;
-    object_nv = object.local.size();
-    object_nf = object.faces.size();
-    object_visit_stamp.assign(object_nv, 0);
-    object_path_stamp.assign(object_nv, 0);
-    object_face_stamp.assign(object_nf, 0);
-    object_face_slot.assign(object_nf, 0);
-    object_depth.assign(object_nv, 0);
-    object_exit_face.assign(object_nv, UINT32_MAX);
-    object_memory = {};
+  if (!object_s.sized_for(object)) {
+    object_s.reset(object);
     epoch = 0;
   }
 }
@@ -232,20 +237,13 @@ void ContactBuilder::Patch::reset() {
   have_prev = false;
   prev_n.setZero();
   held_valid = false;
-  probe_memory = {};
-  object_memory = {};
+  probe_s.memory = {};
+  object_s.memory = {};
 }
 
 std::size_t ContactBuilder::Patch::bytes() const {
-  return probe_vf.bytes() + object_vf.bytes() + (probe_world.capacity() + curve.capacity()) * sizeof(Vec3) +
-         (probe_depth.capacity() + object_depth.capacity()) * sizeof(double) +
-         (probe_xform_stamp.capacity() + probe_visit_stamp.capacity() + object_visit_stamp.capacity() +
-          probe_exit_face.capacity() + object_exit_face.capacity() + probe_path_stamp.capacity() +
-          object_path_stamp.capacity() + probe_face_stamp.capacity() + object_face_stamp.capacity() +
-          probe_face_slot.capacity() + object_face_slot.capacity() +
-          probe_faces.capacity() + object_faces.capacity() +
-          climb.capacity()) * 4 +
-         (probe_normals.capacity() + object_normals.capacity()) * sizeof(Vec3) + valid.capacity() * sizeof(ContactPair);
+  return probe_s.bytes() + object_s.bytes() + (probe_world.capacity() + curve.capacity()) * sizeof(Vec3) +
+         (probe_xform_stamp.capacity() + climb.capacity()) * 4 + valid.capacity() * sizeof(ContactPair);
 }
 
 const Vec3& ContactBuilder::Patch::probe_point(std::uint32_t v, const Mesh& probe) {
@@ -259,22 +257,24 @@ const Vec3& ContactBuilder::Patch::probe_point(std::uint32_t v, const Mesh& prob
 ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, const Vec3& d, const Mesh& probe,
                                                            const Mesh& object) {
   Deepest best;
-  const Mesh& test = probe_side ? probe : object;        // whose points may be inside
-  const Mesh& surface = probe_side ? object : probe;     // whose faces they leave through
-  const VertexFaces& test_vf = probe_side ? probe_vf : object_vf;
-  std::vector<std::uint32_t>& visit = probe_side ? probe_visit_stamp : object_visit_stamp;
-  std::vector<double>& depth = probe_side ? probe_depth : object_depth;
-  std::vector<std::uint32_t>& exitf = probe_side ? probe_exit_face : object_exit_face;
-  Memory& memory = probe_side ? probe_memory : object_memory;
-  const std::size_t test_nv = probe_side ? probe_nv : object_nv;
+  BodyState& T = probe_side ? probe_s : object_s;    // the body whose points may be inside
+  BodyState& S = probe_side ? object_s : probe_s;    // the body whose faces they leave through
+  const Mesh& test = *T.mesh;
+  const Mesh& surface = *S.mesh;
+  const VertexFaces& test_vf = T.vf;
+  std::vector<std::uint32_t>& visit = T.visit_stamp;
+  std::vector<double>& depth = T.depth;
+  std::vector<std::uint32_t>& exitf = T.exit_face;
+  Memory& memory = T.memory;
+  const std::size_t test_nv = T.nv;
   auto test_pos = [&](std::uint32_t v) -> Vec3 { return probe_side ? probe_point(v, probe) : object.local[v]; };
   SurfaceWalk walk;
   walk.mesh = &surface;
-  walk.vf = probe_side ? &object_vf : &probe_vf;
+  walk.vf = &S.vf;
   walk.patch = probe_side ? nullptr : this;
   walk.set_direction(d);
 
-  std::vector<std::uint32_t>& path = probe_side ? probe_path_stamp : object_path_stamp;
+  std::vector<std::uint32_t>& path = T.path_stamp;
 
   // Exit distance of a vertex, walking from a face near it; once per vertex and round.
   std::uint32_t evaluated = 0;
@@ -312,8 +312,8 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   double maxima_depth[Memory::kSize];
   int n_maxima = 0;
   if (climb_serial > 0xF0000000u) {  // serials about to wrap: forget every path (once per ~4e9 climbs)
-    std::fill(probe_path_stamp.begin(), probe_path_stamp.end(), 0);
-    std::fill(object_path_stamp.begin(), object_path_stamp.end(), 0);
+    std::fill(probe_s.path_stamp.begin(), probe_s.path_stamp.end(), 0);
+    std::fill(object_s.path_stamp.begin(), object_s.path_stamp.end(), 0);
     climb_serial = 0;
   }
   const std::uint32_t round_first = climb_serial + 1;
@@ -512,8 +512,9 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
                                           std::span<const ContactPair> pairs) {
   prepare(probe, object);
   if (++epoch == 0) {  // stamps wrapped: clear them once every 2^32 rounds
-    for (auto* v : {&probe_xform_stamp, &probe_visit_stamp, &object_visit_stamp, &probe_face_stamp, &object_face_stamp})
-      std::fill(v->begin(), v->end(), 0);
+    std::fill(probe_xform_stamp.begin(), probe_xform_stamp.end(), 0);
+    probe_s.clear_stamps();
+    object_s.clear_stamps();
     epoch = 1;
   }
   ContactModel m;
@@ -523,28 +524,28 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   if (!pose_ok) m.flags |= kBadInput;
 
   valid.clear();
-  probe_faces.clear();
-  object_faces.clear();
+  probe_s.faces.clear();
+  object_s.faces.clear();
   for (const ContactPair& p : pairs) {
     if (p.probe >= probe.faces.size() || p.object >= object.faces.size()) {
       ++m.skipped_pairs;
       continue;
     }
     valid.push_back(p);
-    if (probe_face_stamp[p.probe] != epoch) {
-      probe_face_stamp[p.probe] = epoch;
-      probe_face_slot[p.probe] = std::uint32_t(probe_faces.size());
-      probe_faces.push_back(p.probe);
+    if (probe_s.face_stamp[p.probe] != epoch) {
+      probe_s.face_stamp[p.probe] = epoch;
+      probe_s.face_slot[p.probe] = std::uint32_t(probe_s.faces.size());
+      probe_s.faces.push_back(p.probe);
     }
-    if (object_face_stamp[p.object] != epoch) {
-      object_face_stamp[p.object] = epoch;
-      object_face_slot[p.object] = std::uint32_t(object_faces.size());
-      object_faces.push_back(p.object);
+    if (object_s.face_stamp[p.object] != epoch) {
+      object_s.face_stamp[p.object] = epoch;
+      object_s.face_slot[p.object] = std::uint32_t(object_s.faces.size());
+      object_s.faces.push_back(p.object);
     }
   }
   if (m.skipped_pairs) m.flags |= kBadInput;
-  m.probe_faces = static_cast<std::uint32_t>(probe_faces.size());
-  m.object_faces = static_cast<std::uint32_t>(object_faces.size());
+  m.probe_faces = static_cast<std::uint32_t>(probe_s.faces.size());
+  m.object_faces = static_cast<std::uint32_t>(object_s.faces.size());
   m.contacts = m.probe_faces + m.object_faces;
   if (!pose_ok) {
     reset();
@@ -564,34 +565,34 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   Vec3 n_faces = Vec3::Zero();  // Σ unnormalised normals: 2 × the area-weighted mean normal (fallback)
   double n_faces_abs = 0;       // Σ of their lengths
   Vec3 nf;
-  object_normals.resize(object_faces.size());
-  for (std::size_t i = 0; i < object_faces.size(); ++i) {
-    const Tri& t = object.faces[object_faces[i]];
-    object_normals[i].setZero();
-    if (!tri_ok(t, object_nv) || !unit_normal(object.local[t[0]], object.local[t[1]], object.local[t[2]], nf)) {
+  object_s.normals.resize(object_s.faces.size());
+  for (std::size_t i = 0; i < object_s.faces.size(); ++i) {
+    const Tri& t = object.faces[object_s.faces[i]];
+    object_s.normals[i].setZero();
+    if (!tri_ok(t, object_s.nv) || !unit_normal(object.local[t[0]], object.local[t[1]], object.local[t[2]], nf)) {
       ++m.degenerate_faces;
       continue;
     }
-    object_normals[i] = nf;
+    object_s.normals[i] = nf;
     const Vec3 cr = (object.local[t[1]] - object.local[t[0]]).cross(object.local[t[2]] - object.local[t[0]]);
     n_faces += cr;
     n_faces_abs += cr.norm();
   }
   if (m.degenerate_faces) m.flags |= kDegenerateSkipped;
-  probe_normals.resize(probe_faces.size());
-  for (std::size_t i = 0; i < probe_faces.size(); ++i) {
-    const Tri& t = probe.faces[probe_faces[i]];
-    probe_normals[i].setZero();
-    if (!tri_ok(t, probe_nv)) continue;
+  probe_s.normals.resize(probe_s.faces.size());
+  for (std::size_t i = 0; i < probe_s.faces.size(); ++i) {
+    const Tri& t = probe.faces[probe_s.faces[i]];
+    probe_s.normals[i].setZero();
+    if (!tri_ok(t, probe_s.nv)) continue;
     for (std::uint32_t v : t) (void)probe_point(v, probe);  // transform each vertex once, in face order
-    if (unit_normal(probe.local[t[0]], probe.local[t[1]], probe.local[t[2]], nf)) probe_normals[i] = R * nf;
+    if (unit_normal(probe.local[t[0]], probe.local[t[1]], probe.local[t[2]], nf)) probe_s.normals[i] = R * nf;
   }
 
   // The vector area of the object surface inside the probe, from the intersection curve:
   // A = ½ Σ (s0 − o) × (s1 − o) over the pairs' segments (o: any point; near the patch for
   // rounding). Split into the part on faces not turned away from the previous FD (front) and all.
   Vec3 origin = Vec3::Zero();
-  if (!valid.empty() && tri_ok(object.faces[valid.front().object], object_nv))
+  if (!valid.empty() && tri_ok(object.faces[valid.front().object], object_s.nv))
     origin = object.local[object.faces[valid.front().object][0]];
   Vec3 a_all = Vec3::Zero(), a_front = Vec3::Zero();
   double abs_all = 0, abs_front = 0;
@@ -601,9 +602,9 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   for (const ContactPair& p : valid) {
     const Tri& to = object.faces[p.object];
     const Tri& tp = probe.faces[p.probe];
-    if (!tri_ok(to, object_nv) || !tri_ok(tp, probe_nv)) continue;
-    const Vec3& na = object_normals[object_face_slot[p.object]];
-    const Vec3& nb = probe_normals[probe_face_slot[p.probe]];
+    if (!tri_ok(to, object_s.nv) || !tri_ok(tp, probe_s.nv)) continue;
+    const Vec3& na = object_s.normals[object_s.face_slot[p.object]];
+    const Vec3& nb = probe_s.normals[probe_s.face_slot[p.probe]];
     if (na.squaredNorm() == 0 || nb.squaredNorm() == 0) continue;  // degenerate: no direction
     const Vec3* a[3] = {&object.local[to[0]], &object.local[to[1]], &object.local[to[2]]};
     const bool front = have_prev && na.dot(prev_n) > kBackCos;
@@ -671,8 +672,8 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     return m;
   }
   if (curve.empty()) {  // touching or coplanar only: the footprint is the colliding faces
-    for (std::uint32_t f : object_faces)
-      if (tri_ok(object.faces[f], object_nv))
+    for (std::uint32_t f : object_s.faces)
+      if (tri_ok(object.faces[f], object_s.nv))
         for (std::uint32_t v : object.faces[f]) curve.push_back(object.local[v]);
   }
 
@@ -708,9 +709,9 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     m.penetration_mm = 0;
     double lowest = std::numeric_limits<double>::infinity();
     std::uint32_t lv = UINT32_MAX;
-    for (std::uint32_t f : probe_faces)
+    for (std::uint32_t f : probe_s.faces)
       for (std::uint32_t v : probe.faces[f])
-        if (v < probe_nv && probe_point(v, probe).dot(n) < lowest) lowest = probe_point(v, probe).dot(n), lv = v;
+        if (v < probe_s.nv && probe_point(v, probe).dot(n) < lowest) lowest = probe_point(v, probe).dot(n), lv = v;
     if (lv == UINT32_MAX) {  // only faces with out-of-range vertices: nothing to render
       reset();
       m.flags &= ~kInContact;

@@ -60,12 +60,29 @@ struct ContactBuilder::Patch {
     std::uint32_t face[kSize] = {UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX};
   };
 
+  /// What the model keeps per body: the faces around each vertex, and per-vertex and per-face
+  /// search state stamped with the round (nothing is cleared between rounds).
+  struct BodyState {
+    const Mesh* mesh = nullptr;
+    std::size_t nv = 0, nf = 0;                 ///< vertex and face counts it was sized for
+    VertexFaces vf;                             ///< faces around each vertex
+    std::vector<std::uint32_t> visit_stamp;     ///< round in which a vertex's exit distance was found
+    std::vector<std::uint32_t> path_stamp;      ///< serial of the climb that stood on a vertex
+    std::vector<double> depth;                  ///< per-vertex exit distance this round (where visited)
+    std::vector<std::uint32_t> exit_face;       ///< and the face it was found on
+    std::vector<std::uint32_t> face_stamp;      ///< round in which a face was counted as colliding
+    std::vector<std::uint32_t> face_slot;       ///< its index in `faces`
+    std::vector<std::uint32_t> faces;           ///< distinct colliding faces this round
+    std::vector<Vec3> normals;                  ///< their unit normals, object-local (zero: degenerate)
+    Memory memory;                              ///< last round's deepest vertices
+    bool sized_for(const Mesh& m) const { return mesh == &m && nv == m.local.size() && nf == m.faces.size(); }
+    void reset(const Mesh& m);                  ///< builds vf and sizes the state for m
+    void clear_stamps();                        ///< after the round counter wrapped
+    std::size_t bytes() const;                  ///< memory held
+  };
+
   ContactConfig config;
-  // Per-mesh data (prepare()).
-  const Mesh* probe_mesh = nullptr;
-  const Mesh* object_mesh = nullptr;
-  std::size_t probe_nv = 0, probe_nf = 0, object_nv = 0, object_nf = 0;
-  VertexFaces probe_vf, object_vf;
+  BodyState probe_s, object_s;            ///< per-mesh data (prepare()) and per-round state
   // History.
   bool have_prev = false;                 ///< prev_n is the last model's FD
   Vec3 prev_n{Vec3::Zero()};
@@ -76,18 +93,10 @@ struct ContactBuilder::Patch {
   double held_radius = 0;                 ///< the patch footprint around held_point, mm
   // Scratch.
   std::vector<ContactPair> valid;
-  std::vector<std::uint32_t> probe_faces, object_faces;  ///< distinct colliding faces this round
   std::vector<Vec3> probe_world;          ///< probe vertices, object-local (valid where stamped)
-  std::vector<double> probe_depth, object_depth;  ///< per-vertex exit distance this round (where visited)
-  std::vector<std::uint32_t> probe_exit_face, object_exit_face;  ///< and the face it was found on
-  Memory probe_memory, object_memory;     ///< last round's deepest vertices
   std::vector<Vec3> curve;                ///< intersection segment end points, object-local
-  std::vector<std::uint32_t> probe_xform_stamp, probe_visit_stamp, object_visit_stamp;
-  std::vector<std::uint32_t> probe_path_stamp, object_path_stamp;  ///< serial of the climb that stood on a vertex
+  std::vector<std::uint32_t> probe_xform_stamp;  ///< round in which probe_world[v] was computed
   std::uint32_t climb_serial = 0;         ///< climbs so far (path stamps)
-  std::vector<std::uint32_t> probe_face_stamp, object_face_stamp;  ///< faces counted this round
-  std::vector<std::uint32_t> probe_face_slot, object_face_slot;    ///< their index in probe_faces / object_faces
-  std::vector<Vec3> probe_normals, object_normals;  ///< unit normals of those faces, object-local (zero: degenerate)
   Eigen::Matrix3d rot{Eigen::Matrix3d::Identity()};  ///< this round's pose rotation
   Vec3 shift{Vec3::Zero()};               ///< and translation, probe-local → object-local
   const Vec3& probe_point(std::uint32_t v, const Mesh& probe);  ///< probe vertex v, object-local
