@@ -394,10 +394,11 @@ void run(const RunArgs& a) {
   appendf(summary, "  outputs         %s/\n", dir.c_str());
   if (!collision.rounds_csv_error().empty()) failures.push_back(collision.rounds_csv_error());
   // ticks.csv is whole when its writer saw no error (in this process, or the servo process's exit).
-  const bool ticks_whole = telemetry ? telemetry->error().empty() : !(a.split && servo_exit != 0);
+  const bool ticks_whole = (telemetry ? telemetry->error().empty() : !(a.split && servo_exit != 0)) &&
+                           collision.rounds_csv_error().empty();
   const bool have_csv = (s.write_trace || s.write_perfetto) && std::filesystem::exists(csv);
   if (s.write_perfetto && have_csv && !ticks_whole) {
-    appendf(summary, "    trace.json    not written: ticks.csv is incomplete\n");
+    appendf(summary, "    trace.json    not written: ticks.csv or rounds.csv is incomplete\n");
   } else if (s.write_perfetto && have_csv) {
     if (Status st = write_trace_json(dir + "/trace.json", csv, rounds_csv); !st) {
       appendf(summary, "  trace.json: %s\n", st.error().c_str());

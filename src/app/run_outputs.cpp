@@ -4,6 +4,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -70,6 +71,12 @@ bool csv_numbers(const std::string& line, std::vector<double>& v) {
 }  // namespace
 
 Status write_trace_json(const std::string& path, const std::string& tick_csv, const std::string& rounds_csv) {
+  // Only regular files are read back: a trace that is a device (/dev/full, /dev/zero) would be
+  // read without end.
+  for (const std::string* p : {&tick_csv, &rounds_csv}) {
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(*p, ec)) return fail(*p, ": not a regular file: trace.json not written");
+  }
   std::ifstream in(tick_csv);
   if (!in) return fail(tick_csv, ": cannot read the per-tick trace");
   std::ifstream rin(rounds_csv);
