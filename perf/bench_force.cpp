@@ -237,10 +237,6 @@ Replay replay(const ForceScene& s, const Model& model, bool closed, int C) {
       const auto t1 = std::chrono::steady_clock::now();
       pending = builder.build(s.probe.mesh, s.object.mesh, pose, r.pairs);
       const auto t2 = std::chrono::steady_clock::now();
-      if (std::getenv("ST_FORCE_DEBUG") && pending.in_contact() && pending.force_dir.z < 0.5)
-        std::fprintf(stderr, "k %d z %.3f pairs %zu pd %.4f fd %.3f %.3f %.3f flags %x\n", k, pose.translation().z(),
-                     r.pairs.size(), pending.penetration_mm, pending.force_dir.x, pending.force_dir.y, pending.force_dir.z,
-                     pending.flags);
       pending.seq = ++seq;
       pending.pose_seq = ps.seq;
       pending.pose_sampled_ns = ps.sampled_ns;
