@@ -1,6 +1,8 @@
 // Endpoint probe (endpoint_probe.hpp).
 #include "net/endpoint_probe.hpp"
 
+#include "net/worker_config.hpp"
+
 #include <unistd.h>
 
 #include <atomic>
@@ -44,7 +46,8 @@ ProbeResult probe_endpoint(zmq::context_t& ctx, const std::string& endpoint, con
     zmq::socket_t mon(ctx, zmq::socket_type::pair);
     mon.set(zmq::sockopt::linger, 0);
     mon.connect(monitor_ep);
-    s.connect(endpoint);
+    if (needs_ipv6(endpoint)) s.set(zmq::sockopt::ipv6, 1);
+    s.connect(zmq_endpoint(endpoint));
 
     int retried = 0, no_detail = 0, dropped = 0;
     bool connected = false;

@@ -1,6 +1,8 @@
 // ScatterGather (scatter_gather.hpp).
 #include "net/scatter_gather.hpp"
 
+#include "net/worker_config.hpp"
+
 #include <malloc.h>
 
 #include <algorithm>
@@ -242,7 +244,8 @@ struct ScatterGather::Impl {
       p.sock.set(zmq::sockopt::curve_secretkey, cfg.curve_secret);
     }
     try {
-      p.sock.connect(p.endpoint);
+      if (needs_ipv6(p.endpoint)) p.sock.set(zmq::sockopt::ipv6, 1);
+      p.sock.connect(zmq_endpoint(p.endpoint));
     } catch (const zmq::error_t& e) {
       return fail("scatter-gather: connect ", p.endpoint, ": ", e.what());
     }

@@ -110,6 +110,14 @@ Result<DaemonConfig> load_daemon_config(const std::string& path, DaemonConfig ba
   return c;
 }
 
+std::string zmq_endpoint(const std::string& ep) {
+  const std::string prefix = "tcp://localhost:";
+  if (ep.rfind(prefix, 0) == 0) return "tcp://127.0.0.1:" + ep.substr(prefix.size());
+  return ep;
+}
+
+bool needs_ipv6(const std::string& ep) { return ep.rfind("tcp://[", 0) == 0; }
+
 bool is_local_endpoint(const std::string& ep) {
   if (ep.rfind("ipc://", 0) == 0 || ep.rfind("inproc://", 0) == 0) return true;
   if (ep.rfind("tcp://", 0) != 0) return false;

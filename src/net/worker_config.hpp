@@ -35,6 +35,12 @@ Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::strin
 Result<DaemonConfig> load_daemon_config(const std::string& path, DaemonConfig base = {});
 
 /// True for tcp:// on 127.0.0.0/8, [::1] or localhost, and for ipc:// and inproc:// (not on a network).
+/// An endpoint as libzmq takes it: in "tcp://localhost:PORT" libzmq's bind() reads "localhost"
+/// as a network interface name ("No such device"), so it becomes 127.0.0.1; others are unchanged.
+std::string zmq_endpoint(const std::string& endpoint);
+/// True for a tcp endpoint with a bracketed IPv6 host ("tcp://[::1]:5550"): its socket needs
+/// ZMQ_IPV6 set before bind() or connect().
+bool needs_ipv6(const std::string& endpoint);
 bool is_local_endpoint(const std::string& endpoint);
 /// Refuses a non-local bind unless CURVE (secret key file and allowed clients) is configured or
 /// `insecure` is set; checks log_level, the endpoint scheme and the client keys.

@@ -1,6 +1,8 @@
 // WorkerService (worker_service.hpp).
 #include "net/worker_service.hpp"
 
+#include "net/worker_config.hpp"
+
 #include <malloc.h>
 
 #include <algorithm>
@@ -55,7 +57,8 @@ WorkerService::WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFa
 Status WorkerService::bind(const std::string& endpoint) {
   if (!init_error_.empty()) return Error{init_error_};
   try {
-    sock_.bind(endpoint);
+    if (needs_ipv6(endpoint)) sock_.set(zmq::sockopt::ipv6, 1);
+    sock_.bind(zmq_endpoint(endpoint));
   } catch (const zmq::error_t& e) {
     return fail("bind ", endpoint, ": ", e.what());
   }

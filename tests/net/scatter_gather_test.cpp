@@ -408,3 +408,20 @@ TEST_CASE("collide() stops its traversal at max_pairs") {
   CHECK_FALSE(r.stats.pair_limit_hit);
   CHECK(r.pairs.size() == 2000u * 2000u);
 }
+
+TEST_CASE("workers bound to tcp://localhost and tcp://[::1] serve a client (README documents both)") {
+  zmq::context_t ctx;
+  const test::NetScene s = test::small_scene(6);
+  for (const std::string host : {"localhost", "[::1]"}) {
+    CAPTURE(host);
+    auto w = LocalWorkers::start(ctx, 2, reference_backend_factory(),
+                                 [&](int) { return "tcp://" + host + ":*"; });
+    if (!w.ok()) FAIL(w.error());
+    auto c = client(ctx, *w.value(), s);
+    REQUIRE(c->wait_ready(Clock::now() + 10s));
+    const auto pose = test::contact_poses(s, 1)[0];
+    RoundResult r = c->round(1, pose, Clock::now() + 5s);
+    CHECK(r.complete);
+    CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+  }
+}
