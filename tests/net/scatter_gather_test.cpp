@@ -37,6 +37,16 @@ std::unique_ptr<ScatterGather> client(zmq::context_t& ctx, const LocalWorkers& w
   return std::move(c.value());
 }
 
+// A fresh client gets these workers ready and one complete round equal to the reference.
+void check_one_exact_round(zmq::context_t& ctx, const LocalWorkers& w, const test::NetScene& s) {
+  auto c = client(ctx, w, s);
+  REQUIRE(c->wait_ready(Clock::now() + 10s));
+  const auto pose = test::contact_poses(s, 1)[0];
+  RoundResult r = c->round(1, pose, Clock::now() + 5s);
+  CHECK(r.complete);
+  CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+}
+
 }  // namespace
 
 TEST_CASE("merged pairs equal the single-process reference for 1, 2, 4 and 8 inproc workers") {
@@ -206,12 +216,7 @@ TEST_CASE("a worker answers hostile messages with an Error or drops them, and ke
     d.send(zmq::buffer(g), zmq::send_flags::dontwait);
   }
   // Still serving: a real client works afterwards.
-  auto c = client(ctx, *w.value(), s);
-  REQUIRE(c->wait_ready(Clock::now() + 10s));
-  const auto pose = test::contact_poses(s, 1)[0];
-  RoundResult r = c->round(1, pose, Clock::now() + 5s);
-  CHECK(r.complete);
-  CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+  check_one_exact_round(ctx, *w.value(), s);
 }
 
 TEST_CASE("an oversized frame is cut off by ZMQ_MAXMSGSIZE before it is buffered") {
@@ -417,11 +422,6 @@ TEST_CASE("workers bound to tcp://localhost and tcp://[::1] serve a client (READ
     auto w = LocalWorkers::start(ctx, 2, reference_backend_factory(),
                                  [&](int) { return "tcp://" + host + ":*"; });
     if (!w.ok()) FAIL(w.error());
-    auto c = client(ctx, *w.value(), s);
-    REQUIRE(c->wait_ready(Clock::now() + 10s));
-    const auto pose = test::contact_poses(s, 1)[0];
-    RoundResult r = c->round(1, pose, Clock::now() + 5s);
-    CHECK(r.complete);
-    CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+    check_one_exact_round(ctx, *w.value(), s);
   }
 }
