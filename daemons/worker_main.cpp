@@ -117,7 +117,17 @@ int main(int argc, char** argv) {
   wc.max_sets = cfg.max_sets;
   wc.idle_set_ttl = std::chrono::seconds(cfg.idle_set_s);
   wc.limits.max_blockset_bytes = cfg.max_blockset_mb << 20;
+  wc.max_upload_bytes = wc.limits.max_blockset_bytes;  // one largest set in transit (or several smaller)
   wc.log = log_line;
+  {
+    // What the limits cost: held sets, plus one being built, plus the upload buffer.
+    const double set_mb = st::net::kSetMemoryFactor * double(cfg.max_blockset_mb);
+    log_line(6, "memory bound: " + std::to_string(long(set_mb * (cfg.max_sets + 1) + double(wc.max_upload_bytes >> 20))) +
+                    " MiB (" + std::to_string(cfg.max_sets) + " held sets + 1 being built, each up to " +
+                    std::to_string(long(set_mb)) + " MiB = " + std::to_string(st::net::kSetMemoryFactor).substr(0, 3) +
+                    " x max_blockset_mb, + " + std::to_string(wc.max_upload_bytes >> 20) + " MiB of uploads); lower " +
+                    "max_blockset_mb or max_sets to fit MemoryMax");
+  }
   if (!cfg.curve_secret_key_file.empty()) {
     auto key = st::net::read_secret_key(cfg.curve_secret_key_file);
     if (!key) { log_line(3, key.error()); return 2; }

@@ -6,6 +6,8 @@
 
 #include "net/wire.hpp"
 
+#include <sodium.h>
+
 namespace st::net {
 
 namespace {
@@ -133,7 +135,22 @@ std::vector<std::uint8_t> encode_block_set(const BlockSet& s) {
   return out;
 }
 
-std::uint64_t block_set_hash(std::span<const std::uint8_t> encoded) { return fnv1a64(encoded); }
+Digest block_set_digest(std::span<const std::uint8_t> encoded) {
+  // sodium_init() picks the fastest BLAKE2b for this CPU; it is idempotent and thread-safe.
+  static const int sodium_ready = sodium_init();
+  (void)sodium_ready;  // < 0 only when /dev/urandom is missing, which the hash does not need
+  Digest d;
+  crypto_generichash(d.data(), d.size(), encoded.data(), encoded.size(), nullptr, 0);
+  return d;
+}
+
+std::uint64_t digest_key(const Digest& d) {
+  std::uint64_t k = 0;
+  for (int i = 7; i >= 0; --i) k = (k << 8) | d[static_cast<std::size_t>(i)];
+  return k;
+}
+
+std::uint64_t block_set_hash(std::span<const std::uint8_t> encoded) { return digest_key(block_set_digest(encoded)); }
 
 Result<BlockSet> decode_block_set(std::span<const std::uint8_t> encoded, const Limits& L) {
   Reader r(encoded, "block set");

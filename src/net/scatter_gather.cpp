@@ -9,6 +9,7 @@
 #include <condition_variable>
 #include <deque>
 #include <mutex>
+#include <random>
 #include <thread>
 #include <unordered_map>
 #include <utility>
@@ -137,6 +138,9 @@ struct ScatterGather::Impl {
   };
 
   zmq::context_t* ctx = nullptr;
+  // This client's ZeroMQ routing id on every worker socket (reconnects keep it); see
+  // ScatterConfig::routing_id.
+  std::string routing_id;
   ScatterConfig cfg;
   std::shared_ptr<const SceneData> scene;
   std::uint32_t probe_faces = 0, object_faces = 0;
@@ -233,6 +237,7 @@ struct ScatterGather::Impl {
     p.socket_opened = Clock::now();
     p.sock = zmq::socket_t(*ctx, zmq::socket_type::dealer);
     set_common_options(p.sock, cfg.sndhwm, cfg.rcvhwm, cfg.limits.max_message_bytes);
+    p.sock.set(zmq::sockopt::routing_id, zmq::buffer(routing_id));
     p.sock.set(zmq::sockopt::immediate, 1);          // no queueing to a worker that is not connected
     p.sock.set(zmq::sockopt::reconnect_ivl, 100);    // a restarted worker is found within 0.1 s
     p.sock.set(zmq::sockopt::reconnect_ivl_max, 1000);
@@ -523,6 +528,16 @@ Result<std::unique_ptr<ScatterGather>> ScatterGather::create(zmq::context_t& ctx
   }
   auto impl = std::make_unique<Impl>();
   impl->ctx = &ctx;
+  if (!config.routing_id.empty()) {
+    if (config.routing_id.size() > 255 || config.routing_id[0] == 0)
+      return fail("scatter-gather: routing_id must be 1-255 bytes and must not start with a zero byte");
+    impl->routing_id = config.routing_id;
+  } else {
+    std::random_device rd;  // getrandom(2) on Linux
+    impl->routing_id.resize(16);
+    for (char& c : impl->routing_id) c = static_cast<char>(rd() & 0xFF);
+    if (impl->routing_id[0] == 0) impl->routing_id[0] = 1;
+  }
   impl->probe_faces = static_cast<std::uint32_t>(probe.faces.size());
   impl->object_faces = static_cast<std::uint32_t>(object.faces.size());
   const auto nblocks = static_cast<std::uint32_t>(blocks.size());

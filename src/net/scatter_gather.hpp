@@ -51,6 +51,11 @@ struct ScatterConfig {
   /// CURVE: the workers' public key (one fleet key) and this client's key pair, Z85; all empty
   /// for plain loopback / ipc.
   std::string curve_server_public, curve_public, curve_secret;
+  /// This client's ZeroMQ routing id on every worker (1–255 bytes, first byte not 0). A worker
+  /// shows a client only the block sets it sent, so without CURVE this id is the client's
+  /// identity: keep it secret. Empty (the default): 16 random bytes per client, so a restarted
+  /// client loads its sets again; under CURVE the client key is the identity instead.
+  std::string routing_id;
 };
 
 /// What the collision thread gets back from one round.

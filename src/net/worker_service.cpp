@@ -4,14 +4,68 @@
 #include "net/worker_config.hpp"
 
 #include <malloc.h>
+#include <sys/eventfd.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <random>
+#include <set>
 #include <stdexcept>
 
-#include "net/block_set.hpp"
-
 namespace st::net {
+
+/// A complete upload being hashed, decoded and built on the loader thread. The thread owns a
+/// reference, so a service destroyed mid-build leaves it to finish on its own.
+struct WorkerService::LoadJob {
+  Upload up;
+  std::vector<Digest> known;  // digests held when the job started: those are not rebuilt
+  Limits limits;
+  BackendFactory factory;
+  int fd = -1;                // eventfd written once when done
+  std::uint64_t counted = 0;  // the upload's bytes as counted in buffered_
+  std::atomic<bool> cancel{false}, done{false};
+  // Results (written by the loader before `done`, read after it).
+  Digest digest{};
+  bool reuse = false;         // the digest was known: a held backend serves these bytes
+  std::unique_ptr<CollisionBackend> backend;
+  std::string error;          // non-empty: refused
+  std::uint32_t faces = 0, probe_faces = 0, blocks = 0;
+  double ms = 0;
+  ~LoadJob() {
+    if (fd >= 0) ::close(fd);
+  }
+  void run() {
+    const auto t0 = std::chrono::steady_clock::now();
+    digest = block_set_digest(up.bytes);
+    if (digest_key(digest) != up.hash) {
+      error = "block set bytes do not match their hash";
+    } else if (std::find(known.begin(), known.end(), digest) != known.end()) {
+      reuse = true;  // keep the bytes: if that backend is gone by the time this job is installed, it is rebuilt
+    } else if (!cancel.load()) {
+      Result<BlockSet> set = decode_block_set(up.bytes, limits);
+      if (!set) {
+        error = set.error();
+      } else {
+        std::vector<std::uint8_t>().swap(up.bytes);  // free the encoding before building
+        faces = static_cast<std::uint32_t>(set.value().object.faces.size());
+        probe_faces = static_cast<std::uint32_t>(set.value().probe.faces.size());
+        blocks = static_cast<std::uint32_t>(set.value().blocks.size());
+        if (!cancel.load()) {
+          backend = factory();
+          if (Status s = backend->load(set.value()); !s) {
+            error = "backend failed to load the block set: " + s.error();
+            backend.reset();
+          }
+        }
+      }
+    }
+    if (cancel.load() && error.empty() && !reuse && !backend) error = "worker stopping";
+    ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    done.store(true, std::memory_order_release);
+    const std::uint64_t one = 1;
+    if (fd >= 0) (void)!::write(fd, &one, sizeof one);
+  }
+};
 
 void set_common_options(zmq::socket_t& s, int sndhwm, int rcvhwm, std::int64_t max_message_bytes) {
   s.set(zmq::sockopt::linger, 0);
@@ -49,9 +103,19 @@ WorkerService::WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFa
       init_error_ = std::string("CURVE set-up: ") + e.what();
     }
   }
+  // A client that reconnects with its routing id takes it over at once (a half-open old
+  // connection would otherwise hold it until the heartbeat drops it).
+  sock_.set(zmq::sockopt::router_handover, 1);
   // ZMTP heartbeats drop half-open TCP connections of vanished clients.
   sock_.set(zmq::sockopt::heartbeat_ivl, 1000);
   sock_.set(zmq::sockopt::heartbeat_timeout, 3000);
+}
+
+WorkerService::~WorkerService() {
+  if (!job_) return;
+  job_->cancel.store(true);
+  if (job_->done.load(std::memory_order_acquire)) loader_.join();
+  else loader_.detach();  // the thread holds the job; a daemon exiting need not wait for a build
 }
 
 Status WorkerService::bind(const std::string& endpoint) {
@@ -73,10 +137,28 @@ std::vector<Held> WorkerService::held() const {
   return h;
 }
 
-HelloMsg WorkerService::hello(std::uint64_t echo) const {
-  HelloMsg h{cfg_.worker_id, epoch_, echo, held()};
-  if (h.held.size() > cfg_.limits.max_held) h.held.resize(cfg_.limits.max_held);
+HelloMsg WorkerService::hello(const std::string& owner, std::uint64_t echo) const {
+  HelloMsg h{cfg_.worker_id, epoch_, echo, {}};
+  for (const Loaded& l : sets_)
+    if (l.owner == owner && h.held.size() < cfg_.limits.max_held) h.held.push_back({l.hash, l.faces});
   return h;
+}
+
+std::string WorkerService::owner_of(const zmq::message_t& peer, const zmq::message_t& frame) const {
+  // Under CURVE the ZAP handler names each connection by its client key (User-Id), which a
+  // client cannot choose; else the routing id, which ScatterGather draws at random.
+  if (zap_) {
+    if (const char* id = zmq_msg_gets(frame.handle(), "User-Id"); id && *id) return std::string("key:") + id;
+  }
+  return std::string("id:") + std::string(static_cast<const char*>(peer.data()), peer.size());
+}
+
+void WorkerService::send(const std::string& peer, const Message& m) {
+  send(zmq::message_t(peer.data(), peer.size()), m);
+}
+
+void WorkerService::send_error(const std::string& peer, ErrorCode code, std::uint64_t ref, std::string text) {
+  send_error(zmq::message_t(peer.data(), peer.size()), code, ref, std::move(text));
 }
 
 void WorkerService::send(const zmq::message_t& peer, const Message& m) {
@@ -145,30 +227,37 @@ void WorkerService::handle_zap() {
   }
   const std::string request_id = f.size() > 1 ? f[1].to_string() : std::string();
   const char* status = ok ? "200" : "400";
+  char user[41] = {};  // the client's key, Z85: the User-Id of its messages (owner_of)
+  if (ok) zmq_z85_encode(user, static_cast<const std::uint8_t*>(f[6].data()), 32);
   try {
     zap_.send(zmq::str_buffer("1.0"), zmq::send_flags::sndmore);
     zap_.send(zmq::buffer(request_id), zmq::send_flags::sndmore);
     zap_.send(zmq::buffer(std::string_view(status)), zmq::send_flags::sndmore);
     zap_.send(zmq::buffer(std::string_view(ok ? "OK" : "client key not allowed")), zmq::send_flags::sndmore);
-    zap_.send(zmq::str_buffer(""), zmq::send_flags::sndmore);
+    zap_.send(zmq::buffer(std::string_view(user)), zmq::send_flags::sndmore);
     zap_.send(zmq::str_buffer(""), zmq::send_flags::none);
   } catch (const zmq::error_t&) {
   }
 }
 
 bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
-  zmq::pollitem_t items[2] = {{sock_.handle(), 0, ZMQ_POLLIN, 0}, {zap_.handle(), 0, ZMQ_POLLIN, 0}};
-  const int n = zap_ ? 2 : 1;
+  zmq::pollitem_t items[3] = {{sock_.handle(), 0, ZMQ_POLLIN, 0}, {zap_.handle(), 0, ZMQ_POLLIN, 0},
+                              {nullptr, job_ ? job_->fd : -1, ZMQ_POLLIN, 0}};
+  // The loader's eventfd wakes the poll when a set is built; without one (eventfd failed) the
+  // poll is kept short while a load runs.
+  if (job_ && job_->fd < 0) timeout = std::min(timeout, std::chrono::milliseconds(5));
   try {
-    if (zmq::poll(items, n, timeout) <= 0) {
-      drop_idle_sets();
+    if (zmq::poll(items, 3, timeout) <= 0) {
+      if (job_ && job_->done.load(std::memory_order_acquire)) finish_job();
+      drop_idle();
       return true;
     }
   } catch (const zmq::error_t& e) {
     return e.num() != ETERM;  // EINTR (a signal): let the caller look at its stop flag
   }
-  if (n == 2 && (items[1].revents & ZMQ_POLLIN)) handle_zap();
-  drop_idle_sets();
+  if (zap_ && (items[1].revents & ZMQ_POLLIN)) handle_zap();
+  if (job_ && job_->done.load(std::memory_order_acquire)) finish_job();
+  drop_idle();
   if (!(items[0].revents & ZMQ_POLLIN)) return true;
   // Handle what is queued now, then return so the caller can tick (watchdog, stop flag).
   for (int budget = 0; budget < 1024; ++budget) {
@@ -188,7 +277,7 @@ bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
         send_error(peer, ErrorCode::BadMessage, 0, "expected exactly one non-empty frame per message");
         continue;
       }
-      handle(peer, {static_cast<const std::uint8_t*>(frame.data()), frame.size()});
+      handle(peer, owner_of(peer, frame), {static_cast<const std::uint8_t*>(frame.data()), frame.size()});
     } catch (const zmq::error_t& e) {
       return e.num() != ETERM;
     }
@@ -196,10 +285,25 @@ bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
   return true;
 }
 
-void WorkerService::drop_idle_sets() {
+void WorkerService::drop_upload(std::unordered_map<std::string, Upload>::iterator it) {
+  buffered_ -= it->second.bytes.capacity();
+  uploads_.erase(it);
+}
+
+void WorkerService::drop_idle() {
   const auto now = std::chrono::steady_clock::now();
-  if (cfg_.idle_set_ttl.count() <= 0 || now < next_idle_check_ || sets_.size() < 2) return;
+  if (now < next_idle_check_) return;
   next_idle_check_ = now + std::chrono::seconds(1);
+  for (auto it = uploads_.begin(); it != uploads_.end();) {
+    if (now - it->second.last_chunk < cfg_.upload_timeout) { ++it; continue; }
+    log(5, st::fail("upload of block set ", std::hex, it->second.hash, std::dec, " abandoned after ",
+                    it->second.bytes.size(), " of ", it->second.total, " bytes: no chunk for ",
+                    cfg_.upload_timeout.count(), " ms").message);
+    ++counters_.uploads_abandoned;
+    auto gone = it++;
+    drop_upload(gone);
+  }
+  if (cfg_.idle_set_ttl.count() <= 0 || sets_.size() < 2) return;
   std::size_t dropped = 0;
   for (auto it = std::next(sets_.begin()); it != sets_.end();) {  // never the most recently used
     if (now - it->last_used < cfg_.idle_set_ttl) { ++it; continue; }
@@ -218,7 +322,7 @@ void WorkerService::run(const std::atomic<bool>& stop, std::chrono::milliseconds
   }
 }
 
-void WorkerService::handle(const zmq::message_t& peer, std::span<const std::uint8_t> frame) {
+void WorkerService::handle(const zmq::message_t& peer, const std::string& owner, std::span<const std::uint8_t> frame) {
   Result<Message> m = decode(frame, cfg_.limits);
   if (!m) {
     note_bad(m.error());
@@ -226,21 +330,21 @@ void WorkerService::handle(const zmq::message_t& peer, std::span<const std::uint
     return;
   }
   Message& msg = m.value();
-  if (auto* q = std::get_if<QueryMsg>(&msg)) return on_query(peer, *q);
-  if (auto* l = std::get_if<LoadBlocksMsg>(&msg)) return on_load(peer, *l);
+  if (auto* q = std::get_if<QueryMsg>(&msg)) return on_query(peer, owner, *q);
+  if (auto* l = std::get_if<LoadBlocksMsg>(&msg)) return on_load(peer, owner, *l);
   if (auto* h = std::get_if<HeartbeatMsg>(&msg)) {
     ++counters_.heartbeats;
-    return send(peer, hello(h->nonce));
+    return send(peer, hello(owner, h->nonce));
   }
   note_bad(std::string("unexpected ") + type_name(msg));
   send_error(peer, ErrorCode::Unexpected, 0, std::string("a worker does not accept ") + type_name(msg));
 }
 
-void WorkerService::on_query(const zmq::message_t& peer, const QueryMsg& q) {
-  auto it = std::find_if(sets_.begin(), sets_.end(), [&](const Loaded& l) { return l.hash == q.hash; });
+void WorkerService::on_query(const zmq::message_t& peer, const std::string& owner, const QueryMsg& q) {
+  auto it = std::find_if(sets_.begin(), sets_.end(), [&](const Loaded& l) { return l.hash == q.hash && l.owner == owner; });
   if (it == sets_.end()) {
     send_error(peer, ErrorCode::NotLoaded, q.seq, st::fail("block set ", std::hex, q.hash, " is not held").message);
-    send(peer, hello(0));  // tell the client what is held so it can load the right set
+    send(peer, hello(owner, 0));  // tell the client what is held so it can load the right set
     return;
   }
   sets_.splice(sets_.begin(), sets_, it);  // most recently used first
@@ -266,52 +370,115 @@ void WorkerService::on_query(const zmq::message_t& peer, const QueryMsg& q) {
   pairs_.swap(r.pairs);  // keep the capacity for the next query
 }
 
-void WorkerService::on_load(const zmq::message_t& peer, const LoadBlocksMsg& m) {
+void WorkerService::on_load(const zmq::message_t& peer, const std::string& owner, const LoadBlocksMsg& m) {
   // decode() has checked total_bytes ≤ max_blockset_bytes and that the chunk lies inside it.
+  auto it = uploads_.find(owner);
   if (m.offset == 0) {
-    asm_ = Assembly{m.hash, m.total_bytes, {}, true};
-    // Grow with the bytes that actually arrive: a lying total_bytes costs nothing up front.
-    asm_.bytes.reserve(std::min<std::uint64_t>(m.total_bytes, 16u << 20));
-  } else if (!asm_.active || asm_.hash != m.hash || asm_.total != m.total_bytes || asm_.bytes.size() != m.offset) {
-    const bool was = asm_.active;
-    asm_ = Assembly{};
-    send_error(peer, ErrorCode::LoadFailed, m.hash,
-               st::fail("LoadBlocks chunk at offset ", m.offset, " out of order", was ? " (load abandoned)" : "").message);
-    return;
+    if (it != uploads_.end()) drop_upload(it);  // this client starts over (its own upload only)
+    const std::size_t busy = uploads_.size() + waiting_.size() + (job_ ? 1 : 0);
+    if (busy >= cfg_.max_uploads) {
+      ++counters_.uploads_refused;
+      return send_error(peer, ErrorCode::TooLarge, m.hash,
+                        st::fail("worker busy: ", busy, " block-set uploads in progress (max_uploads = ",
+                                 cfg_.max_uploads, "); send again later").message);
+    }
+    Upload u;
+    u.owner = owner;
+    u.hash = m.hash;
+    u.total = m.total_bytes;
+    it = uploads_.emplace(owner, std::move(u)).first;
+  } else if (it == uploads_.end() || it->second.hash != m.hash || it->second.total != m.total_bytes ||
+             it->second.bytes.size() != m.offset) {
+    const bool was = it != uploads_.end();
+    if (was) drop_upload(it);
+    return send_error(peer, ErrorCode::LoadFailed, m.hash,
+                      st::fail("LoadBlocks chunk at offset ", m.offset, " out of order", was ? " (load abandoned)" : "").message);
+  }
+  Upload& u = it->second;
+  // Capacity grows with the bytes that actually arrive (a lying total_bytes costs nothing up
+  // front) and is counted against max_upload_bytes over every client's uploads.
+  const std::size_t need = u.bytes.size() + m.data.size(), cap = u.bytes.capacity();
+  if (need > cap) {
+    const std::size_t grown = std::min<std::uint64_t>(u.total, std::max<std::uint64_t>({need, 2 * cap, 1u << 20}));
+    if (buffered_ - cap + grown > cfg_.max_upload_bytes) {
+      ++counters_.uploads_refused;
+      const std::uint64_t hash = u.hash;
+      drop_upload(it);
+      return send_error(peer, ErrorCode::TooLarge, hash,
+                        st::fail("worker busy: uploads would buffer more than max_upload_bytes = ",
+                                 cfg_.max_upload_bytes, " bytes; load refused, send again later").message);
+    }
+    u.bytes.reserve(grown);
+    buffered_ += u.bytes.capacity() - cap;
   }
   ++counters_.chunks;
-  asm_.bytes.insert(asm_.bytes.end(), m.data.begin(), m.data.end());
-  if (asm_.bytes.size() < asm_.total) return;
+  u.bytes.insert(u.bytes.end(), m.data.begin(), m.data.end());
+  u.last_chunk = std::chrono::steady_clock::now();
+  u.peer.assign(static_cast<const char*>(peer.data()), peer.size());  // answer where the last chunk came from
+  if (u.bytes.size() < u.total) return;
+  waiting_.push_back(std::move(u));
+  uploads_.erase(it);  // its bytes stay counted in buffered_ until the loader is done with them
+  start_job();
+}
 
-  const auto t0 = std::chrono::steady_clock::now();
-  Assembly done = std::move(asm_);
-  asm_ = Assembly{};
-  if (block_set_hash(done.bytes) != done.hash) {
-    log(4, "load refused: block set bytes do not match their hash");
-    send_error(peer, ErrorCode::LoadFailed, done.hash, "block set bytes do not match their hash");
+void WorkerService::start_job() {
+  if (job_ || waiting_.empty()) return;
+  auto job = std::make_shared<LoadJob>();
+  job->up = std::move(waiting_.front());
+  waiting_.pop_front();
+  job->counted = job->up.bytes.capacity();
+  for (const Loaded& l : sets_) job->known.push_back(l.digest);
+  job->limits = cfg_.limits;
+  job->factory = factory_;
+  job->fd = ::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);  // −1: poll_once polls every 5 ms instead
+  job_ = job;
+  loader_ = std::thread([job] { job->run(); });
+}
+
+std::size_t WorkerService::distinct_backends() const {
+  std::set<const CollisionBackend*> d;
+  for (const Loaded& l : sets_) d.insert(l.backend.get());
+  return d.size();
+}
+
+void WorkerService::finish_job() {
+  loader_.join();
+  std::shared_ptr<LoadJob> job = std::move(job_);
+  job_ = nullptr;
+  Upload& u = job->up;
+  std::shared_ptr<CollisionBackend> backend;
+  if (job->error.empty() && job->reuse) {
+    for (const Loaded& l : sets_)
+      if (l.digest == job->digest) backend = l.backend;
+    if (!backend) {  // evicted while this job ran: build it after all
+      waiting_.push_front(std::move(u));
+      start_job();
+      return;
+    }
+    ++counters_.loads_shared;
+  }
+  buffered_ -= job->counted;  // the upload's bytes are gone now
+  if (!job->error.empty()) {
+    log(4, "load refused: " + job->error);
+    send_error(u.peer, ErrorCode::LoadFailed, u.hash, job->error);
+    start_job();
     return;
   }
-  Result<BlockSet> set = decode_block_set(done.bytes, cfg_.limits);
-  if (!set) {
-    log(4, "load refused: " + set.error());
-    return send_error(peer, ErrorCode::LoadFailed, done.hash, set.error());
-  }
-  std::vector<std::uint8_t>().swap(done.bytes);  // free the encoding before building
-  std::unique_ptr<CollisionBackend> backend = factory_();
-  if (Status s = backend->load(set.value()); !s) {
-    log(3, "backend failed to load a block set: " + s.error());
-    return send_error(peer, ErrorCode::LoadFailed, done.hash, s.error());
-  }
-  sets_.remove_if([&](const Loaded& l) { return l.hash == done.hash; });
-  while (!sets_.empty() && sets_.size() >= std::max<std::uint32_t>(cfg_.max_sets, 1)) sets_.pop_back();
-  sets_.push_front(Loaded{done.hash, static_cast<std::uint32_t>(set.value().object.faces.size()), std::move(backend),
-                          std::chrono::steady_clock::now()});
+  if (!backend) backend = std::move(job->backend);
+  sets_.remove_if([&](const Loaded& l) { return l.hash == u.hash && l.owner == u.owner; });
+  const bool is_new = std::none_of(sets_.begin(), sets_.end(), [&](const Loaded& l) { return l.backend == backend; });
+  while (is_new && !sets_.empty() && distinct_backends() >= std::max<std::uint32_t>(cfg_.max_sets, 1)) sets_.pop_back();
+  const std::uint32_t faces = job->reuse ? 0 : job->faces;
+  sets_.push_front(Loaded{u.owner, u.hash, job->digest, faces, backend, std::chrono::steady_clock::now()});
+  if (job->reuse)
+    for (const Loaded& l : sets_)
+      if (l.backend == backend && l.faces) sets_.front().faces = l.faces;
   ++counters_.loads;
-  const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  log(6, st::fail("loaded block set ", std::hex, done.hash, std::dec, ": ", set.value().blocks.size(), " blocks, ",
-                  set.value().object.faces.size(), " object faces, ", set.value().probe.faces.size(), " probe faces, in ",
-                  ms, " ms; holding ", sets_.size(), " set(s)").message);
-  send(peer, hello(0));
+  log(6, st::fail("loaded block set ", std::hex, u.hash, std::dec, job->reuse ? " (same bytes as a held set)" : "", ": ",
+                  job->blocks, " blocks, ", sets_.front().faces, " object faces, ", job->probe_faces, " probe faces, in ",
+                  job->ms, " ms; holding ", sets_.size(), " set(s)").message);
+  send(u.peer, hello(u.owner, 0));
+  start_job();
 }
 
 }  // namespace st::net

@@ -4,8 +4,16 @@
 // over inproc:// (the embedded default, local_workers.hpp) and in the spheretouch-worker daemon
 // over tcp:// or ipc://. It never blocks on a send: replies to a peer that is gone or slow are
 // dropped by the ROUTER, and every malformed message gets an Error reply or is dropped.
+//
+// Clients are kept apart: each has its own upload in progress, and a block set is visible (in
+// Hello, to Query) only to the clients that sent its bytes. A client is its CURVE public key when
+// CURVE is on, else its ZeroMQ routing id (ScatterGather sets a random 16-byte one). Two clients
+// that send the same bytes share one backend in memory. Hashing, decoding and building a set run
+// on a loader thread, so the worker keeps answering heartbeats, queries and its watchdog while a
+// large set is built.
 #pragma once
 #include <atomic>
+#include <deque>
 #include <chrono>
 #include <cstdint>
 #include <functional>
@@ -13,11 +21,13 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 #include <unordered_map>
 #include <vector>
 #include <zmq.hpp>
 
 #include "net/backend.hpp"
+#include "net/block_set.hpp"
 #include "net/curve_keys.hpp"
 #include "net/protocol.hpp"
 
@@ -38,9 +48,19 @@ struct WorkerConfig {
   /// most recently used set is always kept). Reassigned variants live through a fault and go
   /// once it is over; a variant needed again is sent again. Zero: keep sets until LRU evicts them.
   std::chrono::milliseconds idle_set_ttl{30'000};
-  /// Decode limits. Memory is bounded by (max_sets + 1) · max_blockset_bytes for block sets plus
-  /// rcvhwm frames of at most max_chunk_bytes queued per client connection.
+  /// Decode limits. What the worker holds is bounded by: max_sets loaded sets, each about
+  /// kSetMemoryFactor × its encoded size (≤ max_blockset_bytes); max_upload_bytes of uploads in
+  /// progress or waiting for the loader, plus one set being built; and, queued inside libzmq,
+  /// at most rcvhwm frames of at most max_chunk_bytes per connection (the worker reads its socket
+  /// while it loads, so queues drain).
   Limits limits = default_limits();
+  /// Uploads in progress or waiting for the loader, over all clients; a client over the limit is
+  /// told TooLarge ("busy") and may retry.
+  std::uint32_t max_uploads = 4;
+  /// Bytes buffered for uploads (in progress and waiting), over all clients.
+  std::uint64_t max_upload_bytes = 2ull << 30;
+  /// An upload with no chunk for this long is abandoned and its bytes freed.
+  std::chrono::milliseconds upload_timeout{10'000};
   int sndhwm = 64;                 ///< messages queued per client before replies are dropped
   int rcvhwm = 32;                 ///< messages queued per client (32 × 1 MiB chunks at most)
   /// Log sink (syslog priority 3 error … 7 debug, message); empty: silent. Bad messages are
@@ -61,7 +81,14 @@ struct WorkerCounters {
   std::uint64_t heartbeats = 0;    ///< Heartbeats answered
   std::uint64_t refused = 0;       ///< CURVE handshakes refused (client key not allowed)
   std::uint64_t too_many_pairs = 0;  ///< queries refused at max_pairs (the traversal stopped there)
+  std::uint64_t uploads_refused = 0;    ///< uploads refused: max_uploads or max_upload_bytes reached
+  std::uint64_t uploads_abandoned = 0;  ///< uploads dropped after upload_timeout without a chunk
+  std::uint64_t loads_shared = 0;       ///< loads served by a backend already built for the same bytes
 };
+
+/// Resident memory of a loaded block set (tree backend) per byte of its encoding, measured:
+/// `spheretouch-bench hostile` prints it (README, "What the worker promises").
+inline constexpr double kSetMemoryFactor = 4.7;
 
 /// One worker; not thread-safe: construct, bind and run it on one thread.
 class WorkerService {
@@ -72,6 +99,11 @@ class WorkerService {
   Status bind(const std::string& endpoint);
   /// The endpoint last bound, resolved (a tcp wildcard port becomes the real one).
   std::string last_endpoint() const;
+  /// Stops a load in progress at its next step (a set being built is left to finish on its own
+  /// thread, which owns everything it touches).
+  ~WorkerService();
+  WorkerService(const WorkerService&) = delete;
+  WorkerService& operator=(const WorkerService&) = delete;
   /// Waits up to `timeout` for messages and handles all that are waiting; false when the context
   /// is being terminated (the caller should stop).
   bool poll_once(std::chrono::milliseconds timeout);
@@ -80,30 +112,45 @@ class WorkerService {
            const std::function<void()>& tick = {});
   std::uint64_t epoch() const { return epoch_; }                 ///< random per instance
   const WorkerCounters& counters() const { return counters_; }   ///< counters so far
-  std::vector<Held> held() const;                                ///< block sets in memory, MRU first
+  std::vector<Held> held() const;                                ///< block sets in memory (all clients), MRU first
+  std::uint64_t upload_bytes() const { return buffered_; }       ///< bytes buffered for uploads now
+  bool loading() const { return job_ != nullptr; }               ///< a set is being hashed, decoded or built
 
  private:
+  /// One client's view of a loaded set; clients that sent the same bytes share the backend.
   struct Loaded {
+    std::string owner;  // the client that loaded it (owner_of)
     std::uint64_t hash;
+    Digest digest;
     std::uint32_t faces;
-    std::unique_ptr<CollisionBackend> backend;
+    std::shared_ptr<CollisionBackend> backend;
     std::chrono::steady_clock::time_point last_used;
   };
-  struct Assembly {
+  /// A block set arriving in chunks from one client.
+  struct Upload {
+    std::string owner, peer;  // who sends it, and the routing id to answer
     std::uint64_t hash = 0, total = 0;
     std::vector<std::uint8_t> bytes;
-    bool active = false;
+    std::chrono::steady_clock::time_point last_chunk;
   };
-  void handle(const zmq::message_t& peer, std::span<const std::uint8_t> frame);
+  struct LoadJob;  // a complete upload on the loader thread (worker_service.cpp)
+  void handle(const zmq::message_t& peer, const std::string& owner, std::span<const std::uint8_t> frame);
   void handle_zap();
-  void on_load(const zmq::message_t& peer, const LoadBlocksMsg& m);
-  void on_query(const zmq::message_t& peer, const QueryMsg& m);
+  void on_load(const zmq::message_t& peer, const std::string& owner, const LoadBlocksMsg& m);
+  void on_query(const zmq::message_t& peer, const std::string& owner, const QueryMsg& m);
   void send(const zmq::message_t& peer, const Message& m);
+  void send(const std::string& peer, const Message& m);
   void send_error(const zmq::message_t& peer, ErrorCode code, std::uint64_t ref, std::string text);
-  HelloMsg hello(std::uint64_t echo) const;
+  void send_error(const std::string& peer, ErrorCode code, std::uint64_t ref, std::string text);
+  HelloMsg hello(const std::string& owner, std::uint64_t echo) const;
+  std::string owner_of(const zmq::message_t& peer, const zmq::message_t& frame) const;
   void log(int priority, const std::string& text) const { if (cfg_.log) cfg_.log(priority, text); }
   void note_bad(const std::string& why);
-  void drop_idle_sets();  ///< at most once a second: idle_set_ttl
+  void drop_idle();             ///< at most once a second: idle_set_ttl, upload_timeout
+  void drop_upload(std::unordered_map<std::string, Upload>::iterator it);
+  void start_job();             ///< hands the next waiting upload to the loader thread
+  void finish_job();            ///< installs (or refuses) the loader's result
+  std::size_t distinct_backends() const;
 
   WorkerConfig cfg_;
   BackendFactory factory_;
@@ -113,7 +160,11 @@ class WorkerService {
   std::string init_error_;        // a CURVE set-up failure, reported by bind()
   std::uint64_t epoch_;
   std::list<Loaded> sets_;        // MRU first
-  Assembly asm_;
+  std::unordered_map<std::string, Upload> uploads_;  // in progress, by owner
+  std::deque<Upload> waiting_;    // complete, waiting for the loader
+  std::uint64_t buffered_ = 0;    // Σ capacity of uploads_ and waiting_ bytes, and the job's
+  std::shared_ptr<LoadJob> job_;  // on the loader thread, or null
+  std::thread loader_;
   WorkerCounters counters_;
   std::vector<FacePair> pairs_;   // reused per query
   std::vector<std::uint8_t> out_; // reused encode buffer

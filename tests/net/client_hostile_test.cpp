@@ -21,6 +21,7 @@ class FakeWorker {
  public:
   explicit FakeWorker(zmq::context_t& ctx) : sock_(ctx, zmq::socket_type::router) {
     sock_.set(zmq::sockopt::linger, 0);
+    sock_.set(zmq::sockopt::router_handover, 1);  // as WorkerService: a reconnecting client keeps its routing id
     sock_.bind("tcp://127.0.0.1:*");
     endpoint_ = sock_.get(zmq::sockopt::last_endpoint);
     thread_ = std::thread([this] { loop(); });

@@ -27,8 +27,9 @@ std::string tag() {
 }
 
 std::unique_ptr<ScatterGather> client(zmq::context_t& ctx, const LocalWorkers& w, const test::NetScene& s,
-                                      std::uint32_t miss_limit = 3) {
+                                      std::uint32_t miss_limit = 3, std::string routing_id = {}) {
   ScatterConfig cfg;
+  cfg.routing_id = std::move(routing_id);
   cfg.endpoints = w.endpoints();
   cfg.miss_limit = miss_limit;
   cfg.heartbeat_period = 20ms;
@@ -75,18 +76,18 @@ TEST_CASE("merged pairs equal the single-process reference for 1, 2, 4 and 8 inp
   }
 }
 
-TEST_CASE("a worker that already holds a block set is not sent it again") {
+TEST_CASE("a worker that already holds a client's block set is not sent it again; another client must send it") {
   zmq::context_t ctx;
   const test::NetScene s = test::small_scene(6);
   const std::string t = tag();
   auto w = LocalWorkers::start(ctx, 3, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); });
   REQUIRE(w.ok());
   {
-    auto c = client(ctx, *w.value(), s);
+    auto c = client(ctx, *w.value(), s, 3, "client-one");
     REQUIRE(c->wait_ready(Clock::now() + 10s));
     for (const auto& ws : c->workers()) CHECK(ws.loads_sent == 1);
   }
-  auto c2 = client(ctx, *w.value(), s);  // a second client (e.g. a restarted app): same hashes
+  auto c2 = client(ctx, *w.value(), s, 3, "client-one");  // the same client again (restarted): same hashes
   REQUIRE(c2->wait_ready(Clock::now() + 10s));
   for (const auto& ws : c2->workers()) {
     CHECK(ws.loads_sent == 0);
@@ -94,6 +95,12 @@ TEST_CASE("a worker that already holds a block set is not sent it again") {
     CHECK(ws.holds_target);
   }
   CHECK(c2->round(1, test::contact_poses(s, 1)[0], Clock::now() + 5s).complete);
+  // A different client is not shown client-one's sets: it sends its own bytes (the workers keep
+  // one backend for both) and gets exact rounds.
+  auto c3 = client(ctx, *w.value(), s);
+  REQUIRE(c3->wait_ready(Clock::now() + 10s));
+  for (const auto& ws : c3->workers()) CHECK(ws.loads_sent == 1);
+  CHECK(c3->round(1, test::contact_poses(s, 1)[0], Clock::now() + 5s).complete);
 }
 
 TEST_CASE("a stopped worker: rounds return by their deadline, incomplete until reassigned, then exact; restart reloads") {

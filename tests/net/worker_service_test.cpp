@@ -1,0 +1,268 @@
+// Tests src/net/worker_service.* as clients see it over inproc://: clients kept apart (uploads,
+// visible sets), loads built off the socket thread (heartbeats answered during a build), and the
+// bounds on buffered upload bytes, concurrent uploads and abandoned uploads.
+#include <doctest/doctest.h>
+
+#include <condition_variable>
+#include <mutex>
+#include <thread>
+
+#include "net/local_workers.hpp"
+#include "net/reference_backend.hpp"
+#include "net_test_util.hpp"
+
+using namespace st;
+using namespace st::net;
+using namespace std::chrono_literals;
+
+namespace {
+
+std::string ws_tag() {
+  static int n = 0;
+  return "ws" + std::to_string(++n);
+}
+
+/// A raw client: a DEALER with a chosen routing id.
+struct RawClient {
+  zmq::socket_t d;
+  RawClient(zmq::context_t& ctx, const std::string& endpoint, const std::string& id) : d(ctx, zmq::socket_type::dealer) {
+    d.set(zmq::sockopt::linger, 0);
+    d.set(zmq::sockopt::rcvtimeo, 10000);
+    d.set(zmq::sockopt::routing_id, zmq::buffer(id));
+    d.connect(endpoint);
+  }
+  void send(const std::vector<std::uint8_t>& bytes) { d.send(zmq::buffer(bytes), zmq::send_flags::none); }
+  Message recv() {
+    zmq::message_t m;
+    REQUIRE(d.recv(m));
+    auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, default_limits());
+    REQUIRE(r.ok());
+    return r.value();
+  }
+  Message ask(const std::vector<std::uint8_t>& bytes) {
+    send(bytes);
+    return recv();
+  }
+  /// Sends `bytes` as LoadBlocks chunks of `chunk` bytes, from `from` up to `to` (byte offsets).
+  void upload(const std::vector<std::uint8_t>& bytes, std::uint64_t hash, std::size_t chunk, std::size_t from = 0,
+              std::size_t to = SIZE_MAX) {
+    for (std::size_t off = from; off < std::min(to, bytes.size()); off += chunk) {
+      const std::size_t n = std::min(chunk, bytes.size() - off);
+      send(encode(LoadBlocksMsg{hash, bytes.size(), off, {bytes.begin() + off, bytes.begin() + off + n}}));
+    }
+  }
+};
+
+ErrorMsg error_of(const Message& m) {
+  const auto* e = std::get_if<ErrorMsg>(&m);
+  REQUIRE_MESSAGE(e, "expected an Error, got ", type_name(m));
+  return *e;
+}
+
+HelloMsg hello_of(const Message& m) {
+  const auto* h = std::get_if<HelloMsg>(&m);
+  REQUIRE_MESSAGE(h, "expected a Hello, got ", type_name(m));
+  return *h;
+}
+
+bool holds(const HelloMsg& h, std::uint64_t hash) {
+  return std::any_of(h.held.begin(), h.held.end(), [&](const Held& x) { return x.hash == hash; });
+}
+
+/// The encoded block set of a small scene (every block), and its hash.
+struct Encoded {
+  std::vector<std::uint8_t> bytes;
+  std::uint64_t hash = 0;
+};
+Encoded encoded_scene(int freq) {
+  const test::NetScene s = test::small_scene(freq);
+  std::vector<std::uint32_t> all(s.blocks.size());
+  for (std::uint32_t b = 0; b < all.size(); ++b) all[b] = b;
+  auto set = make_block_set(s.probe, s.object, s.blocks, all, 24);
+  REQUIRE(set.ok());
+  Encoded e;
+  e.bytes = encode_block_set(set.value());
+  e.hash = block_set_hash(e.bytes);
+  return e;
+}
+
+/// A backend whose load() waits until the test opens the gate: a build that takes as long as the
+/// test wants, without timing anything.
+struct Gate {
+  std::mutex m;
+  std::condition_variable cv;
+  bool open = false;
+  int loads_started = 0;
+  void release() {
+    std::lock_guard lk(m);
+    open = true;
+    cv.notify_all();
+  }
+};
+class GatedBackend final : public CollisionBackend {
+ public:
+  explicit GatedBackend(std::shared_ptr<Gate> g) : gate_(std::move(g)), inner_(reference_backend_factory()()) {}
+  Status load(const BlockSet& set) override {
+    std::unique_lock lk(gate_->m);
+    ++gate_->loads_started;
+    gate_->cv.notify_all();
+    gate_->cv.wait(lk, [&] { return gate_->open; });
+    return inner_->load(set);
+  }
+  QueryStats query(const geom::Pose& pose, std::vector<FacePair>& out, std::size_t max_pairs) override {
+    return inner_->query(pose, out, max_pairs);
+  }
+
+ private:
+  std::shared_ptr<Gate> gate_;
+  std::unique_ptr<CollisionBackend> inner_;
+};
+
+}  // namespace
+
+TEST_CASE("BLAKE2b-256 keys block sets: the published test vector for \"abc\"") {
+  const std::string abc = "abc";
+  const std::span<const std::uint8_t> b(reinterpret_cast<const std::uint8_t*>(abc.data()), abc.size());
+  const Digest d = block_set_digest(b);
+  const std::uint8_t want[8] = {0xbd, 0xdd, 0x81, 0x3c, 0x63, 0x42, 0x39, 0x72};  // bddd813c63423972…
+  for (int i = 0; i < 8; ++i) CHECK(d[static_cast<std::size_t>(i)] == want[i]);
+  CHECK(d[31] == 0x19);
+  CHECK(block_set_hash(b) == 0x723942633c81ddbdull);
+}
+
+TEST_CASE("two clients: each sees and queries only the sets it sent; neither can abort the other's upload") {
+  zmq::context_t ctx;
+  const std::string t = ws_tag();
+  auto w = LocalWorkers::start(ctx, 1, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); });
+  REQUIRE(w.ok());
+  const std::string ep = w.value()->endpoints()[0];
+  RawClient a(ctx, ep, "client-a"), b(ctx, ep, "client-b");
+  const Encoded set = encoded_scene(6);
+  const std::size_t chunk = set.bytes.size() / 3 + 1;
+  REQUIRE(set.bytes.size() > chunk);
+
+  // a sends the first part of its set.
+  a.upload(set.bytes, set.hash, chunk, 0, chunk);
+  // b sends a chunk of the same set out of order, and then starts (and drops) its own upload of it:
+  // both concern b's upload only.
+  CHECK(error_of(b.ask(encode(LoadBlocksMsg{set.hash, set.bytes.size(), chunk, {1, 2, 3}}))).code == ErrorCode::LoadFailed);
+  b.upload(set.bytes, set.hash, chunk, 0, chunk);
+  CHECK(error_of(b.ask(encode(LoadBlocksMsg{set.hash, set.bytes.size(), 7, {1}}))).code == ErrorCode::LoadFailed);
+  // a's upload completes.
+  a.upload(set.bytes, set.hash, chunk, chunk);
+  const HelloMsg ha = hello_of(a.recv());
+  CHECK(holds(ha, set.hash));
+
+  // b is shown nothing and may not query a's set.
+  const HelloMsg hb = hello_of(b.ask(encode(HeartbeatMsg{42})));
+  CHECK(hb.echo == 42);
+  CHECK(hb.held.empty());
+  const ErrorMsg e = error_of(b.ask(encode(QueryMsg{9, set.hash, geom::Pose::Identity()})));
+  CHECK(e.code == ErrorCode::NotLoaded);
+  CHECK(e.ref == 9);
+  CHECK(hello_of(b.recv()).held.empty());  // the Hello after NotLoaded: still nothing of a's
+
+  // a queries its set.
+  const Message r = a.ask(encode(QueryMsg{10, set.hash, geom::Pose::Identity()}));
+  REQUIRE(std::holds_alternative<ResultMsg>(r));
+  CHECK(std::get<ResultMsg>(r).seq == 10);
+
+  // b sends the same bytes: now it may query them too (one backend serves both).
+  b.upload(set.bytes, set.hash, chunk);
+  CHECK(holds(hello_of(b.recv()), set.hash));
+  const Message rb = b.ask(encode(QueryMsg{11, set.hash, geom::Pose::Identity()}));
+  REQUIRE(std::holds_alternative<ResultMsg>(rb));
+  CHECK(std::get<ResultMsg>(rb).pairs == std::get<ResultMsg>(r).pairs);
+}
+
+TEST_CASE("a worker answers heartbeats and other clients' queries while it builds a block set") {
+  zmq::context_t ctx;
+  const std::string t = ws_tag();
+  auto gate = std::make_shared<Gate>();
+  int built = 0;
+  // The first set builds at once; every later one waits at the gate.
+  BackendFactory factory = [gate, &built]() -> std::unique_ptr<CollisionBackend> {
+    if (built++ == 0) return reference_backend_factory()();
+    return std::make_unique<GatedBackend>(gate);
+  };
+  auto w = LocalWorkers::start(ctx, 1, factory, [&](int i) { return inproc_endpoint(i, t); });
+  REQUIRE(w.ok());
+  const std::string ep = w.value()->endpoints()[0];
+  RawClient a(ctx, ep, "client-a"), b(ctx, ep, "client-b");
+  const Encoded small = encoded_scene(4), big = encoded_scene(8);
+  a.upload(small.bytes, small.hash, 1 << 20);
+  REQUIRE(holds(hello_of(a.recv()), small.hash));
+
+  b.upload(big.bytes, big.hash, 1 << 20);
+  {  // wait until b's set is at the gate: the build has started
+    std::unique_lock lk(gate->m);
+    REQUIRE(gate->cv.wait_for(lk, 10s, [&] { return gate->loads_started == 1; }));
+  }
+  // During the build: b's heartbeat is answered (its set not yet listed), a's queries are answered.
+  const HelloMsg during = hello_of(b.ask(encode(HeartbeatMsg{7})));
+  CHECK(during.echo == 7);
+  CHECK_FALSE(holds(during, big.hash));
+  for (std::uint64_t seq = 1; seq <= 3; ++seq) {
+    const Message r = a.ask(encode(QueryMsg{seq, small.hash, geom::Pose::Identity()}));
+    REQUIRE(std::holds_alternative<ResultMsg>(r));
+  }
+  gate->release();
+  const HelloMsg after = hello_of(b.recv());  // the Hello that reports the finished load
+  CHECK(after.echo == 0);
+  CHECK(holds(after, big.hash));
+}
+
+TEST_CASE("upload bounds: total buffered bytes, concurrent uploads, and abandoned uploads freed") {
+  zmq::context_t ctx;
+  const Encoded set = encoded_scene(6);
+  const std::size_t chunk = 1024;
+  REQUIRE(set.bytes.size() > 4 * chunk);
+
+  SUBCASE("bytes over max_upload_bytes are refused; the first client's upload completes") {
+    WorkerConfig wc;
+    // The first upload's buffer grows to min(total, 1 MiB); a second one cannot fit.
+    wc.max_upload_bytes = set.bytes.size() + set.bytes.size() / 2;
+    const std::string t = ws_tag();
+    auto w = LocalWorkers::start(ctx, 1, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, wc);
+    REQUIRE(w.ok());
+    RawClient a(ctx, w.value()->endpoints()[0], "client-a"), b(ctx, w.value()->endpoints()[0], "client-b");
+    a.upload(set.bytes, set.hash, chunk, 0, chunk);
+    const ErrorMsg e = error_of(b.ask(encode(LoadBlocksMsg{set.hash, set.bytes.size(), 0, {set.bytes.begin(), set.bytes.begin() + chunk}})));
+    CHECK(e.code == ErrorCode::TooLarge);
+    CHECK(e.text.find("max_upload_bytes") != std::string::npos);
+    a.upload(set.bytes, set.hash, chunk, chunk);
+    CHECK(holds(hello_of(a.recv()), set.hash));
+  }
+  SUBCASE("more than max_uploads clients uploading at once: the next is told the worker is busy") {
+    WorkerConfig wc;
+    wc.max_uploads = 2;
+    const std::string t = ws_tag();
+    auto w = LocalWorkers::start(ctx, 1, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, wc);
+    REQUIRE(w.ok());
+    const std::string ep = w.value()->endpoints()[0];
+    RawClient a(ctx, ep, "client-a"), b(ctx, ep, "client-b"), c(ctx, ep, "client-c");
+    a.upload(set.bytes, set.hash, chunk, 0, chunk);
+    b.upload(set.bytes, set.hash, chunk, 0, chunk);
+    const ErrorMsg e = error_of(c.ask(encode(LoadBlocksMsg{set.hash, set.bytes.size(), 0, {set.bytes.begin(), set.bytes.begin() + chunk}})));
+    CHECK(e.code == ErrorCode::TooLarge);
+    CHECK(e.text.find("max_uploads") != std::string::npos);
+    b.upload(set.bytes, set.hash, chunk, chunk);  // b finishes: a slot is free again
+    CHECK(holds(hello_of(b.recv()), set.hash));
+    c.upload(set.bytes, set.hash, chunk);
+    CHECK(holds(hello_of(c.recv()), set.hash));
+  }
+  SUBCASE("an upload with no chunk for upload_timeout is dropped: its next chunk is out of order") {
+    WorkerConfig wc;
+    wc.upload_timeout = 100ms;
+    const std::string t = ws_tag();
+    auto w = LocalWorkers::start(ctx, 1, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, wc);
+    REQUIRE(w.ok());
+    RawClient a(ctx, w.value()->endpoints()[0], "client-a");
+    a.upload(set.bytes, set.hash, chunk, 0, chunk);
+    // The worker looks for abandoned uploads once a second; wait well past timeout + check period.
+    std::this_thread::sleep_for(2500ms);
+    const ErrorMsg e = error_of(a.ask(encode(LoadBlocksMsg{set.hash, set.bytes.size(), chunk, {set.bytes.begin() + chunk, set.bytes.begin() + 2 * chunk}})));
+    CHECK(e.code == ErrorCode::LoadFailed);
+    CHECK(e.text.find("out of order") != std::string::npos);
+  }
+}
