@@ -137,11 +137,13 @@ int main(int argc, char** argv) {
     wc.curve = st::net::CurveServer{key.value(), clients.value()};
     log_line(6, "CURVE on: public key " + st::net::curve_public_of(key.value()).value() + ", " +
                     std::to_string(clients.value().size()) + " allowed client key(s)");
+    st::net::wipe_secret(key.value());
   }
   int rc = 0;
   {
     // Sphere trees + collide() (exact); the SAT reference backend stays for tests.
     st::net::WorkerService svc(ctx, wc, st::net::tree_backend_factory());
+    if (wc.curve) st::net::wipe_secret(wc.curve->secret_z85);  // the service has handed it to libzmq
     if (auto s = svc.bind(cfg.bind); !s) { log_line(3, s.error()); return 1; }
     const std::string ep = svc.last_endpoint();
     const bool exposed = !st::net::is_local_endpoint(cfg.bind) && !wc.curve;

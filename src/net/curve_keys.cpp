@@ -1,6 +1,8 @@
 // CURVE key files (curve_keys.hpp).
 #include "net/curve_keys.hpp"
 
+#include <sodium.h>
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -97,13 +99,16 @@ Result<std::string> read_key_line(const std::string& path_in, const char* what, 
   }
   std::string line(buf, n);
   std::memset(buf, 0, sizeof buf);
-  line = line.substr(0, line.find('\n'));
+  line.resize(std::min(line.size(), line.find('\n')));  // in place: no unwiped copy of the key
   while (!line.empty() && std::isspace(static_cast<unsigned char>(line.back()))) line.pop_back();
   std::size_t lead = 0;
   while (lead < line.size() && std::isspace(static_cast<unsigned char>(line[lead]))) ++lead;
   line.erase(0, lead);
   if (line.empty()) return fail(path, ": the ", what, " is empty (expected a 40-character Z85 key on the first line)");
-  if (Status s = check_z85_key(line, path + ": first line"); !s) return Error{s.error()};
+  if (Status s = check_z85_key(line, path + ": first line"); !s) {
+    wipe_secret(line);
+    return Error{s.error()};
+  }
   return line;
 }
 
@@ -111,8 +116,15 @@ Result<std::string> read_key_line(const std::string& path_in, const char* what, 
 
 Status check_z85_key(const std::string& z85, const std::string& what) {
   std::uint8_t raw[32];
-  if (z85.size() != 40 || !zmq_z85_decode(raw, z85.c_str())) return fail(what, ": not a 40-character Z85 CURVE key");
+  const bool ok = z85.size() == 40 && zmq_z85_decode(raw, z85.c_str());
+  sodium_memzero(raw, sizeof raw);  // the key may be a secret one
+  if (!ok) return fail(what, ": not a 40-character Z85 CURVE key");
   return Ok{};
+}
+
+void wipe_secret(std::string& s) {
+  if (!s.empty()) sodium_memzero(s.data(), s.size());
+  s.clear();
 }
 
 Result<std::string> curve_public_of(const std::string& secret_z85) {

@@ -9,10 +9,16 @@
 
 namespace st::net {
 
-/// A CURVE key pair, Z85 (40 characters each).
+/// Overwrites a string's characters with zeros (sodium_memzero: not optimised away) and empties
+/// it; for every copy of a secret key once it has been handed to libzmq. Copies made by earlier
+/// reallocations are out of reach: code that holds a secret does not grow the string.
+void wipe_secret(std::string& s);
+
+/// A CURVE key pair, Z85 (40 characters each). The secret is wiped when the pair is destroyed.
 struct CurveKeyPair {
   std::string public_z85;  ///< handed out: workers' allow-lists, the clients' server_key
   std::string secret_z85;  ///< stays in its owner's PREFIX.key
+  ~CurveKeyPair() { wipe_secret(secret_z85); }
 };
 
 /// The two files of a key pair.

@@ -567,7 +567,9 @@ Result<std::unique_ptr<ScatterGather>> ScatterGather::create(zmq::context_t& ctx
 }
 
 ScatterGather::ScatterGather(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
-ScatterGather::~ScatterGather() = default;
+ScatterGather::~ScatterGather() {
+  if (impl_) wipe_secret(impl_->cfg.curve_secret);  // kept until now: sockets reopened after a fault need it
+}
 
 void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time_point deadline, RoundResult& out) {
   Impl& m = *impl_;

@@ -98,6 +98,7 @@ WorkerService::WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFa
       zap_.bind("inproc://zeromq.zap.01");
       sock_.set(zmq::sockopt::curve_server, true);
       sock_.set(zmq::sockopt::curve_secretkey, cfg_.curve->secret_z85);
+      wipe_secret(cfg_.curve->secret_z85);  // libzmq holds it now
       sock_.set(zmq::sockopt::zap_domain, "spheretouch");
     } catch (const std::exception& e) {
       init_error_ = std::string("CURVE set-up: ") + e.what();
@@ -207,17 +208,19 @@ void WorkerService::handle_zap() {
     ok = std::find(allowed_.begin(), allowed_.end(), key) != allowed_.end();
     if (!ok) {
       ++counters_.refused;
-      constexpr std::size_t kMaxRefusedKeys = 1024;             // bounds the map under a key-rotating flood
-      constexpr auto kRefusalLogInterval = std::chrono::seconds(60);  // a retrying client: one line a minute
-      if (refusals_.size() >= kMaxRefusedKeys && !refusals_.count(key)) refusals_.clear();
-      Refusal& r = refusals_[key];
+      // Rate-limited per source address, not per key: a client rotating keys gets one line, then
+      // one a minute with a count, however many keys it tries.
+      constexpr std::size_t kMaxRefusedSources = 1024;                // bounds the map under a spoofed flood
+      constexpr auto kRefusalLogInterval = std::chrono::seconds(60);
+      const std::string source(f[3].to_string_view());
+      if (refusals_.size() >= kMaxRefusedSources && !refusals_.count(source)) refusals_.clear();
+      Refusal& r = refusals_[source];
       const auto now = std::chrono::steady_clock::now();
       if (r.logged == std::chrono::steady_clock::time_point{} || now - r.logged >= kRefusalLogInterval) {
         char z85[41] = {};
         zmq_z85_encode(z85, static_cast<const std::uint8_t*>(f[6].data()), 32);
-        log(4, std::string("refused CURVE client ") + z85 + " from " + std::string(f[3].to_string_view()) +
-                   ": not in allowed_clients" +
-                   (r.unlogged ? " (" + std::to_string(r.unlogged) + " more refusals of this key not logged)" : ""));
+        log(4, std::string("refused CURVE client ") + z85 + " from " + source + ": not in allowed_clients" +
+                   (r.unlogged ? " (" + std::to_string(r.unlogged) + " more refusals from this address not logged)" : ""));
         r.logged = now;
         r.unlogged = 0;
       } else {

@@ -171,8 +171,9 @@ class WorkerService {
   std::chrono::steady_clock::time_point bad_logged_{};
   std::chrono::steady_clock::time_point next_idle_check_{};
   std::uint64_t bad_unlogged_ = 0;
-  // Refused client keys (raw): each is logged when first seen, then at most once a minute with a
-  // count, so a client retrying with a wrong key cannot flood the log. Bounded: cleared when full.
+  // Refused CURVE handshakes by source address: the first is logged, then at most one line a
+  // minute with a count, so a client retrying or rotating keys cannot flood the log. Bounded:
+  // cleared when full.
   struct Refusal {
     std::chrono::steady_clock::time_point logged{};
     std::uint64_t unlogged = 0;

@@ -3,6 +3,8 @@
 // not match, a secret key offered as a public one).
 #include <doctest/doctest.h>
 
+#include <algorithm>
+
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -201,4 +203,15 @@ TEST_CASE("$CREDENTIALS_DIRECTORY is expanded in key paths") {
   ::unsetenv("CREDENTIALS_DIRECTORY");
   REQUIRE_MESSAGE(k.ok(), k.error());
   CHECK(k.value() == kSecret);
+}
+
+TEST_CASE("wipe_secret zeroes a key's characters in place and empties the string") {
+  CurveKeyPair k = generate_curve_key_pair().value();
+  std::string& s = k.secret_z85;
+  REQUIRE(s.size() == 40);
+  const char* buf = s.data();  // clear() keeps the buffer: its bytes can be read afterwards
+  wipe_secret(s);
+  CHECK(s.empty());
+  CHECK(s.data() == buf);
+  CHECK(std::all_of(buf, buf + 40, [](char c) { return c == 0; }));
 }

@@ -4,6 +4,7 @@
 #include <doctest/doctest.h>
 
 #include <atomic>
+#include <mutex>
 #include <thread>
 
 #include "net/curve_keys.hpp"
@@ -26,9 +27,16 @@ struct ServedWorker {
   std::thread thread;
   std::string endpoint;
 
+  std::mutex log_mutex;
+  std::vector<std::string> log_lines;  // what the worker logged (read after halt())
+
   explicit ServedWorker(std::optional<CurveServer> curve) {
     WorkerConfig wc;
     wc.curve = std::move(curve);
+    wc.log = [this](int, const std::string& line) {
+      std::lock_guard lk(log_mutex);
+      log_lines.push_back(line);
+    };
     svc = std::make_unique<WorkerService>(ctx, wc, tree_backend_factory());
     endpoint = "tcp://127.0.0.1:" + std::to_string(test::free_port());
     Status s = svc->bind(endpoint);
@@ -89,4 +97,21 @@ TEST_CASE("probe_endpoint: admitted, refused, no keys, wrong server key, plain w
   CHECK_MESSAGE(none.outcome == ProbeOutcome::connection_refused, none.detail);
   CHECK_FALSE(none.definitive());
   CHECK(std::chrono::steady_clock::now() - t0 < 3s);  // three refused connects say enough
+}
+
+TEST_CASE("a client rotating CURVE keys is refused every time and logged once, not once per key") {
+  const CurveKeyPair server = generate_curve_key_pair().value(), client = generate_curve_key_pair().value();
+  zmq::context_t ctx;
+  ServedWorker w(CurveServer{server.secret_z85, {client.public_z85}});
+  constexpr int kKeys = 40;
+  for (int i = 0; i < kKeys; ++i) {
+    const CurveKeyPair rogue = generate_curve_key_pair().value();
+    auto r = probe_endpoint(ctx, w.endpoint, server.public_z85, rogue.public_z85, rogue.secret_z85, 5000ms);
+    REQUIRE_MESSAGE(r.outcome == ProbeOutcome::auth_refused, r.detail);
+  }
+  w.halt();
+  CHECK(w.svc->counters().refused >= kKeys);
+  int refused_lines = 0;
+  for (const std::string& l : w.log_lines) refused_lines += l.find("refused CURVE client") != std::string::npos;
+  CHECK(refused_lines == 1);
 }
