@@ -16,6 +16,15 @@ namespace st::geom {
 struct LoadOptions {
   double scale = 1.0;        ///< extra factor applied after the unit conversion
   std::string units = "mm";  ///< unit of the file's coordinates: um, mm, cm, m, in
+  // Formats read by assimp (glTF, FBX, ...) are read in a child process, confined and budgeted:
+  /// Let the file open other files (a glTF's .bin buffers), but only regular files inside its own
+  /// directory. Off: it may open nothing but itself (embedded data: URIs still work).
+  bool allow_external_files = false;
+  /// Memory assimp may use: this floor plus assimp_memory_per_byte × the input's bytes (the file,
+  /// plus its directory's files when allow_external_files). Past it the load is refused.
+  std::uint32_t assimp_memory_floor_mb = 512;
+  std::uint32_t assimp_memory_per_byte = 64;
+  std::uint32_t assimp_cpu_seconds = 120;  ///< CPU time assimp may take
 };
 
 /// What the loader did, for `spheretouch info` and logs.

@@ -88,6 +88,24 @@ std::string gltf_text() {
 {"bufferView":1,"componentType":5123,"count":18,"type":"SCALAR"}]})";
 }
 
+/// The same glTF with its buffer in a separate file named by `uri`; `bin` gets the buffer's bytes.
+std::string gltf_external(const std::string& uri, std::string& bin) {
+  std::string t = gltf_text();
+  const std::size_t a = t.find("data:application"), b = t.find('"', a);
+  const std::string b64 = t.substr(a + 37, b - a - 37);  // after "data:application/octet-stream;base64,"
+  bin.clear();
+  const std::string tbl = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  unsigned acc = 0;
+  int bits = 0;
+  for (char c : b64) {
+    if (c == '=') break;
+    acc = acc << 6 | unsigned(tbl.find(c));
+    bits += 6;
+    if (bits >= 8) bin += char(acc >> (bits -= 8) & 0xFF);
+  }
+  return t.replace(a, b - a, uri);
+}
+
 std::string load_error(const std::string& path, const LoadOptions& o = {}) {
   Result<LoadedMesh> r = load_mesh(path, o);
   REQUIRE_FALSE(r.ok());
@@ -393,4 +411,44 @@ TEST_CASE("real meshes: the model set loads closed and manifold") {
   CHECK(load_mesh(st::test::model("hand_L2.off")).value().mesh.num_faces() == 38240);
   CHECK(load_mesh(st::test::model("elephant.off")).value().mesh.num_faces() == 88928);
   CHECK(load_mesh(st::test::model("armadillo_L1.off")).value().mesh.num_faces() == 208000);
+}
+
+TEST_CASE("assimp formats: a file opens no other file unless allowed, and never one outside its directory") {
+  TempDir d;
+  std::filesystem::create_directories(d.path / "mesh");
+  std::string bin;
+  write_file(d.file("mesh/ext.gltf"), gltf_external("p.bin", bin));
+  write_file(d.file("mesh/p.bin"), bin);
+  // Default: only the file itself.
+  const std::string e = load_error(d.file("mesh/ext.gltf"));
+  CHECK(contains(e, "ext.gltf"));
+  CHECK(contains(e, "p.bin"));
+  CHECK(contains(e, "not opened"));
+  // Allowed: a buffer in the same directory loads, exactly.
+  LoadOptions allow;
+  allow.allow_external_files = true;
+  Result<LoadedMesh> r = load_mesh(d.file("mesh/ext.gltf"), allow);
+  REQUIRE_MESSAGE(r.ok(), r.error());
+  check_faces(r.value().mesh, kTris);
+  // Outside the directory, by ../ or by a symlink: refused even when allowed (its bytes would
+  // come back as coordinates).
+  write_file(d.file("secret.bin"), bin);
+  write_file(d.file("mesh/up.gltf"), gltf_external("../secret.bin", bin));
+  CHECK(contains(load_error(d.file("mesh/up.gltf"), allow), "secret.bin"));
+  std::filesystem::create_symlink(d.path / "secret.bin", d.path / "mesh" / "link.bin");
+  write_file(d.file("mesh/link.gltf"), gltf_external("link.bin", bin));
+  CHECK(contains(load_error(d.file("mesh/link.gltf"), allow), "link.bin"));
+}
+
+TEST_CASE("assimp formats: a tiny file that makes assimp allocate gigabytes is refused at its budget") {
+  // DirectX .x: assimp sizes its vertex array from the count (200 million vertices, 2.4 GB), a
+  // 100-byte file. The reader runs in a child with a memory budget; this process never grows.
+  TempDir d;
+  write_file(d.file("bomb.x"), "xof 0303txt 0032\nMesh m {\n 200000000;\n 0.0;0.0;0.0;,\n 1.0;0.0;0.0;,\n 0.0;1.0;0.0;;\n 1;\n 3;0,1,2;;\n}\n");
+  const std::string e = load_error(d.file("bomb.x"));
+  CHECK(contains(e, "bomb.x"));
+  CHECK(contains(e, "budget"));
+  // A legitimate file still loads under the same budget.
+  write_file(d.file("ok.gltf"), gltf_text());
+  CHECK(load_mesh(d.file("ok.gltf")).ok());
 }
