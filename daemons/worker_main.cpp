@@ -61,7 +61,7 @@ int main(int argc, char** argv) {
   std::string key_out;
   bool insecure = false, keygen = false, force = false;
   app.add_option("--config", config_file,
-                 "TOML config (bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb, [curve])")
+                 "TOML config (bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb, ipc_allowed_uids, [curve])")
       ->check(CLI::ExistingFile);
   app.add_option("--bind", bind, "endpoint to bind: tcp://HOST:PORT or ipc://PATH (overrides the config; default tcp://127.0.0.1:5555)");
   app.add_option("--id", worker_id, "worker id (overrides the config)")->check(CLI::Range(0, 1 << 20));
@@ -118,6 +118,7 @@ int main(int argc, char** argv) {
   wc.idle_set_ttl = std::chrono::seconds(cfg.idle_set_s);
   wc.limits.max_blockset_bytes = cfg.max_blockset_mb << 20;
   wc.max_upload_bytes = wc.limits.max_blockset_bytes;  // one largest set in transit (or several smaller)
+  wc.ipc_allowed_uids = cfg.ipc_allowed_uids;
   wc.log = log_line;
   {
     // What the limits cost: held sets, plus one being built, plus the upload buffer.
@@ -148,6 +149,9 @@ int main(int argc, char** argv) {
     const std::string ep = svc.last_endpoint();
     const bool exposed = !st::net::is_local_endpoint(cfg.bind) && !wc.curve;
     log_line(exposed ? 4 : 6, "listening on " + ep + (exposed ? " (INSECURE: no authentication)" : ""));
+    if (cfg.bind.rfind("tcp://", 0) == 0 && !exposed && !wc.curve)
+      log_line(5, "loopback TCP without CURVE: every local user can connect; bind ipc://PATH (this user only) or "
+                  "configure [curve] to keep other users out");
     notify(("READY=1\nSTATUS=listening on " + ep).c_str());
 
     // Watchdog: ping at a quarter of WatchdogSec; the loop wakes at least every 100 ms.

@@ -53,7 +53,16 @@ Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::strin
     else if (key == "max_sets") s = get_int<std::uint32_t>(node, key, source, 1, 64, c.max_sets);
     else if (key == "idle_set_s") s = get_int<std::uint32_t>(node, key, source, 0, 86400, c.idle_set_s);
     else if (key == "max_blockset_mb") s = get_int<std::uint64_t>(node, key, source, 1, 1u << 20, c.max_blockset_mb);
-    else if (key == "insecure") {
+    else if (key == "ipc_allowed_uids") {
+      const toml::array* a = node.as_array();
+      if (!a) return fail(where(source, node), ": ipc_allowed_uids: expected an array of user ids");
+      c.ipc_allowed_uids.clear();
+      for (const toml::node& u : *a) {
+        std::uint32_t uid = 0;
+        if (Status su = get_int<std::uint32_t>(u, "ipc_allowed_uids", source, 0, 0x7fffffffu, uid); !su) return Error{su.error()};
+        c.ipc_allowed_uids.push_back(uid);
+      }
+    } else if (key == "insecure") {
       if (!node.is_boolean()) return fail(where(source, node), ": insecure: expected true or false");
       c.insecure = *node.value<bool>();
     } else if (key == "curve") {
@@ -86,7 +95,7 @@ Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::strin
       }
     } else {
       return fail(where(source, node), ": unknown key '", key,
-                  "' (known: bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb, [curve])");
+                  "' (known: bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb, ipc_allowed_uids, [curve])");
     }
     if (!s) return Error{s.error()};
   }
@@ -146,7 +155,6 @@ Status check_daemon_config(const DaemonConfig& c) {
   if (!curve && clients) return fail("[curve]: allowed clients are set but secret_key_file is not");
   for (const std::string& k : c.curve_allowed_clients)
     if (Status s = check_z85_key(k, "[curve] allowed_clients: '" + k + "'"); !s) return s;
-  if (c.bind.rfind("ipc://", 0) == 0 && curve) return fail("[curve]: CURVE over ipc:// is pointless; use file permissions");
   if (!is_local_endpoint(c.bind) && !c.insecure && !curve)
     return fail("bind: '", c.bind, "' is not a loopback address; refusing to serve unauthenticated on a network. "
                 "Configure [curve] keys, or pass --insecure (insecure = true) on a trusted network");

@@ -4,10 +4,14 @@
 #include "net/worker_config.hpp"
 
 #include <malloc.h>
+#include <sys/stat.h>
 #include <sys/eventfd.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
 #include <random>
 #include <set>
 #include <stdexcept>
@@ -121,12 +125,43 @@ WorkerService::~WorkerService() {
 
 Status WorkerService::bind(const std::string& endpoint) {
   if (!init_error_.empty()) return Error{init_error_};
+  const bool ipc = endpoint.rfind("ipc://", 0) == 0;
+  const std::string path = ipc ? endpoint.substr(6) : std::string();
+  const bool file = ipc && !path.empty() && path[0] != '@';  // "@name": Linux abstract namespace
+  if (ipc) {
+    // Only this user (and the configured ones) may connect: libzmq compares SO_PEERCRED of each
+    // accepted connection with these filters (the option is deprecated upstream, still in 4.3).
+    std::vector<std::uint32_t> uids = cfg_.ipc_allowed_uids;
+    uids.push_back(static_cast<std::uint32_t>(::geteuid()));
+    for (std::uint32_t u : uids) {
+      const int v = static_cast<int>(u);
+      if (zmq_setsockopt(sock_.handle(), ZMQ_IPC_FILTER_UID, &v, sizeof v) != 0)
+        return fail("bind ", endpoint, ": cannot restrict ipc peers to uid ", u, ": ", zmq_strerror(zmq_errno()));
+    }
+  }
+  if (file) {
+    // Missing directories are created 0700; an existing one open to others is reported.
+    const std::filesystem::path dir = std::filesystem::path(path).parent_path();
+    if (!dir.empty()) {
+      std::vector<std::filesystem::path> missing;
+      for (std::filesystem::path d = dir; !d.empty() && !std::filesystem::exists(d); d = d.parent_path()) missing.push_back(d);
+      for (auto it = missing.rbegin(); it != missing.rend(); ++it)
+        if (::mkdir(it->c_str(), 0700) != 0 && errno != EEXIST)
+          return fail("bind ", endpoint, ": cannot create ", it->string(), ": ", std::strerror(errno));
+      struct stat st {};
+      if (::stat(dir.c_str(), &st) == 0 && (st.st_mode & 0002) && !(st.st_mode & S_ISVTX))
+        log(4, st::fail(dir.string(), " is writable by every user (mode ", std::oct, (st.st_mode & 07777),
+                        "): another user could replace ", path, "; use a 0700 directory").message);
+    }
+  }
   try {
     if (needs_ipv6(endpoint)) sock_.set(zmq::sockopt::ipv6, 1);
     sock_.bind(zmq_endpoint(endpoint));
   } catch (const zmq::error_t& e) {
     return fail("bind ", endpoint, ": ", e.what());
   }
+  if (file && ::chmod(path.c_str(), 0600) != 0)
+    return fail("bind ", endpoint, ": cannot make the socket file 0600: ", std::strerror(errno));
   return Ok{};
 }
 

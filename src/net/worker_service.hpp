@@ -66,8 +66,12 @@ struct WorkerConfig {
   /// Log sink (syslog priority 3 error … 7 debug, message); empty: silent. Bad messages are
   /// summarised at most once a second so a flood cannot flood the log.
   std::function<void(int, const std::string&)> log;
-  /// Encrypt and authenticate with CURVE; the service then owns its context's ZAP endpoint, so
-  /// only one CURVE service per context (the daemon's case).
+  /// On ipc:// endpoints, the users (besides the worker's own effective uid) whose processes may
+  /// connect: libzmq checks each connection's SO_PEERCRED. A filesystem path's missing directories
+  /// are created 0700 and the socket file is made 0600.
+  std::vector<std::uint32_t> ipc_allowed_uids;
+  /// Encrypt and authenticate with CURVE (any transport, ipc:// too); the service then owns its
+  /// context's ZAP endpoint, so only one CURVE service per context (the daemon's case).
   std::optional<CurveServer> curve;
 };
 

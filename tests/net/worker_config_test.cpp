@@ -118,3 +118,19 @@ TEST_CASE("allowed_clients_files: parsed, resolved against the config's director
   REQUIRE_FALSE(bad.ok());
   CHECK(bad.error().find("w.toml:2: curve.allowed_clients_files: expected an array") != std::string::npos);
 }
+
+TEST_CASE("ipc: CURVE is allowed over ipc://; ipc_allowed_uids is parsed and checked") {
+  const std::string k40 = "Yne@$w-vo<fVvi]a<NY6T1ed:M$fCG*[IaLV{hID";
+  DaemonConfig c;
+  c.bind = "ipc:///run/spheretouch/w.sock";
+  c.curve_secret_key_file = "/etc/spheretouch/worker.key";
+  c.curve_allowed_clients = {k40};
+  CHECK(check_daemon_config(c).ok());
+  auto p = parse_daemon_config("ipc_allowed_uids = [1000, 1001]\n", "w.toml");
+  REQUIRE(p.ok());
+  CHECK(p.value().ipc_allowed_uids == std::vector<std::uint32_t>{1000, 1001});
+  auto bad = parse_daemon_config("ipc_allowed_uids = [\"root\"]\n", "w.toml");
+  REQUIRE_FALSE(bad.ok());
+  CHECK(bad.error().find("w.toml:1: ipc_allowed_uids: expected an integer") != std::string::npos);
+  CHECK_FALSE(parse_daemon_config("ipc_allowed_uids = 5\n", "w.toml").ok());
+}
