@@ -69,7 +69,8 @@ if [ "$sanitizers" != 0 ]; then
     # without debug info to keep CI within its time on 2 cores (reports keep function names).
     { configure build-asan "${asan_args[@]}" &&
       build_targets build-asan spheretouch daemons/spheretouch-worker tests/test_geom tests/test_rt tests/test_net tests/test_app \
-        tests/fuzz/fuzz_wire_replay tests/fuzz/fuzz_mesh_replay tests/fuzz/fuzz_scene_replay tests/fuzz/fuzz_pose_replay
+        tests/fuzz/fuzz_wire_replay tests/fuzz/fuzz_mesh_replay tests/fuzz/fuzz_scene_replay tests/fuzz/fuzz_pose_replay \
+        tests/fuzz/fuzz_worker_replay tests/fuzz/fuzz_tree_replay tests/fuzz/fuzz_shm_replay
     } >"$bg/asan.log" 2>&1
     finished asan $?
     { configure build-tsan "${tsan_args[@]}" &&

@@ -200,14 +200,10 @@ Status write_tree(const SphereTree& t, const std::string& path) {
   return Ok{};
 }
 
-Result<SphereTree> read_tree(const std::string& path, const Mesh& mesh, const TreeParams& params) {
-  std::ifstream in(path, std::ios::binary | std::ios::ate);
-  if (!in) return fail(path, ": cannot open");
-  const auto file_size = static_cast<std::uint64_t>(in.tellg());
-  in.seekg(0);
-  Header h{};
-  if (file_size < sizeof h || !in.read(reinterpret_cast<char*>(&h), sizeof h))
-    return fail(path, ": corrupt: file of ", file_size, " bytes is shorter than the 64-byte header");
+namespace {
+
+/// The header's own checks against the file's size (before anything is allocated).
+Status check_header(const Header& h, std::uint64_t file_size, const std::string& path) {
   if (std::memcmp(h.magic, kMagic, 8) != 0) return fail(path, ": corrupt: bad magic (not a spheretouch tree file)");
   if (h.version != kTreeFormatVersion)
     return fail(path, ": corrupt: format version ", h.version, ", expected ", kTreeFormatVersion);
@@ -215,6 +211,18 @@ Result<SphereTree> read_tree(const std::string& path, const Mesh& mesh, const Tr
       file_size != sizeof h + h.payload_bytes)
     return fail(path, ": corrupt: sizes (", h.num_nodes, " nodes, ", h.num_faces, " faces, payload ", h.payload_bytes,
                 " bytes) do not match the file size ", file_size);
+  return Ok{};
+}
+
+}  // namespace
+
+Result<SphereTree> parse_tree(std::span<const std::uint8_t> bytes, const std::string& path, const Mesh& mesh,
+                              const TreeParams& params) {
+  Header h{};
+  if (bytes.size() < sizeof h)
+    return fail(path, ": corrupt: file of ", bytes.size(), " bytes is shorter than the 64-byte header");
+  std::memcpy(&h, bytes.data(), sizeof h);
+  if (Status s = check_header(h, bytes.size(), path); !s) return Error{s.error()};
   SphereTree t;
   t.params.leaf_faces = h.leaf_faces;
   t.mesh_hash = h.mesh_hash;
@@ -224,11 +232,15 @@ Result<SphereTree> read_tree(const std::string& path, const Mesh& mesh, const Tr
   t.cold.resize(h.num_nodes);
   t.face_order.resize(h.num_faces);
   t.face_boxes.resize(h.num_faces);
-  in.read(reinterpret_cast<char*>(t.nodes.data()), static_cast<std::streamsize>(t.nodes.size() * sizeof(SphereNode)));
-  in.read(reinterpret_cast<char*>(t.cold.data()), static_cast<std::streamsize>(t.cold.size() * sizeof(SphereNodeCold)));
-  in.read(reinterpret_cast<char*>(t.face_order.data()), static_cast<std::streamsize>(t.face_order.size() * 4));
-  in.read(reinterpret_cast<char*>(t.face_boxes.data()), static_cast<std::streamsize>(t.face_boxes.size() * sizeof(FaceBox)));
-  if (!in) return fail(path, ": corrupt: short read");
+  const std::uint8_t* p = bytes.data() + sizeof h;
+  auto take = [&](void* dst, std::size_t n) {
+    if (n) std::memcpy(dst, p, n);
+    p += n;
+  };
+  take(t.nodes.data(), t.nodes.size() * sizeof(SphereNode));
+  take(t.cold.data(), t.cold.size() * sizeof(SphereNodeCold));
+  take(t.face_order.data(), t.face_order.size() * 4);
+  take(t.face_boxes.data(), t.face_boxes.size() * sizeof(FaceBox));
   if (payload_checksum(t) != h.checksum) return fail(path, ": corrupt: payload checksum mismatch");
   if (h.leaf_faces != params.leaf_faces || h.mesh_hash != tree_hash(mesh, params) || h.num_faces != mesh.num_faces() ||
       h.num_vertices != mesh.num_vertices())
@@ -237,6 +249,52 @@ Result<SphereTree> read_tree(const std::string& path, const Mesh& mesh, const Tr
   if (Status s = check_structure(t, path); !s) return Error{s.error()};
   if (Status s = check_bounds(t, mesh, path); !s) return Error{s.error()};
   return t;
+}
+
+Result<SphereTree> read_tree(const std::string& path, const Mesh& mesh, const TreeParams& params) {
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  if (!in) return fail(path, ": cannot open");
+  const auto file_size = static_cast<std::uint64_t>(in.tellg());
+  in.seekg(0);
+  Header h{};
+  if (file_size < sizeof h || !in.read(reinterpret_cast<char*>(&h), sizeof h))
+    return fail(path, ": corrupt: file of ", file_size, " bytes is shorter than the 64-byte header");
+  // The sizes are checked before the payload is read, so a header cannot make us allocate.
+  if (Status s = check_header(h, file_size, path); !s) return Error{s.error()};
+  std::vector<std::uint8_t> all(file_size);
+  in.seekg(0);
+  if (!in.read(reinterpret_cast<char*>(all.data()), static_cast<std::streamsize>(file_size)))
+    return fail(path, ": corrupt: short read");
+  return parse_tree(all, path, mesh, params);
+}
+
+void seal_tree_bytes(std::vector<std::uint8_t>& bytes, const Mesh& mesh, const TreeParams& params) {
+  Header h{};
+  if (bytes.size() < sizeof h) return;
+  std::memcpy(&h, bytes.data(), sizeof h);
+  h.mesh_hash = tree_hash(mesh, params);
+  h.leaf_faces = params.leaf_faces;
+  h.num_faces = static_cast<std::uint32_t>(mesh.num_faces());
+  h.num_vertices = static_cast<std::uint32_t>(mesh.num_vertices());
+  std::memcpy(bytes.data(), &h, sizeof h);
+  if (!check_header(h, bytes.size(), "") ) return;
+  // The checksum over the payload as parse_tree reads it.
+  SphereTree t;
+  t.nodes.resize(h.num_nodes);
+  t.cold.resize(h.num_nodes);
+  t.face_order.resize(h.num_faces);
+  t.face_boxes.resize(h.num_faces);
+  const std::uint8_t* p = bytes.data() + sizeof h;
+  auto take = [&](void* dst, std::size_t n) {
+    if (n) std::memcpy(dst, p, n);
+    p += n;
+  };
+  take(t.nodes.data(), t.nodes.size() * sizeof(SphereNode));
+  take(t.cold.data(), t.cold.size() * sizeof(SphereNodeCold));
+  take(t.face_order.data(), t.face_order.size() * 4);
+  take(t.face_boxes.data(), t.face_boxes.size() * sizeof(FaceBox));
+  h.checksum = payload_checksum(t);
+  std::memcpy(bytes.data(), &h, sizeof h);
 }
 
 }  // namespace st::geom

@@ -360,6 +360,11 @@ void WorkerService::run(const std::atomic<bool>& stop, std::chrono::milliseconds
   }
 }
 
+void WorkerService::handle_message(const std::string& peer, std::span<const std::uint8_t> frame) {
+  const zmq::message_t id(peer.data(), peer.size());
+  handle(id, "id:" + peer, frame);
+}
+
 void WorkerService::handle(const zmq::message_t& peer, const std::string& owner, std::span<const std::uint8_t> frame) {
   Result<Message> m = decode(frame, cfg_.limits);
   if (!m) {

@@ -114,6 +114,10 @@ class WorkerService {
   /// Polls until `stop` is set, calling `tick` (if any) at least every `period`.
   void run(const std::atomic<bool>& stop, std::chrono::milliseconds period = std::chrono::milliseconds(100),
            const std::function<void()>& tick = {});
+  /// Handles one frame as if the client with routing id `peer` had sent it on the socket (no
+  /// CURVE identity); replies go to that routing id and are dropped if no such client is
+  /// connected. For the message-sequence fuzzer: the whole handler without a socket round trip.
+  void handle_message(const std::string& peer, std::span<const std::uint8_t> frame);
   std::uint64_t epoch() const { return epoch_; }                 ///< random per instance
   const WorkerCounters& counters() const { return counters_; }   ///< counters so far
   std::vector<Held> held() const;                                ///< block sets in memory (all clients), MRU first

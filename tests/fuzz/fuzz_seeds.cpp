@@ -1,6 +1,7 @@
 // Writes the generated part of the fuzz seed corpus: wire frames made by our own encoder (every
 // message type, empty and non-empty lists, a LoadBlocks carrying a whole small block set) for
-// fuzz_wire, and tiny meshes in every format fuzz_mesh reads (its first byte selects the format).
+// fuzz_wire, tiny meshes in every format fuzz_mesh reads (its first byte selects the format),
+// message sequences for fuzz_worker, a tree file for fuzz_tree and a live segment for fuzz_shm.
 // Scene and pose seeds are copies of real files (configs/*.toml, perf/poses/). Usage:
 //   build-fuzz/tests/fuzz/fuzz_seeds tests/fuzz/corpus
 // (overwrites the seed_* files it writes; run from any build, it needs no libFuzzer).
@@ -11,9 +12,15 @@
 #include <string>
 #include <vector>
 
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <unistd.h>
+
 #include "geom/primitives.hpp"
+#include "geom/tree_io.hpp"
 #include "net/block_set.hpp"
 #include "net/protocol.hpp"
+#include "rt/shm_segment.hpp"
 
 namespace {
 
@@ -118,6 +125,86 @@ void mesh_seeds(const fs::path& dir) {
   write_mesh(dir, "stl_binary", 3, binary);
 }
 
+// fuzz_worker: message sequences (records: u8 client, u16 length, frame) over a block set small
+// enough for the harness's limits.
+void add_record(std::vector<std::uint8_t>& seq, int client, const std::vector<std::uint8_t>& frame) {
+  seq.push_back(std::uint8_t(client));
+  seq.push_back(std::uint8_t(frame.size() & 0xFF));
+  seq.push_back(std::uint8_t(frame.size() >> 8));
+  seq.insert(seq.end(), frame.begin(), frame.end());
+}
+
+void worker_seeds(const fs::path& dir) {
+  const geom::Mesh probe = geom::make_box(geom::Vec3(4, 4, 4));
+  const geom::Mesh object = geom::make_icosphere(10.0, 1);
+  const Blocks blocks = spatial_blocks(object, 8);
+  std::vector<std::uint32_t> all;
+  for (std::uint32_t b = 0; b < blocks.size(); ++b) all.push_back(b);
+  const std::vector<std::uint8_t> enc = encode_block_set(make_block_set(probe, object, blocks, all, 4).value());
+  const std::uint64_t h = block_set_hash(enc);
+  const std::size_t half = enc.size() / 2;
+  const LoadBlocksMsg first{h, enc.size(), 0, {enc.begin(), enc.begin() + half}};
+  const LoadBlocksMsg second{h, enc.size(), half, {enc.begin() + half, enc.end()}};
+  geom::Pose touching = geom::Pose::Identity();
+  touching.translation() = geom::Vec3(9, 0, 0);
+  std::vector<std::uint8_t> seq;
+  // One client loads in two chunks and queries; another queries the same set and is refused.
+  add_record(seq, 0, encode(first));
+  add_record(seq, 0, encode(second));
+  add_record(seq, 0, encode(QueryMsg{1, h, touching}));
+  add_record(seq, 1, encode(QueryMsg{2, h, touching}));
+  add_record(seq, 1, encode(HeartbeatMsg{3}));
+  write(dir / "seed_load_query.bin", seq.data(), seq.size());
+  // Interleaved uploads, one restarted, a third client refused, then the same bytes shared.
+  seq.clear();
+  add_record(seq, 0, encode(first));
+  add_record(seq, 1, encode(first));
+  add_record(seq, 2, encode(first));
+  add_record(seq, 1, encode(first));
+  add_record(seq, 0, encode(second));
+  add_record(seq, 1, encode(second));
+  add_record(seq, 1, encode(QueryMsg{4, h, touching}));
+  add_record(seq, 3, encode(second));
+  write(dir / "seed_interleaved.bin", seq.data(), seq.size());
+}
+
+// fuzz_tree: the tree file of the harness's fixture (icosphere 10 mm, 2 subdivisions, 4 faces a leaf).
+void tree_seeds(const fs::path& dir) {
+  const geom::Mesh object = geom::make_icosphere(10.0, 2);
+  geom::TreeParams params = geom::DefaultTreeParams();
+  params.leaf_faces = 4;
+  fs::create_directories(dir);
+  if (Status s = geom::write_tree(geom::SphereTree::build(object, params).value(), (dir / "seed_icosphere.tree").string()); !s) {
+    std::fprintf(stderr, "%s\n", s.error().c_str());
+    std::exit(1);
+  }
+}
+
+// fuzz_shm: a live segment's bytes after a pose and a contact model went through it.
+void shm_seeds(const fs::path& dir) {
+  const std::string name = "/spheretouch-seed-" + std::to_string(::getpid());
+  auto seg = rt::ShmSegment::create(name);
+  if (!seg) { std::fprintf(stderr, "%s\n", seg.error().c_str()); std::exit(1); }
+  rt::PoseSample p{};
+  p.seq = 7;
+  p.pose = geom::to_pod(geom::Pose::Identity());
+  seg.value()->poses().write(p);
+  geom::ContactModel m{};
+  m.seq = 3;
+  m.flags = geom::kInContact;
+  m.force_dir = geom::to_pod(geom::Vec3(0, 0, 1));
+  m.penetration_mm = 0.8;
+  seg.value()->models().write(m);
+  const int fd = ::shm_open(name.c_str(), O_RDONLY, 0);
+  std::vector<std::uint8_t> bytes(sizeof(rt::ShmLayout));
+  if (fd < 0 || ::pread(fd, bytes.data(), bytes.size(), 0) != static_cast<ssize_t>(bytes.size())) {
+    std::fprintf(stderr, "cannot read back %s\n", name.c_str());
+    std::exit(1);
+  }
+  ::close(fd);
+  write(dir / "seed_segment.bin", bytes.data(), bytes.size());
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -125,6 +212,9 @@ int main(int argc, char** argv) {
   const fs::path root(argv[1]);
   wire_seeds(root / "fuzz_wire");
   mesh_seeds(root / "fuzz_mesh");
-  std::printf("wrote wire and mesh seeds under %s\n", root.c_str());
+  worker_seeds(root / "fuzz_worker");
+  tree_seeds(root / "fuzz_tree");
+  shm_seeds(root / "fuzz_shm");
+  std::printf("wrote wire, mesh, worker, tree and shm seeds under %s\n", root.c_str());
   return 0;
 }

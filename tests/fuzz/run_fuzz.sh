@@ -14,7 +14,7 @@ cd "$(dirname "$0")/../.."
 secs="${1:-}"
 [[ "$secs" =~ ^[0-9]+$ ]] || { echo "usage: tests/fuzz/run_fuzz.sh SECONDS [TARGET...]" >&2; exit 2; }
 shift
-all=(fuzz_wire fuzz_mesh fuzz_scene fuzz_pose)
+all=(fuzz_wire fuzz_mesh fuzz_scene fuzz_pose fuzz_worker fuzz_tree fuzz_shm)
 targets=("$@"); ((${#targets[@]})) || targets=("${all[@]}")
 dir="${ST_FUZZ_BUILD:-build-fuzz}"
 jobs="${ST_JOBS:-2}"
