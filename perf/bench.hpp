@@ -16,5 +16,6 @@ void add_haptic(CLI::App& app);    ///< HapticLoop vs bare clock_nanosleep wake-
 void add_scatter(CLI::App& app);  ///< scatter-gather round trip of an empty query, N workers × transport
 void add_tables(CLI::App& app);   ///< issue 7: table1, table2, table3, peers, trade, icosphere (bench_tables.cpp)
 void add_force(CLI::App& app);    ///< force rendering quality per contact model, simulated time (bench_force.cpp)
+void add_hostile(CLI::App& app);  ///< security reproducers against a live worker (bench_hostile.cpp)
 
 }  // namespace st::bench

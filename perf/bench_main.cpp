@@ -13,6 +13,7 @@ int main(int argc, char** argv) {
   st::bench::add_scatter(app);
   st::bench::add_tables(app);
   st::bench::add_force(app);
+  st::bench::add_hostile(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

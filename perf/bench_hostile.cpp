@@ -1,0 +1,360 @@
+// spheretouch-bench hostile: the reproducers of the security review, replayed against a live
+// worker daemon on loopback while an honest client keeps querying it. Per case: what the worker
+// did with the attack (outcome: refused, answered, crashed, stalled), its resident memory at the
+// peak of the case, and the honest client's round times during the attack against its quiet
+// round time measured first in the same run.
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <random>
+#include <thread>
+#include <zmq.hpp>
+
+#include "bench.hpp"
+#include "geom/primitives.hpp"
+#include "net/block_set.hpp"
+#include "net/protocol.hpp"
+#include "net/scatter_gather.hpp"
+#include "rt/shm_segment.hpp"
+
+namespace st::bench {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using namespace std::chrono_literals;
+
+enum class Outcome { refused, answered, crashed, stalled };
+const char* outcome_name(Outcome o) {
+  switch (o) {
+    case Outcome::refused: return "refused";
+    case Outcome::answered: return "answered";
+    case Outcome::crashed: return "crashed";
+    case Outcome::stalled: return "stalled";
+  }
+  return "?";
+}
+
+/// A raw attacker connection (a DEALER with its own routing id).
+struct Attacker {
+  zmq::socket_t d;
+  Attacker(zmq::context_t& ctx, const std::string& ep, const std::string& id, int rcv_ms = 20000)
+      : d(ctx, zmq::socket_type::dealer) {
+    d.set(zmq::sockopt::linger, 0);
+    d.set(zmq::sockopt::rcvtimeo, rcv_ms);
+    d.set(zmq::sockopt::sndtimeo, rcv_ms);
+    d.set(zmq::sockopt::routing_id, zmq::buffer(id));
+    d.connect(ep);
+  }
+  bool send(const std::vector<std::uint8_t>& b) { return d.send(zmq::buffer(b), zmq::send_flags::none).has_value(); }
+  /// The next reply: a message, or nothing (timeout or undecodable).
+  std::optional<net::Message> recv() {
+    zmq::message_t m;
+    if (!d.recv(m)) return std::nullopt;
+    auto r = net::decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, net::default_limits());
+    if (!r) return std::nullopt;
+    return r.value();
+  }
+  /// Uploads `bytes` in 1 MiB chunks.
+  bool upload(const std::vector<std::uint8_t>& bytes, std::uint64_t hash) {
+    for (std::size_t off = 0; off < bytes.size(); off += 1u << 20) {
+      const std::size_t n = std::min<std::size_t>(1u << 20, bytes.size() - off);
+      if (!send(net::encode(net::LoadBlocksMsg{hash, bytes.size(), off, {bytes.begin() + off, bytes.begin() + off + n}})))
+        return false;
+    }
+    return true;
+  }
+};
+
+bool is_error(const std::optional<net::Message>& m) { return m && std::holds_alternative<net::ErrorMsg>(*m); }
+bool is_hello(const std::optional<net::Message>& m) { return m && std::holds_alternative<net::HelloMsg>(*m); }
+
+/// The encoded block set of `probe` against `object` (every block), and its key.
+struct Set {
+  std::vector<std::uint8_t> bytes;
+  std::uint64_t hash = 0;
+};
+Set encode_set(const geom::Mesh& probe, const geom::Mesh& object, std::uint32_t faces_per_block) {
+  const net::Blocks blocks = net::spatial_blocks(object, faces_per_block);
+  std::vector<std::uint32_t> all(blocks.size());
+  for (std::uint32_t b = 0; b < all.size(); ++b) all[b] = b;
+  Set s;
+  s.bytes = net::encode_block_set(net::make_block_set(probe, object, blocks, all, 24).value());
+  s.hash = net::block_set_hash(s.bytes);
+  return s;
+}
+
+struct CaseResult {
+  std::string name, what;
+  Outcome outcome = Outcome::stalled;
+  double worker_rss_mb = 0;                        // peak during the case
+  double answer_ms_p50 = 0, answer_ms_p99 = 0;     // honest client during the attack
+  std::uint32_t honest_rounds = 0, honest_incomplete = 0;
+  std::string note;
+};
+
+double quantile(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, std::size_t(q * double(v.size())))];
+}
+
+}  // namespace
+
+void add_hostile(CLI::App& app) {
+  struct Args {
+    std::string worker;
+    bool json = false, quick = false;
+    int quiet_rounds = 300;
+  };
+  auto a = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand(
+      "hostile", "Replays the security review's reproducers against a live worker daemon on loopback while an honest "
+                 "client queries it: per case the outcome (refused, answered, crashed, stalled), the worker's peak "
+                 "resident memory, and the honest client's round times against its quiet ones");
+  cmd->add_option("--worker", a->worker, "spheretouch-worker binary (default: beside this program, ../daemons/)");
+  cmd->add_option("--quiet-rounds", a->quiet_rounds, "honest rounds for the quiet baseline")->capture_default_str();
+  cmd->add_flag("--quick", a->quick, "smaller attacks (CI smoke run)");
+  cmd->add_flag("--json", a->json, "print one JSON object");
+  cmd->callback([a] {
+    std::string worker = a->worker;
+    if (worker.empty()) {
+      std::error_code ec;
+      const auto self = std::filesystem::read_symlink("/proc/self/exe", ec);
+      worker = (self.parent_path().parent_path() / "daemons" / "spheretouch-worker").string();
+    }
+    if (!std::filesystem::exists(worker)) {
+      std::fprintf(stderr, "hostile: worker binary %s not found (--worker)\n", worker.c_str());
+      throw CLI::RuntimeError(2);
+    }
+    const std::string ep = "tcp://127.0.0.1:" + std::to_string(free_tcp_port());
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+      ::execl(worker.c_str(), worker.c_str(), "--bind", ep.c_str(), "--log-level", "error", (char*)nullptr);
+      ::_exit(127);
+    }
+    struct Reaper {
+      pid_t p;
+      ~Reaper() { if (p > 0) { ::kill(p, SIGTERM); int st; ::waitpid(p, &st, 0); } }
+    } reaper{pid};
+    auto alive = [&] {
+      int st = 0;
+      return ::waitpid(pid, &st, WNOHANG) == 0;
+    };
+    auto rss_mb = [&] { return double(rt::resident_bytes(pid)) / double(1 << 20); };
+
+    // The honest client: a capsule against a sphere, one worker.
+    zmq::context_t ctx(2);
+    const geom::Mesh probe = geom::make_capsule(4, 10, 12), object = geom::make_icosphere(30, 8);
+    net::ScatterConfig cfg;
+    cfg.endpoints = {ep};
+    cfg.heartbeat_period = 50ms;
+    auto honest = net::ScatterGather::create(ctx, cfg, probe, object, net::spatial_blocks(object, 32));
+    if (!honest || !honest.value()->wait_ready(Clock::now() + 20s)) {
+      std::fprintf(stderr, "hostile: the worker at %s did not become ready\n", ep.c_str());
+      throw CLI::RuntimeError(2);
+    }
+    geom::Pose touch = geom::Pose::Identity();
+    touch.translation() = geom::Vec3(30, 0, 0);  // the capsule's centre on the sphere's surface
+    std::uint64_t seq = 0;
+    auto round_ms = [&](bool& complete) {
+      const auto t0 = Clock::now();
+      net::RoundResult r = honest.value()->round(++seq, touch, t0 + 1s);
+      complete = r.complete;
+      return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+    };
+    std::vector<double> quiet;
+    for (int i = 0; i < a->quiet_rounds; ++i) {
+      bool ok = false;
+      quiet.push_back(round_ms(ok));
+      std::this_thread::sleep_for(1ms);
+    }
+    const double quiet_p50 = quantile(quiet, 0.5), quiet_p99 = quantile(quiet, 0.99);
+    const double rss_quiet = rss_mb();
+
+    // One case: the attack runs on its own thread; the honest client queries until it is over
+    // (at least `min_honest` rounds); memory is sampled all along.
+    std::vector<CaseResult> results;
+    auto run_case = [&](const std::string& name, const std::string& what, const std::function<Outcome()>& attack) {
+      std::fprintf(stderr, "hostile: %s\n", name.c_str());
+      CaseResult c;
+      c.name = name;
+      c.what = what;
+      std::atomic<bool> done{false};
+      Outcome out = Outcome::stalled;
+      std::thread t([&] {
+        out = attack();
+        done = true;
+      });
+      std::vector<double> during;
+      double peak = rss_mb();
+      const auto give_up = Clock::now() + 120s;
+      while ((!done || during.size() < 50) && Clock::now() < give_up && alive()) {
+        bool ok = false;
+        during.push_back(round_ms(ok));
+        c.honest_incomplete += !ok;
+        peak = std::max(peak, rss_mb());
+        std::this_thread::sleep_for(1ms);
+      }
+      if (!done && Clock::now() >= give_up) c.note = "attack still running after 120 s";
+      t.join();
+      peak = std::max(peak, rss_mb());
+      c.outcome = alive() ? out : Outcome::crashed;
+      if (c.outcome != Outcome::crashed && c.honest_incomplete * 10 > during.size()) c.outcome = Outcome::stalled;
+      c.worker_rss_mb = peak;
+      c.honest_rounds = static_cast<std::uint32_t>(during.size());
+      c.answer_ms_p50 = quantile(during, 0.5);
+      c.answer_ms_p99 = quantile(during, 0.99);
+      results.push_back(c);
+    };
+
+    const int pile_faces = a->quick ? 2500 : 4000;
+    run_case("pile_n2_pairs", std::to_string(pile_faces) + " identical triangles on each side: a query of " +
+                                  std::to_string(pile_faces) + "^2 pairs (item 2)", [&] {
+      zmq::context_t c(1);
+      Attacker x(c, ep, "attacker-pile");
+      geom::Mesh pile;
+      pile.name = "pile";
+      pile.local = {{0, 0, 0}, {10, 0, 0}, {0, 10, 0}};
+      pile.faces.assign(std::size_t(pile_faces), geom::Tri{0, 1, 2});
+      net::Blocks one(1);
+      for (std::uint32_t f = 0; f < std::uint32_t(pile_faces); ++f) one[0].push_back(f);
+      auto set = net::make_block_set(pile, pile, one, std::vector<std::uint32_t>{0}, 24);
+      const auto bytes = net::encode_block_set(set.value());
+      const std::uint64_t h = net::block_set_hash(bytes);
+      if (!x.upload(bytes, h) || !is_hello(x.recv())) return Outcome::stalled;
+      geom::Pose shifted = geom::Pose::Identity();
+      shifted.translation() = geom::Vec3(1, 1, 0);
+      x.send(net::encode(net::QueryMsg{1, h, shifted}));
+      const auto r = x.recv();
+      return is_error(r) ? Outcome::refused : r ? Outcome::answered : Outcome::stalled;
+    });
+
+    const int freq = a->quick ? 120 : 300;
+    run_case("large_legal_load", "a legal block set of " + std::to_string(20 * freq * freq) +
+                                     " faces built while others query (item 3)", [&] {
+      zmq::context_t c(1);
+      Attacker x(c, ep, "big-loader", 120000);
+      const Set s = encode_set(geom::make_capsule(4, 10, 12), geom::make_icosphere(40, freq), 64);
+      if (!x.upload(s.bytes, s.hash)) return Outcome::stalled;
+      // Heartbeats are answered during the build: the first Hello echoes the nonce, the last
+      // reports the set.
+      x.send(net::encode(net::HeartbeatMsg{77}));
+      bool echoed = false, loaded = false;
+      for (int i = 0; i < 4 && !loaded; ++i) {
+        const auto r = x.recv();
+        if (!r) break;
+        if (auto* hm = std::get_if<net::HelloMsg>(&*r)) {
+          echoed |= hm->echo == 77;
+          loaded |= std::any_of(hm->held.begin(), hm->held.end(), [&](const net::Held& h) { return h.hash == s.hash; });
+        }
+      }
+      return echoed && loaded ? Outcome::answered : Outcome::stalled;
+    });
+
+    run_case("abandoned_load", "first 1 MiB chunk of a 1 GiB set, then silence; continued after the upload timeout "
+                               "(item 4)", [&] {
+      zmq::context_t c(1);
+      Attacker x(c, ep, "abandoner");
+      std::vector<std::uint8_t> chunk(1u << 20, 0x5a);
+      x.send(net::encode(net::LoadBlocksMsg{42, 1ull << 30, 0, chunk}));
+      std::this_thread::sleep_for(12s);  // the worker's upload_timeout is 10 s
+      x.send(net::encode(net::LoadBlocksMsg{42, 1ull << 30, 1u << 20, chunk}));
+      const auto r = x.recv();
+      return is_error(r) ? Outcome::refused : Outcome::stalled;
+    });
+
+    const int conns = 20, per_conn = a->quick ? 8 : 32;
+    run_case("connection_flood", std::to_string(conns) + " connections x " + std::to_string(per_conn) +
+                                     " chunks of 1 MiB claiming 1 GiB sets (item 4)", [&] {
+      zmq::context_t c(1);
+      std::vector<std::unique_ptr<Attacker>> xs;
+      for (int i = 0; i < conns; ++i) xs.push_back(std::make_unique<Attacker>(c, ep, "flood-" + std::to_string(i)));
+      std::vector<std::uint8_t> chunk(1u << 20, 0x33);
+      for (int k = 0; k < per_conn; ++k)
+        for (int i = 0; i < conns; ++i)
+          xs[std::size_t(i)]->send(net::encode(net::LoadBlocksMsg{100u + unsigned(i), 1ull << 30, std::uint64_t(k) << 20, chunk}));
+      int refused = 0;
+      for (auto& x : xs) {
+        x->d.set(zmq::sockopt::rcvtimeo, 3000);
+        refused += is_error(x->recv());
+      }
+      return refused > 0 ? Outcome::refused : Outcome::answered;
+    });
+
+    run_case("foreign_set", "another client queries the honest client's set and sends chunks of it out of order "
+                            "(item 5)", [&] {
+      zmq::context_t c(1);
+      Attacker x(c, ep, "snooper");
+      // The key the honest client uses is public in any capture (and here recomputed from the
+      // same scene); knowing it is not enough.
+      const Set s = encode_set(probe, object, 32);
+      x.send(net::encode(net::QueryMsg{5, s.hash, touch}));
+      const auto r = x.recv();
+      x.send(net::encode(net::LoadBlocksMsg{s.hash, s.bytes.size(), 4096, {1, 2, 3}}));
+      const auto r2 = x.recv();
+      return is_error(r) && is_error(r2) ? Outcome::refused : Outcome::answered;
+    });
+
+    run_case("garbage_flood", "20,000 random frames of 1-300 bytes", [&] {
+      zmq::context_t c(1);
+      Attacker x(c, ep, "garbage");
+      std::mt19937_64 rng(7);
+      for (int i = 0; i < 20000; ++i) {
+        std::vector<std::uint8_t> g(1 + rng() % 300);
+        for (auto& b : g) b = static_cast<std::uint8_t>(rng());
+        (void)x.d.send(zmq::buffer(g), zmq::send_flags::dontwait);
+      }
+      x.send(net::encode(net::HeartbeatMsg{9}));
+      for (int i = 0; i < 40000; ++i) {  // errors for the garbage, then the Hello
+        const auto r = x.recv();
+        if (!r) return Outcome::stalled;
+        if (auto* hm = std::get_if<net::HelloMsg>(&*r); hm && hm->echo == 9) return Outcome::refused;
+      }
+      return Outcome::stalled;
+    });
+
+    run_case("oversized_frame", "one 80 MiB frame (over ZMQ_MAXMSGSIZE)", [&] {
+      zmq::context_t c(1);
+      Attacker x(c, ep, "big-frame", 3000);
+      std::vector<std::uint8_t> big(80u << 20, 0);
+      x.send(big);
+      return x.recv() ? Outcome::answered : Outcome::refused;  // dropped with the connection
+    });
+
+    bool all_ok = true;
+    for (const CaseResult& c : results)
+      all_ok &= (c.outcome == Outcome::refused || c.outcome == Outcome::answered);
+    if (a->json) {
+      std::printf("{\"worker\": \"%s\", \"quiet_ms_p50\": %.4f, \"quiet_ms_p99\": %.4f, \"quiet_rss_mb\": %.1f, \"cases\": [",
+                  ep.c_str(), quiet_p50, quiet_p99, rss_quiet);
+      for (std::size_t i = 0; i < results.size(); ++i) {
+        const CaseResult& c = results[i];
+        std::printf("%s\n  {\"case\": \"%s\", \"outcome\": \"%s\", \"worker_rss_mb\": %.1f, \"answer_ms\": %.4f, "
+                    "\"answer_ms_p99\": %.4f, \"vs_quiet_p50\": %.2f, \"honest_rounds\": %u, \"honest_incomplete\": %u}",
+                    i ? "," : "", c.name.c_str(), outcome_name(c.outcome), c.worker_rss_mb, c.answer_ms_p50, c.answer_ms_p99,
+                    c.answer_ms_p50 / quiet_p50, c.honest_rounds, c.honest_incomplete);
+      }
+      std::printf("\n], \"all_refused_or_answered\": %s}\n", all_ok ? "true" : "false");
+    } else {
+      std::printf("honest client, quiet: round %.3f ms p50, %.3f ms p99; worker RSS %.1f MiB\n\n", quiet_p50, quiet_p99,
+                  rss_quiet);
+      std::printf("%-18s %-9s %10s %10s %10s %8s %7s  %s\n", "case", "outcome", "rss_MiB", "answer_ms", "p99_ms",
+                  "x_quiet", "rounds", "attack");
+      for (const CaseResult& c : results)
+        std::printf("%-18s %-9s %10.1f %10.3f %10.3f %8.2f %7u  %s%s%s\n", c.name.c_str(), outcome_name(c.outcome),
+                    c.worker_rss_mb, c.answer_ms_p50, c.answer_ms_p99, c.answer_ms_p50 / quiet_p50, c.honest_rounds,
+                    c.what.c_str(), c.note.empty() ? "" : "; ", c.note.c_str());
+      std::printf("\nanswer_ms: the honest client's round time during the attack (p50; x_quiet = against its quiet p50)\n");
+    }
+    if (!all_ok) throw CLI::RuntimeError(1);
+  });
+}
+
+}  // namespace st::bench
