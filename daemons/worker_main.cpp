@@ -121,13 +121,15 @@ int main(int argc, char** argv) {
   wc.ipc_allowed_uids = cfg.ipc_allowed_uids;
   wc.log = log_line;
   {
-    // What the limits cost: held sets, plus one being built, plus the upload buffer.
-    const double set_mb = st::net::kSetMemoryFactor * double(cfg.max_blockset_mb);
-    log_line(6, "memory bound: " + std::to_string(long(set_mb * (cfg.max_sets + 1) + double(wc.max_upload_bytes >> 20))) +
-                    " MiB (" + std::to_string(cfg.max_sets) + " held sets + 1 being built, each up to " +
-                    std::to_string(long(set_mb)) + " MiB = " + std::to_string(st::net::kSetMemoryFactor).substr(0, 3) +
-                    " x max_blockset_mb, + " + std::to_string(wc.max_upload_bytes >> 20) + " MiB of uploads); lower " +
-                    "max_blockset_mb or max_sets to fit MemoryMax");
+    // What the limits cost: held sets, one being built, uploads, libzmq's queues.
+    const double held_mb = st::net::kSetMemoryFactor * double(cfg.max_blockset_mb) * cfg.max_sets;
+    const double build_mb = st::net::kBuildMemoryFactor * double(cfg.max_blockset_mb);
+    const double queue_mb = double(wc.max_connections) * wc.rcvhwm * double(wc.limits.max_chunk_bytes) / double(1 << 20);
+    const double upload_mb = double(wc.max_upload_bytes >> 20);
+    log_line(6, "memory bound: " + std::to_string(long(held_mb + build_mb + queue_mb + upload_mb)) + " MiB (" +
+                    std::to_string(cfg.max_sets) + " held sets " + std::to_string(long(held_mb)) + " + one being built " +
+                    std::to_string(long(build_mb)) + " + uploads " + std::to_string(long(upload_mb)) + " + queues " +
+                    std::to_string(long(queue_mb)) + "); lower max_blockset_mb or max_sets to fit MemoryMax");
   }
   if (!cfg.curve_secret_key_file.empty()) {
     auto key = st::net::read_secret_key(cfg.curve_secret_key_file);

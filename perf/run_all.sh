@@ -144,6 +144,11 @@ force_args=(--json --trace-dir "$out/force" --poses "$out/poses/hand_elephant.tx
 [ $quick = 1 ] && force_args+=(--quick --scenes box,plate,hand_elephant)
 "$bench" force "${force_args[@]}" > "$out/force.json"
 
+log "hostile clients: the security reproducers against a live worker daemon, an honest client querying"
+hostile_args=(--json)
+[ $quick = 1 ] && hostile_args+=(--quick --quiet-rounds 50)
+"$bench" hostile "${hostile_args[@]}" > "$out/hostile.json"
+
 echo "load_end=$(cut -d' ' -f1-3 /proc/loadavg)" >> "$out/machine.txt"
 echo "elapsed_s=$(( $(date +%s) - t_start ))" >> "$out/machine.txt"
 log "report"

@@ -24,7 +24,10 @@ struct Limits {
   std::uint32_t max_message_bytes = 64u << 20;   ///< whole frame (also ZMQ_MAXMSGSIZE), bytes
   std::uint32_t max_chunk_bytes = 1u << 20;      ///< LoadBlocks payload per message, bytes
   std::uint64_t max_blockset_bytes = 2ull << 30; ///< a whole encoded block set, bytes (worker memory)
-  std::uint32_t max_pairs = 4u << 20;            ///< face pairs in one Result (32 MiB)
+  /// Face pairs in one Result (2 MiB). Real contacts give a few pairs each; a worker needs about
+  /// 0.25 µs per pair to reach the limit on a pile of overlapping faces (spheretouch-bench hostile),
+  /// during which it answers no one else.
+  std::uint32_t max_pairs = 1u << 18;
   std::uint32_t max_held = 8;                    ///< block sets listed in a Hello
   std::uint32_t max_text = 1024;                 ///< Error text, bytes
   std::uint32_t max_vertices = 64u << 20;        ///< per mesh in a block set

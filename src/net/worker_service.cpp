@@ -4,6 +4,7 @@
 #include "net/worker_config.hpp"
 
 #include <malloc.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/eventfd.h>
 #include <unistd.h>
@@ -106,6 +107,20 @@ WorkerService::WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFa
       sock_.set(zmq::sockopt::zap_domain, "spheretouch");
     } catch (const std::exception& e) {
       init_error_ = std::string("CURVE set-up: ") + e.what();
+    }
+  }
+  // Connection events: libzmq has no limit on the connections a ROUTER accepts, so the service
+  // counts them and shuts down those past max_connections (what each may queue is bounded by
+  // rcvhwm). Best effort: the descriptor of an accepted connection is shut down from this thread
+  // when its event arrives.
+  {
+    static std::atomic<std::uint64_t> serial{0};
+    const std::string addr = "inproc://spheretouch-worker-monitor-" + std::to_string(::getpid()) + "-" +
+                             std::to_string(serial.fetch_add(1));
+    if (zmq_socket_monitor(sock_.handle(), addr.c_str(), ZMQ_EVENT_ACCEPTED | ZMQ_EVENT_DISCONNECTED) == 0) {
+      monitor_ = zmq::socket_t(ctx, zmq::socket_type::pair);
+      monitor_.set(zmq::sockopt::linger, 0);
+      monitor_.connect(addr);
     }
   }
   // A client that reconnects with its routing id takes it over at once (a half-open old
@@ -278,14 +293,45 @@ void WorkerService::handle_zap() {
   }
 }
 
+void WorkerService::handle_monitor() {
+  for (int budget = 0; budget < 256; ++budget) {
+    zmq::message_t ev, addr;
+    try {
+      if (!monitor_.recv(ev, zmq::recv_flags::dontwait)) return;
+      if (ev.more()) (void)monitor_.recv(addr, zmq::recv_flags::none);
+    } catch (const zmq::error_t&) {
+      return;
+    }
+    if (ev.size() < 6) continue;
+    std::uint16_t event = 0;
+    std::uint32_t value = 0;
+    std::memcpy(&event, ev.data(), 2);
+    std::memcpy(&value, static_cast<const char*>(ev.data()) + 2, 4);
+    if (event == ZMQ_EVENT_ACCEPTED) {
+      if (++connections_ > cfg_.max_connections) {
+        ::shutdown(static_cast<int>(value), SHUT_RDWR);  // libzmq sees the end of the stream and closes it
+        ++counters_.connections_refused;
+        if (counters_.connections_refused == 1 || counters_.connections_refused % 1000 == 0)
+          log(4, st::fail("more than max_connections = ", cfg_.max_connections, " connections: refused ",
+                          counters_.connections_refused, " so far").message);
+      }
+    } else if (event == ZMQ_EVENT_DISCONNECTED) {
+      if (connections_ > 0) --connections_;
+    }
+  }
+}
+
 bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
-  zmq::pollitem_t items[3] = {{sock_.handle(), 0, ZMQ_POLLIN, 0}, {zap_.handle(), 0, ZMQ_POLLIN, 0},
-                              {nullptr, job_ ? job_->fd : -1, ZMQ_POLLIN, 0}};
+  // An absent socket is polled as descriptor -1 (ignored), never as descriptor 0 (stdin).
+  zmq::pollitem_t items[4] = {{sock_.handle(), 0, ZMQ_POLLIN, 0},
+                              {zap_.handle(), -1, ZMQ_POLLIN, 0},
+                              {nullptr, job_ ? job_->fd : -1, ZMQ_POLLIN, 0},
+                              {monitor_.handle(), -1, ZMQ_POLLIN, 0}};
   // The loader's eventfd wakes the poll when a set is built; without one (eventfd failed) the
   // poll is kept short while a load runs.
   if (job_ && job_->fd < 0) timeout = std::min(timeout, std::chrono::milliseconds(5));
   try {
-    if (zmq::poll(items, 3, timeout) <= 0) {
+    if (zmq::poll(items, 4, timeout) <= 0) {
       if (job_ && job_->done.load(std::memory_order_acquire)) finish_job();
       drop_idle();
       return true;
@@ -294,6 +340,7 @@ bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
     return e.num() != ETERM;  // EINTR (a signal): let the caller look at its stop flag
   }
   if (zap_ && (items[1].revents & ZMQ_POLLIN)) handle_zap();
+  if (monitor_ && (items[3].revents & ZMQ_POLLIN)) handle_monitor();
   if (job_ && job_->done.load(std::memory_order_acquire)) finish_job();
   drop_idle();
   if (!(items[0].revents & ZMQ_POLLIN)) return true;

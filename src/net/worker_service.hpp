@@ -49,10 +49,10 @@ struct WorkerConfig {
   /// once it is over; a variant needed again is sent again. Zero: keep sets until LRU evicts them.
   std::chrono::milliseconds idle_set_ttl{30'000};
   /// Decode limits. What the worker holds is bounded by: max_sets loaded sets, each about
-  /// kSetMemoryFactor × its encoded size (≤ max_blockset_bytes); max_upload_bytes of uploads in
-  /// progress or waiting for the loader, plus one set being built; and, queued inside libzmq,
-  /// at most rcvhwm frames of at most max_chunk_bytes per connection (the worker reads its socket
-  /// while it loads, so queues drain).
+  /// kSetMemoryFactor × its encoded size (≤ max_blockset_bytes); one set being built
+  /// (kBuildMemoryFactor × its size at the peak); max_upload_bytes of uploads in progress or
+  /// waiting for the loader; and, queued inside libzmq, at most rcvhwm frames of at most
+  /// max_chunk_bytes per connection, max_connections connections.
   Limits limits = default_limits();
   /// Uploads in progress or waiting for the loader, over all clients; a client over the limit is
   /// told TooLarge ("busy") and may retry.
@@ -62,7 +62,10 @@ struct WorkerConfig {
   /// An upload with no chunk for this long is abandoned and its bytes freed.
   std::chrono::milliseconds upload_timeout{10'000};
   int sndhwm = 64;                 ///< messages queued per client before replies are dropped
-  int rcvhwm = 32;                 ///< messages queued per client (32 × 1 MiB chunks at most)
+  int rcvhwm = 4;                  ///< messages queued inside libzmq per connection (4 × 1 MiB chunks at most)
+  /// TCP and ipc connections held at once; one more is shut down as it is accepted, so what
+  /// libzmq may queue is bounded by max_connections × rcvhwm frames in total.
+  std::uint32_t max_connections = 64;
   /// Log sink (syslog priority 3 error … 7 debug, message); empty: silent. Bad messages are
   /// summarised at most once a second so a flood cannot flood the log.
   std::function<void(int, const std::string&)> log;
@@ -88,11 +91,14 @@ struct WorkerCounters {
   std::uint64_t uploads_refused = 0;    ///< uploads refused: max_uploads or max_upload_bytes reached
   std::uint64_t uploads_abandoned = 0;  ///< uploads dropped after upload_timeout without a chunk
   std::uint64_t loads_shared = 0;       ///< loads served by a backend already built for the same bytes
+  std::uint64_t connections_refused = 0;  ///< connections shut down at max_connections
 };
 
-/// Resident memory of a loaded block set (tree backend) per byte of its encoding, measured:
-/// `spheretouch-bench hostile` prints it (README, "What the worker promises").
-inline constexpr double kSetMemoryFactor = 4.7;
+/// Resident memory of a held block set (tree backend) per byte of its encoding, rounded up from
+/// `spheretouch-bench hostile` (2.73 for a 48 MiB set of 1.8 M faces, perf/RESULTS.md).
+inline constexpr double kSetMemoryFactor = 3.0;
+/// Peak while a set is being built (encoding, decoded set and tree together): 4.8 measured there.
+inline constexpr double kBuildMemoryFactor = 5.0;
 
 /// One worker; not thread-safe: construct, bind and run it on one thread.
 class WorkerService {
@@ -144,6 +150,7 @@ class WorkerService {
   struct LoadJob;  // a complete upload on the loader thread (worker_service.cpp)
   void handle(const zmq::message_t& peer, const std::string& owner, std::span<const std::uint8_t> frame);
   void handle_zap();
+  void handle_monitor();        ///< connection accepted / closed: counts, enforces max_connections
   void on_load(const zmq::message_t& peer, const std::string& owner, const LoadBlocksMsg& m);
   void on_query(const zmq::message_t& peer, const std::string& owner, const QueryMsg& m);
   void send(const zmq::message_t& peer, const Message& m);
@@ -164,6 +171,8 @@ class WorkerService {
   BackendFactory factory_;
   zmq::socket_t sock_;
   zmq::socket_t zap_;             // ZAP handler (CURVE client allow-list), or empty
+  zmq::socket_t monitor_;         // events of sock_ (accepted, disconnected), or empty
+  std::uint32_t connections_ = 0; // TCP/ipc connections open now
   std::vector<std::string> allowed_;  // admitted client public keys, 32 raw bytes each
   std::string init_error_;        // a CURVE set-up failure, reported by bind()
   std::uint64_t epoch_;

@@ -327,3 +327,33 @@ TEST_CASE("ipc://: missing directories are made 0700, the socket 0600; other use
   stop = true;
   t.join();
 }
+
+TEST_CASE("connections past max_connections are shut down as they are accepted; a freed slot is reused") {
+  zmq::context_t ctx;
+  WorkerConfig wc;
+  wc.max_connections = 2;
+  WorkerService svc(ctx, wc, reference_backend_factory());
+  REQUIRE(svc.bind("tcp://127.0.0.1:*").ok());
+  const std::string ep = svc.last_endpoint();
+  std::atomic<bool> stop{false};
+  std::thread t([&] { svc.run(stop, 10ms); });
+  auto answered = [&](RawClient& c, std::uint64_t nonce, int timeout_ms) {
+    c.d.set(zmq::sockopt::rcvtimeo, timeout_ms);
+    c.send(encode(HeartbeatMsg{nonce}));
+    zmq::message_t m;
+    return c.d.recv(m).has_value();
+  };
+  auto a = std::make_unique<RawClient>(ctx, ep, "conn-a");
+  RawClient b(ctx, ep, "conn-b");
+  CHECK(answered(*a, 1, 10000));
+  CHECK(answered(b, 2, 10000));
+  RawClient c(ctx, ep, "conn-c");
+  CHECK_FALSE(answered(c, 3, 1500));  // the third connection is shut down (and retried by libzmq)
+  a.reset();                          // a slot frees
+  bool later = false;
+  for (int i = 0; i < 10 && !later; ++i) later = answered(c, 4 + std::uint64_t(i), 1000);
+  CHECK(later);
+  stop = true;
+  t.join();
+  CHECK(svc.counters().connections_refused >= 1);
+}
