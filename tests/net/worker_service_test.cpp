@@ -11,6 +11,7 @@
 #include <mutex>
 #include <thread>
 
+#include "net/curve_keys.hpp"
 #include "net/local_workers.hpp"
 #include "net/reference_backend.hpp"
 #include "net_test_util.hpp"
@@ -356,4 +357,34 @@ TEST_CASE("connections past max_connections are shut down as they are accepted; 
   stop = true;
   t.join();
   CHECK(svc.counters().connections_refused >= 1);
+}
+
+TEST_CASE("CURVE over ipc://: an admitted key is answered, a client without keys is not") {
+  const CurveKeyPair server = generate_curve_key_pair().value(), client = generate_curve_key_pair().value();
+  zmq::context_t ctx;
+  WorkerConfig wc;
+  wc.curve = CurveServer{server.secret_z85, {client.public_z85}};
+  WorkerService svc(ctx, wc, reference_backend_factory());
+  const std::string ep = "ipc://@spheretouch-curve-test-" + std::to_string(::getpid());
+  REQUIRE(svc.bind(ep).ok());
+  std::atomic<bool> stop{false};
+  std::thread t([&] { svc.run(stop, 10ms); });
+  auto heartbeat = [&](bool with_keys) {
+    zmq::socket_t d(ctx, zmq::socket_type::dealer);
+    d.set(zmq::sockopt::linger, 0);
+    d.set(zmq::sockopt::rcvtimeo, with_keys ? 10000 : 1500);
+    if (with_keys) {
+      d.set(zmq::sockopt::curve_serverkey, server.public_z85);
+      d.set(zmq::sockopt::curve_publickey, client.public_z85);
+      d.set(zmq::sockopt::curve_secretkey, client.secret_z85);
+    }
+    d.connect(ep);
+    d.send(zmq::buffer(encode(HeartbeatMsg{8})), zmq::send_flags::none);
+    zmq::message_t m;
+    return d.recv(m).has_value();
+  };
+  CHECK(heartbeat(true));
+  CHECK_FALSE(heartbeat(false));
+  stop = true;
+  t.join();
 }
