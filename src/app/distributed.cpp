@@ -142,10 +142,14 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
                 " workers (choose a deeper layer or a smaller block size)");
   Result<std::unique_ptr<net::ScatterGather>> sg =
       net::ScatterGather::create(fleet->ctx, cfg, probe, object, std::move(blocks).value());
-  net::wipe_secret(cfg.curve_secret);  // the client keeps its own copy
-  if (!sg) return fail("scatter-gather: ", sg.error());
+  if (!sg) {
+    net::wipe_secret(cfg.curve_secret);
+    return fail("scatter-gather: ", sg.error());
+  }
   fleet->client = std::move(sg).value();
-  if (Status s = wait_for_fleet(*fleet, spec, cfg); !s) return Error{s.error()};
+  const Status ready = wait_for_fleet(*fleet, spec, cfg);  // probes silent workers with the key
+  net::wipe_secret(cfg.curve_secret);                      // the client keeps its own copy
+  if (!ready) return Error{ready.error()};
   return fleet;
 }
 
