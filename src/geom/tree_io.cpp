@@ -214,20 +214,10 @@ Status check_header(const Header& h, std::uint64_t file_size, const std::string&
   return Ok{};
 }
 
-}  // namespace
-
-Result<SphereTree> parse_tree(std::span<const std::uint8_t> bytes, const std::string& path, const Mesh& mesh,
-                              const TreeParams& params) {
-  Header h{};
-  if (bytes.size() < sizeof h)
-    return fail(path, ": corrupt: file of ", bytes.size(), " bytes is shorter than the 64-byte header");
-  std::memcpy(&h, bytes.data(), sizeof h);
-  if (Status s = check_header(h, bytes.size(), path); !s) return Error{s.error()};
+/// A tree with the arrays a file's header announces, filled from the payload that follows it
+/// (check_header has matched the sizes to the bytes).
+SphereTree payload_of(const Header& h, std::span<const std::uint8_t> bytes) {
   SphereTree t;
-  t.params.leaf_faces = h.leaf_faces;
-  t.mesh_hash = h.mesh_hash;
-  t.num_vertices = h.num_vertices;
-  t.num_depths = h.num_depths;
   t.nodes.resize(h.num_nodes);
   t.cold.resize(h.num_nodes);
   t.face_order.resize(h.num_faces);
@@ -241,6 +231,23 @@ Result<SphereTree> parse_tree(std::span<const std::uint8_t> bytes, const std::st
   take(t.cold.data(), t.cold.size() * sizeof(SphereNodeCold));
   take(t.face_order.data(), t.face_order.size() * 4);
   take(t.face_boxes.data(), t.face_boxes.size() * sizeof(FaceBox));
+  return t;
+}
+
+}  // namespace
+
+Result<SphereTree> parse_tree(std::span<const std::uint8_t> bytes, const std::string& path, const Mesh& mesh,
+                              const TreeParams& params) {
+  Header h{};
+  if (bytes.size() < sizeof h)
+    return fail(path, ": corrupt: file of ", bytes.size(), " bytes is shorter than the 64-byte header");
+  std::memcpy(&h, bytes.data(), sizeof h);
+  if (Status s = check_header(h, bytes.size(), path); !s) return Error{s.error()};
+  SphereTree t = payload_of(h, bytes);
+  t.params.leaf_faces = h.leaf_faces;
+  t.mesh_hash = h.mesh_hash;
+  t.num_vertices = h.num_vertices;
+  t.num_depths = h.num_depths;
   if (payload_checksum(t) != h.checksum) return fail(path, ": corrupt: payload checksum mismatch");
   if (h.leaf_faces != params.leaf_faces || h.mesh_hash != tree_hash(mesh, params) || h.num_faces != mesh.num_faces() ||
       h.num_vertices != mesh.num_vertices())
@@ -277,23 +284,8 @@ void seal_tree_bytes(std::vector<std::uint8_t>& bytes, const Mesh& mesh, const T
   h.num_faces = static_cast<std::uint32_t>(mesh.num_faces());
   h.num_vertices = static_cast<std::uint32_t>(mesh.num_vertices());
   std::memcpy(bytes.data(), &h, sizeof h);
-  if (!check_header(h, bytes.size(), "") ) return;
-  // The checksum over the payload as parse_tree reads it.
-  SphereTree t;
-  t.nodes.resize(h.num_nodes);
-  t.cold.resize(h.num_nodes);
-  t.face_order.resize(h.num_faces);
-  t.face_boxes.resize(h.num_faces);
-  const std::uint8_t* p = bytes.data() + sizeof h;
-  auto take = [&](void* dst, std::size_t n) {
-    if (n) std::memcpy(dst, p, n);
-    p += n;
-  };
-  take(t.nodes.data(), t.nodes.size() * sizeof(SphereNode));
-  take(t.cold.data(), t.cold.size() * sizeof(SphereNodeCold));
-  take(t.face_order.data(), t.face_order.size() * 4);
-  take(t.face_boxes.data(), t.face_boxes.size() * sizeof(FaceBox));
-  h.checksum = payload_checksum(t);
+  if (!check_header(h, bytes.size(), "")) return;
+  h.checksum = payload_checksum(payload_of(h, bytes));  // over the payload as parse_tree reads it
   std::memcpy(bytes.data(), &h, sizeof h);
 }
 

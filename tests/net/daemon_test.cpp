@@ -55,6 +55,15 @@ std::unique_ptr<ScatterGather> client(zmq::context_t& ctx, const std::vector<std
   return std::move(c.value());
 }
 
+/// A DEALER connected to `endpoint` (LINGER 0), waiting up to `rcv_ms` for each reply.
+zmq::socket_t dealer_to(zmq::context_t& ctx, const std::string& endpoint, int rcv_ms) {
+  zmq::socket_t d(ctx, zmq::socket_type::dealer);
+  d.set(zmq::sockopt::linger, 0);
+  d.set(zmq::sockopt::rcvtimeo, rcv_ms);
+  d.connect(endpoint);
+  return d;
+}
+
 zmq::message_t request(zmq::socket_t& d, const std::vector<std::uint8_t>& bytes) {
   d.send(zmq::buffer(bytes), zmq::send_flags::none);
   zmq::message_t m;
@@ -148,12 +157,9 @@ TEST_CASE("daemons: kill -9 while queries stream; rounds return, are incomplete 
 TEST_CASE("daemon: hostile messages get an Error reply or a drop, never a crash, never unbounded memory") {
   Fleet f(1);
   zmq::context_t ctx;
-  zmq::socket_t d(ctx, zmq::socket_type::dealer);
-  d.set(zmq::sockopt::linger, 0);
   // Generous: under TSan on a loaded 2-core machine, 200 MiB of chunks took the daemon over 5 s
   // (a CI failure); what is tested is that it answers, not how fast.
-  d.set(zmq::sockopt::rcvtimeo, 60000);
-  d.connect(f.endpoint(0));
+  zmq::socket_t d = dealer_to(ctx, f.endpoint(0), 60000);
   // Wait for the daemon to listen.
   zmq::message_t hello = request(d, encode(HeartbeatMsg{1}));
   REQUIRE(std::holds_alternative<HelloMsg>(decoded(hello)));
@@ -197,10 +203,7 @@ TEST_CASE("daemon: hostile messages get an Error reply or a drop, never a crash,
   std::vector<std::uint8_t> big(8u << 20, 0);
   d.send(zmq::buffer(big), zmq::send_flags::none);
   // The daemon is alive and serving on a fresh connection.
-  zmq::socket_t d2(ctx, zmq::socket_type::dealer);
-  d2.set(zmq::sockopt::linger, 0);
-  d2.set(zmq::sockopt::rcvtimeo, 60000);
-  d2.connect(f.endpoint(0));
+  zmq::socket_t d2 = dealer_to(ctx, f.endpoint(0), 60000);
   CHECK(std::get<HelloMsg>(decoded(request(d2, encode(HeartbeatMsg{3})))).echo == 3);
   CHECK(f.procs[0]->wait(0ms) == -1);
   CHECK(f.procs[0]->log().find("bad message") != std::string::npos);
@@ -209,10 +212,7 @@ TEST_CASE("daemon: hostile messages get an Error reply or a drop, never a crash,
 TEST_CASE("daemon: SIGTERM stops it cleanly (exit 0)") {
   Fleet f(1);
   zmq::context_t ctx;
-  zmq::socket_t d(ctx, zmq::socket_type::dealer);
-  d.set(zmq::sockopt::linger, 0);
-  d.set(zmq::sockopt::rcvtimeo, 5000);
-  d.connect(f.endpoint(0));
+  zmq::socket_t d = dealer_to(ctx, f.endpoint(0), 5000);
   (void)request(d, encode(HeartbeatMsg{1}));  // it is up
   const auto t0 = std::chrono::steady_clock::now();
   f.procs[0]->signal(SIGTERM);
@@ -228,11 +228,7 @@ TEST_CASE("daemon: SIGTERM stops it cleanly (exit 0)") {
 TEST_CASE("daemon: during a large load it answers heartbeats; SIGTERM during the build stops it cleanly") {
   Fleet f(1);
   zmq::context_t ctx;
-  zmq::socket_t d(ctx, zmq::socket_type::dealer);
-  d.set(zmq::sockopt::linger, 0);
-  d.set(zmq::sockopt::rcvtimeo, 60000);
-  d.set(zmq::sockopt::routing_id, zmq::str_buffer("big-loader"));
-  d.connect(f.endpoint(0));
+  zmq::socket_t d = dealer_to(ctx, f.endpoint(0), 60000);
   (void)request(d, encode(HeartbeatMsg{1}));  // it is up
   // ~650,000 object faces: a tree build of a good fraction of a second even in a release build.
   const geom::Mesh probe = geom::make_capsule(4, 10, 12), object = geom::make_icosphere(40, 180);
@@ -275,10 +271,7 @@ TEST_CASE("daemon: refuses a non-loopback bind without --insecure; a config file
   {
     test::Process p({test::worker_binary(), "--bind", "tcp://0.0.0.0:" + std::to_string(port), "--insecure"}, dir.file("b.log"));
     zmq::context_t ctx;
-    zmq::socket_t d(ctx, zmq::socket_type::dealer);
-    d.set(zmq::sockopt::linger, 0);
-    d.set(zmq::sockopt::rcvtimeo, 5000);
-    d.connect("tcp://127.0.0.1:" + std::to_string(port));
+    zmq::socket_t d = dealer_to(ctx, "tcp://127.0.0.1:" + std::to_string(port), 5000);
     CHECK(std::holds_alternative<HelloMsg>(decoded(request(d, encode(HeartbeatMsg{1})))));
     CHECK(p.log().find("INSECURE") != std::string::npos);
     p.signal(SIGTERM);
@@ -296,10 +289,7 @@ TEST_CASE("daemon: refuses a non-loopback bind without --insecure; a config file
     test::write_file(dir.file("ok.toml"), "bind = \"tcp://127.0.0.1:" + std::to_string(port) + "\"\nworker_id = 9\n");
     test::Process p({test::worker_binary(), "--config", dir.file("ok.toml")}, dir.file("d.log"));
     zmq::context_t ctx;
-    zmq::socket_t d(ctx, zmq::socket_type::dealer);
-    d.set(zmq::sockopt::linger, 0);
-    d.set(zmq::sockopt::rcvtimeo, 5000);
-    d.connect("tcp://127.0.0.1:" + std::to_string(port));
+    zmq::socket_t d = dealer_to(ctx, "tcp://127.0.0.1:" + std::to_string(port), 5000);
     CHECK(std::get<HelloMsg>(decoded(request(d, encode(HeartbeatMsg{1})))).worker_id == 9);
   }
 }
