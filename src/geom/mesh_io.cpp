@@ -396,6 +396,9 @@ Result<LoadedMesh> load_with_assimp(const std::string& path, const LoadOptions& 
     const int sig = WTERMSIG(ws);
     if (sig == SIGXCPU || sig == SIGKILL)
       return fail(path, ": assimp took more than ", o.assimp_cpu_seconds, " s of CPU reading it (LoadOptions::assimp_cpu_seconds)");
+    if (sig == SIGABRT)  // assimp's own abort, or a sanitizer build's allocator refusing past the budget
+      return fail(path, ": assimp aborted reading it (signal ", sig, ", ", strsignal(sig), "): the file is malformed or "
+                  "hostile, or needed more than its budget of ", budget >> 20, " MiB (sanitizer builds abort there)");
     return fail(path, ": assimp crashed reading it (signal ", sig, ", ", strsignal(sig), "); the file is malformed or hostile");
   }
   if (result.ok() || status == 0 || !got) {

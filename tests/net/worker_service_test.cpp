@@ -48,6 +48,12 @@ struct RawClient {
     send(bytes);
     return recv();
   }
+  /// Waits until the worker has handled everything this client sent (a Heartbeat round trip:
+  /// one connection's messages are handled in order, different connections' in any order).
+  void sync() {
+    const Message m = ask(encode(HeartbeatMsg{0x5e5e}));
+    REQUIRE(std::holds_alternative<HelloMsg>(m));
+  }
   /// Sends `bytes` as LoadBlocks chunks of `chunk` bytes, from `from` up to `to` (byte offsets).
   void upload(const std::vector<std::uint8_t>& bytes, std::uint64_t hash, std::size_t chunk, std::size_t from = 0,
               std::size_t to = SIZE_MAX) {
@@ -232,6 +238,7 @@ TEST_CASE("upload bounds: total buffered bytes, concurrent uploads, and abandone
     REQUIRE(w.ok());
     RawClient a(ctx, w.value()->endpoints()[0], "client-a"), b(ctx, w.value()->endpoints()[0], "client-b");
     a.upload(set.bytes, set.hash, chunk, 0, chunk);
+    a.sync();  // a's upload is in before b's starts
     const ErrorMsg e = error_of(b.ask(encode(LoadBlocksMsg{set.hash, set.bytes.size(), 0, {set.bytes.begin(), set.bytes.begin() + chunk}})));
     CHECK(e.code == ErrorCode::TooLarge);
     CHECK(e.text.find("max_upload_bytes") != std::string::npos);
@@ -248,6 +255,8 @@ TEST_CASE("upload bounds: total buffered bytes, concurrent uploads, and abandone
     RawClient a(ctx, ep, "client-a"), b(ctx, ep, "client-b"), c(ctx, ep, "client-c");
     a.upload(set.bytes, set.hash, chunk, 0, chunk);
     b.upload(set.bytes, set.hash, chunk, 0, chunk);
+    a.sync();  // both uploads are in before c's starts
+    b.sync();
     const ErrorMsg e = error_of(c.ask(encode(LoadBlocksMsg{set.hash, set.bytes.size(), 0, {set.bytes.begin(), set.bytes.begin() + chunk}})));
     CHECK(e.code == ErrorCode::TooLarge);
     CHECK(e.text.find("max_uploads") != std::string::npos);
