@@ -68,13 +68,13 @@ if [ "$sanitizers" != 0 ]; then
     # Sanitizer builds compile only the test programs and the executables the tests start, at -O1
     # without debug info to keep CI within its time on 2 cores (reports keep function names).
     { configure build-asan "${asan_args[@]}" &&
-      build_targets build-asan spheretouch daemons/spheretouch-worker tests/test_geom tests/test_rt tests/test_net tests/test_app \
+      build_targets build-asan spheretouch daemons/spheretouch-worker tests/net/zmq_ping tests/test_geom tests/test_rt tests/test_net tests/test_app \
         tests/fuzz/fuzz_wire_replay tests/fuzz/fuzz_mesh_replay tests/fuzz/fuzz_scene_replay tests/fuzz/fuzz_pose_replay \
         tests/fuzz/fuzz_worker_replay tests/fuzz/fuzz_tree_replay tests/fuzz/fuzz_shm_replay
     } >"$bg/asan.log" 2>&1
     finished asan $?
     { configure build-tsan "${tsan_args[@]}" &&
-      build_targets build-tsan daemons/spheretouch-worker tests/test_rt tests/test_net
+      build_targets build-tsan daemons/spheretouch-worker tests/net/zmq_ping tests/test_rt tests/test_net
     } >"$bg/tsan.log" 2>&1
     finished tsan $?
     if [ "$fuzz_secs" != 0 ]; then ST_JOBS="$jobs" tests/fuzz/run_fuzz.sh 0 >"$bg/fuzz.log" 2>&1; finished fuzz $?; fi
