@@ -403,7 +403,9 @@ Result<LoadedMesh> load_with_assimp(const std::string& path, const LoadOptions& 
   }
   if (result.ok() || status == 0 || !got) {
     if (!got || !WIFEXITED(ws) || WEXITSTATUS(ws) != 0)
-      return fail(path, ": the assimp reader stopped without an answer (exit status ", WIFEXITED(ws) ? WEXITSTATUS(ws) : -1, ")");
+      return fail(path, ": the assimp reader stopped without an answer (exit status ", WIFEXITED(ws) ? WEXITSTATUS(ws) : -1,
+                  "): the file is malformed or hostile, or needed more than its budget of ", budget >> 20,
+                  " MiB (a sanitizer build's allocator exits there)");
     return result;
   }
   if (result.error().find("out of memory") != std::string::npos || result.error().find("bad_alloc") != std::string::npos)
