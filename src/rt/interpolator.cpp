@@ -161,15 +161,8 @@ Eigen::Vector3d Interpolator::force(const Eigen::Isometry3d& pose, std::int64_t 
     // the force freezes at its old value while updates stream in (found in `spheretouch run`).
     // With arrivals every tick this is exponential smoothing with time constant ~crossfade_ns.
     const double faded = static_cast<double>(std::max<std::int64_t>(idle, 0)) + dt_s * 1e9;
-    if (c_.crossfade_ns > 0 && faded < static_cast<double>(c_.crossfade_ns)) {
+    if (c_.crossfade_ns > 0 && faded < static_cast<double>(c_.crossfade_ns))
       f += offset_ * (1.0 - faded / static_cast<double>(c_.crossfade_ns));
-      // The old model's share may point against the new FD (a direction that flipped, as the
-      // paper's nearest-face FD does): the surface still never pulls the probe into the object.
-      if (contact_) {
-        const double along = f.dot(fd_);
-        if (along < 0) f -= along * fd_;
-      }
-    }
   } else {
     pending_offset_ = false;
   }
