@@ -19,6 +19,7 @@
 #endif
 #include "geom/collide.hpp"
 #include "geom/mesh_io.hpp"
+#include "geom/pose_io.hpp"
 #include "geom/sphere_tree.hpp"
 
 namespace st::bench {
@@ -86,25 +87,10 @@ bool find_pose_for_contacts(const Scene& s, std::uint32_t target, std::uint64_t 
 }
 
 std::vector<std::pair<Pose, std::string>> read_poses(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) { std::fprintf(stderr, "%s: cannot open\n", path.c_str()); throw CLI::RuntimeError(2); }
+  Result<std::vector<geom::PoseLine>> lines = geom::read_pose_lines(path);
+  if (!lines) { std::fprintf(stderr, "%s\n", lines.error().c_str()); throw CLI::RuntimeError(2); }
   std::vector<std::pair<Pose, std::string>> out;
-  std::string line, comment;
-  for (int ln = 1; std::getline(in, line); ++ln) {
-    const auto hash = line.find('#');
-    if (hash != std::string::npos) { comment = line.substr(hash + 1); line.resize(hash); }
-    std::istringstream is(line);
-    double m[16];
-    int k = 0;
-    while (k < 16 && is >> m[k]) ++k;
-    if (k == 0) continue;
-    if (k != 16) { std::fprintf(stderr, "%s:%d: expected 16 numbers, got %d\n", path.c_str(), ln, k); throw CLI::RuntimeError(2); }
-    Pose p;
-    for (int i = 0; i < 4; ++i)
-      for (int j = 0; j < 4; ++j) p.matrix()(i, j) = m[4 * i + j];
-    out.emplace_back(p, comment);
-    comment.clear();
-  }
+  for (geom::PoseLine& l : lines.value()) out.emplace_back(l.pose, std::move(l.comment));
   return out;
 }
 
@@ -198,7 +184,7 @@ void add_collide(CLI::App& app) {
     }
     if (a->poses.empty() && a->build_mesh.empty()) return;
 
-    // Build of a large mesh (issue 3: 832,000 faces in at most 1 s), ours vs FCL's OBBRSS.
+    // Build of a large mesh (832,000 faces in at most 1 s), ours vs FCL's OBBRSS.
     double big_build_s = 0, big_fcl_build_s = 0, big_bytes_per_face = 0;
     std::size_t big_faces = 0;
     if (!a->build_mesh.empty()) {

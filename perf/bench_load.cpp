@@ -1,5 +1,5 @@
 // spheretouch-bench load MESH: time to load a mesh (median of N runs), e.g. the 832,000-face
-// armadillo the foundation issue requires under 2 s.
+// armadillo, loaded in under 2 s.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>

@@ -1,4 +1,4 @@
-// spheretouch-bench exchange | haptic: the real-time core's two speed claims (rt issue).
+// spheretouch-bench exchange | haptic: the real-time core's two speed claims.
 //  exchange: the haptic side's cost of taking the newest ContactModel (update + copy out) from a
 //            TripleBuffer vs a std::mutex-guarded copy, the reader at 1 kHz, the writer
 //            publishing flat out; both variants in the same run, alternating 1 s rounds, next to

@@ -1,4 +1,4 @@
-// spheretouch-bench table1 | table3 | table2 | peers | icosphere: the paper's tables (issue 7).
+// spheretouch-bench table1 | table3 | table2 | peers | icosphere: the paper's tables.
 //  table1/table3: time of one collision round (median, p95, mean, rounds/s) at the poses of a
 //                 pose file, with 0 workers (collide() in the calling thread, as the collision
 //                 thread does) and N spheretouch-worker daemons over tcp loopback (scatter-gather
@@ -32,6 +32,7 @@
 #include "app/scene.hpp"
 #include "bench.hpp"
 #include "bench_tables_common.hpp"
+#include "geom/pose_io.hpp"
 #include "geom/collide.hpp"
 #include "geom/contact.hpp"
 #include "geom/mesh_io.hpp"
@@ -81,30 +82,14 @@ Body load_body(const std::string& spec, std::uint32_t leaf_faces) {
 }
 
 std::vector<TaggedPose> read_tagged_poses(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) die(path + ": cannot open");
+  Result<std::vector<geom::PoseLine>> lines = geom::read_pose_lines(path);
+  if (!lines) die(lines.error());
   std::vector<TaggedPose> out;
-  std::string line;
-  std::uint32_t contacts = 0, target = 0;
-  for (int ln = 1; std::getline(in, line); ++ln) {
-    const auto hash = line.find('#');
-    if (hash != std::string::npos) {
-      unsigned c = 0, t = 0;
-      if (std::sscanf(line.c_str() + hash, "# contacts %u (target %u)", &c, &t) == 2) { contacts = c; target = t; }
-      line.resize(hash);
-    }
-    std::istringstream is(line);
-    double m[16];
-    int k = 0;
-    while (k < 16 && is >> m[k]) ++k;
-    if (k == 0) continue;
-    if (k != 16) die(path + ":" + std::to_string(ln) + ": expected 16 numbers, got " + std::to_string(k));
+  for (const geom::PoseLine& l : lines.value()) {
     TaggedPose p;
-    for (int i = 0; i < 4; ++i)
-      for (int j = 0; j < 4; ++j) p.pose.matrix()(i, j) = m[4 * i + j];
-    p.contacts = contacts;
-    p.target = target;
-    contacts = target = 0;
+    p.pose = l.pose;
+    unsigned c = 0, t = 0;  // "# contacts N (target T)", written by `collide --find-poses`
+    if (std::sscanf(l.comment.c_str(), " contacts %u (target %u)", &c, &t) == 2) { p.contacts = c; p.target = t; }
     out.push_back(p);
   }
   return out;

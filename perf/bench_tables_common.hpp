@@ -1,4 +1,4 @@
-// Shared pieces of the issue-7 harness benchmarks (bench_tables.cpp, bench_trade.cpp): body
+// Shared pieces of the harness benchmarks (bench_tables.cpp, bench_trade.cpp): body
 // loading (files or the built-in ~960-face icosphere), pose files with their "# contacts N
 // (target T)" comments, the hand's built-in press/slide script, worker daemons over tcp
 // loopback, percentiles and CSV appending.
@@ -32,7 +32,7 @@ struct TaggedPose {
   geom::Pose pose;
   std::uint32_t contacts = 0, target = 0;
 };
-/// Reads a pose file (16 numbers a line, '#' comments). Exits on a malformed line.
+/// Reads a pose file (geom::read_pose_lines: checked) with its "# contacts N (target T)" tags. Exits on an error.
 std::vector<TaggedPose> read_tagged_poses(const std::string& path);
 
 /// The built-in approach/press/slide/release script (rt::builtin_press_slide) moving the probe's

@@ -1,4 +1,4 @@
-// spheretouch-bench trade: the speed/accuracy trade (issue 7 item 5), as a deterministic offline
+// spheretouch-bench trade: the speed/accuracy trade, as a deterministic offline
 // simulation in simulated time (no sleeping, no wall clock in the error axis).
 //
 // The probe follows the built-in press/slide script on the finest level's top, one pose per

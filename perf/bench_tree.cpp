@@ -1,5 +1,5 @@
 // spheretouch-bench tree MESH...: SphereTree build time (median of N runs), nodes, leaves, layers
-// and bytes per face, for issue 3's "832,000 faces in at most 1 s" requirement.
+// and bytes per face, against the "832,000 faces in at most 1 s" target.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>

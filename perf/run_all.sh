@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The perf harness (issue 7): regenerates the paper's Tables 1-3, the peers, the speed/accuracy
+# The perf harness: regenerates the paper's Tables 1-3, the peers, the speed/accuracy
 # trade, the force rendering quality (paper vs patch contact model), their CSVs, PNG plots, a JSON
 # summary and the harness sections of perf/RESULTS.md.
 #   perf/run_all.sh            full run (<= 15 min on the 2-core dev VM): perf/results/, perf/RESULTS.md

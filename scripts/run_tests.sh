@@ -2,7 +2,7 @@
 # Runs every doctest suite: the release build, then (unless ST_SANITIZERS=0) the whole suite
 # under ASan+UBSan and the concurrent suites (rt, net) under TSan, then each libFuzzer target for
 # ST_FUZZ seconds (default 30, 0 skips). Closes with one line "tests: N passed, N failed"
-# (doctest test cases summed over every run).
+# (doctest test cases summed over every run, with the Python and install checks).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 jobs="${ST_JOBS:-2}"
@@ -21,7 +21,7 @@ run_suites() {  # build-dir [suite...]
   local log="$dir/meson-logs/testlog.txt" p f
   if [ -f "$log" ]; then
     while read -r p f; do passed=$((passed + p)); failed=$((failed + f)); done < <(
-      grep -E '^\[doctest\] test cases:' "$log" | sed -E 's/.*\| *([0-9]+) passed \| *([0-9]+) failed.*/\1 \2/')
+      grep -E '^\[(doctest|python|install)\] test cases:' "$log" | sed -E 's/.*\| *([0-9]+) passed \| *([0-9]+) failed.*/\1 \2/')
     # Each failed check's doctest block (file:line, test case, what failed), repeated at the end.
     awk -v dir="$dir" '/^={20,}$/ { if (blk ~ /ERROR|FATAL|sanitizer|SUMMARY/) printf "[%s]%s\n", dir, blk; blk = ""; next }
                        { if (length(blk) < 4000) blk = blk "\n" $0 }' "$log" >>"$failures"

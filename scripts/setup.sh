@@ -12,9 +12,10 @@ case "$mode" in demo|test|build) ;; -h|--help) sed -n '2,7p' "$0"; exit 0 ;;
 
 # Build and test dependencies, all Debian packages (no downloads at build time beyond apt).
 packages=(g++ meson ninja-build pkg-config
-          libeigen3-dev libassimp-dev libzmq3-dev libsodium-dev cppzmq-dev libconcurrentqueue-dev libreaderwriterqueue-dev
+          libeigen3-dev libassimp-dev libzmq3-dev libsodium-dev cppzmq-dev
           doctest-dev libtomlplusplus-dev libcli11-dev libsystemd-dev libfcl-dev systemd
-          clang libclang-rt-14-dev)  # clang + libFuzzer runtime: tests/fuzz/run_fuzz.sh
+          clang libclang-rt-14-dev   # clang + libFuzzer runtime: tests/fuzz/run_fuzz.sh
+          pybind11-dev python3-dev python3-numpy)  # the Python module (python/)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -1,5 +1,5 @@
 // spheretouch query PROBE OBJECT --poses FILE: every colliding (probe face, object face) pair per
-// pose, exactly (issue 3 item 5). Output, per pose:
+// pose, exactly. Output, per pose:
 //   pose <i> pairs <n> contacts <c>
 //   <probe_face> <object_face>        (n lines, sorted by probe face then object face)
 #include <algorithm>
@@ -39,17 +39,6 @@ geom::SphereTree tree_or_exit(const geom::Mesh& mesh, const geom::TreeParams& pa
   }
   if (!r.value().note.empty()) std::fprintf(stderr, "spheretouch: tree cache: %s\n", r.value().note.c_str());
   return std::move(r.value().tree);
-}
-
-/// Distinct probe faces + distinct object faces of a sorted pair list (paper §3.5).
-std::uint32_t count_contacts(const std::vector<geom::FacePair>& pairs, std::vector<std::uint32_t>& tmp) {
-  std::uint32_t probe = 0;
-  for (std::size_t i = 0; i < pairs.size(); ++i) probe += i == 0 || pairs[i].probe != pairs[i - 1].probe;
-  tmp.clear();
-  for (const geom::FacePair& p : pairs) tmp.push_back(p.object);
-  std::sort(tmp.begin(), tmp.end());
-  const auto objects = static_cast<std::uint32_t>(std::unique(tmp.begin(), tmp.end()) - tmp.begin());
-  return probe + objects;
 }
 
 void run_query(const QueryArgs& a) {
@@ -134,7 +123,7 @@ void run_query(const QueryArgs& a) {
                        round.workers_replied, round.workers_asked, round.blocks_covered, round.blocks_total);
           throw CLI::RuntimeError(1);
         }
-        for (const net::FacePair& p : round.pairs) merged.push_back({p.probe, p.object});
+        merged.insert(merged.end(), round.pairs.begin(), round.pairs.end());
         stats.node_pairs = round.stats.sphere_tests;
         stats.tri_pairs = round.stats.tri_tests;
       } else if (roots.empty()) {
@@ -155,7 +144,7 @@ void run_query(const QueryArgs& a) {
       times_us.push_back(std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count());
     }
     std::nth_element(times_us.begin(), times_us.begin() + times_us.size() / 2, times_us.end());
-    const std::uint32_t contacts = count_contacts(merged, tmp);
+    const std::uint32_t contacts = geom::count_faces(merged, tmp).contacts();
     std::snprintf(line, sizeof line, "pose %zu pairs %zu contacts %u\n", i, merged.size(), contacts);
     out += line;
     if (!a.count_only)

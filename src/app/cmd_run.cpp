@@ -1,6 +1,6 @@
 // spheretouch run SCENE: the main job. A probe touches an object with force at 1 kHz: the
 // haptic thread (HapticLoop + HapticServo) never waits; the collision thread answers poses with
-// contact models; telemetry goes to a per-tick CSV. See DESIGN.md "Data flow".
+// contact models; telemetry goes to a per-tick CSV.
 #include <algorithm>
 #include <atomic>
 #include <cerrno>

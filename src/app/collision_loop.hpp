@@ -1,4 +1,4 @@
-// The collision thread of `spheretouch run` (DESIGN.md data flow): take the newest pose → one
+// The collision thread of `spheretouch run`: take the newest pose → one
 // collision round (in this thread, or scatter-gather over workers) → contact model (paper §3.6)
 // → publish. It runs as fast as it can, or at a capped rate.
 #pragma once

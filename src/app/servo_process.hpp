@@ -1,4 +1,4 @@
-// The haptic servo as its own process (`spheretouch run --split`, DESIGN.md "Shared memory").
+// The haptic servo as its own process (`spheretouch run --split`).
 // The run (parent: collision thread, workers, status line, summary) creates the segment and
 // re-executes itself as the hidden `spheretouch servo` subcommand: a fresh process with no
 // inherited threads, no meshes and no trees, that owns the device, the haptic loop and the

@@ -25,9 +25,9 @@
 
 #include <algorithm>
 #include <bit>
-#include <cassert>
 #include <limits>
 
+#include "geom/check.hpp"
 #include "geom/tri_tri.hpp"
 
 // SIMD: AVX2 with -march=native, SSE2 on any other x86-64, scalar elsewhere or with -Dsimd=false
@@ -300,7 +300,6 @@ struct CollideQuery {
   CollideResult& res;
   RelTransform rt;
   double s = 1;    // >= ||R||_2
-  double eps = 0;  // absolute slack of every distance test, mm
   float slack = 0;  // absolute slack of the float sphere tests, mm (see sphere_mask)
   std::uint32_t gen = 0;
   bool exact = true;
@@ -450,6 +449,7 @@ struct CollideQuery {
       const std::uint32_t c = first + static_cast<std::uint32_t>(31 - std::countl_zero(mask));
       stack[n++] = probe_side ? std::pair{c, other} : std::pair{other, c};
     }
+    ST_ASSERT(n <= sc.stack_cap_, "descend() leaves room for kMaxChildren before each push");
   }
 
   void descend(std::uint32_t proot, std::uint32_t oroot) {
@@ -493,6 +493,16 @@ struct CollideQuery {
   }
 };
 
+FaceCounts count_faces(std::span<const FacePair> pairs, std::vector<std::uint32_t>& scratch) {
+  const auto distinct = [&](auto field) {
+    scratch.clear();
+    for (const FacePair& p : pairs) scratch.push_back(p.*field);
+    std::sort(scratch.begin(), scratch.end());
+    return static_cast<std::uint32_t>(std::unique(scratch.begin(), scratch.end()) - scratch.begin());
+  };
+  return {distinct(&FacePair::probe), distinct(&FacePair::object)};
+}
+
 void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree,
              const Pose& pose, const CollideOptions& options, CollideScratch& scratch, CollideResult& result) {
   result.clear();
@@ -520,7 +530,6 @@ void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object
   const SphereNode& rp = probe_tree.nodes[0];
   const SphereNode& ro = object_tree.nodes[0];
   const double mag = q.rt.t.norm() + q.s * (centre_of(rp).norm() + rp.radius) + centre_of(ro).norm() + ro.radius;
-  q.eps = 1e-9 * mag + 1e-300;
   q.slack = static_cast<float>(1e-5 * mag) + 1e-30f;
 
   if (!options.restrict_object) {

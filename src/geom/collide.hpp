@@ -13,14 +13,14 @@
 
 namespace st::geom {
 
-/// Probe-local -> object-local map: p_obj_local = R p_probe_local + t. The ONE arithmetic every
+/// Probe local frame -> object local frame (mesh.hpp): p_obj_local = R p_probe_local + t. The ONE arithmetic every
 /// caller (collide, references in tests, tools) uses, so "the same transformed doubles" is literal.
 struct RelTransform {
   Eigen::Matrix3d R;  ///< pose.linear()
   Vec3 t;             ///< R probe.origin + pose.translation() - object.origin, rounded once
 };
 
-/// R and t for `pose` (probe file -> object file coordinates). t is computed with error-free
+/// R and t for `pose` (probe frame -> object frame). t is computed with error-free
 /// transformations (fma TwoProduct + TwoSum) and rounded once, so origins at 1e6 mm lose nothing.
 RelTransform transform_to_object(const Pose& pose, const Mesh& probe, const Mesh& object);
 
@@ -40,6 +40,16 @@ struct FacePair {
   friend bool operator==(const FacePair&, const FacePair&) = default;
   friend auto operator<=>(const FacePair&, const FacePair&) = default;
 };
+
+/// Distinct probe faces and distinct object faces of a pair list: paper §3.5's "number of
+/// contacts" is their sum. The one definition every counter uses.
+struct FaceCounts {
+  std::uint32_t probe_faces = 0;   ///< distinct probe faces
+  std::uint32_t object_faces = 0;  ///< distinct object faces
+  std::uint32_t contacts() const { return probe_faces + object_faces; }  ///< paper §3.5
+};
+/// Counts the pairs' distinct faces (any order; `scratch` is reused, no allocation once warm).
+FaceCounts count_faces(std::span<const FacePair> pairs, std::vector<std::uint32_t>& scratch);
 
 /// Approximate-mode stop layers (CollideOptions::stop_layer).
 inline constexpr int kExact = -2;        ///< full exact descent (default)
@@ -68,7 +78,6 @@ struct CollideStats {
   std::uint64_t node_pairs = 0;       ///< sphere pairs tested
   std::uint64_t leaf_pairs = 0;       ///< leaf-leaf pairs reached (exact mode)
   std::uint64_t tri_pairs = 0;        ///< exact tri_tri_overlap calls
-  std::uint64_t exact_fallbacks = 0;  ///< not exposed by tri_tri.hpp: always 0
   std::uint64_t sphere_pairs = 0;     ///< approximate mode: overlapping sphere pairs reported
   std::uint64_t truncated = 0;        ///< traversals stopped: a tree deeper than its num_depths (or > kMaxTreeDepth); 0 for valid trees
   bool pair_limit_hit = false;        ///< the traversal stopped at CollideOptions::max_pairs
@@ -126,7 +135,7 @@ class CollideScratch {
   std::uint32_t next_generation();
 };
 
-/// Collides probe (posed by `pose`: probe file -> object file coordinates) with object. The pair
+/// Collides probe (posed by `pose`: probe frame -> object frame) with object. The pair
 /// set is exactly {(p, o) : tri_tri_overlap(apply(rt, probe p's vertices), object o's vertices)}
 /// (restricted to object_roots if given). Never throws; allocates only while warming up.
 void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree,

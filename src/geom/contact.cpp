@@ -7,6 +7,7 @@
 #include <limits>
 #include <sstream>
 
+#include "geom/check.hpp"
 #include "geom/contact_patch.hpp"
 
 namespace st::geom {
@@ -71,6 +72,9 @@ ContactModel ContactBuilder::build(const Mesh& probe, const Mesh& object, const 
   ContactModel m = config_.model == ContactModelKind::paper ? build_paper(probe, object, pose, pairs)
                                                             : patch_->build(probe, object, pose, pairs);
   m.kind = static_cast<std::uint32_t>(config_.model);
+  ST_ASSERT(!m.in_contact() || std::abs(to_eigen(m.force_dir).norm() - 1.0) < 1e-9, "FD is a unit vector in contact");
+  ST_ASSERT(std::isfinite(m.penetration_mm) && m.penetration_mm >= 0, "PD is finite and >= 0");
+  ST_ASSERT(m.contacts == m.object_faces + m.probe_faces, "contacts = object faces + probe faces");
   return m;
 }
 

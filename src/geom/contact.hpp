@@ -1,10 +1,10 @@
 // Contact models: from the colliding (probe face, object face) pairs of one collision round, the
 // force direction FD, the penetration PD and a local contact plane that the haptic thread renders
 // and interpolates from. The result is plain data (ContactModel) so a TripleBuffer can carry it.
-// Frames: the builder works in the OBJECT frame (the haptic side's world frame); `pose` maps probe
-// file coordinates into object file coordinates. Every field of ContactModel is in object file
-// coordinates except probe_point, which is a probe vertex in PROBE file coordinates (the haptic
-// side moves it with the pose of each tick).
+// Frames (named as in mesh.hpp): `pose` maps the probe frame into the object frame, the frame
+// the builder works in (the haptic side's world). Every vector of ContactModel is in the object
+// frame except probe_point, which is a probe vertex in the probe frame (the haptic side moves it
+// with the pose of each tick).
 //
 // Two models, chosen by ContactConfig::model:
 //
@@ -52,7 +52,7 @@
 //    object face index, then lower probe vertex index). FD = that object face's outward unit
 //    normal (b-a)×(c-a). contact_point = that probe vertex projected onto that face's plane.
 //  * First contact face: the nearest object face of the first model with a contact after a model
-//    without one (or after reset()); its plane (centroid, normal) is recorded in object-local
+//    without one (or after reset()); its plane (centroid, normal) is recorded in the object's local
 //    coordinates. It is re-recorded (flag kReplaned) when contact restarts, and also when its
 //    normal and FD differ by more than ContactConfig::replane_angle_deg.
 //  * PD = max over the colliding probe faces' vertices of their depth below the recorded plane,
@@ -133,7 +133,7 @@ struct ContactModel {
   PodPose pose;                       ///< probe→object pose it was computed at
   PodVec3 force_dir;                  ///< FD, unit, pushes the probe out of the object; 0 if none
   PodVec3 contact_point;              ///< paper: nearest probe vertex on the nearest face; patch: where the deepest point leaves the surface, mm
-  PodVec3 probe_point;                ///< deepest probe point, PROBE file coordinates, mm
+  PodVec3 probe_point;                ///< deepest probe point, probe frame, mm
   PodVec3 plane_point;                ///< local contact plane: a point, mm (normal = force_dir)
   double penetration_mm = 0;          ///< PD >= 0 (paper: below the first contact face; patch: directional depth)
   std::uint32_t object_faces = 0;     ///< distinct colliding object faces
@@ -196,7 +196,7 @@ class ContactBuilder {
   /// Builds what the model needs per mesh (the patch model's VertexFaces, ~28 B/vertex) so
   /// that the first build() does not pay for it; build() calls it when the meshes changed.
   void prepare(const Mesh& probe, const Mesh& object);
-  /// The model for `pairs` found at `pose` (probe file → object file coordinates). Fills every
+  /// The model for `pairs` found at `pose` (probe frame → object frame). Fills every
   /// field but seq/pose_seq/pose_sampled_ns/published_ns, which belong to the publisher.
   ContactModel build(const Mesh& probe, const Mesh& object, const Pose& pose,
                      std::span<const ContactPair> pairs);
@@ -211,10 +211,10 @@ class ContactBuilder {
   ContactModel build_paper(const Mesh& probe, const Mesh& object, const Pose& pose, std::span<const ContactPair> pairs);
   ContactConfig config_;
   std::uint32_t first_face_ = UINT32_MAX;  ///< paper: recorded face, UINT32_MAX = none
-  Vec3 first_point_{Vec3::Zero()};         ///< paper: its centroid, object-local, mm
+  Vec3 first_point_{Vec3::Zero()};         ///< paper: its centroid, object local frame, mm
   Vec3 first_normal_{Vec3::Zero()};        ///< paper: its unit normal
   std::vector<std::uint32_t> probe_faces_, object_faces_, probe_vertices_;  ///< scratch
-  std::vector<Vec3> probe_points_;         ///< scratch: probe vertices in object-local coordinates
+  std::vector<Vec3> probe_points_;         ///< scratch: probe vertices in the object's local frame
   struct Patch;                            ///< the patch model's state and scratch (contact_patch.cpp)
   friend struct SurfaceWalk;
   std::unique_ptr<Patch> patch_;

@@ -1,6 +1,11 @@
-// Mesh: indexed triangles of one rigid body in its own body-local frame (DESIGN.md).
-// Vertices are stored relative to `origin` (the body's centre, kept in double) so a body placed
-// 10^6 mm from the world origin keeps full precision; large offsets live only in poses.
+// Mesh: indexed triangles of one rigid body.
+// Frames, one name each, used by every header:
+//  * the body's frame ("object frame", "probe frame"): the coordinates of its mesh file, mm.
+//    A pose maps the probe frame into the object frame.
+//  * the body's local frame: its frame shifted by `origin` (the body's centre, kept in double).
+//    Vertices are stored in it so a body placed 10^6 mm from the origin keeps full precision;
+//    large offsets live only in poses and origins. Trees and collide()'s caches use it.
+//  * the world frame: where the public API's Body::frame() places a body (spheretouch/collide.hpp).
 #pragma once
 #include <Eigen/Core>
 #include <Eigen/Geometry>
@@ -36,18 +41,18 @@ struct Topology {
   bool manifold() const { return nonmanifold_edges == 0 && misoriented_edges == 0; }  ///< 2-manifold, oriented
 };
 
-/// Indexed triangle mesh of one body. Face index = position in the input file (DESIGN.md).
+/// Indexed triangle mesh of one body. Face index = position in the input file.
 struct Mesh {
   std::string name;              ///< where it came from (file path or generator), for messages
-  Vec3 origin{Vec3::Zero()};     ///< body centre in the file's frame, mm
+  Vec3 origin{Vec3::Zero()};     ///< body centre in the body's frame, mm
   std::vector<Vec3> local;       ///< vertex positions relative to origin, mm
   std::vector<Tri> faces;        ///< vertex indices, counter-clockwise seen from outside
 
   std::size_t num_faces() const { return faces.size(); }                 ///< triangle count
   std::size_t num_vertices() const { return local.size(); }              ///< vertex count
-  Vec3 vertex(std::uint32_t i) const { return origin + local[i]; }       ///< position in the file's frame
+  Vec3 vertex(std::uint32_t i) const { return origin + local[i]; }       ///< position in the body's frame
   Box local_bounds() const;                                              ///< bounds of `local`
-  Box bounds() const;                                                    ///< bounds in the file's frame
+  Box bounds() const;                                                    ///< bounds in the body's frame
   Topology topology() const;                                             ///< edge counts (O(F log F))
   std::vector<std::uint32_t> degenerate_faces() const;                   ///< zero-area faces, ascending
   /// Re-centres the body: origin becomes the bounding-box centre, snapped so that subtracting it
@@ -59,7 +64,7 @@ struct Mesh {
   Status validate() const;
 };
 
-/// Builds a mesh from vertex positions in the file's frame (recentred) and faces.
+/// Builds a mesh from vertex positions in the body's frame (recentred) and faces.
 Mesh make_mesh(std::string name, const std::vector<Vec3>& positions, std::vector<Tri> faces);
 
 }  // namespace st::geom

@@ -31,8 +31,7 @@ struct Partition {
 Result<Partition> make_partition(const SphereTree& tree, std::uint32_t layer, std::uint32_t workers,
                                  std::uint32_t block_size);
 
-/// Where a subtree lives in the flat arrays, for shipping a worker's blocks (the distribution
-/// issue): the root node, its descendants nodes[desc_begin, desc_end) and its faces
+/// Where a subtree lives in the flat arrays, for shipping a worker's blocks: the root node, its descendants nodes[desc_begin, desc_end) and its faces
 /// face_order[face_begin, face_end) (also face_boxes). Child indices inside the range are absolute.
 struct SubtreeExtent {
   std::uint32_t root;        ///< the subtree root

@@ -38,18 +38,27 @@ std::string join_values(const double* v, int n) {
   return os.str();
 }
 
-/// Checks 16 parsed values as a rigid transform; an empty string when it is one.
-std::string check_rigid(const std::array<double, kValues>& v) {
-  if (v[12] != 0.0 || v[13] != 0.0 || v[14] != 0.0 || v[15] != 1.0)
-    return "last row must be 0 0 0 1, found " + join_values(&v[12], 4);
-  Eigen::Matrix3d r;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) r(i, j) = v[4 * i + j];
+Result<std::vector<Pose>> poses_only(const Result<std::vector<PoseLine>>& lines) {
+  if (!lines) return Error{lines.error()};
+  std::vector<Pose> poses;
+  poses.reserve(lines.value().size());
+  for (const PoseLine& l : lines.value()) poses.push_back(l.pose);
+  return poses;
+}
+
+}  // namespace
+
+std::string check_rigid(const Eigen::Matrix4d& m, double tolerance) {
+  if (!m.allFinite()) return "not finite";
+  if (m(3, 0) != 0.0 || m(3, 1) != 0.0 || m(3, 2) != 0.0 || m(3, 3) != 1.0) {
+    const double last[4] = {m(3, 0), m(3, 1), m(3, 2), m(3, 3)};
+    return "last row must be 0 0 0 1, found " + join_values(last, 4);
+  }
+  const Eigen::Matrix3d r = m.topLeftCorner<3, 3>();
   const double err = (r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
-  if (!(err <= kPoseOrthonormalTolerance)) {
+  if (!(err <= tolerance)) {
     std::ostringstream os;
-    os << "rotation block is not orthonormal: max |R^T R - I| entry is " << err << " > "
-       << kPoseOrthonormalTolerance;
+    os << "rotation block is not orthonormal: max |R^T R - I| entry is " << err << " > " << tolerance;
     return os.str();
   }
   const double det = r.determinant();
@@ -61,10 +70,9 @@ std::string check_rigid(const std::array<double, kValues>& v) {
   return {};
 }
 
-}  // namespace
-
-Result<std::vector<Pose>> parse_poses(std::string_view text, std::string_view name) {
-  std::vector<Pose> poses;
+Result<std::vector<PoseLine>> parse_pose_lines(std::string_view text, std::string_view name) {
+  std::vector<PoseLine> poses;
+  std::string comment;  // the newest comment since the previous pose
   std::size_t line_no = 0;
   std::size_t pos = 0;
   while (pos < text.size()) {
@@ -73,8 +81,11 @@ Result<std::vector<Pose>> parse_poses(std::string_view text, std::string_view na
     std::string_view line = text.substr(pos, eol - pos);
     pos = eol + 1;
     ++line_no;
-    if (const std::size_t hash = line.find('#'); hash != std::string_view::npos)
+    if (const std::size_t hash = line.find('#'); hash != std::string_view::npos) {
+      comment.assign(line.substr(hash + 1));
+      while (!comment.empty() && (is_space(comment.back()) || comment.back() == '\r')) comment.pop_back();
       line = line.substr(0, hash);
+    }
 
     std::array<double, kValues> v{};
     int count = 0;
@@ -103,18 +114,23 @@ Result<std::vector<Pose>> parse_poses(std::string_view text, std::string_view na
     if (count != kValues)
       return fail(name, ":", line_no, ": expected ", kValues,
                   " numbers (a row-major 4x4 rigid transform), found ", count);
-    if (const std::string why = check_rigid(v); !why.empty())
-      return fail(name, ":", line_no, ": ", why);
     Pose pose = Pose::Identity();
     for (int r = 0; r < 4; ++r)
       for (int c = 0; c < 4; ++c) pose.matrix()(r, c) = v[4 * r + c];
-    poses.push_back(pose);
+    if (const std::string why = check_rigid(pose.matrix()); !why.empty())
+      return fail(name, ":", line_no, ": ", why);
+    poses.push_back({pose, std::move(comment)});
+    comment.clear();
   }
   if (poses.empty()) return fail(name, ": no poses (the file is empty or has only comments)");
   return poses;
 }
 
-Result<std::vector<Pose>> read_poses(const std::string& path) {
+Result<std::vector<Pose>> parse_poses(std::string_view text, std::string_view name) {
+  return poses_only(parse_pose_lines(text, name));
+}
+
+Result<std::vector<PoseLine>> read_pose_lines(const std::string& path) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec)) return fail(path, ": is a directory, not a pose file");
   std::ifstream in(path, std::ios::binary);
@@ -122,8 +138,10 @@ Result<std::vector<Pose>> read_poses(const std::string& path) {
   std::ostringstream buf;
   buf << in.rdbuf();
   if (in.bad()) return fail(path, ": read error: ", std::strerror(errno));
-  return parse_poses(buf.str(), path);
+  return parse_pose_lines(buf.str(), path);
 }
+
+Result<std::vector<Pose>> read_poses(const std::string& path) { return poses_only(read_pose_lines(path)); }
 
 std::string format_pose(const Pose& pose) {
   std::string out;

@@ -1,5 +1,5 @@
 // Result<T>: the value of a cold, validating step (import, config, decode) or an error
-// message naming the file, field or offset at fault (STYLE.md 3). Hot paths never use it.
+// message naming the file, field or offset at fault. Hot paths never use it.
 #pragma once
 #include <string>
 #include <utility>

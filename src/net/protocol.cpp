@@ -3,13 +3,12 @@
 
 #include <cmath>
 
+#include "geom/pose_io.hpp"
 #include "net/wire.hpp"
 
 namespace st::net {
 
 namespace {
-
-constexpr double kRigidTolerance = 1e-6;  // |RᵀR − I|∞ and |det R − 1|: poses chained in double drift ~1e-12
 
 void put_pose(Writer& w, const geom::Pose& p) {
   const auto& m = p.matrix();
@@ -23,11 +22,8 @@ geom::Pose get_pose(Reader& r) {
   for (int i = 0; i < 3; ++i)
     for (int c = 0; c < 4; ++c) m(i, c) = r.f64("pose");
   if (r.ok()) {
-    const Eigen::Matrix3d R = m.topLeftCorner<3, 3>();
-    const double orth = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
-    const double det = R.determinant();
-    if (!(orth <= kRigidTolerance) || !(std::abs(det - 1.0) <= kRigidTolerance))
-      r.fail_at(at, "pose", ": not a rigid transform (|RtR-I| = ", orth, ", det = ", det, ")");
+    if (const std::string why = geom::check_rigid(m); !why.empty())
+      r.fail_at(at, "pose", ": not a rigid transform (", why, ")");
   }
   geom::Pose p = geom::Pose::Identity();
   p.matrix() = m;

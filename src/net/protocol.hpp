@@ -1,15 +1,17 @@
-// Wire protocol between the scatter-gather client and the workers (distribution issue, paper
-// §3.4). One ZeroMQ frame per message: a 12-byte header {magic "STNP", version u16, type u8,
+// Wire protocol between the scatter-gather client and the workers (paper §3.4). One ZeroMQ frame per message: a 12-byte header {magic "STNP", version u16, type u8,
 // flags u8 = 0, body length u32} and a little-endian body. decode() checks every length, count,
 // index and number against explicit Limits before using or allocating from it, and its error
 // names the message, the field and the byte offset.
 #pragma once
+#include <cstddef>
 #include <cstdint>
+#include <type_traits>
 #include <span>
 #include <string>
 #include <variant>
 #include <vector>
 
+#include "geom/collide.hpp"
 #include "geom/mesh.hpp"
 #include "geom/result.hpp"
 
@@ -39,13 +41,11 @@ struct Limits {
 /// Default limits (sized for multi-million-face meshes; workers may lower max_blockset_bytes).
 inline Limits default_limits() { return Limits{}; }
 
-/// One colliding pair: probe face index and object face index (file order, DESIGN.md).
-struct FacePair {
-  std::uint32_t probe = 0;   ///< probe face index
-  std::uint32_t object = 0;  ///< global object face index
-  friend auto operator<=>(const FacePair&, const FacePair&) = default;
-};
-static_assert(sizeof(FacePair) == 8);
+/// One colliding pair: probe face index and (global) object face index, file order.
+/// The collision core's own pair type; on the wire as {u32 probe, u32 object} little-endian.
+using FacePair = geom::FacePair;
+static_assert(sizeof(FacePair) == 8 && std::is_trivially_copyable_v<FacePair> && offsetof(FacePair, probe) == 0 &&
+              offsetof(FacePair, object) == 4);
 
 /// Work counters a worker reports with each Result (summed over workers by the client).
 struct QueryStats {

@@ -72,8 +72,8 @@ class GridBackend final : public CollisionBackend {
     const std::size_t start = out.size();
     const auto t0 = std::chrono::steady_clock::now();
     QueryStats st;
-    // Relative transform probe-local → object-local, composed once in double (DESIGN.md: large
-    // offsets live only in poses; never transform through the far-away file frame per vertex).
+    // Relative transform probe-local → object-local, composed once in double (large
+    // offsets live only in poses and origins; never transform through the far-away file frame per vertex).
     const geom::Pose rel = Eigen::Translation3d(-object_.origin) * pose * Eigen::Translation3d(probe_.origin);
     moved_.resize(probe_.local.size());
     for (std::size_t v = 0; v < moved_.size(); ++v) moved_[v] = rel * probe_.local[v];

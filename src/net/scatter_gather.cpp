@@ -1,6 +1,7 @@
 // ScatterGather (scatter_gather.hpp).
 #include "net/scatter_gather.hpp"
 
+#include "geom/check.hpp"
 #include "net/worker_config.hpp"
 
 #include <malloc.h>
@@ -174,7 +175,8 @@ struct ScatterGather::Impl {
     if (f->second.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return nullptr;
     Result<SetPtr> r = f->second.get();
     encoding.erase(f);
-    if (!r) return nullptr;  // cannot happen: blocks come from our own partition
+    ST_ASSERT(r.ok(), "blocks come from our own partition, so they encode");
+    if (!r) return nullptr;
     remember(r.value());
     return r.value();
   }
@@ -650,12 +652,8 @@ std::size_t ScatterGather::encoded_sets() const { return impl_->by_blocks.size()
 std::uint32_t ScatterGather::blocks_total() const { return static_cast<std::uint32_t>(impl_->covered.size()); }
 
 std::size_t count_contacts(const std::vector<FacePair>& pairs) {
-  std::vector<std::uint32_t> p, o;
-  for (const FacePair& f : pairs) { p.push_back(f.probe); o.push_back(f.object); }
-  std::sort(p.begin(), p.end());
-  std::sort(o.begin(), o.end());
-  return static_cast<std::size_t>(std::unique(p.begin(), p.end()) - p.begin()) +
-         static_cast<std::size_t>(std::unique(o.begin(), o.end()) - o.begin());
+  std::vector<std::uint32_t> scratch;
+  return geom::count_faces(pairs, scratch).contacts();
 }
 
 }  // namespace st::net

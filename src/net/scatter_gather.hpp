@@ -118,7 +118,7 @@ class ScatterGather {
   std::unique_ptr<Impl> impl_;
 };
 
-/// "Contacts" (paper §3.5, DESIGN.md): distinct probe faces + distinct object faces in `pairs`.
+/// "Contacts" (paper §3.5, geom::count_faces): distinct probe faces + distinct object faces in `pairs`.
 std::size_t count_contacts(const std::vector<FacePair>& pairs);
 
 }  // namespace st::net

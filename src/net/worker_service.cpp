@@ -1,6 +1,7 @@
 // WorkerService (worker_service.hpp).
 #include "net/worker_service.hpp"
 
+#include "geom/check.hpp"
 #include "net/worker_config.hpp"
 
 #include <malloc.h>
@@ -349,7 +350,8 @@ bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
     zmq::message_t peer, frame;
     try {
       if (!sock_.recv(peer, zmq::recv_flags::dontwait)) break;
-      if (!peer.more()) { note_bad("no body frame"); continue; }  // cannot happen on a ROUTER
+      ST_ASSERT(peer.more(), "a ROUTER prepends the routing id to every message");
+      if (!peer.more()) { note_bad("no body frame"); continue; }
       (void)sock_.recv(frame, zmq::recv_flags::none);             // parts of a message arrive together
       bool extra = frame.more();
       for (bool more = extra; more;) {                            // discard surplus frames

@@ -1,4 +1,4 @@
-// Constants of the real-time core, each with its unit and the reason for its value (STYLE.md).
+// Constants of the real-time core, each with its unit and the reason for its value.
 // Device figures are the SensAble/3D Systems PHANToM Omni (Touch) data sheet, the device of the
 // paper (§3.1); the loop rate is OpenHaptics' servo loop and the paper's "1 KHz" (§3.2).
 #pragma once

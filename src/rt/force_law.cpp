@@ -3,21 +3,12 @@
 #include <algorithm>
 #include <cmath>
 
+#include "geom/check.hpp"
 #include "rt/constants.hpp"
 
 namespace st::rt {
 
-ForceLawConfig DefaultForceLawConfig() {
-  ForceLawConfig c;
-  c.kind = LawKind::log;
-  c.a = kPaperA;
-  c.b_N = kPaperB;
-  c.log_base = kDefaultLogBase;
-  c.pd_unit_mm = kDefaultPdUnitMm;
-  c.spring_N_per_mm = kDefaultSpringNPerMm;
-  c.max_force_N = kOmniPeakForceN;
-  return c;
-}
+ForceLawConfig DefaultForceLawConfig() { return ForceLawConfig{}; }
 
 namespace {
 bool positive_finite(double v) { return std::isfinite(v) && v > 0; }
@@ -70,7 +61,8 @@ double ForceLaw::magnitude_N(double pd_mm) const noexcept {
   } else {
     f = c_.b_N * (std::log(pd_mm / c_.pd_unit_mm) * inv_ln_base_ + c_.a);
   }
-  if (!(f > 0)) return 0.0;  // cannot happen past the knee, but never return NaN/negative
+  ST_ASSERT(f > 0, "the law is positive for PD > 0 (past the knee the log term exceeds its value there)");
+  if (!(f > 0)) return 0.0;  // never NaN or negative, whatever a future law does
   return std::min(f, c_.max_force_N);
 }
 

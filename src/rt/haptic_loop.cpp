@@ -18,11 +18,7 @@
 
 namespace st::rt {
 
-HapticLoopConfig DefaultHapticLoopConfig() {
-  HapticLoopConfig c;
-  c.rate_hz = kDefaultRateHz;
-  return c;
-}
+HapticLoopConfig DefaultHapticLoopConfig() { return HapticLoopConfig{}; }
 
 bool RtReport::all_applied() const {
   for (const RtStep* s : {&fifo, &affinity, &mlock, &prefault})

@@ -1,4 +1,4 @@
-// HapticLoop: the servo loop (DESIGN.md haptic thread). Ticks at absolute deadlines on
+// HapticLoop: the servo loop. Ticks at absolute deadlines on
 // CLOCK_MONOTONIC (clock_nanosleep, TIMER_ABSTIME), so lateness never accumulates into drift.
 // A deadline whose tick cannot start before the next deadline is skipped and counted as a miss;
 // the loop never runs ticks back to back to catch up. Real-time settings (SCHED_FIFO,
@@ -12,13 +12,14 @@
 #include <thread>
 
 #include "geom/result.hpp"
+#include "rt/constants.hpp"
 #include "rt/histogram.hpp"
 
 namespace st::rt {
 
-/// Loop settings; DefaultHapticLoopConfig() gives 1 kHz and no real-time requests.
+/// Loop settings; the initializers (= DefaultHapticLoopConfig()) give 1 kHz and no real-time requests.
 struct HapticLoopConfig {
-  double rate_hz = 0;                   ///< tick rate, Hz, in [kMinRateHz, kMaxRateHz]
+  double rate_hz = kDefaultRateHz;      ///< tick rate, Hz, in [kMinRateHz, kMaxRateHz]
   int fifo_priority = 0;                ///< SCHED_FIFO priority 1..99; 0 = do not ask
   int cpu = -1;                         ///< pin the loop thread to this CPU; -1 = do not pin
   bool lock_memory = false;             ///< mlockall(MCL_CURRENT | MCL_FUTURE)

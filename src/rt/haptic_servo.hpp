@@ -1,4 +1,4 @@
-// HapticServo: the haptic thread's tick (DESIGN.md data flow), as a TickHandler for HapticLoop:
+// HapticServo: the haptic thread's tick, as a TickHandler for HapticLoop:
 // read the device pose → publish it → take the newest ContactModel if one arrived →
 // interpolate the force → saturate → command the device → push one telemetry sample.
 // Everything it touches is preallocated; the tick takes no lock and never waits.

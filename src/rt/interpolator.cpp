@@ -24,17 +24,7 @@ const char* to_string(InterpMode mode) {
   return "?";
 }
 
-InterpolatorConfig DefaultInterpolatorConfig() {
-  InterpolatorConfig c;
-  c.mode = InterpMode::plane;
-  c.stale_timeout_ns = kDefaultStaleTimeoutNs;
-  c.fade_ns = kDefaultFadeNs;
-  c.crossfade_ns = kDefaultCrossfadeNs;
-  c.paper_gain_N_per_mm = kDefaultPaperGainNPerMm;
-  c.paper_max_move_mm = kDefaultPaperMaxMoveMm;
-  c.damping_N_s_per_mm = 0;
-  return c;
-}
+InterpolatorConfig DefaultInterpolatorConfig() { return InterpolatorConfig{}; }
 
 std::string Interpolator::check(const InterpolatorConfig& c) {
   std::ostringstream os;

@@ -21,6 +21,7 @@
 
 #include "geom/contact.hpp"
 #include "geom/result.hpp"
+#include "rt/constants.hpp"
 #include "rt/force_law.hpp"
 
 namespace st::rt {
@@ -32,15 +33,15 @@ Result<InterpMode> parse_interp_mode(std::string_view name);
 /// The name parse_interp_mode() accepts.
 const char* to_string(InterpMode mode);
 
-/// Interpolation settings; DefaultInterpolatorConfig() gives the documented defaults.
+/// Interpolation settings; the initializers (= DefaultInterpolatorConfig()) are the documented defaults.
 struct InterpolatorConfig {
-  InterpMode mode = InterpMode::plane;  ///< method
-  std::int64_t stale_timeout_ns = 0;    ///< no update for this long: start fading, ns
-  std::int64_t fade_ns = 0;             ///< fade duration to zero, ns (0 = cut at once)
-  std::int64_t crossfade_ns = 0;        ///< plane: cross-fade to a new model, ns (0 = switch at once)
-  double paper_gain_N_per_mm = 0;       ///< paper: force per mm of probe movement, N/mm
-  double paper_max_move_mm = 0;         ///< paper: cap on |D|, mm
-  double damping_N_s_per_mm = 0;        ///< optional damping along FD while in contact, N·s/mm (0 = off)
+  InterpMode mode = InterpMode::plane;                      ///< method
+  std::int64_t stale_timeout_ns = kDefaultStaleTimeoutNs;   ///< no update for this long: start fading, ns
+  std::int64_t fade_ns = kDefaultFadeNs;                    ///< fade duration to zero, ns (0 = cut at once)
+  std::int64_t crossfade_ns = kDefaultCrossfadeNs;          ///< plane: cross-fade to a new model, ns (0 = switch at once)
+  double paper_gain_N_per_mm = kDefaultPaperGainNPerMm;     ///< paper: force per mm of probe movement, N/mm
+  double paper_max_move_mm = kDefaultPaperMaxMoveMm;        ///< paper: cap on |D|, mm
+  double damping_N_s_per_mm = 0;                            ///< optional damping along FD while in contact, N·s/mm (0 = off)
 };
 /// plane, 200 ms stale timeout, 100 ms fade, 10 ms cross-fade, paper gain 0.5 N/mm capped at
 /// 2 mm, no damping.

@@ -1,5 +1,5 @@
 // PoseSample: the device pose the haptic thread publishes each tick for the collision thread
-// (DESIGN.md data flow). Plain data with a sequence number and the sampling time, so the
+//. Plain data with a sequence number and the sampling time, so the
 // collision side can stamp its ContactModel with the pose it was computed at.
 #pragma once
 #include <cstdint>

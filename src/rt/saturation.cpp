@@ -8,15 +8,7 @@
 
 namespace st::rt {
 
-SaturationConfig DefaultSaturationConfig() {
-  SaturationConfig c;
-  c.peak_N = kOmniPeakForceN;
-  c.sustained = true;
-  c.continuous_N = kOmniContinuousForceN;
-  c.tau_s = kSustainedTauS;
-  c.onset = kSustainedOnset;
-  return c;
-}
+SaturationConfig DefaultSaturationConfig() { return SaturationConfig{}; }
 
 std::string Saturator::check(const SaturationConfig& c) {
   std::ostringstream os;

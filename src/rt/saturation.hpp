@@ -7,15 +7,18 @@
 #include <cstdint>
 #include <string>
 
+#include "rt/constants.hpp"
+
 namespace st::rt {
 
-/// Saturation settings; DefaultSaturationConfig() = Omni: 3.3 N peak, 0.88 N continuous, 10 s.
+/// Saturation settings; the initializers (= DefaultSaturationConfig()) are the Omni's: 3.3 N
+/// peak, 0.88 N continuous, 10 s.
 struct SaturationConfig {
-  double peak_N = 0;        ///< hard ceiling, N
-  bool sustained = true;    ///< enable the sustained-force limit
-  double continuous_N = 0;  ///< RMS force the ceiling converges to under a long push, N
-  double tau_s = 0;         ///< time constant of the RMS estimate, s
-  double onset = 0;         ///< RMS / continuous_N at which the ceiling starts to fall, in (0, 1)
+  double peak_N = kOmniPeakForceN;              ///< hard ceiling, N
+  bool sustained = true;                        ///< enable the sustained-force limit
+  double continuous_N = kOmniContinuousForceN;  ///< RMS force the ceiling converges to under a long push, N
+  double tau_s = kSustainedTauS;                ///< time constant of the RMS estimate, s
+  double onset = kSustainedOnset;               ///< RMS / continuous_N at which the ceiling starts to fall, in (0, 1)
 };
 /// Omni: peak 3.3 N, sustained limit on, continuous 0.88 N, tau 10 s, onset 0.8.
 SaturationConfig DefaultSaturationConfig();

@@ -1,5 +1,5 @@
 // ShmSegment: a named POSIX shared-memory segment holding the pose and contact-model triple
-// buffers, so the haptic servo can run as its own process (DESIGN.md "Shared memory").
+// buffers, so the haptic servo can run as its own process.
 // A versioned header (magic, layout version, sizes, creator pid and start time) guards it:
 // attach() refuses anything that does not match this build or whose creator is dead;
 // create() replaces a segment left by a dead process and refuses one whose creator lives.

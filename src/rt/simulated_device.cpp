@@ -6,6 +6,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "geom/pose_io.hpp"
+
 namespace st::rt {
 
 Eigen::Isometry3d Trajectory::at(double t_s) const {
@@ -46,20 +48,12 @@ Result<Trajectory> parse_trajectory(const std::string& text, const std::string& 
     }
     if (n == 0) continue;
     if (n != 17) return fail(name, ":", lineno, ": ", n, " numbers, expected 17 (t_s and a row-major 4x4)");
-    const double* m = v + 1;
-    if (m[12] != 0 || m[13] != 0 || m[14] != 0 || m[15] != 1)
-      return fail(name, ":", lineno, ": last row is ", m[12], " ", m[13], " ", m[14], " ", m[15], ", expected 0 0 0 1");
     TimedPose k;
     k.t_s = v[0];
-    Eigen::Matrix3d r;
-    for (int i = 0; i < 3; ++i) {
-      for (int j = 0; j < 3; ++j) r(i, j) = m[4 * i + j];
-      k.pose.translation()(i) = m[4 * i + 3];
-    }
-    const double ortho = (r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
-    if (ortho > 1e-6 || r.determinant() < 0)
-      return fail(name, ":", lineno, ": rotation is not orthonormal with determinant +1 (max |RᵀR−I| = ", ortho, ")");
-    k.pose.linear() = r;
+    for (int i = 0; i < 4; ++i)
+      for (int j = 0; j < 4; ++j) k.pose.matrix()(i, j) = v[1 + 4 * i + j];
+    if (const std::string why = geom::check_rigid(k.pose.matrix()); !why.empty())
+      return fail(name, ":", lineno, ": ", why);
     if (!tr.keys.empty() && !(k.t_s > tr.keys.back().t_s))
       return fail(name, ":", lineno, ": time ", k.t_s, " s is not after the previous ", tr.keys.back().t_s, " s");
     tr.keys.push_back(k);

@@ -35,7 +35,7 @@ struct Trajectory {
 inline constexpr std::uint64_t kMaxTrajectoryBytes = 256ull << 20;
 
 /// Reads a trajectory file (a regular file of at most kMaxTrajectoryBytes): one pose per line, 17 numbers: t_s then a row-major 4×4 rigid
-/// transform (DESIGN.md pose-file layout with a leading time); '#' starts a comment. Errors
+/// transform; '#' starts a comment. Errors
 /// name the file and line (non-finite values, last row not 0 0 0 1, rotation not orthonormal
 /// within 1e-6, times not strictly increasing).
 Result<Trajectory> load_trajectory(const std::string& path);

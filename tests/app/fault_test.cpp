@@ -1,4 +1,4 @@
-// Fault injection into `spheretouch run` with four worker daemons over tcp loopback (issue #8):
+// Fault injection into `spheretouch run` with four worker daemons over tcp loopback:
 // a worker killed with SIGKILL and restarted, a worker frozen with SIGSTOP and thawed, and all
 // traffic to a worker held by a relay (the link is down) and released. The same run without
 // faults is the reference. Asserted: the haptic loop misses no more ticks than the fault-free

@@ -49,7 +49,7 @@ const Mesh& ball10() {
   static const Mesh m = make_icosphere(10, 16);
   return m;
 }
-constexpr double kDepthTol = 0.05;  // mm: the target for analytic shapes
+constexpr double kDepthTol = 0.05;  // mm: the depth target for analytic shapes (README, force rendering)
 }  // namespace
 
 TEST_CASE("contact patch: the default model is patch; names parse") {

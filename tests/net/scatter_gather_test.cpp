@@ -347,7 +347,7 @@ TEST_CASE("after a fault, idle reassigned sets are dropped by workers and client
 }
 
 TEST_CASE("a block set of faces piled on each other: the worker refuses the query at max_pairs, then serves") {
-  // The attack of issue 14: every probe face overlaps every object face (1,000 identical triangles
+  // The N² attack: every probe face overlaps every object face (1,000 identical triangles
   // on each side: 10^6 pairs). With max_pairs = 50,000 the traversal must stop near the cap and
   // the worker answer TooLarge at once, not compute and hold the million pairs first.
   zmq::context_t ctx;

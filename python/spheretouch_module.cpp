@@ -1,0 +1,339 @@
+// The `spheretouch` Python module (pybind11, numpy): meshes from arrays or files, sphere trees,
+// exact collision queries for one pose or a batch, the contact models and the force law.
+// Conventions: arrays are numpy; poses are 4x4 float64 rigid transforms (probe frame -> object
+// frame, mm); face pairs are (k, 2) uint32 arrays of (probe face, object face) file indices.
+// Errors raise ValueError with the project's message (file, field or index at fault).
+#include <pybind11/eigen.h>
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <cmath>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "geom/contact.hpp"
+#include "geom/mesh_io.hpp"
+#include "geom/pose_io.hpp"
+#include "rt/force_law.hpp"
+#include "spheretouch/collide.hpp"
+
+namespace py = pybind11;
+using namespace st;
+
+namespace {
+
+template <class T>
+T take(Result<T> r) {
+  if (!r.ok()) throw py::value_error(r.error());
+  return std::move(r).value();
+}
+
+using Array3d = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+Pose to_pose(const Array3d& a, const char* what) {
+  if (a.ndim() != 2 || a.shape(0) != 4 || a.shape(1) != 4)
+    throw py::value_error(std::string(what) + ": expected a 4x4 array");
+  Eigen::Matrix4d m;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) m(r, c) = a.at(r, c);
+  if (const std::string why = geom::check_rigid(m); !why.empty()) throw py::value_error(std::string(what) + ": " + why);
+  Pose p;
+  p.matrix() = m;
+  return p;
+}
+
+py::array_t<double> to_array(const Pose& p) {
+  py::array_t<double> a({4, 4});
+  auto w = a.mutable_unchecked<2>();
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) w(r, c) = p.matrix()(r, c);
+  return a;
+}
+
+py::array_t<double> to_array(const Vec3& v) {
+  py::array_t<double> a(3);
+  auto w = a.mutable_unchecked<1>();
+  for (int i = 0; i < 3; ++i) w(i) = v[i];
+  return a;
+}
+
+py::array_t<std::uint32_t> pairs_array(const std::vector<FacePair>& pairs) {
+  py::array_t<std::uint32_t> a({static_cast<py::ssize_t>(pairs.size()), py::ssize_t{2}});
+  auto w = a.mutable_unchecked<2>();
+  for (std::size_t i = 0; i < pairs.size(); ++i) {
+    w(static_cast<py::ssize_t>(i), 0) = pairs[i].probe;
+    w(static_cast<py::ssize_t>(i), 1) = pairs[i].object;
+  }
+  return a;
+}
+
+std::vector<FacePair> pairs_from(const py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>& a) {
+  if (a.ndim() != 2 || (a.shape(1) != 2 && a.shape(0) != 0)) throw py::value_error("pairs: expected a (k, 2) array");
+  std::vector<FacePair> out;
+  out.reserve(static_cast<std::size_t>(a.shape(0)));
+  auto r = a.unchecked<2>();
+  for (py::ssize_t i = 0; i < a.shape(0); ++i) {
+    const std::int64_t p = r(i, 0), o = r(i, 1);
+    // Out-of-range indices are the contact builder's to flag (kBadInput); only the uint32 range is ours.
+    if (p < 0 || o < 0 || p > UINT32_MAX || o > UINT32_MAX)
+      throw py::value_error("pairs: row " + std::to_string(i) + ": face index out of the uint32 range");
+    out.push_back({static_cast<std::uint32_t>(p), static_cast<std::uint32_t>(o)});
+  }
+  return out;
+}
+
+std::shared_ptr<Mesh> mesh_from_arrays(const Array3d& vertices,
+                                       const py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>& faces,
+                                       const std::string& name) {
+  if (vertices.ndim() != 2 || vertices.shape(1) != 3) throw py::value_error(name + ": vertices: expected an (n, 3) array");
+  if (faces.ndim() != 2 || faces.shape(1) != 3) throw py::value_error(name + ": faces: expected an (m, 3) array");
+  std::vector<Vec3> pos(static_cast<std::size_t>(vertices.shape(0)));
+  auto v = vertices.unchecked<2>();
+  for (py::ssize_t i = 0; i < vertices.shape(0); ++i) pos[static_cast<std::size_t>(i)] = Vec3(v(i, 0), v(i, 1), v(i, 2));
+  std::vector<geom::Tri> tris(static_cast<std::size_t>(faces.shape(0)));
+  auto f = faces.unchecked<2>();
+  for (py::ssize_t i = 0; i < faces.shape(0); ++i)
+    for (int k = 0; k < 3; ++k) {
+      const std::int64_t x = f(i, k);
+      if (x < 0 || x >= vertices.shape(0))
+        throw py::value_error(name + ": face " + std::to_string(i) + ": vertex index " + std::to_string(x) +
+                              " out of range [0, " + std::to_string(vertices.shape(0)) + ")");
+      tris[static_cast<std::size_t>(i)][static_cast<std::size_t>(k)] = static_cast<std::uint32_t>(x);
+    }
+  auto mesh = std::make_shared<Mesh>(geom::make_mesh(name, pos, std::move(tris)));
+  if (Status s = mesh->validate(); !s.ok()) throw py::value_error(name + ": " + s.error());
+  return mesh;
+}
+
+py::array_t<double> vertices_array(const Mesh& m) {
+  py::array_t<double> a({static_cast<py::ssize_t>(m.num_vertices()), py::ssize_t{3}});
+  auto w = a.mutable_unchecked<2>();
+  for (std::size_t i = 0; i < m.num_vertices(); ++i) {
+    const Vec3 p = m.vertex(static_cast<std::uint32_t>(i));
+    for (int k = 0; k < 3; ++k) w(static_cast<py::ssize_t>(i), k) = p[k];
+  }
+  return a;
+}
+
+py::array_t<std::uint32_t> faces_array(const Mesh& m) {
+  py::array_t<std::uint32_t> a({static_cast<py::ssize_t>(m.num_faces()), py::ssize_t{3}});
+  auto w = a.mutable_unchecked<2>();
+  for (std::size_t i = 0; i < m.num_faces(); ++i)
+    for (int k = 0; k < 3; ++k) w(static_cast<py::ssize_t>(i), k) = m.faces[i][static_cast<std::size_t>(k)];
+  return a;
+}
+
+CollisionRequest make_request(std::optional<std::size_t> max_pairs, std::optional<int> approximate_layer, bool sort) {
+  CollisionRequest r = DefaultCollisionRequest();
+  if (max_pairs) r.max_pairs = *max_pairs;
+  if (approximate_layer) r.approximate_layer = *approximate_layer;
+  r.sort_pairs = sort;
+  if (const std::string why = check(r); !why.empty()) throw py::value_error(why);
+  return r;
+}
+
+py::dict stats_dict(const CollideStats& s) {
+  py::dict d;
+  d["node_pairs"] = s.node_pairs;
+  d["leaf_pairs"] = s.leaf_pairs;
+  d["tri_pairs"] = s.tri_pairs;
+  d["sphere_pairs"] = s.sphere_pairs;
+  d["truncated"] = s.truncated;
+  d["pair_limit_hit"] = s.pair_limit_hit;
+  return d;
+}
+
+}  // namespace
+
+PYBIND11_MODULE(spheretouch, m) {
+  m.doc() = "spheretouch: exact face-level collision of large meshes (layered boundary spheres), contact models "
+            "and force law. Poses are 4x4 rigid transforms in mm (probe frame -> object frame).";
+  m.attr("EXACT") = geom::kExact;
+  m.attr("LEAF_SPHERES") = geom::kLeafSpheres;
+
+  py::class_<Mesh, std::shared_ptr<Mesh>>(m, "Mesh", "An indexed triangle mesh (mm); face i is the file's i-th triangle.")
+      .def(py::init(&mesh_from_arrays), py::arg("vertices"), py::arg("faces"), py::arg("name") = "array",
+           "From an (n, 3) float array of vertices and an (m, 3) int array of faces (counter-clockwise from outside).")
+      .def_property_readonly("vertices", &vertices_array, "(n, 3) float64 copy of the vertices, body frame, mm")
+      .def_property_readonly("faces", &faces_array, "(m, 3) uint32 copy of the faces")
+      .def_property_readonly("num_vertices", &Mesh::num_vertices)
+      .def_property_readonly("num_faces", &Mesh::num_faces)
+      .def_readonly("name", &Mesh::name)
+      .def("__repr__", [](const Mesh& me) {
+        return "<spheretouch.Mesh '" + me.name + "' " + std::to_string(me.num_vertices()) + " vertices, " +
+               std::to_string(me.num_faces()) + " faces>";
+      });
+
+  m.def(
+      "load_mesh",
+      [](const std::string& path, const std::string& units, double scale) {
+        geom::LoadOptions o;
+        o.units = units;
+        o.scale = scale;
+        return std::make_shared<Mesh>(take(geom::load_mesh(path, o)).mesh);
+      },
+      py::arg("path"), py::arg("units") = "mm", py::arg("scale") = 1.0,
+      "Reads a mesh file (OFF, OBJ, PLY, STL; other formats through assimp). units: um, mm, cm, m, in.");
+
+  py::class_<SphereTree, std::shared_ptr<SphereTree>>(m, "SphereTree", "Layered boundary spheres over one mesh.")
+      .def(py::init([](const Mesh& mesh, std::uint32_t leaf_faces) {
+             TreeParams p = geom::DefaultTreeParams();
+             p.leaf_faces = leaf_faces;
+             return std::make_shared<SphereTree>(take(SphereTree::build(mesh, p)));
+           }),
+           py::arg("mesh"), py::arg("leaf_faces") = geom::DefaultTreeParams().leaf_faces,
+           "Builds the tree; every leaf holds at most leaf_faces (1..64) faces.")
+      .def_property_readonly("num_nodes", &SphereTree::num_nodes)
+      .def_property_readonly("num_leaves", &SphereTree::num_leaves)
+      .def_property_readonly("num_layers", [](const SphereTree& t) { return t.num_depths; })
+      .def_property_readonly("num_faces", &SphereTree::num_faces);
+
+  py::class_<Body>(m, "Body", "A mesh, its tree and its frame (body frame -> world, 4x4).")
+      .def(py::init([](std::shared_ptr<Mesh> mesh, std::shared_ptr<SphereTree> tree, const Array3d& frame) {
+             if (!mesh) throw py::value_error("Body: mesh is None");
+             if (!tree) {
+               tree = std::make_shared<SphereTree>(take(SphereTree::build(*mesh, geom::DefaultTreeParams())));
+             }
+             return take(Body::make(std::move(mesh), std::move(tree), to_pose(frame, "frame")));
+           }),
+           py::arg("mesh"), py::arg("tree") = nullptr, py::arg("frame") = py::array_t<double>(to_array(Pose::Identity())),
+           "A body; the tree is built with the default leaf size when not given.")
+      .def_property(
+          "frame", [](const Body& b) { return to_array(b.frame()); },
+          [](Body& b, const Array3d& f) { b.set_frame(to_pose(f, "frame")); })
+      .def_property_readonly("mesh", [](const Body& b) { return std::const_pointer_cast<Mesh>(b.shared_mesh()); });
+
+  py::class_<CollisionResult>(m, "CollisionResult", "What one query found.")
+      .def_property_readonly("pairs", [](const CollisionResult& r) { return pairs_array(r.pairs); },
+                             "(k, 2) uint32: (probe face, object face)")
+      .def_property_readonly("colliding", &CollisionResult::colliding)
+      .def_property_readonly("contacts", &CollisionResult::contacts, "distinct probe faces + distinct object faces")
+      .def_readonly("probe_faces", &CollisionResult::probe_faces)
+      .def_readonly("object_faces", &CollisionResult::object_faces)
+      .def_readonly("complete", &CollisionResult::complete, "False when the query stopped at max_pairs")
+      .def_property_readonly("stats", [](const CollisionResult& r) { return stats_dict(r.stats); });
+
+  py::class_<ComputeCollision>(m, "Collider",
+                               "Collision of one (probe, object) pair with its scratch kept between queries.")
+      .def(py::init<Body, Body>(), py::arg("probe"), py::arg("object"))
+      .def(
+          "query",
+          [](ComputeCollision& c, const std::optional<Array3d>& pose, std::optional<std::size_t> max_pairs,
+             std::optional<int> approximate_layer, bool sort) {
+            const CollisionRequest req = make_request(max_pairs, approximate_layer, sort);
+            CollisionResult r;
+            if (pose) {
+              const Pose p = to_pose(*pose, "pose");
+              py::gil_scoped_release unlock;
+              c.at_relative(p, req, r);
+            } else {
+              py::gil_scoped_release unlock;
+              c(req, r);
+            }
+            return r;
+          },
+          py::arg("pose") = py::none(), py::arg("max_pairs") = py::none(), py::arg("approximate_layer") = py::none(),
+          py::arg("sort") = true,
+          "Collides at `pose` (probe frame -> object frame), or at the bodies' frames when pose is None.")
+      .def(
+          "pairs",
+          [](ComputeCollision& c, const Array3d& pose, std::optional<std::size_t> max_pairs) {
+            const CollisionRequest req = make_request(max_pairs, std::nullopt, true);
+            const Pose p = to_pose(pose, "pose");
+            CollisionResult r;
+            {
+              py::gil_scoped_release unlock;
+              c.at_relative(p, req, r);
+            }
+            return pairs_array(r.pairs);
+          },
+          py::arg("pose"), py::arg("max_pairs") = py::none(), "The sorted colliding pairs at one pose, (k, 2) uint32.")
+      .def(
+          "batch",
+          [](ComputeCollision& c, const py::array_t<double, py::array::c_style | py::array::forcecast>& poses,
+             std::optional<std::size_t> max_pairs) {
+            if (poses.ndim() != 3 || poses.shape(1) != 4 || poses.shape(2) != 4)
+              throw py::value_error("poses: expected an (N, 4, 4) array");
+            const CollisionRequest req = make_request(max_pairs, std::nullopt, true);
+            std::vector<Pose> ps(static_cast<std::size_t>(poses.shape(0)));
+            auto a = poses.unchecked<3>();
+            for (py::ssize_t i = 0; i < poses.shape(0); ++i) {
+              Eigen::Matrix4d mm;
+              for (int r = 0; r < 4; ++r)
+                for (int k = 0; k < 4; ++k) mm(r, k) = a(i, r, k);
+              if (const std::string why = geom::check_rigid(mm); !why.empty())
+                throw py::value_error("poses[" + std::to_string(i) + "]: " + why);
+              ps[static_cast<std::size_t>(i)].matrix() = mm;
+            }
+            std::vector<std::vector<FacePair>> out(ps.size());
+            {
+              py::gil_scoped_release unlock;
+              CollisionResult r;
+              for (std::size_t i = 0; i < ps.size(); ++i) {
+                c.at_relative(ps[i], req, r);
+                out[i] = r.pairs;
+              }
+            }
+            py::list l;
+            for (const auto& p : out) l.append(pairs_array(p));
+            return l;
+          },
+          py::arg("poses"), py::arg("max_pairs") = py::none(),
+          "Sorted pairs for each of N poses ((N, 4, 4) array): a list of (k, 2) uint32 arrays.");
+
+  py::class_<geom::ContactModel>(m, "ContactModel", "FD, PD and the local contact plane of one round (object frame).")
+      .def_property_readonly("in_contact", &geom::ContactModel::in_contact)
+      .def_property_readonly("force_dir", [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.force_dir)); })
+      .def_readonly("penetration_mm", &geom::ContactModel::penetration_mm)
+      .def_property_readonly("contact_point", [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.contact_point)); })
+      .def_property_readonly("plane_point", [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.plane_point)); })
+      .def_property_readonly("probe_point", [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.probe_point)); },
+                             "deepest probe point, probe frame")
+      .def_property_readonly("proxy_offset", [](const geom::ContactModel& c) { return to_array(c.proxy_offset()); })
+      .def_readonly("flags", &geom::ContactModel::flags)
+      .def_readonly("contacts", &geom::ContactModel::contacts)
+      .def_readonly("object_faces", &geom::ContactModel::object_faces)
+      .def_readonly("probe_faces", &geom::ContactModel::probe_faces);
+
+  py::class_<geom::ContactBuilder>(m, "ContactBuilder", "Builds contact models, keeping the model's history between rounds.")
+      .def(py::init([](const std::string& model) {
+             geom::ContactConfig c = geom::DefaultContactConfig();
+             c.model = take(geom::parse_contact_model(model));
+             return geom::ContactBuilder(c);
+           }),
+           py::arg("model") = "patch", "model: 'patch' (default) or 'paper' (paper §3.6)")
+      .def(
+          "build",
+          [](geom::ContactBuilder& b, const Mesh& probe, const Mesh& object, const Array3d& pose,
+             const py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>& pairs) {
+            const Pose p = to_pose(pose, "pose");
+            const std::vector<FacePair> ps = pairs_from(pairs);
+            py::gil_scoped_release unlock;
+            return b.build(probe, object, p, ps);
+          },
+          py::arg("probe"), py::arg("object"), py::arg("pose"), py::arg("pairs"),
+          "The contact model for the pairs found at pose (probe frame -> object frame).")
+      .def("reset", &geom::ContactBuilder::reset, "Forgets the history (as if contact had ended).");
+
+  py::class_<rt::ForceLaw>(m, "ForceLaw", "Force magnitude (N) from penetration depth (mm): paper eq. (1) or a spring.")
+      .def(py::init([](const std::string& kind, std::optional<double> spring_N_per_mm, std::optional<double> max_force_N) {
+             rt::ForceLawConfig c = rt::DefaultForceLawConfig();
+             if (kind == "linear") c.kind = rt::LawKind::linear;
+             else if (kind != "log") throw py::value_error("kind: expected 'log' or 'linear', got '" + kind + "'");
+             if (spring_N_per_mm) c.spring_N_per_mm = *spring_N_per_mm;
+             if (max_force_N) c.max_force_N = *max_force_N;
+             return take(rt::ForceLaw::make(c));
+           }),
+           py::arg("kind") = "log", py::arg("spring_N_per_mm") = py::none(), py::arg("max_force_N") = py::none())
+      .def("magnitude", &rt::ForceLaw::magnitude_N, py::arg("pd_mm"), "N, finite, in [0, max_force_N] for any input")
+      .def(
+          "force",
+          [](const rt::ForceLaw& law, const geom::ContactModel& c) {
+            if (!c.in_contact()) return to_array(Vec3::Zero());
+            return to_array(law.magnitude_N(c.penetration_mm) * geom::to_eigen(c.force_dir));
+          },
+          py::arg("contact"), "The force vector at the model's own pose, N, object frame: magnitude(PD) · FD.")
+      .def_property_readonly("max_stiffness_N_per_mm", &rt::ForceLaw::max_stiffness_N_per_mm);
+}

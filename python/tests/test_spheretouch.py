@@ -1,0 +1,221 @@
+"""Tests of the spheretouch Python module (run by `meson test --suite python`).
+
+The module is checked against the project's own command line (`spheretouch query`, the exact
+reference every other suite uses) on the real hand and elephant meshes, and on small generated
+meshes whose answer is known. Prints '[python] test cases: N | P passed | F failed' at the end,
+the line scripts/run_tests.sh sums.
+"""
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import traceback
+
+import numpy as np
+
+import spheretouch as st
+
+SRC = os.environ.get("ST_SOURCE_ROOT", os.path.join(os.path.dirname(__file__), "..", ".."))
+BUILD = os.environ.get("ST_BUILD_ROOT", os.path.join(SRC, "build"))
+MODELS = os.environ.get("ST_MODEL_DIR", os.path.join(SRC, ".cache", "models"))
+
+
+def box(size, centre=(0.0, 0.0, 0.0)):
+    """A closed box mesh (12 faces, outward counter-clockwise), as numpy arrays."""
+    sx, sy, sz = (s / 2 for s in size)
+    v = np.array([[x, y, z] for x in (-sx, sx) for y in (-sy, sy) for z in (-sz, sz)]) + np.array(centre)
+    f = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    return v, f
+
+
+def translation(x, y, z):
+    m = np.eye(4)
+    m[:3, 3] = (x, y, z)
+    return m
+
+
+def rot_z(deg):
+    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
+    m = np.eye(4)
+    m[:2, :2] = [[c, -s], [s, c]]
+    return m
+
+
+def expect_error(fn, *words):
+    try:
+        fn()
+    except ValueError as e:
+        msg = str(e)
+        for w in words:
+            assert w in msg, f"error {msg!r} does not name {w!r}"
+        return msg
+    raise AssertionError("no ValueError raised")
+
+
+def test_mesh_from_arrays_and_errors():
+    v, f = box((10, 10, 10))
+    m = st.Mesh(v, f, name="cube")
+    assert m.num_vertices == 8 and m.num_faces == 12
+    assert np.allclose(m.vertices, v) and (m.faces == f).all()
+    expect_error(lambda: st.Mesh(v, np.array([[0, 1, 8]]), name="bad"), "bad", "face 0", "8")
+    expect_error(lambda: st.Mesh(v[:, :2], f), "vertices")
+    nan = v.copy()
+    nan[3, 1] = float("nan")
+    expect_error(lambda: st.Mesh(nan, f, name="nanmesh"), "nanmesh")
+
+
+def test_boxes_touch_exactly_when_they_overlap():
+    a = st.Body(st.Mesh(*box((10, 10, 10)), name="a"))
+    b = st.Body(st.Mesh(*box((10, 10, 10)), name="b"))
+    c = st.Collider(a, b)
+    # Overlapping by 1 mm along x: the faces cross; 11 mm apart: nothing.
+    r = c.query(translation(9, 0.5, 0.25))
+    assert r.colliding and r.complete and len(r.pairs) > 0
+    assert r.contacts == r.probe_faces + r.object_faces
+    assert not c.query(translation(11, 0, 0)).colliding
+    # Body frames: the same relative pose expressed as two world frames gives the same pairs.
+    a.frame = translation(100, 200, 300) @ translation(9, 0.5, 0.25)
+    b.frame = translation(100, 200, 300)
+    c2 = st.Collider(a, b)
+    assert (c2.query().pairs == r.pairs).all()
+    # first pair only, and a cap.
+    first = c.query(translation(9, 0.5, 0.25), max_pairs=1)
+    assert len(first.pairs) == 1 and not first.complete
+    assert tuple(first.pairs[0]) in {tuple(p) for p in r.pairs}
+    capped = c.query(translation(9, 0.5, 0.25), max_pairs=3)
+    assert len(capped.pairs) == min(3, len(r.pairs))
+    expect_error(lambda: c.query(translation(9, 0, 0), max_pairs=0), "max_pairs")
+    # Approximate mode reports a superset of the exact pairs.
+    approx = c.query(translation(9, 0.5, 0.25), approximate_layer=st.LEAF_SPHERES)
+    assert {tuple(p) for p in r.pairs} <= {tuple(p) for p in approx.pairs}
+
+
+def test_bad_poses_are_refused_with_a_message():
+    m = st.Mesh(*box((1, 1, 1)))
+    c = st.Collider(st.Body(m), st.Body(m))
+    bad = np.eye(4)
+    bad[0, 0] = 2.0
+    expect_error(lambda: c.query(bad), "pose", "orthonormal")
+    refl = np.eye(4)
+    refl[0, 0] = -1.0
+    expect_error(lambda: c.query(refl), "reflection")
+    nan = np.eye(4)
+    nan[1, 3] = float("nan")
+    expect_error(lambda: c.query(nan), "finite")
+    expect_error(lambda: c.pairs(np.eye(3)), "4x4")
+    expect_error(lambda: c.batch(np.stack([np.eye(4), bad])), "poses[1]")
+
+
+def query_reference(probe, obj, poses):
+    """Pairs per pose from `spheretouch query` (the CLI's exact query), as sets."""
+    exe = os.path.join(BUILD, "spheretouch")
+    with tempfile.NamedTemporaryFile("w", suffix=".txt", delete=False) as fh:
+        for p in poses:
+            fh.write(" ".join(repr(float(x)) for x in p.reshape(-1)) + "\n")
+        path = fh.name
+    try:
+        out = subprocess.run([exe, "query", probe, obj, "--poses", path], check=True, capture_output=True,
+                             text=True).stdout
+    finally:
+        os.unlink(path)
+    result, cur = [], None
+    for line in out.splitlines():
+        w = line.split()
+        if w and w[0] == "pose":
+            cur = []
+            result.append(cur)
+        elif len(w) == 2 and cur is not None:
+            cur.append((int(w[0]), int(w[1])))
+    return result
+
+
+def perf_poses():
+    rows = []
+    with open(os.path.join(SRC, "perf", "poses", "hand_elephant.txt")) as fh:
+        for line in fh:
+            line = line.split("#")[0].split()
+            if len(line) == 16:
+                rows.append(np.array([float(x) for x in line]).reshape(4, 4))
+    return rows
+
+
+def test_hand_elephant_pairs_match_the_command_line():
+    hand = os.path.join(MODELS, "hand_L2.off")
+    elephant = os.path.join(MODELS, "elephant.off")
+    probe, obj = st.load_mesh(hand), st.load_mesh(elephant)
+    assert probe.num_faces > 10000 and obj.num_faces > 10000
+    c = st.Collider(st.Body(probe), st.Body(obj))
+    poses = perf_poses()[::3]
+    ref = query_reference(hand, elephant, poses)
+    assert len(ref) == len(poses)
+    batch = c.batch(np.stack(poses))
+    touching = 0
+    for i, p in enumerate(poses):
+        one = c.pairs(p)
+        assert [tuple(x) for x in one] == ref[i], f"pose {i}: {len(one)} pairs, the command line gives {len(ref[i])}"
+        assert (batch[i] == one).all()
+        touching += len(ref[i]) > 0
+    assert touching > 0, "no perf pose touches: the check would prove nothing"
+
+
+def test_contact_model_and_force():
+    # A 20 mm box pressed 2 mm into a 100 mm box's top face: FD = +z, PD = 2 mm (patch model).
+    big = st.Mesh(*box((100, 100, 100)), name="object")
+    small = st.Mesh(*box((20, 20, 20)), name="probe")
+    c = st.Collider(st.Body(small), st.Body(big))
+    pose = translation(3, -4, 50 + 10 - 2)
+    pairs = c.pairs(pose)
+    assert len(pairs) > 0
+    builder = st.ContactBuilder()
+    model = builder.build(small, big, pose, pairs)
+    assert model.in_contact
+    assert np.allclose(model.force_dir, [0, 0, 1], atol=1e-9), model.force_dir
+    assert abs(model.penetration_mm - 2.0) < 1e-9, model.penetration_mm
+    law = st.ForceLaw()
+    f = law.force(model)
+    assert np.allclose(f, law.magnitude(2.0) * np.array([0, 0, 1.0]))
+    assert 0 < law.magnitude(2.0) <= law.magnitude(3.0)
+    # The paper's model is selectable and gives the same face normal on a flat face.
+    paper = st.ContactBuilder("paper").build(small, big, pose, pairs)
+    assert paper.in_contact and np.allclose(paper.force_dir, [0, 0, 1])
+    expect_error(lambda: st.ContactBuilder("nearest"), "nearest")
+    # No pairs: no contact, zero force. Bad pair indices: finite, flagged, never a crash.
+    none = st.ContactBuilder().build(small, big, pose, np.zeros((0, 2), dtype=np.uint32))
+    assert not none.in_contact and (law.force(none) == 0).all()
+    bad = st.ContactBuilder().build(small, big, pose, np.array([[99999, 0]]))
+    assert np.isfinite(bad.force_dir).all() and bad.flags != 0
+    for pd in (float("nan"), -1.0, float("inf"), 1e300):
+        assert 0 <= law.magnitude(pd) <= 3.3 + 1e-12
+
+
+def test_file_errors_name_the_file():
+    with tempfile.NamedTemporaryFile("w", suffix=".off", delete=False) as fh:
+        fh.write("OFF\n3 1 0\n0 0 0\n1 0 0\n")
+        path = fh.name
+    try:
+        expect_error(lambda: st.load_mesh(path), os.path.basename(path))
+    finally:
+        os.unlink(path)
+    expect_error(lambda: st.load_mesh(path + ".missing.off"), "missing")
+
+
+def main():
+    tests = [(k, v) for k, v in sorted(globals().items()) if k.startswith("test_") and callable(v)]
+    passed = failed = 0
+    for name, fn in tests:
+        try:
+            fn()
+            passed += 1
+            print(f"ok   {name}")
+        except Exception:  # noqa: BLE001 - report every failure, then fail the run
+            failed += 1
+            print(f"FAIL {name}")
+            traceback.print_exc()
+    print(f"[python] test cases: {len(tests)} | {passed} passed | {failed} failed")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

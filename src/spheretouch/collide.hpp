@@ -1,0 +1,133 @@
+// <spheretouch/collide.hpp>: the collision core's public API (depends on Eigen only; link the
+// `spheretouch` pkg-config package). In the spirit of Coal's collide(o1, o2, request, result)
+// and ComputeCollision: a Body pairs a mesh with its sphere tree and its frame, a request says
+// what to compute, a result answers colliding(), the pairs and the counters, and a
+// ComputeCollision keeps the scratch of one (probe, object) pair between queries.
+//
+// Frames, one name each (the same names are used by every header of the project):
+//  * world frame: where Body::frame() places a body; any fixed frame of the caller's.
+//  * object frame: the object mesh's file coordinates. The relative pose, contacts, forces and
+//    every vector of a ContactModel except probe_point are in it.
+//  * probe frame: the probe mesh's file coordinates (ContactModel::probe_point).
+// The relative pose (probe frame -> object frame) of two bodies is object.frame()^-1 · probe.frame().
+//
+// The pair set is exact: {(p, o) : the probe face p, posed, and the object face o intersect},
+// faces named by their index in the input file, the same set geom::collide() returns (that is the
+// inner function; this API adds nothing to its arithmetic). In approximate mode it is a superset.
+#pragma once
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "geom/collide.hpp"
+#include "geom/mesh.hpp"
+#include "geom/result.hpp"
+#include "geom/sphere_tree.hpp"
+
+namespace st {
+
+using geom::CollideStats;
+using geom::FacePair;
+using geom::Mesh;
+using geom::Pose;
+using geom::SphereTree;
+using geom::TreeParams;
+using geom::Vec3;
+
+/// A collidable body: a mesh, the sphere tree built for it, and its frame (object or probe frame
+/// -> world frame). Mesh and tree are shared, immutable and may back many bodies.
+class Body {
+ public:
+  /// Validates the mesh and builds its tree. The error names the bad face or vertex.
+  static Result<Body> make(Mesh mesh, const TreeParams& params = geom::DefaultTreeParams(),
+                           const Pose& frame = Pose::Identity());
+  /// A body from a mesh and a tree already built (or read from a file) for it. The error says
+  /// when the tree was built for another mesh or with other parameters (its hash differs).
+  static Result<Body> make(std::shared_ptr<const Mesh> mesh, std::shared_ptr<const SphereTree> tree,
+                           const Pose& frame = Pose::Identity());
+
+  const Mesh& mesh() const { return *mesh_; }        ///< the mesh (faces by input-file index)
+  const SphereTree& tree() const { return *tree_; }  ///< its sphere tree
+  const Pose& frame() const { return frame_; }       ///< body frame -> world frame
+  void set_frame(const Pose& frame) { frame_ = frame; }  ///< moves the body
+  const std::shared_ptr<const Mesh>& shared_mesh() const { return mesh_; }        ///< for sharing
+  const std::shared_ptr<const SphereTree>& shared_tree() const { return tree_; }  ///< for sharing
+
+ private:
+  Body(std::shared_ptr<const Mesh> mesh, std::shared_ptr<const SphereTree> tree, const Pose& frame)
+      : mesh_(std::move(mesh)), tree_(std::move(tree)), frame_(frame) {}
+  std::shared_ptr<const Mesh> mesh_;
+  std::shared_ptr<const SphereTree> tree_;
+  Pose frame_ = Pose::Identity();
+};
+
+/// What a query computes. Start from DefaultCollisionRequest() or one of the named requests.
+struct CollisionRequest {
+  /// Stop once this many pairs are found (>= 1; SIZE_MAX = all pairs). The result then holds
+  /// exactly max_pairs pairs (the first ones the traversal met) and complete == false.
+  std::size_t max_pairs = SIZE_MAX;
+  /// geom::kExact (triangle tests), geom::kLeafSpheres (stop at leaf spheres) or a layer K >= 0:
+  /// approximate mode reports every face pair of the overlapping sphere pairs there (a superset).
+  int approximate_layer = geom::kExact;
+  bool sort_pairs = true;  ///< pairs sorted by (probe face, object face)
+
+  static CollisionRequest all_pairs() { return {}; }                    ///< every colliding pair
+  static CollisionRequest first_pair() { return {.max_pairs = 1}; }      ///< "do they touch?"
+  static CollisionRequest capped(std::size_t n) { return {.max_pairs = n}; }  ///< at most n pairs
+  static CollisionRequest approximate(int layer) { return {.approximate_layer = layer}; }  ///< superset
+};
+inline CollisionRequest DefaultCollisionRequest() { return {}; }  ///< all pairs, exact, sorted
+/// Empty when the request is usable, else a message naming the bad field.
+std::string check(const CollisionRequest& request);
+
+/// What a query found. Reuse one across queries: clear() keeps the capacity.
+struct CollisionResult {
+  std::vector<FacePair> pairs;     ///< (probe face, object face), file indices
+  std::uint32_t probe_faces = 0;   ///< distinct probe faces in `pairs`
+  std::uint32_t object_faces = 0;  ///< distinct object faces in `pairs`
+  bool complete = true;            ///< false when the query stopped at max_pairs (more pairs may exist)
+  bool bad_request = false;        ///< the request failed check(): nothing was computed
+  CollideStats stats;              ///< traversal counters
+
+  bool colliding() const { return !pairs.empty(); }                      ///< any pair found
+  std::uint32_t contacts() const { return probe_faces + object_faces; }  ///< paper §3.5 "number of contacts"
+  void clear();                                                          ///< empties, keeps capacity
+};
+
+/// The collision of one (probe, object) pair, kept between queries: the per-query caches are
+/// sized on the first query and reused (later queries allocate nothing). Not thread-safe: one
+/// per thread and pair.
+class ComputeCollision {
+ public:
+  ComputeCollision(Body probe, Body object);
+  /// Collides the bodies at their frames.
+  void operator()(const CollisionRequest& request, CollisionResult& result);
+  /// Collides the bodies at these frames (probe frame -> world, object frame -> world); the
+  /// bodies' own frames are not changed.
+  void operator()(const Pose& probe_frame, const Pose& object_frame, const CollisionRequest& request,
+                  CollisionResult& result);
+  /// Collides at a relative pose (probe frame -> object frame), the pose the rest of the
+  /// project passes around; the bodies' frames are not used.
+  void at_relative(const Pose& relative, const CollisionRequest& request, CollisionResult& result);
+
+  Body& probe() { return probe_; }    ///< the first body
+  Body& object() { return object_; }  ///< the second body
+  std::size_t scratch_bytes() const { return scratch_.bytes(); }  ///< heap held between queries
+
+ private:
+  Body probe_, object_;
+  geom::CollideScratch scratch_;
+  geom::CollideResult inner_;
+};
+
+/// One query, with its own scratch (allocates; use ComputeCollision for repeated queries).
+void collide(const Body& probe, const Body& object, const CollisionRequest& request, CollisionResult& result);
+
+/// probe frame -> object frame for two bodies: object.frame()^-1 · probe.frame() (rigid frames).
+Pose relative_pose(const Body& probe, const Body& object);
+/// The same for two frames given directly.
+Pose relative_pose(const Pose& probe_frame, const Pose& object_frame);
+
+}  // namespace st

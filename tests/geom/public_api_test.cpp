@@ -1,0 +1,189 @@
+// Tests src/spheretouch/collide.*: the public API gives exactly geom::collide()'s pairs (and the
+// brute-force reference's), frames compose as documented, the first-pair and capped requests
+// return pairs of the full set with consistent counters, and bad bodies and requests are refused
+// with a message.
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <limits>
+#include <random>
+
+#include "geom/pose_io.hpp"
+#include "geom/primitives.hpp"
+#include "spheretouch/collide.hpp"
+#include "test_models.hpp"
+#include "test_util.hpp"
+
+namespace {
+
+st::Body api_body(st::geom::Mesh mesh) {
+  st::Result<st::Body> b = st::Body::make(std::move(mesh));
+  REQUIRE_MESSAGE(b.ok(), b.error());
+  return std::move(b).value();
+}
+
+std::vector<st::FacePair> api_inner_pairs(const st::Body& probe, const st::Body& object, const st::Pose& pose) {
+  st::geom::CollideScratch scratch;
+  st::geom::CollideResult res;
+  st::geom::CollideOptions opt = st::geom::DefaultCollideOptions();
+  opt.sort_pairs = true;
+  st::geom::collide(probe.mesh(), probe.tree(), object.mesh(), object.tree(), pose, opt, scratch, res);
+  return res.pairs;
+}
+
+bool api_is_subset(const std::vector<st::FacePair>& part, const std::vector<st::FacePair>& all) {
+  return std::all_of(part.begin(), part.end(),
+                     [&](const st::FacePair& p) { return std::binary_search(all.begin(), all.end(), p); });
+}
+
+}  // namespace
+
+TEST_CASE("the public API returns exactly the inner collide()'s pairs and the brute-force set") {
+  const st::Body probe = api_body(st::geom::make_capsule(4, 12, 10));
+  const st::Body object = api_body(st::geom::make_icosphere(20, 6));
+  st::ComputeCollision pair(probe, object);
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(-26, 26);
+  int touching = 0;
+  st::CollisionResult r;
+  for (int i = 0; i < 40; ++i) {
+    st::Pose pose = st::Pose::Identity();
+    pose.linear() = st::test::random_rotation(rng);
+    pose.translation() = st::Vec3(u(rng), u(rng), u(rng));
+    pair.at_relative(pose, st::CollisionRequest::all_pairs(), r);
+    CHECK(r.complete);
+    CHECK(r.pairs == api_inner_pairs(probe, object, pose));
+    std::vector<st::FacePair> brute = st::test::brute_force(probe.mesh(), object.mesh(), pose);
+    std::sort(brute.begin(), brute.end());
+    CHECK(r.pairs == brute);
+    std::vector<std::uint32_t> scratch;
+    const st::geom::FaceCounts c = st::geom::count_faces(r.pairs, scratch);
+    CHECK(r.probe_faces == c.probe_faces);
+    CHECK(r.object_faces == c.object_faces);
+    CHECK(r.colliding() == !r.pairs.empty());
+    touching += r.colliding() ? 1 : 0;
+  }
+  CHECK(touching >= 5);  // the poses exercise contact, not only misses
+}
+
+TEST_CASE("world frames compose as object.frame()^-1 * probe.frame()") {
+  st::Body probe = api_body(st::geom::make_box({10, 10, 10}));
+  st::Body object = api_body(st::geom::make_icosphere(15, 5));
+  std::mt19937_64 rng(11);
+  st::Pose world = st::Pose::Identity();
+  world.linear() = st::test::random_rotation(rng);
+  world.translation() = st::Vec3(1e5, -2e5, 3e4);  // far from the world origin
+  st::Pose rel = st::Pose::Identity();
+  rel.linear() = st::test::random_rotation(rng);
+  rel.translation() = st::Vec3(14, 3, -2);  // the box's corner region inside the sphere's surface
+  object.set_frame(world);
+  probe.set_frame(world * rel);
+  const st::Pose composed = st::relative_pose(probe, object);
+  CHECK((composed.matrix() - rel.matrix()).cwiseAbs().maxCoeff() < 1e-9);
+  st::ComputeCollision pair(probe, object);
+  st::CollisionResult at_frames, at_given, at_rel;
+  pair(st::CollisionRequest::all_pairs(), at_frames);
+  pair(probe.frame(), object.frame(), st::CollisionRequest::all_pairs(), at_given);
+  pair.at_relative(composed, st::CollisionRequest::all_pairs(), at_rel);
+  REQUIRE(at_frames.colliding());
+  CHECK(at_frames.pairs == at_rel.pairs);
+  CHECK(at_given.pairs == at_rel.pairs);
+  st::CollisionResult once;
+  st::collide(probe, object, st::CollisionRequest::all_pairs(), once);
+  CHECK(once.pairs == at_rel.pairs);
+}
+
+TEST_CASE("first-pair and capped requests return pairs of the full set, with counters of what they return") {
+  const st::Body probe = api_body(*st::test::model_mesh("hand_L2.off"));
+  const st::Body object = api_body(*st::test::model_mesh("elephant.off"));
+  const char* root = std::getenv("ST_SOURCE_ROOT");
+  st::Result<std::vector<st::Pose>> poses =
+      st::geom::read_poses(std::string(root ? root : ".") + "/perf/poses/hand_elephant.txt");
+  REQUIRE_MESSAGE(poses.ok(), poses.error());
+  std::vector<st::Pose> all_poses = poses.value();
+  // And the hand's vertices placed at random elephant vertices, 0-4 mm deep.
+  std::mt19937_64 rng(5);
+  const auto normals = st::test::vertex_normals(object.mesh());
+  std::uniform_int_distribution<std::uint32_t> vo(0, static_cast<std::uint32_t>(object.mesh().num_vertices() - 1));
+  std::uniform_int_distribution<std::uint32_t> vp(0, static_cast<std::uint32_t>(probe.mesh().num_vertices() - 1));
+  std::uniform_real_distribution<double> depth(0.0, 4.0);
+  for (int i = 0; i < 12; ++i) {
+    const std::uint32_t o = vo(rng);
+    all_poses.push_back(st::test::pose_near(probe.mesh(), vp(rng), object.mesh(), o, normals[o], depth(rng),
+                                            st::test::random_rotation(rng)));
+  }
+  st::ComputeCollision pair(probe, object);
+  st::CollisionResult all, first, capped;
+  int checked = 0;
+  for (const st::Pose& pose : all_poses) {
+    pair.at_relative(pose, st::CollisionRequest::all_pairs(), all);
+    CHECK(all.pairs == api_inner_pairs(probe, object, pose));
+    pair.at_relative(pose, st::CollisionRequest::first_pair(), first);
+    pair.at_relative(pose, st::CollisionRequest::capped(50), capped);
+    if (!all.colliding()) {
+      CHECK_FALSE(first.colliding());
+      CHECK(first.complete);
+      continue;
+    }
+    ++checked;
+    REQUIRE(first.pairs.size() == 1);
+    CHECK(first.contacts() == 2);
+    CHECK(api_is_subset(first.pairs, all.pairs));
+    CHECK(first.stats.tri_pairs <= all.stats.tri_pairs);  // it stopped early
+    CHECK(capped.pairs.size() == std::min<std::size_t>(50, all.pairs.size()));
+    CHECK(api_is_subset(capped.pairs, all.pairs));
+    CHECK(std::is_sorted(capped.pairs.begin(), capped.pairs.end()));
+    std::vector<std::uint32_t> scratch;
+    const st::geom::FaceCounts c = st::geom::count_faces(capped.pairs, scratch);
+    CHECK(capped.probe_faces == c.probe_faces);
+    CHECK(capped.object_faces == c.object_faces);
+    if (all.pairs.size() > 50) CHECK_FALSE(capped.complete);
+  }
+  CHECK(checked >= 8);
+}
+
+TEST_CASE("approximate requests report a superset of the exact pairs") {
+  const st::Body probe = api_body(st::geom::make_capsule(3, 10, 8));
+  const st::Body object = api_body(st::geom::make_icosphere(12, 5));
+  st::ComputeCollision pair(probe, object);
+  st::Pose pose = st::Pose::Identity();
+  pose.translation() = st::Vec3(12, 1, 0.5);
+  st::CollisionResult exact, approx;
+  pair.at_relative(pose, st::CollisionRequest::all_pairs(), exact);
+  pair.at_relative(pose, st::CollisionRequest::approximate(st::geom::kLeafSpheres), approx);
+  REQUIRE(exact.colliding());
+  CHECK(approx.pairs.size() >= exact.pairs.size());
+  CHECK(api_is_subset(exact.pairs, approx.pairs));
+}
+
+TEST_CASE("bad bodies and requests are refused with a message") {
+  st::geom::Mesh bad = st::geom::make_box({1, 1, 1});
+  bad.name = "broken-box";
+  bad.faces[3][1] = 999;
+  st::Result<st::Body> b = st::Body::make(bad);
+  REQUIRE_FALSE(b.ok());
+  CHECK(st::test::contains(b.error(), "broken-box"));
+
+  // A tree built for another mesh.
+  auto box = std::make_shared<const st::geom::Mesh>(st::geom::make_box({1, 1, 1}));
+  auto ball = st::geom::make_icosphere(1, 2);
+  auto ball_tree = std::make_shared<const st::SphereTree>(st::SphereTree::build(ball).value());
+  st::Result<st::Body> mismatched = st::Body::make(box, ball_tree);
+  REQUIRE_FALSE(mismatched.ok());
+  CHECK(st::test::contains(mismatched.error(), "another mesh"));
+
+  st::CollisionRequest zero = st::DefaultCollisionRequest();
+  zero.max_pairs = 0;
+  CHECK(st::test::contains(st::check(zero), "max_pairs"));
+  const st::Body one = api_body(st::geom::make_box({2, 2, 2}));
+  st::ComputeCollision pair(one, one);
+  st::CollisionResult r;
+  pair.at_relative(st::Pose::Identity(), zero, r);
+  CHECK(r.bad_request);
+  CHECK_FALSE(r.colliding());
+  st::Pose nan = st::Pose::Identity();
+  nan.translation().x() = std::numeric_limits<double>::quiet_NaN();
+  pair.at_relative(nan, st::CollisionRequest::all_pairs(), r);  // never crashes; nothing found
+  CHECK_FALSE(r.colliding());
+}
