@@ -54,16 +54,20 @@ int main(int argc, char** argv) {
   // per-thread arena their freed memory stays resident, in the main one malloc_trim() returns it
   // when idle sets are dropped (perf/soak.sh: worker memory flat across reassignments).
   mallopt(M_ARENA_MAX, 1);
-  CLI::App app{"spheretouch-worker: holds sphere blocks in memory and answers collision queries "
-               "(binds loopback unless told otherwise)"};
+  CLI::App app{
+      "spheretouch-worker: holds sphere blocks in memory and answers collision queries "
+      "(binds loopback unless told otherwise)"};
   std::string config_file, bind, log_level;
   std::int64_t worker_id = -1;
   std::string key_out;
   bool insecure = false, keygen = false, force = false;
   app.add_option("--config", config_file,
-                 "TOML config (bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb, ipc_allowed_uids, [curve])")
+                 "TOML config (bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb, "
+                 "ipc_allowed_uids, [curve])")
       ->check(CLI::ExistingFile);
-  app.add_option("--bind", bind, "endpoint to bind: tcp://HOST:PORT or ipc://PATH (overrides the config; default tcp://127.0.0.1:5555)");
+  app.add_option(
+      "--bind", bind,
+      "endpoint to bind: tcp://HOST:PORT or ipc://PATH (overrides the config; default tcp://127.0.0.1:5555)");
   app.add_option("--id", worker_id, "worker id (overrides the config)")->check(CLI::Range(0, 1 << 20));
   app.add_option("--log-level", log_level, "error, warning, info or debug (overrides the config)");
   app.add_flag("--insecure", insecure, "allow binding a non-loopback address without CURVE (trusted networks only)");
@@ -75,7 +79,10 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   if (keygen) {
     auto keys = st::net::generate_curve_key_pair();
-    if (!keys) { std::fprintf(stderr, "spheretouch-worker: %s\n", keys.error().c_str()); return 1; }
+    if (!keys) {
+      std::fprintf(stderr, "spheretouch-worker: %s\n", keys.error().c_str());
+      return 1;
+    }
     if (key_out.empty()) {
       std::printf("public %s\nsecret %s\n", keys.value().public_z85.c_str(), keys.value().secret_z85.c_str());
       return 0;
@@ -94,7 +101,10 @@ int main(int argc, char** argv) {
   st::net::DaemonConfig cfg;
   if (!config_file.empty()) {
     auto c = st::net::load_daemon_config(config_file);
-    if (!c) { log_line(3, c.error()); return 2; }
+    if (!c) {
+      log_line(3, c.error());
+      return 2;
+    }
     cfg = std::move(c.value());
   }
   if (!bind.empty()) cfg.bind = bind;
@@ -102,7 +112,10 @@ int main(int argc, char** argv) {
   if (!log_level.empty()) cfg.log_level = log_level;
   if (insecure) cfg.insecure = true;
   g_id = cfg.worker_id;
-  if (auto s = st::net::check_daemon_config(cfg); !s) { log_line(3, s.error()); return 2; }
+  if (auto s = st::net::check_daemon_config(cfg); !s) {
+    log_line(3, s.error());
+    return 2;
+  }
   g_max_priority = st::net::log_priority(cfg.log_level);
 
   struct sigaction sa {};
@@ -127,15 +140,22 @@ int main(int argc, char** argv) {
     const double queue_mb = double(wc.max_connections) * wc.rcvhwm * double(wc.limits.max_chunk_bytes) / double(1 << 20);
     const double upload_mb = double(wc.max_upload_bytes >> 20);
     log_line(6, "memory bound: " + std::to_string(long(held_mb + build_mb + queue_mb + upload_mb)) + " MiB (" +
-                    std::to_string(cfg.max_sets) + " held sets " + std::to_string(long(held_mb)) + " + one being built " +
-                    std::to_string(long(build_mb)) + " + uploads " + std::to_string(long(upload_mb)) + " + queues " +
-                    std::to_string(long(queue_mb)) + "); lower max_blockset_mb or max_sets to fit MemoryMax");
+                    std::to_string(cfg.max_sets) + " held sets " + std::to_string(long(held_mb)) +
+                    " + one being built " + std::to_string(long(build_mb)) + " + uploads " +
+                    std::to_string(long(upload_mb)) + " + queues " + std::to_string(long(queue_mb)) +
+                    "); lower max_blockset_mb or max_sets to fit MemoryMax");
   }
   if (!cfg.curve_secret_key_file.empty()) {
     auto key = st::net::read_secret_key(cfg.curve_secret_key_file);
-    if (!key) { log_line(3, key.error()); return 2; }
+    if (!key) {
+      log_line(3, key.error());
+      return 2;
+    }
     auto clients = st::net::allowed_client_keys(cfg);
-    if (!clients) { log_line(3, clients.error()); return 2; }
+    if (!clients) {
+      log_line(3, clients.error());
+      return 2;
+    }
     for (const std::string& k : clients.value()) log_line(7, "allowed CURVE client " + k);
     wc.curve = st::net::CurveServer{key.value(), clients.value()};
     log_line(6, "CURVE on: public key " + st::net::curve_public_of(key.value()).value() + ", " +
@@ -147,13 +167,17 @@ int main(int argc, char** argv) {
     // Sphere trees + collide() (exact); the SAT reference backend stays for tests.
     st::net::WorkerService svc(ctx, wc, st::net::tree_backend_factory());
     if (wc.curve) st::net::wipe_secret(wc.curve->secret_z85);  // the service has handed it to libzmq
-    if (auto s = svc.bind(cfg.bind); !s) { log_line(3, s.error()); return 1; }
+    if (auto s = svc.bind(cfg.bind); !s) {
+      log_line(3, s.error());
+      return 1;
+    }
     const std::string ep = svc.last_endpoint();
     const bool exposed = !st::net::is_local_endpoint(cfg.bind) && !wc.curve;
     log_line(exposed ? 4 : 6, "listening on " + ep + (exposed ? " (INSECURE: no authentication)" : ""));
     if (cfg.bind.rfind("tcp://", 0) == 0 && !exposed && !wc.curve)
-      log_line(5, "loopback TCP without CURVE: every local user can connect; bind ipc://PATH (this user only) or "
-                  "configure [curve] to keep other users out");
+      log_line(5,
+               "loopback TCP without CURVE: every local user can connect; bind ipc://PATH (this user only) or "
+               "configure [curve] to keep other users out");
     notify(("READY=1\nSTATUS=listening on " + ep).c_str());
 
     // Watchdog: ping at a quarter of WatchdogSec; the loop wakes at least every 100 ms.
@@ -167,7 +191,10 @@ int main(int argc, char** argv) {
     const auto on_tick = [&] {
       if (wd_period.count() == 0) return;
       const auto now = std::chrono::steady_clock::now();
-      if (now >= next_ping) { notify("WATCHDOG=1"); next_ping = now + wd_period; }
+      if (now >= next_ping) {
+        notify("WATCHDOG=1");
+        next_ping = now + wd_period;
+      }
     };
     on_tick();
     svc.run(g_stop, tick, on_tick);

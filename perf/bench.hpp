@@ -8,13 +8,13 @@ namespace st::bench {
 /// A TCP port on 127.0.0.1 that was free a moment ago (for workers the benchmarks start).
 int free_tcp_port();
 
-void add_load(CLI::App& app);  ///< mesh loading time (the 832k-face armadillo)
-void add_tree(CLI::App& app);  ///< sphere-tree build time and bytes/face
-void add_collide(CLI::App& app);  ///< collide() query time at contact buckets, pose finder
+void add_load(CLI::App& app);      ///< mesh loading time (the 832k-face armadillo)
+void add_tree(CLI::App& app);      ///< sphere-tree build time and bytes/face
+void add_collide(CLI::App& app);   ///< collide() query time at contact buckets, pose finder
 void add_exchange(CLI::App& app);  ///< TripleBuffer vs mutex take-newest latency
 void add_haptic(CLI::App& app);    ///< HapticLoop vs bare clock_nanosleep wake-up latency
-void add_scatter(CLI::App& app);  ///< scatter-gather round trip of an empty query, N workers × transport
-void add_tables(CLI::App& app);   ///< the paper's tables: table1, table2, table3, peers, trade, icosphere (bench_tables.cpp)
+void add_scatter(CLI::App& app);   ///< scatter-gather round trip of an empty query, N workers × transport
+void add_tables(CLI::App& app);  ///< the paper's tables: table1, table2, table3, peers, trade, icosphere (bench_tables.cpp)
 void add_force(CLI::App& app);    ///< force rendering quality per contact model, simulated time (bench_force.cpp)
 void add_hostile(CLI::App& app);  ///< security reproducers against a live worker (bench_hostile.cpp)
 

@@ -79,8 +79,15 @@ bool find_pose_for_contacts(const Scene& s, std::uint32_t target, std::uint64_t 
     for (int it = 0; it < 40; ++it) {
       const double mid = 0.5 * (lo + hi);
       const std::uint32_t c = contacts_at(s, fingertip_pose(s.probe, s.object, vo, normal, mid), sc, r);
-      if (c >= target) hi = mid; else lo = mid;
-      if (std::abs(double(c) - target) <= 0.1 * target) { out = fingertip_pose(s.probe, s.object, vo, normal, mid); got = c; return true; }
+      if (c >= target)
+        hi = mid;
+      else
+        lo = mid;
+      if (std::abs(double(c) - target) <= 0.1 * target) {
+        out = fingertip_pose(s.probe, s.object, vo, normal, mid);
+        got = c;
+        return true;
+      }
     }
   }
   return false;
@@ -88,7 +95,10 @@ bool find_pose_for_contacts(const Scene& s, std::uint32_t target, std::uint64_t 
 
 std::vector<std::pair<Pose, std::string>> read_poses(const std::string& path) {
   Result<std::vector<geom::PoseLine>> lines = geom::read_pose_lines(path);
-  if (!lines) { std::fprintf(stderr, "%s\n", lines.error().c_str()); throw CLI::RuntimeError(2); }
+  if (!lines) {
+    std::fprintf(stderr, "%s\n", lines.error().c_str());
+    throw CLI::RuntimeError(2);
+  }
   std::vector<std::pair<Pose, std::string>> out;
   for (geom::PoseLine& l : lines.value()) out.emplace_back(l.pose, std::move(l.comment));
   return out;
@@ -127,7 +137,8 @@ void add_collide(CLI::App& app) {
     bool fcl = false, json = false;
   };
   auto a = std::make_shared<Args>();
-  CLI::App* cmd = app.add_subcommand("collide", "Exact collide() median query time at the poses of a pose file (single thread)");
+  CLI::App* cmd =
+      app.add_subcommand("collide", "Exact collide() median query time at the poses of a pose file (single thread)");
   cmd->add_option("--probe", a->probe, "probe mesh (the hand)")->required()->check(CLI::ExistingFile);
   cmd->add_option("--object", a->object, "object mesh")->required()->check(CLI::ExistingFile);
   cmd->add_option("--poses", a->poses, "pose file to time (16 numbers a line)");
@@ -135,9 +146,13 @@ void add_collide(CLI::App& app) {
   cmd->add_option("--targets", a->targets, "contact counts for --find-poses")->capture_default_str();
   cmd->add_option("--seed", a->seed, "site choice for --find-poses")->capture_default_str();
   cmd->add_option("--runs", a->runs, "queries per pose")->check(CLI::Range(1, 100000))->capture_default_str();
-  cmd->add_option("--leaf-faces", a->leaf, "faces per leaf (both trees)")->check(CLI::Range(1u, geom::kMaxLeafFaces))->capture_default_str();
-  cmd->add_flag("--fcl", a->fcl, "also time FCL 0.7 (BVHModel<OBBRSS>, all contacts) on the same poses and compare pair sets");
-  cmd->add_option("--build-mesh", a->build_mesh, "also time our tree build and FCL's OBBRSS build of this mesh")->check(CLI::ExistingFile);
+  cmd->add_option("--leaf-faces", a->leaf, "faces per leaf (both trees)")
+      ->check(CLI::Range(1u, geom::kMaxLeafFaces))
+      ->capture_default_str();
+  cmd->add_flag("--fcl", a->fcl,
+                "also time FCL 0.7 (BVHModel<OBBRSS>, all contacts) on the same poses and compare pair sets");
+  cmd->add_option("--build-mesh", a->build_mesh, "also time our tree build and FCL's OBBRSS build of this mesh")
+      ->check(CLI::ExistingFile);
   cmd->add_flag("--json", a->json, "print one JSON object instead of the table");
   cmd->callback([a] {
 #ifndef ST_HAVE_FCL
@@ -149,7 +164,10 @@ void add_collide(CLI::App& app) {
     Scene s;
     for (auto [path, mesh] : {std::pair{&a->probe, &s.probe}, std::pair{&a->object, &s.object}}) {
       auto m = geom::load_mesh(*path);
-      if (!m) { std::fprintf(stderr, "%s\n", m.error().c_str()); throw CLI::RuntimeError(2); }
+      if (!m) {
+        std::fprintf(stderr, "%s\n", m.error().c_str());
+        throw CLI::RuntimeError(2);
+      }
       *mesh = std::move(m.value().mesh);
     }
     auto t0 = std::chrono::steady_clock::now();
@@ -189,7 +207,10 @@ void add_collide(CLI::App& app) {
     std::size_t big_faces = 0;
     if (!a->build_mesh.empty()) {
       auto m = geom::load_mesh(a->build_mesh);
-      if (!m) { std::fprintf(stderr, "%s\n", m.error().c_str()); throw CLI::RuntimeError(2); }
+      if (!m) {
+        std::fprintf(stderr, "%s\n", m.error().c_str());
+        throw CLI::RuntimeError(2);
+      }
       const geom::Mesh& big = m.value().mesh;
       big_faces = big.num_faces();
       std::vector<double> bs;
@@ -211,7 +232,10 @@ void add_collide(CLI::App& app) {
     if (!a->poses.empty()) {
 #ifdef ST_HAVE_FCL
       std::unique_ptr<FclPeer> peer;
-      if (a->fcl) { peer = std::make_unique<FclPeer>(s.probe, s.object); fcl_build_s = peer->build_seconds(); }
+      if (a->fcl) {
+        peer = std::make_unique<FclPeer>(s.probe, s.object);
+        fcl_build_s = peer->build_seconds();
+      }
 #endif
       geom::CollideScratch sc;
       geom::CollideResult r;
@@ -265,11 +289,22 @@ void add_collide(CLI::App& app) {
             row.diffs.emplace_back(buf);
           };
           while (i < r.pairs.size() || j < fp.size()) {
-            const bool take_ours = j == fp.size() || (i < r.pairs.size() && std::pair{r.pairs[i].probe, r.pairs[i].object} < fp[j]);
-            const bool take_fcl = i == r.pairs.size() || (j < fp.size() && fp[j] < std::pair{r.pairs[i].probe, r.pairs[i].object});
-            if (take_ours) { ++row.only_ours; note("ours", r.pairs[i].probe, r.pairs[i].object); ++i; }
-            else if (take_fcl) { ++row.only_fcl; note("FCL", fp[j].first, fp[j].second); ++j; }
-            else { ++i; ++j; }
+            const bool take_ours =
+                j == fp.size() || (i < r.pairs.size() && std::pair{r.pairs[i].probe, r.pairs[i].object} < fp[j]);
+            const bool take_fcl =
+                i == r.pairs.size() || (j < fp.size() && fp[j] < std::pair{r.pairs[i].probe, r.pairs[i].object});
+            if (take_ours) {
+              ++row.only_ours;
+              note("ours", r.pairs[i].probe, r.pairs[i].object);
+              ++i;
+            } else if (take_fcl) {
+              ++row.only_fcl;
+              note("FCL", fp[j].first, fp[j].second);
+              ++j;
+            } else {
+              ++i;
+              ++j;
+            }
           }
         }
 #endif
@@ -281,39 +316,47 @@ void add_collide(CLI::App& app) {
     const double bpf_probe = double(s.pt.bytes()) / double(s.probe.num_faces());
     const double bpf_object = double(s.ot.bytes()) / double(s.object.num_faces());
     if (a->json) {
-      std::printf("{\"probe\": \"%s\", \"object\": \"%s\", \"probe_faces\": %zu, \"object_faces\": %zu, \"leaf_faces\": %u, "
-                  "\"runs\": %d,\n \"build\": {\"probe_s\": %.4f, \"object_s\": %.4f, \"probe_bytes_per_face\": %.1f, "
-                  "\"object_bytes_per_face\": %.1f, \"scratch_bytes\": %zu, \"fcl_both_s\": %.4f",
-                  a->probe.c_str(), a->object.c_str(), s.probe.num_faces(), s.object.num_faces(), a->leaf, a->runs,
-                  probe_build_s, object_build_s, bpf_probe, bpf_object, scratch_bytes, fcl_build_s);
+      std::printf(
+          "{\"probe\": \"%s\", \"object\": \"%s\", \"probe_faces\": %zu, \"object_faces\": %zu, \"leaf_faces\": %u, "
+          "\"runs\": %d,\n \"build\": {\"probe_s\": %.4f, \"object_s\": %.4f, \"probe_bytes_per_face\": %.1f, "
+          "\"object_bytes_per_face\": %.1f, \"scratch_bytes\": %zu, \"fcl_both_s\": %.4f",
+          a->probe.c_str(), a->object.c_str(), s.probe.num_faces(), s.object.num_faces(), a->leaf, a->runs,
+          probe_build_s, object_build_s, bpf_probe, bpf_object, scratch_bytes, fcl_build_s);
       if (!a->build_mesh.empty())
-        std::printf(", \"big_mesh\": \"%s\", \"big_faces\": %zu, \"big_s\": %.4f, \"big_bytes_per_face\": %.1f, \"big_fcl_s\": %.4f",
-                    a->build_mesh.c_str(), big_faces, big_build_s, big_bytes_per_face, big_fcl_build_s);
+        std::printf(
+            ", \"big_mesh\": \"%s\", \"big_faces\": %zu, \"big_s\": %.4f, \"big_bytes_per_face\": %.1f, \"big_fcl_s\": "
+            "%.4f",
+            a->build_mesh.c_str(), big_faces, big_build_s, big_bytes_per_face, big_fcl_build_s);
       std::printf("},\n \"poses\": [");
       for (std::size_t i = 0; i < rows.size(); ++i) {
         const PoseRow& w = rows[i];
-        std::printf("%s\n  {\"contacts\": %u, \"pairs\": %zu, \"p50_us\": %.2f, \"p95_us\": %.2f, \"min_us\": %.2f, "
-                    "\"node_pairs\": %llu, \"leaf_pairs\": %llu, \"tri_tests\": %llu",
-                    i ? "," : "", w.contacts, w.pairs, w.p50_us, w.p95_us, w.min_us,
-                    static_cast<unsigned long long>(w.stats.node_pairs), static_cast<unsigned long long>(w.stats.leaf_pairs),
-                    static_cast<unsigned long long>(w.stats.tri_pairs));
+        std::printf(
+            "%s\n  {\"contacts\": %u, \"pairs\": %zu, \"p50_us\": %.2f, \"p95_us\": %.2f, \"min_us\": %.2f, "
+            "\"node_pairs\": %llu, \"leaf_pairs\": %llu, \"tri_tests\": %llu",
+            i ? "," : "", w.contacts, w.pairs, w.p50_us, w.p95_us, w.min_us,
+            static_cast<unsigned long long>(w.stats.node_pairs), static_cast<unsigned long long>(w.stats.leaf_pairs),
+            static_cast<unsigned long long>(w.stats.tri_pairs));
         if (w.fcl)
-          std::printf(", \"fcl_p50_us\": %.2f, \"fcl_p95_us\": %.2f, \"fcl_min_us\": %.2f, \"ratio\": %.4f, \"fcl_pairs\": %zu, "
-                      "\"only_ours\": %zu, \"only_fcl\": %zu",
-                      w.fcl_p50_us, w.fcl_p95_us, w.fcl_min_us, w.p50_us / w.fcl_p50_us, w.fcl_pairs, w.only_ours, w.only_fcl);
+          std::printf(
+              ", \"fcl_p50_us\": %.2f, \"fcl_p95_us\": %.2f, \"fcl_min_us\": %.2f, \"ratio\": %.4f, \"fcl_pairs\": "
+              "%zu, "
+              "\"only_ours\": %zu, \"only_fcl\": %zu",
+              w.fcl_p50_us, w.fcl_p95_us, w.fcl_min_us, w.p50_us / w.fcl_p50_us, w.fcl_pairs, w.only_ours, w.only_fcl);
         std::printf("}");
       }
       std::printf("]}\n");
       return;
     }
-    std::printf("leaf_faces %u; probe %zu faces (tree %.3f s, %.1f B/face), object %zu faces (tree %.3f s, %.1f B/face)",
-                a->leaf, s.probe.num_faces(), probe_build_s, bpf_probe, s.object.num_faces(), object_build_s, bpf_object);
+    std::printf(
+        "leaf_faces %u; probe %zu faces (tree %.3f s, %.1f B/face), object %zu faces (tree %.3f s, %.1f B/face)",
+        a->leaf, s.probe.num_faces(), probe_build_s, bpf_probe, s.object.num_faces(), object_build_s, bpf_object);
     if (a->fcl) std::printf("; FCL OBBRSS build of both %.3f s", fcl_build_s);
     std::printf("; %d runs per pose; query scratch %.1f MB\n", a->runs, double(scratch_bytes) / 1e6);
     if (!rows.empty()) {
-      std::printf("%8s %8s %10s %10s %10s %9s %9s %9s", "contacts", "pairs", "node_pairs", "leaf_pairs", "tri_tests", "p50_ms",
-                  "p95_ms", "min_ms");
-      if (a->fcl) std::printf(" %9s %9s %7s %9s %9s %8s", "fcl_p50", "fcl_min", "ratio", "fcl_pairs", "only_ours", "only_fcl");
+      std::printf("%8s %8s %10s %10s %10s %9s %9s %9s", "contacts", "pairs", "node_pairs", "leaf_pairs", "tri_tests",
+                  "p50_ms", "p95_ms", "min_ms");
+      if (a->fcl)
+        std::printf(" %9s %9s %7s %9s %9s %8s", "fcl_p50", "fcl_min", "ratio", "fcl_pairs", "only_ours", "only_fcl");
       std::printf("\n");
     }
     for (const PoseRow& w : rows) {
@@ -321,8 +364,8 @@ void add_collide(CLI::App& app) {
                   static_cast<unsigned long long>(w.stats.node_pairs), static_cast<unsigned long long>(w.stats.leaf_pairs),
                   static_cast<unsigned long long>(w.stats.tri_pairs), w.p50_us / 1e3, w.p95_us / 1e3, w.min_us / 1e3);
       if (w.fcl)
-        std::printf(" %9.4f %9.4f %7.3f %9zu %9zu %8zu", w.fcl_p50_us / 1e3, w.fcl_min_us / 1e3, w.p50_us / w.fcl_p50_us,
-                    w.fcl_pairs, w.only_ours, w.only_fcl);
+        std::printf(" %9.4f %9.4f %7.3f %9zu %9zu %8zu", w.fcl_p50_us / 1e3, w.fcl_min_us / 1e3,
+                    w.p50_us / w.fcl_p50_us, w.fcl_pairs, w.only_ours, w.only_fcl);
       std::printf("\n");
       for (const std::string& d : w.diffs) std::printf("           %s\n", d.c_str());
     }

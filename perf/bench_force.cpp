@@ -51,10 +51,10 @@ struct ForceScene {
   std::string name;
   Body probe, object;
   rt::Trajectory script;
-  double slide_t0 = 0, slide_t1 = 0;  // dF / angle window, s (empty: every contact tick)
-  double still_t0 = 0, still_t1 = 0;  // holding still, s (empty: no still figure)
+  double slide_t0 = 0, slide_t1 = 0;                   // dF / angle window, s (empty: every contact tick)
+  double still_t0 = 0, still_t1 = 0;                   // holding still, s (empty: no still figure)
   std::function<double(const geom::Vec3&)> depth_ref;  // analytic depth of the probe at a position (null: unknown)
-  bool plate = false;                 // pop-through: device below the plate's top while over it
+  bool plate = false;                                  // pop-through: device below the plate's top while over it
 };
 
 Body generated(const std::string& label, geom::Mesh mesh) {
@@ -156,7 +156,7 @@ ForceScene plate_scene() {
   k.at({0.3, -0.2, 10.5});
   k.to({0.3, -0.2, -20.0}, 0.305);  // 100 mm/s down, through the plate
   k.hold(0.2);
-  k.to({0.3, -0.2, 10.5}, 0.305);   // and back up
+  k.to({0.3, -0.2, 10.5}, 0.305);  // and back up
   k.hold(0.3);
   s.script = k.tr;
   s.plate = true;
@@ -310,7 +310,8 @@ Figures measure(const ForceScene& s, const Replay& rp) {
     if (T[i].f.norm() > 0) ++fg.contact_ticks;
     // Flips: direction against 20 ms earlier, counted once per event.
     bool flip = false;
-    if (i >= 20 && T[i].f.norm() > kDirMinN && T[i - 20].f.norm() > kDirMinN) flip = angle_deg(T[i].f, T[i - 20].f) > 45;
+    if (i >= 20 && T[i].f.norm() > kDirMinN && T[i - 20].f.norm() > kDirMinN)
+      flip = angle_deg(T[i].f, T[i - 20].f) > 45;
     if (flip && !flipping) ++flips;
     flipping = flip;
     if (!on || (window && (t_of(i) < s.slide_t0 || t_of(i) > s.slide_t1))) continue;
@@ -413,7 +414,9 @@ std::vector<Cost> contact_cost(const Body& probe, const Body& object, const std:
   geom::CollideScratch sc;
   geom::CollideResult r;
   using clock = std::chrono::steady_clock;
-  auto us = [](clock::time_point a, clock::time_point b) { return std::chrono::duration<double, std::micro>(b - a).count(); };
+  auto us = [](clock::time_point a, clock::time_point b) {
+    return std::chrono::duration<double, std::micro>(b - a).count();
+  };
   for (const TaggedPose& tp : poses) {
     for (const Model& m : models) {
       Cost c;
@@ -461,9 +464,10 @@ void add_force(CLI::App& app) {
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
-      "force", "Force rendering quality in simulated time: per scene, contact model (paper, patch) and loop (open, "
-               "closed with the simulated hand): force steps, direction changes and flips, energy per contact "
-               "cycle, oscillation while holding still, depth error, pop-through, cost per round");
+      "force",
+      "Force rendering quality in simulated time: per scene, contact model (paper, patch) and loop (open, "
+      "closed with the simulated hand): force steps, direction changes and flips, energy per contact "
+      "cycle, oscillation while holding still, depth error, pop-through, cost per round");
   cmd->add_option("--scenes", a->scenes, "box, sphere, plate, hand_elephant, hand_armadillo (model set)")->capture_default_str();
   cmd->add_option("--models", a->models, "contact models: paper (no passivity guard), patch (the default, guarded)")
       ->capture_default_str();
@@ -471,7 +475,8 @@ void add_force(CLI::App& app) {
       ->check(CLI::Range(1, 1000))
       ->capture_default_str();
   cmd->add_option("--trace-dir", a->trace_dir, "write force_<scene>_<model>_<loop>.csv (one line per tick) here");
-  cmd->add_option("--poses", a->poses, "pose file for the contact-cost figure (default perf/poses/hand_elephant.txt when present)");
+  cmd->add_option("--poses", a->poses,
+                  "pose file for the contact-cost figure (default perf/poses/hand_elephant.txt when present)");
   cmd->add_option("--cost-runs", a->cost_runs, "timed rounds per pose and model for the contact-cost figure")
       ->check(CLI::Range(1, 100000))
       ->capture_default_str();
@@ -493,13 +498,17 @@ void add_force(CLI::App& app) {
     std::stringstream ss(a->scenes);
     for (std::string n; std::getline(ss, n, ',');) {
       std::fprintf(stderr, "force: loading scene %s\n", n.c_str());
-      if (n == "box") scenes.push_back(box_scene(a->quick));
-      else if (n == "sphere") scenes.push_back(sphere_scene(a->quick));
-      else if (n == "plate") scenes.push_back(plate_scene());
+      if (n == "box")
+        scenes.push_back(box_scene(a->quick));
+      else if (n == "sphere")
+        scenes.push_back(sphere_scene(a->quick));
+      else if (n == "plate")
+        scenes.push_back(plate_scene());
       else if (n == "hand_elephant" || n == "hand_armadillo") {
         const std::string obj = n == "hand_elephant" ? "elephant.off" : "armadillo_L2.off";
         if (!std::filesystem::exists(dir + "/hand_L2.off") || !std::filesystem::exists(dir + "/" + obj)) {
-          std::fprintf(stderr, "force: skipping %s: the model set is not in %s (scripts/models.sh)\n", n.c_str(), dir.c_str());
+          std::fprintf(stderr, "force: skipping %s: the model set is not in %s (scripts/models.sh)\n", n.c_str(),
+                       dir.c_str());
           continue;
         }
         scenes.push_back(hand_scene(n, dir + "/hand_L2.off", dir + "/" + obj));
@@ -526,8 +535,10 @@ void add_force(CLI::App& app) {
     // Contact-model cost at the perf poses.
     std::vector<Cost> costs;
     std::string pose_file = a->poses;
-    if (pose_file.empty() && std::filesystem::exists("perf/poses/hand_elephant.txt")) pose_file = "perf/poses/hand_elephant.txt";
-    if (!pose_file.empty() && std::filesystem::exists(dir + "/hand_L2.off") && std::filesystem::exists(dir + "/elephant.off")) {
+    if (pose_file.empty() && std::filesystem::exists("perf/poses/hand_elephant.txt"))
+      pose_file = "perf/poses/hand_elephant.txt";
+    if (!pose_file.empty() && std::filesystem::exists(dir + "/hand_L2.off") &&
+        std::filesystem::exists(dir + "/elephant.off")) {
       std::fprintf(stderr, "force: contact-model cost at the poses of %s\n", pose_file.c_str());
       const Body hand = load_body(dir + "/hand_L2.off"), elephant = load_body(dir + "/elephant.off");
       costs = contact_cost(hand, elephant, read_tagged_poses(pose_file), models, a->quick ? 5 : a->cost_runs);
@@ -542,27 +553,29 @@ void add_force(CLI::App& app) {
       std::printf("{\"collision_ticks\": %d, \"quick\": %s, \"scenes\": [", a->collision_ticks, a->quick ? "true" : "false");
       for (std::size_t i = 0; i < all.size(); ++i) {
         const Figures& f = all[i];
-        std::printf("%s\n  {\"scene\": \"%s\", \"model\": \"%s\", \"loop\": \"%s\", \"dF_p99_N\": %s, \"dF_max_N\": %s, "
-                    "\"angle_p99_deg\": %s, \"flips45_per_s\": %s, \"energy_per_cycle_mJ\": %s, \"energy_cycle_max_mJ\": %s, "
-                    "\"cycles\": %d, \"still_rms_30hz_N\": %s, \"depth_err_mm\": %s, \"depth_err_rms_mm\": %s, "
-                    "\"popthrough\": %s, \"round_us_p50\": %s, \"collide_us_p50\": %s, \"contact_us_p50\": %s, "
-                    "\"contacts_p50\": %s, \"ticks\": %zu, \"contact_ticks\": %zu}",
-                    i ? "," : "", f.scene.c_str(), f.model.c_str(), f.loop.c_str(), num(f.dF_p99).c_str(),
-                    num(f.dF_max).c_str(), num(f.angle_p99).c_str(), num(f.flips45_per_s).c_str(),
-                    num(f.energy_per_cycle).c_str(), num(f.energy_cycle_max).c_str(), f.cycles,
-                    f.still_rms < 0 ? "null" : num(f.still_rms).c_str(), f.depth_err < 0 ? "null" : num(f.depth_err).c_str(),
-                    f.depth_err_rms < 0 ? "null" : num(f.depth_err_rms).c_str(),
-                    f.popthrough < 0 ? "null" : std::to_string(f.popthrough).c_str(), num(f.round_us_p50).c_str(),
-                    num(f.collide_us_p50).c_str(), num(f.contact_us_p50).c_str(), num(f.contacts_p50).c_str(), f.ticks,
-                    f.contact_ticks);
+        std::printf(
+            "%s\n  {\"scene\": \"%s\", \"model\": \"%s\", \"loop\": \"%s\", \"dF_p99_N\": %s, \"dF_max_N\": %s, "
+            "\"angle_p99_deg\": %s, \"flips45_per_s\": %s, \"energy_per_cycle_mJ\": %s, \"energy_cycle_max_mJ\": %s, "
+            "\"cycles\": %d, \"still_rms_30hz_N\": %s, \"depth_err_mm\": %s, \"depth_err_rms_mm\": %s, "
+            "\"popthrough\": %s, \"round_us_p50\": %s, \"collide_us_p50\": %s, \"contact_us_p50\": %s, "
+            "\"contacts_p50\": %s, \"ticks\": %zu, \"contact_ticks\": %zu}",
+            i ? "," : "", f.scene.c_str(), f.model.c_str(), f.loop.c_str(), num(f.dF_p99).c_str(),
+            num(f.dF_max).c_str(), num(f.angle_p99).c_str(), num(f.flips45_per_s).c_str(),
+            num(f.energy_per_cycle).c_str(), num(f.energy_cycle_max).c_str(), f.cycles,
+            f.still_rms < 0 ? "null" : num(f.still_rms).c_str(), f.depth_err < 0 ? "null" : num(f.depth_err).c_str(),
+            f.depth_err_rms < 0 ? "null" : num(f.depth_err_rms).c_str(),
+            f.popthrough < 0 ? "null" : std::to_string(f.popthrough).c_str(), num(f.round_us_p50).c_str(),
+            num(f.collide_us_p50).c_str(), num(f.contact_us_p50).c_str(), num(f.contacts_p50).c_str(), f.ticks,
+            f.contact_ticks);
       }
       std::printf("\n], \"contact_cost\": [");
       for (std::size_t i = 0; i < costs.size(); ++i) {
         const Cost& c = costs[i];
-        std::printf("%s\n  {\"contacts\": %u, \"model\": \"%s\", \"collide_us_p50\": %s, \"contact_cold_us_p50\": %s, "
-                    "\"contact_warm_us_p50\": %s, \"share_cold\": %s, \"share_warm\": %s}",
-                    i ? "," : "", c.contacts, c.model.c_str(), num(c.collide_us).c_str(), num(c.cold_us).c_str(),
-                    num(c.warm_us).c_str(), num(c.cold_us / c.collide_us).c_str(), num(c.warm_us / c.collide_us).c_str());
+        std::printf(
+            "%s\n  {\"contacts\": %u, \"model\": \"%s\", \"collide_us_p50\": %s, \"contact_cold_us_p50\": %s, "
+            "\"contact_warm_us_p50\": %s, \"share_cold\": %s, \"share_warm\": %s}",
+            i ? "," : "", c.contacts, c.model.c_str(), num(c.collide_us).c_str(), num(c.cold_us).c_str(),
+            num(c.warm_us).c_str(), num(c.cold_us / c.collide_us).c_str(), num(c.warm_us / c.collide_us).c_str());
       }
       std::printf("\n]}\n");
       return;
@@ -576,14 +589,15 @@ void add_force(CLI::App& app) {
       std::printf("%-15s %-6s %-6s %9.4f %9.4f %9.3f %8.2f %10.4f %10.4f %9s %9s %5s %9.1f %9.1f\n", f.scene.c_str(),
                   f.model.c_str(), f.loop.c_str(), f.dF_p99, f.dF_max, f.angle_p99, f.flips45_per_s, f.energy_per_cycle,
                   f.energy_cycle_max, f.still_rms < 0 ? "-" : num(f.still_rms).c_str(),
-                  f.depth_err < 0 ? "-" : num(f.depth_err).c_str(), f.popthrough < 0 ? "-" : std::to_string(f.popthrough).c_str(),
-                  f.round_us_p50, f.contact_us_p50);
+                  f.depth_err < 0 ? "-" : num(f.depth_err).c_str(),
+                  f.popthrough < 0 ? "-" : std::to_string(f.popthrough).c_str(), f.round_us_p50, f.contact_us_p50);
     if (!costs.empty()) {
       std::printf("\ncontact model cost at the perf poses (median µs; share = contact / collide() in the same loop)\n");
-      std::printf("%8s %-6s %10s %10s %10s %8s %8s\n", "contacts", "model", "collide", "cold", "warm", "cold %", "warm %");
+      std::printf("%8s %-6s %10s %10s %10s %8s %8s\n", "contacts", "model", "collide", "cold", "warm", "cold %",
+                  "warm %");
       for (const Cost& c : costs)
-        std::printf("%8u %-6s %10.1f %10.1f %10.1f %7.0f%% %7.0f%%\n", c.contacts, c.model.c_str(), c.collide_us, c.cold_us,
-                    c.warm_us, 100 * c.cold_us / c.collide_us, 100 * c.warm_us / c.collide_us);
+        std::printf("%8u %-6s %10.1f %10.1f %10.1f %7.0f%% %7.0f%%\n", c.contacts, c.model.c_str(), c.collide_us,
+                    c.cold_us, c.warm_us, 100 * c.cold_us / c.collide_us, 100 * c.warm_us / c.collide_us);
     }
   });
 }

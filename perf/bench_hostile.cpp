@@ -33,10 +33,14 @@ using namespace std::chrono_literals;
 enum class Outcome { refused, answered, crashed, stalled };
 const char* outcome_name(Outcome o) {
   switch (o) {
-    case Outcome::refused: return "refused";
-    case Outcome::answered: return "answered";
-    case Outcome::crashed: return "crashed";
-    case Outcome::stalled: return "stalled";
+    case Outcome::refused:
+      return "refused";
+    case Outcome::answered:
+      return "answered";
+    case Outcome::crashed:
+      return "crashed";
+    case Outcome::stalled:
+      return "stalled";
   }
   return "?";
 }
@@ -93,8 +97,8 @@ Set encode_set(const geom::Mesh& probe, const geom::Mesh& object, std::uint32_t 
 struct CaseResult {
   std::string name, what;
   Outcome outcome = Outcome::stalled;
-  double worker_rss_mb = 0;                        // peak during the case
-  double answer_ms_p50 = 0, answer_ms_p99 = 0;     // honest client during the attack
+  double worker_rss_mb = 0;                     // peak during the case
+  double answer_ms_p50 = 0, answer_ms_p99 = 0;  // honest client during the attack
   std::uint32_t honest_rounds = 0, honest_incomplete = 0;
   std::string note;
 };
@@ -115,9 +119,10 @@ void add_hostile(CLI::App& app) {
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
-      "hostile", "Replays the security review's reproducers against a live worker daemon on loopback while an honest "
-                 "client queries it: per case the outcome (refused, answered, crashed, stalled), the worker's peak "
-                 "resident memory, and the honest client's round times against its quiet ones");
+      "hostile",
+      "Replays the security review's reproducers against a live worker daemon on loopback while an honest "
+      "client queries it: per case the outcome (refused, answered, crashed, stalled), the worker's peak "
+      "resident memory, and the honest client's round times against its quiet ones");
   cmd->add_option("--worker", a->worker, "spheretouch-worker binary (default: beside this program, ../daemons/)");
   cmd->add_option("--quiet-rounds", a->quiet_rounds, "honest rounds for the quiet baseline")->capture_default_str();
   cmd->add_flag("--quick", a->quick, "smaller attacks (CI smoke run)");
@@ -141,7 +146,13 @@ void add_hostile(CLI::App& app) {
     }
     struct Reaper {
       pid_t p;
-      ~Reaper() { if (p > 0) { ::kill(p, SIGTERM); int st; ::waitpid(p, &st, 0); } }
+      ~Reaper() {
+        if (p > 0) {
+          ::kill(p, SIGTERM);
+          int st;
+          ::waitpid(p, &st, 0);
+        }
+      }
     } reaper{pid};
     auto alive = [&] {
       int st = 0;
@@ -215,105 +226,117 @@ void add_hostile(CLI::App& app) {
     };
 
     const int pile_faces = a->quick ? 2500 : 4000;
-    run_case("pile_n2_pairs", std::to_string(pile_faces) + " identical triangles on each side: a query of " +
-                                  std::to_string(pile_faces) + "^2 pairs (item 2)", [&] {
-      zmq::context_t c(1);
-      Attacker x(c, ep, "attacker-pile");
-      geom::Mesh pile;
-      pile.name = "pile";
-      pile.local = {{0, 0, 0}, {10, 0, 0}, {0, 10, 0}};
-      pile.faces.assign(std::size_t(pile_faces), geom::Tri{0, 1, 2});
-      net::Blocks one(1);
-      for (std::uint32_t f = 0; f < std::uint32_t(pile_faces); ++f) one[0].push_back(f);
-      auto set = net::make_block_set(pile, pile, one, std::vector<std::uint32_t>{0}, 24);
-      const auto bytes = net::encode_block_set(set.value());
-      const std::uint64_t h = net::block_set_hash(bytes);
-      if (!x.upload(bytes, h) || !is_hello(x.recv())) return Outcome::stalled;
-      geom::Pose shifted = geom::Pose::Identity();
-      shifted.translation() = geom::Vec3(1, 1, 0);
-      x.send(net::encode(net::QueryMsg{1, h, shifted}));
-      const auto r = x.recv();
-      return is_error(r) ? Outcome::refused : r ? Outcome::answered : Outcome::stalled;
-    });
+    run_case("pile_n2_pairs",
+             std::to_string(pile_faces) + " identical triangles on each side: a query of " +
+                 std::to_string(pile_faces) + "^2 pairs (item 2)",
+             [&] {
+               zmq::context_t c(1);
+               Attacker x(c, ep, "attacker-pile");
+               geom::Mesh pile;
+               pile.name = "pile";
+               pile.local = {{0, 0, 0}, {10, 0, 0}, {0, 10, 0}};
+               pile.faces.assign(std::size_t(pile_faces), geom::Tri{0, 1, 2});
+               net::Blocks one(1);
+               for (std::uint32_t f = 0; f < std::uint32_t(pile_faces); ++f) one[0].push_back(f);
+               auto set = net::make_block_set(pile, pile, one, std::vector<std::uint32_t>{0}, 24);
+               const auto bytes = net::encode_block_set(set.value());
+               const std::uint64_t h = net::block_set_hash(bytes);
+               if (!x.upload(bytes, h) || !is_hello(x.recv())) return Outcome::stalled;
+               geom::Pose shifted = geom::Pose::Identity();
+               shifted.translation() = geom::Vec3(1, 1, 0);
+               x.send(net::encode(net::QueryMsg{1, h, shifted}));
+               const auto r = x.recv();
+               return is_error(r) ? Outcome::refused : r ? Outcome::answered : Outcome::stalled;
+             });
 
     const int freq = a->quick ? 120 : 300;
     double set_factor = 0, set_mb = 0;
-    run_case("large_legal_load", "a legal block set of " + std::to_string(20 * freq * freq) +
-                                     " faces built while others query (item 3)", [&] {
-      zmq::context_t c(1);
-      Attacker x(c, ep, "big-loader", 120000);
-      const Set s = encode_set(geom::make_capsule(4, 10, 12), geom::make_icosphere(40, freq), 64);
-      const double before = rss_mb();
-      if (!x.upload(s.bytes, s.hash)) return Outcome::stalled;
-      // Heartbeats are answered during the build: the first Hello echoes the nonce, the last
-      // reports the set.
-      x.send(net::encode(net::HeartbeatMsg{77}));
-      bool echoed = false, loaded = false;
-      for (int i = 0; i < 4 && !loaded; ++i) {
-        const auto r = x.recv();
-        if (!r) break;
-        if (auto* hm = std::get_if<net::HelloMsg>(&*r)) {
-          echoed |= hm->echo == 77;
-          loaded |= std::any_of(hm->held.begin(), hm->held.end(), [&](const net::Held& h) { return h.hash == s.hash; });
-        }
-      }
-      // What a held set costs: the worker's growth per byte of the encoding (the upload buffer
-      // is freed before the build; what malloc keeps of it counts too).
-      std::this_thread::sleep_for(200ms);
-      set_factor = (rss_mb() - before) / (double(s.bytes.size()) / double(1 << 20));
-      set_mb = double(s.bytes.size()) / double(1 << 20);
-      return echoed && loaded ? Outcome::answered : Outcome::stalled;
-    });
-    results.back().note += (results.back().note.empty() ? "" : "; ") + std::string("set of ") + std::to_string(set_mb).substr(0, 5) + " MiB encoded: worker grew " +
-                          std::to_string(set_factor).substr(0, 4) + "x that";
+    run_case("large_legal_load",
+             "a legal block set of " + std::to_string(20 * freq * freq) + " faces built while others query (item 3)", [&] {
+               zmq::context_t c(1);
+               Attacker x(c, ep, "big-loader", 120000);
+               const Set s = encode_set(geom::make_capsule(4, 10, 12), geom::make_icosphere(40, freq), 64);
+               const double before = rss_mb();
+               if (!x.upload(s.bytes, s.hash)) return Outcome::stalled;
+               // Heartbeats are answered during the build: the first Hello echoes the nonce, the last
+               // reports the set.
+               x.send(net::encode(net::HeartbeatMsg{77}));
+               bool echoed = false, loaded = false;
+               for (int i = 0; i < 4 && !loaded; ++i) {
+                 const auto r = x.recv();
+                 if (!r) break;
+                 if (auto* hm = std::get_if<net::HelloMsg>(&*r)) {
+                   echoed |= hm->echo == 77;
+                   loaded |= std::any_of(hm->held.begin(), hm->held.end(),
+                                         [&](const net::Held& h) { return h.hash == s.hash; });
+                 }
+               }
+               // What a held set costs: the worker's growth per byte of the encoding (the upload buffer
+               // is freed before the build; what malloc keeps of it counts too).
+               std::this_thread::sleep_for(200ms);
+               set_factor = (rss_mb() - before) / (double(s.bytes.size()) / double(1 << 20));
+               set_mb = double(s.bytes.size()) / double(1 << 20);
+               return echoed && loaded ? Outcome::answered : Outcome::stalled;
+             });
+    results.back().note += (results.back().note.empty() ? "" : "; ") + std::string("set of ") +
+                           std::to_string(set_mb).substr(0, 5) + " MiB encoded: worker grew " +
+                           std::to_string(set_factor).substr(0, 4) + "x that";
 
     if (!a->quick) {  // 12 s of waiting; the upload timeout has its own test (worker_service_test)
-      run_case("abandoned_load", "first 1 MiB chunk of a 1 GiB set, then silence; continued after the upload timeout "
-                                 "(item 4)", [&] {
-        zmq::context_t c(1);
-        Attacker x(c, ep, "abandoner");
-        std::vector<std::uint8_t> chunk(1u << 20, 0x5a);
-        x.send(net::encode(net::LoadBlocksMsg{42, 1ull << 30, 0, chunk}));
-        std::this_thread::sleep_for(12s);  // the worker's upload_timeout is 10 s
-        x.send(net::encode(net::LoadBlocksMsg{42, 1ull << 30, 1u << 20, chunk}));
-        const auto r = x.recv();
-        return is_error(r) ? Outcome::refused : Outcome::stalled;
-      });
+      run_case("abandoned_load",
+               "first 1 MiB chunk of a 1 GiB set, then silence; continued after the upload timeout "
+               "(item 4)",
+               [&] {
+                 zmq::context_t c(1);
+                 Attacker x(c, ep, "abandoner");
+                 std::vector<std::uint8_t> chunk(1u << 20, 0x5a);
+                 x.send(net::encode(net::LoadBlocksMsg{42, 1ull << 30, 0, chunk}));
+                 std::this_thread::sleep_for(12s);  // the worker's upload_timeout is 10 s
+                 x.send(net::encode(net::LoadBlocksMsg{42, 1ull << 30, 1u << 20, chunk}));
+                 const auto r = x.recv();
+                 return is_error(r) ? Outcome::refused : Outcome::stalled;
+               });
     }
 
     const int conns = 20, per_conn = a->quick ? 8 : 32;
-    run_case("connection_flood", std::to_string(conns) + " connections x " + std::to_string(per_conn) +
-                                     " chunks of 1 MiB claiming 1 GiB sets (item 4)", [&] {
-      zmq::context_t c(1);
-      std::vector<std::unique_ptr<Attacker>> xs;
-      for (int i = 0; i < conns; ++i) xs.push_back(std::make_unique<Attacker>(c, ep, "flood-" + std::to_string(i)));
-      std::vector<std::uint8_t> chunk(1u << 20, 0x33);
-      for (int k = 0; k < per_conn; ++k)
-        for (int i = 0; i < conns; ++i)
-          xs[std::size_t(i)]->send(net::encode(net::LoadBlocksMsg{100u + unsigned(i), 1ull << 30, std::uint64_t(k) << 20, chunk}));
-      int refused = 0;
-      for (auto& x : xs) {
-        x->d.set(zmq::sockopt::rcvtimeo, 3000);
-        refused += is_error(x->recv());
-      }
-      return refused > 0 ? Outcome::refused : Outcome::answered;
-    });
+    run_case("connection_flood",
+             std::to_string(conns) + " connections x " + std::to_string(per_conn) +
+                 " chunks of 1 MiB claiming 1 GiB sets (item 4)",
+             [&] {
+               zmq::context_t c(1);
+               std::vector<std::unique_ptr<Attacker>> xs;
+               for (int i = 0; i < conns; ++i)
+                 xs.push_back(std::make_unique<Attacker>(c, ep, "flood-" + std::to_string(i)));
+               std::vector<std::uint8_t> chunk(1u << 20, 0x33);
+               for (int k = 0; k < per_conn; ++k)
+                 for (int i = 0; i < conns; ++i)
+                   xs[std::size_t(i)]->send(
+                       net::encode(net::LoadBlocksMsg{100u + unsigned(i), 1ull << 30, std::uint64_t(k) << 20, chunk}));
+               int refused = 0;
+               for (auto& x : xs) {
+                 x->d.set(zmq::sockopt::rcvtimeo, 3000);
+                 refused += is_error(x->recv());
+               }
+               return refused > 0 ? Outcome::refused : Outcome::answered;
+             });
 
-    run_case("foreign_set", "another client queries the honest client's set and sends chunks of it out of order "
-                            "(item 5)", [&] {
-      zmq::context_t c(1);
-      Attacker x(c, ep, "snooper");
-      // The key the honest client uses is public in any capture (and here recomputed from the
-      // same scene); knowing it is not enough.
-      const Set s = encode_set(probe, object, 32);
-      x.send(net::encode(net::QueryMsg{5, s.hash, touch}));
-      const auto r = x.recv();     // NotLoaded ...
-      const auto list = x.recv();  // ... and the Hello after it: the sets this client may see
-      const bool hidden = is_hello(list) && std::get<net::HelloMsg>(*list).held.empty();
-      x.send(net::encode(net::LoadBlocksMsg{s.hash, s.bytes.size(), 4096, {1, 2, 3}}));
-      const auto r2 = x.recv();    // out of order: its own (absent) upload only
-      return is_error(r) && hidden && is_error(r2) ? Outcome::refused : Outcome::answered;
-    });
+    run_case("foreign_set",
+             "another client queries the honest client's set and sends chunks of it out of order "
+             "(item 5)",
+             [&] {
+               zmq::context_t c(1);
+               Attacker x(c, ep, "snooper");
+               // The key the honest client uses is public in any capture (and here recomputed from the
+               // same scene); knowing it is not enough.
+               const Set s = encode_set(probe, object, 32);
+               x.send(net::encode(net::QueryMsg{5, s.hash, touch}));
+               const auto r = x.recv();     // NotLoaded ...
+               const auto list = x.recv();  // ... and the Hello after it: the sets this client may see
+               const bool hidden = is_hello(list) && std::get<net::HelloMsg>(*list).held.empty();
+               x.send(net::encode(net::LoadBlocksMsg{s.hash, s.bytes.size(), 4096, {1, 2, 3}}));
+               const auto r2 = x.recv();  // out of order: its own (absent) upload only
+               return is_error(r) && hidden && is_error(r2) ? Outcome::refused : Outcome::answered;
+             });
 
     run_case("garbage_flood", "20,000 random frames of 1-300 bytes", [&] {
       zmq::context_t c(1);
@@ -342,17 +365,18 @@ void add_hostile(CLI::App& app) {
     });
 
     bool all_ok = true;
-    for (const CaseResult& c : results)
-      all_ok &= (c.outcome == Outcome::refused || c.outcome == Outcome::answered);
+    for (const CaseResult& c : results) all_ok &= (c.outcome == Outcome::refused || c.outcome == Outcome::answered);
     if (a->json) {
-      std::printf("{\"worker\": \"%s\", \"quiet_ms_p50\": %.4f, \"quiet_ms_p99\": %.4f, \"quiet_rss_mb\": %.1f, \"cases\": [",
-                  ep.c_str(), quiet_p50, quiet_p99, rss_quiet);
+      std::printf(
+          "{\"worker\": \"%s\", \"quiet_ms_p50\": %.4f, \"quiet_ms_p99\": %.4f, \"quiet_rss_mb\": %.1f, \"cases\": [",
+          ep.c_str(), quiet_p50, quiet_p99, rss_quiet);
       for (std::size_t i = 0; i < results.size(); ++i) {
         const CaseResult& c = results[i];
-        std::printf("%s\n  {\"case\": \"%s\", \"outcome\": \"%s\", \"worker_rss_mb\": %.1f, \"answer_ms\": %.4f, "
-                    "\"answer_ms_p99\": %.4f, \"vs_quiet_p50\": %.2f, \"honest_rounds\": %u, \"honest_incomplete\": %u}",
-                    i ? "," : "", c.name.c_str(), outcome_name(c.outcome), c.worker_rss_mb, c.answer_ms_p50, c.answer_ms_p99,
-                    c.answer_ms_p50 / quiet_p50, c.honest_rounds, c.honest_incomplete);
+        std::printf(
+            "%s\n  {\"case\": \"%s\", \"outcome\": \"%s\", \"worker_rss_mb\": %.1f, \"answer_ms\": %.4f, "
+            "\"answer_ms_p99\": %.4f, \"vs_quiet_p50\": %.2f, \"honest_rounds\": %u, \"honest_incomplete\": %u}",
+            i ? "," : "", c.name.c_str(), outcome_name(c.outcome), c.worker_rss_mb, c.answer_ms_p50, c.answer_ms_p99,
+            c.answer_ms_p50 / quiet_p50, c.honest_rounds, c.honest_incomplete);
       }
       std::printf("\n], \"set_memory_factor\": %.2f, \"all_refused_or_answered\": %s}\n", set_factor,
                   all_ok ? "true" : "false");
@@ -365,7 +389,8 @@ void add_hostile(CLI::App& app) {
         std::printf("%-18s %-9s %10.1f %10.3f %10.3f %8.2f %7u  %s%s%s\n", c.name.c_str(), outcome_name(c.outcome),
                     c.worker_rss_mb, c.answer_ms_p50, c.answer_ms_p99, c.answer_ms_p50 / quiet_p50, c.honest_rounds,
                     c.what.c_str(), c.note.empty() ? "" : "; ", c.note.c_str());
-      std::printf("\nanswer_ms: the honest client's round time during the attack (p50; x_quiet = against its quiet p50)\n");
+      std::printf(
+          "\nanswer_ms: the honest client's round time during the attack (p50; x_quiet = against its quiet p50)\n");
     }
     if (!all_ok) throw CLI::RuntimeError(1);
   });

@@ -12,7 +12,11 @@
 namespace st::bench {
 
 void add_load(CLI::App& app) {
-  struct Args { std::vector<std::string> paths; int runs = 5; bool json = false; };
+  struct Args {
+    std::vector<std::string> paths;
+    int runs = 5;
+    bool json = false;
+  };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("load", "Median wall time to load each mesh (read, parse, validate, recentre)");
   cmd->add_option("meshes", a->paths, "mesh files")->required()->check(CLI::ExistingFile);
@@ -27,7 +31,10 @@ void add_load(CLI::App& app) {
         const auto t0 = std::chrono::steady_clock::now();
         Result<geom::LoadedMesh> m = geom::load_mesh(a->paths[i]);
         s.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-        if (!m) { std::fprintf(stderr, "%s\n", m.error().c_str()); throw CLI::RuntimeError(2); }
+        if (!m) {
+          std::fprintf(stderr, "%s\n", m.error().c_str());
+          throw CLI::RuntimeError(2);
+        }
         faces = m.value().mesh.num_faces();
       }
       std::sort(s.begin(), s.end());
@@ -36,7 +43,8 @@ void add_load(CLI::App& app) {
         std::printf("%s{\"mesh\": \"%s\", \"faces\": %zu, \"median_s\": %.4f, \"min_s\": %.4f}", i ? ", " : "",
                     a->paths[i].c_str(), faces, med, s.front());
       else
-        std::printf("%-50s %9zu faces  median %.3f s  min %.3f s  (%d runs)\n", a->paths[i].c_str(), faces, med, s.front(), a->runs);
+        std::printf("%-50s %9zu faces  median %.3f s  min %.3f s  (%d runs)\n", a->paths[i].c_str(), faces, med,
+                    s.front(), a->runs);
     }
     if (a->json) std::printf("]}\n");
   });

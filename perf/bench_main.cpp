@@ -2,8 +2,9 @@
 #include "bench.hpp"
 
 int main(int argc, char** argv) {
-  CLI::App app{"spheretouch-bench: benchmarks behind perf/RESULTS.md (ratios against baselines "
-               "measured in the same run)"};
+  CLI::App app{
+      "spheretouch-bench: benchmarks behind perf/RESULTS.md (ratios against baselines "
+      "measured in the same run)"};
   app.require_subcommand(1);
   st::bench::add_load(app);
   st::bench::add_tree(app);
@@ -16,8 +17,6 @@ int main(int argc, char** argv) {
   st::bench::add_hostile(app);
   try {
     app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e);
-  }
+  } catch (const CLI::ParseError& e) { return app.exit(e); }
   return 0;
 }

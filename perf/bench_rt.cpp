@@ -49,8 +49,7 @@ void pin(int cpu) {
 // Sleeps until an absolute CLOCK_MONOTONIC time.
 void sleep_until(std::int64_t t) {
   const timespec ts = rt::to_timespec(t);
-  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-  }
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {}
 }
 
 // ---------------------------------------------------------------------------- exchange
@@ -111,8 +110,8 @@ void add_exchange_impl(CLI::App& app) {
     int reader_cpu = -1, writer_cpu = -1;
   };
   auto a = std::make_shared<Args>();
-  CLI::App* cmd = app.add_subcommand("exchange",
-      "Take-newest latency: TripleBuffer vs std::mutex copy (reader 1 kHz, writer flat out, same run)");
+  CLI::App* cmd = app.add_subcommand(
+      "exchange", "Take-newest latency: TripleBuffer vs std::mutex copy (reader 1 kHz, writer flat out, same run)");
   cmd->add_option("--seconds", a->seconds, "measurement time per variant, s")->check(CLI::Range(1.0, 3600.0))->capture_default_str();
   cmd->add_option("--reader-cpu", a->reader_cpu, "pin the reader (-1: no)")->capture_default_str();
   cmd->add_option("--writer-cpu", a->writer_cpu, "pin the writer (-1: no)")->capture_default_str();
@@ -141,56 +140,60 @@ void add_exchange_impl(CLI::App& app) {
     for (int i = 0; i <= rounds; ++i) {
       const int ms = i < rounds ? 1000 : ms_last;
       if (ms == 0) continue;
-      exchange_round(ms, tri, [&](const geom::ContactModel& m) { tb->write(m); },
-                     [&](geom::ContactModel& o) { return tb->read(o); }, a->reader_cpu, a->writer_cpu);
+      exchange_round(
+          ms, tri, [&](const geom::ContactModel& m) { tb->write(m); },
+          [&](geom::ContactModel& o) { return tb->read(o); }, a->reader_cpu, a->writer_cpu);
       // update() alone: the index exchange without copying the 288 B payload out.
-      exchange_round(ms, upd, [&](const geom::ContactModel& m) { tb->write(m); },
-                     [&](geom::ContactModel&) { return tb->update(); }, a->reader_cpu, a->writer_cpu);
-      exchange_round(ms, line, [&](const geom::ContactModel& m) { word->v.store(m.seq, std::memory_order_release); },
-                     [&](geom::ContactModel& o) {
-                       const std::uint64_t v = word->v.load(std::memory_order_acquire);
-                       const bool fresh = v != o.seq;
-                       o.seq = v;
-                       return fresh;
-                     },
-                     a->reader_cpu, a->writer_cpu);
-      exchange_round(ms, mtx,
-                     [&](const geom::ContactModel& m) {
-                       std::lock_guard<std::mutex> g(box->m);
-                       box->v = m;
-                     },
-                     [&](geom::ContactModel& o) {
-                       std::lock_guard<std::mutex> g(box->m);
-                       const bool fresh = o.seq != box->v.seq;
-                       o = box->v;
-                       return fresh;
-                     },
-                     a->reader_cpu, a->writer_cpu);
+      exchange_round(
+          ms, upd, [&](const geom::ContactModel& m) { tb->write(m); },
+          [&](geom::ContactModel&) { return tb->update(); }, a->reader_cpu, a->writer_cpu);
+      exchange_round(
+          ms, line, [&](const geom::ContactModel& m) { word->v.store(m.seq, std::memory_order_release); },
+          [&](geom::ContactModel& o) {
+            const std::uint64_t v = word->v.load(std::memory_order_acquire);
+            const bool fresh = v != o.seq;
+            o.seq = v;
+            return fresh;
+          },
+          a->reader_cpu, a->writer_cpu);
+      exchange_round(
+          ms, mtx,
+          [&](const geom::ContactModel& m) {
+            std::lock_guard<std::mutex> g(box->m);
+            box->v = m;
+          },
+          [&](geom::ContactModel& o) {
+            std::lock_guard<std::mutex> g(box->m);
+            const bool fresh = o.seq != box->v.seq;
+            o = box->v;
+            return fresh;
+          },
+          a->reader_cpu, a->writer_cpu);
     }
     auto p = [](const LatencyHistogram& h, double q) { return static_cast<double>(h.percentile_ns(q)); };
     const double ratio50 = p(*mtx.read, 0.5) / std::max(1.0, p(*tri.read, 0.5));
     const double ratio99 = p(*mtx.read, 0.99) / std::max(1.0, p(*tri.read, 0.99));
     if (a->json) {
-      std::printf("{\"triple_ns_p50\": %.0f, \"triple_ns_p99\": %.0f, \"mutex_ns_p50\": %.0f, \"mutex_ns_p99\": %.0f, "
-                  "\"triple_ns_max\": %lld, \"mutex_ns_max\": %lld, "
-                  "\"ratio_p50\": %.2f, \"ratio_p99\": %.2f, \"reads\": %llu, "
-                  "\"triple_publish_ns_p50\": %.0f, \"triple_publish_ns_p99\": %.0f, "
-                  "\"mutex_publish_ns_p50\": %.0f, \"mutex_publish_ns_p99\": %.0f, "
-                  "\"triple_publishes\": %llu, \"mutex_publishes\": %llu, \"timer_ns_p50\": %.0f, "
-                  "\"triple_update_only_ns_p50\": %.0f, \"triple_update_only_ns_p99\": %.0f, "
-                  "\"line_floor_ns_p50\": %.0f, \"line_floor_ns_p99\": %.0f, \"payload_bytes\": %zu}\n",
-                  p(*tri.read, 0.5), p(*tri.read, 0.99), p(*mtx.read, 0.5), p(*mtx.read, 0.99),
-                  static_cast<long long>(tri.read->max_ns()), static_cast<long long>(mtx.read->max_ns()), ratio50,
-                  ratio99, static_cast<unsigned long long>(tri.read->count()), p(*tri.publish, 0.5),
-                  p(*tri.publish, 0.99), p(*mtx.publish, 0.5), p(*mtx.publish, 0.99),
-                  static_cast<unsigned long long>(tri.publishes), static_cast<unsigned long long>(mtx.publishes),
-                  p(timer, 0.5), p(*upd.read, 0.5), p(*upd.read, 0.99), p(*line.read, 0.5), p(*line.read, 0.99),
-                  sizeof(geom::ContactModel));
+      std::printf(
+          "{\"triple_ns_p50\": %.0f, \"triple_ns_p99\": %.0f, \"mutex_ns_p50\": %.0f, \"mutex_ns_p99\": %.0f, "
+          "\"triple_ns_max\": %lld, \"mutex_ns_max\": %lld, "
+          "\"ratio_p50\": %.2f, \"ratio_p99\": %.2f, \"reads\": %llu, "
+          "\"triple_publish_ns_p50\": %.0f, \"triple_publish_ns_p99\": %.0f, "
+          "\"mutex_publish_ns_p50\": %.0f, \"mutex_publish_ns_p99\": %.0f, "
+          "\"triple_publishes\": %llu, \"mutex_publishes\": %llu, \"timer_ns_p50\": %.0f, "
+          "\"triple_update_only_ns_p50\": %.0f, \"triple_update_only_ns_p99\": %.0f, "
+          "\"line_floor_ns_p50\": %.0f, \"line_floor_ns_p99\": %.0f, \"payload_bytes\": %zu}\n",
+          p(*tri.read, 0.5), p(*tri.read, 0.99), p(*mtx.read, 0.5), p(*mtx.read, 0.99),
+          static_cast<long long>(tri.read->max_ns()), static_cast<long long>(mtx.read->max_ns()), ratio50, ratio99,
+          static_cast<unsigned long long>(tri.read->count()), p(*tri.publish, 0.5), p(*tri.publish, 0.99),
+          p(*mtx.publish, 0.5), p(*mtx.publish, 0.99), static_cast<unsigned long long>(tri.publishes),
+          static_cast<unsigned long long>(mtx.publishes), p(timer, 0.5), p(*upd.read, 0.5), p(*upd.read, 0.99),
+          p(*line.read, 0.5), p(*line.read, 0.99), sizeof(geom::ContactModel));
     } else {
       std::printf("take-newest ContactModel (%zu B), reader at 1 kHz, writer flat out, %.0f s per variant\n",
                   sizeof(geom::ContactModel), a->seconds);
-      std::printf("%-14s %10s %10s %10s %10s %14s %14s\n", "variant", "read p50", "read p99", "read max",
-                  "reads", "publish p50", "publishes");
+      std::printf("%-14s %10s %10s %10s %10s %14s %14s\n", "variant", "read p50", "read p99", "read max", "reads",
+                  "publish p50", "publishes");
       std::printf("%-14s %8.0f ns %7.0f ns %7lld ns %10llu %11.0f ns %14llu\n", "TripleBuffer", p(*tri.read, 0.5),
                   p(*tri.read, 0.99), static_cast<long long>(tri.read->max_ns()),
                   static_cast<unsigned long long>(tri.read->count()), p(*tri.publish, 0.5),
@@ -199,8 +202,8 @@ void add_exchange_impl(CLI::App& app) {
                   p(*mtx.read, 0.99), static_cast<long long>(mtx.read->max_ns()),
                   static_cast<unsigned long long>(mtx.read->count()), p(*mtx.publish, 0.5),
                   static_cast<unsigned long long>(mtx.publishes));
-      std::printf("%-14s %8.0f ns %7.0f ns %7lld ns %10llu   (index exchange only, no payload copy)\n",
-                  "Triple update", p(*upd.read, 0.5), p(*upd.read, 0.99), static_cast<long long>(upd.read->max_ns()),
+      std::printf("%-14s %8.0f ns %7.0f ns %7lld ns %10llu   (index exchange only, no payload copy)\n", "Triple update",
+                  p(*upd.read, 0.5), p(*upd.read, 0.99), static_cast<long long>(upd.read->max_ns()),
                   static_cast<unsigned long long>(upd.read->count()));
       std::printf("%-14s %8.0f ns %7.0f ns %7lld ns %10llu   (floor: one word the writer stores flat out)\n",
                   "Cache line", p(*line.read, 0.5), p(*line.read, 0.99), static_cast<long long>(line.read->max_ns()),
@@ -281,10 +284,11 @@ void bare_round(std::int64_t periods, std::int64_t period_ns, LatencyStats& s) {
 
 void print_latency_json(const char* name, const LatencyStats& s) {
   auto us = [&](double q) { return static_cast<double>(s.wake->percentile_ns(q)) / 1000.0; };
-  std::printf("\"%s\": {\"p50_us\": %.1f, \"p99_us\": %.1f, \"p999_us\": %.1f, \"max_us\": %.1f, \"ticks\": %llu, "
-              "\"misses\": %llu}",
-              name, us(0.5), us(0.99), us(0.999), static_cast<double>(s.wake->max_ns()) / 1000.0,
-              static_cast<unsigned long long>(s.ticks), static_cast<unsigned long long>(s.misses));
+  std::printf(
+      "\"%s\": {\"p50_us\": %.1f, \"p99_us\": %.1f, \"p999_us\": %.1f, \"max_us\": %.1f, \"ticks\": %llu, "
+      "\"misses\": %llu}",
+      name, us(0.5), us(0.99), us(0.999), static_cast<double>(s.wake->max_ns()) / 1000.0,
+      static_cast<unsigned long long>(s.ticks), static_cast<unsigned long long>(s.misses));
 }
 
 void add_haptic_impl(CLI::App& app) {
@@ -296,11 +300,14 @@ void add_haptic_impl(CLI::App& app) {
     int fifo = 0, cpu = -1, load_cpu = -1;
   };
   auto a = std::make_shared<Args>();
-  CLI::App* cmd = app.add_subcommand("haptic",
+  CLI::App* cmd = app.add_subcommand(
+      "haptic",
       "Wake-up latency: HapticLoop with the full servo tick vs a bare clock_nanosleep loop, other core loaded");
   cmd->add_option("--seconds", a->seconds, "measurement time per variant, s")->check(CLI::Range(1.0, 36000.0))->capture_default_str();
   cmd->add_option("--rate", a->rate_hz, "loop rate, Hz")->check(CLI::Range(rt::kMinRateHz, rt::kMaxRateHz))->capture_default_str();
-  cmd->add_option("--round", a->round_s, "alternate the variants every this many seconds")->check(CLI::Range(1, 3600))->capture_default_str();
+  cmd->add_option("--round", a->round_s, "alternate the variants every this many seconds")
+      ->check(CLI::Range(1, 3600))
+      ->capture_default_str();
   cmd->add_option("--fifo", a->fifo, "SCHED_FIFO priority for both loops (0: off)")->check(CLI::Range(0, 99))->capture_default_str();
   cmd->add_option("--cpu", a->cpu, "pin both loops to this CPU (-1: no)")->capture_default_str();
   cmd->add_option("--load-cpu", a->load_cpu, "pin the load thread (-1: the CPU after --cpu, or unpinned)")->capture_default_str();
@@ -336,8 +343,7 @@ void add_haptic_impl(CLI::App& app) {
     std::thread drain([&] {
       std::vector<rt::TelemetrySample> buf(1024);
       while (!stop_aux.load(std::memory_order_relaxed)) {
-        while (telemetry.drain_to(buf.data(), buf.size()) > 0) {
-        }
+        while (telemetry.drain_to(buf.data(), buf.size()) > 0) {}
         std::this_thread::sleep_for(std::chrono::milliseconds(5));
       }
     });
@@ -393,14 +399,14 @@ void add_haptic_impl(CLI::App& app) {
       print_latency_json("bare", bare);
       std::printf(", ");
       print_latency_json("loop", loop);
-      std::printf(", \"tick_compute_p999_us\": %.2f, \"tick_compute_p50_us\": %.2f, \"tick_compute_max_us\": %.1f, "
-                  "\"p999_ratio\": %.3f, \"seconds\": %.1f, \"rate_hz\": %.1f, \"load\": %s, \"models\": %llu, "
-                  "\"telemetry_pushed\": %llu, \"telemetry_dropped\": %llu, \"rt\": \"%s\"}\n",
-                  compute_p999_us, static_cast<double>(compute->percentile_ns(0.5)) / 1000.0,
-                  static_cast<double>(compute->max_ns()) / 1000.0, ratio, a->seconds, a->rate_hz,
-                  a->no_load ? "false" : "true", static_cast<unsigned long long>(servo.stats().models),
-                  static_cast<unsigned long long>(ts.pushed), static_cast<unsigned long long>(ts.dropped),
-                  rt_report.c_str());
+      std::printf(
+          ", \"tick_compute_p999_us\": %.2f, \"tick_compute_p50_us\": %.2f, \"tick_compute_max_us\": %.1f, "
+          "\"p999_ratio\": %.3f, \"seconds\": %.1f, \"rate_hz\": %.1f, \"load\": %s, \"models\": %llu, "
+          "\"telemetry_pushed\": %llu, \"telemetry_dropped\": %llu, \"rt\": \"%s\"}\n",
+          compute_p999_us, static_cast<double>(compute->percentile_ns(0.5)) / 1000.0,
+          static_cast<double>(compute->max_ns()) / 1000.0, ratio, a->seconds, a->rate_hz, a->no_load ? "false" : "true",
+          static_cast<unsigned long long>(servo.stats().models), static_cast<unsigned long long>(ts.pushed),
+          static_cast<unsigned long long>(ts.dropped), rt_report.c_str());
     } else {
       std::printf("wake-up latency at %.0f Hz, %.0f s per variant, %s; real-time: %s\n", a->rate_hz, a->seconds,
                   a->no_load ? "no load" : "other core saturated", rt_report.c_str());

@@ -54,7 +54,8 @@ Stats summarise(std::vector<double> us) {
 
 std::string endpoint_for(const std::string& transport, int i, const std::string& tag = "bench") {
   if (transport == "inproc") return net::inproc_endpoint(i, tag);
-  if (transport == "ipc") return "ipc:///tmp/spheretouch-" + tag + "-" + std::to_string(::getpid()) + "-" + std::to_string(i) + ".sock";
+  if (transport == "ipc")
+    return "ipc:///tmp/spheretouch-" + tag + "-" + std::to_string(::getpid()) + "-" + std::to_string(i) + ".sock";
   return "tcp://127.0.0.1:*";
 }
 
@@ -149,18 +150,24 @@ void add_scatter(CLI::App& app) {
     int spin_us = 0;
     bool json = false;
     std::string csv;
-    std::string spawn;        // worker daemon binary: run workers as processes (tcp/ipc)
-    bool own_context = false; // threads, but each worker with its own ZeroMQ context (I/O thread)
+    std::string spawn;         // worker daemon binary: run workers as processes (tcp/ipc)
+    bool own_context = false;  // threads, but each worker with its own ZeroMQ context (I/O thread)
   };
   auto a = std::make_shared<Args>();
-  CLI::App* cmd = app.add_subcommand("scatter", "Round trip of an empty query through N workers (scatter-gather overhead), p50/p99");
+  CLI::App* cmd = app.add_subcommand(
+      "scatter", "Round trip of an empty query through N workers (scatter-gather overhead), p50/p99");
   cmd->add_option("--workers", a->workers, "workers (threads of this process)")->check(CLI::Range(1, 64))->capture_default_str();
-  cmd->add_option("--transport", a->transport, "inproc, ipc or tcp (loopback)")->check(CLI::IsMember({"inproc", "ipc", "tcp"}))->capture_default_str();
+  cmd->add_option("--transport", a->transport, "inproc, ipc or tcp (loopback)")
+      ->check(CLI::IsMember({"inproc", "ipc", "tcp"}))
+      ->capture_default_str();
   cmd->add_option("--rounds", a->rounds, "measured rounds")->check(CLI::Range(10, 10000000))->capture_default_str();
   cmd->add_option("--warmup", a->warmup, "unmeasured rounds first")->check(CLI::Range(0, 1000000))->capture_default_str();
-  cmd->add_option("--gap-us", a->gap_us, "idle time between rounds, us (the collision loop's own work)")->check(CLI::Range(0, 1000000))->capture_default_str();
+  cmd->add_option("--gap-us", a->gap_us, "idle time between rounds, us (the collision loop's own work)")
+      ->check(CLI::Range(0, 1000000))
+      ->capture_default_str();
   cmd->add_option("--deadline-ms", a->deadline_ms, "round deadline, ms")->check(CLI::Range(1, 10000))->capture_default_str();
-  cmd->add_option("--spin-us", a->spin_us, "client busy-polls this long before blocking (ScatterConfig::spin_us)")->capture_default_str();
+  cmd->add_option("--spin-us", a->spin_us, "client busy-polls this long before blocking (ScatterConfig::spin_us)")
+      ->capture_default_str();
   cmd->add_flag("--json", a->json, "print one JSON object");
   cmd->add_option("--spawn", a->spawn, "run the workers as processes of this spheretouch-worker binary (tcp/ipc)");
   cmd->add_flag("--own-context", a->own_context, "worker threads each get their own ZeroMQ context, as processes would");
@@ -177,13 +184,18 @@ void add_scatter(CLI::App& app) {
     std::vector<pid_t> procs;
     std::vector<std::string> endpoints;
     if (!a->spawn.empty()) {
-      if (a->transport == "inproc") { std::fprintf(stderr, "--spawn needs tcp or ipc\n"); throw CLI::RuntimeError(2); }
+      if (a->transport == "inproc") {
+        std::fprintf(stderr, "--spawn needs tcp or ipc\n");
+        throw CLI::RuntimeError(2);
+      }
       for (int i = 0; i < a->workers; ++i) {
-        std::string ep = a->transport == "ipc" ? endpoint_for("ipc", i) : "tcp://127.0.0.1:" + std::to_string(free_tcp_port());
+        std::string ep =
+            a->transport == "ipc" ? endpoint_for("ipc", i) : "tcp://127.0.0.1:" + std::to_string(free_tcp_port());
         const pid_t pid = ::fork();
         if (pid == 0) {
           const std::string id = std::to_string(i);
-          ::execl(a->spawn.c_str(), a->spawn.c_str(), "--bind", ep.c_str(), "--id", id.c_str(), "--log-level", "warning", (char*)nullptr);
+          ::execl(a->spawn.c_str(), a->spawn.c_str(), "--bind", ep.c_str(), "--id", id.c_str(), "--log-level",
+                  "warning", (char*)nullptr);
           ::_exit(127);
         }
         procs.push_back(pid);
@@ -192,23 +204,38 @@ void add_scatter(CLI::App& app) {
     } else {
       for (int i = 0; i < a->workers; ++i) {
         zmq::context_t* wc = &ctx;
-        if (a->own_context) { wctx.push_back(std::make_unique<zmq::context_t>(1)); wc = wctx.back().get(); }
+        if (a->own_context) {
+          wctx.push_back(std::make_unique<zmq::context_t>(1));
+          wc = wctx.back().get();
+        }
         const std::string ep = endpoint_for(a->own_context && a->transport == "inproc" ? "tcp" : a->transport, i);
         auto w = net::LocalWorkers::start(*wc, 1, net::reference_backend_factory(), [&](int) { return ep; });
-        if (!w) { std::fprintf(stderr, "%s\n", w.error().c_str()); throw CLI::RuntimeError(2); }
+        if (!w) {
+          std::fprintf(stderr, "%s\n", w.error().c_str());
+          throw CLI::RuntimeError(2);
+        }
         endpoints.push_back(w.value()->endpoints()[0]);
         local.push_back(std::move(w.value()));
       }
     }
     struct Reaper {
       std::vector<pid_t>& p;
-      ~Reaper() { for (pid_t x : p) { ::kill(x, SIGTERM); int st; ::waitpid(x, &st, 0); } }
+      ~Reaper() {
+        for (pid_t x : p) {
+          ::kill(x, SIGTERM);
+          int st;
+          ::waitpid(x, &st, 0);
+        }
+      }
     } reaper{procs};
     net::ScatterConfig cfg;
     cfg.endpoints = endpoints;
     cfg.spin_us = static_cast<std::uint32_t>(a->spin_us);
     auto c = net::ScatterGather::create(ctx, cfg, probe, object, blocks);
-    if (!c) { std::fprintf(stderr, "%s\n", c.error().c_str()); throw CLI::RuntimeError(2); }
+    if (!c) {
+      std::fprintf(stderr, "%s\n", c.error().c_str());
+      throw CLI::RuntimeError(2);
+    }
     if (!c.value()->wait_ready(Clock::now() + std::chrono::seconds(10))) {
       std::fprintf(stderr, "workers not ready after 10 s\n");
       throw CLI::RuntimeError(2);
@@ -255,8 +282,10 @@ void add_scatter(CLI::App& app) {
         const bool ok = one(measured);
         const auto t1 = Clock::now();
         if (measured && into) {
-          if (ok) into->push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
-          else ++lost;
+          if (ok)
+            into->push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+          else
+            ++lost;
         }
         if (gap.count()) std::this_thread::sleep_until(t1 + gap);
       }
@@ -276,27 +305,31 @@ void add_scatter(CLI::App& app) {
     const Stats f = summarise(flo);
 
     if (a->json)
-      std::printf("{\"bench\": \"scatter\", \"workers\": %d, \"transport\": \"%s\", \"gap_us\": %d, \"rounds\": %d, "
-                  "\"incomplete\": %d, \"p50_us\": %.1f, \"p99_us\": %.1f, \"max_us\": %.1f, \"mean_us\": %.1f, "
-                  "\"baseline_p50_us\": %.1f, \"baseline_p99_us\": %.1f, \"floor_p50_us\": %.1f, \"floor_p99_us\": %.1f, "
-                  "\"lost\": %d}\n",
-                  a->workers, a->transport.c_str(), a->gap_us, a->rounds, incomplete, s.p50, s.p99, s.max, s.mean, b.p50, b.p99,
-                  f.p50, f.p99, lost);
+      std::printf(
+          "{\"bench\": \"scatter\", \"workers\": %d, \"transport\": \"%s\", \"gap_us\": %d, \"rounds\": %d, "
+          "\"incomplete\": %d, \"p50_us\": %.1f, \"p99_us\": %.1f, \"max_us\": %.1f, \"mean_us\": %.1f, "
+          "\"baseline_p50_us\": %.1f, \"baseline_p99_us\": %.1f, \"floor_p50_us\": %.1f, \"floor_p99_us\": %.1f, "
+          "\"lost\": %d}\n",
+          a->workers, a->transport.c_str(), a->gap_us, a->rounds, incomplete, s.p50, s.p99, s.max, s.mean, b.p50, b.p99,
+          f.p50, f.p99, lost);
     else
-      std::printf("scatter  %d workers  %-6s gap %5d us  %d rounds (%d incomplete)  p50 %7.1f us  p99 %7.1f us  max %8.1f us"
-                  "\n  baseline 1 req-rep: p50 %6.1f us  p99 %6.1f us\n  floor, raw %d-way fan-out: p50 %6.1f us  p99 %6.1f us"
-                  "  (ours / floor: p50 x%.2f, p99 x%.2f)%s\n",
-                  a->workers, a->transport.c_str(), a->gap_us, a->rounds, incomplete, s.p50, s.p99, s.max, b.p50, b.p99,
-                  a->workers, f.p50, f.p99, f.p50 > 0 ? s.p50 / f.p50 : 0.0, f.p99 > 0 ? s.p99 / f.p99 : 0.0,
-                  lost ? "  (some baseline/floor rounds lost: see --json)" : "");
+      std::printf(
+          "scatter  %d workers  %-6s gap %5d us  %d rounds (%d incomplete)  p50 %7.1f us  p99 %7.1f us  max %8.1f us"
+          "\n  baseline 1 req-rep: p50 %6.1f us  p99 %6.1f us\n  floor, raw %d-way fan-out: p50 %6.1f us  p99 %6.1f us"
+          "  (ours / floor: p50 x%.2f, p99 x%.2f)%s\n",
+          a->workers, a->transport.c_str(), a->gap_us, a->rounds, incomplete, s.p50, s.p99, s.max, b.p50, b.p99,
+          a->workers, f.p50, f.p99, f.p50 > 0 ? s.p50 / f.p50 : 0.0, f.p99 > 0 ? s.p99 / f.p99 : 0.0,
+          lost ? "  (some baseline/floor rounds lost: see --json)" : "");
     if (!a->csv.empty()) {
       const bool fresh = !std::ifstream(a->csv).good();
       std::ofstream o(a->csv, std::ios::app);
-      if (fresh) o << "bench,workers,transport,gap_us,rounds,incomplete,p50_us,p99_us,max_us,mean_us,baseline_p50_us,baseline_p99_us,"
-                    "floor_p50_us,floor_p99_us\n";
-      o << "scatter," << a->workers << ',' << a->transport << ',' << a->gap_us << ',' << a->rounds << ',' << incomplete << ','
-        << s.p50 << ',' << s.p99 << ',' << s.max << ',' << s.mean << ',' << b.p50 << ',' << b.p99 << ',' << f.p50 << ','
-        << f.p99 << '\n';
+      if (fresh)
+        o << "bench,workers,transport,gap_us,rounds,incomplete,p50_us,p99_us,max_us,mean_us,baseline_p50_us,baseline_"
+             "p99_us,"
+             "floor_p50_us,floor_p99_us\n";
+      o << "scatter," << a->workers << ',' << a->transport << ',' << a->gap_us << ',' << a->rounds << ',' << incomplete
+        << ',' << s.p50 << ',' << s.p99 << ',' << s.max << ',' << s.mean << ',' << b.p50 << ',' << b.p99 << ',' << f.p50
+        << ',' << f.p99 << '\n';
     }
   });
 }

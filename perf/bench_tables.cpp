@@ -89,14 +89,17 @@ std::vector<TaggedPose> read_tagged_poses(const std::string& path) {
     TaggedPose p;
     p.pose = l.pose;
     unsigned c = 0, t = 0;  // "# contacts N (target T)", written by `collide --find-poses`
-    if (std::sscanf(l.comment.c_str(), " contacts %u (target %u)", &c, &t) == 2) { p.contacts = c; p.target = t; }
+    if (std::sscanf(l.comment.c_str(), " contacts %u (target %u)", &c, &t) == 2) {
+      p.contacts = c;
+      p.target = t;
+    }
     out.push_back(p);
   }
   return out;
 }
 
-rt::Trajectory press_slide_script(const geom::Mesh& probe, const geom::Mesh& object, double duration_s,
-                                  double press_mm, double slide_mm) {
+rt::Trajectory press_slide_script(const geom::Mesh& probe, const geom::Mesh& object, double duration_s, double press_mm,
+                                  double slide_mm) {
   app::Scene s = app::DefaultScene();  // fingertip along -z onto the object's top, identity orientation
   s.device.press_mm = press_mm;
   s.device.slide_mm = slide_mm;
@@ -105,7 +108,6 @@ rt::Trajectory press_slide_script(const geom::Mesh& probe, const geom::Mesh& obj
   for (rt::TimedPose& k : t.keys) k.t_s *= scale;
   return t;
 }
-
 
 Daemons::Daemons(const std::string& binary, int n) {
   if (::access(binary.c_str(), X_OK) != 0) die(binary + ": not an executable (--worker-bin)");
@@ -200,7 +202,8 @@ void add_rounds(CLI::App& app, const char* name, const char* what) {
     const Body object = load_body(a->object, a->leaf);
     const std::vector<TaggedPose> poses = read_tagged_poses(a->poses);
     const std::string header =
-        "table,probe,object,object_faces,target,contacts,workers,transport,rounds,median_ms,p95_ms,mean_ms,rounds_per_s,incomplete";
+        "table,probe,object,object_faces,target,contacts,workers,transport,rounds,median_ms,p95_ms,mean_ms,rounds_per_"
+        "s,incomplete";
     std::printf("%s: %s (%zu faces) x %s (%zu faces), %zu poses, %d rounds each\n", table.c_str(), probe.label.c_str(),
                 probe.mesh.num_faces(), object.label.c_str(), object.mesh.num_faces(), poses.size(), a->rounds);
     std::printf("%7s %8s %8s %10s %10s %10s %10s %6s\n", "workers", "target", "contacts", "median_ms", "p95_ms",
@@ -291,8 +294,7 @@ struct RateResult {
 
 void sleep_until_ns(std::int64_t t) {
   const timespec ts = rt::to_timespec(t);
-  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-  }
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {}
 }
 
 // Table 2 reproduces the paper's system: its contact model (§3.6).
@@ -444,16 +446,20 @@ void add_table2(CLI::App& app) {
   cmd->add_option("--probe", a->probe, "probe mesh (the hand)")->required();
   cmd->add_option("objects", a->objects, "object meshes, or icosphere[:R[:FREQ]]")->required();
   cmd->add_option("--seconds", a->seconds, "run length per variant (the press/slide script is time-scaled to it)")
-      ->check(CLI::Range(0.2, 600.0))->capture_default_str();
+      ->check(CLI::Range(0.2, 600.0))
+      ->capture_default_str();
   cmd->add_option("--press-mm", a->press_mm, "press depth below the object's top, mm (built-in script: 3)")
-      ->check(CLI::Range(0.0, 100.0))->capture_default_str();
-  cmd->add_option("--workers", a->workers, "spheretouch variant: in-process workers (0 = collide in the collision thread)")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
+  cmd->add_option("--workers", a->workers,
+                  "spheretouch variant: in-process workers (0 = collide in the collision thread)")
       ->capture_default_str();
   cmd->add_option("--csv", a->csv, "append rows to this CSV");
   cmd->callback([a] {
     const Body probe = load_body(a->probe);
     const std::string header =
-        "table,probe,object,object_faces,press_mm,variant,workers,seconds,haptic_hz,collision_hz,round_p50_ms,ticks,misses,rounds,"
+        "table,probe,object,object_faces,press_mm,variant,workers,seconds,haptic_hz,collision_hz,round_p50_ms,ticks,"
+        "misses,rounds,"
         "max_contacts,peak_force_N";
     std::printf("%-14s %9s %-12s %10s %12s %12s %9s %9s\n", "object", "faces", "variant", "haptic_Hz", "collision_Hz",
                 "round_p50_ms", "contacts", "peak_N");
@@ -470,10 +476,10 @@ void add_table2(CLI::App& app) {
         std::fflush(stdout);
         append_csv(a->csv, header,
                    fmt("table2,%s,%s,%zu,%.1f,%s,%d,%.2f,%.2f,%.2f,%.4f,%llu,%llu,%llu,%u,%.4f", probe.label.c_str(),
-                       object.label.c_str(), object.mesh.num_faces(), a->press_mm, variant, single ? 0 : a->workers, a->seconds,
-                       r.haptic_hz, r.collision_hz, r.round_p50_ms, static_cast<unsigned long long>(r.ticks),
-                       static_cast<unsigned long long>(r.misses), static_cast<unsigned long long>(r.rounds),
-                       r.max_contacts, r.peak_force_N));
+                       object.label.c_str(), object.mesh.num_faces(), a->press_mm, variant, single ? 0 : a->workers,
+                       a->seconds, r.haptic_hz, r.collision_hz, r.round_p50_ms,
+                       static_cast<unsigned long long>(r.ticks), static_cast<unsigned long long>(r.misses),
+                       static_cast<unsigned long long>(r.rounds), r.max_contacts, r.peak_force_N));
       }
     }
   });
@@ -488,7 +494,8 @@ void add_peers(CLI::App& app) {
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
-      "peers", "Our exact collide() vs FCL 0.7 OBBRSS all-contacts on the same poses: time ratio and pair-set agreement");
+      "peers",
+      "Our exact collide() vs FCL 0.7 OBBRSS all-contacts on the same poses: time ratio and pair-set agreement");
   cmd->add_option("--probe", a->probe, "probe mesh")->required();
   cmd->add_option("--object", a->object, "object mesh")->required();
   cmd->add_option("--poses", a->poses, "pose file")->required()->check(CLI::ExistingFile);
@@ -532,8 +539,8 @@ void add_peers(CLI::App& app) {
       const std::size_t uni = op.size() + fp.size() - common.size();
       const double jaccard = uni ? double(common.size()) / double(uni) : 1.0;
       const double om = quantile(ours, 0.5), fm = quantile(theirs, 0.5);
-      std::printf("%8u %8u %10.3f %10.3f %8.2f %9zu %9zu %9.4f %s\n", tp.target, r.contacts(), om, fm, om / fm, op.size(),
-                  fp.size(), jaccard, op == fp ? "yes" : "no");
+      std::printf("%8u %8u %10.3f %10.3f %8.2f %9zu %9zu %9.4f %s\n", tp.target, r.contacts(), om, fm, om / fm,
+                  op.size(), fp.size(), jaccard, op == fp ? "yes" : "no");
       append_csv(a->csv, header,
                  fmt("peers,%s,%s,%u,%u,%.4f,%.4f,%.3f,%zu,%zu,%zu,%.5f,%d", probe.label.c_str(), object.label.c_str(),
                      tp.target, r.contacts(), om, fm, om / fm, op.size(), fp.size(), common.size(), jaccard, op == fp));
@@ -566,7 +573,8 @@ void add_tables(CLI::App& app) {
   add_rounds(app, "table1",
              "Collision round time (median, p95) vs contacts vs workers (0 = in this thread, N = daemons over tcp), "
              "paper Table 1");
-  add_rounds(app, "table3", "Collision rounds per second vs workers at given poses (paper Table 3); same measurement as table1");
+  add_rounds(app, "table3",
+             "Collision rounds per second vs workers at given poses (paper Table 3); same measurement as table1");
   add_table2(app);
   add_peers(app);
   add_icosphere(app);

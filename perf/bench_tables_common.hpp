@@ -17,9 +17,9 @@ namespace st::bench {
 
 /// A body with its sphere tree.
 struct Body {
-  std::string label;     ///< file stem or "icosphere"
-  geom::Mesh mesh;       ///< the mesh
-  geom::SphereTree tree; ///< its layered spheres
+  std::string label;      ///< file stem or "icosphere"
+  geom::Mesh mesh;        ///< the mesh
+  geom::SphereTree tree;  ///< its layered spheres
 };
 
 /// Loads a mesh file, or generates "icosphere[:RADIUS_MM[:FREQUENCY]]" (default 50 mm, 7 → 980

@@ -80,8 +80,9 @@ struct Trace {
 
 /// Forces of one configuration over the script (see the file comment). k = ticks per round;
 /// `exact_every_tick` = the reference (model built and used at the same tick).
-Trace simulate(const geom::ContactConfig& contact, const Body& probe, const LevelRun& lv, const std::vector<geom::Pose>& poses, int k, rt::InterpMode mode,
-               bool exact_every_tick, const LevelRun* finest) {
+Trace simulate(const geom::ContactConfig& contact, const Body& probe, const LevelRun& lv,
+               const std::vector<geom::Pose>& poses, int k, rt::InterpMode mode, bool exact_every_tick,
+               const LevelRun* finest) {
   rt::InterpolatorConfig ic = rt::DefaultInterpolatorConfig();
   ic.mode = mode;
   rt::Interpolator interp(rt::ForceLaw{}, ic);
@@ -138,23 +139,28 @@ void add_trade(CLI::App& app) {
     int samples = 200;
   };
   auto a = std::make_shared<Args>();
-  CLI::App* cmd = app.add_subcommand(
-      "trade", "Speed/accuracy trade: leaf size, mesh level, collision rate cap, interpolation vs an exact "
-               "every-tick reference (offline, simulated time)");
+  CLI::App* cmd =
+      app.add_subcommand("trade",
+                         "Speed/accuracy trade: leaf size, mesh level, collision rate cap, interpolation vs an exact "
+                         "every-tick reference (offline, simulated time)");
   cmd->add_option("--probe", a->probe, "probe mesh (the hand)")->required();
   cmd->add_option("--contact", a->contact, "contact model of the reference and the configurations: patch or paper")
       ->check(CLI::IsMember({"patch", "paper"}))
       ->capture_default_str();
-  cmd->add_option("--levels", a->levels, "object meshes coarse to fine, one Loop level apart, comma-separated; the "
-                                         "last is the reference")->required();
+  cmd->add_option("--levels", a->levels,
+                  "object meshes coarse to fine, one Loop level apart, comma-separated; the "
+                  "last is the reference")
+      ->required();
   cmd->add_option("--seconds", a->seconds, "script length (the press/slide script time-scaled), s")
-      ->check(CLI::Range(0.2, 120.0))->capture_default_str();
+      ->check(CLI::Range(0.2, 120.0))
+      ->capture_default_str();
   cmd->add_option("--leafs", a->leafs, "leaf sizes to time on the finest level")->capture_default_str();
   cmd->add_option("--rates", a->rates, "collision rate caps, Hz (1000 = every tick)")->capture_default_str();
   cmd->add_option("--interps", a->interps, "interpolation methods")->capture_default_str();
   cmd->add_option("--samples", a->samples, "in-contact poses timed per latency figure")->capture_default_str();
   cmd->add_option("--csv", a->csv, "append one row per configuration");
-  cmd->add_option("--trace-csv", a->trace_csv, "write per-tick force magnitudes of the reference and a few configurations");
+  cmd->add_option("--trace-csv", a->trace_csv,
+                  "write per-tick force magnitudes of the reference and a few configurations");
   cmd->callback([a] {
     geom::ContactConfig contact = geom::DefaultContactConfig();
     contact.model = geom::parse_contact_model(a->contact).value();
@@ -208,8 +214,8 @@ void add_trade(CLI::App& app) {
     const std::size_t n = std::min<std::size_t>(std::size_t(std::max(1, a->samples)), in_contact.size());
     for (std::size_t j = 0; j < n; ++j) sample.push_back(in_contact[j * in_contact.size() / n]);
     for (LevelRun& L : lv) L.latency_us = time_collide(probe, L.body, poses, sample, nullptr);
-    std::fprintf(stderr, "trade: %zu ticks (%zu in contact) on %zu levels in %.1f s\n", ticks, in_contact.size(), lv.size(),
-                 std::chrono::duration<double>(std::chrono::steady_clock::now() - w0).count());
+    std::fprintf(stderr, "trade: %zu ticks (%zu in contact) on %zu levels in %.1f s\n", ticks, in_contact.size(),
+                 lv.size(), std::chrono::duration<double>(std::chrono::steady_clock::now() - w0).count());
 
     const Trace ref = simulate(contact, probe, fine, poses, 1, rt::InterpMode::hold, true, &fine);
     double ref_rms = 0;
@@ -258,8 +264,22 @@ void add_trade(CLI::App& app) {
     auto run_config = [&](const std::string& knob, std::size_t l, int rate, rt::InterpMode mode) {
       const int k = std::max(1, int(std::lround(1000.0 / rate)));
       const Trace t = simulate(contact, probe, lv[l], poses, k, mode, false, &fine);
-      Row r{knob, "", stem(paths[l]), rt::to_string(mode), lv[l].body.mesh.num_faces(), default_leaf, 1000.0 / k, k,
-            lv[l].latency_us, lv[l].latency_us / k, double(lv[l].memory) / 1048576.0, 0, 0, 0, t.recall, true};
+      Row r{knob,
+            "",
+            stem(paths[l]),
+            rt::to_string(mode),
+            lv[l].body.mesh.num_faces(),
+            default_leaf,
+            1000.0 / k,
+            k,
+            lv[l].latency_us,
+            lv[l].latency_us / k,
+            double(lv[l].memory) / 1048576.0,
+            0,
+            0,
+            0,
+            t.recall,
+            true};
       err(t, r.rms, r.max, r.mag_rms);
       char name[160];
       std::snprintf(name, sizeof name, "%s leaf%u %.0fHz %s", r.level.c_str(), r.leaf, r.rate, r.interp.c_str());
@@ -294,8 +314,8 @@ void add_trade(CLI::App& app) {
       r.config = name;
       rows.push_back(r);
     }
-    std::printf("reference: %s exact every tick, hold, no delay; %zu ticks, RMS |F| %.3f N\n", stem(paths.back()).c_str(),
-                ticks, ref_rms);
+    std::printf("reference: %s exact every tick, hold, no delay; %zu ticks, RMS |F| %.3f N\n",
+                stem(paths.back()).c_str(), ticks, ref_rms);
     std::printf("%-12s %-34s %9s %10s %8s %10s %10s %10s %8s %5s\n", "knob", "config", "query_us", "us/tick", "mem_MB",
                 "rms_err_N", "max_err_N", "|F|rms_err", "recall", "exact");
     for (const Row& r : rows) {

@@ -87,11 +87,13 @@ std::vector<FacePair> pairs_from(const py::array_t<std::int64_t, py::array::c_st
 std::shared_ptr<Mesh> mesh_from_arrays(const Array3d& vertices,
                                        const py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>& faces,
                                        const std::string& name) {
-  if (vertices.ndim() != 2 || vertices.shape(1) != 3) throw py::value_error(name + ": vertices: expected an (n, 3) array");
+  if (vertices.ndim() != 2 || vertices.shape(1) != 3)
+    throw py::value_error(name + ": vertices: expected an (n, 3) array");
   if (faces.ndim() != 2 || faces.shape(1) != 3) throw py::value_error(name + ": faces: expected an (m, 3) array");
   std::vector<Vec3> pos(static_cast<std::size_t>(vertices.shape(0)));
   auto v = vertices.unchecked<2>();
-  for (py::ssize_t i = 0; i < vertices.shape(0); ++i) pos[static_cast<std::size_t>(i)] = Vec3(v(i, 0), v(i, 1), v(i, 2));
+  for (py::ssize_t i = 0; i < vertices.shape(0); ++i)
+    pos[static_cast<std::size_t>(i)] = Vec3(v(i, 0), v(i, 1), v(i, 2));
   std::vector<geom::Tri> tris(static_cast<std::size_t>(faces.shape(0)));
   auto f = faces.unchecked<2>();
   for (py::ssize_t i = 0; i < faces.shape(0); ++i)
@@ -148,12 +150,14 @@ py::dict stats_dict(const CollideStats& s) {
 }  // namespace
 
 PYBIND11_MODULE(spheretouch, m) {
-  m.doc() = "spheretouch: exact face-level collision of large meshes (layered boundary spheres), contact models "
-            "and force law. Poses are 4x4 rigid transforms in mm (probe frame -> object frame).";
+  m.doc() =
+      "spheretouch: exact face-level collision of large meshes (layered boundary spheres), contact models "
+      "and force law. Poses are 4x4 rigid transforms in mm (probe frame -> object frame).";
   m.attr("EXACT") = geom::kExact;
   m.attr("LEAF_SPHERES") = geom::kLeafSpheres;
 
-  py::class_<Mesh, std::shared_ptr<Mesh>>(m, "Mesh", "An indexed triangle mesh (mm); face i is the file's i-th triangle.")
+  py::class_<Mesh, std::shared_ptr<Mesh>>(m, "Mesh",
+                                          "An indexed triangle mesh (mm); face i is the file's i-th triangle.")
       .def(py::init(&mesh_from_arrays), py::arg("vertices"), py::arg("faces"), py::arg("name") = "array",
            "From an (n, 3) float array of vertices and an (m, 3) int array of faces (counter-clockwise from outside).")
       .def_property_readonly("vertices", &vertices_array, "(n, 3) float64 copy of the vertices, body frame, mm")
@@ -206,8 +210,9 @@ PYBIND11_MODULE(spheretouch, m) {
       .def_property_readonly("mesh", [](const Body& b) { return std::const_pointer_cast<Mesh>(b.shared_mesh()); });
 
   py::class_<CollisionResult>(m, "CollisionResult", "What one query found.")
-      .def_property_readonly("pairs", [](const CollisionResult& r) { return pairs_array(r.pairs); },
-                             "(k, 2) uint32: (probe face, object face)")
+      .def_property_readonly(
+          "pairs", [](const CollisionResult& r) { return pairs_array(r.pairs); },
+          "(k, 2) uint32: (probe face, object face)")
       .def_property_readonly("colliding", &CollisionResult::colliding)
       .def_property_readonly("contacts", &CollisionResult::contacts, "distinct probe faces + distinct object faces")
       .def_readonly("probe_faces", &CollisionResult::probe_faces)
@@ -285,19 +290,24 @@ PYBIND11_MODULE(spheretouch, m) {
 
   py::class_<geom::ContactModel>(m, "ContactModel", "FD, PD and the local contact plane of one round (object frame).")
       .def_property_readonly("in_contact", &geom::ContactModel::in_contact)
-      .def_property_readonly("force_dir", [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.force_dir)); })
+      .def_property_readonly("force_dir",
+                             [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.force_dir)); })
       .def_readonly("penetration_mm", &geom::ContactModel::penetration_mm)
-      .def_property_readonly("contact_point", [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.contact_point)); })
-      .def_property_readonly("plane_point", [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.plane_point)); })
-      .def_property_readonly("probe_point", [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.probe_point)); },
-                             "deepest probe point, probe frame")
+      .def_property_readonly("contact_point",
+                             [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.contact_point)); })
+      .def_property_readonly("plane_point",
+                             [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.plane_point)); })
+      .def_property_readonly(
+          "probe_point", [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.probe_point)); },
+          "deepest probe point, probe frame")
       .def_property_readonly("proxy_offset", [](const geom::ContactModel& c) { return to_array(c.proxy_offset()); })
       .def_readonly("flags", &geom::ContactModel::flags)
       .def_readonly("contacts", &geom::ContactModel::contacts)
       .def_readonly("object_faces", &geom::ContactModel::object_faces)
       .def_readonly("probe_faces", &geom::ContactModel::probe_faces);
 
-  py::class_<geom::ContactBuilder>(m, "ContactBuilder", "Builds contact models, keeping the model's history between rounds.")
+  py::class_<geom::ContactBuilder>(m, "ContactBuilder",
+                                   "Builds contact models, keeping the model's history between rounds.")
       .def(py::init([](const std::string& model) {
              geom::ContactConfig c = geom::DefaultContactConfig();
              c.model = take(geom::parse_contact_model(model));
@@ -320,8 +330,10 @@ PYBIND11_MODULE(spheretouch, m) {
   py::class_<rt::ForceLaw>(m, "ForceLaw", "Force magnitude (N) from penetration depth (mm): paper eq. (1) or a spring.")
       .def(py::init([](const std::string& kind, std::optional<double> spring_N_per_mm, std::optional<double> max_force_N) {
              rt::ForceLawConfig c = rt::DefaultForceLawConfig();
-             if (kind == "linear") c.kind = rt::LawKind::linear;
-             else if (kind != "log") throw py::value_error("kind: expected 'log' or 'linear', got '" + kind + "'");
+             if (kind == "linear")
+               c.kind = rt::LawKind::linear;
+             else if (kind != "log")
+               throw py::value_error("kind: expected 'log' or 'linear', got '" + kind + "'");
              if (spring_N_per_mm) c.spring_N_per_mm = *spring_N_per_mm;
              if (max_force_N) c.max_force_N = *max_force_N;
              return take(rt::ForceLaw::make(c));

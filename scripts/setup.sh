@@ -15,6 +15,7 @@ packages=(g++ meson ninja-build pkg-config
           libeigen3-dev libassimp-dev libzmq3-dev libsodium-dev cppzmq-dev
           doctest-dev libtomlplusplus-dev libcli11-dev libsystemd-dev libfcl-dev systemd
           clang libclang-rt-14-dev   # clang + libFuzzer runtime: tests/fuzz/run_fuzz.sh
+          clang-format               # scripts/format.sh --check
           pybind11-dev python3-dev python3-numpy)  # the Python module (python/)
 missing=()
 for p in "${packages[@]}"; do

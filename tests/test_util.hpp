@@ -33,7 +33,10 @@ struct TempDir {
     path = std::filesystem::temp_directory_path() / ("spheretouch-test-" + std::to_string(rd()) + std::to_string(rd()));
     std::filesystem::create_directories(path);
   }
-  ~TempDir() { std::error_code ec; std::filesystem::remove_all(path, ec); }
+  ~TempDir() {
+    std::error_code ec;
+    std::filesystem::remove_all(path, ec);
+  }
   std::string file(const std::string& name) const { return (path / name).string(); }  ///< path of a file inside
 };
 

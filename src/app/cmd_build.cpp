@@ -18,8 +18,9 @@ void add_build(CLI::App& app) {
     std::uint32_t leaf_faces = geom::DefaultTreeParams().leaf_faces;
   };
   auto a = std::make_shared<Args>();
-  CLI::App* cmd = app.add_subcommand("build", "Build a mesh's layered boundary spheres and write them to a tree file "
-                                              "(magic, version, mesh+parameter hash, checksum)");
+  CLI::App* cmd = app.add_subcommand("build",
+                                     "Build a mesh's layered boundary spheres and write them to a tree file "
+                                     "(magic, version, mesh+parameter hash, checksum)");
   cmd->add_option("mesh", a->mesh, "mesh file")->required()->check(CLI::ExistingFile);
   cmd->add_option("-o,--out", a->out, "tree file to write (default: the tree cache, " + default_tree_cache_dir() + ")");
   add_load_options(cmd, a->load);

@@ -21,8 +21,9 @@ struct ExportArgs {
 
 void add_export(CLI::App& app) {
   auto a = std::make_shared<ExportArgs>();
-  CLI::App* cmd = app.add_subcommand("export", "Write a mesh as OFF (double precision, face order kept), "
-                                               "optionally rescaled and Loop-subdivided");
+  CLI::App* cmd = app.add_subcommand("export",
+                                     "Write a mesh as OFF (double precision, face order kept), "
+                                     "optionally rescaled and Loop-subdivided");
   cmd->add_option("mesh", a->in, "input mesh")->required()->check(CLI::ExistingFile);
   cmd->add_option("-o,--out", a->out, "output .off file")->required();
   add_load_options(cmd, a->load);
@@ -38,7 +39,8 @@ void add_export(CLI::App& app) {
     if (a->diagonal_mm > 0) {
       const double d = mesh.bounds().diagonal();
       if (!(d > 0)) {
-        std::fprintf(stderr, "spheretouch: %s: bounding-box diagonal is 0, cannot scale to %g mm\n", a->in.c_str(), a->diagonal_mm);
+        std::fprintf(stderr, "spheretouch: %s: bounding-box diagonal is 0, cannot scale to %g mm\n", a->in.c_str(),
+                     a->diagonal_mm);
         throw CLI::RuntimeError(2);
       }
       mesh.scale(a->diagonal_mm / d);

@@ -43,8 +43,9 @@ void print_info(const geom::LoadedMesh& lm) {
 
 void add_info(CLI::App& app) {
   auto args = std::make_shared<InfoArgs>();
-  CLI::App* cmd = app.add_subcommand("info", "Describe mesh files: faces, vertices, bounds, closed/manifold, "
-                                             "degenerate faces, which reader and precision, load time");
+  CLI::App* cmd = app.add_subcommand("info",
+                                     "Describe mesh files: faces, vertices, bounds, closed/manifold, "
+                                     "degenerate faces, which reader and precision, load time");
   cmd->add_option("meshes", args->paths, "mesh files (.off .obj .ply read in double; .stl .gltf .glb ... via assimp)")
       ->required()
       ->check(CLI::ExistingFile);

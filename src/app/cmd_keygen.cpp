@@ -16,9 +16,10 @@ void add_keygen(CLI::App& app) {
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
-      "keygen", "Make a CURVE key pair: PREFIX.key (secret, mode 0600, created so that no one else can ever read it)\n"
-                "and PREFIX.pub (public). Workers use theirs in [curve] secret_key_file; clients give theirs with\n"
-                "--client-key PREFIX (or [workers] client_key) and list the workers' PREFIX.pub as server_key.");
+      "keygen",
+      "Make a CURVE key pair: PREFIX.key (secret, mode 0600, created so that no one else can ever read it)\n"
+      "and PREFIX.pub (public). Workers use theirs in [curve] secret_key_file; clients give theirs with\n"
+      "--client-key PREFIX (or [workers] client_key) and list the workers' PREFIX.pub as server_key.");
   cmd->add_option("--out", a->out, "write PREFIX.key and PREFIX.pub (a trailing .key or .pub is dropped)")
       ->type_name("PREFIX")
       ->required();

@@ -84,17 +84,19 @@ std::string status_line(const rt::ShmSegment& seg, std::int64_t now) {
                                                                : " not started";
   appendf(line, "servo %s %d%s: ", split ? "process" : "thread of", servo_pid, state_name);
   if (have_sv) {
-    const double f = std::sqrt(sv.force_N[0] * sv.force_N[0] + sv.force_N[1] * sv.force_N[1] + sv.force_N[2] * sv.force_N[2]);
+    const double f =
+        std::sqrt(sv.force_N[0] * sv.force_N[0] + sv.force_N[1] * sv.force_N[1] + sv.force_N[2] * sv.force_N[2]);
     appendf(line, "%llu ticks, %llu misses | pose #%llu age %.1f ms | ", static_cast<unsigned long long>(sv.ticks),
-        static_cast<unsigned long long>(sv.misses), static_cast<unsigned long long>(sv.pose_seq),
-        ms(now - sv.pose_sampled_ns));
+            static_cast<unsigned long long>(sv.misses), static_cast<unsigned long long>(sv.pose_seq),
+            ms(now - sv.pose_sampled_ns));
     appendf(line, "force %.3f N (peak %.3f), PD %.3f mm, fade %.2f | ", f, sv.peak_force_N, sv.penetration_mm, sv.fade);
   } else {
     appendf(line, "no ticks yet | ");
   }
   if (have_co)
-    appendf(line, "model #%llu age %.1f ms, %u contacts, %llu rounds, %.2f ms", static_cast<unsigned long long>(co.model_seq),
-        ms(now - co.updated_ns), co.contacts, static_cast<unsigned long long>(co.rounds), ms(co.latency_ns));
+    appendf(line, "model #%llu age %.1f ms, %u contacts, %llu rounds, %.2f ms",
+            static_cast<unsigned long long>(co.model_seq), ms(now - co.updated_ns), co.contacts,
+            static_cast<unsigned long long>(co.rounds), ms(co.latency_ns));
   else
     appendf(line, "no contact model yet");
   const std::uint32_t lost = st.collision_lost.load(std::memory_order_relaxed);
@@ -159,11 +161,15 @@ void monitor(const MonitorArgs& a) {
     Reading rd;
     if (!read_status(seg, rd)) {
       if (tty) std::printf("\n");
-      fail_command("spheretouch monitor", 1, seg.name() + ": the segment shrank under the monitor (truncated by another "
-                                             "process): its contents are gone, stopped");
+      fail_command("spheretouch monitor", 1,
+                   seg.name() +
+                       ": the segment shrank under the monitor (truncated by another "
+                       "process): its contents are gone, stopped");
     }
-    if (tty) std::printf("\r\033[K%s", rd.line.c_str());
-    else std::printf("%s\n", rd.line.c_str());
+    if (tty)
+      std::printf("\r\033[K%s", rd.line.c_str());
+    else
+      std::printf("%s\n", rd.line.c_str());
     std::fflush(stdout);
     const auto state = rd.state;
     const int servo_pid = rd.servo_pid;
@@ -182,8 +188,9 @@ void monitor(const MonitorArgs& a) {
 void add_monitor(CLI::App& app) {
   auto a = std::make_shared<MonitorArgs>();
   CLI::App* cmd = app.add_subcommand(
-      "monitor", "Watch a running `spheretouch run` through its shared-memory segment, read-only: servo ticks and\n"
-                 "misses, pose and contact-model sequence numbers and ages, contacts, penetration, force.");
+      "monitor",
+      "Watch a running `spheretouch run` through its shared-memory segment, read-only: servo ticks and\n"
+      "misses, pose and contact-model sequence numbers and ages, contacts, penetration, force.");
   cmd->add_option("--name", a->name, "segment (default: the only running /spheretouch-* session)");
   cmd->add_option("--interval", a->interval_ms, "milliseconds between lines (default 500)")->check(CLI::Range(1.0, 60000.0));
   cmd->add_option("--count", a->count, "lines to print, then exit (0 = until the session ends or Ctrl-C)")

@@ -152,10 +152,14 @@ void run_query(const QueryArgs& a) {
         std::snprintf(line, sizeof line, "%u %u\n", p.probe, p.object);
         out += line;
       }
-    if (out.size() > (1 << 20)) { std::fputs(out.c_str(), stdout); out.clear(); }
+    if (out.size() > (1 << 20)) {
+      std::fputs(out.c_str(), stdout);
+      out.clear();
+    }
     if (a.stats)
-      std::fprintf(stderr, "stats pose %zu query_us %.1f node_pairs %llu tri_tests %llu\n", i, times_us[times_us.size() / 2],
-                   static_cast<unsigned long long>(stats.node_pairs), static_cast<unsigned long long>(stats.tri_pairs));
+      std::fprintf(stderr, "stats pose %zu query_us %.1f node_pairs %llu tri_tests %llu\n", i,
+                   times_us[times_us.size() / 2], static_cast<unsigned long long>(stats.node_pairs),
+                   static_cast<unsigned long long>(stats.tri_pairs));
   }
   std::fputs(out.c_str(), stdout);
 }
@@ -164,9 +168,10 @@ void run_query(const QueryArgs& a) {
 
 void add_query(CLI::App& app) {
   auto a = std::make_shared<QueryArgs>();
-  CLI::App* cmd = app.add_subcommand(
-      "query", "Every colliding (probe face, object face) pair for each pose, exactly. Prints per pose\n"
-               "'pose <i> pairs <n> contacts <c>' then n lines '<probe_face> <object_face>' sorted.");
+  CLI::App* cmd =
+      app.add_subcommand("query",
+                         "Every colliding (probe face, object face) pair for each pose, exactly. Prints per pose\n"
+                         "'pose <i> pairs <n> contacts <c>' then n lines '<probe_face> <object_face>' sorted.");
   cmd->add_option("probe", a->probe, "probe mesh (the hand)")->required()->check(CLI::ExistingFile);
   cmd->add_option("object", a->object, "object mesh")->required()->check(CLI::ExistingFile);
   cmd->add_option("--poses", a->poses,
@@ -200,8 +205,8 @@ void add_query(CLI::App& app) {
                   "run the query over N in-process workers (inproc://), the object's layer-n sphere blocks dealt "
                   "block-cyclically; same output")
       ->check(CLI::Range(1, 64));
-  CLI::Option* connect =
-      cmd->add_option("--connect", a->connect, "run the query over worker daemons EP1,EP2,... (tcp:// or ipc://); same output");
+  CLI::Option* connect = cmd->add_option(
+      "--connect", a->connect, "run the query over worker daemons EP1,EP2,... (tcp:// or ipc://); same output");
   CLI::Option* server_key =
       cmd->add_option("--server-key", a->server_key,
                       "CURVE (with --connect): the workers' public key file, PREFIX.pub from `spheretouch keygen`")

@@ -39,8 +39,8 @@ struct RunArgs {
   int workers = -1;
   std::string connect, out;
   std::string server_key, client_key;  ///< CURVE key files (override [workers] server_key, client_key)
-  bool split = false;       ///< the servo as its own process
-  std::string shm_name;     ///< segment name ("" = /spheretouch-<pid>)
+  bool split = false;                  ///< the servo as its own process
+  std::string shm_name;                ///< segment name ("" = /spheretouch-<pid>)
 };
 
 [[noreturn]] void die(int code, const std::string& msg) { fail_command("spheretouch", code, msg); }
@@ -72,17 +72,25 @@ void run(const RunArgs& a) {
   }
   // Before any thread exists (ours, libzmq's): lock_memory keeps every thread's stack resident whole.
   if (s.thread_stack_bytes)
-    if (Status st = rt::set_default_thread_stack(s.thread_stack_bytes); !st) die(2, s.file + ": haptic.thread_stack_kb: " + st.error());
+    if (Status st = rt::set_default_thread_stack(s.thread_stack_bytes); !st)
+      die(2, s.file + ": haptic.thread_stack_kb: " + st.error());
   // CURVE keys for worker daemons: the flags override the scene; read now, so a bad key file
   // fails before any mesh is loaded. Errors name the flag or the scene field.
   std::string server_what = s.file + ": workers.server_key", client_what = s.file + ": workers.client_key";
-  if (!a.server_key.empty()) { s.server_key = a.server_key; server_what = "--server-key"; }
-  if (!a.client_key.empty()) { s.client_key = a.client_key; client_what = "--client-key"; }
+  if (!a.server_key.empty()) {
+    s.server_key = a.server_key;
+    server_what = "--server-key";
+  }
+  if (!a.client_key.empty()) {
+    s.client_key = a.client_key;
+    client_what = "--client-key";
+  }
   Result<ClientCurve> curve = load_client_curve(s.server_key, s.client_key, server_what, client_what);
   if (!curve) die(2, curve.error());
   if (curve.value().enabled() && s.endpoints.empty())
-    die(2, "CURVE keys (" + server_what + ", " + client_what + ") are for worker daemons: give their endpoints "
-           "([workers] endpoints or --connect)");
+    die(2, "CURVE keys (" + server_what + ", " + client_what +
+               ") are for worker daemons: give their endpoints "
+               "([workers] endpoints or --connect)");
   const bool tty = s.status == "tty" || (s.status == "auto" && ::isatty(STDOUT_FILENO));
   const bool show = s.status != "off";
 
@@ -128,7 +136,8 @@ void run(const RunArgs& a) {
     out.pairs.assign(result.pairs.begin(), result.pairs.end());
   };
   if (!s.endpoints.empty() || s.workers > 0) {
-    if (s.approx_layer != geom::kExact) die(2, s.file + ": collision.mode = \"approximate\" runs without workers (set workers.count = 0)");
+    if (s.approx_layer != geom::kExact)
+      die(2, s.file + ": collision.mode = \"approximate\" runs without workers (set workers.count = 0)");
     FleetSpec spec;
     spec.workers = s.workers;
     spec.endpoints = s.endpoints;
@@ -159,7 +168,8 @@ void run(const RunArgs& a) {
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   // Run outputs (poses, forces, the contact state) are the user's: the directory is private.
-  if (!ec) std::filesystem::permissions(dir, std::filesystem::perms::owner_all, std::filesystem::perm_options::replace, ec);
+  if (!ec)
+    std::filesystem::permissions(dir, std::filesystem::perms::owner_all, std::filesystem::perm_options::replace, ec);
   if (ec) die(2, dir + ": cannot create the run directory (" + ec.message() + ")");
 
   Result<rt::ForceLaw> law = rt::ForceLaw::make(s.law);
@@ -250,8 +260,7 @@ void run(const RunArgs& a) {
   }
   const std::string servo_where =
       a.split ? "servo process pid " + std::to_string(servo_pid) : std::string("servo thread");
-  std::fprintf(stderr, "running %.1f s: %s, collision %s, %s; shm %s; run directory %s (Ctrl-C stops)\n",
-               s.duration_s,
+  std::fprintf(stderr, "running %.1f s: %s, collision %s, %s; shm %s; run directory %s (Ctrl-C stops)\n", s.duration_s,
                s.device.script == "builtin" ? "built-in approach/press/slide/release" : s.device.script.c_str(),
                backend.c_str(), servo_where.c_str(), shm.name().c_str(), dir.c_str());
 
@@ -259,8 +268,8 @@ void run(const RunArgs& a) {
   std::int64_t last_print = t_start;
   std::uint64_t last_ticks = 0, last_rounds = 0;
   const std::int64_t print_every = tty ? 200'000'000 : 1'000'000'000;
-  int servo_exit = -1;        // split: the servo process's exit code once it ended
-  bool forwarded = false;     // split: a signal was passed on to the servo
+  int servo_exit = -1;     // split: the servo process's exit code once it ended
+  bool forwarded = false;  // split: a signal was passed on to the servo
   std::int64_t forwarded_ns = 0;
   SilenceWatch silence(s.interp.stale_timeout_ns);
   // Resident memory after one second of running (trees, buffers and connections in place) and at
@@ -297,19 +306,23 @@ void run(const RunArgs& a) {
     if (show && now - last_print >= print_every) {
       const double dt = double(now - last_print) * 1e-9;
       const std::uint64_t ticks = have_ss ? ss.ticks : 0, rounds = collision.rounds();
-      const double force = have_ss ? std::sqrt(ss.force_N[0] * ss.force_N[0] + ss.force_N[1] * ss.force_N[1] +
-                                               ss.force_N[2] * ss.force_N[2])
-                                   : 0.0;
+      const double force =
+          have_ss
+              ? std::sqrt(ss.force_N[0] * ss.force_N[0] + ss.force_N[1] * ss.force_N[1] + ss.force_N[2] * ss.force_N[2])
+              : 0.0;
       char line[256];
-      std::snprintf(line, sizeof line,
-                    "t %5.1f s | haptic %6.0f Hz, %llu misses | collision %5.0f Hz, %6.2f ms, %u contacts | "
-                    "force %5.2f N | %s%s",
-                    elapsed, double(ticks - last_ticks) / dt, static_cast<unsigned long long>(have_ss ? ss.misses : 0),
-                    double(rounds - last_rounds) / dt, double(collision.last_latency_ns()) * 1e-6,
-                    collision.last_contacts(), force, backend.c_str(),
-                    fleet ? (", " + std::to_string(replied.load()) + "/" + std::to_string(asked.load()) + " answering").c_str() : "");
-      if (tty) std::printf("\r\033[K%s", line);
-      else std::printf("%s\n", line);
+      std::snprintf(
+          line, sizeof line,
+          "t %5.1f s | haptic %6.0f Hz, %llu misses | collision %5.0f Hz, %6.2f ms, %u contacts | "
+          "force %5.2f N | %s%s",
+          elapsed, double(ticks - last_ticks) / dt, static_cast<unsigned long long>(have_ss ? ss.misses : 0),
+          double(rounds - last_rounds) / dt, double(collision.last_latency_ns()) * 1e-6, collision.last_contacts(),
+          force, backend.c_str(),
+          fleet ? (", " + std::to_string(replied.load()) + "/" + std::to_string(asked.load()) + " answering").c_str() : "");
+      if (tty)
+        std::printf("\r\033[K%s", line);
+      else
+        std::printf("%s\n", line);
       std::fflush(stdout);
       last_print = now;
       last_ticks = ticks;
@@ -336,10 +349,13 @@ void run(const RunArgs& a) {
     // The summary is printed even when the servo's results cannot be read (its process failed, or
     // the disk was full when it wrote servo.txt): with the collision side's figures and a note.
     if (servo_exit != 0)
-      failures.push_back("servo process (pid " + std::to_string(servo_pid) + ") ended with exit " + std::to_string(servo_exit));
+      failures.push_back("servo process (pid " + std::to_string(servo_pid) + ") ended with exit " +
+                         std::to_string(servo_exit));
     Result<ServoResults> r = read_servo_results(dir + "/servo.txt");
-    if (r) sres = r.value();
-    else failures.push_back(r.error() + " (the servo's figures below are missing)");
+    if (r)
+      sres = r.value();
+    else
+      failures.push_back(r.error() + " (the servo's figures below are missing)");
   } else {
     const rt::LoopStats& ls = loop.stats();
     sres.seconds = secs;
@@ -366,36 +382,39 @@ void run(const RunArgs& a) {
   appendf(summary, "summary\n");
   appendf(summary, "  duration        %.2f s\n", secs);
   appendf(summary, "  haptic          %llu ticks (%.1f Hz), %llu misses, %llu overruns, wake-up p99 %.1f us; %s\n",
-      static_cast<unsigned long long>(sres.ticks), double(sres.ticks) / servo_secs,
-      static_cast<unsigned long long>(sres.misses), static_cast<unsigned long long>(sres.overruns), sres.wake_p99_us,
-      servo_where.c_str());
+          static_cast<unsigned long long>(sres.ticks), double(sres.ticks) / servo_secs,
+          static_cast<unsigned long long>(sres.misses), static_cast<unsigned long long>(sres.overruns),
+          sres.wake_p99_us, servo_where.c_str());
   appendf(summary, "  collision       %llu rounds (%.1f Hz), latency p50 %.3f ms, p99 %.3f ms, %llu incomplete; %s\n",
-      static_cast<unsigned long long>(collision.rounds()), double(collision.rounds()) / secs,
-      double(lat.percentile_ns(0.5)) * 1e-6, double(lat.percentile_ns(0.99)) * 1e-6,
-      static_cast<unsigned long long>(collision.incomplete()), backend.c_str());
+          static_cast<unsigned long long>(collision.rounds()), double(collision.rounds()) / secs,
+          double(lat.percentile_ns(0.5)) * 1e-6, double(lat.percentile_ns(0.99)) * 1e-6,
+          static_cast<unsigned long long>(collision.incomplete()), backend.c_str());
   if (sres.silences)
-    appendf(summary, "  silences        %llu: no contact model for the stale timeout, force faded to zero (longest %.0f ms)\n",
-        static_cast<unsigned long long>(sres.silences), sres.longest_silence_ms);
-  appendf(summary, "  force           peak %.3f N (limit %.2f N), peak penetration %.3f mm\n", sres.peak_force_N, s.saturation.peak_N,
-      std::max(0.0, collision.peak_penetration_mm()));
+    appendf(summary,
+            "  silences        %llu: no contact model for the stale timeout, force faded to zero (longest %.0f ms)\n",
+            static_cast<unsigned long long>(sres.silences), sres.longest_silence_ms);
+  appendf(summary, "  force           peak %.3f N (limit %.2f N), peak penetration %.3f mm\n", sres.peak_force_N,
+          s.saturation.peak_N, std::max(0.0, collision.peak_penetration_mm()));
   {
     std::string guard = s.passivity.enabled ? "passivity guard on" : "passivity guard off";
     if (s.passivity.enabled && !a.split)
-      appendf(guard, " (controller acted on %llu ticks)", static_cast<unsigned long long>(servo->passivity().active_ticks()));
+      appendf(guard, " (controller acted on %llu ticks)",
+              static_cast<unsigned long long>(servo->passivity().active_ticks()));
     appendf(summary, "  contact         model %s, interpolation %s, %s\n", geom::to_string(s.contact.model),
-        rt::to_string(s.interp.mode), guard.c_str());
+            rt::to_string(s.interp.mode), guard.c_str());
   }
-  appendf(summary, "  telemetry       %llu samples, %llu dropped\n", static_cast<unsigned long long>(sres.telemetry_pushed),
-      static_cast<unsigned long long>(sres.telemetry_dropped));
-  if (sres.device_dropped) appendf(summary, "  device records  %llu dropped\n", static_cast<unsigned long long>(sres.device_dropped));
+  appendf(summary, "  telemetry       %llu samples, %llu dropped\n",
+          static_cast<unsigned long long>(sres.telemetry_pushed), static_cast<unsigned long long>(sres.telemetry_dropped));
+  if (sres.device_dropped)
+    appendf(summary, "  device records  %llu dropped\n", static_cast<unsigned long long>(sres.device_dropped));
   if (rss_start && rss_end)
     appendf(summary, "  memory          RSS %.1f MB after %.1f s, %.1f MB at the end (%+.2f MB)\n", double(rss_start) / 1e6,
-        std::min(1.0, s.duration_s / 2), double(rss_end) / 1e6, (double(rss_end) - double(rss_start)) / 1e6);
+            std::min(1.0, s.duration_s / 2), double(rss_end) / 1e6, (double(rss_end) - double(rss_start)) / 1e6);
   appendf(summary, "  outputs         %s/\n", dir.c_str());
   if (!collision.rounds_csv_error().empty()) failures.push_back(collision.rounds_csv_error());
   // ticks.csv is whole when its writer saw no error (in this process, or the servo process's exit).
-  const bool ticks_whole = (telemetry ? telemetry->error().empty() : !(a.split && servo_exit != 0)) &&
-                           collision.rounds_csv_error().empty();
+  const bool ticks_whole =
+      (telemetry ? telemetry->error().empty() : !(a.split && servo_exit != 0)) && collision.rounds_csv_error().empty();
   const bool have_csv = (s.write_trace || s.write_perfetto) && std::filesystem::exists(csv);
   if (s.write_perfetto && have_csv && !ticks_whole) {
     appendf(summary, "    trace.json    not written: ticks.csv or rounds.csv is incomplete\n");
@@ -403,29 +422,36 @@ void run(const RunArgs& a) {
     if (Status st = write_trace_json(dir + "/trace.json", csv, rounds_csv); !st) {
       appendf(summary, "  trace.json: %s\n", st.error().c_str());
       failures.push_back(st.error());
-    }
-    else appendf(summary, "    trace.json    haptic ticks and collision rounds (open in ui.perfetto.dev or chrome://tracing)\n");
+    } else
+      appendf(summary,
+              "    trace.json    haptic ticks and collision rounds (open in ui.perfetto.dev or chrome://tracing)\n");
   }
-  if (s.write_trace) appendf(summary, "    ticks.csv     one line per haptic tick; rounds.csv one line per collision round\n");
+  if (s.write_trace)
+    appendf(summary, "    ticks.csv     one line per haptic tick; rounds.csv one line per collision round\n");
   if (a.split) appendf(summary, "    servo.txt     the servo process's counters; script.txt its trajectory\n");
   if (s.write_ply) {
     if (collision.peak_pairs().empty()) {
       appendf(summary, "    contact.ply   not written: the probe never touched the object\n");
-    } else if (Status st = write_contact_ply(dir + "/contact.ply", probe, object, collision.peak_pose(), collision.peak_pairs()); !st) {
+    } else if (Status st =
+                   write_contact_ply(dir + "/contact.ply", probe, object, collision.peak_pose(), collision.peak_pairs());
+               !st) {
       appendf(summary, "    contact.ply: %s\n", st.error().c_str());
       failures.push_back(st.error());
     } else {
       appendf(summary, "    contact.ply   contact state at peak penetration, colliding faces red (MeshLab, Blender)\n");
     }
   }
-  if (!failures.empty()) appendf(summary, "  FAILED          %zu output(s) not written whole; first: %s\n", failures.size(), failures[0].c_str());
+  if (!failures.empty())
+    appendf(summary, "  FAILED          %zu output(s) not written whole; first: %s\n", failures.size(),
+            failures[0].c_str());
   std::fputs(summary.c_str(), stdout);
   std::fflush(stdout);
   const std::string summary_path = dir + "/summary.txt";
   if (std::FILE* f = std::fopen(summary_path.c_str(), "w")) {
     const bool wrote = std::fputs(summary.c_str(), f) >= 0 && std::fflush(f) == 0;
     const int err = errno;
-    if ((std::fclose(f) != 0 || !wrote)) failures.push_back(summary_path + ": write failed: " + std::strerror(wrote ? errno : err));
+    if ((std::fclose(f) != 0 || !wrote))
+      failures.push_back(summary_path + ": write failed: " + std::strerror(wrote ? errno : err));
   } else {
     failures.push_back(summary_path + ": cannot create: " + std::strerror(errno));
   }
@@ -444,15 +470,15 @@ void run(const RunArgs& a) {
 void add_run(CLI::App& app) {
   auto a = std::make_shared<RunArgs>();
   CLI::App* cmd = app.add_subcommand(
-      "run", "Touch an object: haptic loop (1 kHz), collision thread, workers and telemetry, with a simulated\n"
-             "device running the scene's script. Writes a run directory: ticks.csv, trace.json, contact.ply,\n"
-             "summary.txt. --split: the servo runs as its own process on a shared-memory segment\n"
-             "(`spheretouch monitor` watches either kind of run).");
-  cmd->add_option("scene", a->scene, "scene file (configs/demo.toml documents every field)")
-      ->required()
-      ->check(CLI::ExistingFile);
+      "run",
+      "Touch an object: haptic loop (1 kHz), collision thread, workers and telemetry, with a simulated\n"
+      "device running the scene's script. Writes a run directory: ticks.csv, trace.json, contact.ply,\n"
+      "summary.txt. --split: the servo runs as its own process on a shared-memory segment\n"
+      "(`spheretouch monitor` watches either kind of run).");
+  cmd->add_option("scene", a->scene, "scene file (configs/demo.toml documents every field)")->required()->check(CLI::ExistingFile);
   cmd->add_option("--duration", a->duration_s, "seconds to run (overrides [run] duration_s)")->check(CLI::Range(0.01, 1e6));
-  cmd->add_option("--workers", a->workers, "in-process workers (overrides [workers] count; 0 = collide in the collision thread)")
+  cmd->add_option("--workers", a->workers,
+                  "in-process workers (overrides [workers] count; 0 = collide in the collision thread)")
       ->check(CLI::Range(0, 64));
   cmd->add_option("--connect", a->connect, "worker daemons EP1,EP2,... (tcp:// or ipc://; overrides [workers])");
   cmd->add_option("--server-key", a->server_key,
@@ -467,8 +493,9 @@ void add_run(CLI::App& app) {
   cmd->add_flag("--split", a->split,
                 "run the haptic servo as its own process on the shared-memory segment: it keeps the device\n"
                 "safe (force fades to zero) and finishes its run if the collision side dies");
-  cmd->add_option("--shm-name", a->shm_name,
-                  "shared-memory segment of the run (default /spheretouch-<pid>); `spheretouch monitor` attaches to it");
+  cmd->add_option(
+      "--shm-name", a->shm_name,
+      "shared-memory segment of the run (default /spheretouch-<pid>); `spheretouch monitor` attaches to it");
   cmd->callback([a] { run(*a); });
 }
 

@@ -13,8 +13,14 @@ namespace st::app {
 CollisionLoop::CollisionLoop(const geom::Mesh& probe, const geom::Mesh& object, rt::TripleBuffer<rt::PoseSample>& poses,
                              rt::TripleBuffer<geom::ContactModel>& models, CollideFn collide, double rate_hz,
                              std::size_t max_rounds, const geom::ContactConfig& contact)
-    : probe_(probe), object_(object), poses_(poses), models_(models), collide_(std::move(collide)), builder_(contact),
-      rate_hz_(rate_hz), max_rounds_(max_rounds) {
+    : probe_(probe),
+      object_(object),
+      poses_(poses),
+      models_(models),
+      collide_(std::move(collide)),
+      builder_(contact),
+      rate_hz_(rate_hz),
+      max_rounds_(max_rounds) {
   records_.reserve(max_rounds_);
   builder_.prepare(probe_, object_);
 }
@@ -29,7 +35,9 @@ Status CollisionLoop::write_rounds_csv(const std::string& path) {
   return Ok{};
 }
 
-void CollisionLoop::start() { thread_ = std::thread([this] { run(); }); }
+void CollisionLoop::start() {
+  thread_ = std::thread([this] { run(); });
+}
 
 void CollisionLoop::stop() {
   stop_.store(true, std::memory_order_release);
@@ -100,8 +108,8 @@ void CollisionLoop::run() {
     if (records_.size() < max_rounds_) records_.push_back(rec);
     if (rounds_csv_ && rounds_error_.empty() &&
         std::fprintf(rounds_csv_, "%lld,%lld,%llu,%u,%u,%.6g,%d\n", static_cast<long long>(rec.start_ns),
-                   static_cast<long long>(rec.end_ns), static_cast<unsigned long long>(rec.pose_seq), rec.pairs,
-                   rec.contacts, rec.penetration_mm, rec.complete ? 1 : 0) < 0)
+                     static_cast<long long>(rec.end_ns), static_cast<unsigned long long>(rec.pose_seq), rec.pairs,
+                     rec.contacts, rec.penetration_mm, rec.complete ? 1 : 0) < 0)
       rounds_error_ = rounds_path_ + ": write failed: " + std::strerror(errno);  // a full disk: once, then stop
     if (m.in_contact() && m.penetration_mm > peak_pd_) {
       peak_pd_ = m.penetration_mm;

@@ -46,8 +46,8 @@ class CollisionLoop {
   /// `contact` selects the contact model (the builder is prepared for the meshes here, not in
   /// the first round).
   CollisionLoop(const geom::Mesh& probe, const geom::Mesh& object, rt::TripleBuffer<rt::PoseSample>& poses,
-                rt::TripleBuffer<geom::ContactModel>& models, CollideFn collide, double rate_hz,
-                std::size_t max_rounds, const geom::ContactConfig& contact = geom::DefaultContactConfig());
+                rt::TripleBuffer<geom::ContactModel>& models, CollideFn collide, double rate_hz, std::size_t max_rounds,
+                const geom::ContactConfig& contact = geom::DefaultContactConfig());
   ~CollisionLoop();
   /// Publish a CollisionStatus after every round into `status` (null = off); before start().
   void publish_status_to(rt::SeqLock<rt::CollisionStatus>* status) { status_ = status; }
@@ -60,16 +60,20 @@ class CollisionLoop {
   /// failure naming the file (a full disk); the loop stops writing the CSV after it.
   const std::string& rounds_csv_error() const { return rounds_error_; }
 
-  std::uint64_t rounds() const { return rounds_.load(std::memory_order_relaxed); }                 ///< rounds so far
-  std::uint64_t incomplete() const { return incomplete_.load(std::memory_order_relaxed); }         ///< rounds missing a worker
-  std::int64_t last_latency_ns() const { return last_latency_ns_.load(std::memory_order_relaxed); }  ///< newest round's time
-  std::uint32_t last_contacts() const { return last_contacts_.load(std::memory_order_relaxed); }    ///< newest round's contacts
+  std::uint64_t rounds() const { return rounds_.load(std::memory_order_relaxed); }          ///< rounds so far
+  std::uint64_t incomplete() const { return incomplete_.load(std::memory_order_relaxed); }  ///< rounds missing a worker
+  std::int64_t last_latency_ns() const {
+    return last_latency_ns_.load(std::memory_order_relaxed);
+  }  ///< newest round's time
+  std::uint32_t last_contacts() const {
+    return last_contacts_.load(std::memory_order_relaxed);
+  }                                                                     ///< newest round's contacts
   const std::vector<RoundRecord>& records() const { return records_; }  ///< the first max_rounds, after stop()
   const rt::LatencyHistogram& latency() const { return latency_; }      ///< every round's latency, after stop()
   /// The round with the deepest penetration (the peak of the force law): its pose and pairs.
   const geom::Pose& peak_pose() const { return peak_pose_; }
   const std::vector<geom::FacePair>& peak_pairs() const { return peak_pairs_; }  ///< after stop()
-  double peak_penetration_mm() const { return peak_pd_; }                       ///< after stop()
+  double peak_penetration_mm() const { return peak_pd_; }                        ///< after stop()
 
  private:
   void run();

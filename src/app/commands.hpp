@@ -8,14 +8,14 @@
 
 namespace st::app {
 
-void add_info(CLI::App& app);    ///< spheretouch info MESH...
-void add_export(CLI::App& app);  ///< spheretouch export IN -o OUT (scale, subdivide, write OFF)
-void add_query(CLI::App& app);   ///< spheretouch query PROBE OBJECT --poses FILE
-void add_build(CLI::App& app);   ///< spheretouch build MESH -o FILE (sphere-tree file)
-void add_run(CLI::App& app);     ///< spheretouch run SCENE [--split] (the main job)
-void add_servo(CLI::App& app);   ///< spheretouch servo ... (hidden: the servo process of run --split)
-void add_monitor(CLI::App& app); ///< spheretouch monitor [--name SEGMENT] (watch a live run)
-void add_keygen(CLI::App& app);  ///< spheretouch keygen --out PREFIX (CURVE key pair files)
+void add_info(CLI::App& app);     ///< spheretouch info MESH...
+void add_export(CLI::App& app);   ///< spheretouch export IN -o OUT (scale, subdivide, write OFF)
+void add_query(CLI::App& app);    ///< spheretouch query PROBE OBJECT --poses FILE
+void add_build(CLI::App& app);    ///< spheretouch build MESH -o FILE (sphere-tree file)
+void add_run(CLI::App& app);      ///< spheretouch run SCENE [--split] (the main job)
+void add_servo(CLI::App& app);    ///< spheretouch servo ... (hidden: the servo process of run --split)
+void add_monitor(CLI::App& app);  ///< spheretouch monitor [--name SEGMENT] (watch a live run)
+void add_keygen(CLI::App& app);   ///< spheretouch keygen --out PREFIX (CURVE key pair files)
 
 /// Prints "<who>: <msg>" on stderr and ends the command with exit status `code`.
 [[noreturn]] inline void fail_command(const char* who, int code, const std::string& msg) {

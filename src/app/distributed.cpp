@@ -108,8 +108,9 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
   cfg.miss_limit = spec.miss_limit;
   cfg.leaf_faces = spec.leaf_faces;
   if (spec.curve.enabled() && spec.endpoints.empty())
-    return fail("CURVE keys (server key, client key) are for worker daemons; in-process workers need none "
-                "(give the daemons' endpoints with --connect or [workers] endpoints)");
+    return fail(
+        "CURVE keys (server key, client key) are for worker daemons; in-process workers need none "
+        "(give the daemons' endpoints with --connect or [workers] endpoints)");
   if (!spec.endpoints.empty()) {
     cfg.endpoints = spec.endpoints;
     if (spec.curve.enabled()) {
@@ -122,9 +123,11 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
     if (!spec.curve.enabled())
       for (const std::string& ep : spec.endpoints)
         if (!net::is_local_endpoint(ep))
-          std::fprintf(stderr, "warning: %s is not a loopback or ipc:// endpoint and no CURVE keys are set: poses, block "
-                               "sets and results cross the network in plaintext, unauthenticated (set server_key and "
-                               "client_key, README \"Securing a fleet\")\n", ep.c_str());
+          std::fprintf(stderr,
+                       "warning: %s is not a loopback or ipc:// endpoint and no CURVE keys are set: poses, block "
+                       "sets and results cross the network in plaintext, unauthenticated (set server_key and "
+                       "client_key, README \"Securing a fleet\")\n",
+                       ep.c_str());
   } else {
     if (spec.workers < 1) return fail("distribution: no workers (use --workers N or --connect EP,...)");
     // A tag unique to this fleet keeps inproc names apart when several fleets share a process.

@@ -33,16 +33,16 @@ Result<ClientCurve> load_client_curve(const std::string& server_key_file, const 
 
 /// How to reach the workers.
 struct FleetSpec {
-  int workers = 0;                     ///< in-process workers (ignored when endpoints are given)
-  std::vector<std::string> endpoints;  ///< worker daemons
+  int workers = 0;                          ///< in-process workers (ignored when endpoints are given)
+  std::vector<std::string> endpoints;       ///< worker daemons
   std::uint32_t layer = 2, block_size = 1;  ///< distribution: sphere layer, layer spheres per block
   std::uint32_t leaf_faces = geom::DefaultTreeParams().leaf_faces;  ///< tree knob sent to workers
-  std::uint32_t miss_limit = 3;        ///< missed deadlines before a worker is marked down
-  std::chrono::milliseconds ready_timeout{30000};  ///< time allowed for the first upload
+  std::uint32_t miss_limit = 3;                                     ///< missed deadlines before a worker is marked down
+  std::chrono::milliseconds ready_timeout{30000};                   ///< time allowed for the first upload
   /// A daemon silent this long is probed: a refused CURVE key or a security mismatch fails the
   /// start at once (waiting cannot help); anything else waits out ready_timeout.
   std::chrono::milliseconds hello_timeout{2000};
-  ClientCurve curve;                   ///< CURVE keys for worker daemons (empty: plain)
+  ClientCurve curve;  ///< CURVE keys for worker daemons (empty: plain)
   /// Progress notes while the start waits (a daemon still silent after hello_timeout); may be empty.
   std::function<void(const std::string&)> note;
 };
@@ -52,8 +52,8 @@ struct Fleet {
   zmq::context_t ctx{1};
   std::unique_ptr<net::LocalWorkers> local;
   std::unique_ptr<net::ScatterGather> client;
-  std::uint32_t blocks = 0;       ///< blocks dealt
-  std::string description;        ///< "2 in-process workers" / "3 daemons"
+  std::uint32_t blocks = 0;  ///< blocks dealt
+  std::string description;   ///< "2 in-process workers" / "3 daemons"
   /// Workers currently up (not marked down).
   int up() const;
 };

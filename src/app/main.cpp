@@ -27,8 +27,6 @@ int main(int argc, char** argv) {
   st::app::add_keygen(app);
   try {
     app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e);
-  }
+  } catch (const CLI::ParseError& e) { return app.exit(e); }
   return 0;
 }

@@ -85,7 +85,8 @@ Status write_trace_json(const std::string& path, const std::string& tick_csv, co
   if (!f) return fail(path, ": cannot create");
   std::fprintf(f, "{\"displayTimeUnit\":\"ms\",\"traceEvents\":[\n");
   std::fprintf(f, "{\"name\":\"process_name\",\"ph\":\"M\",\"pid\":1,\"args\":{\"name\":\"spheretouch run\"}},\n");
-  std::fprintf(f, "{\"name\":\"thread_name\",\"ph\":\"M\",\"pid\":1,\"tid\":1,\"args\":{\"name\":\"haptic 1 kHz\"}},\n");
+  std::fprintf(f,
+               "{\"name\":\"thread_name\",\"ph\":\"M\",\"pid\":1,\"tid\":1,\"args\":{\"name\":\"haptic 1 kHz\"}},\n");
   std::fprintf(f, "{\"name\":\"thread_name\",\"ph\":\"M\",\"pid\":1,\"tid\":2,\"args\":{\"name\":\"collision\"}}");
   // Timestamps are CLOCK_MONOTONIC in microseconds, shared by both threads' events.
   auto us = [](double ns) { return ns / 1000.0; };
@@ -94,8 +95,9 @@ Status write_trace_json(const std::string& path, const std::string& tick_csv, co
   while (std::getline(in, line)) {
     if (!csv_numbers(line, v) || v.size() < 17) continue;
     const double force = std::sqrt(v[9] * v[9] + v[10] * v[10] + v[11] * v[11]);
-    std::fprintf(f, ",\n{\"name\":\"tick\",\"ph\":\"X\",\"pid\":1,\"tid\":1,\"ts\":%.3f,\"dur\":1,"
-                    "\"args\":{\"tick\":%.0f,\"latency_us\":%.3f,\"model\":%.0f,\"pd_mm\":%.4g}}",
+    std::fprintf(f,
+                 ",\n{\"name\":\"tick\",\"ph\":\"X\",\"pid\":1,\"tid\":1,\"ts\":%.3f,\"dur\":1,"
+                 "\"args\":{\"tick\":%.0f,\"latency_us\":%.3f,\"model\":%.0f,\"pd_mm\":%.4g}}",
                  us(v[1]), v[0], v[2] / 1000.0, v[4], v[12]);
     std::fprintf(f, ",\n{\"name\":\"force_N\",\"ph\":\"C\",\"pid\":1,\"ts\":%.3f,\"args\":{\"force\":%.5g}}", us(v[1]),
                  force);
@@ -103,8 +105,9 @@ Status write_trace_json(const std::string& path, const std::string& tick_csv, co
   // rounds.csv: start_ns,end_ns,pose_seq,pairs,contacts,pd_mm,complete
   while (std::getline(rin, line)) {
     if (!csv_numbers(line, v) || v.size() < 7) continue;
-    std::fprintf(f, ",\n{\"name\":\"round\",\"ph\":\"X\",\"pid\":1,\"tid\":2,\"ts\":%.3f,\"dur\":%.3f,"
-                    "\"args\":{\"pose\":%.0f,\"pairs\":%.0f,\"contacts\":%.0f,\"pd_mm\":%.4g,\"complete\":%s}}",
+    std::fprintf(f,
+                 ",\n{\"name\":\"round\",\"ph\":\"X\",\"pid\":1,\"tid\":2,\"ts\":%.3f,\"dur\":%.3f,"
+                 "\"args\":{\"pose\":%.0f,\"pairs\":%.0f,\"contacts\":%.0f,\"pd_mm\":%.4g,\"complete\":%s}}",
                  us(v[0]), us(v[1] - v[0]), v[2], v[3], v[4], v[5], v[6] != 0 ? "true" : "false");
   }
   std::fprintf(f, "\n]}\n");

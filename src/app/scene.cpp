@@ -40,8 +40,10 @@ void read_body(TomlReader& r, BodySpec& b, const std::string& dir, const std::st
   r.number("scale", b.scale, 1e-12, 1e12);
   if (!mesh.empty() && !b.builtin.empty()) r.error("mesh", "give either mesh or builtin, not both");
   if (mesh.empty() && b.builtin.empty()) r.error("mesh", "expected a mesh path (or \"model:NAME\") or a builtin shape");
-  if (mesh.rfind("model:", 0) == 0) b.mesh = model_dir() + "/" + mesh.substr(6);
-  else if (!mesh.empty()) b.mesh = std::filesystem::path(mesh).is_absolute() ? mesh : dir + "/" + mesh;
+  if (mesh.rfind("model:", 0) == 0)
+    b.mesh = model_dir() + "/" + mesh.substr(6);
+  else if (!mesh.empty())
+    b.mesh = std::filesystem::path(mesh).is_absolute() ? mesh : dir + "/" + mesh;
   if (!b.mesh.empty())
     if (std::string why = lookup(b.mesh); !why.empty())
       r.error("mesh", why + (mesh.rfind("model:", 0) == 0 ? " (run scripts/models.sh to build the model set)" : ""));
@@ -94,11 +96,13 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     top.known(sec);
   if (Status st = top.finish(); !st) return Error{st.error()};
   for (const char* sec : {"probe", "object"})
-    if (!root.contains(sec)) return fail(name, ": missing section [", sec, "] (every scene names its probe and object)");
+    if (!root.contains(sec))
+      return fail(name, ": missing section [", sec, "] (every scene names its probe and object)");
 
   auto section = [&](const char* key) { return root.get_as<toml::table>(key); };
   auto check_table = [&](const char* key) -> Status {
-    if (root.contains(key) && !root.get_as<toml::table>(key)) return fail(name, ": ", key, ": expected a [", key, "] table");
+    if (root.contains(key) && !root.get_as<toml::table>(key))
+      return fail(name, ": ", key, ": expected a [", key, "] table");
     return Ok{};
   };
   for (const char* sec : {"probe", "object", "tree", "workers", "collision", "haptic", "force", "interpolation",
@@ -112,7 +116,10 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     std::vector<double> tip, rot;
     r.numbers("tip", tip, 3);
     r.numbers("rotation_deg", rot, 3);
-    if (!tip.empty()) { s.probe_tip_auto = false; s.probe_tip = vec3(tip); }
+    if (!tip.empty()) {
+      s.probe_tip_auto = false;
+      s.probe_tip = vec3(tip);
+    }
     if (!rot.empty()) s.probe_rotation_deg = vec3(rot);
     if (Status st = r.finish(); !st) return Error{st.error()};
   }
@@ -153,7 +160,8 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     else if (s.server_key.empty() && !s.client_key.empty())
       r.error("server_key", "client_key is set but server_key is not: CURVE needs the workers' public key too");
     if (!s.server_key.empty() && !std::filesystem::exists(s.server_key))
-      r.error("server_key", "file " + s.server_key + " does not exist (the workers' PREFIX.pub from `spheretouch keygen`)");
+      r.error("server_key",
+              "file " + s.server_key + " does not exist (the workers' PREFIX.pub from `spheretouch keygen`)");
     if (!s.client_key.empty() && !std::filesystem::exists(net::key_files(s.client_key).secret_file))
       r.error("client_key", "file " + net::key_files(s.client_key).secret_file +
                                 " does not exist (make the pair with `spheretouch keygen --out PREFIX`)");
@@ -166,8 +174,10 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     r.string("mode", mode, {"exact", "approximate"});
     int layer = geom::kLeafSpheres;
     r.integer("approx_layer", layer, -1, 64);
-    if (mode == "approximate") s.approx_layer = layer;
-    else if (r.has("approx_layer")) r.error("approx_layer", "only meaningful with mode = \"approximate\"");
+    if (mode == "approximate")
+      s.approx_layer = layer;
+    else if (r.has("approx_layer"))
+      r.error("approx_layer", "only meaningful with mode = \"approximate\"");
     if (Status st = r.finish(); !st) return Error{st.error()};
   }
   {
@@ -185,8 +195,9 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     s.thread_stack_bytes = stack_kb * 1024;
     const std::size_t margin_kb = rt::kPrefaultStackMargin / 1024;
     if (stack_kb != 0 && prefault_kb > 0 && prefault_kb + margin_kb > stack_kb)
-      r.error("prefault_stack_kb", std::to_string(prefault_kb) + " KiB does not fit the haptic thread's stack (thread_stack_kb = " +
-                                       std::to_string(stack_kb) + ", of which " + std::to_string(margin_kb) + " KiB stay free)");
+      r.error("prefault_stack_kb",
+              std::to_string(prefault_kb) + " KiB does not fit the haptic thread's stack (thread_stack_kb = " +
+                  std::to_string(stack_kb) + ", of which " + std::to_string(margin_kb) + " KiB stay free)");
     r.boolean("strict", s.haptic.strict);
     if (Status st = r.finish(); !st) return Error{st.error()};
   }
@@ -206,8 +217,7 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     r.number("continuous_n", s.saturation.continuous_N, 1e-9, 1e4);
     r.number("sustained_tau_s", s.saturation.tau_s, 1e-3, 1e5);
     r.number("damping_n_s_per_mm", s.interp.damping_N_s_per_mm, 0, 1e3);
-    if (s.saturation.continuous_N > s.saturation.peak_N)
-      r.error("continuous_n", "must not exceed peak_n");
+    if (s.saturation.continuous_N > s.saturation.peak_N) r.error("continuous_n", "must not exceed peak_n");
     if (Status st = r.finish(); !st) return Error{st.error()};
     if (Result<rt::ForceLaw> l = rt::ForceLaw::make(s.law); !l) return fail(name, ": [force] ", l.error());
     if (std::string e = rt::Saturator::check(s.saturation); !e.empty()) return fail(name, ": [force] ", e);
@@ -264,12 +274,17 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
       r.string("target", t, {"top"});
     } else {
       r.numbers("target", target, 3);
-      if (!target.empty()) { s.device.target_top = false; s.device.target = vec3(target); }
+      if (!target.empty()) {
+        s.device.target_top = false;
+        s.device.target = vec3(target);
+      }
     }
     r.numbers("normal", normal, 3);
     if (!normal.empty()) {
-      if (vec3(normal).norm() < 1e-9) r.error("normal", "must not be the zero vector");
-      else s.device.normal = vec3(normal).normalized();
+      if (vec3(normal).norm() < 1e-9)
+        r.error("normal", "must not be the zero vector");
+      else
+        s.device.normal = vec3(normal).normalized();
     }
     r.number("press_mm", s.device.press_mm, 0, 1000);
     r.number("slide_mm", s.device.slide_mm, 0, 10000);
@@ -311,16 +326,23 @@ rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, const geo
   if (s.device.target_top) {  // the object's extreme vertex along the normal
     double best = -std::numeric_limits<double>::infinity();
     for (std::uint32_t i = 0; i < object.num_vertices(); ++i)
-      if (const double d = object.vertex(i).dot(n); d > best) { best = d; target = object.vertex(i); }
+      if (const double d = object.vertex(i).dot(n); d > best) {
+        best = d;
+        target = object.vertex(i);
+      }
   }
   const geom::Vec3 r = s.probe_rotation_deg * (M_PI / 180.0);
-  const Eigen::Matrix3d R = (Eigen::AngleAxisd(r.x(), geom::Vec3::UnitX()) * Eigen::AngleAxisd(r.y(), geom::Vec3::UnitY()) *
-                             Eigen::AngleAxisd(r.z(), geom::Vec3::UnitZ())).toRotationMatrix();
+  const Eigen::Matrix3d R = (Eigen::AngleAxisd(r.x(), geom::Vec3::UnitX()) *
+                             Eigen::AngleAxisd(r.y(), geom::Vec3::UnitY()) * Eigen::AngleAxisd(r.z(), geom::Vec3::UnitZ()))
+                                .toRotationMatrix();
   geom::Vec3 tip = s.probe_tip;
   if (s.probe_tip_auto) {  // the probe's lowest vertex along the approach direction
     double best = std::numeric_limits<double>::infinity();
     for (std::uint32_t i = 0; i < probe.num_vertices(); ++i)
-      if (const double d = (R * probe.vertex(i)).dot(n); d < best) { best = d; tip = probe.vertex(i); }
+      if (const double d = (R * probe.vertex(i)).dot(n); d < best) {
+        best = d;
+        tip = probe.vertex(i);
+      }
   }
   rt::Trajectory t = rt::builtin_press_slide(target, n, s.device.press_mm, s.device.slide_mm);
   for (rt::TimedPose& k : t.keys) {

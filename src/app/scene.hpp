@@ -20,55 +20,56 @@ namespace st::app {
 
 /// One body: a mesh file, the model set ("model:NAME") or a generated shape.
 struct BodySpec {
-  std::string mesh;            ///< resolved file path; empty for a generated body
-  std::string builtin;         ///< "icosphere", "box", "capsule" when generated
+  std::string mesh;                                     ///< resolved file path; empty for a generated body
+  std::string builtin;                                  ///< "icosphere", "box", "capsule" when generated
   double radius_mm = 10, length_mm = 30, size_mm = 40;  ///< generated shape dimensions
   int frequency = 7, segments = 24;                     ///< generated shape resolution
-  std::string units = "mm";    ///< unit of the file's coordinates
-  double scale = 1;            ///< extra factor
+  std::string units = "mm";                             ///< unit of the file's coordinates
+  double scale = 1;                                     ///< extra factor
 };
 
 /// The simulated device's script.
 struct DeviceSpec {
-  std::string script = "builtin";  ///< "builtin" or a trajectory file (t + 16 numbers a line)
-  bool target_top = true;          ///< builtin: touch the object's highest point along +z
-  geom::Vec3 target{geom::Vec3::Zero()};  ///< builtin: surface point, object frame, mm (target_top false)
-  geom::Vec3 normal{geom::Vec3::UnitZ()}; ///< builtin: approach against this outward normal
-  double press_mm = 3, slide_mm = 20;     ///< builtin: press depth and slide length, mm
-  rt::VirtualUser user;                   ///< spring-damper hand reacting to the force
-  bool repeat = false;                    ///< replay the script from its start each time it ends
+  std::string script = "builtin";          ///< "builtin" or a trajectory file (t + 16 numbers a line)
+  bool target_top = true;                  ///< builtin: touch the object's highest point along +z
+  geom::Vec3 target{geom::Vec3::Zero()};   ///< builtin: surface point, object frame, mm (target_top false)
+  geom::Vec3 normal{geom::Vec3::UnitZ()};  ///< builtin: approach against this outward normal
+  double press_mm = 3, slide_mm = 20;      ///< builtin: press depth and slide length, mm
+  rt::VirtualUser user;                    ///< spring-damper hand reacting to the force
+  bool repeat = false;                     ///< replay the script from its start each time it ends
 };
 
 /// Everything a run needs, with defaults from the libraries' Default…() functions.
 struct Scene {
-  std::string file;                    ///< the scene file (for messages)
-  BodySpec probe, object;              ///< the hand and the touched object
-  bool probe_tip_auto = true;          ///< fingertip = probe's lowest vertex along the approach
-  geom::Vec3 probe_tip{geom::Vec3::Zero()};   ///< fingertip, probe file coordinates, mm
+  std::string file;                                   ///< the scene file (for messages)
+  BodySpec probe, object;                             ///< the hand and the touched object
+  bool probe_tip_auto = true;                         ///< fingertip = probe's lowest vertex along the approach
+  geom::Vec3 probe_tip{geom::Vec3::Zero()};           ///< fingertip, probe file coordinates, mm
   geom::Vec3 probe_rotation_deg{geom::Vec3::Zero()};  ///< probe orientation (XYZ Euler, about the tip)
   geom::TreeParams tree = geom::DefaultTreeParams();  ///< leaf size
-  bool tree_cache = true;              ///< read/write trees in the tree cache
-  std::uint32_t layer = 2, block_size = 1;  ///< distribution: sphere layer and blocks per worker
-  int workers = 2;                     ///< in-process workers (0 = collide in the collision thread)
-  std::vector<std::string> endpoints;  ///< worker daemons (overrides `workers`)
-  std::string server_key;              ///< CURVE: the workers' public key file (resolved path; "" = plain)
-  std::string client_key;              ///< CURVE: this client's key pair PREFIX (PREFIX.key, PREFIX.pub)
-  double deadline_ms = 50;             ///< scatter-gather round deadline, ms
-  int down_after = 3;                  ///< missed deadlines before a worker is marked down
-  double collision_rate_hz = 0;        ///< cap on collision rounds per second (0 = as fast as possible)
-  int approx_layer = geom::kExact;     ///< kExact, or a sphere layer for the approximate mode
-  rt::HapticLoopConfig haptic = rt::DefaultHapticLoopConfig();      ///< servo loop
-  std::size_t thread_stack_bytes = 1 << 20;  ///< stack of every thread run starts ([haptic] thread_stack_kb); 0 = glibc's default
-  rt::ForceLawConfig law = rt::DefaultForceLawConfig();             ///< eq. (1) or spring
-  rt::SaturationConfig saturation = rt::DefaultSaturationConfig();  ///< device limits
-  rt::InterpolatorConfig interp = rt::DefaultInterpolatorConfig();  ///< between contact updates
-  geom::ContactConfig contact = geom::DefaultContactConfig();       ///< contact model (patch or paper)
-  rt::PassivityConfig passivity = rt::DefaultPassivityConfig();     ///< energy guard in the servo
-  DeviceSpec device;                   ///< simulated device
-  double duration_s = 6;               ///< run length (the built-in script takes 5 s)
-  std::string out_dir;                 ///< run directory ("" = runs/<timestamp>)
+  bool tree_cache = true;                             ///< read/write trees in the tree cache
+  std::uint32_t layer = 2, block_size = 1;            ///< distribution: sphere layer and blocks per worker
+  int workers = 2;                                    ///< in-process workers (0 = collide in the collision thread)
+  std::vector<std::string> endpoints;                 ///< worker daemons (overrides `workers`)
+  std::string server_key;           ///< CURVE: the workers' public key file (resolved path; "" = plain)
+  std::string client_key;           ///< CURVE: this client's key pair PREFIX (PREFIX.key, PREFIX.pub)
+  double deadline_ms = 50;          ///< scatter-gather round deadline, ms
+  int down_after = 3;               ///< missed deadlines before a worker is marked down
+  double collision_rate_hz = 0;     ///< cap on collision rounds per second (0 = as fast as possible)
+  int approx_layer = geom::kExact;  ///< kExact, or a sphere layer for the approximate mode
+  rt::HapticLoopConfig haptic = rt::DefaultHapticLoopConfig();  ///< servo loop
+  /// stack of every thread run starts ([haptic] thread_stack_kb); 0 = glibc's default
+  std::size_t thread_stack_bytes = 1 << 20;
+  rt::ForceLawConfig law = rt::DefaultForceLawConfig();              ///< eq. (1) or spring
+  rt::SaturationConfig saturation = rt::DefaultSaturationConfig();   ///< device limits
+  rt::InterpolatorConfig interp = rt::DefaultInterpolatorConfig();   ///< between contact updates
+  geom::ContactConfig contact = geom::DefaultContactConfig();        ///< contact model (patch or paper)
+  rt::PassivityConfig passivity = rt::DefaultPassivityConfig();      ///< energy guard in the servo
+  DeviceSpec device;                                                 ///< simulated device
+  double duration_s = 6;                                             ///< run length (the built-in script takes 5 s)
+  std::string out_dir;                                               ///< run directory ("" = runs/<timestamp>)
   bool write_trace = true, write_perfetto = true, write_ply = true;  ///< outputs
-  std::string status = "auto";         ///< status line: auto, tty, plain, off
+  std::string status = "auto";                                       ///< status line: auto, tty, plain, off
 };
 
 /// The defaults (a capsule fingertip against an icosphere: needs no download).

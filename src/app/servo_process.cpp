@@ -127,8 +127,9 @@ Result<pid_t> spawn_servo(const ServoArgs& a) {
   exe[n] = 0;
   char dur[64];
   std::snprintf(dur, sizeof dur, "%.17g", a.duration_s);
-  std::vector<std::string> args = {"spheretouch", "servo", "--shm", a.shm, "--scene", a.scene, "--script", a.script,
-                                   "--out", a.out, "--duration", dur, "--parent", std::to_string(a.parent)};
+  std::vector<std::string> args = {
+      "spheretouch", "servo", "--shm", a.shm,        "--scene", a.scene,    "--script",
+      a.script,      "--out", a.out,   "--duration", dur,       "--parent", std::to_string(a.parent)};
   std::vector<char*> argv;
   for (std::string& s : args) argv.push_back(s.data());
   argv.push_back(nullptr);
@@ -154,7 +155,8 @@ void run_servo(const ServoArgs& a) {
   Scene s = std::move(sr).value();
   if (a.duration_s > 0) s.duration_s = a.duration_s;
   if (s.thread_stack_bytes)
-    if (Status st = rt::set_default_thread_stack(s.thread_stack_bytes); !st) servo_die(2, s.file + ": haptic.thread_stack_kb: " + st.error());
+    if (Status st = rt::set_default_thread_stack(s.thread_stack_bytes); !st)
+      servo_die(2, s.file + ": haptic.thread_stack_kb: " + st.error());
   Result<rt::Trajectory> script = rt::load_trajectory(a.script);
   if (!script) servo_die(2, script.error());
   Result<std::unique_ptr<rt::ShmSegment>> seg = rt::ShmSegment::attach(a.shm);
@@ -272,7 +274,8 @@ void run_servo(const ServoArgs& a) {
       std::fputs(buf, f);
       std::fclose(f);
     }
-    if (shm.unlink_if_orphaned()) std::fprintf(stderr, "spheretouch servo: removed the orphaned segment %s\n", shm.name().c_str());
+    if (shm.unlink_if_orphaned())
+      std::fprintf(stderr, "spheretouch servo: removed the orphaned segment %s\n", shm.name().c_str());
   }
   if (!ticks_error.empty()) servo_die(1, ticks_error);
 }

@@ -19,17 +19,17 @@ namespace st::app {
 
 /// What a servo reports at its end (servo.txt: one "key value" per line).
 struct ServoResults {
-  double seconds = 0;                ///< loop wall time, s
-  std::uint64_t ticks = 0, misses = 0, overruns = 0;  ///< loop counters
-  double wake_p99_us = 0;            ///< wake-up latency p99, µs
-  double peak_force_N = 0;           ///< largest |force| commanded
-  std::uint64_t models = 0;          ///< contact models taken
+  double seconds = 0;                                                             ///< loop wall time, s
+  std::uint64_t ticks = 0, misses = 0, overruns = 0;                              ///< loop counters
+  double wake_p99_us = 0;                                                         ///< wake-up latency p99, µs
+  double peak_force_N = 0;                                                        ///< largest |force| commanded
+  std::uint64_t models = 0;                                                       ///< contact models taken
   std::uint64_t telemetry_pushed = 0, telemetry_dropped = 0, device_dropped = 0;  ///< drops
-  std::uint64_t silences = 0;        ///< episodes where the collision side went silent
-  double longest_silence_ms = 0;     ///< longest such episode (so far, at the end)
-  int collision_died = 0;            ///< 1: the collision process died during the run
-  double collision_died_at_s = -1;   ///< when, s after the servo started
-  int signal = 0;                    ///< stopped by this signal (0 = ran its duration)
+  std::uint64_t silences = 0;       ///< episodes where the collision side went silent
+  double longest_silence_ms = 0;    ///< longest such episode (so far, at the end)
+  int collision_died = 0;           ///< 1: the collision process died during the run
+  double collision_died_at_s = -1;  ///< when, s after the servo started
+  int signal = 0;                   ///< stopped by this signal (0 = ran its duration)
 };
 /// Writes results as "key value" lines.
 Status write_servo_results(const std::string& path, const ServoResults& r);
@@ -45,8 +45,8 @@ class SilenceWatch {
   /// Looks at a status snapshot at now_ns; returns a line to print ("" = nothing new).
   std::string poll(const rt::ServoStatus& st, std::int64_t now_ns);
   std::uint64_t episodes() const { return episodes_; }  ///< silences reported
-  double longest_ms() const { return longest_ms_; }      ///< longest silence seen, ms
-  bool silent() const { return silent_; }                ///< in an episode now
+  double longest_ms() const { return longest_ms_; }     ///< longest silence seen, ms
+  bool silent() const { return silent_; }               ///< in an episode now
 
  private:
   std::int64_t stale_ns_;

@@ -97,7 +97,8 @@ class TomlReader {
     if (t_)
       for (const auto& [k, v] : *t_)
         if (!seen_.count(std::string(k.str())))
-          return fail(where(&v), field(std::string(k.str())), ": unknown key (check the spelling; configs/demo.toml lists every field)");
+          return fail(where(&v), field(std::string(k.str())),
+                      ": unknown key (check the spelling; configs/demo.toml lists every field)");
     return Ok{};
   }
   /// Records an error about `key` from outside (cross-field checks).
@@ -113,12 +114,15 @@ class TomlReader {
   }
   std::string field(const std::string& key) const { return (path_.empty() ? "" : path_ + ".") + key; }
   std::string where(const toml::node* n) const {
-    if (n && n->source().begin.line)
-      return file_ + ":" + std::to_string(n->source().begin.line) + ": ";
+    if (n && n->source().begin.line) return file_ + ":" + std::to_string(n->source().begin.line) + ": ";
     return file_ + ": ";
   }
   static std::string range(double lo, double hi) {
-    auto s = [](double x) { std::ostringstream o; o << x; return o.str(); };
+    auto s = [](double x) {
+      std::ostringstream o;
+      o << x;
+      return o.str();
+    };
     return "a value in [" + s(lo) + ", " + s(hi) + "]";
   }
   void bad(const toml::node* n, const char* key, const std::string& expected, double found) {

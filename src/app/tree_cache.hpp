@@ -16,10 +16,10 @@ enum class TreeSource { built, cached, rebuilt_stale, rebuilt_corrupt };
 
 /// A tree and where it came from.
 struct CachedTree {
-  geom::SphereTree tree;   ///< the tree
-  TreeSource source;       ///< built fresh, read from the cache, or rebuilt because the file was bad
-  std::string path;        ///< cache file used ("" without a cache)
-  std::string note;        ///< why a cached file was rejected
+  geom::SphereTree tree;  ///< the tree
+  TreeSource source;      ///< built fresh, read from the cache, or rebuilt because the file was bad
+  std::string path;       ///< cache file used ("" without a cache)
+  std::string note;       ///< why a cached file was rejected
 };
 
 /// The tree of `mesh` for `params`, from `cache_dir` when valid ("" = no cache). A bad cache file

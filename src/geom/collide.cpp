@@ -104,7 +104,6 @@ inline std::uint32_t sphere_mask(const float* c, std::size_t st, std::uint32_t n
 #endif
 }
 
-
 // Bit i (i < n <= 64) set when box i of a float SoA block (lo x at c[i], lo y at c[st + i], ...,
 // hi z at c[5 st + i]) meets box b (lo xyz, hi xyz). Pure comparisons, exact. Reads whole
 // 8-lane vectors past n: the SoA arrays are padded by kMaxLeafFaces.
@@ -156,7 +155,8 @@ inline std::uint64_t face_box_mask(const FaceBox* fb, std::uint32_t n, const flo
   for (std::uint32_t j = 0; j < n; j += 8) {
     const std::uint32_t left = n - j;
     const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-    const __m256 live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32(static_cast<int>(std::min(left, 8u))), lane));
+    const __m256 live =
+        _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32(static_cast<int>(std::min(left, 8u))), lane));
     const float* p = base + 6 * j;
     auto g = [&](int k) { return _mm256_mask_i32gather_ps(_mm256_setzero_ps(), p + k, idx, live, 4); };
     __m256 h = _mm256_and_ps(live, _mm256_cmp_ps(g(0), _mm256_set1_ps(b[3]), _CMP_LE_OQ));
@@ -299,7 +299,7 @@ struct CollideQuery {
   CollideScratch& sc;
   CollideResult& res;
   RelTransform rt;
-  double s = 1;    // >= ||R||_2
+  double s = 1;     // >= ||R||_2
   float slack = 0;  // absolute slack of the float sphere tests, mm (see sphere_mask)
   std::uint32_t gen = 0;
   bool exact = true;
@@ -365,9 +365,16 @@ struct CollideQuery {
 
   void emit(std::uint32_t pf, std::uint32_t of) {
     res.pairs.push_back({pf, of});
-    if (res.pairs.size() > opt.max_pairs) [[unlikely]] res.stats.pair_limit_hit = true;
-    if (sc.pmark_[pf] != gen) { sc.pmark_[pf] = gen; ++res.probe_faces; }
-    if (sc.omark_[of] != gen) { sc.omark_[of] = gen; ++res.object_faces; }
+    if (res.pairs.size() > opt.max_pairs) [[unlikely]]
+      res.stats.pair_limit_hit = true;
+    if (sc.pmark_[pf] != gen) {
+      sc.pmark_[pf] = gen;
+      ++res.probe_faces;
+    }
+    if (sc.omark_[of] != gen) {
+      sc.omark_[of] = gen;
+      ++res.object_faces;
+    }
   }
 
   // Bit i set when probe face box at slot first + i (i < n) meets box b (lo xyz, hi xyz).
@@ -401,7 +408,8 @@ struct CollideQuery {
     {
       const std::array<float, 8>& v = sc.obox_[o];
       // Branch-free on purpose: int-valued | of all six comparisons, one branch at the end.
-      if (int(v[0] > u[3]) | int(v[1] > u[4]) | int(v[2] > u[5]) | int(v[3] < u[0]) | int(v[4] < u[1]) | int(v[5] < u[2])) return;
+      if (int(v[0] > u[3]) | int(v[1] > u[4]) | int(v[2] > u[5]) | int(v[3] < u[0]) | int(v[4] < u[1]) | int(v[5] < u[2]))
+        return;
     }
     const FaceBox* ob = OT.face_boxes.data() + ho.first;
     const std::uint64_t mo = face_box_mask(ob, ho.count, u.data());
@@ -410,7 +418,10 @@ struct CollideQuery {
     float ou[6] = {inf, inf, inf, -inf, -inf, -inf};
     for (std::uint64_t m = mo; m != 0; m &= m - 1) {
       const FaceBox& fb = ob[std::countr_zero(m)];
-      for (int k = 0; k < 3; ++k) { ou[k] = std::min(ou[k], fb.lo[k]); ou[3 + k] = std::max(ou[3 + k], fb.hi[k]); }
+      for (int k = 0; k < 3; ++k) {
+        ou[k] = std::min(ou[k], fb.lo[k]);
+        ou[3 + k] = std::max(ou[3 + k], fb.hi[k]);
+      }
     }
     const std::uint64_t mp = probe_mask(hp.first, hp.count, ou);
     if (mp == 0) return;
@@ -468,8 +479,10 @@ struct CollideQuery {
       const SphereNode& ho = OT.nodes[o];
       const bool tp = terminal_p(hp), to = terminal_o(ho);
       if (tp && to) {
-        if (exact) leaf_leaf(p, o);
-        else approx_pair(p, o);
+        if (exact)
+          leaf_leaf(p, o);
+        else
+          approx_pair(p, o);
         continue;
       }
       // A tree deeper than its num_depths claims (never one built or read by tree_io, which
@@ -481,12 +494,14 @@ struct CollideQuery {
       // Descend the larger sphere; test all its children against the other sphere at once.
       if (!to && (tp || ho.radius >= s * hp.radius)) {
         res.stats.node_pairs += ho.count;
-        const std::uint32_t m = sphere_mask(os + ho.first, so, ho.count, ps[p], ps[sp + p], ps[2 * sp + p], ps[3 * sp + p]);
+        const std::uint32_t m =
+            sphere_mask(os + ho.first, so, ho.count, ps[p], ps[sp + p], ps[2 * sp + p], ps[3 * sp + p]);
         push_children(m, ho.first, p, false, stack, n);
       } else {
         probe_children(p);
         res.stats.node_pairs += hp.count;
-        const std::uint32_t m = sphere_mask(ps + hp.first, sp, hp.count, os[o], os[so + o], os[2 * so + o], os[3 * so + o]);
+        const std::uint32_t m =
+            sphere_mask(ps + hp.first, sp, hp.count, os[o], os[so + o], os[2 * so + o], os[3 * so + o]);
         push_children(m, hp.first, o, true, stack, n);
       }
     }
@@ -519,7 +534,8 @@ void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object
       scratch.stack_cap_ < 8 * (probe_tree.num_depths + object_tree.num_depths) + 8)
     scratch.prepare(probe, probe_tree, object, object_tree);
 
-  CollideQuery q{probe, probe_tree, object, object_tree, options, scratch, result, transform_to_object(pose, probe, object)};
+  CollideQuery q{probe,   probe_tree, object, object_tree,
+                 options, scratch,    result, transform_to_object(pose, probe, object)};
   q.gen = scratch.next_generation();
   q.exact = options.stop_layer == kExact;
   q.stop = options.stop_layer >= 0 ? static_cast<std::uint32_t>(options.stop_layer) : 0xffffffffu;

@@ -44,8 +44,8 @@ struct FacePair {
 /// Distinct probe faces and distinct object faces of a pair list: paper §3.5's "number of
 /// contacts" is their sum. The one definition every counter uses.
 struct FaceCounts {
-  std::uint32_t probe_faces = 0;   ///< distinct probe faces
-  std::uint32_t object_faces = 0;  ///< distinct object faces
+  std::uint32_t probe_faces = 0;                                         ///< distinct probe faces
+  std::uint32_t object_faces = 0;                                        ///< distinct object faces
   std::uint32_t contacts() const { return probe_faces + object_faces; }  ///< paper §3.5
 };
 /// Counts the pairs' distinct faces (any order; `scratch` is reused, no allocation once warm).
@@ -64,7 +64,7 @@ struct CollideOptions {
   /// With restrict_object: only these object subtree roots (a worker's blocks, partition.hpp; may
   /// be empty = nothing). Must be disjoint subtrees (e.g. nodes of one layer).
   std::span<const std::uint32_t> object_roots{};
-  bool restrict_object = false;  ///< use object_roots instead of the whole object
+  bool restrict_object = false;   ///< use object_roots instead of the whole object
   bool approx_face_pairs = true;  ///< approximate mode: also expand sphere pairs into face pairs
   /// Stop the traversal once more than this many pairs are found (stats.pair_limit_hit); the result
   /// then holds at most max_pairs plus one leaf pair's worth (64 × 64). A worker answering a
@@ -75,23 +75,29 @@ inline CollideOptions DefaultCollideOptions() { return {}; }  ///< exact, unsort
 
 /// Counters of one query (Box2D-style, for tests and benchmarks).
 struct CollideStats {
-  std::uint64_t node_pairs = 0;       ///< sphere pairs tested
-  std::uint64_t leaf_pairs = 0;       ///< leaf-leaf pairs reached (exact mode)
-  std::uint64_t tri_pairs = 0;        ///< exact tri_tri_overlap calls
-  std::uint64_t sphere_pairs = 0;     ///< approximate mode: overlapping sphere pairs reported
-  std::uint64_t truncated = 0;        ///< traversals stopped: a tree deeper than its num_depths (or > kMaxTreeDepth); 0 for valid trees
-  bool pair_limit_hit = false;        ///< the traversal stopped at CollideOptions::max_pairs
+  std::uint64_t node_pairs = 0;    ///< sphere pairs tested
+  std::uint64_t leaf_pairs = 0;    ///< leaf-leaf pairs reached (exact mode)
+  std::uint64_t tri_pairs = 0;     ///< exact tri_tri_overlap calls
+  std::uint64_t sphere_pairs = 0;  ///< approximate mode: overlapping sphere pairs reported
+  /// traversals stopped: a tree deeper than its num_depths (or > kMaxTreeDepth); 0 for valid trees
+  std::uint64_t truncated = 0;
+  bool pair_limit_hit = false;  ///< the traversal stopped at CollideOptions::max_pairs
 };
 
 /// Output of a query; caller-owned, reused across queries (clear() keeps capacity).
 struct CollideResult {
   std::vector<FacePair> pairs;  ///< colliding (or, approximate mode, candidate) face pairs
   std::vector<std::pair<std::uint32_t, std::uint32_t>> sphere_pairs;  ///< approximate mode: (probe node, object node)
-  std::uint32_t probe_faces = 0;   ///< distinct probe faces in `pairs`
-  std::uint32_t object_faces = 0;  ///< distinct object faces in `pairs`
-  CollideStats stats;              ///< counters
+  std::uint32_t probe_faces = 0;                                      ///< distinct probe faces in `pairs`
+  std::uint32_t object_faces = 0;                                     ///< distinct object faces in `pairs`
+  CollideStats stats;                                                 ///< counters
   std::uint32_t contacts() const { return probe_faces + object_faces; }  ///< paper §3.5 "number of contacts"
-  void clear() { pairs.clear(); sphere_pairs.clear(); probe_faces = object_faces = 0; stats = {}; }
+  void clear() {
+    pairs.clear();
+    sphere_pairs.clear();
+    probe_faces = object_faces = 0;
+    stats = {};
+  }
 };
 
 /// Per-caller scratch: per-query caches of transformed probe vertices, centres and leaf face boxes
@@ -111,13 +117,13 @@ class CollideScratch {
   // Probe leaves as little meshes, so a query transforms a leaf's vertices in one sequential pass
   // (derived from the probe tree once, keyed by pkey_/phash_):
   std::vector<std::array<std::uint32_t, 2>> lvrange_;  // probe leaf node -> its vertices [begin, end) in lverts_
-  std::vector<Vec3> lverts_;                // distinct vertices of each leaf, leaves one after another, probe-local
+  std::vector<Vec3> lverts_;  // distinct vertices of each leaf, leaves one after another, probe-local
   std::vector<std::array<std::uint32_t, 3>> lidx_;  // probe slot -> its face's vertices as indices into lverts_
-  std::vector<Vec3> ptx_;                   // lverts_ transformed into object-local (valid for leaves stamped this query)
-  const void* pkey_ = nullptr;              // probe tree the above was derived from (nodes.data()) ...
-  std::uint64_t phash_ = 0;                 // ... and its mesh_hash
-  std::vector<std::uint32_t> cstamp_;       // probe node -> generation its CHILDREN's spheres were transformed
-  std::vector<float> psph_;                 // probe node spheres in object-local, SoA (x, y, z, s·r + slack) by node, stride nstride_p_
+  std::vector<Vec3> ptx_;              // lverts_ transformed into object-local (valid for leaves stamped this query)
+  const void* pkey_ = nullptr;         // probe tree the above was derived from (nodes.data()) ...
+  std::uint64_t phash_ = 0;            // ... and its mesh_hash
+  std::vector<std::uint32_t> cstamp_;  // probe node -> generation its CHILDREN's spheres were transformed
+  std::vector<float> psph_;  // probe node spheres in object-local, SoA (x, y, z, s·r + slack) by node, stride nstride_p_
   std::size_t nstride_p_ = 0;               // probe nodes + padding for 8-wide loads
   std::vector<float> osph_;                 // object node spheres, SoA (x, y, z, r) by node, stride nstride_o_
   std::size_t nstride_o_ = 0;               // object nodes + padding for 8-wide loads

@@ -20,8 +20,10 @@ Result<ContactModelKind> parse_contact_model(std::string_view name) {
 
 const char* to_string(ContactModelKind kind) {
   switch (kind) {
-    case ContactModelKind::paper: return "paper";
-    case ContactModelKind::patch: return "patch";
+    case ContactModelKind::paper:
+      return "paper";
+    case ContactModelKind::patch:
+      return "patch";
   }
   return "?";
 }
@@ -41,8 +43,7 @@ std::string check(const ContactConfig& c) {
   return os.str();
 }
 
-ContactBuilder::ContactBuilder(ContactConfig config)
-    : config_(config), patch_(std::make_unique<Patch>(config)) {}
+ContactBuilder::ContactBuilder(ContactConfig config) : config_(config), patch_(std::make_unique<Patch>(config)) {}
 ContactBuilder::~ContactBuilder() = default;
 ContactBuilder::ContactBuilder(ContactBuilder&&) noexcept = default;
 ContactBuilder& ContactBuilder::operator=(ContactBuilder&&) noexcept = default;

@@ -126,28 +126,30 @@ using ContactPair = FacePair;
 
 /// Everything the haptic side needs from one collision round. Plain data, fixed size.
 struct ContactModel {
-  std::uint64_t seq = 0;              ///< 1, 2, 3... per builder; 0 = no model yet
-  std::uint64_t pose_seq = 0;         ///< sequence number of the pose it was computed at
-  std::int64_t pose_sampled_ns = 0;   ///< when that pose was sampled, CLOCK_MONOTONIC ns
-  std::int64_t published_ns = 0;      ///< when this model was published, CLOCK_MONOTONIC ns
-  PodPose pose;                       ///< probe→object pose it was computed at
-  PodVec3 force_dir;                  ///< FD, unit, pushes the probe out of the object; 0 if none
-  PodVec3 contact_point;              ///< paper: nearest probe vertex on the nearest face; patch: where the deepest point leaves the surface, mm
-  PodVec3 probe_point;                ///< deepest probe point, probe frame, mm
-  PodVec3 plane_point;                ///< local contact plane: a point, mm (normal = force_dir)
-  double penetration_mm = 0;          ///< PD >= 0 (paper: below the first contact face; patch: directional depth)
-  std::uint32_t object_faces = 0;     ///< distinct colliding object faces
-  std::uint32_t probe_faces = 0;      ///< distinct colliding probe faces
-  std::uint32_t contacts = 0;         ///< object_faces + probe_faces (paper §3.5)
-  std::uint32_t pairs = 0;            ///< face pairs given (including skipped ones)
-  std::uint32_t nearest_object_face = UINT32_MAX;  ///< paper: the face FD comes from; patch: the face the deepest point leaves through
-  std::uint32_t nearest_probe_vertex = UINT32_MAX; ///< paper: the probe vertex of the nearest pair
-  std::uint32_t first_contact_face = UINT32_MAX;   ///< paper: the recorded face PD is measured against
-  std::uint32_t deepest_probe_vertex = UINT32_MAX; ///< the probe vertex probe_point comes from (UINT32_MAX: an object vertex was deepest)
-  std::uint32_t skipped_pairs = 0;    ///< pairs with an index out of range
-  std::uint32_t degenerate_faces = 0; ///< distinct degenerate colliding object faces
-  std::uint32_t flags = 0;            ///< ContactFlag bits
-  std::uint32_t kind = 0;             ///< ContactModelKind that built it
+  std::uint64_t seq = 0;             ///< 1, 2, 3... per builder; 0 = no model yet
+  std::uint64_t pose_seq = 0;        ///< sequence number of the pose it was computed at
+  std::int64_t pose_sampled_ns = 0;  ///< when that pose was sampled, CLOCK_MONOTONIC ns
+  std::int64_t published_ns = 0;     ///< when this model was published, CLOCK_MONOTONIC ns
+  PodPose pose;                      ///< probe→object pose it was computed at
+  PodVec3 force_dir;                 ///< FD, unit, pushes the probe out of the object; 0 if none
+  PodVec3 contact_point;  ///< paper: nearest probe vertex on the nearest face; patch: where the deepest point leaves the surface, mm
+  PodVec3 probe_point;             ///< deepest probe point, probe frame, mm
+  PodVec3 plane_point;             ///< local contact plane: a point, mm (normal = force_dir)
+  double penetration_mm = 0;       ///< PD >= 0 (paper: below the first contact face; patch: directional depth)
+  std::uint32_t object_faces = 0;  ///< distinct colliding object faces
+  std::uint32_t probe_faces = 0;   ///< distinct colliding probe faces
+  std::uint32_t contacts = 0;      ///< object_faces + probe_faces (paper §3.5)
+  std::uint32_t pairs = 0;         ///< face pairs given (including skipped ones)
+  /// paper: the face FD comes from; patch: the face the deepest point leaves through
+  std::uint32_t nearest_object_face = UINT32_MAX;
+  std::uint32_t nearest_probe_vertex = UINT32_MAX;  ///< paper: the probe vertex of the nearest pair
+  std::uint32_t first_contact_face = UINT32_MAX;    ///< paper: the recorded face PD is measured against
+  /// the probe vertex probe_point comes from (UINT32_MAX: an object vertex was deepest)
+  std::uint32_t deepest_probe_vertex = UINT32_MAX;
+  std::uint32_t skipped_pairs = 0;           ///< pairs with an index out of range
+  std::uint32_t degenerate_faces = 0;        ///< distinct degenerate colliding object faces
+  std::uint32_t flags = 0;                   ///< ContactFlag bits
+  std::uint32_t kind = 0;                    ///< ContactModelKind that built it
   std::uint32_t inside_probe_vertices = 0;   ///< patch: probe vertices the depth search found inside the object
   std::uint32_t inside_object_vertices = 0;  ///< patch: object vertices the depth search found inside the probe
 
@@ -161,9 +163,10 @@ static_assert(sizeof(ContactModel) == 288, "ContactModel layout is pinned (share
 /// Builder knobs; DefaultContactConfig() gives the documented defaults.
 struct ContactConfig {
   ContactModelKind model = ContactModelKind::patch;  ///< which model
-  double replane_angle_deg = 60.0;        ///< paper: re-record the first contact face when FD turns further than this
-  double hold_margin_mm = 1.0;            ///< patch: a held contact lasts while the probe is this close to the patch's footprint
-  std::uint32_t max_inside_vertices = 1u << 18;  ///< patch: vertices the depth search may visit per body and round (kInsideCapped past it)
+  double replane_angle_deg = 60.0;  ///< paper: re-record the first contact face when FD turns further than this
+  double hold_margin_mm = 1.0;  ///< patch: a held contact lasts while the probe is this close to the patch's footprint
+  /// patch: vertices the depth search may visit per body and round (kInsideCapped past it)
+  std::uint32_t max_inside_vertices = 1u << 18;
 };
 /// patch model, paper replane angle 60°, hold margin 1 mm, 262,144 inside vertices per side.
 ContactConfig DefaultContactConfig();
@@ -198,14 +201,13 @@ class ContactBuilder {
   void prepare(const Mesh& probe, const Mesh& object);
   /// The model for `pairs` found at `pose` (probe frame → object frame). Fills every
   /// field but seq/pose_seq/pose_sampled_ns/published_ns, which belong to the publisher.
-  ContactModel build(const Mesh& probe, const Mesh& object, const Pose& pose,
-                     std::span<const ContactPair> pairs);
+  ContactModel build(const Mesh& probe, const Mesh& object, const Pose& pose, std::span<const ContactPair> pairs);
   /// Forgets the history (as if contact had ended).
   void reset();
   /// paper: true while a first contact face is recorded; patch: true while a previous FD is kept.
   bool has_first_face() const;
   const ContactConfig& config() const { return config_; }  ///< its knobs
-  std::size_t bytes() const;  ///< memory held for the meshes (adjacency) and scratch
+  std::size_t bytes() const;                               ///< memory held for the meshes (adjacency) and scratch
 
  private:
   ContactModel build_paper(const Mesh& probe, const Mesh& object, const Pose& pose, std::span<const ContactPair> pairs);
@@ -214,8 +216,8 @@ class ContactBuilder {
   Vec3 first_point_{Vec3::Zero()};         ///< paper: its centroid, object local frame, mm
   Vec3 first_normal_{Vec3::Zero()};        ///< paper: its unit normal
   std::vector<std::uint32_t> probe_faces_, object_faces_, probe_vertices_;  ///< scratch
-  std::vector<Vec3> probe_points_;         ///< scratch: probe vertices in the object's local frame
-  struct Patch;                            ///< the patch model's state and scratch (contact_patch.cpp)
+  std::vector<Vec3> probe_points_;  ///< scratch: probe vertices in the object's local frame
+  struct Patch;                     ///< the patch model's state and scratch (contact_patch.cpp)
   friend struct SurfaceWalk;
   std::unique_ptr<Patch> patch_;
 };

@@ -108,7 +108,6 @@ bool SurfaceWalk::exit(const Vec3& x, std::uint32_t& face, double& dist, int max
 
 namespace {
 
-
 /// Where triangle (p0, p1, p2), with signed distances d[] to the other triangle's plane, crosses
 /// that plane, as an interval [t0, t1] of x·L along the line direction L (the points x0, x1 at its
 /// ends). False when it does not cross (all distances of one strict sign) or lies
@@ -145,7 +144,7 @@ bool crossing(const Vec3* p[3], const double d[3], const Vec3& L, double& t0, do
 /// normal nb), oriented along na × nb (the boundary of the object surface inside the probe runs
 /// that way, with the inside on its left seen from outside). False when there is no segment.
 bool segment(const Vec3* a[3], const Vec3& na, const Vec3* b[3], const Vec3& nb, Vec3& s0, Vec3& s1) {
-  const Vec3 L = na.cross(nb);  // unit normals: |L| = sin of the angle between the planes
+  const Vec3 L = na.cross(nb);                   // unit normals: |L| = sin of the angle between the planes
   if (!(L.squaredNorm() > 1e-24)) return false;  // parallel planes: touching or coplanar, no curve
   double db[3], da[3];
   for (int k = 0; k < 3; ++k) db[k] = na.dot(*b[k] - *a[0]);
@@ -215,8 +214,10 @@ void ContactBuilder::Patch::BodyState::clear_stamps() {
 }
 
 std::size_t ContactBuilder::Patch::BodyState::bytes() const {
-  return vf.bytes() + (visit_stamp.capacity() + path_stamp.capacity() + exit_face.capacity() + face_stamp.capacity() +
-                       face_slot.capacity() + faces.capacity()) * 4 +
+  return vf.bytes() +
+         (visit_stamp.capacity() + path_stamp.capacity() + exit_face.capacity() + face_stamp.capacity() +
+          face_slot.capacity() + faces.capacity()) *
+             4 +
          depth.capacity() * sizeof(double) + normals.capacity() * sizeof(Vec3);
 }
 
@@ -257,8 +258,8 @@ const Vec3& ContactBuilder::Patch::probe_point(std::uint32_t v, const Mesh& prob
 ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, const Vec3& d, const Mesh& probe,
                                                            const Mesh& object) {
   Deepest best;
-  BodyState& T = probe_side ? probe_s : object_s;    // the body whose points may be inside
-  BodyState& S = probe_side ? object_s : probe_s;    // the body whose faces they leave through
+  BodyState& T = probe_side ? probe_s : object_s;  // the body whose points may be inside
+  BodyState& S = probe_side ? object_s : probe_s;  // the body whose faces they leave through
   const Mesh& test = *T.mesh;
   const Mesh& surface = *S.mesh;
   const VertexFaces& test_vf = T.vf;
@@ -335,7 +336,8 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
           key[n++] = -test_pos(u).dot(d);
         }
       for (int i = 1; i < n; ++i)  // insertion sort, deepest along -d first (n is ~6)
-        for (int j = i; j > 0 && key[j] > key[j - 1]; --j) std::swap(key[j], key[j - 1]), std::swap(cand[j], cand[j - 1]);
+        for (int j = i; j > 0 && key[j] > key[j - 1]; --j)
+          std::swap(key[j], key[j - 1]), std::swap(cand[j], cand[j - 1]);
       std::uint32_t next = UINT32_MAX;
       bool joined = false;
       for (int i = 0; i < n && next == UINT32_MAX; ++i) {
@@ -389,7 +391,8 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   std::uint32_t low_v[kLowSeeds], low_f[kLowSeeds];
   double low_key[kLowSeeds];
   int n_low = 0;
-  const std::span<const ContactPair> seed_pairs = discover ? std::span<const ContactPair>(valid) : std::span<const ContactPair>();
+  const std::span<const ContactPair> seed_pairs =
+      discover ? std::span<const ContactPair>(valid) : std::span<const ContactPair>();
   for (const ContactPair& p : seed_pairs) {
     const std::uint32_t tf = probe_side ? p.probe : p.object, sf = probe_side ? p.object : p.probe;
     for (std::uint32_t v : test.faces[tf]) {
@@ -641,9 +644,12 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     } else {
       m.flags |= kNormalFallback;
       if (abs_sum > 0 && !tiny) m.flags |= kNormalsDisagree;
-      if (have_prev) n = prev_n;
-      else if (n_faces.norm() > kCancelRatio * n_faces_abs) n = n_faces.normalized();
-      else in_contact = false;
+      if (have_prev)
+        n = prev_n;
+      else if (n_faces.norm() > kCancelRatio * n_faces_abs)
+        n = n_faces.normalized();
+      else
+        in_contact = false;
     }
   }
 

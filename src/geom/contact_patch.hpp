@@ -16,8 +16,8 @@ bool face_frame(const Mesh& m, std::uint32_t f, Vec3& centroid, Vec3& normal);
 /// edges (Guibas & Stolfi's walk) over the faces that face d, to the face above a point, and
 /// answers how far the point must travel along d to leave through it.
 struct SurfaceWalk {
-  const Mesh* mesh = nullptr;           ///< the surface's body
-  const VertexFaces* vf = nullptr;      ///< its faces around each vertex
+  const Mesh* mesh = nullptr;              ///< the surface's body
+  const VertexFaces* vf = nullptr;         ///< its faces around each vertex
   ContactBuilder::Patch* patch = nullptr;  ///< set when the surface is the probe (vertices move with the pose)
   Vec3 d{Vec3::UnitZ()}, u{Vec3::UnitX()}, w{Vec3::UnitY()};  ///< direction and the plane ⊥ d
   /// Sets the direction (unit) and derives the plane basis.
@@ -43,12 +43,12 @@ struct ContactBuilder::Patch {
 
   /// Result of one side's depth search.
   struct Deepest {
-    double depth = 0;                 ///< largest exit distance found, mm (0: none inside)
+    double depth = 0;                   ///< largest exit distance found, mm (0: none inside)
     std::uint32_t vertex = UINT32_MAX;  ///< the vertex it belongs to (UINT32_MAX: an edge point)
-    Vec3 point{Vec3::Zero()};         ///< the deepest point, common (object-local) frame
-    std::uint32_t face = UINT32_MAX;  ///< the surface face it leaves through
-    std::uint32_t inside = 0;         ///< vertices found inside
-    bool capped = false;              ///< the search stopped at max_inside_vertices
+    Vec3 point{Vec3::Zero()};           ///< the deepest point, common (object-local) frame
+    std::uint32_t face = UINT32_MAX;    ///< the surface face it leaves through
+    std::uint32_t inside = 0;           ///< vertices found inside
+    bool capped = false;                ///< the search stopped at max_inside_vertices
   };
   /// One side's pass: points of `test` inside `surface`, leaving along d.
   Deepest side(bool probe_side, const Vec3& d, const Mesh& probe, const Mesh& object);
@@ -64,44 +64,44 @@ struct ContactBuilder::Patch {
   /// search state stamped with the round (nothing is cleared between rounds).
   struct BodyState {
     const Mesh* mesh = nullptr;
-    std::size_t nv = 0, nf = 0;                 ///< vertex and face counts it was sized for
-    VertexFaces vf;                             ///< faces around each vertex
-    std::vector<std::uint32_t> visit_stamp;     ///< round in which a vertex's exit distance was found
-    std::vector<std::uint32_t> path_stamp;      ///< serial of the climb that stood on a vertex
-    std::vector<double> depth;                  ///< per-vertex exit distance this round (where visited)
-    std::vector<std::uint32_t> exit_face;       ///< and the face it was found on
-    std::vector<std::uint32_t> face_stamp;      ///< round in which a face was counted as colliding
-    std::vector<std::uint32_t> face_slot;       ///< its index in `faces`
-    std::vector<std::uint32_t> faces;           ///< distinct colliding faces this round
-    std::vector<Vec3> normals;                  ///< their unit normals, object-local (zero: degenerate)
-    Memory memory;                              ///< last round's deepest vertices
+    std::size_t nv = 0, nf = 0;              ///< vertex and face counts it was sized for
+    VertexFaces vf;                          ///< faces around each vertex
+    std::vector<std::uint32_t> visit_stamp;  ///< round in which a vertex's exit distance was found
+    std::vector<std::uint32_t> path_stamp;   ///< serial of the climb that stood on a vertex
+    std::vector<double> depth;               ///< per-vertex exit distance this round (where visited)
+    std::vector<std::uint32_t> exit_face;    ///< and the face it was found on
+    std::vector<std::uint32_t> face_stamp;   ///< round in which a face was counted as colliding
+    std::vector<std::uint32_t> face_slot;    ///< its index in `faces`
+    std::vector<std::uint32_t> faces;        ///< distinct colliding faces this round
+    std::vector<Vec3> normals;               ///< their unit normals, object-local (zero: degenerate)
+    Memory memory;                           ///< last round's deepest vertices
     bool sized_for(const Mesh& m) const { return mesh == &m && nv == m.local.size() && nf == m.faces.size(); }
-    void reset(const Mesh& m);                  ///< builds vf and sizes the state for m
-    void clear_stamps();                        ///< after the round counter wrapped
-    std::size_t bytes() const;                  ///< memory held
+    void reset(const Mesh& m);  ///< builds vf and sizes the state for m
+    void clear_stamps();        ///< after the round counter wrapped
+    std::size_t bytes() const;  ///< memory held
   };
 
   ContactConfig config;
-  BodyState probe_s, object_s;            ///< per-mesh data (prepare()) and per-round state
+  BodyState probe_s, object_s;  ///< per-mesh data (prepare()) and per-round state
   // History.
-  bool have_prev = false;                 ///< prev_n is the last model's FD
+  bool have_prev = false;  ///< prev_n is the last model's FD
   Vec3 prev_n{Vec3::Zero()};
-  bool held_valid = false;                ///< a contact plane to hold
-  Vec3 held_n{Vec3::Zero()};              ///< its normal
-  Vec3 held_point{Vec3::Zero()};          ///< a point of it, object-local, mm
-  Vec3 held_tracked{Vec3::Zero()};        ///< the probe point held against it, probe-local, mm
-  double held_radius = 0;                 ///< the patch footprint around held_point, mm
+  bool held_valid = false;          ///< a contact plane to hold
+  Vec3 held_n{Vec3::Zero()};        ///< its normal
+  Vec3 held_point{Vec3::Zero()};    ///< a point of it, object-local, mm
+  Vec3 held_tracked{Vec3::Zero()};  ///< the probe point held against it, probe-local, mm
+  double held_radius = 0;           ///< the patch footprint around held_point, mm
   // Scratch.
   std::vector<ContactPair> valid;
-  std::vector<Vec3> probe_world;          ///< probe vertices, object-local (valid where stamped)
-  std::vector<Vec3> curve;                ///< intersection segment end points, object-local
-  std::vector<std::uint32_t> probe_xform_stamp;  ///< round in which probe_world[v] was computed
-  std::uint32_t climb_serial = 0;         ///< climbs so far (path stamps)
-  Eigen::Matrix3d rot{Eigen::Matrix3d::Identity()};  ///< this round's pose rotation
-  Vec3 shift{Vec3::Zero()};               ///< and translation, probe-local → object-local
+  std::vector<Vec3> probe_world;                                ///< probe vertices, object-local (valid where stamped)
+  std::vector<Vec3> curve;                                      ///< intersection segment end points, object-local
+  std::vector<std::uint32_t> probe_xform_stamp;                 ///< round in which probe_world[v] was computed
+  std::uint32_t climb_serial = 0;                               ///< climbs so far (path stamps)
+  Eigen::Matrix3d rot{Eigen::Matrix3d::Identity()};             ///< this round's pose rotation
+  Vec3 shift{Vec3::Zero()};                                     ///< and translation, probe-local → object-local
   const Vec3& probe_point(std::uint32_t v, const Mesh& probe);  ///< probe vertex v, object-local
   std::uint32_t epoch = 0;
-  std::vector<std::uint32_t> climb;        ///< scratch: vertices to climb from
+  std::vector<std::uint32_t> climb;  ///< scratch: vertices to climb from
 };
 
 }  // namespace st::geom

@@ -15,14 +15,20 @@ Box Mesh::local_bounds() const {
 
 Box Mesh::bounds() const {
   Box b = local_bounds();
-  if (!b.empty()) { b.lo += origin; b.hi += origin; }
+  if (!b.empty()) {
+    b.lo += origin;
+    b.hi += origin;
+  }
   return b;
 }
 
 Topology Mesh::topology() const {
   // One record per directed half-edge, keyed by its undirected edge; sorting groups the uses
   // of each edge together (no hash map: deterministic and cache-friendly).
-  struct Half { std::uint64_t key; bool forward; };
+  struct Half {
+    std::uint64_t key;
+    bool forward;
+  };
   std::vector<Half> halves;
   halves.reserve(faces.size() * 3);
   for (const Tri& f : faces) {
@@ -40,9 +46,12 @@ Topology Mesh::topology() const {
     std::size_t j = i;
     while (j < halves.size() && halves[j].key == halves[i].key) ++j;
     const std::size_t uses = j - i;
-    if (uses == 1) ++t.boundary_edges;
-    else if (uses > 2) ++t.nonmanifold_edges;
-    else if (halves[i].forward == halves[i + 1].forward) ++t.misoriented_edges;
+    if (uses == 1)
+      ++t.boundary_edges;
+    else if (uses > 2)
+      ++t.nonmanifold_edges;
+    else if (halves[i].forward == halves[i + 1].forward)
+      ++t.misoriented_edges;
     i = j;
   }
   return t;
@@ -55,7 +64,10 @@ std::vector<std::uint32_t> Mesh::degenerate_faces() const {
   std::vector<std::uint32_t> out;
   for (std::uint32_t i = 0; i < faces.size(); ++i) {
     const Tri& f = faces[i];
-    if (f[0] == f[1] || f[1] == f[2] || f[0] == f[2]) { out.push_back(i); continue; }
+    if (f[0] == f[1] || f[1] == f[2] || f[0] == f[2]) {
+      out.push_back(i);
+      continue;
+    }
     const Vec3 e1 = local[f[1]] - local[f[0]], e2 = local[f[2]] - local[f[0]];
     const double lim = 8 * DBL_EPSILON * e1.norm() * e2.norm();
     if (!(e1.cross(e2).norm() > lim)) out.push_back(i);

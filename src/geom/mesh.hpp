@@ -26,35 +26,38 @@ using Tri = std::array<std::uint32_t, 3>;
 struct Box {
   Vec3 lo{Vec3::Constant(std::numeric_limits<double>::infinity())};   ///< minimum corner
   Vec3 hi{Vec3::Constant(-std::numeric_limits<double>::infinity())};  ///< maximum corner
-  void grow(const Vec3& p) { lo = lo.cwiseMin(p); hi = hi.cwiseMax(p); }  ///< include a point
-  bool empty() const { return !(lo.x() <= hi.x()); }                      ///< no point yet
-  Vec3 centre() const { return 0.5 * (lo + hi); }                         ///< midpoint
-  double diagonal() const { return empty() ? 0.0 : (hi - lo).norm(); }   ///< length of the diagonal, mm
+  void grow(const Vec3& p) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }                                                                     ///< include a point
+  bool empty() const { return !(lo.x() <= hi.x()); }                    ///< no point yet
+  Vec3 centre() const { return 0.5 * (lo + hi); }                       ///< midpoint
+  double diagonal() const { return empty() ? 0.0 : (hi - lo).norm(); }  ///< length of the diagonal, mm
 };
 
 /// Edge-topology facts about a mesh, computed by Mesh::topology().
 struct Topology {
-  std::size_t boundary_edges = 0;       ///< edges used by exactly one face (open surface)
-  std::size_t nonmanifold_edges = 0;    ///< edges used by three or more faces
-  std::size_t misoriented_edges = 0;    ///< manifold edges whose two faces traverse them the same way
-  bool closed() const { return boundary_edges == 0; }                                  ///< watertight
+  std::size_t boundary_edges = 0;                      ///< edges used by exactly one face (open surface)
+  std::size_t nonmanifold_edges = 0;                   ///< edges used by three or more faces
+  std::size_t misoriented_edges = 0;                   ///< manifold edges whose two faces traverse them the same way
+  bool closed() const { return boundary_edges == 0; }  ///< watertight
   bool manifold() const { return nonmanifold_edges == 0 && misoriented_edges == 0; }  ///< 2-manifold, oriented
 };
 
 /// Indexed triangle mesh of one body. Face index = position in the input file.
 struct Mesh {
-  std::string name;              ///< where it came from (file path or generator), for messages
-  Vec3 origin{Vec3::Zero()};     ///< body centre in the body's frame, mm
-  std::vector<Vec3> local;       ///< vertex positions relative to origin, mm
-  std::vector<Tri> faces;        ///< vertex indices, counter-clockwise seen from outside
+  std::string name;           ///< where it came from (file path or generator), for messages
+  Vec3 origin{Vec3::Zero()};  ///< body centre in the body's frame, mm
+  std::vector<Vec3> local;    ///< vertex positions relative to origin, mm
+  std::vector<Tri> faces;     ///< vertex indices, counter-clockwise seen from outside
 
-  std::size_t num_faces() const { return faces.size(); }                 ///< triangle count
-  std::size_t num_vertices() const { return local.size(); }              ///< vertex count
-  Vec3 vertex(std::uint32_t i) const { return origin + local[i]; }       ///< position in the body's frame
-  Box local_bounds() const;                                              ///< bounds of `local`
-  Box bounds() const;                                                    ///< bounds in the body's frame
-  Topology topology() const;                                             ///< edge counts (O(F log F))
-  std::vector<std::uint32_t> degenerate_faces() const;                   ///< zero-area faces, ascending
+  std::size_t num_faces() const { return faces.size(); }            ///< triangle count
+  std::size_t num_vertices() const { return local.size(); }         ///< vertex count
+  Vec3 vertex(std::uint32_t i) const { return origin + local[i]; }  ///< position in the body's frame
+  Box local_bounds() const;                                         ///< bounds of `local`
+  Box bounds() const;                                               ///< bounds in the body's frame
+  Topology topology() const;                                        ///< edge counts (O(F log F))
+  std::vector<std::uint32_t> degenerate_faces() const;              ///< zero-area faces, ascending
   /// Re-centres the body: origin becomes the bounding-box centre, snapped so that subtracting it
   /// from every vertex is exact where the coordinates allow (see mesh.cpp).
   void recentre();

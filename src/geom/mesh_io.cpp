@@ -77,8 +77,7 @@ void fan(const std::vector<std::uint32_t>& poly, std::vector<Tri>& faces, LoadRe
   for (std::size_t k = 1; k + 1 < poly.size(); ++k) faces.push_back({poly[0], poly[k], poly[k + 1]});
 }
 
-Result<LoadedMesh> finish(const std::string& name, const std::vector<Vec3>& pos, std::vector<Tri> faces,
-                          LoadReport rep) {
+Result<LoadedMesh> finish(const std::string& name, const std::vector<Vec3>& pos, std::vector<Tri> faces, LoadReport rep) {
   LoadedMesh out{make_mesh(name, pos, std::move(faces)), std::move(rep)};
   if (Status s = out.mesh.validate(); !s) return Error{s.error()};
   out.report.degenerate = out.mesh.degenerate_faces();
@@ -110,7 +109,8 @@ Result<LoadedMesh> load_mesh(const std::string& path, const LoadOptions& options
   const auto t0 = std::chrono::steady_clock::now();
   Result<double> unit = unit_to_mm(options.units);
   if (!unit) return fail(path, ": ", unit.error());
-  if (!std::isfinite(options.scale) || options.scale <= 0) return fail(path, ": scale ", options.scale, " must be finite and positive");
+  if (!std::isfinite(options.scale) || options.scale <= 0)
+    return fail(path, ": scale ", options.scale, " must be finite and positive");
   std::ifstream probe(path);
   if (!probe) return fail(path, ": cannot open (", std::strerror(errno), ")");
   probe.close();
@@ -122,7 +122,8 @@ Result<LoadedMesh> load_mesh(const std::string& path, const LoadOptions& options
     r = parse_mesh(text.value(), ext, path);
   } else {
     if (ext.empty() || !assimp_reads(ext))
-      return fail(path, ": unknown mesh format '", ext, "' (expected .off, .obj, .ply, .stl, .gltf, .glb or another assimp format)");
+      return fail(path, ": unknown mesh format '", ext,
+                  "' (expected .off, .obj, .ply, .stl, .gltf, .glb or another assimp format)");
     r = load_with_assimp(path, options);
   }
   if (!r) return r;

@@ -29,14 +29,14 @@ struct LoadOptions {
 
 /// What the loader did, for `spheretouch info` and logs.
 struct LoadReport {
-  std::string reader;                    ///< which path read the file (ours or assimp's importer)
-  std::string precision;                 ///< "double" (ours) or "float" (assimp's ai_real)
-  std::size_t polygons = 0;              ///< polygons in the file
-  std::size_t fanned_polygons = 0;       ///< polygons with more than 3 corners, fan-triangulated
-  std::size_t skipped_primitives = 0;    ///< points and lines in the file (not surfaces; ignored)
-  std::size_t welded_vertices = 0;       ///< exact duplicate vertices merged (assimp path only)
-  std::vector<std::uint32_t> degenerate; ///< zero-area faces (kept, see DEGENERATE_POLICY)
-  double seconds = 0;                    ///< wall time to read and build the mesh
+  std::string reader;                     ///< which path read the file (ours or assimp's importer)
+  std::string precision;                  ///< "double" (ours) or "float" (assimp's ai_real)
+  std::size_t polygons = 0;               ///< polygons in the file
+  std::size_t fanned_polygons = 0;        ///< polygons with more than 3 corners, fan-triangulated
+  std::size_t skipped_primitives = 0;     ///< points and lines in the file (not surfaces; ignored)
+  std::size_t welded_vertices = 0;        ///< exact duplicate vertices merged (assimp path only)
+  std::vector<std::uint32_t> degenerate;  ///< zero-area faces (kept, see DEGENERATE_POLICY)
+  double seconds = 0;                     ///< wall time to read and build the mesh
 };
 
 /// Degenerate (zero-area) faces are kept where they are: they take part in collision as the

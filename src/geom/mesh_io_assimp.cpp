@@ -82,7 +82,10 @@ AssimpOut read_with_assimp(const std::string& path, bool allow_external) {
     out.error = st::fail(path, ": assimp could not read it: ", importer.GetErrorString()).message;
     if (!io->refused.empty())
       out.error += st::fail(" (it refers to '", io->refused, "': files other than the mesh are not opened",
-                            allow_external ? " outside its directory" : "; LoadOptions::allow_external_files opens those in its directory", ")").message;
+                            allow_external ? " outside its directory"
+                                           : "; LoadOptions::allow_external_files opens those in its directory",
+                            ")")
+                       .message;
     return out;
   }
   LoadReport rep;
@@ -93,7 +96,10 @@ AssimpOut read_with_assimp(const std::string& path, bool allow_external) {
   std::vector<std::uint32_t> poly;
   // Depth-first over the node tree in child order: meshes in the order nodes reference them,
   // each with its accumulated node transform (applied in double).
-  struct Item { const aiNode* node; Eigen::Matrix4d xf; };
+  struct Item {
+    const aiNode* node;
+    Eigen::Matrix4d xf;
+  };
   std::vector<Item> stack{{scene->mRootNode, Eigen::Matrix4d::Identity()}};
   while (!stack.empty()) {
     Item it = stack.back();
@@ -112,12 +118,16 @@ AssimpOut read_with_assimp(const std::string& path, bool allow_external) {
       }
       for (unsigned f = 0; f < mesh->mNumFaces; ++f) {
         const aiFace& face = mesh->mFaces[f];
-        if (face.mNumIndices < 3) { ++rep.skipped_primitives; continue; }
+        if (face.mNumIndices < 3) {
+          ++rep.skipped_primitives;
+          continue;
+        }
         poly.clear();
         for (unsigned k = 0; k < face.mNumIndices; ++k) {
           if (face.mIndices[k] >= mesh->mNumVertices) {
-            out.error = st::fail(path, ": mesh ", mi, " face ", f, ": vertex index ", face.mIndices[k], " out of range [0, ",
-                                 mesh->mNumVertices, ")").message;
+            out.error = st::fail(path, ": mesh ", mi, " face ", f, ": vertex index ", face.mIndices[k],
+                                 " out of range [0, ", mesh->mNumVertices, ")")
+                            .message;
             return out;
           }
           poly.push_back(remap[face.mIndices[k]]);
@@ -178,9 +188,7 @@ bool read_all(int fd, void* data, std::size_t n) {
   try {
     out = read_with_assimp(path, o.allow_external_files);
     status = out.error.empty() ? 0 : 1;
-  } catch (const std::bad_alloc&) {
-    out.error = "out of memory";
-  } catch (const std::exception& e) {
+  } catch (const std::bad_alloc&) { out.error = "out of memory"; } catch (const std::exception& e) {
     out.error = e.what();
   }
   bool ok = write_all(fd, &status, 1);
@@ -188,8 +196,8 @@ bool read_all(int fd, void* data, std::size_t n) {
     const std::uint64_t n = out.error.size();
     ok = ok && write_all(fd, &n, 8) && write_all(fd, out.error.data(), n);
   } else {
-    const std::uint64_t head[6] = {out.rep.polygons, out.rep.fanned_polygons, out.rep.skipped_primitives,
-                                   out.rep.welded_vertices, out.pos.size(), out.faces.size()};
+    const std::uint64_t head[6] = {out.rep.polygons,        out.rep.fanned_polygons, out.rep.skipped_primitives,
+                                   out.rep.welded_vertices, out.pos.size(),          out.faces.size()};
     ok = ok && write_all(fd, head, sizeof head);
     for (const Vec3& v : out.pos) ok = ok && write_all(fd, v.data(), 3 * sizeof(double));
     ok = ok && write_all(fd, out.faces.data(), out.faces.size() * sizeof(Tri));
@@ -208,8 +216,9 @@ Result<LoadedMesh> detail::load_with_assimp(const std::string& path, const LoadO
   std::uint64_t input = ec ? 0 : file_bytes;
   if (o.allow_external_files) {  // buffers beside it count towards what it may allocate
     for (const auto& e : std::filesystem::directory_iterator(std::filesystem::path(path).parent_path().empty()
-                                                                  ? std::filesystem::path(".")
-                                                                  : std::filesystem::path(path).parent_path(), ec))
+                                                                 ? std::filesystem::path(".")
+                                                                 : std::filesystem::path(path).parent_path(),
+                                                             ec))
       if (e.is_regular_file(ec)) input += e.file_size(ec);
   }
   const std::uint64_t budget = (std::uint64_t(o.assimp_memory_floor_mb) << 20) + o.assimp_memory_per_byte * input;
@@ -261,16 +270,19 @@ Result<LoadedMesh> detail::load_with_assimp(const std::string& path, const LoadO
   }
   ::close(fd);
   int ws = 0;
-  while (::waitpid(pid, &ws, 0) < 0 && errno == EINTR) {
-  }
+  while (::waitpid(pid, &ws, 0) < 0 && errno == EINTR) {}
   if (WIFSIGNALED(ws)) {
     const int sig = WTERMSIG(ws);
     if (sig == SIGXCPU || sig == SIGKILL)
-      return fail(path, ": assimp took more than ", o.assimp_cpu_seconds, " s of CPU reading it (LoadOptions::assimp_cpu_seconds)");
+      return fail(path, ": assimp took more than ", o.assimp_cpu_seconds,
+                  " s of CPU reading it (LoadOptions::assimp_cpu_seconds)");
     if (sig == SIGABRT)  // assimp's own abort, or a sanitizer build's allocator refusing past the budget
-      return fail(path, ": assimp aborted reading it (signal ", sig, ", ", strsignal(sig), "): the file is malformed or "
-                  "hostile, or needed more than its budget of ", budget >> 20, " MiB (sanitizer builds abort there)");
-    return fail(path, ": assimp crashed reading it (signal ", sig, ", ", strsignal(sig), "); the file is malformed or hostile");
+      return fail(path, ": assimp aborted reading it (signal ", sig, ", ", strsignal(sig),
+                  "): the file is malformed or "
+                  "hostile, or needed more than its budget of ",
+                  budget >> 20, " MiB (sanitizer builds abort there)");
+    return fail(path, ": assimp crashed reading it (signal ", sig, ", ", strsignal(sig),
+                "); the file is malformed or hostile");
   }
   if (result.ok() || status == 0 || !got) {
     if (!got || !WIFEXITED(ws) || WEXITSTATUS(ws) != 0)

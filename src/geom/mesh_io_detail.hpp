@@ -72,8 +72,7 @@ std::string quote(std::string_view t);
 /// Appends the fan triangulation of one polygon, (v0, vk, vk+1), to `faces`.
 void fan(const std::vector<std::uint32_t>& poly, std::vector<Tri>& faces, LoadReport& rep);
 
-Result<LoadedMesh> finish(const std::string& name, const std::vector<Vec3>& pos, std::vector<Tri> faces,
-                          LoadReport rep);
+Result<LoadedMesh> finish(const std::string& name, const std::vector<Vec3>& pos, std::vector<Tri> faces, LoadReport rep);
 
 /// Welds exact-duplicate vertices (formats like STL repeat them per face), so closedness and
 /// subdivision see the real topology; +0 and -0 weld together. Welding never reorders faces.
@@ -87,7 +86,7 @@ class Welder {
     return slot->second;
   }
   const std::vector<Vec3>& positions() const { return pos_; }  ///< distinct vertices, first-seen order
-  std::size_t welded() const { return raw_ - pos_.size(); }     ///< duplicates merged
+  std::size_t welded() const { return raw_ - pos_.size(); }    ///< duplicates merged
 
  private:
   struct Hash {

@@ -30,8 +30,8 @@ Result<LoadedMesh> parse_off(std::string_view text, const std::string& name) {
   // Counts are checked against the file size before anything is reserved: a vertex needs at
   // least 6 bytes of text ("0 0 0\n"), a face at least 8.
   if (std::size_t(nv) > text.size() / 6 + 1 || std::size_t(nf) > text.size() / 8 + 1)
-    return fail_at_line(name, lines.line_no(), ": counts ", nv, " vertices, ", nf, " faces exceed what a ",
-                text.size(), "-byte file can hold");
+    return fail_at_line(name, lines.line_no(), ": counts ", nv, " vertices, ", nf, " faces exceed what a ", text.size(),
+                        "-byte file can hold");
   LoadReport rep;
   rep.reader = "spheretouch OFF reader";
   rep.precision = "double (correctly rounded)";
@@ -44,8 +44,10 @@ Result<LoadedMesh> parse_off(std::string_view text, const std::string& name) {
     for (int k = 0; k < 3; ++k) {
       const std::string_view t = token(rest);
       if (t.empty()) return fail_at_line(name, lines.line_no(), ": vertex ", i, ": expected 3 coordinates, found ", k);
-      if (!to_double(t, p[k])) return fail_at_line(name, lines.line_no(), ": vertex ", i, ": ", quote(t), " is not a number");
-      if (!std::isfinite(p[k])) return fail_at_line(name, lines.line_no(), ": vertex ", i, ": coordinate ", quote(t), " is not finite");
+      if (!to_double(t, p[k]))
+        return fail_at_line(name, lines.line_no(), ": vertex ", i, ": ", quote(t), " is not a number");
+      if (!std::isfinite(p[k]))
+        return fail_at_line(name, lines.line_no(), ": vertex ", i, ": coordinate ", quote(t), " is not finite");
     }
     pos.push_back(p);
   }
@@ -57,15 +59,19 @@ Result<LoadedMesh> parse_off(std::string_view text, const std::string& name) {
     rest = line;
     long long n = 0;
     const std::string_view tn = token(rest);
-    if (!to_int(tn, n)) return fail_at_line(name, lines.line_no(), ": face ", i, ": expected a corner count, found ", quote(tn));
+    if (!to_int(tn, n))
+      return fail_at_line(name, lines.line_no(), ": face ", i, ": expected a corner count, found ", quote(tn));
     if (n < 3) return fail_at_line(name, lines.line_no(), ": face ", i, ": has ", n, " corners (expected at least 3)");
-    if (std::size_t(n) > line.size()) return fail_at_line(name, lines.line_no(), ": face ", i, ": corner count ", n, " exceeds the line");
+    if (std::size_t(n) > line.size())
+      return fail_at_line(name, lines.line_no(), ": face ", i, ": corner count ", n, " exceeds the line");
     poly.clear();
     for (long long k = 0; k < n; ++k) {
       const std::string_view t = token(rest);
       long long v = -1;
-      if (t.empty()) return fail_at_line(name, lines.line_no(), ": face ", i, ": expected ", n, " vertex indices, found ", k);
-      if (!to_int(t, v)) return fail_at_line(name, lines.line_no(), ": face ", i, ": index ", quote(t), " is not an integer");
+      if (t.empty())
+        return fail_at_line(name, lines.line_no(), ": face ", i, ": expected ", n, " vertex indices, found ", k);
+      if (!to_int(t, v))
+        return fail_at_line(name, lines.line_no(), ": face ", i, ": index ", quote(t), " is not an integer");
       if (v < 0 || v >= nv)
         return fail_at_line(name, lines.line_no(), ": face ", i, ": vertex index ", v, " out of range [0, ", nv, ")");
       poly.push_back(static_cast<std::uint32_t>(v));

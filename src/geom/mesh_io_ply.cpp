@@ -32,11 +32,20 @@ PlyType ply_type(std::string_view t) {
 
 std::size_t ply_size(PlyType t) {
   switch (t) {
-    case PlyType::I8: case PlyType::U8: return 1;
-    case PlyType::I16: case PlyType::U16: return 2;
-    case PlyType::I32: case PlyType::U32: case PlyType::F32: return 4;
-    case PlyType::F64: return 8;
-    case PlyType::Unknown: break;
+    case PlyType::I8:
+    case PlyType::U8:
+      return 1;
+    case PlyType::I16:
+    case PlyType::U16:
+      return 2;
+    case PlyType::I32:
+    case PlyType::U32:
+    case PlyType::F32:
+      return 4;
+    case PlyType::F64:
+      return 8;
+    case PlyType::Unknown:
+      break;
   }
   return 0;
 }
@@ -59,15 +68,50 @@ class PlyBinary {
     static_assert(std::endian::native == std::endian::little, "PlyBinary swaps big-endian data only");
     if (big_) std::reverse(b, b + n);
     switch (t) {
-      case PlyType::I8: { std::int8_t v; std::memcpy(&v, b, 1); out = v; break; }
-      case PlyType::U8: out = b[0]; break;
-      case PlyType::I16: { std::int16_t v; std::memcpy(&v, b, 2); out = v; break; }
-      case PlyType::U16: { std::uint16_t v; std::memcpy(&v, b, 2); out = v; break; }
-      case PlyType::I32: { std::int32_t v; std::memcpy(&v, b, 4); out = v; break; }
-      case PlyType::U32: { std::uint32_t v; std::memcpy(&v, b, 4); out = v; break; }
-      case PlyType::F32: { float v; std::memcpy(&v, b, 4); out = v; break; }
-      case PlyType::F64: std::memcpy(&out, b, 8); break;
-      case PlyType::Unknown: return false;
+      case PlyType::I8: {
+        std::int8_t v;
+        std::memcpy(&v, b, 1);
+        out = v;
+        break;
+      }
+      case PlyType::U8:
+        out = b[0];
+        break;
+      case PlyType::I16: {
+        std::int16_t v;
+        std::memcpy(&v, b, 2);
+        out = v;
+        break;
+      }
+      case PlyType::U16: {
+        std::uint16_t v;
+        std::memcpy(&v, b, 2);
+        out = v;
+        break;
+      }
+      case PlyType::I32: {
+        std::int32_t v;
+        std::memcpy(&v, b, 4);
+        out = v;
+        break;
+      }
+      case PlyType::U32: {
+        std::uint32_t v;
+        std::memcpy(&v, b, 4);
+        out = v;
+        break;
+      }
+      case PlyType::F32: {
+        float v;
+        std::memcpy(&v, b, 4);
+        out = v;
+        break;
+      }
+      case PlyType::F64:
+        std::memcpy(&out, b, 8);
+        break;
+      case PlyType::Unknown:
+        return false;
     }
     return true;
   }
@@ -86,8 +130,16 @@ Result<LoadedMesh> parse_ply(std::string_view text, const std::string& name) {
   Lines lines(text);
   std::string_view line;
   if (!lines.next(line, false) || line != "ply") return fail(name, ":1: expected the 'ply' magic line");
-  struct Property { std::string name; bool list = false; PlyType type = PlyType::Unknown, count_type = PlyType::Unknown; };
-  struct Element { std::string name; long long count = 0; std::vector<Property> props; };
+  struct Property {
+    std::string name;
+    bool list = false;
+    PlyType type = PlyType::Unknown, count_type = PlyType::Unknown;
+  };
+  struct Element {
+    std::string name;
+    long long count = 0;
+    std::vector<Property> props;
+  };
   std::vector<Element> elements;
   enum class Format { None, Ascii, Little, Big } format = Format::None;
   for (;;) {
@@ -98,17 +150,25 @@ Result<LoadedMesh> parse_ply(std::string_view text, const std::string& name) {
     if (kw == "comment" || kw == "obj_info") continue;
     if (kw == "format") {
       const std::string_view f = token(rest);
-      if (f == "ascii") format = Format::Ascii;
-      else if (f == "binary_little_endian") format = Format::Little;
-      else if (f == "binary_big_endian") format = Format::Big;
-      else return fail_at_line(name, lines.line_no(), ": format ", quote(f), " is not ascii, binary_little_endian or binary_big_endian");
+      if (f == "ascii")
+        format = Format::Ascii;
+      else if (f == "binary_little_endian")
+        format = Format::Little;
+      else if (f == "binary_big_endian")
+        format = Format::Big;
+      else
+        return fail_at_line(name, lines.line_no(), ": format ", quote(f),
+                            " is not ascii, binary_little_endian or binary_big_endian");
     } else if (kw == "element") {
       Element e;
       e.name = std::string(token(rest));
       const std::string_view c = token(rest);
       if (!to_int(c, e.count) || e.count < 0)
-        return fail_at_line(name, lines.line_no(), ": element '", e.name, "': count ", quote(c), " is not a non-negative integer");
-      if (std::size_t(e.count) > text.size()) return fail_at_line(name, lines.line_no(), ": element '", e.name, "': count ", e.count, " exceeds the file size");
+        return fail_at_line(name, lines.line_no(), ": element '", e.name, "': count ", quote(c),
+                            " is not a non-negative integer");
+      if (std::size_t(e.count) > text.size())
+        return fail_at_line(name, lines.line_no(), ": element '", e.name, "': count ", e.count,
+                            " exceeds the file size");
       elements.push_back(std::move(e));
     } else if (kw == "property") {
       if (elements.empty()) return fail_at_line(name, lines.line_no(), ": property before any element");
@@ -156,7 +216,8 @@ Result<LoadedMesh> parse_ply(std::string_view text, const std::string& name) {
     }
   };
   auto where = [&]() {
-    return binary ? name + ": byte " + std::to_string(body_at + bin.offset()) : name + ":" + std::to_string(lines.line_no());
+    return binary ? name + ": byte " + std::to_string(body_at + bin.offset())
+                  : name + ":" + std::to_string(lines.line_no());
   };
   // Next value of type `type` as a double; for ASCII `integer` asks for an integer token.
   // Returns an empty string, or what went wrong.
@@ -195,8 +256,8 @@ Result<LoadedMesh> parse_ply(std::string_view text, const std::string& name) {
       std::size_t min_bytes = 0;
       for (const Property& p : e.props) min_bytes += p.list ? ply_size(p.count_type) : ply_size(p.type);
       if (std::size_t(e.count) > bin.left() / min_bytes)
-        return fail(where(), ": element '", e.name, "': ", e.count, " items of at least ", min_bytes, " bytes do not fit in the ",
-                    bin.left(), " bytes left");
+        return fail(where(), ": element '", e.name, "': ", e.count, " items of at least ", min_bytes,
+                    " bytes do not fit in the ", bin.left(), " bytes left");
     }
     if (is_vertex) pos.reserve(pos.size() + std::size_t(e.count));
     for (long long i = 0; i < e.count; ++i) {
@@ -208,10 +269,12 @@ Result<LoadedMesh> parse_ply(std::string_view text, const std::string& name) {
           std::string why = next_value(prop.count_type, true, d);
           if (why == "end") return fail(name, ": file ends inside element '", e.name, "' ", i, " of ", e.count);
           if (!why.empty() || d < 0 || d > double(text.size()))
-            return fail(where(), ": ", e.name, " ", i, ": list length ", why.empty() ? std::to_string(static_cast<long long>(d)) : why, " is not valid");
+            return fail(where(), ": ", e.name, " ", i, ": list length ",
+                        why.empty() ? std::to_string(static_cast<long long>(d)) : why, " is not valid");
           const auto n = static_cast<std::size_t>(d);
           if (binary && n > bin.left() / ply_size(prop.type))
-            return fail(where(), ": ", e.name, " ", i, ": list of ", n, " values does not fit in the ", bin.left(), " bytes left");
+            return fail(where(), ": ", e.name, " ", i, ": list of ", n, " values does not fit in the ", bin.left(),
+                        " bytes left");
           const bool indices = is_face && (prop.name == "vertex_indices" || prop.name == "vertex_index");
           if (binary && indices && !ply_integral(prop.type))
             return fail(where(), ": face ", i, ": vertex indices of a floating-point type");
@@ -222,11 +285,13 @@ Result<LoadedMesh> parse_ply(std::string_view text, const std::string& name) {
             if (!indices) continue;
             if (!why.empty()) return fail(where(), ": face ", i, ": index ", why);
             if (!vertices_done || d < 0 || d >= static_cast<double>(pos.size()))
-              return fail(where(), ": face ", i, ": vertex index ", static_cast<long long>(d), " out of range [0, ", pos.size(), ")");
+              return fail(where(), ": face ", i, ": vertex index ", static_cast<long long>(d), " out of range [0, ",
+                          pos.size(), ")");
             poly.push_back(static_cast<std::uint32_t>(d));
           }
           if (indices) {
-            if (poly.size() < 3) return fail(where(), ": face ", i, ": has ", poly.size(), " corners (expected at least 3)");
+            if (poly.size() < 3)
+              return fail(where(), ": face ", i, ": has ", poly.size(), " corners (expected at least 3)");
             fan(poly, faces, rep);
           }
         } else {

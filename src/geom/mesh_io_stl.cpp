@@ -35,7 +35,9 @@ Result<LoadedMesh> parse_stl(std::string_view bytes, const std::string& name) {
         poly.clear();
         for (int k = 0; k < 3; ++k) {
           const Vec3 q(c[3 * k], c[3 * k + 1], c[3 * k + 2]);
-          if (!q.allFinite()) return fail(name, ": facet ", f, " (byte ", 84 + 50 * std::size_t{f} + 12 + 12 * k, "): vertex ", k, " is not finite");
+          if (!q.allFinite())
+            return fail(name, ": facet ", f, " (byte ", 84 + 50 * std::size_t{f} + 12 + 12 * k, "): vertex ", k,
+                        " is not finite");
           poly.push_back(weld.add(q));
         }
         fan(poly, faces, rep);
@@ -71,7 +73,10 @@ Result<LoadedMesh> parse_stl(std::string_view bytes, const std::string& name) {
         at = At::Solid;
         break;
       case At::Solid:
-        if (kw == "endsolid") { at = At::Outside; break; }
+        if (kw == "endsolid") {
+          at = At::Outside;
+          break;
+        }
         if (kw != "facet") return expected("'facet' or 'endsolid'");
         if (const std::string_view n = token(rest); !n.empty()) {
           if (n != "normal") return expected("'facet normal NX NY NZ'");
@@ -89,7 +94,9 @@ Result<LoadedMesh> parse_stl(std::string_view bytes, const std::string& name) {
         break;
       case At::Loop:
         if (kw == "endloop") {
-          if (poly.size() < 3) return fail_at_line(name, lines.line_no(), ": facet ", facet, ": has ", poly.size(), " vertices (expected at least 3)");
+          if (poly.size() < 3)
+            return fail_at_line(name, lines.line_no(), ": facet ", facet, ": has ", poly.size(),
+                                " vertices (expected at least 3)");
           fan(poly, faces, rep);
           at = At::EndLoop;
           break;
@@ -99,8 +106,10 @@ Result<LoadedMesh> parse_stl(std::string_view bytes, const std::string& name) {
           Vec3 q;
           for (int k = 0; k < 3; ++k) {
             const std::string_view t = token(rest);
-            if (!to_double(t, q[k])) return fail_at_line(name, lines.line_no(), ": facet ", facet, ": ", quote(t), " is not a number");
-            if (!std::isfinite(q[k])) return fail_at_line(name, lines.line_no(), ": facet ", facet, ": coordinate ", quote(t), " is not finite");
+            if (!to_double(t, q[k]))
+              return fail_at_line(name, lines.line_no(), ": facet ", facet, ": ", quote(t), " is not a number");
+            if (!std::isfinite(q[k]))
+              return fail_at_line(name, lines.line_no(), ": facet ", facet, ": coordinate ", quote(t), " is not finite");
           }
           poly.push_back(weld.add(q));
         }

@@ -34,7 +34,10 @@ SubtreeExtent subtree_extent(const SphereTree& tree, std::uint32_t root) {
   const SphereNode& h = tree.nodes[root];
   const SphereNodeCold& c = tree.cold[root];
   SubtreeExtent e{root, 0, 0, c.face_begin, c.face_end};
-  if (!h.leaf) { e.desc_begin = h.first; e.desc_end = c.desc_end; }
+  if (!h.leaf) {
+    e.desc_begin = h.first;
+    e.desc_end = c.desc_end;
+  }
   return e;
 }
 

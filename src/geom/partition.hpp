@@ -12,16 +12,16 @@ namespace st::geom {
 
 /// The blocks of one layer and their owners. Every face is below exactly one block node.
 struct Partition {
-  std::uint32_t layer = 0;       ///< sphere layer n that was distributed
-  std::uint32_t workers = 1;     ///< W
-  std::uint32_t block_size = 1;  ///< B, layer nodes per block
+  std::uint32_t layer = 0;                 ///< sphere layer n that was distributed
+  std::uint32_t workers = 1;               ///< W
+  std::uint32_t block_size = 1;            ///< B, layer nodes per block
   std::vector<std::uint32_t> layer_nodes;  ///< SphereTree::layer(n)
 
   std::uint32_t num_blocks() const {  ///< ceil(|layer| / B)
     return static_cast<std::uint32_t>((layer_nodes.size() + block_size - 1) / block_size);
   }
   std::uint32_t owner(std::uint32_t block) const { return block % workers; }  ///< worker of a block
-  std::span<const std::uint32_t> block(std::uint32_t k) const;  ///< node indices of block k
+  std::span<const std::uint32_t> block(std::uint32_t k) const;                ///< node indices of block k
   /// Subtree roots of worker w (its blocks' nodes, in block order): CollideOptions::object_roots.
   std::vector<std::uint32_t> worker_roots(std::uint32_t w) const;
 };

@@ -51,8 +51,10 @@ inline Eigen::Isometry3d to_eigen(const PodPose& q) {
 inline bool finite(const PodVec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 /// True when every entry is finite.
 inline bool finite(const PodPose& q) {
-  for (double d : q.r) if (!std::isfinite(d)) return false;
-  for (double d : q.t) if (!std::isfinite(d)) return false;
+  for (double d : q.r)
+    if (!std::isfinite(d)) return false;
+  for (double d : q.t)
+    if (!std::isfinite(d)) return false;
   return true;
 }
 

@@ -101,24 +101,20 @@ Result<std::vector<PoseLine>> parse_pose_lines(std::string_view text, std::strin
       double x = 0.0;
       const std::string why = parse_number(tok, x);
       if (!why.empty())
-        return fail(name, ":", line_no, ": value ", count + 1, " (column ", i + 1, ") '", tok,
-                    "' ", why);
+        return fail(name, ":", line_no, ": value ", count + 1, " (column ", i + 1, ") '", tok, "' ", why);
       if (!std::isfinite(x))
-        return fail(name, ":", line_no, ": value ", count + 1, " (column ", i + 1, ") '", tok,
-                    "' is not finite");
+        return fail(name, ":", line_no, ": value ", count + 1, " (column ", i + 1, ") '", tok, "' is not finite");
       if (count < kValues) v[count] = x;
       ++count;
       i = j;
     }
     if (count == 0) continue;  // blank or comment-only line
     if (count != kValues)
-      return fail(name, ":", line_no, ": expected ", kValues,
-                  " numbers (a row-major 4x4 rigid transform), found ", count);
+      return fail(name, ":", line_no, ": expected ", kValues, " numbers (a row-major 4x4 rigid transform), found ", count);
     Pose pose = Pose::Identity();
     for (int r = 0; r < 4; ++r)
       for (int c = 0; c < 4; ++c) pose.matrix()(r, c) = v[4 * r + c];
-    if (const std::string why = check_rigid(pose.matrix()); !why.empty())
-      return fail(name, ":", line_no, ": ", why);
+    if (const std::string why = check_rigid(pose.matrix()); !why.empty()) return fail(name, ":", line_no, ": ", why);
     poses.push_back({pose, std::move(comment)});
     comment.clear();
   }

@@ -106,8 +106,7 @@ void add_product(Expansion<N>& acc, double sign, const Diff& x, const Diff& y) n
 
 /// Adds sign·x·y·z exactly (8 terms, each split into 4 doubles).
 template <int N>
-void add_product(Expansion<N>& acc, double sign, const Diff& x, const Diff& y,
-                 const Diff& z) noexcept {
+void add_product(Expansion<N>& acc, double sign, const Diff& x, const Diff& y, const Diff& z) noexcept {
   for (double xi : x.v) {
     if (xi == 0.0) continue;
     for (double yj : y.v) {
@@ -159,8 +158,7 @@ int orient2d_exact(double ax, double ay, double bx, double by, double cx, double
 }
 
 int orient3d_exact(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) noexcept {
-  double v[12] = {a.x(), a.y(), a.z(), b.x(), b.y(), b.z(),
-                  c.x(), c.y(), c.z(), d.x(), d.y(), d.z()};
+  double v[12] = {a.x(), a.y(), a.z(), b.x(), b.y(), b.z(), c.x(), c.y(), c.z(), d.x(), d.y(), d.z()};
   if (!normalise(v)) return 0;
   Diff e1[3], e2[3], e3[3];
   for (int k = 0; k < 3; ++k) {

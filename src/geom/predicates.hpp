@@ -44,8 +44,7 @@ inline constexpr double kOrient3dAbs = 0x1p-760;
 
 /// orient2d, filtered; exact for every finite input (the filter only needs no overflow, which
 /// shows up as inf/NaN in the bound and sends the call to the exact stage).
-inline int orient2d_filtered(double ax, double ay, double bx, double by, double cx,
-                             double cy) noexcept {
+inline int orient2d_filtered(double ax, double ay, double bx, double by, double cx, double cy) noexcept {
   const double l = (bx - ax) * (cy - ay);
   const double r = (by - ay) * (cx - ax);
   const double det = l - r;
@@ -75,8 +74,7 @@ class PlaneSide {
   int side(const Vec3& d) const noexcept {
     const double e3x = d.x() - a_.x(), e3y = d.y() - a_.y(), e3z = d.z() - a_.z();
     const double det = (e3x * n_[0] + e3y * n_[1]) + e3z * n_[2];
-    const double perm =
-        (std::abs(e3x) * perm_[0] + std::abs(e3y) * perm_[1]) + std::abs(e3z) * perm_[2];
+    const double perm = (std::abs(e3x) * perm_[0] + std::abs(e3y) * perm_[1]) + std::abs(e3z) * perm_[2];
     const double bound = kOrient3dRel * perm + kOrient3dAbs;
     if (det > bound) return 1;
     if (-det > bound) return -1;

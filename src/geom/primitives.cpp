@@ -9,11 +9,11 @@ namespace st::geom {
 
 Mesh make_icosphere(double radius_mm, int frequency) {
   const double p = (1 + std::sqrt(5.0)) / 2;  // golden ratio
-  const Vec3 ico[12] = {{-1, p, 0}, {1, p, 0}, {-1, -p, 0}, {1, -p, 0}, {0, -1, p}, {0, 1, p},
-                        {0, -1, -p}, {0, 1, -p}, {p, 0, -1}, {p, 0, 1}, {-p, 0, -1}, {-p, 0, 1}};
-  const int tri[20][3] = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
+  const Vec3 ico[12] = {{-1, p, 0},  {1, p, 0},  {-1, -p, 0}, {1, -p, 0}, {0, -1, p},  {0, 1, p},
+                        {0, -1, -p}, {0, 1, -p}, {p, 0, -1},  {p, 0, 1},  {-p, 0, -1}, {-p, 0, 1}};
+  const int tri[20][3] = {{0, 11, 5},  {0, 5, 1},  {0, 1, 7},  {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
                           {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
-                          {3, 8, 9},  {4, 9, 5},  {2, 4, 11}, {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
+                          {3, 8, 9},   {4, 9, 5},  {2, 4, 11}, {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
   const int n = std::max(1, frequency);
   std::vector<Vec3> pos;
   std::vector<Tri> faces;
@@ -26,7 +26,10 @@ Mesh make_icosphere(double radius_mm, int frequency) {
     std::array<int, 6> key{};
     int m = 0;
     for (auto& [id, wt] : w)
-      if (wt) { key[m++] = id; key[m++] = wt; }
+      if (wt) {
+        key[m++] = id;
+        key[m++] = wt;
+      }
     auto [it, fresh] = ids.try_emplace(key, static_cast<std::uint32_t>(pos.size()));
     if (fresh) {
       const Vec3 q = (i * ico[a] + j * ico[b] + k * ico[c]) / n;

@@ -16,13 +16,13 @@ struct Error {
 template <class T>
 class [[nodiscard]] Result {
  public:
-  Result(T value) : v_(std::move(value)) {}              ///< success
-  Result(Error error) : v_(std::move(error)) {}          ///< failure
-  bool ok() const { return v_.index() == 0; }            ///< true when a value is held
-  explicit operator bool() const { return ok(); }        ///< same as ok()
-  T& value() & { return std::get<0>(v_); }               ///< the value (must be ok())
-  const T& value() const& { return std::get<0>(v_); }    ///< the value (must be ok())
-  T&& value() && { return std::get<0>(std::move(v_)); }  ///< move the value out
+  Result(T value) : v_(std::move(value)) {}                             ///< success
+  Result(Error error) : v_(std::move(error)) {}                         ///< failure
+  bool ok() const { return v_.index() == 0; }                           ///< true when a value is held
+  explicit operator bool() const { return ok(); }                       ///< same as ok()
+  T& value() & { return std::get<0>(v_); }                              ///< the value (must be ok())
+  const T& value() const& { return std::get<0>(v_); }                   ///< the value (must be ok())
+  T&& value() && { return std::get<0>(std::move(v_)); }                 ///< move the value out
   const std::string& error() const { return std::get<1>(v_).message; }  ///< the message (must be !ok())
 
  private:

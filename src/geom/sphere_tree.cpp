@@ -50,8 +50,16 @@ float round_down(double x) {
 // Smallest sphere with the n <= 4 points on its boundary (circumsphere in their affine hull).
 // Returns false for affinely dependent points (caller keeps the previous ball).
 bool ball_through(const Vec3* s, int n, Vec3& c, double& r2) {
-  if (n == 0) { c.setZero(); r2 = -1; return true; }
-  if (n == 1) { c = s[0]; r2 = 0; return true; }
+  if (n == 0) {
+    c.setZero();
+    r2 = -1;
+    return true;
+  }
+  if (n == 1) {
+    c = s[0];
+    r2 = 0;
+    return true;
+  }
   // c = s0 + sum_k lambda_k (s_k - s0), with |c - s_k| = |c - s0|: G lambda = b,
   // G_ij = (s_i - s0).(s_j - s0), b_i = |s_i - s0|^2 / 2.
   const int m = n - 1;
@@ -78,7 +86,9 @@ bool ball_through(const Vec3* s, int n, Vec3& c, double& r2) {
     const double det = A.determinant();
     if (!(std::abs(det) > 1e-14 * G[0][0] * G[1][1] * G[2][2])) return false;
     const Vec3 l = A.inverse() * Vec3(b[0], b[1], b[2]);
-    lam[0] = l[0]; lam[1] = l[1]; lam[2] = l[2];
+    lam[0] = l[0];
+    lam[1] = l[1];
+    lam[2] = l[2];
   }
   c = s[0];
   for (int k = 0; k < m; ++k) c += lam[k] * d[k];
@@ -97,7 +107,10 @@ void mtf(std::vector<Vec3>& pts, std::size_t end, Vec3* sup, int ns, Vec3& c, do
       Vec3 c2 = c;
       double r22 = r2;
       mtf(pts, i, sup, ns + 1, c2, r22);
-      if (r22 > r2) { c = c2; r2 = r22; }
+      if (r22 > r2) {
+        c = c2;
+        r2 = r22;
+      }
       const Vec3 p = pts[i];
       std::copy_backward(pts.begin(), pts.begin() + static_cast<std::ptrdiff_t>(i),
                          pts.begin() + static_cast<std::ptrdiff_t>(i) + 1);
@@ -119,18 +132,26 @@ struct Builder {
 
   std::uint32_t slot_of_leaf(std::uint64_t j) const { return static_cast<std::uint32_t>(j * F / M); }
 
-  struct Group { std::uint32_t j0, j1; };
+  struct Group {
+    std::uint32_t j0, j1;
+  };
 
   // Binary median splits of leaves [j0, j1) down `levels` levels or to single leaves.
   void split(std::uint32_t j0, std::uint32_t j1, int levels, Group* out, int& n) {
-    if (levels == 0 || j1 - j0 == 1) { out[n++] = {j0, j1}; return; }
+    if (levels == 0 || j1 - j0 == 1) {
+      out[n++] = {j0, j1};
+      return;
+    }
     const std::uint32_t lo = slot_of_leaf(j0), hi = slot_of_leaf(j1);
     const std::uint32_t jm = j0 + (j1 - j0 + 1) / 2;
     const std::uint32_t mid = slot_of_leaf(jm);
     float bl[3] = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max(), std::numeric_limits<float>::max()};
     float bh[3] = {-bl[0], -bl[1], -bl[2]};
     for (std::uint32_t s = lo; s < hi; ++s)
-      for (int k = 0; k < 3; ++k) { bl[k] = std::min(bl[k], cents[s].c[k]); bh[k] = std::max(bh[k], cents[s].c[k]); }
+      for (int k = 0; k < 3; ++k) {
+        bl[k] = std::min(bl[k], cents[s].c[k]);
+        bh[k] = std::max(bh[k], cents[s].c[k]);
+      }
     int axis = 0;
     for (int k = 1; k < 3; ++k)
       if (bh[k] - bl[k] > bh[axis] - bl[axis]) axis = k;
@@ -174,7 +195,11 @@ struct Builder {
 }  // namespace
 
 void min_sphere(std::vector<Vec3>& pts, Vec3& centre, double& radius) {
-  if (pts.empty()) { centre.setZero(); radius = 0; return; }
+  if (pts.empty()) {
+    centre.setZero();
+    radius = 0;
+    return;
+  }
   Vec3 sup[4];
   Vec3 c = pts[0];
   double r2 = 0;
@@ -195,7 +220,11 @@ std::uint64_t tree_hash(const Mesh& mesh, const TreeParams& params) {
   auto bytes = [&mix](const void* p, std::size_t n) {
     const auto* c = static_cast<const unsigned char*>(p);
     std::size_t i = 0;
-    for (; i + 8 <= n; i += 8) { std::uint64_t w; std::memcpy(&w, c + i, 8); mix(w); }
+    for (; i + 8 <= n; i += 8) {
+      std::uint64_t w;
+      std::memcpy(&w, c + i, 8);
+      mix(w);
+    }
     std::uint64_t w = 0;
     std::memcpy(&w, c + i, n - i);
     mix(w ^ (static_cast<std::uint64_t>(n - i) << 56));
@@ -205,7 +234,9 @@ std::uint64_t tree_hash(const Mesh& mesh, const TreeParams& params) {
   if (!mesh.faces.empty()) bytes(mesh.faces.data(), mesh.faces.size() * sizeof(Tri));
   mix(params.leaf_faces);
   mix(0x5354524545ull);  // "STREE" + layout generation of the build algorithm
-  h ^= h >> 33; h *= 0xff51afd7ed558ccdull; h ^= h >> 33;
+  h ^= h >> 33;
+  h *= 0xff51afd7ed558ccdull;
+  h ^= h >> 33;
   return h;
 }
 
@@ -266,14 +297,18 @@ Result<SphereTree> SphereTree::build(const Mesh& mesh, const TreeParams& params)
   leaves.reserve(M);
   for (std::uint32_t i = 0; i < N; ++i)
     if (t.nodes[i].leaf) leaves.push_back(i);
-  std::sort(leaves.begin(), leaves.end(), [&t](std::uint32_t a, std::uint32_t c) { return t.nodes[a].first < t.nodes[c].first; });
+  std::sort(leaves.begin(), leaves.end(),
+            [&t](std::uint32_t a, std::uint32_t c) { return t.nodes[a].first < t.nodes[c].first; });
   for (const std::uint32_t i : leaves) {
     const SphereNode& h = t.nodes[i];
     pt_at[h.first] = static_cast<std::uint32_t>(pts.size());
     for (std::uint32_t s = h.first; s < h.first + h.count; ++s) {
       const Tri& tr = mesh.faces[t.face_order[s]];
       for (std::uint32_t v : tr)
-        if (vstamp[v] != i) { vstamp[v] = i; pts.push_back(mesh.local[v]); }
+        if (vstamp[v] != i) {
+          vstamp[v] = i;
+          pts.push_back(mesh.local[v]);
+        }
     }
   }
   pt_at[F] = static_cast<std::uint32_t>(pts.size());
@@ -308,7 +343,10 @@ Result<SphereTree> SphereTree::build(const Mesh& mesh, const TreeParams& params)
         const Vec3* far = nullptr;
         for (const Vec3* p = p0; p != p1; ++p) {
           const double d2 = (*p - ctr).squaredNorm();
-          if (d2 > far2) { far2 = d2; far = p; }
+          if (d2 > far2) {
+            far2 = d2;
+            far = p;
+          }
         }
         if (!far) break;
         cand.push_back(*far);
@@ -344,7 +382,10 @@ std::vector<std::uint32_t> SphereTree::layer(std::uint32_t n) const {
     const std::uint32_t i = stack.back();
     stack.pop_back();
     const SphereNode& h = nodes[i];
-    if (h.leaf || h.depth == n) { out.push_back(i); continue; }
+    if (h.leaf || h.depth == n) {
+      out.push_back(i);
+      continue;
+    }
     for (std::uint32_t k = h.count; k-- > 0;) stack.push_back(h.first + k);  // keep child order
   }
   return out;

@@ -29,12 +29,12 @@ inline constexpr std::uint32_t kMaxTreeDepth = 64;
 /// Sphere in the body-local frame, float, padded so it encloses every vertex below it EXACTLY
 /// (see sphere_tree.cpp, "Conservative float spheres").
 struct SphereNode {
-  float centre[3];        ///< sphere centre, body-local mm (12 B)
-  float radius;           ///< padded radius, mm (4 B)
-  std::uint32_t first;    ///< inner: index of the first child (children contiguous); leaf: first slot in face_order
-  std::uint16_t count;    ///< inner: number of children 1..8; leaf: number of faces
-  std::uint8_t leaf;      ///< 1 for a leaf
-  std::uint8_t depth;     ///< layer of this node (root = 0)
+  float centre[3];      ///< sphere centre, body-local mm (12 B)
+  float radius;         ///< padded radius, mm (4 B)
+  std::uint32_t first;  ///< inner: index of the first child (children contiguous); leaf: first slot in face_order
+  std::uint16_t count;  ///< inner: number of children 1..8; leaf: number of faces
+  std::uint8_t leaf;    ///< 1 for a leaf
+  std::uint8_t depth;   ///< layer of this node (root = 0)
 };
 static_assert(sizeof(SphereNode) == 24, "hot node size is pinned");
 
@@ -61,27 +61,29 @@ struct FaceBox {
 /// contiguous, and all descendants of a node are the contiguous range [first, desc_end), so a
 /// subtree is {node} + one node range + one face_order range (easy to extract and ship).
 struct SphereTree {
-  TreeParams params;                   ///< what it was built with
-  std::uint64_t mesh_hash = 0;         ///< hash of the mesh's vertices, faces and params (tree_io.hpp)
-  std::uint32_t num_vertices = 0;      ///< vertex count of the mesh it was built for
-  std::uint32_t num_depths = 0;        ///< number of layers (max depth + 1)
-  std::vector<SphereNode> nodes;       ///< hot nodes
-  std::vector<SphereNodeCold> cold;    ///< cold nodes, same indices
+  TreeParams params;                      ///< what it was built with
+  std::uint64_t mesh_hash = 0;            ///< hash of the mesh's vertices, faces and params (tree_io.hpp)
+  std::uint32_t num_vertices = 0;         ///< vertex count of the mesh it was built for
+  std::uint32_t num_depths = 0;           ///< number of layers (max depth + 1)
+  std::vector<SphereNode> nodes;          ///< hot nodes
+  std::vector<SphereNodeCold> cold;       ///< cold nodes, same indices
   std::vector<std::uint32_t> face_order;  ///< face ids in leaf order (every face exactly once)
-  std::vector<FaceBox> face_boxes;     ///< per slot of face_order: outward-rounded face AABB
+  std::vector<FaceBox> face_boxes;        ///< per slot of face_order: outward-rounded face AABB
 
   /// Builds the tree (single thread). Fails on an empty or invalid mesh or leaf_faces out of [1, 64].
   static Result<SphereTree> build(const Mesh& mesh, const TreeParams& params = DefaultTreeParams());
 
   std::uint32_t num_faces() const { return static_cast<std::uint32_t>(face_order.size()); }  ///< faces covered
   std::uint32_t num_nodes() const { return static_cast<std::uint32_t>(nodes.size()); }       ///< nodes
-  std::uint32_t num_leaves() const;  ///< leaf count
+  std::uint32_t num_leaves() const;                                                          ///< leaf count
   /// Node indices of layer n in depth-first (spatially coherent) order: the nodes of depth n, and
   /// leaves shallower than n standing for themselves. Covers every face exactly once.
   std::vector<std::uint32_t> layer(std::uint32_t n) const;
   /// Face ids below node i (face_order[face_begin, face_end)).
   const std::uint32_t* faces_begin(std::uint32_t i) const { return face_order.data() + cold[i].face_begin; }
-  const std::uint32_t* faces_end(std::uint32_t i) const { return face_order.data() + cold[i].face_end; }  ///< end of faces_begin
+  const std::uint32_t* faces_end(std::uint32_t i) const {
+    return face_order.data() + cold[i].face_end;
+  }                           ///< end of faces_begin
   std::size_t bytes() const;  ///< heap bytes held by the tree
 };
 

@@ -12,12 +12,16 @@ namespace {
 Result<Mesh> subdivide_once(const Mesh& in) {
   const std::size_t nf = in.faces.size(), nv = in.local.size();
   // Half-edges sorted by undirected key: the two uses of each manifold edge end up adjacent.
-  struct Half { std::uint64_t key; std::uint32_t slot; };  // slot = 3 * face + corner
+  struct Half {
+    std::uint64_t key;
+    std::uint32_t slot;
+  };  // slot = 3 * face + corner
   std::vector<Half> halves(3 * nf);
   for (std::uint32_t f = 0; f < nf; ++f)
     for (std::uint32_t k = 0; k < 3; ++k) {
       const std::uint32_t a = in.faces[f][k], b = in.faces[f][(k + 1) % 3];
-      if (a == b) return fail(in.name, ": face ", f, " repeats vertex ", a, " (Loop subdivision needs a manifold mesh)");
+      if (a == b)
+        return fail(in.name, ": face ", f, " repeats vertex ", a, " (Loop subdivision needs a manifold mesh)");
       halves[3 * f + k] = {a < b ? (std::uint64_t(a) << 32 | b) : (std::uint64_t(b) << 32 | a), 3 * f + k};
     }
   std::sort(halves.begin(), halves.end(),
@@ -33,7 +37,8 @@ Result<Mesh> subdivide_once(const Mesh& in) {
                   ") shared by 3 or more faces, first ", face_of(halves[i].slot));
     const std::uint32_t s0 = halves[i].slot, s1 = halves[i + 1].slot;
     if (in.faces[s0 / 3][s0 % 3] == in.faces[s1 / 3][s1 % 3])
-      return fail(in.name, ": faces ", s0 / 3, " and ", s1 / 3, " traverse their shared edge the same way (inconsistent orientation)");
+      return fail(in.name, ": faces ", s0 / 3, " and ", s1 / 3,
+                  " traverse their shared edge the same way (inconsistent orientation)");
     twin[s0] = s1;
     twin[s1] = s0;
   }
@@ -72,7 +77,10 @@ Result<Mesh> subdivide_once(const Mesh& in) {
     ++valence[b];
   }
   for (std::uint32_t v = 0; v < nv; ++v) {
-    if (valence[v] == 0) { out.local[v] = in.local[v]; continue; }  // unused vertex: left in place
+    if (valence[v] == 0) {
+      out.local[v] = in.local[v];
+      continue;
+    }  // unused vertex: left in place
     const double n = valence[v];
     const double c = 0.375 + 0.25 * std::cos(2 * std::numbers::pi / n);
     const double beta = (0.625 - c * c) / n;

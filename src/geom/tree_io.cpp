@@ -107,8 +107,10 @@ Status check_structure(const SphereTree& t, const std::string& path) {
       ++count;
       const SphereNodeCold& ck = t.cold[k];
       if (ck.parent != i) return fail(path, ": corrupt: node ", k, " names parent ", ck.parent, ", not ", i);
-      if (t.nodes[k].depth != h.depth + 1) return fail(path, ": corrupt: node ", k, " depth ", unsigned(t.nodes[k].depth), ", expected ", h.depth + 1);
-      if (ck.face_begin != next_face) return fail(path, ": corrupt: node ", k, " face range does not follow its sibling's");
+      if (t.nodes[k].depth != h.depth + 1)
+        return fail(path, ": corrupt: node ", k, " depth ", unsigned(t.nodes[k].depth), ", expected ", h.depth + 1);
+      if (ck.face_begin != next_face)
+        return fail(path, ": corrupt: node ", k, " face range does not follow its sibling's");
       next_face = ck.face_end;
     }
     if (next_face != c.face_end) return fail(path, ": corrupt: node ", i, " children do not cover its faces");

@@ -67,10 +67,8 @@ Projection projection(const Vec3& a, const Vec3& b, const Vec3& c) noexcept {
 }
 
 /// Point p, coplanar with the non-degenerate triangle a,b,c, lies in the closed triangle.
-bool coplanar_point_in_tri(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c,
-                           Projection pr) noexcept {
-  return pr.sign * orient2d_proj(a, b, p, pr.axis) >= 0 &&
-         pr.sign * orient2d_proj(b, c, p, pr.axis) >= 0 &&
+bool coplanar_point_in_tri(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, Projection pr) noexcept {
+  return pr.sign * orient2d_proj(a, b, p, pr.axis) >= 0 && pr.sign * orient2d_proj(b, c, p, pr.axis) >= 0 &&
          pr.sign * orient2d_proj(c, a, p, pr.axis) >= 0;
 }
 
@@ -105,11 +103,9 @@ bool segment_tri(const Vec3& s0, const Vec3& s1, const Vec3 (&t)[3], Projection 
     for (int i = 0; i < 3; ++i) {
       const Vec3& e0 = t[i];
       const Vec3& e1 = t[(i + 1) % 3];
-      if (pr.sign * orient2d_proj(e0, e1, s0, k) < 0 && pr.sign * orient2d_proj(e0, e1, s1, k) < 0)
-        return false;
+      if (pr.sign * orient2d_proj(e0, e1, s0, k) < 0 && pr.sign * orient2d_proj(e0, e1, s1, k) < 0) return false;
     }
-    const int r0 = orient2d_proj(s0, s1, t[0], k), r1 = orient2d_proj(s0, s1, t[1], k),
-              r2 = orient2d_proj(s0, s1, t[2], k);
+    const int r0 = orient2d_proj(s0, s1, t[0], k), r1 = orient2d_proj(s0, s1, t[1], k), r2 = orient2d_proj(s0, s1, t[2], k);
     return !(r0 == r1 && r1 == r2 && r0 != 0);
   }
   // The line s0s1 crosses the plane in one point X of the segment. orient3d(s0,s1,ti,tj) has the
@@ -126,8 +122,7 @@ bool segment_tri(const Vec3& s0, const Vec3& s1, const Vec3 (&t)[3], Projection 
 /// p lies on the line through s0 ≠ s1: (s1−s0)×(p−s0) = 0, whose components are the three
 /// projected orientations.
 bool collinear(const Vec3& s0, const Vec3& s1, const Vec3& p) noexcept {
-  return orient2d_proj(s0, s1, p, 0) == 0 && orient2d_proj(s0, s1, p, 1) == 0 &&
-         orient2d_proj(s0, s1, p, 2) == 0;
+  return orient2d_proj(s0, s1, p, 0) == 0 && orient2d_proj(s0, s1, p, 1) == 0 && orient2d_proj(s0, s1, p, 2) == 0;
 }
 
 /// Closed segment s0s1 (s0 ≠ s1) contains p.
@@ -195,8 +190,10 @@ bool degenerate_or_coplanar(const Vec3 (&p)[3], const Vec3 (&q)[3]) noexcept {
   switch (a.kind) {
     case Shape::kTriangle:
       switch (b.kind) {
-        case Shape::kTriangle: return coplanar_tri_tri(a.v, b.v, a.pr);
-        case Shape::kSegment: return segment_tri(b.v[0], b.v[1], a.v, a.pr);
+        case Shape::kTriangle:
+          return coplanar_tri_tri(a.v, b.v, a.pr);
+        case Shape::kSegment:
+          return segment_tri(b.v[0], b.v[1], a.v, a.pr);
         case Shape::kPoint:
           return PlaneSide(a.v[0], a.v[1], a.v[2]).side(b.v[0]) == 0 &&
                  coplanar_point_in_tri(b.v[0], a.v[0], a.v[1], a.v[2], a.pr);
@@ -282,13 +279,11 @@ bool overlap(const Vec3 (&p)[3], const Vec3 (&q)[3]) noexcept {
 
 }  // namespace
 
-bool tri_tri_overlap(const Vec3& a0, const Vec3& a1, const Vec3& a2,
-                     const Vec3& b0, const Vec3& b1, const Vec3& b2) noexcept {
+bool tri_tri_overlap(const Vec3& a0, const Vec3& a1, const Vec3& a2, const Vec3& b0, const Vec3& b1, const Vec3& b2) noexcept {
   const Vec3 p[3] = {a0, a1, a2};
   const Vec3 q[3] = {b0, b1, b2};
   // Sum of all |coordinates| (a tree, so the adds overlap): NaN and Inf propagate into it.
-  const Vec3 s = ((a0.cwiseAbs() + a1.cwiseAbs()) + (a2.cwiseAbs() + b0.cwiseAbs())) +
-                 (b1.cwiseAbs() + b2.cwiseAbs());
+  const Vec3 s = ((a0.cwiseAbs() + a1.cwiseAbs()) + (a2.cwiseAbs() + b0.cwiseAbs())) + (b1.cwiseAbs() + b2.cwiseAbs());
   const double total = (s.x() + s.y()) + s.z();
   if (total <= detail::kFilterMaxAbs && total >= 0x1p-100) return overlap(p, q);
   return overlap_rescaled(p, q);

@@ -10,7 +10,6 @@ namespace st::geom {
 /// A zero-area triangle is the segment or point its vertices span. Hot path: no allocation,
 /// no exceptions. Exact whenever every nonzero coordinate is ≥ 2^-306 times the largest
 /// coordinate magnitude of the six vertices (tri_tri.cpp); false if any coordinate is NaN/Inf.
-bool tri_tri_overlap(const Vec3& a0, const Vec3& a1, const Vec3& a2,
-                     const Vec3& b0, const Vec3& b1, const Vec3& b2) noexcept;
+bool tri_tri_overlap(const Vec3& a0, const Vec3& a1, const Vec3& a2, const Vec3& b0, const Vec3& b1, const Vec3& b2) noexcept;
 
 }  // namespace st::geom

@@ -31,11 +31,15 @@ void get_mesh(Reader& r, geom::Mesh& m, const char* which, std::uint32_t max_fac
   const std::uint32_t nv = r.u32("vertex count");
   const std::size_t nf_at = r.offset();
   const std::uint32_t nf = r.u32("face count");
-  if (r.ok() && nf > max_faces) { r.fail_at(nf_at, "face count", ": ", which, " has ", nf, " faces, more than ", max_faces); return; }
+  if (r.ok() && nf > max_faces) {
+    r.fail_at(nf_at, "face count", ": ", which, " has ", nf, " faces, more than ", max_faces);
+    return;
+  }
   if (!r.count_ok(nv, L.max_vertices, 24, "vertex count")) return;
   // The faces follow the vertices: check both fit before allocating either.
   if (r.ok() && std::uint64_t{nf} * 12 > r.left() - std::size_t{nv} * 24) {
-    r.fail_at(nf_at, "face count", ": ", nf, " faces do not fit in the bytes left"); return;
+    r.fail_at(nf_at, "face count", ": ", nf, " faces do not fit in the bytes left");
+    return;
   }
   m.local.resize(nv);
   for (auto& v : m.local)
@@ -45,7 +49,10 @@ void get_mesh(Reader& r, geom::Mesh& m, const char* which, std::uint32_t max_fac
     for (int k = 0; k < 3; ++k) {
       const std::size_t at = r.offset();
       const std::uint32_t i = r.u32("face");
-      if (r.ok() && i >= nv) { r.fail_at(at, "face", " ", f, " of the ", which, ": vertex index ", i, " out of range [0, ", nv, ")"); return; }
+      if (r.ok() && i >= nv) {
+        r.fail_at(at, "face", " ", f, " of the ", which, ": vertex index ", i, " out of range [0, ", nv, ")");
+        return;
+      }
       m.faces[f][k] = i;
     }
 }
@@ -58,7 +65,8 @@ void get_ascending(Reader& r, std::vector<std::uint32_t>& ids, std::uint32_t n, 
     const std::size_t at = r.offset();
     ids[i] = r.u32(field);
     if (r.ok() && ids[i] >= total) r.fail_at(at, field, " ", i, ": ", ids[i], " out of range [0, ", total, ")");
-    if (r.ok() && i > 0 && ids[i] <= ids[i - 1]) r.fail_at(at, field, " ", i, ": ", ids[i], " not above the previous ", ids[i - 1]);
+    if (r.ok() && i > 0 && ids[i] <= ids[i - 1])
+      r.fail_at(at, field, " ", i, ": ", ids[i], " not above the previous ", ids[i - 1]);
   }
 }
 
@@ -84,12 +92,14 @@ Result<BlockSet> make_block_set(const geom::Mesh& probe, const geom::Mesh& objec
   s.blocks.assign(block_ids.begin(), block_ids.end());
   std::sort(s.blocks.begin(), s.blocks.end());
   for (std::size_t i = 0; i < s.blocks.size(); ++i) {
-    if (s.blocks[i] >= blocks.size()) return fail("block set: block ", s.blocks[i], " out of range [0, ", blocks.size(), ")");
+    if (s.blocks[i] >= blocks.size())
+      return fail("block set: block ", s.blocks[i], " out of range [0, ", blocks.size(), ")");
     if (i > 0 && s.blocks[i] == s.blocks[i - 1]) return fail("block set: block ", s.blocks[i], " listed twice");
   }
   for (std::uint32_t b : s.blocks)
     for (std::uint32_t f : blocks[b]) {
-      if (f >= object.faces.size()) return fail("block set: block ", b, ": face ", f, " out of range [0, ", object.faces.size(), ")");
+      if (f >= object.faces.size())
+        return fail("block set: block ", b, ": face ", f, " out of range [0, ", object.faces.size(), ")");
       s.object_face_ids.push_back(f);
     }
   std::sort(s.object_face_ids.begin(), s.object_face_ids.end());
@@ -103,7 +113,10 @@ Result<BlockSet> make_block_set(const geom::Mesh& probe, const geom::Mesh& objec
   s.object.name = object.name + " (share)";
   s.object.origin = object.origin;
   for (std::size_t v = 0; v < remap.size(); ++v)
-    if (remap[v] == 0) { remap[v] = static_cast<std::uint32_t>(s.object.local.size()); s.object.local.push_back(object.local[v]); }
+    if (remap[v] == 0) {
+      remap[v] = static_cast<std::uint32_t>(s.object.local.size());
+      s.object.local.push_back(object.local[v]);
+    }
   s.object.faces.reserve(s.object_face_ids.size());
   for (std::uint32_t f : s.object_face_ids) {
     const auto& t = object.faces[f];
@@ -158,20 +171,25 @@ Result<BlockSet> decode_block_set(std::span<const std::uint8_t> encoded, const L
   const std::uint32_t magic = r.u32("magic");
   if (r.ok() && magic != kBlockSetMagic) r.fail_at(0, "magic", ": not \"STBS\"");
   const std::uint16_t version = r.u16("version");
-  if (r.ok() && version != kBlockSetVersion) r.fail_at(4, "version", ": ", version, " not supported (this build reads ", kBlockSetVersion, ")");
+  if (r.ok() && version != kBlockSetVersion)
+    r.fail_at(4, "version", ": ", version, " not supported (this build reads ", kBlockSetVersion, ")");
   if (r.u16("reserved") != 0) r.fail_at(6, "reserved", ": must be 0");
   s.leaf_faces = r.u32("leaf_faces");
   if (r.ok() && (s.leaf_faces == 0 || s.leaf_faces > L.max_leaf_faces))
     r.fail_at(8, "leaf_faces", ": ", s.leaf_faces, " outside [1, ", L.max_leaf_faces, "]");
   s.object_faces_total = r.u32("object_faces_total");
-  if (r.ok() && s.object_faces_total > L.max_faces) r.fail_at(12, "object_faces_total", ": ", s.object_faces_total, " exceeds the limit ", L.max_faces);
+  if (r.ok() && s.object_faces_total > L.max_faces)
+    r.fail_at(12, "object_faces_total", ": ", s.object_faces_total, " exceeds the limit ", L.max_faces);
   s.blocks_total = r.u32("blocks_total");
-  if (r.ok() && s.blocks_total > L.max_blocks) r.fail_at(16, "blocks_total", ": ", s.blocks_total, " exceeds the limit ", L.max_blocks);
+  if (r.ok() && s.blocks_total > L.max_blocks)
+    r.fail_at(16, "blocks_total", ": ", s.blocks_total, " exceeds the limit ", L.max_blocks);
   const std::uint32_t nb = r.u32("block count");
   get_ascending(r, s.blocks, nb, s.blocks_total, "block id");
   if (r.ok()) get_mesh(r, s.probe, "probe", L.max_faces, L);
   if (r.ok()) get_mesh(r, s.object, "object share", s.object_faces_total, L);
-  if (r.ok()) get_ascending(r, s.object_face_ids, static_cast<std::uint32_t>(s.object.faces.size()), s.object_faces_total, "object face id");
+  if (r.ok())
+    get_ascending(r, s.object_face_ids, static_cast<std::uint32_t>(s.object.faces.size()), s.object_faces_total,
+                  "object face id");
   if (!r.expect_end()) return Error{r.error()};
   s.probe.name = "probe";
   s.object.name = "object share";

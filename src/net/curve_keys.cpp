@@ -30,7 +30,9 @@ std::string errno_text() { return std::strerror(errno); }
 /// Closes a descriptor on scope exit.
 struct Fd {
   int fd = -1;
-  ~Fd() { if (fd >= 0) ::close(fd); }
+  ~Fd() {
+    if (fd >= 0) ::close(fd);
+  }
 };
 
 Status write_all(int fd, const std::string& data, const std::string& path) {
@@ -151,7 +153,8 @@ KeyFiles key_files(const std::string& prefix) {
 Status write_key_pair(const std::string& prefix, const CurveKeyPair& keys, bool force) {
   Result<std::string> derived = curve_public_of(keys.secret_z85);
   if (!derived) return Error{derived.error()};
-  if (derived.value() != keys.public_z85) return fail("write_key_pair: the public key does not belong to the secret key");
+  if (derived.value() != keys.public_z85)
+    return fail("write_key_pair: the public key does not belong to the secret key");
   const KeyFiles f = key_files(prefix);
   if (prefix.empty() || f.secret_file == ".key") return fail("key file prefix is empty");
   if (!force) {
@@ -192,11 +195,14 @@ Result<std::string> expand_credentials_path(const std::string& path) {
   return dir + path.substr(var.size());
 }
 
-Result<std::string> read_secret_key(const std::string& path) { return read_key_line(path, "CURVE secret key file", true); }
+Result<std::string> read_secret_key(const std::string& path) {
+  return read_key_line(path, "CURVE secret key file", true);
+}
 
 Result<std::string> read_public_key(const std::string& path) {
   if (ends_with(path, ".key"))
-    return fail(path, ": expected a public key file (PREFIX.pub), not a secret key file (PREFIX.key): "
+    return fail(path,
+                ": expected a public key file (PREFIX.pub), not a secret key file (PREFIX.key): "
                 "secret keys never leave their owner");
   return read_key_line(path, "CURVE public key file", false);
 }

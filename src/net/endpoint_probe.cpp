@@ -23,11 +23,11 @@ std::string hex(std::uint32_t v) {
 }  // namespace
 
 ProbeResult probe_endpoint(zmq::context_t& ctx, const std::string& endpoint, const std::string& server_public,
-                           const std::string& public_z85, const std::string& secret_z85,
-                           std::chrono::milliseconds timeout) {
+                           const std::string& public_z85, const std::string& secret_z85, std::chrono::milliseconds timeout) {
   const bool curve = !server_public.empty();
   static std::atomic<int> probes{0};
-  const std::string monitor_ep = "inproc://spheretouch-probe-" + std::to_string(::getpid()) + "-" + std::to_string(probes++);
+  const std::string monitor_ep =
+      "inproc://spheretouch-probe-" + std::to_string(::getpid()) + "-" + std::to_string(probes++);
   ProbeResult res;
   res.detail = "no connection within " + std::to_string(timeout.count()) + " ms (host down, port filtered, or slow)";
   try {
@@ -74,7 +74,8 @@ ProbeResult probe_endpoint(zmq::context_t& ctx, const std::string& endpoint, con
         case ZMQ_EVENT_CONNECT_RETRIED:
           // Refused connects come back as retries every reconnect interval (0.1 s): three say enough.
           if (!connected && ++retried >= 3) {
-            res = {ProbeOutcome::connection_refused, "connection refused: nothing is listening there (is the worker running, on this port?)"};
+            res = {ProbeOutcome::connection_refused,
+                   "connection refused: nothing is listening there (is the worker running, on this port?)"};
             done = true;
           }
           break;
@@ -85,18 +86,20 @@ ProbeResult probe_endpoint(zmq::context_t& ctx, const std::string& endpoint, con
           break;
         case ZMQ_EVENT_HANDSHAKE_FAILED_AUTH:
           // The worker's ZAP handler said no (RFC 27 status 400; 500 = its handler failed).
-          res = {ProbeOutcome::auth_refused, "the worker refused this client's CURVE key (ZAP status " +
-                                                 std::to_string(value) + ")"};
+          res = {ProbeOutcome::auth_refused,
+                 "the worker refused this client's CURVE key (ZAP status " + std::to_string(value) + ")"};
           done = true;
           break;
         case ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL:
           if (value == ZMQ_PROTOCOL_ERROR_ZMTP_MECHANISM_MISMATCH)
             res = {ProbeOutcome::security_mismatch,
-                   curve ? "security mismatch: this client uses CURVE but the worker does not use CURVE (no [curve] in its config)"
+                   curve ? "security mismatch: this client uses CURVE but the worker does not use CURVE (no [curve] in "
+                           "its config)"
                          : "security mismatch: the worker requires CURVE but this client has no keys"};
           else if (value == ZMQ_PROTOCOL_ERROR_ZMTP_CRYPTOGRAPHIC)
-            res = {ProbeOutcome::handshake_failed, "the CURVE handshake failed with a cryptographic error "
-                                                   "(is the server key the workers' public key?)"};
+            res = {ProbeOutcome::handshake_failed,
+                   "the CURVE handshake failed with a cryptographic error "
+                   "(is the server key the workers' public key?)"};
           else
             res = {ProbeOutcome::handshake_failed, "the handshake failed: ZMTP protocol error " + hex(value)};
           done = true;
@@ -107,8 +110,10 @@ ProbeResult probe_endpoint(zmq::context_t& ctx, const std::string& endpoint, con
           // our HELLO (wrong server key) does so, and so does a worker that saw the other security
           // mechanism first (its reset can overtake its greeting, hiding the mismatch from us).
           // Several in a row are not a hiccup; a mismatch seen meanwhile wins (above).
-          if (event == ZMQ_EVENT_DISCONNECTED) ++dropped;
-          else ++no_detail;
+          if (event == ZMQ_EVENT_DISCONNECTED)
+            ++dropped;
+          else
+            ++no_detail;
           if (no_detail >= 4 || dropped >= 4) {
             res = {ProbeOutcome::handshake_failed,
                    curve ? "the worker closed the connection during the CURVE handshake: the server key is not the "

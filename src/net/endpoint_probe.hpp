@@ -33,7 +33,6 @@ struct ProbeResult {
 /// Connects to `endpoint` with CURVE when `server_public` is set (client keys `public_z85`,
 /// `secret_z85`, all Z85), plain otherwise, and waits up to `timeout` for a telling event.
 ProbeResult probe_endpoint(zmq::context_t& ctx, const std::string& endpoint, const std::string& server_public,
-                           const std::string& public_z85, const std::string& secret_z85,
-                           std::chrono::milliseconds timeout);
+                           const std::string& public_z85, const std::string& secret_z85, std::chrono::milliseconds timeout);
 
 }  // namespace st::net

@@ -36,12 +36,18 @@ Status LocalWorkers::launch(int i, const std::string& endpoint) {
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
       s = svc.bind(endpoint);
     }
-    if (!s) { bound.set_value(Error{s.error()}); return; }
+    if (!s) {
+      bound.set_value(Error{s.error()});
+      return;
+    }
     bound.set_value(svc.last_endpoint());
     svc.run(*stop, std::chrono::milliseconds(20));
   });
   Result<std::string> r = fut.get();
-  if (!r) { slot.thread.join(); return Error{r.error()}; }
+  if (!r) {
+    slot.thread.join();
+    return Error{r.error()};
+  }
   endpoints_[i] = r.value();
   return Ok{};
 }

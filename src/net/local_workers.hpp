@@ -20,22 +20,22 @@ class LocalWorkers {
   /// Starts `n` workers in `ctx`; worker i binds endpoint_for(i) (a tcp wildcard port is resolved)
   /// and gets worker_id i. Fails, naming the endpoint, if a bind fails.
   static Result<std::unique_ptr<LocalWorkers>> start(zmq::context_t& ctx, int n, BackendFactory factory,
-                                                     std::function<std::string(int)> endpoint_for,
-                                                     WorkerConfig base = {});
+                                                     std::function<std::string(int)> endpoint_for, WorkerConfig base = {});
   ~LocalWorkers();
   LocalWorkers(const LocalWorkers&) = delete;
   LocalWorkers& operator=(const LocalWorkers&) = delete;
 
   const std::vector<std::string>& endpoints() const { return endpoints_; }  ///< resolved, by worker
-  void stop(int i);      ///< stops worker i (its socket closes; memory is lost)
-  Status restart(int i); ///< starts worker i again on the same endpoint, with a new epoch
+  void stop(int i);       ///< stops worker i (its socket closes; memory is lost)
+  Status restart(int i);  ///< starts worker i again on the same endpoint, with a new epoch
 
  private:
   struct Slot {
     std::unique_ptr<std::atomic<bool>> stop;
     std::thread thread;
   };
-  LocalWorkers(zmq::context_t& ctx, BackendFactory f, WorkerConfig base) : ctx_(ctx), factory_(std::move(f)), base_(base) {}
+  LocalWorkers(zmq::context_t& ctx, BackendFactory f, WorkerConfig base)
+      : ctx_(ctx), factory_(std::move(f)), base_(base) {}
   Status launch(int i, const std::string& endpoint);
 
   zmq::context_t& ctx_;

@@ -37,7 +37,10 @@ struct BodyEncoder {
     w.u64(m.epoch);
     w.u64(m.echo);
     w.u32(static_cast<std::uint32_t>(m.held.size()));
-    for (const Held& h : m.held) { w.u64(h.hash); w.u32(h.faces); }
+    for (const Held& h : m.held) {
+      w.u64(h.hash);
+      w.u32(h.faces);
+    }
   }
   void operator()(const LoadBlocksMsg& m) {
     w.u64(m.hash);
@@ -85,7 +88,10 @@ Result<Message> decode_body(MsgType type, Reader& r, const Limits& L) {
       const std::uint32_t n = r.u32("held count");
       if (r.count_ok(n, L.max_held, 12, "held count")) {
         m.held.resize(n);
-        for (Held& h : m.held) { h.hash = r.u64("held hash"); h.faces = r.u32("held faces"); }
+        for (Held& h : m.held) {
+          h.hash = r.u64("held hash");
+          h.faces = r.u32("held faces");
+        }
       }
       out = std::move(m);
       break;
@@ -100,9 +106,9 @@ Result<Message> decode_body(MsgType type, Reader& r, const Limits& L) {
       if (r.ok() && m.total_bytes > L.max_blockset_bytes)
         r.fail_at(off_at - 8, "total_bytes", ": ", m.total_bytes, " exceeds the limit ", L.max_blockset_bytes);
       if (r.ok() && (m.offset > m.total_bytes || n > m.total_bytes - m.offset))
-        r.fail_at(off_at, "offset", ": chunk [", m.offset, ", +", n, ") outside the block set of ", m.total_bytes, " bytes");
-      if (r.ok() && n == 0)
-        r.fail_at(off_at + 8, "chunk length", ": empty chunk");
+        r.fail_at(off_at, "offset", ": chunk [", m.offset, ", +", n, ") outside the block set of ", m.total_bytes,
+                  " bytes");
+      if (r.ok() && n == 0) r.fail_at(off_at + 8, "chunk length", ": empty chunk");
       if (r.count_ok(n, L.max_chunk_bytes, 1, "chunk length")) {
         auto b = r.bytes(n, "chunk data");
         m.data.assign(b.begin(), b.end());
@@ -166,12 +172,18 @@ Result<Message> decode_body(MsgType type, Reader& r, const Limits& L) {
 
 const char* type_name(MsgType t) {
   switch (t) {
-    case MsgType::Hello: return "Hello";
-    case MsgType::LoadBlocks: return "LoadBlocks";
-    case MsgType::Query: return "Query";
-    case MsgType::Result: return "Result";
-    case MsgType::Heartbeat: return "Heartbeat";
-    case MsgType::Error: return "Error";
+    case MsgType::Hello:
+      return "Hello";
+    case MsgType::LoadBlocks:
+      return "LoadBlocks";
+    case MsgType::Query:
+      return "Query";
+    case MsgType::Result:
+      return "Result";
+    case MsgType::Heartbeat:
+      return "Heartbeat";
+    case MsgType::Error:
+      return "Error";
   }
   return "unknown";
 }
@@ -201,9 +213,11 @@ Result<Message> decode(std::span<const std::uint8_t> frame, const Limits& limits
     return fail("message of ", frame.size(), " bytes exceeds the limit ", limits.max_message_bytes);
   Reader h(frame.first(std::min(frame.size(), kHeaderBytes)), "header");
   const std::uint32_t magic = h.u32("magic");
-  if (h.ok() && magic != kMagic) return fail("header at byte 0: magic: 0x", std::hex, magic, " is not \"STNP\" (0x", kMagic, ")");
+  if (h.ok() && magic != kMagic)
+    return fail("header at byte 0: magic: 0x", std::hex, magic, " is not \"STNP\" (0x", kMagic, ")");
   const std::uint16_t version = h.u16("version");
-  if (h.ok() && version != kVersion) return fail("header at byte 4: version: ", version, " not supported (this build speaks ", kVersion, ")");
+  if (h.ok() && version != kVersion)
+    return fail("header at byte 4: version: ", version, " not supported (this build speaks ", kVersion, ")");
   const std::uint8_t type = h.u8("type");
   if (h.ok() && (type < 1 || type > static_cast<std::uint8_t>(MsgType::Error)))
     return fail("header at byte 6: type: unknown message type ", unsigned{type});
@@ -212,7 +226,8 @@ Result<Message> decode(std::span<const std::uint8_t> frame, const Limits& limits
   const std::uint32_t body = h.u32("body length");
   if (!h.ok()) return Error{h.error()};
   if (body != frame.size() - kHeaderBytes)
-    return fail("header at byte 8: body length: ", body, " but the frame carries ", frame.size() - kHeaderBytes, " bytes");
+    return fail("header at byte 8: body length: ", body, " but the frame carries ", frame.size() - kHeaderBytes,
+                " bytes");
   const auto t = static_cast<MsgType>(type);
   Reader r(frame.subspan(kHeaderBytes), type_name(t), kHeaderBytes);
   return decode_body(t, r, limits);

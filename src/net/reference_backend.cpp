@@ -20,8 +20,8 @@ inline void project(const Vec3& axis, const Vec3& p0, const Vec3& p1, const Vec3
   hi = std::max({d0, d1, d2});
 }
 
-inline bool separates(const Vec3& axis, const Vec3& a0, const Vec3& a1, const Vec3& a2,
-                      const Vec3& b0, const Vec3& b1, const Vec3& b2) {
+inline bool separates(const Vec3& axis, const Vec3& a0, const Vec3& a1, const Vec3& a2, const Vec3& b0, const Vec3& b1,
+                      const Vec3& b2) {
   double alo, ahi, blo, bhi;
   project(axis, a0, a1, a2, alo, ahi);
   project(axis, b0, b1, b2, blo, bhi);
@@ -30,8 +30,12 @@ inline bool separates(const Vec3& axis, const Vec3& a0, const Vec3& a1, const Ve
 
 struct Box3 {
   Vec3 lo, hi;
-  static Box3 of(const Vec3& a, const Vec3& b, const Vec3& c) { return {a.cwiseMin(b).cwiseMin(c), a.cwiseMax(b).cwiseMax(c)}; }
-  bool overlaps(const Box3& o) const { return (lo.array() <= o.hi.array()).all() && (o.lo.array() <= hi.array()).all(); }
+  static Box3 of(const Vec3& a, const Vec3& b, const Vec3& c) {
+    return {a.cwiseMin(b).cwiseMin(c), a.cwiseMax(b).cwiseMax(c)};
+  }
+  bool overlaps(const Box3& o) const {
+    return (lo.array() <= o.hi.array()).all() && (o.lo.array() <= hi.array()).all();
+  }
 };
 
 class GridBackend final : public CollisionBackend {
@@ -84,7 +88,10 @@ class GridBackend final : public CollisionBackend {
       const Box3 pb = Box3::of(p0, p1, p2);
       ++st.sphere_tests;
       if (!pb.overlaps(bounds_)) continue;
-      if (++epoch_ == 0) { std::fill(stamp_.begin(), stamp_.end(), 0); epoch_ = 1; }
+      if (++epoch_ == 0) {
+        std::fill(stamp_.begin(), stamp_.end(), 0);
+        epoch_ = 1;
+      }
       std::int64_t lo[3], hi[3];
       cell_range(pb, lo, hi);
       for (auto x = lo[0]; x <= hi[0]; ++x)
@@ -159,7 +166,9 @@ bool sat_tri_overlap(const Vec3& a0, const Vec3& a1, const Vec3& a2, const Vec3&
 
 std::unique_ptr<CollisionBackend> make_reference_backend() { return std::make_unique<GridBackend>(); }
 
-BackendFactory reference_backend_factory() { return [] { return make_reference_backend(); }; }
+BackendFactory reference_backend_factory() {
+  return [] { return make_reference_backend(); };
+}
 
 std::vector<FacePair> reference_collide(const geom::Mesh& probe, const geom::Mesh& object, const geom::Pose& pose) {
   Blocks all(1);

@@ -17,8 +17,8 @@ BackendFactory reference_backend_factory();
 
 /// Separating-axis test of closed triangles (touching counts). Deterministic in double, not
 /// exact near degeneracies; geom::tri_tri_overlap replaces it with the collision core.
-bool sat_tri_overlap(const geom::Vec3& a0, const geom::Vec3& a1, const geom::Vec3& a2,
-                     const geom::Vec3& b0, const geom::Vec3& b1, const geom::Vec3& b2);
+bool sat_tri_overlap(const geom::Vec3& a0, const geom::Vec3& a1, const geom::Vec3& a2, const geom::Vec3& b0,
+                     const geom::Vec3& b1, const geom::Vec3& b2);
 
 /// All colliding pairs of two whole meshes at `pose`, sorted (single-process reference).
 std::vector<FacePair> reference_collide(const geom::Mesh& probe, const geom::Mesh& object, const geom::Pose& pose);

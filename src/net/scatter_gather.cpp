@@ -110,27 +110,27 @@ struct ScatterGather::Impl {
     zmq::socket_t sock;
     bool up = true;
     std::uint32_t worker_id = 0;
-    std::uint64_t epoch = 0;                 // 0 until the first Hello
+    std::uint64_t epoch = 0;  // 0 until the first Hello
     std::uint32_t misses = 0;
-    std::vector<std::uint64_t> held;         // hashes from its last Hello, MRU first
-    std::vector<std::uint32_t> original;     // its own blocks (block-cyclic)
-    std::vector<std::uint32_t> target;       // blocks it should hold now
-    std::uint64_t target_hash = 0;           // 0 while the target is being encoded
-    SetPtr upload;                           // block set being sent, or null
-    std::size_t upload_off = 0;              // bytes of `upload` handed to ZeroMQ
-    Clock::time_point upload_progress{};     // last chunk sent
-    std::uint64_t failed_hash = 0;           // a set it refused to load (not retried until load_timeout)
+    std::vector<std::uint64_t> held;      // hashes from its last Hello, MRU first
+    std::vector<std::uint32_t> original;  // its own blocks (block-cyclic)
+    std::vector<std::uint32_t> target;    // blocks it should hold now
+    std::uint64_t target_hash = 0;        // 0 while the target is being encoded
+    SetPtr upload;                        // block set being sent, or null
+    std::size_t upload_off = 0;           // bytes of `upload` handed to ZeroMQ
+    Clock::time_point upload_progress{};  // last chunk sent
+    std::uint64_t failed_hash = 0;        // a set it refused to load (not retried until load_timeout)
     Clock::time_point failed_at{};
     Clock::time_point next_heartbeat{};
-    Clock::time_point next_refresh{};        // next Heartbeat to a busy worker (held sets)
-    Clock::time_point last_heard{};          // last message received from it
-    Clock::time_point last_asked{};          // last Query or Heartbeat sent to it
+    Clock::time_point next_refresh{};  // next Heartbeat to a busy worker (held sets)
+    Clock::time_point last_heard{};    // last message received from it
+    Clock::time_point last_asked{};    // last Query or Heartbeat sent to it
     Clock::time_point socket_opened{};
     std::uint64_t nonce = 0;
     // This round.
     Ask ask = Ask::None;
     bool replied = false;
-    SetPtr asked;                            // the block set the Query named
+    SetPtr asked;  // the block set the Query named
     // Totals.
     std::uint64_t bytes_sent = 0;
     std::uint32_t loads_sent = 0;
@@ -149,19 +149,22 @@ struct ScatterGather::Impl {
   std::map<std::vector<std::uint32_t>, SetPtr> by_blocks;
   std::unordered_map<std::uint64_t, SetPtr> by_hash;
   std::map<std::vector<std::uint32_t>, std::future<Result<SetPtr>>> encoding;
-  Encoder encoder;  // started with the client
-  bool dirty = false;                        // up/down changed: reassign
-  bool prune_pending = false;                // a worker dropped a set: prune_sets()
+  Encoder encoder;             // started with the client
+  bool dirty = false;          // up/down changed: reassign
+  bool prune_pending = false;  // a worker dropped a set: prune_sets()
   std::uint64_t cur_seq = 0;
   bool in_round = false;
-  std::vector<std::uint8_t> covered;         // per block, this round
-  std::vector<std::uint8_t> buf;             // encode buffer
+  std::vector<std::uint8_t> covered;  // per block, this round
+  std::vector<std::uint8_t> buf;      // encode buffer
   std::vector<zmq::pollitem_t> items;
   RoundResult* out = nullptr;
 
   // ---- block sets --------------------------------------------------------------------------
 
-  void remember(const SetPtr& s) { by_blocks[s->blocks] = s; by_hash[s->hash] = s; }
+  void remember(const SetPtr& s) {
+    by_blocks[s->blocks] = s;
+    by_hash[s->hash] = s;
+  }
 
   /// The encoded set of `blocks`, or null while it is being encoded in the background.
   SetPtr get_set(const std::vector<std::uint32_t>& blocks) {
@@ -185,7 +188,10 @@ struct ScatterGather::Impl {
   /// bounded however often workers come and go), and collects finished background encodings.
   void prune_sets() {
     for (auto it = encoding.begin(); it != encoding.end();) {
-      if (it->second.wait_for(std::chrono::seconds(0)) != std::future_status::ready) { ++it; continue; }
+      if (it->second.wait_for(std::chrono::seconds(0)) != std::future_status::ready) {
+        ++it;
+        continue;
+      }
       if (Result<SetPtr> r = it->second.get(); r) remember(r.value());
       it = encoding.erase(it);
     }
@@ -198,9 +204,13 @@ struct ScatterGather::Impl {
     prune_pending = false;
     std::size_t dropped = 0;
     for (auto it = by_blocks.begin(); it != by_blocks.end();) {
-      const bool original = std::any_of(peers.begin(), peers.end(), [&](const Peer& p) { return p.original == it->first; });
+      const bool original =
+          std::any_of(peers.begin(), peers.end(), [&](const Peer& p) { return p.original == it->first; });
       const bool targeted = std::any_of(peers.begin(), peers.end(), [&](const Peer& p) { return p.target == it->first; });
-      if (original || targeted || keep.count(it->second->hash)) { ++it; continue; }
+      if (original || targeted || keep.count(it->second->hash)) {
+        ++it;
+        continue;
+      }
       by_hash.erase(it->second->hash);
       it = by_blocks.erase(it);
       ++dropped;
@@ -220,8 +230,10 @@ struct ScatterGather::Impl {
     std::vector<std::size_t> alive;
     std::vector<std::uint32_t> orphans;
     for (std::size_t i = 0; i < peers.size(); ++i) {
-      if (peers[i].up) alive.push_back(i);
-      else orphans.insert(orphans.end(), peers[i].original.begin(), peers[i].original.end());
+      if (peers[i].up)
+        alive.push_back(i);
+      else
+        orphans.insert(orphans.end(), peers[i].original.begin(), peers[i].original.end());
     }
     std::sort(orphans.begin(), orphans.end());
     for (Peer& p : peers) p.target = p.up ? p.original : std::vector<std::uint32_t>{};
@@ -240,10 +252,10 @@ struct ScatterGather::Impl {
     p.sock = zmq::socket_t(*ctx, zmq::socket_type::dealer);
     set_common_options(p.sock, cfg.sndhwm, cfg.rcvhwm, cfg.limits.max_message_bytes);
     p.sock.set(zmq::sockopt::routing_id, zmq::buffer(routing_id));
-    p.sock.set(zmq::sockopt::immediate, 1);          // no queueing to a worker that is not connected
-    p.sock.set(zmq::sockopt::reconnect_ivl, 100);    // a restarted worker is found within 0.1 s
+    p.sock.set(zmq::sockopt::immediate, 1);        // no queueing to a worker that is not connected
+    p.sock.set(zmq::sockopt::reconnect_ivl, 100);  // a restarted worker is found within 0.1 s
     p.sock.set(zmq::sockopt::reconnect_ivl_max, 1000);
-    p.sock.set(zmq::sockopt::heartbeat_ivl, 500);    // ZMTP heartbeats drop half-open connections
+    p.sock.set(zmq::sockopt::heartbeat_ivl, 500);  // ZMTP heartbeats drop half-open connections
     p.sock.set(zmq::sockopt::heartbeat_timeout, 1500);
     if (!cfg.curve_server_public.empty()) {
       p.sock.set(zmq::sockopt::curve_serverkey, cfg.curve_server_public);
@@ -253,9 +265,7 @@ struct ScatterGather::Impl {
     try {
       if (needs_ipv6(p.endpoint)) p.sock.set(zmq::sockopt::ipv6, 1);
       p.sock.connect(zmq_endpoint(p.endpoint));
-    } catch (const zmq::error_t& e) {
-      return fail("scatter-gather: connect ", p.endpoint, ": ", e.what());
-    }
+    } catch (const zmq::error_t& e) { return fail("scatter-gather: connect ", p.endpoint, ": ", e.what()); }
     return Ok{};
   }
 
@@ -265,9 +275,7 @@ struct ScatterGather::Impl {
     encode(m, buf);
     try {
       return p.sock.send(zmq::buffer(buf), zmq::send_flags::dontwait).has_value();
-    } catch (const zmq::error_t&) {
-      return false;
-    }
+    } catch (const zmq::error_t&) { return false; }
   }
 
   void heartbeat(Peer& p, Clock::time_point now) {
@@ -314,18 +322,31 @@ struct ScatterGather::Impl {
     const std::size_t had = p.held.size();
     p.held.clear();
     for (const Held& x : h.held) p.held.push_back(x.hash);
-    if (p.held.size() < had) prune_pending = true;  // it dropped a set: maybe ours can go too
+    if (p.held.size() < had) prune_pending = true;                // it dropped a set: maybe ours can go too
     if (p.upload && p.holds(p.upload->hash)) p.upload = nullptr;  // load acknowledged
-    if (!p.up) { p.up = true; p.misses = 0; dirty = true; }
+    if (!p.up) {
+      p.up = true;
+      p.misses = 0;
+      dirty = true;
+    }
     if (p.ask == Ask::Heartbeat) p.replied = true;
     maybe_start_upload(p, now);
   }
 
   void on_result(Peer& p, ResultMsg& r) {
-    if (!in_round || r.seq != cur_seq) { ++out->stale_dropped; return; }
-    if (p.ask != Ask::Query || p.replied || !p.asked || r.hash != p.asked->hash) { ++out->bad_messages; return; }
+    if (!in_round || r.seq != cur_seq) {
+      ++out->stale_dropped;
+      return;
+    }
+    if (p.ask != Ask::Query || p.replied || !p.asked || r.hash != p.asked->hash) {
+      ++out->bad_messages;
+      return;
+    }
     for (const FacePair& fp : r.pairs)
-      if (fp.probe >= probe_faces || fp.object >= object_faces) { ++out->bad_messages; return; }
+      if (fp.probe >= probe_faces || fp.object >= object_faces) {
+        ++out->bad_messages;
+        return;
+      }
     p.replied = true;
     p.misses = 0;
     ++out->workers_replied;
@@ -356,25 +377,32 @@ struct ScatterGather::Impl {
       zmq::message_t msg;
       try {
         if (!p.sock.recv(msg, zmq::recv_flags::dontwait)) return;
-      } catch (const zmq::error_t&) {
-        return;
-      }
+      } catch (const zmq::error_t&) { return; }
       if (msg.more()) {  // a worker sends one frame per message; drop the rest
         for (bool more = true; more;) {
           zmq::message_t junk;
-          try { (void)p.sock.recv(junk, zmq::recv_flags::dontwait); } catch (const zmq::error_t&) { return; }
+          try {
+            (void)p.sock.recv(junk, zmq::recv_flags::dontwait);
+          } catch (const zmq::error_t&) { return; }
           more = junk.more();
         }
         if (out) ++out->bad_messages;
         continue;
       }
       Result<Message> m = decode({static_cast<const std::uint8_t*>(msg.data()), msg.size()}, cfg.limits);
-      if (!m) { if (out) ++out->bad_messages; continue; }
+      if (!m) {
+        if (out) ++out->bad_messages;
+        continue;
+      }
       p.last_heard = now;
-      if (auto* h = std::get_if<HelloMsg>(&m.value())) on_hello(p, *h, now);
-      else if (auto* r = std::get_if<ResultMsg>(&m.value())) { if (out) on_result(p, *r); }
-      else if (auto* e = std::get_if<ErrorMsg>(&m.value())) on_error(p, *e, now);
-      else if (out) ++out->bad_messages;
+      if (auto* h = std::get_if<HelloMsg>(&m.value()))
+        on_hello(p, *h, now);
+      else if (auto* r = std::get_if<ResultMsg>(&m.value())) {
+        if (out) on_result(p, *r);
+      } else if (auto* e = std::get_if<ErrorMsg>(&m.value()))
+        on_error(p, *e, now);
+      else if (out)
+        ++out->bad_messages;
     }
   }
 
@@ -393,8 +421,7 @@ struct ScatterGather::Impl {
     const long timeout_ms = left_us > 0 ? left_us / 1000 : 0;
     try {
       zmq::poll(items.data(), items.size(), std::chrono::milliseconds(timeout_ms));
-    } catch (const zmq::error_t&) {
-    }
+    } catch (const zmq::error_t&) {}
     if (timeout_ms == 0 && left_us > 0) std::this_thread::yield();
     const auto t = Clock::now();
     for (std::size_t i = 0; i < peers.size(); ++i) {
@@ -418,12 +445,15 @@ struct ScatterGather::Impl {
     for (Peer& p : peers) {
       p.asked = nullptr;
       if (!p.up || !p.epoch) continue;
-      if (p.holds(p.target_hash)) p.asked = by_hash.at(p.target_hash);
+      if (p.holds(p.target_hash))
+        p.asked = by_hash.at(p.target_hash);
       else
         for (std::uint64_t h : p.held)
-          if (auto it = by_hash.find(h); it != by_hash.end() && (!p.asked || it->second->blocks.size() > p.asked->blocks.size()))
+          if (auto it = by_hash.find(h);
+              it != by_hash.end() && (!p.asked || it->second->blocks.size() > p.asked->blocks.size()))
             p.asked = it->second;
-      if (p.asked) for (std::uint32_t b : p.asked->blocks) covered[b] = 1;
+      if (p.asked)
+        for (std::uint32_t b : p.asked->blocks) covered[b] = 1;
     }
     if (std::all_of(covered.begin(), covered.end(), [](std::uint8_t c) { return c; })) return;
     for (Peer& p : peers) {
@@ -435,9 +465,15 @@ struct ScatterGather::Impl {
         if (it == by_hash.end() || (p.asked && !is_superset(it->second->blocks, p.asked->blocks))) continue;
         std::size_t gain = 0;
         for (std::uint32_t b : it->second->blocks) gain += !covered[b];
-        if (gain > best_gain) { best_gain = gain; best = it->second; }
+        if (gain > best_gain) {
+          best_gain = gain;
+          best = it->second;
+        }
       }
-      if (best) { p.asked = best; for (std::uint32_t b : best->blocks) covered[b] = 1; }
+      if (best) {
+        p.asked = best;
+        for (std::uint32_t b : best->blocks) covered[b] = 1;
+      }
     }
   }
 
@@ -455,8 +491,10 @@ struct ScatterGather::Impl {
 
   void begin_round_sends(const geom::Pose& pose, Clock::time_point now) {
     revive_silent(now);
-    if (dirty) reassign();
-    else if (prune_pending) prune_sets();
+    if (dirty)
+      reassign();
+    else if (prune_pending)
+      prune_sets();
     refresh_targets();
     for (Peer& p : peers) maybe_start_upload(p, now);
     choose_sets();
@@ -519,8 +557,8 @@ struct ScatterGather::Impl {
   }
 };
 
-Result<std::unique_ptr<ScatterGather>> ScatterGather::create(zmq::context_t& ctx, ScatterConfig config, geom::Mesh probe,
-                                                              geom::Mesh object, Blocks blocks) {
+Result<std::unique_ptr<ScatterGather>> ScatterGather::create(zmq::context_t& ctx, ScatterConfig config,
+                                                             geom::Mesh probe, geom::Mesh object, Blocks blocks) {
   if (config.endpoints.empty()) return fail("scatter-gather: no worker endpoints");
   if (config.miss_limit == 0) return fail("scatter-gather: miss_limit must be at least 1");
   if (!config.curve_server_public.empty() || !config.curve_public.empty() || !config.curve_secret.empty()) {
@@ -543,7 +581,8 @@ Result<std::unique_ptr<ScatterGather>> ScatterGather::create(zmq::context_t& ctx
   impl->probe_faces = static_cast<std::uint32_t>(probe.faces.size());
   impl->object_faces = static_cast<std::uint32_t>(object.faces.size());
   const auto nblocks = static_cast<std::uint32_t>(blocks.size());
-  impl->scene = std::make_shared<const SceneData>(SceneData{std::move(probe), std::move(object), std::move(blocks), config.leaf_faces});
+  impl->scene = std::make_shared<const SceneData>(
+      SceneData{std::move(probe), std::move(object), std::move(blocks), config.leaf_faces});
   impl->covered.assign(nblocks, 0);
   impl->cfg = std::move(config);
   const auto share = block_cyclic(nblocks, static_cast<std::uint32_t>(impl->cfg.endpoints.size()));
@@ -627,7 +666,10 @@ bool ScatterGather::wait_ready(Clock::time_point deadline) {
     m.refresh_targets();
     bool ready = true;
     for (Impl::Peer& p : m.peers) {
-      if (!p.up) { if (now >= p.next_heartbeat) m.heartbeat(p, now); continue; }
+      if (!p.up) {
+        if (now >= p.next_heartbeat) m.heartbeat(p, now);
+        continue;
+      }
       if (!p.epoch && now >= p.next_heartbeat) m.heartbeat(p, now);
       m.maybe_start_upload(p, now);
       m.pump_upload(p, now);

@@ -30,21 +30,21 @@ using Clock = std::chrono::steady_clock;
 
 /// How the client talks to its workers.
 struct ScatterConfig {
-  std::vector<std::string> endpoints;        ///< worker i is endpoints[i] (tcp://, ipc://, inproc://)
-  std::uint32_t miss_limit = 3;              ///< K: consecutive missed deadlines before a worker is down
+  std::vector<std::string> endpoints;               ///< worker i is endpoints[i] (tcp://, ipc://, inproc://)
+  std::uint32_t miss_limit = 3;                     ///< K: consecutive missed deadlines before a worker is down
   std::chrono::milliseconds heartbeat_period{100};  ///< Heartbeats to down workers
   /// Heartbeats to busy workers too, this often: their Hello says which block sets they still
   /// hold (they drop idle ones), so the client can drop its copies and memory stays flat.
   std::chrono::milliseconds held_refresh_period{5000};
-  std::chrono::milliseconds load_timeout{10000};    ///< an upload not acknowledged in this long fails
+  std::chrono::milliseconds load_timeout{10000};  ///< an upload not acknowledged in this long fails
   /// A worker asked but silent this long gets a fresh socket: libzmq gives up on a connection for
   /// good after a protocol error (e.g. an oversized or garbled frame) and never reconnects it.
   std::chrono::milliseconds reconnect_after{1000};
-  std::uint32_t chunk_bytes = 256u << 10;    ///< LoadBlocks chunk size (≤ limits.max_chunk_bytes)
+  std::uint32_t chunk_bytes = 256u << 10;  ///< LoadBlocks chunk size (≤ limits.max_chunk_bytes)
   std::uint32_t leaf_faces = geom::DefaultTreeParams().leaf_faces;  ///< tree parameter sent with every block set
-  int sndhwm = 8;                            ///< per-worker send queue, messages (small: no stale backlog)
-  int rcvhwm = 64;                           ///< per-worker receive queue, messages
-  Limits limits = default_limits();          ///< decode limits for replies
+  int sndhwm = 8;                    ///< per-worker send queue, messages (small: no stale backlog)
+  int rcvhwm = 64;                   ///< per-worker receive queue, messages
+  Limits limits = default_limits();  ///< decode limits for replies
   /// Busy-poll for replies this long before blocking in poll(), us: trades CPU on the collision
   /// thread's core for the wake-up latency of an idle core (tens of us on a VM). 0 = never spin.
   std::uint32_t spin_us = 0;
@@ -60,34 +60,34 @@ struct ScatterConfig {
 
 /// What the collision thread gets back from one round.
 struct RoundResult {
-  std::uint64_t seq = 0;                 ///< the round's sequence number
-  std::vector<FacePair> pairs;           ///< colliding pairs, sorted by (probe, object), unique
+  std::uint64_t seq = 0;                    ///< the round's sequence number
+  std::vector<FacePair> pairs;              ///< colliding pairs, sorted by (probe, object), unique
   std::vector<std::uint32_t> probe_faces;   ///< distinct colliding probe faces, ascending (merged over workers)
   std::vector<std::uint32_t> object_faces;  ///< distinct colliding object faces, ascending
-  bool complete = false;                 ///< the merged replies cover every block: pairs are exact
-  std::uint32_t workers_asked = 0;       ///< Queries sent this round
-  std::uint32_t workers_replied = 0;     ///< Results merged this round
-  std::uint32_t blocks_covered = 0;      ///< blocks whose pairs are in `pairs`
-  std::uint32_t blocks_total = 0;        ///< blocks in the partition
-  std::uint32_t stale_dropped = 0;       ///< replies of older rounds dropped
-  std::uint32_t bad_messages = 0;        ///< undecodable or unexpected replies dropped
-  QueryStats stats;                      ///< summed counters; compute_ns is the slowest worker's
+  bool complete = false;                    ///< the merged replies cover every block: pairs are exact
+  std::uint32_t workers_asked = 0;          ///< Queries sent this round
+  std::uint32_t workers_replied = 0;        ///< Results merged this round
+  std::uint32_t blocks_covered = 0;         ///< blocks whose pairs are in `pairs`
+  std::uint32_t blocks_total = 0;           ///< blocks in the partition
+  std::uint32_t stale_dropped = 0;          ///< replies of older rounds dropped
+  std::uint32_t bad_messages = 0;           ///< undecodable or unexpected replies dropped
+  QueryStats stats;                         ///< summed counters; compute_ns is the slowest worker's
   /// "Contacts" (paper §3.5): distinct colliding probe faces + distinct colliding object faces.
   std::size_t contacts() const { return probe_faces.size() + object_faces.size(); }
 };
 
 /// A worker as the client sees it.
 struct WorkerStatus {
-  std::string endpoint;                  ///< where it is
-  bool up = true;                        ///< not marked down
-  std::uint32_t worker_id = 0;           ///< from its last Hello
-  std::uint64_t epoch = 0;               ///< from its last Hello (0: never heard)
-  std::uint32_t misses = 0;              ///< consecutive missed deadlines
+  std::string endpoint;                      ///< where it is
+  bool up = true;                            ///< not marked down
+  std::uint32_t worker_id = 0;               ///< from its last Hello
+  std::uint64_t epoch = 0;                   ///< from its last Hello (0: never heard)
+  std::uint32_t misses = 0;                  ///< consecutive missed deadlines
   std::vector<std::uint32_t> target_blocks;  ///< blocks it is meant to hold now
-  bool holds_target = false;             ///< it has acknowledged its target block set
-  std::uint64_t bytes_sent = 0;          ///< LoadBlocks bytes sent to it so far
-  std::uint32_t loads_sent = 0;          ///< block sets sent to it so far
-  std::size_t sets_held = 0;             ///< block sets it holds, from its last Hello
+  bool holds_target = false;                 ///< it has acknowledged its target block set
+  std::uint64_t bytes_sent = 0;              ///< LoadBlocks bytes sent to it so far
+  std::uint32_t loads_sent = 0;              ///< block sets sent to it so far
+  std::size_t sets_held = 0;                 ///< block sets it holds, from its last Hello
 };
 
 /// The collision thread's client to the worker fleet.
@@ -108,9 +108,9 @@ class ScatterGather {
   /// (true) or `deadline` passes (false). Call between rounds or before the first.
   bool wait_ready(Clock::time_point deadline);
 
-  std::vector<WorkerStatus> workers() const;       ///< a snapshot of every worker
-  std::size_t encoded_sets() const;                ///< block sets this client keeps encoded (memory)
-  std::uint32_t blocks_total() const;              ///< blocks in the partition
+  std::vector<WorkerStatus> workers() const;  ///< a snapshot of every worker
+  std::size_t encoded_sets() const;           ///< block sets this client keeps encoded (memory)
+  std::uint32_t blocks_total() const;         ///< blocks in the partition
 
  private:
   struct Impl;

@@ -42,8 +42,8 @@ class TreeBackend final : public CollisionBackend {
     for (const geom::FacePair& p : result_.pairs) out.push_back({p.probe, set_.object_face_ids[p.object]});
     st.sphere_tests = result_.stats.node_pairs;
     st.tri_tests = result_.stats.tri_pairs;
-    st.compute_ns = std::uint64_t(
-        std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count());
+    st.compute_ns =
+        std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count());
     return st;
   }
 

@@ -47,19 +47,26 @@ Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::strin
   for (auto&& [k, node] : t) {
     const std::string key(k.str());
     Status s = Ok{};
-    if (key == "bind") s = get_string(node, key, source, c.bind);
-    else if (key == "worker_id") s = get_int<std::uint32_t>(node, key, source, 0, 1u << 20, c.worker_id);
-    else if (key == "log_level") s = get_string(node, key, source, c.log_level);
-    else if (key == "max_sets") s = get_int<std::uint32_t>(node, key, source, 1, 64, c.max_sets);
-    else if (key == "idle_set_s") s = get_int<std::uint32_t>(node, key, source, 0, 86400, c.idle_set_s);
-    else if (key == "max_blockset_mb") s = get_int<std::uint64_t>(node, key, source, 1, 1u << 20, c.max_blockset_mb);
+    if (key == "bind")
+      s = get_string(node, key, source, c.bind);
+    else if (key == "worker_id")
+      s = get_int<std::uint32_t>(node, key, source, 0, 1u << 20, c.worker_id);
+    else if (key == "log_level")
+      s = get_string(node, key, source, c.log_level);
+    else if (key == "max_sets")
+      s = get_int<std::uint32_t>(node, key, source, 1, 64, c.max_sets);
+    else if (key == "idle_set_s")
+      s = get_int<std::uint32_t>(node, key, source, 0, 86400, c.idle_set_s);
+    else if (key == "max_blockset_mb")
+      s = get_int<std::uint64_t>(node, key, source, 1, 1u << 20, c.max_blockset_mb);
     else if (key == "ipc_allowed_uids") {
       const toml::array* a = node.as_array();
       if (!a) return fail(where(source, node), ": ipc_allowed_uids: expected an array of user ids");
       c.ipc_allowed_uids.clear();
       for (const toml::node& u : *a) {
         std::uint32_t uid = 0;
-        if (Status su = get_int<std::uint32_t>(u, "ipc_allowed_uids", source, 0, 0x7fffffffu, uid); !su) return Error{su.error()};
+        if (Status su = get_int<std::uint32_t>(u, "ipc_allowed_uids", source, 0, 0x7fffffffu, uid); !su)
+          return Error{su.error()};
         c.ipc_allowed_uids.push_back(uid);
       }
     } else if (key == "insecure") {
@@ -70,7 +77,8 @@ Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::strin
       if (!ct) return fail(where(source, node), ": curve: expected a table [curve]");
       for (auto&& [ck, cn] : *ct) {
         const std::string ckey = "curve." + std::string(ck.str());
-        if (ckey == "curve.secret_key_file") s = get_string(cn, ckey, source, c.curve_secret_key_file);
+        if (ckey == "curve.secret_key_file")
+          s = get_string(cn, ckey, source, c.curve_secret_key_file);
         else if (ckey == "curve.allowed_clients") {
           const toml::array* a = cn.as_array();
           if (!a) return fail(where(source, cn), ": ", ckey, ": expected an array of Z85 public keys");
@@ -89,13 +97,15 @@ Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::strin
               return fail(where(source, e), ": ", ckey, ": expected public key file paths (PREFIX.pub)");
             c.curve_allowed_clients_files.push_back(*e.value<std::string>());
           }
-        } else return fail(where(source, cn), ": unknown key '", ckey,
-                           "' (known: secret_key_file, allowed_clients, allowed_clients_files)");
+        } else
+          return fail(where(source, cn), ": unknown key '", ckey,
+                      "' (known: secret_key_file, allowed_clients, allowed_clients_files)");
         if (!s) return Error{s.error()};
       }
     } else {
       return fail(where(source, node), ": unknown key '", key,
-                  "' (known: bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb, ipc_allowed_uids, [curve])");
+                  "' (known: bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb, "
+                  "ipc_allowed_uids, [curve])");
     }
     if (!s) return Error{s.error()};
   }
@@ -139,24 +149,28 @@ bool is_local_endpoint(const std::string& ep) {
   // 127.0.0.0/8 in dotted-quad form only.
   unsigned a, b, cc, d;
   char tail;
-  if (std::sscanf(host.c_str(), "%u.%u.%u.%u%c", &a, &b, &cc, &d, &tail) == 4) return a == 127 && b < 256 && cc < 256 && d < 256;
+  if (std::sscanf(host.c_str(), "%u.%u.%u.%u%c", &a, &b, &cc, &d, &tail) == 4)
+    return a == 127 && b < 256 && cc < 256 && d < 256;
   return false;
 }
 
 Status check_daemon_config(const DaemonConfig& c) {
-  if (log_priority(c.log_level) < 0) return fail("log_level: '", c.log_level, "' is not one of error, warning, info, debug");
+  if (log_priority(c.log_level) < 0)
+    return fail("log_level: '", c.log_level, "' is not one of error, warning, info, debug");
   if (c.bind.rfind("tcp://", 0) != 0 && c.bind.rfind("ipc://", 0) != 0)
     return fail("bind: '", c.bind, "': expected tcp://HOST:PORT or ipc://PATH");
   const bool curve = !c.curve_secret_key_file.empty();
   const bool clients = !c.curve_allowed_clients.empty() || !c.curve_allowed_clients_files.empty();
   if (curve && !clients)
-    return fail("[curve]: secret_key_file is set but allowed_clients and allowed_clients_files are empty: "
-                "no client could connect");
+    return fail(
+        "[curve]: secret_key_file is set but allowed_clients and allowed_clients_files are empty: "
+        "no client could connect");
   if (!curve && clients) return fail("[curve]: allowed clients are set but secret_key_file is not");
   for (const std::string& k : c.curve_allowed_clients)
     if (Status s = check_z85_key(k, "[curve] allowed_clients: '" + k + "'"); !s) return s;
   if (!is_local_endpoint(c.bind) && !c.insecure && !curve)
-    return fail("bind: '", c.bind, "' is not a loopback address; refusing to serve unauthenticated on a network. "
+    return fail("bind: '", c.bind,
+                "' is not a loopback address; refusing to serve unauthenticated on a network. "
                 "Configure [curve] keys, or pass --insecure (insecure = true) on a trusted network");
   return Ok{};
 }

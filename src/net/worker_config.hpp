@@ -14,15 +14,15 @@ namespace st::net {
 
 /// Everything a worker daemon is configured with; defaults are safe.
 struct DaemonConfig {
-  std::string bind = "tcp://127.0.0.1:5555";   ///< endpoint: tcp://HOST:PORT or ipc://PATH
-  std::uint32_t worker_id = 0;                 ///< reported in Hello and Result
-  std::string log_level = "info";              ///< error, warning, info or debug
-  bool insecure = false;                       ///< allow a non-loopback bind without CURVE
-  std::uint32_t max_sets = 3;                  ///< block sets kept in memory (LRU)
-  std::uint32_t idle_set_s = 30;               ///< drop a set not queried for this long (0 = never; not the newest)
-  std::uint64_t max_blockset_mb = 1024;        ///< largest block set accepted, MiB (memory bound)
-  std::vector<std::uint32_t> ipc_allowed_uids; ///< ipc://: users besides the worker's own that may connect
-  std::string curve_secret_key_file;           ///< [curve] secret_key_file (Z85), empty: no CURVE
+  std::string bind = "tcp://127.0.0.1:5555";       ///< endpoint: tcp://HOST:PORT or ipc://PATH
+  std::uint32_t worker_id = 0;                     ///< reported in Hello and Result
+  std::string log_level = "info";                  ///< error, warning, info or debug
+  bool insecure = false;                           ///< allow a non-loopback bind without CURVE
+  std::uint32_t max_sets = 3;                      ///< block sets kept in memory (LRU)
+  std::uint32_t idle_set_s = 30;                   ///< drop a set not queried for this long (0 = never; not the newest)
+  std::uint64_t max_blockset_mb = 1024;            ///< largest block set accepted, MiB (memory bound)
+  std::vector<std::uint32_t> ipc_allowed_uids;     ///< ipc://: users besides the worker's own that may connect
+  std::string curve_secret_key_file;               ///< [curve] secret_key_file (Z85), empty: no CURVE
   std::vector<std::string> curve_allowed_clients;  ///< [curve] allowed_clients (Z85 public keys)
   std::vector<std::string> curve_allowed_clients_files;  ///< [curve] allowed_clients_files (PREFIX.pub paths)
 };

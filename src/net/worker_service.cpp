@@ -32,9 +32,9 @@ struct WorkerService::LoadJob {
   std::atomic<bool> cancel{false}, done{false};
   // Results (written by the loader before `done`, read after it).
   Digest digest{};
-  bool reuse = false;         // the digest was known: a held backend serves these bytes
+  bool reuse = false;  // the digest was known: a held backend serves these bytes
   std::unique_ptr<CollisionBackend> backend;
-  std::string error;          // non-empty: refused
+  std::string error;  // non-empty: refused
   std::uint32_t faces = 0, probe_faces = 0, blocks = 0;
   double ms = 0;
   ~LoadJob() {
@@ -83,7 +83,8 @@ void set_common_options(zmq::socket_t& s, int sndhwm, int rcvhwm, std::int64_t m
 WorkerService::WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFactory factory)
     : cfg_(std::move(config)), factory_(std::move(factory)), sock_(ctx, zmq::socket_type::router) {
   std::random_device rd;
-  do epoch_ = (std::uint64_t{rd()} << 32) ^ rd(); while (epoch_ == 0);
+  do epoch_ = (std::uint64_t{rd()} << 32) ^ rd();
+  while (epoch_ == 0);
   // The largest legitimate frame a worker receives is a LoadBlocks chunk; anything bigger is cut
   // off by libzmq before it is buffered.
   const std::int64_t max_in = std::int64_t(kHeaderBytes) + 64 + cfg_.limits.max_chunk_bytes;
@@ -106,9 +107,7 @@ WorkerService::WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFa
       sock_.set(zmq::sockopt::curve_secretkey, cfg_.curve->secret_z85);
       wipe_secret(cfg_.curve->secret_z85);  // libzmq holds it now
       sock_.set(zmq::sockopt::zap_domain, "spheretouch");
-    } catch (const std::exception& e) {
-      init_error_ = std::string("CURVE set-up: ") + e.what();
-    }
+    } catch (const std::exception& e) { init_error_ = std::string("CURVE set-up: ") + e.what(); }
   }
   // Connection events: libzmq has no limit on the connections a ROUTER accepts, so the service
   // counts them and shuts down those past max_connections (what each may queue is bounded by
@@ -116,8 +115,8 @@ WorkerService::WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFa
   // when its event arrives.
   {
     static std::atomic<std::uint64_t> serial{0};
-    const std::string addr = "inproc://spheretouch-worker-monitor-" + std::to_string(::getpid()) + "-" +
-                             std::to_string(serial.fetch_add(1));
+    const std::string addr =
+        "inproc://spheretouch-worker-monitor-" + std::to_string(::getpid()) + "-" + std::to_string(serial.fetch_add(1));
     if (zmq_socket_monitor(sock_.handle(), addr.c_str(), ZMQ_EVENT_ACCEPTED | ZMQ_EVENT_DISCONNECTED) == 0) {
       monitor_ = zmq::socket_t(ctx, zmq::socket_type::pair);
       monitor_.set(zmq::sockopt::linger, 0);
@@ -135,8 +134,10 @@ WorkerService::WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFa
 WorkerService::~WorkerService() {
   if (!job_) return;
   job_->cancel.store(true);
-  if (job_->done.load(std::memory_order_acquire)) loader_.join();
-  else loader_.detach();  // the thread holds the job; a daemon exiting need not wait for a build
+  if (job_->done.load(std::memory_order_acquire))
+    loader_.join();
+  else
+    loader_.detach();  // the thread holds the job; a daemon exiting need not wait for a build
 }
 
 Status WorkerService::bind(const std::string& endpoint) {
@@ -160,22 +161,22 @@ Status WorkerService::bind(const std::string& endpoint) {
     const std::filesystem::path dir = std::filesystem::path(path).parent_path();
     if (!dir.empty()) {
       std::vector<std::filesystem::path> missing;
-      for (std::filesystem::path d = dir; !d.empty() && !std::filesystem::exists(d); d = d.parent_path()) missing.push_back(d);
+      for (std::filesystem::path d = dir; !d.empty() && !std::filesystem::exists(d); d = d.parent_path())
+        missing.push_back(d);
       for (auto it = missing.rbegin(); it != missing.rend(); ++it)
         if (::mkdir(it->c_str(), 0700) != 0 && errno != EEXIST)
           return fail("bind ", endpoint, ": cannot create ", it->string(), ": ", std::strerror(errno));
       struct stat st {};
       if (::stat(dir.c_str(), &st) == 0 && (st.st_mode & 0002) && !(st.st_mode & S_ISVTX))
         log(4, st::fail(dir.string(), " is writable by every user (mode ", std::oct, (st.st_mode & 07777),
-                        "): another user could replace ", path, "; use a 0700 directory").message);
+                        "): another user could replace ", path, "; use a 0700 directory")
+                   .message);
     }
   }
   try {
     if (needs_ipv6(endpoint)) sock_.set(zmq::sockopt::ipv6, 1);
     sock_.bind(zmq_endpoint(endpoint));
-  } catch (const zmq::error_t& e) {
-    return fail("bind ", endpoint, ": ", e.what());
-  }
+  } catch (const zmq::error_t& e) { return fail("bind ", endpoint, ": ", e.what()); }
   if (file && ::chmod(path.c_str(), 0600) != 0)
     return fail("bind ", endpoint, ": cannot make the socket file 0600: ", std::strerror(errno));
   return Ok{};
@@ -221,8 +222,7 @@ void WorkerService::send(const zmq::message_t& peer, const Message& m) {
     zmq::message_t id(peer.data(), peer.size());
     if (!sock_.send(id, zmq::send_flags::sndmore | zmq::send_flags::dontwait)) return;
     (void)sock_.send(zmq::buffer(out_), zmq::send_flags::dontwait);
-  } catch (const zmq::error_t&) {
-  }
+  } catch (const zmq::error_t&) {}
 }
 
 void WorkerService::note_bad(const std::string& why) {
@@ -249,10 +249,11 @@ void WorkerService::handle_zap() {
       f.emplace_back();
       if (!zap_.recv(f.back(), zmq::recv_flags::dontwait)) return;
     } while (f.back().more() && f.size() < 16);
-    while (f.back().more()) { zmq::message_t junk; (void)zap_.recv(junk); }
-  } catch (const zmq::error_t&) {
-    return;
-  }
+    while (f.back().more()) {
+      zmq::message_t junk;
+      (void)zap_.recv(junk);
+    }
+  } catch (const zmq::error_t&) { return; }
   bool ok = false;
   if (f.size() >= 7 && f[5].to_string_view() == "CURVE" && f[6].size() == 32) {
     const std::string key(static_cast<const char*>(f[6].data()), 32);
@@ -261,7 +262,7 @@ void WorkerService::handle_zap() {
       ++counters_.refused;
       // Rate-limited per source address, not per key: a client rotating keys gets one line, then
       // one a minute with a count, however many keys it tries.
-      constexpr std::size_t kMaxRefusedSources = 1024;                // bounds the map under a spoofed flood
+      constexpr std::size_t kMaxRefusedSources = 1024;  // bounds the map under a spoofed flood
       constexpr auto kRefusalLogInterval = std::chrono::seconds(60);
       const std::string source(f[3].to_string_view());
       if (refusals_.size() >= kMaxRefusedSources && !refusals_.count(source)) refusals_.clear();
@@ -290,8 +291,7 @@ void WorkerService::handle_zap() {
     zap_.send(zmq::buffer(std::string_view(ok ? "OK" : "client key not allowed")), zmq::send_flags::sndmore);
     zap_.send(zmq::buffer(std::string_view(user)), zmq::send_flags::sndmore);
     zap_.send(zmq::str_buffer(""), zmq::send_flags::none);
-  } catch (const zmq::error_t&) {
-  }
+  } catch (const zmq::error_t&) {}
 }
 
 void WorkerService::handle_monitor() {
@@ -300,9 +300,7 @@ void WorkerService::handle_monitor() {
     try {
       if (!monitor_.recv(ev, zmq::recv_flags::dontwait)) return;
       if (ev.more()) (void)monitor_.recv(addr, zmq::recv_flags::none);
-    } catch (const zmq::error_t&) {
-      return;
-    }
+    } catch (const zmq::error_t&) { return; }
     if (ev.size() < 6) continue;
     std::uint16_t event = 0;
     std::uint32_t value = 0;
@@ -314,7 +312,8 @@ void WorkerService::handle_monitor() {
         ++counters_.connections_refused;
         if (counters_.connections_refused == 1 || counters_.connections_refused % 1000 == 0)
           log(4, st::fail("more than max_connections = ", cfg_.max_connections, " connections: refused ",
-                          counters_.connections_refused, " so far").message);
+                          counters_.connections_refused, " so far")
+                     .message);
       }
     } else if (event == ZMQ_EVENT_DISCONNECTED) {
       if (connections_ > 0) --connections_;
@@ -351,10 +350,13 @@ bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
     try {
       if (!sock_.recv(peer, zmq::recv_flags::dontwait)) break;
       ST_ASSERT(peer.more(), "a ROUTER prepends the routing id to every message");
-      if (!peer.more()) { note_bad("no body frame"); continue; }
-      (void)sock_.recv(frame, zmq::recv_flags::none);             // parts of a message arrive together
+      if (!peer.more()) {
+        note_bad("no body frame");
+        continue;
+      }
+      (void)sock_.recv(frame, zmq::recv_flags::none);  // parts of a message arrive together
       bool extra = frame.more();
-      for (bool more = extra; more;) {                            // discard surplus frames
+      for (bool more = extra; more;) {  // discard surplus frames
         zmq::message_t junk;
         (void)sock_.recv(junk, zmq::recv_flags::none);
         more = junk.more();
@@ -365,9 +367,7 @@ bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
         continue;
       }
       handle(peer, owner_of(peer, frame), {static_cast<const std::uint8_t*>(frame.data()), frame.size()});
-    } catch (const zmq::error_t& e) {
-      return e.num() != ETERM;
-    }
+    } catch (const zmq::error_t& e) { return e.num() != ETERM; }
   }
   return true;
 }
@@ -382,10 +382,14 @@ void WorkerService::drop_idle() {
   if (now < next_idle_check_) return;
   next_idle_check_ = now + std::chrono::seconds(1);
   for (auto it = uploads_.begin(); it != uploads_.end();) {
-    if (now - it->second.last_chunk < cfg_.upload_timeout) { ++it; continue; }
+    if (now - it->second.last_chunk < cfg_.upload_timeout) {
+      ++it;
+      continue;
+    }
     log(5, st::fail("upload of block set ", std::hex, it->second.hash, std::dec, " abandoned after ",
                     it->second.bytes.size(), " of ", it->second.total, " bytes: no chunk for ",
-                    cfg_.upload_timeout.count(), " ms").message);
+                    cfg_.upload_timeout.count(), " ms")
+               .message);
     ++counters_.uploads_abandoned;
     auto gone = it++;
     drop_upload(gone);
@@ -393,9 +397,13 @@ void WorkerService::drop_idle() {
   if (cfg_.idle_set_ttl.count() <= 0 || sets_.size() < 2) return;
   std::size_t dropped = 0;
   for (auto it = std::next(sets_.begin()); it != sets_.end();) {  // never the most recently used
-    if (now - it->last_used < cfg_.idle_set_ttl) { ++it; continue; }
+    if (now - it->last_used < cfg_.idle_set_ttl) {
+      ++it;
+      continue;
+    }
     log(6, st::fail("dropped block set ", std::hex, it->hash, std::dec, ": not queried for ",
-                    std::chrono::duration_cast<std::chrono::seconds>(now - it->last_used).count(), " s").message);
+                    std::chrono::duration_cast<std::chrono::seconds>(now - it->last_used).count(), " s")
+               .message);
     it = sets_.erase(it);
     ++dropped;
   }
@@ -433,7 +441,8 @@ void WorkerService::handle(const zmq::message_t& peer, const std::string& owner,
 }
 
 void WorkerService::on_query(const zmq::message_t& peer, const std::string& owner, const QueryMsg& q) {
-  auto it = std::find_if(sets_.begin(), sets_.end(), [&](const Loaded& l) { return l.hash == q.hash && l.owner == owner; });
+  auto it =
+      std::find_if(sets_.begin(), sets_.end(), [&](const Loaded& l) { return l.hash == q.hash && l.owner == owner; });
   if (it == sets_.end()) {
     send_error(peer, ErrorCode::NotLoaded, q.seq, st::fail("block set ", std::hex, q.hash, " is not held").message);
     send(peer, hello(owner, 0));  // tell the client what is held so it can load the right set
@@ -471,8 +480,9 @@ void WorkerService::on_load(const zmq::message_t& peer, const std::string& owner
     if (busy >= cfg_.max_uploads) {
       ++counters_.uploads_refused;
       return send_error(peer, ErrorCode::TooLarge, m.hash,
-                        st::fail("worker busy: ", busy, " block-set uploads in progress (max_uploads = ",
-                                 cfg_.max_uploads, "); send again later").message);
+                        st::fail("worker busy: ", busy, " block-set uploads in progress (max_uploads = ", cfg_.max_uploads,
+                                 "); send again later")
+                            .message);
     }
     Upload u;
     u.owner = owner;
@@ -483,8 +493,9 @@ void WorkerService::on_load(const zmq::message_t& peer, const std::string& owner
              it->second.bytes.size() != m.offset) {
     const bool was = it != uploads_.end();
     if (was) drop_upload(it);
-    return send_error(peer, ErrorCode::LoadFailed, m.hash,
-                      st::fail("LoadBlocks chunk at offset ", m.offset, " out of order", was ? " (load abandoned)" : "").message);
+    return send_error(
+        peer, ErrorCode::LoadFailed, m.hash,
+        st::fail("LoadBlocks chunk at offset ", m.offset, " out of order", was ? " (load abandoned)" : "").message);
   }
   Upload& u = it->second;
   // Capacity grows with the bytes that actually arrive (a lying total_bytes costs nothing up
@@ -497,8 +508,9 @@ void WorkerService::on_load(const zmq::message_t& peer, const std::string& owner
       const std::uint64_t hash = u.hash;
       drop_upload(it);
       return send_error(peer, ErrorCode::TooLarge, hash,
-                        st::fail("worker busy: uploads would buffer more than max_upload_bytes = ",
-                                 cfg_.max_upload_bytes, " bytes; load refused, send again later").message);
+                        st::fail("worker busy: uploads would buffer more than max_upload_bytes = ", cfg_.max_upload_bytes,
+                                 " bytes; load refused, send again later")
+                            .message);
     }
     u.bytes.reserve(grown);
     buffered_ += u.bytes.capacity() - cap;
@@ -566,9 +578,10 @@ void WorkerService::finish_job() {
     for (const Loaded& l : sets_)
       if (l.backend == backend && l.faces) sets_.front().faces = l.faces;
   ++counters_.loads;
-  log(6, st::fail("loaded block set ", std::hex, u.hash, std::dec, job->reuse ? " (same bytes as a held set)" : "", ": ",
-                  job->blocks, " blocks, ", sets_.front().faces, " object faces, ", job->probe_faces, " probe faces, in ",
-                  job->ms, " ms; holding ", sets_.size(), " set(s)").message);
+  log(6, st::fail("loaded block set ", std::hex, u.hash, std::dec, job->reuse ? " (same bytes as a held set)" : "",
+                  ": ", job->blocks, " blocks, ", sets_.front().faces, " object faces, ", job->probe_faces,
+                  " probe faces, in ", job->ms, " ms; holding ", sets_.size(), " set(s)")
+             .message);
   send(u.peer, hello(u.owner, 0));
   start_job();
 }

@@ -42,8 +42,8 @@ struct CurveServer {
 
 /// What a worker is and how much it may hold.
 struct WorkerConfig {
-  std::uint32_t worker_id = 0;     ///< reported in Hello and Result
-  std::uint32_t max_sets = 3;      ///< block sets kept in memory (LRU): own share + reassigned variants
+  std::uint32_t worker_id = 0;  ///< reported in Hello and Result
+  std::uint32_t max_sets = 3;   ///< block sets kept in memory (LRU): own share + reassigned variants
   /// A held set not queried for this long is dropped and its memory returned to the system (the
   /// most recently used set is always kept). Reassigned variants live through a fault and go
   /// once it is over; a variant needed again is sent again. Zero: keep sets until LRU evicts them.
@@ -61,8 +61,8 @@ struct WorkerConfig {
   std::uint64_t max_upload_bytes = 2ull << 30;
   /// An upload with no chunk for this long is abandoned and its bytes freed.
   std::chrono::milliseconds upload_timeout{10'000};
-  int sndhwm = 64;                 ///< messages queued per client before replies are dropped
-  int rcvhwm = 4;                  ///< messages queued inside libzmq per connection (4 × 1 MiB chunks at most)
+  int sndhwm = 64;  ///< messages queued per client before replies are dropped
+  int rcvhwm = 4;   ///< messages queued inside libzmq per connection (4 × 1 MiB chunks at most)
   /// TCP and ipc connections held at once; one more is shut down as it is accepted, so what
   /// libzmq may queue is bounded by max_connections × rcvhwm frames in total.
   std::uint32_t max_connections = 64;
@@ -80,17 +80,17 @@ struct WorkerConfig {
 
 /// Counters since start (read on the service's thread, or after it stopped).
 struct WorkerCounters {
-  std::uint64_t queries = 0;       ///< Query messages answered with a Result
-  std::uint64_t loads = 0;         ///< block sets loaded
-  std::uint64_t chunks = 0;        ///< LoadBlocks messages accepted
-  std::uint64_t bad_messages = 0;  ///< undecodable or misframed messages
-  std::uint64_t errors_sent = 0;   ///< Error replies sent
-  std::uint64_t heartbeats = 0;    ///< Heartbeats answered
-  std::uint64_t refused = 0;       ///< CURVE handshakes refused (client key not allowed)
-  std::uint64_t too_many_pairs = 0;  ///< queries refused at max_pairs (the traversal stopped there)
-  std::uint64_t uploads_refused = 0;    ///< uploads refused: max_uploads or max_upload_bytes reached
-  std::uint64_t uploads_abandoned = 0;  ///< uploads dropped after upload_timeout without a chunk
-  std::uint64_t loads_shared = 0;       ///< loads served by a backend already built for the same bytes
+  std::uint64_t queries = 0;              ///< Query messages answered with a Result
+  std::uint64_t loads = 0;                ///< block sets loaded
+  std::uint64_t chunks = 0;               ///< LoadBlocks messages accepted
+  std::uint64_t bad_messages = 0;         ///< undecodable or misframed messages
+  std::uint64_t errors_sent = 0;          ///< Error replies sent
+  std::uint64_t heartbeats = 0;           ///< Heartbeats answered
+  std::uint64_t refused = 0;              ///< CURVE handshakes refused (client key not allowed)
+  std::uint64_t too_many_pairs = 0;       ///< queries refused at max_pairs (the traversal stopped there)
+  std::uint64_t uploads_refused = 0;      ///< uploads refused: max_uploads or max_upload_bytes reached
+  std::uint64_t uploads_abandoned = 0;    ///< uploads dropped after upload_timeout without a chunk
+  std::uint64_t loads_shared = 0;         ///< loads served by a backend already built for the same bytes
   std::uint64_t connections_refused = 0;  ///< connections shut down at max_connections
 };
 
@@ -126,11 +126,11 @@ class WorkerService {
   /// CURVE identity); replies go to that routing id and are dropped if no such client is
   /// connected. For the message-sequence fuzzer: the whole handler without a socket round trip.
   void handle_message(const std::string& peer, std::span<const std::uint8_t> frame);
-  std::uint64_t epoch() const { return epoch_; }                 ///< random per instance
-  const WorkerCounters& counters() const { return counters_; }   ///< counters so far
-  std::vector<Held> held() const;                                ///< block sets in memory (all clients), MRU first
-  std::uint64_t upload_bytes() const { return buffered_; }       ///< bytes buffered for uploads now
-  bool loading() const { return job_ != nullptr; }               ///< a set is being hashed, decoded or built
+  std::uint64_t epoch() const { return epoch_; }                ///< random per instance
+  const WorkerCounters& counters() const { return counters_; }  ///< counters so far
+  std::vector<Held> held() const;                               ///< block sets in memory (all clients), MRU first
+  std::uint64_t upload_bytes() const { return buffered_; }      ///< bytes buffered for uploads now
+  bool loading() const { return job_ != nullptr; }              ///< a set is being hashed, decoded or built
 
  private:
   /// One client's view of a loaded set; clients that sent the same bytes share the backend.
@@ -152,7 +152,7 @@ class WorkerService {
   struct LoadJob;  // a complete upload on the loader thread (worker_service.cpp)
   void handle(const zmq::message_t& peer, const std::string& owner, std::span<const std::uint8_t> frame);
   void handle_zap();
-  void handle_monitor();        ///< connection accepted / closed: counts, enforces max_connections
+  void handle_monitor();  ///< connection accepted / closed: counts, enforces max_connections
   void on_load(const zmq::message_t& peer, const std::string& owner, const LoadBlocksMsg& m);
   void on_query(const zmq::message_t& peer, const std::string& owner, const QueryMsg& m);
   void send(const zmq::message_t& peer, const Message& m);
@@ -161,32 +161,34 @@ class WorkerService {
   void send_error(const std::string& peer, ErrorCode code, std::uint64_t ref, std::string text);
   HelloMsg hello(const std::string& owner, std::uint64_t echo) const;
   std::string owner_of(const zmq::message_t& peer, const zmq::message_t& frame) const;
-  void log(int priority, const std::string& text) const { if (cfg_.log) cfg_.log(priority, text); }
+  void log(int priority, const std::string& text) const {
+    if (cfg_.log) cfg_.log(priority, text);
+  }
   void note_bad(const std::string& why);
-  void drop_idle();             ///< at most once a second: idle_set_ttl, upload_timeout
+  void drop_idle();  ///< at most once a second: idle_set_ttl, upload_timeout
   void drop_upload(std::unordered_map<std::string, Upload>::iterator it);
-  void start_job();             ///< hands the next waiting upload to the loader thread
-  void finish_job();            ///< installs (or refuses) the loader's result
+  void start_job();   ///< hands the next waiting upload to the loader thread
+  void finish_job();  ///< installs (or refuses) the loader's result
   std::size_t distinct_backends() const;
 
   WorkerConfig cfg_;
   BackendFactory factory_;
   zmq::socket_t sock_;
-  zmq::socket_t zap_;             // ZAP handler (CURVE client allow-list), or empty
-  zmq::socket_t monitor_;         // events of sock_ (accepted, disconnected), or empty
-  std::uint32_t connections_ = 0; // TCP/ipc connections open now
+  zmq::socket_t zap_;                 // ZAP handler (CURVE client allow-list), or empty
+  zmq::socket_t monitor_;             // events of sock_ (accepted, disconnected), or empty
+  std::uint32_t connections_ = 0;     // TCP/ipc connections open now
   std::vector<std::string> allowed_;  // admitted client public keys, 32 raw bytes each
-  std::string init_error_;        // a CURVE set-up failure, reported by bind()
+  std::string init_error_;            // a CURVE set-up failure, reported by bind()
   std::uint64_t epoch_;
-  std::list<Loaded> sets_;        // MRU first
+  std::list<Loaded> sets_;                           // MRU first
   std::unordered_map<std::string, Upload> uploads_;  // in progress, by owner
-  std::deque<Upload> waiting_;    // complete, waiting for the loader
-  std::uint64_t buffered_ = 0;    // Σ capacity of uploads_ and waiting_ bytes, and the job's
-  std::shared_ptr<LoadJob> job_;  // on the loader thread, or null
+  std::deque<Upload> waiting_;                       // complete, waiting for the loader
+  std::uint64_t buffered_ = 0;                       // Σ capacity of uploads_ and waiting_ bytes, and the job's
+  std::shared_ptr<LoadJob> job_;                     // on the loader thread, or null
   std::thread loader_;
   WorkerCounters counters_;
-  std::vector<FacePair> pairs_;   // reused per query
-  std::vector<std::uint8_t> out_; // reused encode buffer
+  std::vector<FacePair> pairs_;    // reused per query
+  std::vector<std::uint8_t> out_;  // reused encode buffer
   std::chrono::steady_clock::time_point bad_logged_{};
   std::chrono::steady_clock::time_point next_idle_check_{};
   std::uint64_t bad_unlogged_ = 0;

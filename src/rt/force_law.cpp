@@ -15,7 +15,8 @@ bool positive_finite(double v) { return std::isfinite(v) && v > 0; }
 }  // namespace
 
 Result<ForceLaw> ForceLaw::make(const ForceLawConfig& c) {
-  if (!positive_finite(c.max_force_N)) return fail("force law: max_force_N = ", c.max_force_N, ", expected a finite value > 0");
+  if (!positive_finite(c.max_force_N))
+    return fail("force law: max_force_N = ", c.max_force_N, ", expected a finite value > 0");
   if (c.kind == LawKind::linear) {
     if (!positive_finite(c.spring_N_per_mm))
       return fail("force law: spring_N_per_mm = ", c.spring_N_per_mm, ", expected a finite value > 0");
@@ -25,7 +26,8 @@ Result<ForceLaw> ForceLaw::make(const ForceLawConfig& c) {
   if (!positive_finite(c.b_N)) return fail("force law: b_N = ", c.b_N, ", expected a finite value > 0");
   if (!(std::isfinite(c.log_base) && c.log_base > 1.0))
     return fail("force law: log_base = ", c.log_base, ", expected a finite value > 1");
-  if (!positive_finite(c.pd_unit_mm)) return fail("force law: pd_unit_mm = ", c.pd_unit_mm, ", expected a finite value > 0");
+  if (!positive_finite(c.pd_unit_mm))
+    return fail("force law: pd_unit_mm = ", c.pd_unit_mm, ", expected a finite value > 0");
   ForceLaw law(c);
   if (!positive_finite(law.x0_) || !positive_finite(law.k_))
     return fail("force law: a = ", c.a, ", log_base = ", c.log_base, ", pd_unit_mm = ", c.pd_unit_mm,
@@ -61,7 +63,8 @@ double ForceLaw::magnitude_N(double pd_mm) const noexcept {
   } else {
     f = c_.b_N * (std::log(pd_mm / c_.pd_unit_mm) * inv_ln_base_ + c_.a);
   }
-  ST_ASSERT(f > 0, "the law is positive for PD > 0 (past the knee the log term exceeds its value there)");
+  // >= rather than >: k·PD underflows to 0 for a subnormal PD.
+  ST_ASSERT(f >= 0, "the law is non-negative for PD > 0 (past the knee the log term exceeds its value there)");
   if (!(f > 0)) return 0.0;  // never NaN or negative, whatever a future law does
   return std::min(f, c_.max_force_N);
 }

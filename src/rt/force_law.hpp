@@ -13,13 +13,13 @@ enum class LawKind { log, linear };
 
 /// Law parameters; the initializers (= DefaultForceLawConfig()) are the documented defaults.
 struct ForceLawConfig {
-  LawKind kind = LawKind::log;                  ///< paper eq. (1) or the linear spring
-  double a = kPaperA;                           ///< eq. (1) constant a, dimensionless (paper: 3.0)
-  double b_N = kPaperB;                         ///< eq. (1) constant b, N (paper: 0.8)
-  double log_base = kDefaultLogBase;            ///< base of eq. (1)'s log, > 1
-  double pd_unit_mm = kDefaultPdUnitMm;         ///< eq. (1) takes PD in this unit, mm (10 = centimetres)
-  double spring_N_per_mm = kDefaultSpringNPerMm; ///< linear law stiffness, N/mm
-  double max_force_N = kOmniPeakForceN;         ///< saturation, N (device peak)
+  LawKind kind = LawKind::log;                    ///< paper eq. (1) or the linear spring
+  double a = kPaperA;                             ///< eq. (1) constant a, dimensionless (paper: 3.0)
+  double b_N = kPaperB;                           ///< eq. (1) constant b, N (paper: 0.8)
+  double log_base = kDefaultLogBase;              ///< base of eq. (1)'s log, > 1
+  double pd_unit_mm = kDefaultPdUnitMm;           ///< eq. (1) takes PD in this unit, mm (10 = centimetres)
+  double spring_N_per_mm = kDefaultSpringNPerMm;  ///< linear law stiffness, N/mm
+  double max_force_N = kOmniPeakForceN;           ///< saturation, N (device peak)
 };
 /// Paper constants, natural log, PD in cm (max stiffness 0.59 N/mm), Omni peak force 3.3 N.
 ForceLawConfig DefaultForceLawConfig();

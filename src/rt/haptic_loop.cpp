@@ -73,7 +73,8 @@ __attribute__((noinline)) std::size_t stack_left_here() {
   pthread_attr_destroy(&attr);
   if (e != 0) return 0;
   // The frame address, not a local's: under ASan a local may live on a fake stack in the heap.
-  const auto sp = reinterpret_cast<std::uintptr_t>(__builtin_frame_address(0)), base = reinterpret_cast<std::uintptr_t>(low);
+  const auto sp = reinterpret_cast<std::uintptr_t>(__builtin_frame_address(0)),
+             base = reinterpret_cast<std::uintptr_t>(low);
   return sp > base && sp - base <= size ? sp - base : 0;
 }
 }  // namespace
@@ -98,9 +99,12 @@ Status set_default_thread_stack(std::size_t bytes) {
     // glibc takes the static TLS of every loaded library out of each stack (ThreadSanitizer's is
     // ~0.8 MB), so a size can be accepted here and still fail every pthread_create: try one now.
     pthread_t t;
-    e = pthread_create(&t, nullptr, [](void*) -> void* { return nullptr; }, nullptr);
-    if (e == 0) pthread_join(t, nullptr);
-    else if (before) set(before);
+    e = pthread_create(
+        &t, nullptr, [](void*) -> void* { return nullptr; }, nullptr);
+    if (e == 0)
+      pthread_join(t, nullptr);
+    else if (before)
+      set(before);
   }
   if (e != 0) return Error{"cannot use a thread stack of " + std::to_string(bytes) + " bytes: " + std::strerror(e)};
   return Ok{};
@@ -167,8 +171,7 @@ void HapticLoop::loop(TickHandler& handler) {
   while (!stop_.load(std::memory_order_relaxed)) {
     if (config_.max_periods && sched.index() >= config_.max_periods) break;
     const timespec ts = to_timespec(sched.deadline_ns());
-    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-    }
+    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {}
     const std::int64_t woke = now_ns();
     stats_.wake_latency.record(woke - sched.deadline_ns());
     const std::uint64_t skipped = sched.on_wake(woke);

@@ -19,13 +19,13 @@ namespace st::rt {
 
 /// Loop settings; the initializers (= DefaultHapticLoopConfig()) give 1 kHz and no real-time requests.
 struct HapticLoopConfig {
-  double rate_hz = kDefaultRateHz;      ///< tick rate, Hz, in [kMinRateHz, kMaxRateHz]
-  int fifo_priority = 0;                ///< SCHED_FIFO priority 1..99; 0 = do not ask
-  int cpu = -1;                         ///< pin the loop thread to this CPU; -1 = do not pin
-  bool lock_memory = false;             ///< mlockall(MCL_CURRENT | MCL_FUTURE)
-  std::size_t prefault_stack_bytes = 0; ///< touch this much stack before the first tick; 0 = no
-  bool strict = false;                  ///< any refused request makes start() fail
-  std::uint64_t max_periods = 0;        ///< stop after this many deadlines (ticks + misses); 0 = run until stop()
+  double rate_hz = kDefaultRateHz;       ///< tick rate, Hz, in [kMinRateHz, kMaxRateHz]
+  int fifo_priority = 0;                 ///< SCHED_FIFO priority 1..99; 0 = do not ask
+  int cpu = -1;                          ///< pin the loop thread to this CPU; -1 = do not pin
+  bool lock_memory = false;              ///< mlockall(MCL_CURRENT | MCL_FUTURE)
+  std::size_t prefault_stack_bytes = 0;  ///< touch this much stack before the first tick; 0 = no
+  bool strict = false;                   ///< any refused request makes start() fail
+  std::uint64_t max_periods = 0;         ///< stop after this many deadlines (ticks + misses); 0 = run until stop()
 };
 /// 1 kHz, no real-time requests, not strict, run until stop().
 HapticLoopConfig DefaultHapticLoopConfig();
@@ -58,7 +58,7 @@ struct RtReport {
   RtStep fifo, affinity, mlock, prefault;  ///< one per request
   bool all_applied() const;                ///< no requested step was refused
   std::string describe() const;            ///< "SCHED_FIFO 80: refused (Operation not permitted); ..."
-  std::size_t stack_left = 0;              ///< bytes of the loop thread's stack below its frame, when a pre-fault was refused
+  std::size_t stack_left = 0;  ///< bytes of the loop thread's stack below its frame, when a pre-fault was refused
 };
 
 /// Stack kept free below a pre-fault for the tick path and signal delivery.
@@ -104,11 +104,11 @@ class DeadlineSchedule {
 
 /// Counters and histograms of a run. Histograms: read only after stop()/run() returned.
 struct LoopStats {
-  std::uint64_t ticks = 0;         ///< ticks run
-  std::uint64_t misses = 0;        ///< deadlines skipped
-  std::uint64_t overruns = 0;      ///< ticks whose work ended after the next deadline
-  LatencyHistogram wake_latency;   ///< woke_ns - deadline_ns, ns
-  LatencyHistogram tick_compute;   ///< time inside TickHandler::tick plus bookkeeping, ns
+  std::uint64_t ticks = 0;        ///< ticks run
+  std::uint64_t misses = 0;       ///< deadlines skipped
+  std::uint64_t overruns = 0;     ///< ticks whose work ended after the next deadline
+  LatencyHistogram wake_latency;  ///< woke_ns - deadline_ns, ns
+  LatencyHistogram tick_compute;  ///< time inside TickHandler::tick plus bookkeeping, ns
 };
 
 /// The servo loop. Either run() in the calling thread or start()/stop() its own thread.

@@ -34,18 +34,17 @@ class HapticServo final : public TickHandler {
   /// lowered to the device's max_force_N() if it is above it. `period_s` is the loop's period
   /// (it sizes the passivity guard's minimum damping).
   HapticServo(Device& device, TripleBuffer<PoseSample>& poses, TripleBuffer<geom::ContactModel>& models,
-              const ForceLaw& law, const InterpolatorConfig& interp, SaturationConfig saturation,
-              Telemetry* telemetry, const PassivityConfig& passivity = DefaultPassivityConfig(),
-              double period_s = 1.0 / kDefaultRateHz);
+              const ForceLaw& law, const InterpolatorConfig& interp, SaturationConfig saturation, Telemetry* telemetry,
+              const PassivityConfig& passivity = DefaultPassivityConfig(), double period_s = 1.0 / kDefaultRateHz);
   void tick(const TickInfo& info) noexcept override;
   /// Publish a ServoStatus every kStatusEveryTicks ticks into `status` (null = off). Set before
   /// the loop starts; the servo is the SeqLock's only writer.
   void publish_status_to(SeqLock<ServoStatus>* status) { status_ = status; }
-  const ServoStats& stats() const { return stats_; }             ///< counters
-  double peak_force_N() const { return peak_force_N_; }          ///< largest |force| commanded (after the loop)
-  const Interpolator& interpolator() const { return interp_; }   ///< for inspection
-  const Saturator& saturator() const { return sat_; }            ///< for inspection
-  const PassivityGuard& passivity() const { return guard_; }     ///< for inspection
+  const ServoStats& stats() const { return stats_; }            ///< counters
+  double peak_force_N() const { return peak_force_N_; }         ///< largest |force| commanded (after the loop)
+  const Interpolator& interpolator() const { return interp_; }  ///< for inspection
+  const Saturator& saturator() const { return sat_; }           ///< for inspection
+  const PassivityGuard& passivity() const { return guard_; }    ///< for inspection
 
  private:
   Device& device_;
@@ -57,9 +56,9 @@ class HapticServo final : public TickHandler {
   Telemetry* telemetry_;
   SeqLock<ServoStatus>* status_ = nullptr;
   ServoStats stats_;
-  double peak_force_N_ = 0;         ///< largest |force| commanded
+  double peak_force_N_ = 0;  ///< largest |force| commanded
   std::int64_t model_received_ns_ = 0;
-  std::int64_t pose_ns_ = 0;        ///< sampling time of the newest published pose
+  std::int64_t pose_ns_ = 0;  ///< sampling time of the newest published pose
   std::uint32_t model_contacts_ = 0;
   std::uint64_t pose_seq_ = 0;
   std::int64_t last_ns_ = 0;

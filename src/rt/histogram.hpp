@@ -14,7 +14,7 @@ namespace st::rt {
 /// Histogram of non-negative nanosecond values (negative values count as 0).
 class LatencyHistogram {
  public:
-  static constexpr int kSub = 1 << kHistSubBits;                          ///< bins per octave
+  static constexpr int kSub = 1 << kHistSubBits;                                             ///< bins per octave
   static constexpr std::size_t kBins = 2 * kSub + (kHistOctaves - kHistSubBits - 1) * kSub;  ///< total bins
 
   /// Adds one value.
@@ -65,10 +65,9 @@ class LatencyHistogram {
   /// Bin of a value (exposed for tests).
   static std::size_t bin_of(std::uint64_t v) noexcept {
     if (v < 2u * kSub) return static_cast<std::size_t>(v);
-    const int msb = 63 - std::countl_zero(v);     // v in [2^msb, 2^(msb+1)), msb >= kHistSubBits+1
-    const int shift = msb - kHistSubBits;         // >= 1
-    std::size_t i = 2u * kSub + static_cast<std::size_t>(shift - 1) * kSub +
-                    static_cast<std::size_t>((v >> shift) - kSub);
+    const int msb = 63 - std::countl_zero(v);  // v in [2^msb, 2^(msb+1)), msb >= kHistSubBits+1
+    const int shift = msb - kHistSubBits;      // >= 1
+    std::size_t i = 2u * kSub + static_cast<std::size_t>(shift - 1) * kSub + static_cast<std::size_t>((v >> shift) - kSub);
     return i < kBins ? i : kBins - 1;
   }
   /// Largest value that falls in bin i (exposed for tests).

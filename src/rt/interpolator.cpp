@@ -17,9 +17,12 @@ Result<InterpMode> parse_interp_mode(std::string_view name) {
 
 const char* to_string(InterpMode mode) {
   switch (mode) {
-    case InterpMode::hold: return "hold";
-    case InterpMode::paper: return "paper";
-    case InterpMode::plane: return "plane";
+    case InterpMode::hold:
+      return "hold";
+    case InterpMode::paper:
+      return "paper";
+    case InterpMode::plane:
+      return "plane";
   }
   return "?";
 }
@@ -28,9 +31,12 @@ InterpolatorConfig DefaultInterpolatorConfig() { return InterpolatorConfig{}; }
 
 std::string Interpolator::check(const InterpolatorConfig& c) {
   std::ostringstream os;
-  if (c.stale_timeout_ns <= 0) os << "interpolation: stale_timeout_ns = " << c.stale_timeout_ns << ", expected > 0";
-  else if (c.fade_ns < 0) os << "interpolation: fade_ns = " << c.fade_ns << ", expected >= 0";
-  else if (c.crossfade_ns < 0) os << "interpolation: crossfade_ns = " << c.crossfade_ns << ", expected >= 0";
+  if (c.stale_timeout_ns <= 0)
+    os << "interpolation: stale_timeout_ns = " << c.stale_timeout_ns << ", expected > 0";
+  else if (c.fade_ns < 0)
+    os << "interpolation: fade_ns = " << c.fade_ns << ", expected >= 0";
+  else if (c.crossfade_ns < 0)
+    os << "interpolation: crossfade_ns = " << c.crossfade_ns << ", expected >= 0";
   else if (!(std::isfinite(c.paper_gain_N_per_mm) && c.paper_gain_N_per_mm >= 0))
     os << "interpolation: paper_gain_N_per_mm = " << c.paper_gain_N_per_mm << ", expected a finite value >= 0";
   else if (!(std::isfinite(c.paper_max_move_mm) && c.paper_max_move_mm >= 0))
@@ -122,7 +128,7 @@ Eigen::Vector3d Interpolator::force(const Eigen::Isometry3d& pose, std::int64_t 
         if (dn > c_.paper_max_move_mm) d *= c_.paper_max_move_mm / dn;
         f = force_a_ - c_.paper_gain_N_per_mm * d;  // moving into the surface (against FD) pushes harder
         const double along = f.dot(fd_);
-        if (along < 0) f -= along * fd_;           // never pull the probe into the object
+        if (along < 0) f -= along * fd_;  // never pull the probe into the object
         pd = model_.penetration_mm - d.dot(fd_);
         break;
       }
@@ -160,7 +166,7 @@ Eigen::Vector3d Interpolator::force(const Eigen::Isometry3d& pose, std::int64_t 
     if (!have_last_point_) velocity_fd_ = 0;
     if (dt_s > 0 && dt_s < 0.1 && have_last_point_) {
       const double v = (p - last_point_).dot(fd_) / dt_s;  // mm/s, + = leaving the surface
-      velocity_fd_ += 0.3 * (v - velocity_fd_);             // one-pole low-pass, ~57 Hz at 1 kHz
+      velocity_fd_ += 0.3 * (v - velocity_fd_);            // one-pole low-pass, ~57 Hz at 1 kHz
     }
     const double along = f.dot(fd_);
     if (along > 0) {

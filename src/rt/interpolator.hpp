@@ -35,13 +35,13 @@ const char* to_string(InterpMode mode);
 
 /// Interpolation settings; the initializers (= DefaultInterpolatorConfig()) are the documented defaults.
 struct InterpolatorConfig {
-  InterpMode mode = InterpMode::plane;                      ///< method
-  std::int64_t stale_timeout_ns = kDefaultStaleTimeoutNs;   ///< no update for this long: start fading, ns
-  std::int64_t fade_ns = kDefaultFadeNs;                    ///< fade duration to zero, ns (0 = cut at once)
-  std::int64_t crossfade_ns = kDefaultCrossfadeNs;          ///< plane: cross-fade to a new model, ns (0 = switch at once)
-  double paper_gain_N_per_mm = kDefaultPaperGainNPerMm;     ///< paper: force per mm of probe movement, N/mm
-  double paper_max_move_mm = kDefaultPaperMaxMoveMm;        ///< paper: cap on |D|, mm
-  double damping_N_s_per_mm = 0;                            ///< optional damping along FD while in contact, N·s/mm (0 = off)
+  InterpMode mode = InterpMode::plane;                     ///< method
+  std::int64_t stale_timeout_ns = kDefaultStaleTimeoutNs;  ///< no update for this long: start fading, ns
+  std::int64_t fade_ns = kDefaultFadeNs;                   ///< fade duration to zero, ns (0 = cut at once)
+  std::int64_t crossfade_ns = kDefaultCrossfadeNs;       ///< plane: cross-fade to a new model, ns (0 = switch at once)
+  double paper_gain_N_per_mm = kDefaultPaperGainNPerMm;  ///< paper: force per mm of probe movement, N/mm
+  double paper_max_move_mm = kDefaultPaperMaxMoveMm;     ///< paper: cap on |D|, mm
+  double damping_N_s_per_mm = 0;  ///< optional damping along FD while in contact, N·s/mm (0 = off)
 };
 /// plane, 200 ms stale timeout, 100 ms fade, 10 ms cross-fade, paper gain 0.5 N/mm capped at
 /// 2 mm, no damping.
@@ -49,10 +49,10 @@ InterpolatorConfig DefaultInterpolatorConfig();
 
 /// What the last force() computed, for telemetry.
 struct InterpState {
-  double penetration_mm = 0;   ///< PD used (model PD, or recomputed for plane)
-  double fade = 0;             ///< stale-fade factor in [0, 1]
-  double raw_force_N = 0;      ///< |force| before fade
-  bool in_contact = false;     ///< the newest model is in contact
+  double penetration_mm = 0;  ///< PD used (model PD, or recomputed for plane)
+  double fade = 0;            ///< stale-fade factor in [0, 1]
+  double raw_force_N = 0;     ///< |force| before fade
+  bool in_contact = false;    ///< the newest model is in contact
 };
 
 /// Per-servo interpolator. Tick-path safe: noexcept, no allocation.
@@ -69,12 +69,12 @@ class Interpolator {
   /// magnitude <= the law's max force + damping's share (the Saturator caps the rest).
   Eigen::Vector3d force(const Eigen::Isometry3d& pose, std::int64_t now_ns) noexcept;
 
-  const InterpState& state() const noexcept { return state_; }            ///< last force()'s details
-  std::uint64_t rejected_models() const noexcept { return rejected_; }    ///< bad models seen
-  std::uint64_t bad_poses() const noexcept { return bad_poses_; }         ///< non-finite poses seen
-  std::uint64_t model_seq() const noexcept { return model_.seq; }         ///< newest model's seq
-  std::int64_t received_ns() const noexcept { return received_ns_; }      ///< when it arrived
-  const InterpolatorConfig& config() const noexcept { return c_; }        ///< settings
+  const InterpState& state() const noexcept { return state_; }          ///< last force()'s details
+  std::uint64_t rejected_models() const noexcept { return rejected_; }  ///< bad models seen
+  std::uint64_t bad_poses() const noexcept { return bad_poses_; }       ///< non-finite poses seen
+  std::uint64_t model_seq() const noexcept { return model_.seq; }       ///< newest model's seq
+  std::int64_t received_ns() const noexcept { return received_ns_; }    ///< when it arrived
+  const InterpolatorConfig& config() const noexcept { return c_; }      ///< settings
   /// The contact normal FD of the model in use (unit, object frame), zero when not in contact.
   const Eigen::Vector3d& normal() const noexcept { return fd_; }
 
@@ -82,9 +82,9 @@ class Interpolator {
   Eigen::Vector3d contact_force(const Eigen::Isometry3d& pose, double& pd_mm) const noexcept;
   ForceLaw law_;
   InterpolatorConfig c_;
-  geom::ContactModel model_{};            ///< newest accepted model
+  geom::ContactModel model_{};  ///< newest accepted model
   bool have_model_ = false;
-  bool contact_ = false;                  ///< model_ is in contact
+  bool contact_ = false;                                  ///< model_ is in contact
   Eigen::Vector3d fd_{Eigen::Vector3d::Zero()};           ///< FD
   Eigen::Vector3d probe_point_{Eigen::Vector3d::Zero()};  ///< probe file coordinates
   Eigen::Vector3d plane_point_{Eigen::Vector3d::Zero()};  ///< object frame
@@ -100,11 +100,11 @@ class Interpolator {
   double prev_fade_ = 0;                                  ///< the stale fade of the last output
   Eigen::Vector3d last_out_{Eigen::Vector3d::Zero()};     ///< last force() output (after fade)
   Eigen::Vector3d last_point_{Eigen::Vector3d::Zero()};   ///< probe point, previous tick (damping)
-  bool pending_offset_ = false;           ///< plane: offset_ to be taken at the next force()
-  bool have_last_point_ = false;          ///< last_point_ is valid (damping)
-  double velocity_fd_ = 0;                ///< filtered probe speed along FD, mm/s
-  std::int64_t last_ns_ = 0;              ///< previous force() time
-  std::int64_t received_ns_ = 0;          ///< newest model's arrival
+  bool pending_offset_ = false;                           ///< plane: offset_ to be taken at the next force()
+  bool have_last_point_ = false;                          ///< last_point_ is valid (damping)
+  double velocity_fd_ = 0;                                ///< filtered probe speed along FD, mm/s
+  std::int64_t last_ns_ = 0;                              ///< previous force() time
+  std::int64_t received_ns_ = 0;                          ///< newest model's arrival
   std::uint64_t rejected_ = 0, bad_poses_ = 0;
   InterpState state_;
 };

@@ -37,9 +37,9 @@ PassivityConfig DefaultPassivityConfig();
 
 /// What the guard did on the last tick, for telemetry.
 struct PassivityState {
-  double energy_mJ = 0;       ///< observer: energy the surface put into the device since contact began, mJ (N·mm)
-  double damping_N = 0;       ///< normal force the guard added (negative: it took force away), N
-  bool active = false;        ///< the passivity controller (stage 2) acted
+  double energy_mJ = 0;  ///< observer: energy the surface put into the device since contact began, mJ (N·mm)
+  double damping_N = 0;  ///< normal force the guard added (negative: it took force away), N
+  bool active = false;   ///< the passivity controller (stage 2) acted
 };
 
 /// One per servo.
@@ -53,28 +53,27 @@ class PassivityGuard {
   /// The force to command before saturation, for the model's force `f` (N) at end-effector
   /// position `x_mm` (object frame), contact normal `n` (unit, or zero when not in contact), `dt_s`
   /// after the previous tick. Feed what was finally commanded to commanded().
-  Eigen::Vector3d apply(const Eigen::Vector3d& f, const Eigen::Vector3d& x_mm, const Eigen::Vector3d& n,
-                        double dt_s) noexcept;
+  Eigen::Vector3d apply(const Eigen::Vector3d& f, const Eigen::Vector3d& x_mm, const Eigen::Vector3d& n, double dt_s) noexcept;
   /// The force actually sent to the device this tick (after saturation): the observer's input.
   void commanded(const Eigen::Vector3d& f) noexcept { last_f_ = f.allFinite() ? f : Eigen::Vector3d::Zero(); }
   /// Forgets position and energy (a new session, a device re-home).
   void reset() noexcept;
 
-  const PassivityState& state() const noexcept { return state_; }  ///< last apply()'s details
-  double min_damping_N_s_per_mm() const noexcept { return b_min_; } ///< stage 1 damping
+  const PassivityState& state() const noexcept { return state_; }        ///< last apply()'s details
+  double min_damping_N_s_per_mm() const noexcept { return b_min_; }      ///< stage 1 damping
   std::uint64_t active_ticks() const noexcept { return active_ticks_; }  ///< ticks stage 2 acted
 
  private:
   PassivityConfig c_;
-  double b_min_;             ///< stage 1 damping, N·s/mm
-  double k_;                 ///< the law's steepest slope, N/mm (stored-energy estimate)
-  double period_s_;          ///< nominal period, s (fallback for dt)
+  double b_min_;                                     ///< stage 1 damping, N·s/mm
+  double k_;                                         ///< the law's steepest slope, N/mm (stored-energy estimate)
+  double period_s_;                                  ///< nominal period, s (fallback for dt)
   Eigen::Vector3d last_x_{Eigen::Vector3d::Zero()};  ///< previous position, mm
   Eigen::Vector3d last_f_{Eigen::Vector3d::Zero()};  ///< previous commanded force, N
-  double vn_ = 0;            ///< filtered normal velocity, mm/s (+ = leaving the surface)
-  double energy_ = 0;        ///< observer, mJ
+  double vn_ = 0;                                    ///< filtered normal velocity, mm/s (+ = leaving the surface)
+  double energy_ = 0;                                ///< observer, mJ
   bool have_x_ = false;
-  bool contact_ = false;     ///< previous tick was in contact
+  bool contact_ = false;  ///< previous tick was in contact
   std::uint64_t active_ticks_ = 0;
   PassivityState state_;
 };

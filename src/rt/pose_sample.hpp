@@ -11,9 +11,9 @@ namespace st::rt {
 
 /// One device pose sample.
 struct PoseSample {
-  std::uint64_t seq = 0;          ///< 1, 2, 3... per publisher; 0 = none yet
-  std::int64_t sampled_ns = 0;    ///< when the device was read, CLOCK_MONOTONIC ns
-  geom::PodPose pose;             ///< probe file → object file coordinates, mm
+  std::uint64_t seq = 0;        ///< 1, 2, 3... per publisher; 0 = none yet
+  std::int64_t sampled_ns = 0;  ///< when the device was read, CLOCK_MONOTONIC ns
+  geom::PodPose pose;           ///< probe file → object file coordinates, mm
 };
 static_assert(std::is_trivially_copyable_v<PoseSample> && sizeof(PoseSample) == 112);
 

@@ -12,11 +12,14 @@ SaturationConfig DefaultSaturationConfig() { return SaturationConfig{}; }
 
 std::string Saturator::check(const SaturationConfig& c) {
   std::ostringstream os;
-  if (!(std::isfinite(c.peak_N) && c.peak_N > 0)) os << "saturation: peak_N = " << c.peak_N << ", expected a finite value > 0";
+  if (!(std::isfinite(c.peak_N) && c.peak_N > 0))
+    os << "saturation: peak_N = " << c.peak_N << ", expected a finite value > 0";
   else if (c.sustained && !(std::isfinite(c.continuous_N) && c.continuous_N > 0 && c.continuous_N <= c.peak_N))
     os << "saturation: continuous_N = " << c.continuous_N << ", expected in (0, peak_N = " << c.peak_N << "]";
-  else if (c.sustained && !(std::isfinite(c.tau_s) && c.tau_s > 0)) os << "saturation: tau_s = " << c.tau_s << ", expected > 0";
-  else if (c.sustained && !(c.onset > 0 && c.onset < 1)) os << "saturation: onset = " << c.onset << ", expected in (0, 1)";
+  else if (c.sustained && !(std::isfinite(c.tau_s) && c.tau_s > 0))
+    os << "saturation: tau_s = " << c.tau_s << ", expected > 0";
+  else if (c.sustained && !(c.onset > 0 && c.onset < 1))
+    os << "saturation: onset = " << c.onset << ", expected in (0, 1)";
   return os.str();
 }
 

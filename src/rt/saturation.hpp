@@ -32,15 +32,15 @@ class Saturator {
   /// The force to command for a requested force f (N), dt_s after the previous call.
   /// Finite, |result| <= ceiling_N() <= peak_N, same direction as f.
   Eigen::Vector3d apply(const Eigen::Vector3d& f, double dt_s) noexcept;
-  double ceiling_N() const noexcept { return ceiling_; }          ///< current ceiling, N
-  double rms_N() const noexcept;                                  ///< RMS force estimate, N
-  bool limited() const noexcept { return limited_; }              ///< last apply() cut the force
+  double ceiling_N() const noexcept { return ceiling_; }                  ///< current ceiling, N
+  double rms_N() const noexcept;                                          ///< RMS force estimate, N
+  bool limited() const noexcept { return limited_; }                      ///< last apply() cut the force
   std::uint64_t nonfinite_inputs() const noexcept { return nonfinite_; }  ///< NaN/Inf requests zeroed
 
  private:
   SaturationConfig c_;
-  double mean_sq_ = 0;   ///< exponential mean of |F|², N²
-  double ceiling_;       ///< current ceiling, N
+  double mean_sq_ = 0;  ///< exponential mean of |F|², N²
+  double ceiling_;      ///< current ceiling, N
   bool limited_ = false;
   std::uint64_t nonfinite_ = 0;
 };

@@ -36,9 +36,7 @@ std::uint64_t process_start_ticks(int pid) {
   }
   try {
     return std::stoull(field);
-  } catch (...) {
-    return 0;
-  }
+  } catch (...) { return 0; }
 }
 
 std::uint64_t resident_bytes(int pid) {
@@ -52,8 +50,8 @@ bool process_alive(int pid, std::uint64_t start_ticks) {
   if (pid <= 0) return false;
   if (kill(pid, 0) != 0 && errno != EPERM) return false;  // ESRCH: gone
   const std::uint64_t now_start = process_start_ticks(pid);
-  if (now_start == 0) return false;                          // zombie or vanished meanwhile
-  return now_start == start_ticks;                           // else: pid reused by another process
+  if (now_start == 0) return false;  // zombie or vanished meanwhile
+  return now_start == start_ticks;   // else: pid reused by another process
 }
 
 namespace {

@@ -21,17 +21,17 @@ namespace st::rt {
 /// creator_start_ticks keep their offsets in every layout version, so a newer build can still
 /// tell whether an old segment's creator is alive.
 struct alignas(kCacheLine) ShmHeader {
-  std::uint64_t magic;                 ///< kShmMagic
-  std::uint32_t layout_version;        ///< kShmLayoutVersion
-  std::uint32_t header_size;           ///< sizeof(ShmHeader)
-  std::uint64_t total_size;            ///< sizeof(ShmLayout), bytes
-  std::uint32_t pose_size;             ///< sizeof(PoseSample)
-  std::uint32_t model_size;            ///< sizeof(geom::ContactModel)
-  std::int32_t creator_pid;            ///< process that created the segment
-  std::uint32_t reserved;              ///< zero
-  std::uint64_t creator_start_ticks;   ///< its start time, clock ticks after boot (/proc/pid/stat 22)
-  std::int64_t created_ns;             ///< CLOCK_MONOTONIC at creation
-  std::atomic<std::uint32_t> state;    ///< 0 = being initialised, 1 = ready
+  std::uint64_t magic;                ///< kShmMagic
+  std::uint32_t layout_version;       ///< kShmLayoutVersion
+  std::uint32_t header_size;          ///< sizeof(ShmHeader)
+  std::uint64_t total_size;           ///< sizeof(ShmLayout), bytes
+  std::uint32_t pose_size;            ///< sizeof(PoseSample)
+  std::uint32_t model_size;           ///< sizeof(geom::ContactModel)
+  std::int32_t creator_pid;           ///< process that created the segment
+  std::uint32_t reserved;             ///< zero
+  std::uint64_t creator_start_ticks;  ///< its start time, clock ticks after boot (/proc/pid/stat 22)
+  std::int64_t created_ns;            ///< CLOCK_MONOTONIC at creation
+  std::atomic<std::uint32_t> state;   ///< 0 = being initialised, 1 = ready
 };
 
 /// "STSHMRT1" little-endian: identifies a spheretouch real-time segment.
@@ -43,10 +43,10 @@ inline constexpr std::uint32_t kShmLayoutVersion = 3;
 
 /// The whole segment.
 struct ShmLayout {
-  ShmHeader header;                          ///< guard
-  TripleBuffer<PoseSample> poses;            ///< haptic → collision
-  TripleBuffer<geom::ContactModel> models;   ///< collision → haptic
-  ShmStatus status;                          ///< live status, any number of readers
+  ShmHeader header;                         ///< guard
+  TripleBuffer<PoseSample> poses;           ///< haptic → collision
+  TripleBuffer<geom::ContactModel> models;  ///< collision → haptic
+  ShmStatus status;                         ///< live status, any number of readers
 };
 
 /// A mapping of the segment. The creator unlinks the name when destroyed.
@@ -79,8 +79,8 @@ class ShmSegment {
   /// Unlinks the name if it still refers to this segment and its creator is dead (an attacher
   /// that outlived the creator tidies up); true when it did.
   bool unlink_if_orphaned() const;
-  const std::string& name() const { return name_; }                       ///< normalised name
-  bool creator() const { return creator_; }                               ///< this mapping created it
+  const std::string& name() const { return name_; }  ///< normalised name
+  bool creator() const { return creator_; }          ///< this mapping created it
 
  private:
   ShmSegment(std::string name, ShmLayout* layout, bool creator)

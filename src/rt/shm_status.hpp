@@ -33,14 +33,14 @@ static_assert(std::is_trivially_copyable_v<ServoStatus> && sizeof(ServoStatus) =
 
 /// What the collision thread publishes after every round.
 struct CollisionStatus {
-  std::int64_t updated_ns = 0;     ///< end of the round, CLOCK_MONOTONIC ns
-  std::uint64_t rounds = 0;        ///< rounds so far
-  std::uint64_t model_seq = 0;     ///< model published by the round
-  std::uint64_t pose_seq = 0;      ///< pose it answered
-  std::int64_t latency_ns = 0;     ///< round time
-  double penetration_mm = 0;       ///< PD of the model
-  std::uint32_t contacts = 0;      ///< contacts of the model
-  std::uint32_t incomplete = 0;    ///< rounds so far that missed a worker (low 32 bits)
+  std::int64_t updated_ns = 0;   ///< end of the round, CLOCK_MONOTONIC ns
+  std::uint64_t rounds = 0;      ///< rounds so far
+  std::uint64_t model_seq = 0;   ///< model published by the round
+  std::uint64_t pose_seq = 0;    ///< pose it answered
+  std::int64_t latency_ns = 0;   ///< round time
+  double penetration_mm = 0;     ///< PD of the model
+  std::uint32_t contacts = 0;    ///< contacts of the model
+  std::uint32_t incomplete = 0;  ///< rounds so far that missed a worker (low 32 bits)
 };
 static_assert(std::is_trivially_copyable_v<CollisionStatus> && sizeof(CollisionStatus) == 56);
 
@@ -49,13 +49,13 @@ enum class ServoState : std::uint32_t { none = 0, starting = 1, running = 2, fin
 
 /// The status area. Process-level words are plain atomics written outside the tick path.
 struct alignas(kCacheLine) ShmStatus {
-  std::atomic<std::int32_t> servo_pid{0};            ///< process running the haptic servo (0 = not yet)
-  std::atomic<std::uint32_t> servo_state{0};         ///< ServoState
-  std::atomic<std::uint64_t> servo_start_ticks{0};   ///< its start time (process_alive())
-  std::atomic<std::uint32_t> split{0};               ///< 1: the servo is its own process
-  std::atomic<std::uint32_t> collision_lost{0};      ///< servo's verdict: 1 collision side silent, 2 dead
-  SeqLock<ServoStatus> servo;                        ///< written by the servo tick
-  SeqLock<CollisionStatus> collision;                ///< written by the collision thread
+  std::atomic<std::int32_t> servo_pid{0};           ///< process running the haptic servo (0 = not yet)
+  std::atomic<std::uint32_t> servo_state{0};        ///< ServoState
+  std::atomic<std::uint64_t> servo_start_ticks{0};  ///< its start time (process_alive())
+  std::atomic<std::uint32_t> split{0};              ///< 1: the servo is its own process
+  std::atomic<std::uint32_t> collision_lost{0};     ///< servo's verdict: 1 collision side silent, 2 dead
+  SeqLock<ServoStatus> servo;                       ///< written by the servo tick
+  SeqLock<CollisionStatus> collision;               ///< written by the collision thread
 };
 
 /// The servo publishes its status every this many ticks: 100 Hz at 1 kHz, plenty for a display,

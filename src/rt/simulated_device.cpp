@@ -14,8 +14,7 @@ Eigen::Isometry3d Trajectory::at(double t_s) const {
   if (keys.empty()) return Eigen::Isometry3d::Identity();
   if (!(t_s > keys.front().t_s)) return keys.front().pose;  // also NaN
   if (t_s >= keys.back().t_s) return keys.back().pose;
-  const auto it = std::upper_bound(keys.begin(), keys.end(), t_s,
-                                   [](double t, const TimedPose& k) { return t < k.t_s; });
+  const auto it = std::upper_bound(keys.begin(), keys.end(), t_s, [](double t, const TimedPose& k) { return t < k.t_s; });
   const TimedPose& b = *it;
   const TimedPose& a = *(it - 1);
   const double s = (t_s - a.t_s) / (b.t_s - a.t_s);
@@ -84,8 +83,8 @@ Trajectory builtin_press_slide(const Eigen::Vector3d& surface, const Eigen::Vect
                                double slide_mm) {
   const Eigen::Vector3d n = normal.normalized();
   // A tangent: any unit vector perpendicular to n.
-  const Eigen::Vector3d tangent = (std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY())
-                                      .cross(n).cross(n).normalized() * -1.0;
+  const Eigen::Vector3d tangent =
+      (std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY()).cross(n).cross(n).normalized() * -1.0;
   auto key = [&](double t, const Eigen::Vector3d& p) {
     TimedPose k;
     k.t_s = t;
@@ -94,8 +93,12 @@ Trajectory builtin_press_slide(const Eigen::Vector3d& surface, const Eigen::Vect
   };
   const Eigen::Vector3d above = surface + 10.0 * n, pressed = surface - depth_mm * n;
   Trajectory tr;
-  tr.keys = {key(0.0, above), key(1.0, surface), key(1.5, pressed), key(2.0, pressed),
-             key(4.0, pressed + slide_mm * tangent), key(4.5, surface + slide_mm * tangent + 10.0 * n),
+  tr.keys = {key(0.0, above),
+             key(1.0, surface),
+             key(1.5, pressed),
+             key(2.0, pressed),
+             key(4.0, pressed + slide_mm * tangent),
+             key(4.5, surface + slide_mm * tangent + 10.0 * n),
              key(5.0, surface + slide_mm * tangent + 10.0 * n)};
   return tr;
 }
@@ -121,8 +124,8 @@ bool SimulatedDevice::read_pose(std::int64_t now_ns, Eigen::Isometry3d& pose) no
     double dt = std::clamp(static_cast<double>(now_ns - last_ns_) * 1e-9, 0.0, 0.05);
     while (dt > 0) {
       const double h = std::min(dt, 5e-4);
-      const Eigen::Vector3d f = user_.stiffness_N_per_mm * (target.translation() - x_) -
-                                user_.damping_N_s_per_mm * v_ + last_force_;
+      const Eigen::Vector3d f =
+          user_.stiffness_N_per_mm * (target.translation() - x_) - user_.damping_N_s_per_mm * v_ + last_force_;
       v_ += h * (f / user_.mass_kg) * 1000.0;
       x_ += h * v_;
       dt -= h;

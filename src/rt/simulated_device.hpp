@@ -16,8 +16,8 @@ namespace st::rt {
 
 /// One scripted pose.
 struct TimedPose {
-  double t_s = 0;                                            ///< time from the script's start, s
-  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();   ///< probe → object
+  double t_s = 0;                                          ///< time from the script's start, s
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  ///< probe → object
 };
 
 /// A trajectory: poses with strictly increasing times, interpolated linearly (translation) and
@@ -46,20 +46,20 @@ Result<Trajectory> parse_trajectory(const std::string& text, const std::string& 
 /// (probe origin positions, identity rotation): start 10 mm above, approach to the surface
 /// in 1 s, press to `depth_mm` in 0.5 s, hold 0.5 s, slide `slide_mm` along the plane in 2 s,
 /// release back to 10 mm above in 0.5 s, rest 0.5 s.
-Trajectory builtin_press_slide(const Eigen::Vector3d& surface, const Eigen::Vector3d& normal,
-                               double depth_mm = 3.0, double slide_mm = 20.0);
+Trajectory builtin_press_slide(const Eigen::Vector3d& surface, const Eigen::Vector3d& normal, double depth_mm = 3.0,
+                               double slide_mm = 20.0);
 
 /// Virtual user holding the probe: m·a = k·(target − x) − c·v + F_commanded.
 struct VirtualUser {
-  bool enabled = false;        ///< false: the probe follows the script exactly
-  double mass_kg = 0.1;        ///< stylus plus fingers
-  double stiffness_N_per_mm = 0.3;  ///< grip stiffness, human fingertip range 0.2–1 N/mm
+  bool enabled = false;               ///< false: the probe follows the script exactly
+  double mass_kg = 0.1;               ///< stylus plus fingers
+  double stiffness_N_per_mm = 0.3;    ///< grip stiffness, human fingertip range 0.2–1 N/mm
   double damping_N_s_per_mm = 0.005;  ///< damping ratio ≈ 0.46 with the above
 };
 
 /// One recorded tick.
 struct ForceRecord {
-  std::int64_t t_ns = 0;          ///< command time
+  std::int64_t t_ns = 0;                              ///< command time
   Eigen::Vector3d position{Eigen::Vector3d::Zero()};  ///< probe origin, object frame, mm
   Eigen::Vector3d force_N{Eigen::Vector3d::Zero()};   ///< commanded force
 };

@@ -20,8 +20,7 @@ class SpscQueue {
 
  public:
   /// Room for `capacity` values (>= 1), allocated here.
-  explicit SpscQueue(std::size_t capacity)
-      : slots_(capacity + 1), buf_(std::make_unique<T[]>(capacity + 1)) {}
+  explicit SpscQueue(std::size_t capacity) : slots_(capacity + 1), buf_(std::make_unique<T[]>(capacity + 1)) {}
   SpscQueue(const SpscQueue&) = delete;
   SpscQueue& operator=(const SpscQueue&) = delete;
 

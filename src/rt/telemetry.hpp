@@ -17,19 +17,19 @@ namespace st::rt {
 
 /// One tick, plain data (128 bytes).
 struct TelemetrySample {
-  std::uint64_t tick = 0;           ///< tick number
-  std::int64_t t_ns = 0;            ///< tick wake-up, CLOCK_MONOTONIC ns
-  std::int64_t latency_ns = 0;      ///< wake-up minus deadline
-  std::uint64_t pose_seq = 0;       ///< pose sample published this tick (0 = none)
-  std::uint64_t model_seq = 0;      ///< newest contact model used
-  std::int64_t model_age_ns = 0;    ///< now minus that model's pose sampling time
-  double position_mm[3] = {};       ///< probe origin, object frame
-  double force_N[3] = {};           ///< commanded force
-  double penetration_mm = 0;        ///< PD used
-  double fade = 0;                  ///< stale-fade factor
-  double ceiling_N = 0;             ///< saturation ceiling
-  std::uint32_t flags = 0;          ///< bit 0 in contact, bit 1 saturated, bit 2 pose read failed
-  std::uint32_t misses = 0;         ///< loop misses so far (low 32 bits)
+  std::uint64_t tick = 0;         ///< tick number
+  std::int64_t t_ns = 0;          ///< tick wake-up, CLOCK_MONOTONIC ns
+  std::int64_t latency_ns = 0;    ///< wake-up minus deadline
+  std::uint64_t pose_seq = 0;     ///< pose sample published this tick (0 = none)
+  std::uint64_t model_seq = 0;    ///< newest contact model used
+  std::int64_t model_age_ns = 0;  ///< now minus that model's pose sampling time
+  double position_mm[3] = {};     ///< probe origin, object frame
+  double force_N[3] = {};         ///< commanded force
+  double penetration_mm = 0;      ///< PD used
+  double fade = 0;                ///< stale-fade factor
+  double ceiling_N = 0;           ///< saturation ceiling
+  std::uint32_t flags = 0;        ///< bit 0 in contact, bit 1 saturated, bit 2 pose read failed
+  std::uint32_t misses = 0;       ///< loop misses so far (low 32 bits)
 };
 static_assert(std::is_trivially_copyable_v<TelemetrySample> && sizeof(TelemetrySample) == 128);
 
@@ -44,8 +44,7 @@ struct TelemetryStats {
 class Telemetry {
  public:
   /// Opens `path` for writing (CSV with a header line) and starts the writer thread.
-  static Result<std::unique_ptr<Telemetry>> open(const std::string& path,
-                                                 std::size_t capacity = kDefaultTelemetryCapacity);
+  static Result<std::unique_ptr<Telemetry>> open(const std::string& path, std::size_t capacity = kDefaultTelemetryCapacity);
   /// A telemetry stream without a file or thread: samples are queued and drained by drain_to()
   /// (tests and benchmarks that want to look at them).
   explicit Telemetry(std::size_t capacity);
@@ -55,8 +54,10 @@ class Telemetry {
 
   /// Producer: queues one sample; on a full queue counts a drop. Wait-free, no allocation.
   void push(const TelemetrySample& s) noexcept {
-    if (queue_.try_push(s)) pushed_.fetch_add(1, std::memory_order_relaxed);
-    else dropped_.fetch_add(1, std::memory_order_relaxed);
+    if (queue_.try_push(s))
+      pushed_.fetch_add(1, std::memory_order_relaxed);
+    else
+      dropped_.fetch_add(1, std::memory_order_relaxed);
   }
   /// Consumer (only without a writer thread): pops up to max samples into out; returns how many.
   std::size_t drain_to(TelemetrySample* out, std::size_t max) noexcept;
@@ -77,7 +78,7 @@ class Telemetry {
   std::atomic<bool> stop_{false};
   std::FILE* file_ = nullptr;
   std::string path_;
-  std::string error_;              ///< first failure (written by the writer thread, read after close())
+  std::string error_;  ///< first failure (written by the writer thread, read after close())
   std::atomic<bool> failed_{false};
   std::thread writer_;
 };

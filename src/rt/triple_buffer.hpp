@@ -40,8 +40,8 @@ class TripleBuffer {
   T& input() noexcept { return slots_[bounded(writer_.index)].value; }
   /// Writer: makes input() the newest value and takes the old back slot as the next input. Wait-free.
   void publish() noexcept {
-    const std::uint8_t former = back_.exchange(static_cast<std::uint8_t>(bounded(writer_.index) | kDirty),
-                                           std::memory_order_acq_rel);
+    const std::uint8_t former =
+        back_.exchange(static_cast<std::uint8_t>(bounded(writer_.index) | kDirty), std::memory_order_acq_rel);
     writer_.index = bounded(former & kIndexMask);
   }
   /// Writer: copy v into the input slot and publish it.

@@ -17,8 +17,8 @@ Result<Body> Body::make(Mesh mesh, const TreeParams& params, const Pose& frame) 
 Result<Body> Body::make(std::shared_ptr<const Mesh> mesh, std::shared_ptr<const SphereTree> tree, const Pose& frame) {
   if (!mesh || !tree) return fail("Body::make: mesh and tree must not be null");
   if (tree->mesh_hash != geom::tree_hash(*mesh, tree->params))
-    return fail(mesh->name, ": the tree was built for another mesh or with other parameters (hash ",
-                tree->mesh_hash, ", this mesh gives ", geom::tree_hash(*mesh, tree->params), ")");
+    return fail(mesh->name, ": the tree was built for another mesh or with other parameters (hash ", tree->mesh_hash,
+                ", this mesh gives ", geom::tree_hash(*mesh, tree->params), ")");
   if (!frame.matrix().allFinite()) return fail(mesh->name, ": the frame is not finite");
   return Body(std::move(mesh), std::move(tree), frame);
 }

@@ -48,11 +48,11 @@ class Body {
   static Result<Body> make(std::shared_ptr<const Mesh> mesh, std::shared_ptr<const SphereTree> tree,
                            const Pose& frame = Pose::Identity());
 
-  const Mesh& mesh() const { return *mesh_; }        ///< the mesh (faces by input-file index)
-  const SphereTree& tree() const { return *tree_; }  ///< its sphere tree
-  const Pose& frame() const { return frame_; }       ///< body frame -> world frame
-  void set_frame(const Pose& frame) { frame_ = frame; }  ///< moves the body
-  const std::shared_ptr<const Mesh>& shared_mesh() const { return mesh_; }        ///< for sharing
+  const Mesh& mesh() const { return *mesh_; }                               ///< the mesh (faces by input-file index)
+  const SphereTree& tree() const { return *tree_; }                         ///< its sphere tree
+  const Pose& frame() const { return frame_; }                              ///< body frame -> world frame
+  void set_frame(const Pose& frame) { frame_ = frame; }                     ///< moves the body
+  const std::shared_ptr<const Mesh>& shared_mesh() const { return mesh_; }  ///< for sharing
   const std::shared_ptr<const SphereTree>& shared_tree() const { return tree_; }  ///< for sharing
 
  private:
@@ -73,9 +73,9 @@ struct CollisionRequest {
   int approximate_layer = geom::kExact;
   bool sort_pairs = true;  ///< pairs sorted by (probe face, object face)
 
-  static CollisionRequest all_pairs() { return {}; }                    ///< every colliding pair
-  static CollisionRequest first_pair() { return {.max_pairs = 1}; }      ///< "do they touch?"
-  static CollisionRequest capped(std::size_t n) { return {.max_pairs = n}; }  ///< at most n pairs
+  static CollisionRequest all_pairs() { return {}; }                                       ///< every colliding pair
+  static CollisionRequest first_pair() { return {.max_pairs = 1}; }                        ///< "do they touch?"
+  static CollisionRequest capped(std::size_t n) { return {.max_pairs = n}; }               ///< at most n pairs
   static CollisionRequest approximate(int layer) { return {.approximate_layer = layer}; }  ///< superset
 };
 inline CollisionRequest DefaultCollisionRequest() { return {}; }  ///< all pairs, exact, sorted
@@ -112,8 +112,8 @@ class ComputeCollision {
   /// project passes around; the bodies' frames are not used.
   void at_relative(const Pose& relative, const CollisionRequest& request, CollisionResult& result);
 
-  Body& probe() { return probe_; }    ///< the first body
-  Body& object() { return object_; }  ///< the second body
+  Body& probe() { return probe_; }                                ///< the first body
+  Body& object() { return object_; }                              ///< the second body
   std::size_t scratch_bytes() const { return scratch_.bytes(); }  ///< heap held between queries
 
  private:

@@ -1,9 +1,9 @@
 // Tests for src/app: the command line as a user runs it (the real binary, through a shell).
 #include "test_util.hpp"
 
+using st::test::contains;
 using st::test::run_command;
 using st::test::spheretouch_exe;
-using st::test::contains;
 
 TEST_CASE("--help explains the command and every subcommand") {
   const auto top = run_command(spheretouch_exe() + " --help");

@@ -61,8 +61,9 @@ struct Fleet {
   void start(int i) {
     const std::string log = dir.file("worker" + std::to_string(i) + ".log");
     procs[std::size_t(i)] = std::make_unique<st::test::Process>(
-        std::vector<std::string>{st::test::worker_binary(), "--bind", "tcp://127.0.0.1:" + std::to_string(ports[std::size_t(i)]),
-                                 "--id", std::to_string(i), "--log-level", "info"},
+        std::vector<std::string>{st::test::worker_binary(), "--bind",
+                                 "tcp://127.0.0.1:" + std::to_string(ports[std::size_t(i)]), "--id", std::to_string(i),
+                                 "--log-level", "info"},
         log);
     const auto until = std::chrono::steady_clock::now() + 20s;
     while (procs[std::size_t(i)]->log().find("listening on") == std::string::npos) {
@@ -85,7 +86,9 @@ std::string fleet_scene(const Fleet& f, double duration_s) {
   return "[probe]\nbuiltin = \"capsule\"\nradius_mm = 6.0\nlength_mm = 30.0\n"
          "[object]\nbuiltin = \"icosphere\"\nradius_mm = 40.0\nfrequency = 20\n"
          "[tree]\ncache = false\n"
-         "[workers]\nendpoints = [" + f.endpoints() + "]\ndeadline_ms = 50.0\ndown_after = 3\n"
+         "[workers]\nendpoints = [" +
+         f.endpoints() +
+         "]\ndeadline_ms = 50.0\ndown_after = 3\n"
          // Real-time options, asked for, not required (a refusal is reported and the run goes on).
          // lock_memory matters here: while a fault is handled the client encodes and frees
          // megabytes of block sets; without mlockall a page fault in the haptic thread can wait
@@ -94,7 +97,8 @@ std::string fleet_scene(const Fleet& f, double duration_s) {
          "[haptic]\nfifo_priority = 80\nlock_memory = true\nprefault_stack_kb = 256\n"
          "[device]\nrepeat = true\n"
          "[output]\nstatus = \"plain\"\nperfetto = false\nply = false\n"
-         "[run]\nduration_s = " + std::to_string(duration_s) + "\n";
+         "[run]\nduration_s = " +
+         std::to_string(duration_s) + "\n";
 }
 
 /// Steal time of the whole VM so far and all CPU time, in clock ticks (/proc/stat "cpu" line).
@@ -133,7 +137,12 @@ RunResult run_scene(Fleet& f, const std::string& name, double duration_s, Faults
   const pid_t pid = st::test::spawn_spheretouch({"run", scene, "--out", out, "--shm-name", shm}, log);
   struct Reaper {  // a failed REQUIRE below must not leave the run behind
     pid_t pid;
-    ~Reaper() { if (pid > 0) { ::kill(pid, SIGKILL); ::waitpid(pid, nullptr, 0); } }
+    ~Reaper() {
+      if (pid > 0) {
+        ::kill(pid, SIGKILL);
+        ::waitpid(pid, nullptr, 0);
+      }
+    }
   } reaper{pid};
   const st::rt::ServoStatus st = st::test::wait_for_ticks(shm, 50, pid, 60);
   {
@@ -174,8 +183,8 @@ TEST_CASE("run with 4 daemons survives kill -9, SIGSTOP, a dropped link and a re
   // Faults, relative to the first ticks: kill -9 worker 0 at 1 s and restart it at 2 s; freeze
   // worker 1 from 2.5 s to 3.5 s; hold all traffic to worker 2 from 4.5 s to 6 s.
   auto at = [](std::chrono::steady_clock::time_point t0, double s) {
-    std::this_thread::sleep_until(t0 + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                                           std::chrono::duration<double>(s)));
+    std::this_thread::sleep_until(
+        t0 + std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(s)));
   };
   auto faults = [&](std::uint64_t& relayed_before_drop, std::uint64_t& relayed_during_drop) {
     return [&](std::chrono::steady_clock::time_point t0) {
@@ -222,8 +231,8 @@ TEST_CASE("run with 4 daemons survives kill -9, SIGSTOP, a dropped link and a re
     clean = run_scene(f, "clean" + std::to_string(pair), kSeconds, [](auto) {});
     faulted = run_scene(f, "faulted" + std::to_string(pair), kSeconds, faults(relayed_before_drop, relayed_during_drop));
     INFO(faulted.log);
-    CHECK(relayed_before_drop > 0);     // worker 2 was served through the relay
-    CHECK(relayed_during_drop == 0);    // and cut off while the link was down
+    CHECK(relayed_before_drop > 0);         // worker 2 was served through the relay
+    CHECK(relayed_during_drop == 0);        // and cut off while the link was down
     CHECK(faulted.summary.incomplete > 0);  // the faults were seen by the collision side
     const std::uint64_t kMissNoise = std::max<std::uint64_t>(30, clean.summary.ticks / 300);
     quiet = faulted.summary.misses <= clean.summary.misses + kMissNoise;
@@ -234,8 +243,10 @@ TEST_CASE("run with 4 daemons survives kill -9, SIGSTOP, a dropped link and a re
   INFO("fault-free run: " << clean.log);
   INFO("faulted run: " << faulted.log);
   if (!st::test::kSanitizerBuild) {
-    if (judged) CHECK(quiet);
-    else if (!quiet) MESSAGE("every pair ran with host steal >= " << kStealLimitPct << " %: misses reported, not compared");
+    if (judged)
+      CHECK(quiet);
+    else if (!quiet)
+      MESSAGE("every pair ran with host steal >= " << kStealLimitPct << " %: misses reported, not compared");
   }
   CHECK(faulted.summary.ticks + faulted.summary.misses >= std::uint64_t(kSeconds * 1000 * 0.95));
 

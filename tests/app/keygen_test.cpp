@@ -14,13 +14,12 @@
 #include "test_util.hpp"
 
 using namespace st;
+using st::test::contains;
 using st::test::run_command;
 using st::test::spheretouch_exe;
-using st::test::contains;
 using namespace std::chrono_literals;
 
 namespace {
-
 
 mode_t mode_of(const std::string& path) {
   struct stat st {};
@@ -62,9 +61,10 @@ struct CurveWorker {
     keygen(fleet);
     keygen(client);
     // Paths relative to the config's directory: the daemon starts in the test's cwd.
-    st::test::write_file(dir.file("worker.toml"), "bind = \"" + endpoint +
-                                                      "\"\nlog_level = \"debug\"\n[curve]\nsecret_key_file = \"fleet.key\"\n"
-                                                      "allowed_clients_files = [\"client.pub\"]\n");
+    st::test::write_file(dir.file("worker.toml"),
+                         "bind = \"" + endpoint +
+                             "\"\nlog_level = \"debug\"\n[curve]\nsecret_key_file = \"fleet.key\"\n"
+                             "allowed_clients_files = [\"client.pub\"]\n");
   }
   void start() {
     proc = std::make_unique<st::test::Process>(
@@ -161,7 +161,8 @@ TEST_CASE("query --connect to a CURVE worker: an allowed client gets the single-
   CHECK(contains(plain.output, "CURVE"));
 }
 
-TEST_CASE("query --connect with an unknown client key: no service, a clear error naming the endpoint, the refusal logged") {
+TEST_CASE(
+    "query --connect with an unknown client key: no service, a clear error naming the endpoint, the refusal logged") {
   Meshes m;
   CurveWorker w;
   w.start();
@@ -178,7 +179,7 @@ TEST_CASE("query --connect with an unknown client key: no service, a clear error
   CHECK(contains(r.output, rogue_pub));  // what to add to allowed_clients
   CHECK(contains(r.output, "allowed_clients"));
   CHECK_FALSE(contains(r.output, "pose 0"));  // no service
-  CHECK(secs < 15);  // fails fast, well before the 30 s ready timeout
+  CHECK(secs < 15);                           // fails fast, well before the 30 s ready timeout
   INFO(w.proc->log());
   CHECK(contains(w.proc->log(), "refused CURVE client " + rogue_pub + " from 127.0.0.1"));
   CHECK(w.proc->wait(0ms) == -1);  // the worker is still serving
@@ -206,16 +207,21 @@ TEST_CASE("the client side refuses a group-readable client key, a .key given as 
   CHECK(r.exit_code != 0);  // and both need --connect
 }
 
-TEST_CASE("run with [workers] server_key and client_key (relative to the scene) reaches a CURVE worker; --client-key overrides") {
+TEST_CASE(
+    "run with [workers] server_key and client_key (relative to the scene) reaches a CURVE worker; --client-key "
+    "overrides") {
   CurveWorker w;
   w.start();
   const std::string scene = w.dir.file("scene.toml");
-  st::test::write_file(scene, "[probe]\nbuiltin = \"capsule\"\nradius_mm = 6.0\nlength_mm = 30.0\n"
-                              "[object]\nbuiltin = \"icosphere\"\nradius_mm = 40.0\nfrequency = 12\n"
-                              "[workers]\nendpoints = [\"" + w.endpoint + "\"]\nserver_key = \"fleet.pub\"\n"
-                              "client_key = \"client\"\ndeadline_ms = 500\n"
-                              "[output]\nstatus = \"off\"\ntrace = false\nperfetto = false\nply = false\n"
-                              "[run]\nduration_s = 0.5\n");
+  st::test::write_file(scene,
+                       "[probe]\nbuiltin = \"capsule\"\nradius_mm = 6.0\nlength_mm = 30.0\n"
+                       "[object]\nbuiltin = \"icosphere\"\nradius_mm = 40.0\nfrequency = 12\n"
+                       "[workers]\nendpoints = [\"" +
+                           w.endpoint +
+                           "\"]\nserver_key = \"fleet.pub\"\n"
+                           "client_key = \"client\"\ndeadline_ms = 500\n"
+                           "[output]\nstatus = \"off\"\ntrace = false\nperfetto = false\nply = false\n"
+                           "[run]\nduration_s = 0.5\n");
   auto r = run_command(spheretouch_exe() + " run " + scene + " --out " + w.dir.file("run1"));
   INFO(r.output);
   CHECK(r.exit_code == 0);

@@ -74,7 +74,7 @@ struct TickCsvRow {
   std::uint64_t misses = 0;  ///< loop misses so far
   double t_s = 0;            ///< since the first row
   std::uint64_t model_seq = 0;
-  double force_N = 0;        ///< |force|
+  double force_N = 0;  ///< |force|
   int flags = 0;
 };
 
@@ -93,8 +93,7 @@ inline std::vector<TickCsvRow> read_tick_csv(const std::string& csv) {
     REQUIRE(v.size() == 17);
     if (t0 < 0) t0 = v[1];
     rows.push_back({static_cast<std::uint64_t>(v[0]), static_cast<std::uint64_t>(v[16]), (v[1] - t0) * 1e-9,
-                    static_cast<std::uint64_t>(v[4]), std::sqrt(v[9] * v[9] + v[10] * v[10] + v[11] * v[11]),
-                    int(v[15])});
+                    static_cast<std::uint64_t>(v[4]), std::sqrt(v[9] * v[9] + v[10] * v[10] + v[11] * v[11]), int(v[15])});
   }
   return rows;
 }

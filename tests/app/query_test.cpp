@@ -12,9 +12,9 @@
 #include "test_util.hpp"
 
 using namespace st;
+using st::test::contains;
 using st::test::run_command;
 using st::test::spheretouch_exe;
-using st::test::contains;
 
 namespace {
 
@@ -80,7 +80,8 @@ TEST_CASE("query --count-only and --stats") {
 
 TEST_CASE("query --approx-layer reports a superset of the exact pairs") {
   Fixture f;
-  const auto exact = run_command(f.query("--count-only")), approx = run_command(f.query("--count-only --approx-layer -1"));
+  const auto exact = run_command(f.query("--count-only")),
+             approx = run_command(f.query("--count-only --approx-layer -1"));
   REQUIRE(exact.exit_code == 0);
   REQUIRE(approx.exit_code == 0);
   auto pairs_of = [](const std::string& out, int pose) {
@@ -93,10 +94,8 @@ TEST_CASE("query --approx-layer reports a superset of the exact pairs") {
 TEST_CASE("query: pose-file errors name the line and what is wrong") {
   Fixture f;
   const std::pair<const char*, const char*> cases[] = {
-      {"1 0 0 0 0 1 0 0 0 0 1 0 0 0 0\n", ":1:"},
-      {"1 0 0 0 0 1 0 0 0 0 1 0 0 0 1 1\n", ":1:"},
-      {"# c\n1 0 0 0 0 1 x 0 0 0 1 0 0 0 0 1\n", ":2:"},
-      {"2 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\n", ":1:"},
+      {"1 0 0 0 0 1 0 0 0 0 1 0 0 0 0\n", ":1:"},        {"1 0 0 0 0 1 0 0 0 0 1 0 0 0 1 1\n", ":1:"},
+      {"# c\n1 0 0 0 0 1 x 0 0 0 1 0 0 0 0 1\n", ":2:"}, {"2 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\n", ":1:"},
       {"1 0 0 nan 0 1 0 0 0 0 1 0 0 0 0 1\n", ":1:"},
   };
   for (const auto& item : cases) {
@@ -144,7 +143,8 @@ TEST_CASE("build writes a tree file; a stale or corrupt cache file is rebuilt, n
 TEST_CASE("query over in-process workers and over worker daemons gives the single-process output (real meshes)") {
   const std::string root = std::getenv("ST_SOURCE_ROOT") ? std::getenv("ST_SOURCE_ROOT") : ".";
   const std::string base = spheretouch_exe() + " query " + st::test::model("hand_L2.off") + " " +
-                           st::test::model("elephant.off") + " --poses " + root + "/perf/poses/hand_elephant.txt --no-cache";
+                           st::test::model("elephant.off") + " --poses " + root +
+                           "/perf/poses/hand_elephant.txt --no-cache";
   const auto single = run_command(base);
   REQUIRE(single.exit_code == 0);
   CHECK(contains(single.output, "pose 2 pairs "));

@@ -12,24 +12,36 @@
 #include "app/process_util.hpp"
 #include "test_util.hpp"
 
+using st::test::contains;
 using st::test::run_command;
 using st::test::spheretouch_exe;
-using st::test::contains;
 
 namespace {
-
 
 /// Minimal JSON syntax check (RFC 8259 grammar, no semantic checks): true when `s` is one value.
 struct Json {
   const std::string& s;
   std::size_t i = 0;
-  void ws() { while (i < s.size() && std::isspace(static_cast<unsigned char>(s[i]))) ++i; }
-  bool lit(const char* w) { const std::size_t n = std::strlen(w); if (s.compare(i, n, w) != 0) return false; i += n; return true; }
+  void ws() {
+    while (i < s.size() && std::isspace(static_cast<unsigned char>(s[i]))) ++i;
+  }
+  bool lit(const char* w) {
+    const std::size_t n = std::strlen(w);
+    if (s.compare(i, n, w) != 0) return false;
+    i += n;
+    return true;
+  }
   bool str() {
     if (s[i] != '"') return false;
     for (++i; i < s.size(); ++i) {
-      if (s[i] == '\\') { ++i; continue; }
-      if (s[i] == '"') { ++i; return true; }
+      if (s[i] == '\\') {
+        ++i;
+        continue;
+      }
+      if (s[i] == '"') {
+        ++i;
+        return true;
+      }
       if (static_cast<unsigned char>(s[i]) < 0x20) return false;
     }
     return false;
@@ -37,7 +49,9 @@ struct Json {
   bool num() {
     const std::size_t b = i;
     if (s[i] == '-') ++i;
-    while (i < s.size() && (std::isdigit(static_cast<unsigned char>(s[i])) || s[i] == '.' || s[i] == 'e' || s[i] == 'E' || s[i] == '+' || s[i] == '-')) ++i;
+    while (i < s.size() && (std::isdigit(static_cast<unsigned char>(s[i])) || s[i] == '.' || s[i] == 'e' ||
+                            s[i] == 'E' || s[i] == '+' || s[i] == '-'))
+      ++i;
     return i > b && std::isdigit(static_cast<unsigned char>(s[i - 1]));
   }
   bool value() {
@@ -45,17 +59,36 @@ struct Json {
     if (i >= s.size()) return false;
     bool ok;
     if (s[i] == '{') {
-      ++i; ws();
-      if (s[i] == '}') { ++i; return true; }
-      do { ws(); ok = str(); ws(); if (!ok || s[i] != ':') return false; ++i; if (!value()) return false; ws(); } while (s[i] == ',' && ++i);
+      ++i;
+      ws();
+      if (s[i] == '}') {
+        ++i;
+        return true;
+      }
+      do {
+        ws();
+        ok = str();
+        ws();
+        if (!ok || s[i] != ':') return false;
+        ++i;
+        if (!value()) return false;
+        ws();
+      } while (s[i] == ',' && ++i);
       if (s[i] != '}') return false;
       ++i;
       return true;
     }
     if (s[i] == '[') {
-      ++i; ws();
-      if (s[i] == ']') { ++i; return true; }
-      do { if (!value()) return false; ws(); } while (s[i] == ',' && ++i);
+      ++i;
+      ws();
+      if (s[i] == ']') {
+        ++i;
+        return true;
+      }
+      do {
+        if (!value()) return false;
+        ws();
+      } while (s[i] == ',' && ++i);
       if (s[i] != ']') return false;
       ++i;
       return true;
@@ -64,7 +97,11 @@ struct Json {
     if (lit("true") || lit("false") || lit("null")) return true;
     return num();
   }
-  bool document() { const bool ok = value(); ws(); return ok && i == s.size(); }
+  bool document() {
+    const bool ok = value();
+    ws();
+    return ok && i == s.size();
+  }
 };
 
 std::string slurp(const std::string& path) {
@@ -152,8 +189,12 @@ TEST_CASE("run: a short scene ticks at its rate, presses with force, releases to
     if (line.rfind("element face ", 0) == 0) nf = std::stoul(line.substr(13));
   }
   st::app::BodySpec ball, finger;
-  ball.builtin = "icosphere"; ball.radius_mm = 40; ball.frequency = 20;
-  finger.builtin = "capsule"; finger.radius_mm = 6; finger.length_mm = 30;
+  ball.builtin = "icosphere";
+  ball.radius_mm = 40;
+  ball.frequency = 20;
+  finger.builtin = "capsule";
+  finger.radius_mm = 6;
+  finger.length_mm = 30;
   const st::geom::Mesh ball_mesh = st::app::load_body(ball, "object").value();
   const st::geom::Mesh finger_mesh = st::app::load_body(finger, "probe").value();
   CHECK(nf == ball_mesh.num_faces() + finger_mesh.num_faces());
@@ -189,22 +230,24 @@ TEST_CASE("run: a full disk is an error naming the file, and the summary is prin
     const char* file;
     bool split;
   };
-  for (const Case c : {Case{"ticks.csv", false}, Case{"rounds.csv", false}, Case{"summary.txt", false},
-                       Case{"ticks.csv", true}}) {
+  for (const Case c :
+       {Case{"ticks.csv", false}, Case{"rounds.csv", false}, Case{"summary.txt", false}, Case{"ticks.csv", true}}) {
     const std::string what = std::string(c.file) + (c.split ? " (split)" : "");
     CAPTURE(what);
     const std::string out = d.file(std::string("run-") + c.file + (c.split ? "-split" : ""));
     std::filesystem::create_directories(out);
     std::filesystem::create_symlink("/dev/full", out + "/" + c.file);
-    const auto r = run_command(spheretouch_exe() + " run " + d.file("scene.toml") + " --out " + out +
-                               (c.split ? " --split" : ""));
+    const auto r =
+        run_command(spheretouch_exe() + " run " + d.file("scene.toml") + " --out " + out + (c.split ? " --split" : ""));
     INFO(r.output);
     CHECK(r.exit_code == 1);
-    CHECK(contains(r.output, "summary\n"));          // on stdout, whatever happened to the files
+    CHECK(contains(r.output, "summary\n"));  // on stdout, whatever happened to the files
     CHECK(contains(r.output, "haptic          "));
     CHECK(contains(r.output, "No space left on device"));
-    if (!c.split) CHECK(contains(r.output, "spheretouch run: " + out + "/" + c.file + ": write failed"));
-    else CHECK(contains(r.output, out + "/ticks.csv: write failed"));  // from the servo process
+    if (!c.split)
+      CHECK(contains(r.output, "spheretouch run: " + out + "/" + c.file + ": write failed"));
+    else
+      CHECK(contains(r.output, out + "/ticks.csv: write failed"));  // from the servo process
     // The run directory is private to its user (poses and forces are the user's data).
     const auto perms = std::filesystem::status(out).permissions();
     CHECK((perms & (std::filesystem::perms::group_all | std::filesystem::perms::others_all)) == std::filesystem::perms::none);
@@ -234,37 +277,52 @@ TEST_CASE("run: SIGHUP (a closed terminal) ends the run like Ctrl-C: summary pri
 TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
   const std::pair<const char*, const char*> cases[] = {
       {"[probe]\nbuiltin = \"capsule\"\n", "missing section [object]"},
-      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\npeak_n = \"lots\"\n", "force.peak_n: expected a number"},
-      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\npeak_n = -1\n", "force.peak_n: expected a value in"},
-      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[haptic]\nrate = 1000\n", "haptic.rate: unknown key"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\npeak_n = \"lots\"\n",
+       "force.peak_n: expected a number"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\npeak_n = -1\n",
+       "force.peak_n: expected a value in"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[haptic]\nrate = 1000\n",
+       "haptic.rate: unknown key"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[telepathy]\n", "telepathy: unknown key"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nmesh = \"nowhere.off\"\n", "object.mesh: file"},
-      {"[probe]\nbuiltin = \"sphere\"\n[object]\nbuiltin = \"box\"\n", "probe.builtin: expected one of icosphere, box, capsule"},
-      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[interpolation]\nmethod = \"magic\"\n", "interpolation.method"},
-      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nendpoints = [\"http://x\"]\n", "workers.endpoints"},
-      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\ncount = 1.5\n", "workers.count: expected an integer"},
-      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[device]\ntarget = [1, 2]\n", "device.target: expected an array of 3 numbers"},
-      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\ncontinuous_n = 5\n", "force.continuous_n: must not exceed peak_n"},
+      {"[probe]\nbuiltin = \"sphere\"\n[object]\nbuiltin = \"box\"\n",
+       "probe.builtin: expected one of icosphere, box, capsule"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[interpolation]\nmethod = \"magic\"\n",
+       "interpolation.method"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nendpoints = [\"http://x\"]\n",
+       "workers.endpoints"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\ncount = 1.5\n",
+       "workers.count: expected an integer"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[device]\ntarget = [1, 2]\n",
+       "device.target: expected an array of 3 numbers"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\ncontinuous_n = 5\n",
+       "force.continuous_n: must not exceed peak_n"},
       {"[probe]\nbuiltin = \"capsule\"\n[object\n", "TOML syntax"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[contact]\nmodel = \"nearest\"\n",
        "contact.model: expected one of patch, paper"},
-      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[contact]\nhold_margin_mm = -1\n", "contact.hold_margin_mm"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[contact]\nhold_margin_mm = -1\n",
+       "contact.hold_margin_mm"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[contact]\nmax_inside_vertices = 0\n",
        "contact.max_inside_vertices"},
-      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[passivity]\ncolgate_margin = -2\n", "passivity.colgate_margin"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[passivity]\ncolgate_margin = -2\n",
+       "passivity.colgate_margin"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[passivity]\nenabled = 1\n", "passivity.enabled"},
-      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[passivity]\ndamping = 1\n", "passivity.damping: unknown key"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[passivity]\ndamping = 1\n",
+       "passivity.damping: unknown key"},
       {"[probe]\nbuiltin = \"capsule\"\nmesh = \"a.off\"\n[object]\nbuiltin = \"box\"\n", "probe.mesh"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nserver_key = \"/nowhere/fleet.pub\"\n",
        "workers.client_key: server_key is set but client_key is not"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nclient_key = \"c\"\n",
        "workers.server_key: client_key is set but server_key is not"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nserver_key = \"/nowhere/fleet.pub\"\n"
-       "client_key = \"/nowhere/c\"\n", "workers.server_key: file /nowhere/fleet.pub does not exist"},
-      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nserver_key = 3\n", "workers.server_key: expected a string"},
+       "client_key = \"/nowhere/c\"\n",
+       "workers.server_key: file /nowhere/fleet.pub does not exist"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nserver_key = 3\n",
+       "workers.server_key: expected a string"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[haptic]\nthread_stack_kb = 16\n",
        "haptic.thread_stack_kb: expected 0 (glibc's default) or at least 64"},
-      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[haptic]\nthread_stack_kb = 256\nprefault_stack_kb = 200\n",
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[haptic]\nthread_stack_kb = "
+       "256\nprefault_stack_kb = 200\n",
        "haptic.prefault_stack_kb: 200 KiB does not fit the haptic thread's stack (thread_stack_kb = 256"},
   };
   for (const auto& item : cases) {
@@ -279,7 +337,8 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
   }
   // And through the command: exit code 2 with the message.
   st::test::TempDir d;
-  st::test::write_file(d.file("s.toml"), "[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\npeak_n = -1\n");
+  st::test::write_file(d.file("s.toml"),
+                       "[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\npeak_n = -1\n");
   const auto r = run_command(spheretouch_exe() + " run " + d.file("s.toml") + " --out " + d.file("o"));
   CHECK(r.exit_code == 2);
   CHECK(contains(r.output, "s.toml:6: force.peak_n: expected a value in"));
@@ -320,8 +379,10 @@ TEST_CASE("scene files: configs/demo.toml and configs/small.toml parse, with the
   CHECK(demo.value().passivity.enabled == st::rt::DefaultPassivityConfig().enabled);
   CHECK(demo.value().passivity.colgate_margin == st::rt::DefaultPassivityConfig().colgate_margin);
   CHECK(demo.value().passivity.max_damping_N_s_per_mm == st::rt::DefaultPassivityConfig().max_damping_N_s_per_mm);
-  auto paper = st::app::parse_scene("[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[contact]\nmodel = \"paper\"\n"
-                                    "[passivity]\nenabled = false\n", "paper.toml", ".");
+  auto paper = st::app::parse_scene(
+      "[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[contact]\nmodel = \"paper\"\n"
+      "[passivity]\nenabled = false\n",
+      "paper.toml", ".");
   REQUIRE_MESSAGE(paper.ok(), paper.error());
   CHECK(paper.value().contact.model == st::geom::ContactModelKind::paper);
   CHECK_FALSE(paper.value().passivity.enabled);

@@ -21,7 +21,9 @@ bool shm_exists(const std::string& name) {
 }
 }  // namespace
 
-TEST_CASE("run --split: the servo process ticks at the rate, presses with force, writes the usual outputs; monitor watches it") {
+TEST_CASE(
+    "run --split: the servo process ticks at the rate, presses with force, writes the usual outputs; monitor watches "
+    "it") {
   TempDir d;
   write_file(d.file("scene.toml"), small_scene(3.0));
   const std::string out = d.file("run"), log = d.file("run.log");
@@ -91,7 +93,8 @@ TEST_CASE("run --split: the servo process ticks at the rate, presses with force,
   CHECK(contains(gone.output, "cannot attach"));
 }
 
-TEST_CASE("run --split: collision process SIGKILLed mid-press, the servo fades the force to zero, says so, runs to its end") {
+TEST_CASE(
+    "run --split: collision process SIGKILLed mid-press, the servo fades the force to zero, says so, runs to its end") {
   // Orphans are re-parented to us, so the test can reap the servo after killing its parent.
   REQUIRE(prctl(PR_SET_CHILD_SUBREAPER, 1) == 0);
   TempDir d;
@@ -146,9 +149,9 @@ TEST_CASE("run --split: collision process SIGKILLed mid-press, the servo fades t
       ++faded_ticks;
     }
   }
-  CHECK(pressing > 0.1);       // killed while pressing
-  CHECK(faded_max == 0.0);     // exactly zero after the fade
-  CHECK(faded_ticks > 1000);   // and it kept ticking (about 2 s more)
+  CHECK(pressing > 0.1);      // killed while pressing
+  CHECK(faded_max == 0.0);    // exactly zero after the fade
+  CHECK(faded_ticks > 1000);  // and it kept ticking (about 2 s more)
   CHECK(t_last < duration - 1.0);
 }
 

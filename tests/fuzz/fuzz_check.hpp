@@ -5,11 +5,10 @@
 #include <cstdlib>
 
 /// Aborts with the failed condition and a note when `cond` is false.
-#define ST_FUZZ_CHECK(cond, what)                                                              \
-  do {                                                                                         \
-    if (!(cond)) {                                                                             \
-      std::fprintf(stderr, "%s:%d: fuzz property violated: %s (%s)\n", __FILE__, __LINE__,     \
-                   #cond, what);                                                               \
-      std::abort();                                                                            \
-    }                                                                                          \
+#define ST_FUZZ_CHECK(cond, what)                                                                        \
+  do {                                                                                                   \
+    if (!(cond)) {                                                                                       \
+      std::fprintf(stderr, "%s:%d: fuzz property violated: %s (%s)\n", __FILE__, __LINE__, #cond, what); \
+      std::abort();                                                                                      \
+    }                                                                                                    \
   } while (0)

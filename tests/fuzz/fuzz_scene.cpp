@@ -45,7 +45,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   check_body(s.object);
   ST_FUZZ_CHECK(s.probe_tip.allFinite() && s.probe_rotation_deg.allFinite(), "probe tip and rotation finite");
   ST_FUZZ_CHECK(s.device.target.allFinite(), "device target finite");
-  ST_FUZZ_CHECK(s.device.normal.allFinite() && std::abs(s.device.normal.norm() - 1) < 1e-9, "device normal is a unit vector");
+  ST_FUZZ_CHECK(s.device.normal.allFinite() && std::abs(s.device.normal.norm() - 1) < 1e-9,
+                "device normal is a unit vector");
   ST_FUZZ_CHECK(std::isfinite(s.device.press_mm) && std::isfinite(s.device.slide_mm), "press and slide finite");
   ST_FUZZ_CHECK(s.workers >= 0 && s.workers <= 64, "worker count");
   for (const std::string& ep : s.endpoints)
@@ -53,7 +54,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   ST_FUZZ_CHECK(std::isfinite(s.deadline_ms) && s.deadline_ms > 0, "deadline");
   ST_FUZZ_CHECK(std::isfinite(s.duration_s) && s.duration_s > 0, "duration");
   ST_FUZZ_CHECK(std::isfinite(s.collision_rate_hz) && s.collision_rate_hz >= 0, "collision rate");
-  ST_FUZZ_CHECK(s.interp.crossfade_ns >= 0 && s.interp.stale_timeout_ns > 0 && s.interp.fade_ns >= 0, "interpolation times");
+  ST_FUZZ_CHECK(s.interp.crossfade_ns >= 0 && s.interp.stale_timeout_ns > 0 && s.interp.fade_ns >= 0,
+                "interpolation times");
   ST_FUZZ_CHECK(st::rt::ForceLaw::make(s.law).ok(), "the force law is constructible");
   ST_FUZZ_CHECK(st::rt::Saturator::check(s.saturation).empty(), "saturation config valid");
   ST_FUZZ_CHECK(st::rt::HapticLoop::check(s.haptic).empty(), "haptic config valid");

@@ -32,7 +32,10 @@ void write(const fs::path& path, const void* data, std::size_t size) {
   fs::create_directories(path.parent_path());
   std::ofstream o(path, std::ios::binary | std::ios::trunc);
   o.write(static_cast<const char*>(data), static_cast<std::streamsize>(size));
-  if (!o) { std::fprintf(stderr, "cannot write %s\n", path.c_str()); std::exit(1); }
+  if (!o) {
+    std::fprintf(stderr, "cannot write %s\n", path.c_str());
+    std::exit(1);
+  }
 }
 
 void write_frame(const fs::path& dir, const std::string& name, const Message& m) {
@@ -65,7 +68,10 @@ void wire_seeds(const fs::path& dir) {
   std::vector<std::uint32_t> mine;
   for (std::uint32_t b = 0; b < blocks.size(); b += 2) mine.push_back(b);
   Result<BlockSet> set = make_block_set(probe, object, blocks, mine, 4);
-  if (!set) { std::fprintf(stderr, "%s\n", set.error().c_str()); std::exit(1); }
+  if (!set) {
+    std::fprintf(stderr, "%s\n", set.error().c_str());
+    std::exit(1);
+  }
   const std::vector<std::uint8_t> enc = encode_block_set(set.value());
   write_frame(dir, "loadblocks_whole_set", LoadBlocksMsg{block_set_hash(enc), enc.size(), 0, enc});
 }
@@ -80,23 +86,32 @@ void write_mesh(const fs::path& dir, const std::string& name, char format, const
 }
 
 void mesh_seeds(const fs::path& dir) {
-  write_mesh(dir, "off", 0,
-             "OFF\n# a pyramid\n5 5 0\n0 0 0\n2 0 0\n2 2 0\n0 2 0\n1 1 1.5\n4 0 3 2 1\n3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 4\n");
+  write_mesh(
+      dir, "off", 0,
+      "OFF\n# a pyramid\n5 5 0\n0 0 0\n2 0 0\n2 2 0\n0 2 0\n1 1 1.5\n4 0 3 2 1\n3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 4\n");
   write_mesh(dir, "obj", 1,
              "# pyramid\nv 0 0 0\nv 2 0 0\nv 2 2 0\nv 0 2 0\nv 1 1 1.5\nvn 0 0 1\nvt 0 0\ng base\nusemtl a\n"
              "f 1/1/1 3/1/1 2/1/1\nf -5//1 -2//1 -3//1\ng sides\nf 1 2 5\nf 2 3 5\nf 3 4 5\nf 4 1 5\nl 1 2\n");
-  write_mesh(dir, "ply_ascii", 2,
-             "ply\nformat ascii 1.0\ncomment pyramid\nelement vertex 5\nproperty float x\nproperty float y\n"
-             "property float z\nproperty uchar red\nelement face 5\nproperty list uchar int vertex_indices\n"
-             "end_header\n0 0 0 1\n2 0 0 2\n2 2 0 3\n0 2 0 4\n1 1 1.5 5\n4 0 3 2 1\n3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 4\n");
+  write_mesh(
+      dir, "ply_ascii", 2,
+      "ply\nformat ascii 1.0\ncomment pyramid\nelement vertex 5\nproperty float x\nproperty float y\n"
+      "property float z\nproperty uchar red\nelement face 5\nproperty list uchar int vertex_indices\n"
+      "end_header\n0 0 0 1\n2 0 0 2\n2 2 0 3\n0 2 0 4\n1 1 1.5 5\n4 0 3 2 1\n3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 4\n");
   {
-    std::string ply = "ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
-                      "property float z\nelement face 6\nproperty list uchar int vertex_indices\nend_header\n";
+    std::string ply =
+        "ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 6\nproperty list uchar int vertex_indices\nend_header\n";
     for (const geom::Vec3& p : kPos)
-      for (int c = 0; c < 3; ++c) { const float f = float(p[c]); ply.append(reinterpret_cast<const char*>(&f), 4); }
+      for (int c = 0; c < 3; ++c) {
+        const float f = float(p[c]);
+        ply.append(reinterpret_cast<const char*>(&f), 4);
+      }
     for (const geom::Tri& t : kTris) {
       ply += char(3);
-      for (std::uint32_t i : t) { const std::int32_t v = std::int32_t(i); ply.append(reinterpret_cast<const char*>(&v), 4); }
+      for (std::uint32_t i : t) {
+        const std::int32_t v = std::int32_t(i);
+        ply.append(reinterpret_cast<const char*>(&v), 4);
+      }
     }
     write_mesh(dir, "ply_binary", 2, ply);
   }
@@ -105,8 +120,8 @@ void mesh_seeds(const fs::path& dir) {
   binary.append(reinterpret_cast<const char*>(&n), 4);
   for (const geom::Tri& t : kTris) {
     const geom::Vec3 nrm = (kPos[t[1]] - kPos[t[0]]).cross(kPos[t[2]] - kPos[t[0]]).normalized();
-    ascii += " facet normal " + std::to_string(nrm.x()) + " " + std::to_string(nrm.y()) + " " + std::to_string(nrm.z()) +
-             "\n  outer loop\n";
+    ascii += " facet normal " + std::to_string(nrm.x()) + " " + std::to_string(nrm.y()) + " " +
+             std::to_string(nrm.z()) + "\n  outer loop\n";
     float f[12] = {float(nrm.x()), float(nrm.y()), float(nrm.z())};
     for (int k = 0; k < 3; ++k) {
       ascii += "   vertex";
@@ -174,7 +189,8 @@ void tree_seeds(const fs::path& dir) {
   geom::TreeParams params = geom::DefaultTreeParams();
   params.leaf_faces = 4;
   fs::create_directories(dir);
-  if (Status s = geom::write_tree(geom::SphereTree::build(object, params).value(), (dir / "seed_icosphere.tree").string()); !s) {
+  if (Status s = geom::write_tree(geom::SphereTree::build(object, params).value(), (dir / "seed_icosphere.tree").string());
+      !s) {
     std::fprintf(stderr, "%s\n", s.error().c_str());
     std::exit(1);
   }
@@ -184,7 +200,10 @@ void tree_seeds(const fs::path& dir) {
 void shm_seeds(const fs::path& dir) {
   const std::string name = "/spheretouch-seed-" + std::to_string(::getpid());
   auto seg = rt::ShmSegment::create(name);
-  if (!seg) { std::fprintf(stderr, "%s\n", seg.error().c_str()); std::exit(1); }
+  if (!seg) {
+    std::fprintf(stderr, "%s\n", seg.error().c_str());
+    std::exit(1);
+  }
   rt::PoseSample p{};
   p.seq = 7;
   p.pose = geom::to_pod(geom::Pose::Identity());
@@ -208,7 +227,10 @@ void shm_seeds(const fs::path& dir) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc != 2) { std::fprintf(stderr, "usage: %s CORPUS_DIR (tests/fuzz/corpus)\n", argv[0]); return 2; }
+  if (argc != 2) {
+    std::fprintf(stderr, "usage: %s CORPUS_DIR (tests/fuzz/corpus)\n", argv[0]);
+    return 2;
+  }
   const fs::path root(argv[1]);
   wire_seeds(root / "fuzz_wire");
   mesh_seeds(root / "fuzz_mesh");

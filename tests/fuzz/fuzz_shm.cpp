@@ -69,8 +69,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if (rw) {
     ShmSegment& seg = *rw.value();
     SimulatedDevice dev(still_script(), VirtualUser{}, 64);
-    HapticServo servo(dev, seg.poses(), seg.models(), ForceLaw{}, DefaultInterpolatorConfig(), DefaultSaturationConfig(),
-                      nullptr, DefaultPassivityConfig(), 1e-3);
+    HapticServo servo(dev, seg.poses(), seg.models(), ForceLaw{}, DefaultInterpolatorConfig(),
+                      DefaultSaturationConfig(), nullptr, DefaultPassivityConfig(), 1e-3);
     for (int k = 0; k < 12; ++k) {
       TickInfo info;
       info.tick = info.deadline_index = std::uint64_t(k);

@@ -99,7 +99,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     ST_FUZZ_CHECK(q->pose.matrix().allFinite(), "Query pose finite");
   } else if (const auto* lb = std::get_if<LoadBlocksMsg>(&m)) {
     ST_FUZZ_CHECK(lb->offset + lb->data.size() <= lb->total_bytes, "chunk inside its block set");
-    ST_FUZZ_CHECK(lb->total_bytes <= defaults.max_blockset_bytes && lb->data.size() <= defaults.max_chunk_bytes, "chunk limits");
+    ST_FUZZ_CHECK(lb->total_bytes <= defaults.max_blockset_bytes && lb->data.size() <= defaults.max_chunk_bytes,
+                  "chunk limits");
     if (lb->offset == 0 && lb->data.size() == lb->total_bytes) {
       check_block_set(lb->data, defaults);
       check_block_set(lb->data, tight_limits());

@@ -25,10 +25,16 @@ int main(int argc, char** argv) {
       files.push_back(p);
     }
   }
-  if (files.empty()) { std::fprintf(stderr, "usage: %s FILE|DIR...\n(no input files found)\n", argv[0]); return 2; }
+  if (files.empty()) {
+    std::fprintf(stderr, "usage: %s FILE|DIR...\n(no input files found)\n", argv[0]);
+    return 2;
+  }
   for (const auto& f : files) {
     std::ifstream in(f, std::ios::binary);
-    if (!in) { std::fprintf(stderr, "cannot read %s\n", f.c_str()); return 2; }
+    if (!in) {
+      std::fprintf(stderr, "cannot read %s\n", f.c_str());
+      return 2;
+    }
     const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     std::vector<std::uint8_t> copy(bytes.begin(), bytes.end());  // exact size, so ASan sees overreads
     LLVMFuzzerTestOneInput(copy.data(), copy.size());

@@ -20,7 +20,8 @@ namespace {
 struct Body {
   Mesh mesh;
   SphereTree tree;
-  explicit Body(Mesh m, TreeParams p = DefaultTreeParams()) : mesh(std::move(m)), tree(SphereTree::build(mesh, p).value()) {}
+  explicit Body(Mesh m, TreeParams p = DefaultTreeParams())
+      : mesh(std::move(m)), tree(SphereTree::build(mesh, p).value()) {}
 };
 
 std::vector<FacePair> run(const Body& probe, const Body& object, const Pose& pose, CollideOptions opt = {}) {
@@ -30,7 +31,10 @@ std::vector<FacePair> run(const Body& probe, const Body& object, const Pose& pos
   collide(probe.mesh, probe.tree, object.mesh, object.tree, pose, opt, scratch, res);
   // Counters agree with the pairs: contacts = distinct faces on each side.
   std::set<std::uint32_t> pf, of;
-  for (auto& p : res.pairs) { pf.insert(p.probe); of.insert(p.object); }
+  for (auto& p : res.pairs) {
+    pf.insert(p.probe);
+    of.insert(p.object);
+  }
   CHECK(res.probe_faces == pf.size());
   CHECK(res.object_faces == of.size());
   CHECK(std::adjacent_find(res.pairs.begin(), res.pairs.end()) == res.pairs.end());
@@ -38,7 +42,8 @@ std::vector<FacePair> run(const Body& probe, const Body& object, const Pose& pos
 }
 
 // Poses of probe against object: far, random near-surface, deep, exact vertex touches.
-std::vector<std::pair<std::string, Pose>> poses_for(const Mesh& probe, const Mesh& object, int near_count, std::uint64_t seed) {
+std::vector<std::pair<std::string, Pose>> poses_for(const Mesh& probe, const Mesh& object, int near_count,
+                                                    std::uint64_t seed) {
   std::vector<std::pair<std::string, Pose>> out;
   std::mt19937_64 rng(seed);
   Pose far = Pose::Identity();
@@ -50,8 +55,8 @@ std::vector<std::pair<std::string, Pose>> poses_for(const Mesh& probe, const Mes
   std::uniform_real_distribution<double> depth(-1.0, 6.0);
   for (int i = 0; i < near_count; ++i) {
     const std::uint32_t o = vo(rng);
-    out.emplace_back("near " + std::to_string(i),
-                     st::test::pose_near(probe, vp(rng), object, o, normals[o], depth(rng), st::test::random_rotation(rng)));
+    out.emplace_back("near " + std::to_string(i), st::test::pose_near(probe, vp(rng), object, o, normals[o], depth(rng),
+                                                                      st::test::random_rotation(rng)));
   }
   Pose deep = Pose::Identity();
   deep.linear() = st::test::random_rotation(rng);
@@ -121,7 +126,11 @@ TEST_CASE("transform_to_object: t is accurate with origins at 1e6 mm") {
 TEST_CASE("collide equals brute force: generated meshes, touching cases") {
   Body a(make_box({2, 2, 2}));
   Body b(make_box({2, 2, 2}));
-  auto at = [](Vec3 t) { Pose p = Pose::Identity(); p.translation() = t; return p; };
+  auto at = [](Vec3 t) {
+    Pose p = Pose::Identity();
+    p.translation() = t;
+    return p;
+  };
   // Face-face, edge-edge (collinear), vertex-vertex, just apart, overlapping.
   for (const Vec3& t : {Vec3(2, 0, 0), Vec3(2, 2, 0), Vec3(2, 2, 2), Vec3(2.0000001, 0, 0), Vec3(1, 0.5, 0.25)}) {
     CAPTURE(t.transpose());
@@ -145,7 +154,8 @@ TEST_CASE("collide equals brute force: generated meshes, touching cases") {
       Pose p = Pose::Identity();
       p.linear() = st::test::random_rotation(rng);
       p.translation() = Vec3(u(rng), u(rng), u(rng));
-      CAPTURE(L); CAPTURE(i);
+      CAPTURE(L);
+      CAPTURE(i);
       CHECK(run(c, s, p) == brute_force(c.mesh, s.mesh, p, true));
     }
   }
@@ -157,7 +167,7 @@ TEST_CASE("collide equals brute force: hand x hand (literal all pairs)") {
   const Mesh* hand = st::test::model_mesh("hand.off");
   Body probe(*hand), object(*hand);
   auto poses = poses_for(*hand, *hand, 4, 1);
-  poses.resize(4);  // far and three near poses
+  poses.resize(4);                                              // far and three near poses
   if (st::test::kSanitizerBuild) poses = {poses[1], poses[2]};  // two near poses
   compare_at(probe, object, poses, true);
 }
@@ -180,8 +190,9 @@ TEST_CASE("collide equals brute force: hand and hand_L2 x elephant at >= 20 pose
       Pose q = Eigen::Translation3d(dob) * pose * Eigen::Translation3d(-dp);
       far_poses.emplace_back(name + " @1e6", q);
     }
-    far_poses.erase(std::remove_if(far_poses.begin(), far_poses.end(),
-                                   [](auto& p) { return p.first.rfind("touch", 0) == 0; }), far_poses.end());
+    far_poses.erase(
+        std::remove_if(far_poses.begin(), far_poses.end(), [](auto& p) { return p.first.rfind("touch", 0) == 0; }),
+        far_poses.end());
     compare_at(fprobe, fobject, far_poses);
   }
 }
@@ -199,7 +210,8 @@ TEST_CASE("approximate mode is a superset of exact") {
       const Pose& pose = named.second;
       // The hand buried in the elephant at the coarse layer adds millions more pairs, nothing new.
       if (name == "deep" && stop != kLeafSpheres) continue;
-      CAPTURE(name); CAPTURE(stop);
+      CAPTURE(name);
+      CAPTURE(stop);
       const auto exact = run(probe, object, pose);
       CollideOptions o;
       o.stop_layer = stop;

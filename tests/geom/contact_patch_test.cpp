@@ -222,7 +222,7 @@ TEST_CASE("contact patch: pushed through a 1 mm plate and back: no pop-through, 
     CAPTURE(cz);
     REQUIRE(finite_model(m));
     if (depth <= 0.02) return;  // at or above the top: contact may or may not be reported
-    REQUIRE(m.in_contact());  // never lost while below the entry surface
+    REQUIRE(m.in_contact());    // never lost while below the entry surface
     ++contacts;
     CHECK(angle_deg(fd(m), Vec3::UnitZ()) < 1e-6);  // always out of the entry side
     CHECK(std::abs(m.penetration_mm - depth) <= kDepthTol);
@@ -233,7 +233,7 @@ TEST_CASE("contact patch: pushed through a 1 mm plate and back: no pop-through, 
   // Exact values, as a script gives them: at cz = -4.5 the ball's pole touches the top face from
   // inside the plate (a zero-area curve, whose rounding noise once pointed FD down).
   for (int i = 0; 6.0 - 0.1 * i >= -20.0; i += 2) step(6.0 - 0.1 * i);
-  for (int i = 1; -20 + 0.1 * i <= 6.0; i += 2) step(-20 + 0.1 * i);
+  for (int i = 1; - 20 + 0.1 * i <= 6.0; i += 2) step(-20 + 0.1 * i);
   CHECK(contacts > 200);
   CHECK(held > 100);  // fully through (cz < -5.5) no face collides: the held plane carries it
 }

@@ -96,8 +96,7 @@ class BigInt {
     if (n + 1 > kLimbs) throw std::overflow_error("BigInt add overflow");
     std::uint64_t carry = 0;
     for (int i = 0; i < n; ++i) {
-      const std::uint64_t t = static_cast<std::uint64_t>(i < a.n_ ? a.d_[i] : 0) +
-                              (i < b.n_ ? b.d_[i] : 0) + carry;
+      const std::uint64_t t = static_cast<std::uint64_t>(i < a.n_ ? a.d_[i] : 0) + (i < b.n_ ? b.d_[i] : 0) + carry;
       r.d_[i] = static_cast<std::uint32_t>(t);
       carry = t >> 32;
     }

@@ -10,9 +10,9 @@
 
 using namespace st;
 using namespace st::geom;
+using st::test::contains;
 using st::test::TempDir;
 using st::test::write_file;
-using st::test::contains;
 using namespace std::string_literals;
 
 namespace {
@@ -23,7 +23,8 @@ const std::vector<Tri> kTris = {{0, 2, 1}, {0, 3, 2}, {0, 1, 4}, {1, 2, 4}, {2, 
 
 std::string off_text() {
   // The base is one quad (0 3 2 1) -> fan (0,3,2), (0,2,1): written as a polygon to test fanning.
-  return "OFF\n# a pyramid\n5 5 0\n0 0 0\n2 0 0\n2 2 0\n0 2 0\n1 1 1.5\n4 0 3 2 1\n3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 4\n";
+  return "OFF\n# a pyramid\n5 5 0\n0 0 0\n2 0 0\n2 2 0\n0 2 0\n1 1 1.5\n4 0 3 2 1\n3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 "
+         "4\n";
 }
 const std::vector<Tri> kFannedOff = {{0, 3, 2}, {0, 2, 1}, {0, 1, 4}, {1, 2, 4}, {2, 3, 4}, {3, 0, 4}};
 
@@ -59,14 +60,22 @@ std::string base64(const std::string& in) {
   std::size_t i = 0;
   for (; i + 2 < in.size(); i += 3) {
     const unsigned v = (unsigned char)in[i] << 16 | (unsigned char)in[i + 1] << 8 | (unsigned char)in[i + 2];
-    out += tbl[v >> 18 & 63]; out += tbl[v >> 12 & 63]; out += tbl[v >> 6 & 63]; out += tbl[v & 63];
+    out += tbl[v >> 18 & 63];
+    out += tbl[v >> 12 & 63];
+    out += tbl[v >> 6 & 63];
+    out += tbl[v & 63];
   }
   if (i + 1 == in.size()) {
     const unsigned v = (unsigned char)in[i] << 16;
-    out += tbl[v >> 18 & 63]; out += tbl[v >> 12 & 63]; out += "==";
+    out += tbl[v >> 18 & 63];
+    out += tbl[v >> 12 & 63];
+    out += "==";
   } else if (i + 2 == in.size()) {
     const unsigned v = (unsigned char)in[i] << 16 | (unsigned char)in[i + 1] << 8;
-    out += tbl[v >> 18 & 63]; out += tbl[v >> 12 & 63]; out += tbl[v >> 6 & 63]; out += '=';
+    out += tbl[v >> 18 & 63];
+    out += tbl[v >> 12 & 63];
+    out += tbl[v >> 6 & 63];
+    out += '=';
   }
   return out;
 }
@@ -74,16 +83,25 @@ std::string base64(const std::string& in) {
 std::string gltf_text() {
   std::string bin;
   for (const Vec3& p : kPos)
-    for (int c = 0; c < 3; ++c) { float f = float(p[c]); bin.append(reinterpret_cast<const char*>(&f), 4); }
+    for (int c = 0; c < 3; ++c) {
+      float f = float(p[c]);
+      bin.append(reinterpret_cast<const char*>(&f), 4);
+    }
   const std::size_t pos_bytes = bin.size();
   for (const Tri& t : kTris)
-    for (int k = 0; k < 3; ++k) { std::uint16_t i = std::uint16_t(t[k]); bin.append(reinterpret_cast<const char*>(&i), 2); }
+    for (int k = 0; k < 3; ++k) {
+      std::uint16_t i = std::uint16_t(t[k]);
+      bin.append(reinterpret_cast<const char*>(&i), 2);
+    }
   const std::size_t idx_bytes = bin.size() - pos_bytes;
   return R"({"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{"mesh":0}],
 "meshes":[{"primitives":[{"attributes":{"POSITION":0},"indices":1,"mode":4}]}],
-"buffers":[{"byteLength":)" + std::to_string(bin.size()) + R"(,"uri":"data:application/octet-stream;base64,)" + base64(bin) + R"("}],
-"bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":)" + std::to_string(pos_bytes) + R"(},
-{"buffer":0,"byteOffset":)" + std::to_string(pos_bytes) + R"(,"byteLength":)" + std::to_string(idx_bytes) + R"(}],
+"buffers":[{"byteLength":)" +
+         std::to_string(bin.size()) + R"(,"uri":"data:application/octet-stream;base64,)" + base64(bin) + R"("}],
+"bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":)" +
+         std::to_string(pos_bytes) + R"(},
+{"buffer":0,"byteOffset":)" +
+         std::to_string(pos_bytes) + R"(,"byteLength":)" + std::to_string(idx_bytes) + R"(}],
 "accessors":[{"bufferView":0,"componentType":5126,"count":5,"type":"VEC3","min":[0,0,0],"max":[2,2,1.5]},
 {"bufferView":1,"componentType":5123,"count":18,"type":"SCALAR"}]})";
 }
@@ -141,11 +159,14 @@ TEST_CASE("OBJ: double path, negative indices, v/vt/vn forms, order kept across 
 
 TEST_CASE("ASCII PLY: double path, extra properties skipped") {
   TempDir d;
-  std::string s = "ply\nformat ascii 1.0\ncomment test\nelement vertex 5\nproperty float x\nproperty float y\n"
-                  "property float z\nproperty uchar red\nelement face 6\nproperty list uchar int vertex_indices\n"
-                  "property int flags\nend_header\n";
-  for (const Vec3& p : kPos) s += std::to_string(p.x()) + " " + std::to_string(p.y()) + " " + std::to_string(p.z()) + " 7\n";
-  for (const Tri& t : kTris) s += "3 " + std::to_string(t[0]) + " " + std::to_string(t[1]) + " " + std::to_string(t[2]) + " 0\n";
+  std::string s =
+      "ply\nformat ascii 1.0\ncomment test\nelement vertex 5\nproperty float x\nproperty float y\n"
+      "property float z\nproperty uchar red\nelement face 6\nproperty list uchar int vertex_indices\n"
+      "property int flags\nend_header\n";
+  for (const Vec3& p : kPos)
+    s += std::to_string(p.x()) + " " + std::to_string(p.y()) + " " + std::to_string(p.z()) + " 7\n";
+  for (const Tri& t : kTris)
+    s += "3 " + std::to_string(t[0]) + " " + std::to_string(t[1]) + " " + std::to_string(t[2]) + " 0\n";
   write_file(d.file("p.ply"), s);
   Result<LoadedMesh> r = load_mesh(d.file("p.ply"));
   REQUIRE(r.ok());
@@ -156,13 +177,20 @@ TEST_CASE("ASCII PLY: double path, extra properties skipped") {
 TEST_CASE("binary PLY, ASCII and binary STL (ours), glTF (assimp) keep face order") {
   TempDir d;
   SUBCASE("binary PLY") {
-    std::string s = "ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
-                    "property float z\nelement face 6\nproperty list uchar int vertex_indices\nend_header\n";
+    std::string s =
+        "ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 6\nproperty list uchar int vertex_indices\nend_header\n";
     for (const Vec3& p : kPos)
-      for (int c = 0; c < 3; ++c) { float f = float(p[c]); s.append(reinterpret_cast<const char*>(&f), 4); }
+      for (int c = 0; c < 3; ++c) {
+        float f = float(p[c]);
+        s.append(reinterpret_cast<const char*>(&f), 4);
+      }
     for (const Tri& t : kTris) {
       s += char(3);
-      for (int k = 0; k < 3; ++k) { std::int32_t i = std::int32_t(t[k]); s.append(reinterpret_cast<const char*>(&i), 4); }
+      for (int k = 0; k < 3; ++k) {
+        std::int32_t i = std::int32_t(t[k]);
+        s.append(reinterpret_cast<const char*>(&i), 4);
+      }
     }
     write_file(d.file("p.ply"), s);
     Result<LoadedMesh> r = load_mesh(d.file("p.ply"));
@@ -175,7 +203,8 @@ TEST_CASE("binary PLY, ASCII and binary STL (ours), glTF (assimp) keep face orde
     for (const Tri& t : kTris) {
       s += "facet normal 0 0 0\nouter loop\n";
       for (int k = 0; k < 3; ++k)
-        s += "vertex " + std::to_string(kPos[t[k]].x()) + " " + std::to_string(kPos[t[k]].y()) + " " + std::to_string(kPos[t[k]].z()) + "\n";
+        s += "vertex " + std::to_string(kPos[t[k]].x()) + " " + std::to_string(kPos[t[k]].y()) + " " +
+             std::to_string(kPos[t[k]].z()) + "\n";
       s += "endloop\nendfacet\n";
     }
     s += "endsolid p\n";
@@ -218,7 +247,8 @@ TEST_CASE("bad input: each error names the file and the item") {
   write_file(d.file("inf.obj"), "v 0 0 0\nv 1 0 inf\nv 0 1 0\nf 1 2 3\n");
   CHECK(contains(load_error(d.file("inf.obj")), "inf.obj:2: vertex 1: coordinate 'inf' is not finite"));
   write_file(d.file("big.off"), "OFF\n3 1 0\n1e200 0 0\n0 1 0\n0 0 1\n3 0 1 2\n");  // finite, but not usable
-  CHECK(contains(load_error(d.file("big.off")), "big.off: vertex 0: coordinate too large (9.9999999999999997e+199, 0, 0)"));
+  CHECK(contains(load_error(d.file("big.off")),
+                 "big.off: vertex 0: coordinate too large (9.9999999999999997e+199, 0, 0)"));
   write_file(d.file("word.off"), "OFF\n3 1 0\n0 0 0\n1 zero 0\n0 1 0\n3 0 1 2\n");
   CHECK(contains(load_error(d.file("word.off")), "word.off:4: vertex 1: 'zero' is not a number"));
   write_file(d.file("short.off"), "OFF\n3 1 0\n0 0 0\n1 0 0\n");
@@ -233,8 +263,9 @@ TEST_CASE("bad input: each error names the file and the item") {
   CHECK(contains(load_error(d.file("objr.obj")), "objr.obj:4: face 0: vertex index 4 out of range"));
   write_file(d.file("line.obj"), "v 0 0 0\nv 1 0 0\nf 1 2\n");
   CHECK(contains(load_error(d.file("line.obj")), "line.obj:3: face 0: has 2 corners"));
-  write_file(d.file("p.ply"), "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
-                              "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n");
+  write_file(d.file("p.ply"),
+             "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+             "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n");
   CHECK(contains(load_error(d.file("p.ply")), "p.ply:13: face 0: vertex index 9 out of range [0, 3)"));
   write_file(d.file("bad.stl"), "solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 0\n");
   CHECK(contains(load_error(d.file("bad.stl")), "bad.stl"));
@@ -252,9 +283,10 @@ TEST_CASE("binary PLY: either byte order, any scalar type, doubles kept exactly"
     std::memcpy(b.data(), &v, sizeof v);
     return std::string(b.rbegin(), b.rend());
   };
-  std::string s = "ply\r\nformat binary_big_endian 1.0\r\nelement vertex 5\r\nproperty float64 x\r\nproperty double y\r\n"
-                  "property double z\r\nproperty uchar red\r\nelement face 5\r\nproperty list ushort uint vertex_indices\r\n"
-                  "element edge 1\r\nproperty int vertex1\r\nend_header\r\n";
+  std::string s =
+      "ply\r\nformat binary_big_endian 1.0\r\nelement vertex 5\r\nproperty float64 x\r\nproperty double y\r\n"
+      "property double z\r\nproperty uchar red\r\nelement face 5\r\nproperty list ushort uint vertex_indices\r\n"
+      "element edge 1\r\nproperty int vertex1\r\nend_header\r\n";
   const std::vector<Vec3> pos = {{0, 0, 0}, {2, 0, 0}, {2, 2, 0}, {0, 2, 0}, {1, 1, 1.5 + 1e-12}};
   for (const Vec3& p : pos) {
     for (int c = 0; c < 3; ++c) s += be(p[c]);
@@ -287,12 +319,16 @@ TEST_CASE("hostile PLY: truncated or inconsistent files are refused with a messa
   // end_header ends where the text ends.
   CHECK(contains(error("ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty flo\0\0\0\0@\0\0"s),
                  "h.ply:4: property without a name"));
-  CHECK(contains(error("ply\nformat binary_little_endian 1.0\nelement vertex 5\n"), "h.ply: file ends inside the header"));
-  const std::string head = "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
-                           "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
-  CHECK(contains(error(head + std::string(35, '\0')), "h.ply: byte 169: element 'vertex': 3 items of at least 12 bytes do not fit in the 35 bytes left"));
+  CHECK(contains(error("ply\nformat binary_little_endian 1.0\nelement vertex 5\n"),
+                 "h.ply: file ends inside the header"));
+  const std::string head =
+      "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
+  CHECK(contains(error(head + std::string(35, '\0')),
+                 "h.ply: byte 169: element 'vertex': 3 items of at least 12 bytes do not fit in the 35 bytes left"));
   std::string tris(36, '\0');
-  CHECK(contains(error(head + tris + "\x03\x01"s), "h.ply: byte 206: face 0: list of 3 values does not fit in the 1 bytes left"));
+  CHECK(contains(error(head + tris + "\x03\x01"s),
+                 "h.ply: byte 206: face 0: list of 3 values does not fit in the 1 bytes left"));
   CHECK(contains(error(head + tris + "\x03\x00\x00\x00\x00\x01\x00\x00\x00\x07\x00\x00\x00"s),
                  "h.ply: byte 218: face 0: vertex index 7 out of range [0, 3)"));
   CHECK(contains(error(head + tris + "\x02\x00\x00\x00\x00\x01\x00\x00\x00"s), "face 0: has 2 corners"));
@@ -301,13 +337,18 @@ TEST_CASE("hostile PLY: truncated or inconsistent files are refused with a messa
                  "vertex 0: coordinate nan is not finite"));
   CHECK(contains(error("ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty quad x\nend_header\n"),
                  "element 'vertex' property 'x': type must be one of"));
-  CHECK(contains(error("ply\nformat binary_little_endian 1.0\nelement face 1\nproperty list float int vertex_indices\nend_header\n"),
-                 "with an integer count type"));
-  CHECK(contains(error("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float x\nproperty float y\nend_header\n"),
+  CHECK(contains(
+      error(
+          "ply\nformat binary_little_endian 1.0\nelement face 1\nproperty list float int vertex_indices\nend_header\n"),
+      "with an integer count type"));
+  CHECK(contains(error("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float x\nproperty float "
+                       "y\nend_header\n"),
                  "element 'vertex' declares property 'x' twice"));
-  CHECK(contains(error("ply\nformat ascii 1.0\nelement vertex 1\nproperty list uchar float x\nproperty float y\nproperty float z\nend_header\n"),
+  CHECK(contains(error("ply\nformat ascii 1.0\nelement vertex 1\nproperty list uchar float x\nproperty float "
+                       "y\nproperty float z\nend_header\n"),
                  "property 'x' is a list"));
-  CHECK(contains(error("ply\nformat text 1.0\nend_header\n"), "h.ply:2: format 'text' is not ascii, binary_little_endian or binary_big_endian"));
+  CHECK(contains(error("ply\nformat text 1.0\nend_header\n"),
+                 "h.ply:2: format 'text' is not ascii, binary_little_endian or binary_big_endian"));
 }
 
 TEST_CASE("STL (ours): ASCII in double precision, several solids, hostile files refused (fuzz findings)") {
@@ -316,8 +357,11 @@ TEST_CASE("STL (ours): ASCII in double precision, several solids, hostile files 
     REQUIRE_FALSE(r.ok());
     return r.error();
   };
-  const std::string facet = "facet normal 0 0 1\n outer loop\n  vertex 1000000.001 0 0\n  vertex 1000001 0 0\n  vertex 1000000 1 0\n endloop\nendfacet\n";
-  Result<LoadedMesh> r = parse_mesh("solid a\n" + facet + "endsolid a\nsolid b\n" + facet + "endsolid b\n", ".stl", "two.stl");
+  const std::string facet =
+      "facet normal 0 0 1\n outer loop\n  vertex 1000000.001 0 0\n  vertex 1000001 0 0\n  vertex 1000000 1 0\n "
+      "endloop\nendfacet\n";
+  Result<LoadedMesh> r =
+      parse_mesh("solid a\n" + facet + "endsolid a\nsolid b\n" + facet + "endsolid b\n", ".stl", "two.stl");
   REQUIRE_MESSAGE(r.ok(), r.error());
   CHECK(r.value().mesh.num_faces() == 2);
   CHECK(r.value().mesh.num_vertices() == 3);  // the second solid's vertices weld onto the first's
@@ -325,19 +369,23 @@ TEST_CASE("STL (ours): ASCII in double precision, several solids, hostile files 
   CHECK(r.value().mesh.vertex(0).x() == 1000000.001);  // assimp's float would give 1000000
   // fuzz_mesh: a truncated ASCII STL leaked two objects inside assimp 5.2.5 (tests/lsan.supp);
   // our reader names the line.
-  CHECK(contains(error("solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 0\n"), "h.stl:4: facet 0: '' is not a number"));
+  CHECK(
+      contains(error("solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 0\n"), "h.stl:4: facet 0: '' is not a number"));
   CHECK(contains(error("solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\n"), "h.stl: file ends inside facet 0"));
   CHECK(contains(error("solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\n"),
                  "h.stl: file ends inside facet 0"));
   CHECK(contains(error("solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nendloop\nendfacet\n"),
                  "h.stl:6: facet 0: has 2 vertices (expected at least 3)"));
-  CHECK(contains(error("solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 inf 0\n"), "h.stl:4: facet 0: coordinate 'inf' is not finite"));
+  CHECK(contains(error("solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 inf 0\n"),
+                 "h.stl:4: facet 0: coordinate 'inf' is not finite"));
   CHECK(contains(error("solid x\nfacet normal 0 0\n"), "h.stl:2: expected 'facet normal NX NY NZ'"));
   CHECK(contains(error("solid x\nendsolid x\n"), "h.stl: no triangles"));
   CHECK(contains(error(""), "h.stl: empty file"));
   // Binary: recognised by its exact size; a count that does not match is named.
   std::string bin = binary_stl(kTris);
-  CHECK(contains(error(bin + "x"), "not an ASCII STL (no 'solid' line) and not a binary one either (6 facets take 384 bytes, the file has 385)"));
+  CHECK(contains(
+      error(bin + "x"),
+      "not an ASCII STL (no 'solid' line) and not a binary one either (6 facets take 384 bytes, the file has 385)"));
   const float nan = std::numeric_limits<float>::quiet_NaN();
   std::memcpy(bin.data() + 84 + 50 * 2 + 12 + 12 + 4, &nan, 4);
   CHECK(contains(error(bin), "h.stl: facet 2 (byte 208): vertex 1 is not finite"));
@@ -444,7 +492,9 @@ TEST_CASE("assimp formats: a tiny file that makes assimp allocate gigabytes is r
   // DirectX .x: assimp sizes its vertex array from the count (200 million vertices, 2.4 GB), a
   // 100-byte file. The reader runs in a child with a memory budget; this process never grows.
   TempDir d;
-  write_file(d.file("bomb.x"), "xof 0303txt 0032\nMesh m {\n 200000000;\n 0.0;0.0;0.0;,\n 1.0;0.0;0.0;,\n 0.0;1.0;0.0;;\n 1;\n 3;0,1,2;;\n}\n");
+  write_file(
+      d.file("bomb.x"),
+      "xof 0303txt 0032\nMesh m {\n 200000000;\n 0.0;0.0;0.0;,\n 1.0;0.0;0.0;,\n 0.0;1.0;0.0;;\n 1;\n 3;0,1,2;;\n}\n");
   const std::string e = load_error(d.file("bomb.x"));
   CHECK(contains(e, "bomb.x"));
   CHECK(contains(e, "budget"));

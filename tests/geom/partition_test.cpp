@@ -29,7 +29,9 @@ TEST_CASE("block-cyclic partition: cover and union over workers") {
   for (std::uint32_t layer : {0u, 1u, 2u, 3u, et.num_depths}) {
     for (std::uint32_t B : {1u, 3u, 16u}) {
       for (std::uint32_t W = 1; W <= 16; ++W) {
-        CAPTURE(layer); CAPTURE(B); CAPTURE(W);
+        CAPTURE(layer);
+        CAPTURE(B);
+        CAPTURE(W);
         const Partition p = make_partition(et, layer, W, B).value();
         std::vector<int> cover(ele.num_faces(), 0);
         std::vector<FacePair> uni;

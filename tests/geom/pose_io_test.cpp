@@ -38,7 +38,7 @@ TEST_CASE("parse_poses: accepted syntax") {
       "1 0 0 10   0 1 0 -20.5   0 0 1 3e2   0 0 0 1   # trailing comment\n"
       "   \t\n"
       "0 -1 0 +1\t1 0 0 0 0 0 1 0 0 0 0 1\r\n"  // tab, '+' sign, CRLF
-      "0 0 1 0 0 1 0 0 -1 0 0 0 0 0 0 1";          // no final newline
+      "0 0 1 0 0 1 0 0 -1 0 0 0 0 0 0 1";       // no final newline
   auto r = parse_poses(text, "p.txt");
   REQUIRE(r.ok());
   const auto& poses = r.value();
@@ -71,30 +71,20 @@ TEST_CASE("parse_poses: every error names file:line and what is wrong") {
         "p.txt:1: expected 16 numbers (a row-major 4x4 rigid transform), found 15");
   CHECK(error_of(std::string(kIdentity) + "\n" + kIdentity + " 7\n") ==
         "p.txt:2: expected 16 numbers (a row-major 4x4 rigid transform), found 17");
-  CHECK(error_of("# c\n\n1 0 0 x 0 1 0 0 0 0 1 0 0 0 0 1\n") ==
-        "p.txt:3: value 4 (column 7) 'x' is not a number");
-  CHECK(error_of("1,0,0,0 0 1 0 0 0 0 1 0 0 0 0 1") ==
-        "p.txt:1: value 1 (column 1) '1,0,0,0' is not a number");
-  CHECK(error_of("1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1.0.0") ==
-        "p.txt:1: value 16 (column 31) '1.0.0' is not a number");
-  CHECK(error_of("1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 +-1") ==
-        "p.txt:1: value 16 (column 31) '+-1' is not a number");
-  CHECK(error_of("1 0 0 0 0 1 0 0 0 0 1 0x10 0 0 0 1") ==
-        "p.txt:1: value 12 (column 23) '0x10' is not a number");
-  CHECK(error_of("1 0 0 nan 0 1 0 0 0 0 1 0 0 0 0 1") ==
-        "p.txt:1: value 4 (column 7) 'nan' is not finite");
-  CHECK(error_of("1 0 0 0 0 1 0 -inf 0 0 1 0 0 0 0 1") ==
-        "p.txt:1: value 8 (column 15) '-inf' is not finite");
+  CHECK(error_of("# c\n\n1 0 0 x 0 1 0 0 0 0 1 0 0 0 0 1\n") == "p.txt:3: value 4 (column 7) 'x' is not a number");
+  CHECK(error_of("1,0,0,0 0 1 0 0 0 0 1 0 0 0 0 1") == "p.txt:1: value 1 (column 1) '1,0,0,0' is not a number");
+  CHECK(error_of("1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1.0.0") == "p.txt:1: value 16 (column 31) '1.0.0' is not a number");
+  CHECK(error_of("1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 +-1") == "p.txt:1: value 16 (column 31) '+-1' is not a number");
+  CHECK(error_of("1 0 0 0 0 1 0 0 0 0 1 0x10 0 0 0 1") == "p.txt:1: value 12 (column 23) '0x10' is not a number");
+  CHECK(error_of("1 0 0 nan 0 1 0 0 0 0 1 0 0 0 0 1") == "p.txt:1: value 4 (column 7) 'nan' is not finite");
+  CHECK(error_of("1 0 0 0 0 1 0 -inf 0 0 1 0 0 0 0 1") == "p.txt:1: value 8 (column 15) '-inf' is not finite");
   CHECK(error_of("1 0 0 1e999 0 1 0 0 0 0 1 0 0 0 0 1") ==
         "p.txt:1: value 4 (column 7) '1e999' is out of the range of a double");
   CHECK(error_of("1 0 0 0 0 1 0 0 0 0 1 1e-400 0 0 0 1") ==
         "p.txt:1: value 12 (column 23) '1e-400' is out of the range of a double");
-  CHECK(error_of("1 0 0 0 0 1 0 0 0 0 1 1e 0 0 0 1") ==
-        "p.txt:1: value 12 (column 23) '1e' is not a number");
-  CHECK(error_of("1 0 0 0 0 1 0 0 0 0 1 0 0 0 0.5 1") ==
-        "p.txt:1: last row must be 0 0 0 1, found 0 0 0.5 1");
-  CHECK(error_of("1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 2") ==
-        "p.txt:1: last row must be 0 0 0 1, found 0 0 0 2");
+  CHECK(error_of("1 0 0 0 0 1 0 0 0 0 1 1e 0 0 0 1") == "p.txt:1: value 12 (column 23) '1e' is not a number");
+  CHECK(error_of("1 0 0 0 0 1 0 0 0 0 1 0 0 0 0.5 1") == "p.txt:1: last row must be 0 0 0 1, found 0 0 0.5 1");
+  CHECK(error_of("1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 2") == "p.txt:1: last row must be 0 0 0 1, found 0 0 0 2");
   CHECK(error_of("2 0 0 0 0 2 0 0 0 0 2 0 0 0 0 1") ==
         "p.txt:1: rotation block is not orthonormal: max |R^T R - I| entry is 3 > 1e-06");
   CHECK(error_of("-1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1") ==
@@ -102,8 +92,7 @@ TEST_CASE("parse_poses: every error names file:line and what is wrong") {
   CHECK(error_of("0 1 0 0 1 0 0 0 0 0 1 0 0 0 0 1") ==
         "p.txt:1: rotation block is not a rotation (reflection): det = -1");
   CHECK(error_of("") == "p.txt: no poses (the file is empty or has only comments)");
-  CHECK(error_of("# only\n\n   # comments\n") ==
-        "p.txt: no poses (the file is empty or has only comments)");
+  CHECK(error_of("# only\n\n   # comments\n") == "p.txt: no poses (the file is empty or has only comments)");
 }
 
 TEST_CASE("read_poses: files") {

@@ -82,7 +82,8 @@ void check_tree(const Mesh& m, const SphereTree& t) {
 
 TEST_CASE("min_sphere is the minimal enclosing sphere on known sets") {
   std::vector<Vec3> two{{-1, 0, 0}, {3, 0, 0}};
-  Vec3 c; double r;
+  Vec3 c;
+  double r;
   min_sphere(two, c, r);
   CHECK(r == doctest::Approx(2.0).epsilon(1e-12));
   CHECK(c.x() == doctest::Approx(1.0).epsilon(1e-12));

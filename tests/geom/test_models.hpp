@@ -36,14 +36,18 @@ inline const geom::Mesh* model_mesh(const std::string& name) {
 /// doubles of transform_to_object/apply. Candidates are cut by exact double AABB tests (two closed
 /// triangles that share a point have overlapping boxes), so this equals all-pairs exactly.
 /// `all_pairs` forces the literal loop over every pair (slow; for small probes).
-inline std::vector<geom::FacePair> brute_force(const geom::Mesh& probe, const geom::Mesh& object, const geom::Pose& pose,
-                                               bool all_pairs = false) {
+inline std::vector<geom::FacePair> brute_force(const geom::Mesh& probe, const geom::Mesh& object,
+                                               const geom::Pose& pose, bool all_pairs = false) {
   using geom::Vec3;
   const geom::RelTransform rt = geom::transform_to_object(pose, probe, object);
   std::vector<Vec3> pv(probe.local.size());
   for (std::size_t i = 0; i < pv.size(); ++i) pv[i] = geom::apply(rt, probe.local[i]);
   auto box_of = [](const Vec3& a, const Vec3& b, const Vec3& c) {
-    geom::Box bx; bx.grow(a); bx.grow(b); bx.grow(c); return bx;
+    geom::Box bx;
+    bx.grow(a);
+    bx.grow(b);
+    bx.grow(c);
+    return bx;
   };
   auto meet = [](const geom::Box& a, const geom::Box& b) {
     return (a.lo.array() <= b.hi.array()).all() && (b.lo.array() <= a.hi.array()).all();
@@ -53,13 +57,18 @@ inline std::vector<geom::FacePair> brute_force(const geom::Mesh& probe, const ge
   for (std::size_t f = 0; f < pb.size(); ++f) {
     const auto& t = probe.faces[f];
     pb[f] = box_of(pv[t[0]], pv[t[1]], pv[t[2]]);
-    pall.grow(pb[f].lo); pall.grow(pb[f].hi);
+    pall.grow(pb[f].lo);
+    pall.grow(pb[f].hi);
   }
   std::vector<std::uint32_t> oc, pc;
   for (std::size_t f = 0; f < ob.size(); ++f) {
     const auto& t = object.faces[f];
     ob[f] = box_of(object.local[t[0]], object.local[t[1]], object.local[t[2]]);
-    if (all_pairs || meet(ob[f], pall)) { oc.push_back(static_cast<std::uint32_t>(f)); oall.grow(ob[f].lo); oall.grow(ob[f].hi); }
+    if (all_pairs || meet(ob[f], pall)) {
+      oc.push_back(static_cast<std::uint32_t>(f));
+      oall.grow(ob[f].lo);
+      oall.grow(ob[f].hi);
+    }
   }
   for (std::size_t f = 0; f < pb.size(); ++f)
     if (all_pairs || (!oall.empty() && meet(pb[f], oall))) pc.push_back(static_cast<std::uint32_t>(f));
@@ -82,14 +91,15 @@ inline std::vector<geom::FacePair> brute_force(const geom::Mesh& probe, const ge
     const double cell = std::max(2.0 * mean.maxCoeff() / double(oc.size()), 1e-300);
     const Vec3 origin = oall.lo;
     Eigen::Vector3i dims;
-    for (int k = 0; k < 3; ++k)
-      dims[k] = std::clamp(static_cast<int>((oall.hi[k] - oall.lo[k]) / cell) + 1, 1, 256);
+    for (int k = 0; k < 3; ++k) dims[k] = std::clamp(static_cast<int>((oall.hi[k] - oall.lo[k]) / cell) + 1, 1, 256);
     auto cell_of = [&](double x, int k) {
       const double c = (x - origin[k]) / (oall.hi[k] - oall.lo[k] > 0 ? (oall.hi[k] - oall.lo[k]) : 1.0) * dims[k];
       return std::clamp(static_cast<int>(std::floor(c)), 0, dims[k] - 1);
     };
     std::vector<std::vector<std::uint32_t>> grid(std::size_t(dims.prod()));
-    auto idx = [&](int x, int y, int z) { return (std::size_t(z) * dims.y() + std::size_t(y)) * dims.x() + std::size_t(x); };
+    auto idx = [&](int x, int y, int z) {
+      return (std::size_t(z) * dims.y() + std::size_t(y)) * dims.x() + std::size_t(x);
+    };
     for (std::uint32_t o : oc)
       for (int z = cell_of(ob[o].lo.z(), 2); z <= cell_of(ob[o].hi.z(), 2); ++z)
         for (int y = cell_of(ob[o].lo.y(), 1); y <= cell_of(ob[o].hi.y(), 1); ++y)
@@ -118,7 +128,8 @@ inline std::vector<geom::Vec3> vertex_normals(const geom::Mesh& m) {
     const geom::Vec3 fn = (m.local[t[1]] - m.local[t[0]]).cross(m.local[t[2]] - m.local[t[0]]);
     for (auto v : t) n[v] += fn;
   }
-  for (auto& v : n) if (v.norm() > 0) v.normalize();
+  for (auto& v : n)
+    if (v.norm() > 0) v.normalize();
   return n;
 }
 

@@ -74,14 +74,17 @@ TEST_CASE("tree files: forged structures are refused, each with what is wrong") 
       {"num_depths smaller than the tree", [](SphereTree& f) { f.num_depths = 1; }, "deepest node"},
       {"a node deeper than its parent + 1", [&](SphereTree& f) { f.nodes[leaf].depth = 200; }, "depth"},
       // The hang: two inner nodes sharing their children (a DAG: exponential descent).
-      {"two parents", [&](SphereTree& f) { f.nodes[b].first = f.nodes[a].first; f.nodes[b].count = f.nodes[a].count; },
+      {"two parents",
+       [&](SphereTree& f) {
+         f.nodes[b].first = f.nodes[a].first;
+         f.nodes[b].count = f.nodes[a].count;
+       },
        "two parents"},
       {"a cycle back to the root", [&](SphereTree& f) { f.nodes[a].first = 0; }, "child range"},
       {"unreachable nodes", [](SphereTree& f) { f.nodes[0].count = 1; }, "cover"},
-      {"a child's faces outside its parent's",
-       [&](SphereTree& f) { f.cold[f.nodes[a].first].face_begin += 1; }, "face range"},
-      {"a leaf's face range past the end",
-       [&](SphereTree& f) { f.cold[leaf].face_end = f.num_faces() + 5; }, "cover"},
+      {"a child's faces outside its parent's", [&](SphereTree& f) { f.cold[f.nodes[a].first].face_begin += 1; },
+       "face range"},
+      {"a leaf's face range past the end", [&](SphereTree& f) { f.cold[leaf].face_end = f.num_faces() + 5; }, "cover"},
       {"a leaf with more faces than the limit", [&](SphereTree& f) { f.nodes[leaf].count = 65; }, "leaf"},
       {"a wrong parent field", [&](SphereTree& f) { f.cold[a].parent = b; }, "parent"},
       {"a wrong descendant range", [&](SphereTree& f) { f.cold[a].desc_end += 1; }, "descendant range"},

@@ -40,51 +40,67 @@ std::vector<Case> hand_cases() {
       {"piercing", base, {Vec3(1, 1, -1), Vec3(1, 1, 1), Vec3(2, 1, 1)}, true},
       {"piercing, one vertex through", base, {Vec3(1, 1, -1), Vec3(3, 3, 2), Vec3(-3, 2, 2)}, true},
       {"planes cross, intervals disjoint", small, {Vec3(4, 4, -1), Vec3(4, 4, 1), Vec3(2, 2, 0)}, false},
-      {"planes cross, intervals touch (vertex on edge)", small,
-       {Vec3(4, 4, -1), Vec3(4, 4, 1), Vec3(1, 1, 0)}, true},
+      {"planes cross, intervals touch (vertex on edge)", small, {Vec3(4, 4, -1), Vec3(4, 4, 1), Vec3(1, 1, 0)}, true},
       {"planes cross, intervals overlap", small, {Vec3(4, 4, -1), Vec3(4, 4, 1), Vec3(0.5, 0.5, 0)}, true},
       {"planes cross, one-sided gap", small, {Vec3(3, 3, -1), Vec3(3, 3, 1), Vec3(-1, -1, 0.5)}, true},
-      {"interval ends meet at a crossing point", small,
-       {Vec3(1, 1, -1), Vec3(1, 1, 1), Vec3(3, 3, 0)}, true},
-      {"edge crosses edge (3D)", {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, 0, 1)},
-       {Vec3(0, -1, 0), Vec3(0, 1, 0), Vec3(0, 0, -1)}, true},
-      {"cut passes beside the face (3D)", {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, 0, 1)},
-       {Vec3(0.5, -1, 1), Vec3(0.5, 1, 1), Vec3(3, 0, -1)}, false},
-      {"edge through face (3D)", {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, 0, 1)},
-       {Vec3(0.25, -1, 0.25), Vec3(0.25, 1, 0.25), Vec3(3, 0, -1)}, true},
-      {"edge beside edge (3D, apart)", {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, 0, 1)},
-       {Vec3(2, -1, 0), Vec3(2, 1, 0), Vec3(2, 0, -1)}, false},
-      {"edge end on edge (3D T)", {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, 0, 1)},
-       {Vec3(0, 0, 0), Vec3(0, 1, -1), Vec3(0, -1, -1)}, true},
+      {"interval ends meet at a crossing point", small, {Vec3(1, 1, -1), Vec3(1, 1, 1), Vec3(3, 3, 0)}, true},
+      {"edge crosses edge (3D)",
+       {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, 0, 1)},
+       {Vec3(0, -1, 0), Vec3(0, 1, 0), Vec3(0, 0, -1)},
+       true},
+      {"cut passes beside the face (3D)",
+       {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, 0, 1)},
+       {Vec3(0.5, -1, 1), Vec3(0.5, 1, 1), Vec3(3, 0, -1)},
+       false},
+      {"edge through face (3D)",
+       {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, 0, 1)},
+       {Vec3(0.25, -1, 0.25), Vec3(0.25, 1, 0.25), Vec3(3, 0, -1)},
+       true},
+      {"edge beside edge (3D, apart)",
+       {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, 0, 1)},
+       {Vec3(2, -1, 0), Vec3(2, 1, 0), Vec3(2, 0, -1)},
+       false},
+      {"edge end on edge (3D T)",
+       {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, 0, 1)},
+       {Vec3(0, 0, 0), Vec3(0, 1, -1), Vec3(0, -1, -1)},
+       true},
       {"vertex on face", base, {Vec3(1, 1, 0), Vec3(1, 1, 2), Vec3(2, 1, 3)}, true},
       {"vertex on face from below", base, {Vec3(1, 1, 0), Vec3(1, 1, -2), Vec3(2, 1, -3)}, true},
       {"vertex in plane, outside face", base, {Vec3(3, 3, 0), Vec3(3, 3, 2), Vec3(4, 3, 3)}, false},
       {"vertex on edge", base, {Vec3(2, 2, 0), Vec3(2, 2, 2), Vec3(3, 2, 3)}, true},
       {"vertex on vertex", base, {Vec3(4, 0, 0), Vec3(5, 0, 2), Vec3(5, 1, 3)}, true},
-      {"hinge (shared edge)", {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)},
-       {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 0, 1)}, true},
-      {"shared vertex only", {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)},
-       {Vec3(0, 0, 0), Vec3(-1, 0, 1), Vec3(0, -1, 1)}, true},
-      {"shared vertex, other crosses plane", {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)},
-       {Vec3(0, 0, 0), Vec3(-1, -1, 1), Vec3(-1, -1, -1)}, true},
+      {"hinge (shared edge)", {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)}, {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 0, 1)}, true},
+      {"shared vertex only", {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)}, {Vec3(0, 0, 0), Vec3(-1, 0, 1), Vec3(0, -1, 1)}, true},
+      {"shared vertex, other crosses plane",
+       {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)},
+       {Vec3(0, 0, 0), Vec3(-1, -1, 1), Vec3(-1, -1, -1)},
+       true},
       {"identical", base, base, true},
       // Coplanar.
       {"coplanar overlap", base, {Vec3(1, 1, 0), Vec3(5, 1, 0), Vec3(1, 5, 0)}, true},
       {"coplanar containment", base, {Vec3(1, 1, 0), Vec3(2, 1, 0), Vec3(1, 2, 0)}, true},
       {"coplanar contained in other", {Vec3(1, 1, 0), Vec3(2, 1, 0), Vec3(1, 2, 0)}, base, true},
-      {"coplanar star of David", {Vec3(0, 0, 0), Vec3(4, 0, 0), Vec3(2, 3, 0)},
-       {Vec3(0, 2, 0), Vec3(4, 2, 0), Vec3(2, -1, 0)}, true},
-      {"coplanar shared edge, opposite sides", {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)},
-       {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, -1, 0)}, true},
+      {"coplanar star of David",
+       {Vec3(0, 0, 0), Vec3(4, 0, 0), Vec3(2, 3, 0)},
+       {Vec3(0, 2, 0), Vec3(4, 2, 0), Vec3(2, -1, 0)},
+       true},
+      {"coplanar shared edge, opposite sides",
+       {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)},
+       {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, -1, 0)},
+       true},
       {"coplanar vertex on edge", small, {Vec3(1, 1, 0), Vec3(3, 1, 0), Vec3(1, 3, 0)}, true},
       {"coplanar edge along edge", small, {Vec3(1, 1, 0), Vec3(3, -1, 0), Vec3(3, 1, 0)}, true},
       {"coplanar vertex on vertex", small, {Vec3(2, 0, 0), Vec3(3, 0, 0), Vec3(3, 1, 0)}, true},
       {"coplanar collinear edges apart", small, {Vec3(3, 0, 0), Vec3(4, 0, 0), Vec3(4, 1, 0)}, false},
       {"coplanar close but apart", small, {Vec3(2, 1, 0), Vec3(3, 1, 0), Vec3(2, 2, 0)}, false},
-      {"coplanar in tilted plane, touching", {Vec3(0, 0, 0), Vec3(2, -2, 0), Vec3(2, 0, -2)},
-       {Vec3(2, -1, -1), Vec3(4, -3, -1), Vec3(4, -1, -3)}, true},
-      {"coplanar in tilted plane, apart", {Vec3(0, 0, 0), Vec3(2, -2, 0), Vec3(2, 0, -2)},
-       {Vec3(3, -1, -2), Vec3(4, -3, -1), Vec3(4, -1, -3)}, false},
+      {"coplanar in tilted plane, touching",
+       {Vec3(0, 0, 0), Vec3(2, -2, 0), Vec3(2, 0, -2)},
+       {Vec3(2, -1, -1), Vec3(4, -3, -1), Vec3(4, -1, -3)},
+       true},
+      {"coplanar in tilted plane, apart",
+       {Vec3(0, 0, 0), Vec3(2, -2, 0), Vec3(2, 0, -2)},
+       {Vec3(3, -1, -2), Vec3(4, -3, -1), Vec3(4, -1, -3)},
+       false},
       // Degenerate: segments (collinear or repeated vertex) and points.
       {"segment pierces face", base, {Vec3(1, 1, -1), Vec3(1, 1, 1), Vec3(1, 1, 0.5)}, true},
       {"segment misses face", base, {Vec3(5, 5, -1), Vec3(5, 5, 1), Vec3(5, 5, 0)}, false},
@@ -104,34 +120,44 @@ std::vector<Case> hand_cases() {
       {"point on vertex", base, {Vec3(0, 4, 0), Vec3(0, 4, 0), Vec3(0, 4, 0)}, true},
       {"point above face", base, {Vec3(1, 1, 1), Vec3(1, 1, 1), Vec3(1, 1, 1)}, false},
       {"point in plane, outside", base, {Vec3(3, 3, 0), Vec3(3, 3, 0), Vec3(3, 3, 0)}, false},
-      {"segments cross (coplanar)", {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(1, 0, 0)},
-       {Vec3(0, -1, 0), Vec3(0, 1, 0), Vec3(0, 0, 0)}, true},
-      {"segments skew", {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(1, 0, 0)},
-       {Vec3(0, -1, 1), Vec3(0, 1, 1), Vec3(0, 0, 1)}, false},
-      {"segments T", {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, 0, 0)},
-       {Vec3(0.5, 0, 0), Vec3(0.5, 1, 1), Vec3(0.5, 1, 1)}, true},
-      {"segments coplanar, apart", {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(1, 0, 0)},
-       {Vec3(2, -1, 0), Vec3(2, 1, 0), Vec3(2, 1, 0)}, false},
-      {"segments parallel", {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(1, 0, 0)},
-       {Vec3(-1, 1, 0), Vec3(1, 1, 0), Vec3(0, 1, 0)}, false},
-      {"segments collinear overlapping", {Vec3(-1, -1, -1), Vec3(1, 1, 1), Vec3(0, 0, 0)},
-       {Vec3(0.5, 0.5, 0.5), Vec3(3, 3, 3), Vec3(3, 3, 3)}, true},
-      {"segments collinear touching", {Vec3(-1, -1, -1), Vec3(1, 1, 1), Vec3(0, 0, 0)},
-       {Vec3(1, 1, 1), Vec3(3, 3, 3), Vec3(3, 3, 3)}, true},
-      {"segments collinear apart", {Vec3(-1, -1, -1), Vec3(1, 1, 1), Vec3(0, 0, 0)},
-       {Vec3(1.5, 1.5, 1.5), Vec3(3, 3, 3), Vec3(2, 2, 2)}, false},
-      {"point on segment", {Vec3(-1, 2, 0), Vec3(1, 0, 2), Vec3(0, 1, 1)},
-       {Vec3(0.5, 0.5, 1.5), Vec3(0.5, 0.5, 1.5), Vec3(0.5, 0.5, 1.5)}, true},
-      {"point beyond segment end", {Vec3(-1, 2, 0), Vec3(1, 0, 2), Vec3(0, 1, 1)},
-       {Vec3(2, -1, 3), Vec3(2, -1, 3), Vec3(2, -1, 3)}, false},
-      {"point beside segment", {Vec3(-1, 2, 0), Vec3(1, 0, 2), Vec3(0, 1, 1)},
-       {Vec3(0.5, 0.5, 1), Vec3(0.5, 0.5, 1), Vec3(0.5, 0.5, 1)}, false},
-      {"points equal", {Vec3(1, 2, 3), Vec3(1, 2, 3), Vec3(1, 2, 3)},
-       {Vec3(1, 2, 3), Vec3(1, 2, 3), Vec3(1, 2, 3)}, true},
-      {"points differ", {Vec3(1, 2, 3), Vec3(1, 2, 3), Vec3(1, 2, 3)},
-       {Vec3(1, 2, 3.5), Vec3(1, 2, 3.5), Vec3(1, 2, 3.5)}, false},
-      {"all at the origin", {Vec3(0, 0, 0), Vec3(0, 0, 0), Vec3(0, 0, 0)},
-       {Vec3(0, 0, 0), Vec3(0, 0, 0), Vec3(0, 0, 0)}, true},
+      {"segments cross (coplanar)",
+       {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(1, 0, 0)},
+       {Vec3(0, -1, 0), Vec3(0, 1, 0), Vec3(0, 0, 0)},
+       true},
+      {"segments skew", {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(1, 0, 0)}, {Vec3(0, -1, 1), Vec3(0, 1, 1), Vec3(0, 0, 1)}, false},
+      {"segments T", {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, 0, 0)}, {Vec3(0.5, 0, 0), Vec3(0.5, 1, 1), Vec3(0.5, 1, 1)}, true},
+      {"segments coplanar, apart",
+       {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(1, 0, 0)},
+       {Vec3(2, -1, 0), Vec3(2, 1, 0), Vec3(2, 1, 0)},
+       false},
+      {"segments parallel", {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(1, 0, 0)}, {Vec3(-1, 1, 0), Vec3(1, 1, 0), Vec3(0, 1, 0)}, false},
+      {"segments collinear overlapping",
+       {Vec3(-1, -1, -1), Vec3(1, 1, 1), Vec3(0, 0, 0)},
+       {Vec3(0.5, 0.5, 0.5), Vec3(3, 3, 3), Vec3(3, 3, 3)},
+       true},
+      {"segments collinear touching",
+       {Vec3(-1, -1, -1), Vec3(1, 1, 1), Vec3(0, 0, 0)},
+       {Vec3(1, 1, 1), Vec3(3, 3, 3), Vec3(3, 3, 3)},
+       true},
+      {"segments collinear apart",
+       {Vec3(-1, -1, -1), Vec3(1, 1, 1), Vec3(0, 0, 0)},
+       {Vec3(1.5, 1.5, 1.5), Vec3(3, 3, 3), Vec3(2, 2, 2)},
+       false},
+      {"point on segment",
+       {Vec3(-1, 2, 0), Vec3(1, 0, 2), Vec3(0, 1, 1)},
+       {Vec3(0.5, 0.5, 1.5), Vec3(0.5, 0.5, 1.5), Vec3(0.5, 0.5, 1.5)},
+       true},
+      {"point beyond segment end",
+       {Vec3(-1, 2, 0), Vec3(1, 0, 2), Vec3(0, 1, 1)},
+       {Vec3(2, -1, 3), Vec3(2, -1, 3), Vec3(2, -1, 3)},
+       false},
+      {"point beside segment",
+       {Vec3(-1, 2, 0), Vec3(1, 0, 2), Vec3(0, 1, 1)},
+       {Vec3(0.5, 0.5, 1), Vec3(0.5, 0.5, 1), Vec3(0.5, 0.5, 1)},
+       false},
+      {"points equal", {Vec3(1, 2, 3), Vec3(1, 2, 3), Vec3(1, 2, 3)}, {Vec3(1, 2, 3), Vec3(1, 2, 3), Vec3(1, 2, 3)}, true},
+      {"points differ", {Vec3(1, 2, 3), Vec3(1, 2, 3), Vec3(1, 2, 3)}, {Vec3(1, 2, 3.5), Vec3(1, 2, 3.5), Vec3(1, 2, 3.5)}, false},
+      {"all at the origin", {Vec3(0, 0, 0), Vec3(0, 0, 0), Vec3(0, 0, 0)}, {Vec3(0, 0, 0), Vec3(0, 0, 0), Vec3(0, 0, 0)}, true},
   };
 }
 
@@ -292,9 +318,8 @@ TEST_CASE("tri_tri: one-ulp perturbations flip touching pairs") {
       CAPTURE(c);
       CAPTURE(e);
       const auto scaled = [e](const Tri3& t) {
-        return map(t, [e](const Vec3& v) {
-          return Vec3(std::scalbn(v.x(), e), std::scalbn(v.y(), e), std::scalbn(v.z(), e));
-        });
+        return map(
+            t, [e](const Vec3& v) { return Vec3(std::scalbn(v.x(), e), std::scalbn(v.y(), e), std::scalbn(v.z(), e)); });
       };
       for (const Flip& f : flips) {
         CAPTURE(std::string(f.name));
@@ -341,8 +366,9 @@ struct GridGen {
     for (auto& v : p) v = point(r);
     for (auto& v : q) v = point(r);
     switch (kind) {
-      case 0: break;  // plain random (r = 1 alone gives many degeneracies)
-      case 1:         // share one or two vertices
+      case 0:
+        break;  // plain random (r = 1 alone gives many degeneracies)
+      case 1:   // share one or two vertices
         q[0] = p[pick(0, 2)];
         if (pick(0, 1)) q[1] = p[pick(0, 2)];
         break;
@@ -362,14 +388,15 @@ struct GridGen {
         break;
       }
       case 4:  // degenerate: repeated or collinear vertices
-        if (pick(0, 1)) p[1] = p[pick(0, 1) ? 0 : 2];
-        else p[2] = add(p[0], mul(pick(-2, 2), add(p[1], mul(-1, p[0]))));
+        if (pick(0, 1))
+          p[1] = p[pick(0, 1) ? 0 : 2];
+        else
+          p[2] = add(p[0], mul(pick(-2, 2), add(p[1], mul(-1, p[0]))));
         if (pick(0, 2) == 0) q[0] = q[1] = q[2];
         break;
       case 5:  // coplanar-ish: q in p's plane through a shared vertex, plus one point off it
         q[0] = p[0];
-        q[1] = add(p[0], add(mul(pick(-1, 1), add(p[1], mul(-1, p[0]))),
-                             mul(pick(-1, 1), add(p[2], mul(-1, p[0])))));
+        q[1] = add(p[0], add(mul(pick(-1, 1), add(p[1], mul(-1, p[0]))), mul(pick(-1, 1), add(p[2], mul(-1, p[0])))));
         break;
     }
     return {p, q};
@@ -413,21 +440,20 @@ TEST_CASE("tri_tri: random integer-grid pairs against the exact reference") {
     };
     const Vec3 p0 = f(ip[a[0]]), p1 = f(ip[a[1]]), p2 = f(ip[a[2]]);
     const Vec3 q0 = f(iq[b[0]]), q1 = f(iq[b[1]]), q2 = f(iq[b[2]]);
-    const bool got = rng() % 2 ? tri_tri_overlap(p0, p1, p2, q0, q1, q2)
-                               : tri_tri_overlap(q0, q1, q2, p0, p1, p2);
+    const bool got = rng() % 2 ? tri_tri_overlap(p0, p1, p2, q0, q1, q2) : tri_tri_overlap(q0, q1, q2, p0, p1, p2);
     if (got != want && ++failures <= 10) {
       auto str = [](const I3& v) {
         std::ostringstream os;
         os << '(' << v[0] << ',' << v[1] << ',' << v[2] << ')';
         return os.str();
       };
-      FAIL_CHECK("case ", n, ": P ", str(ip[0]), str(ip[1]), str(ip[2]), " Q ", str(iq[0]),
-                 str(iq[1]), str(iq[2]), " want ", want);
+      FAIL_CHECK("case ", n, ": P ", str(ip[0]), str(ip[1]), str(ip[2]), " Q ", str(iq[0]), str(iq[1]), str(iq[2]),
+                 " want ", want);
     }
   }
   CHECK(failures == 0);
-  MESSAGE(kCases, " grid pairs: ", yes, " overlapping, ", degen, " with a degenerate triangle, ",
-          coplanar, " coplanar (", coplanar_yes, " overlapping)");
+  MESSAGE(kCases, " grid pairs: ", yes, " overlapping, ", degen, " with a degenerate triangle, ", coplanar,
+          " coplanar (", coplanar_yes, " overlapping)");
   // The generator must reach every regime, or a pass would prove little.
   CHECK(yes > kCases / 5);
   CHECK(kCases - yes > kCases / 5);

@@ -109,18 +109,67 @@ TEST_CASE("hostile block sets: truncation at every offset, bad indices, order, c
     REQUIRE_FALSE(d.ok());
     CHECK_MESSAGE(d.error().find(word) != std::string::npos, d.error());
   };
-  { auto b = good; put_u32(b, probe_faces_at + 4, 1000); expect_error(b, "out of range"); }
-  { auto b = good; put_u32(b, obj_faces_at, 1000); expect_error(b, "out of range"); }
-  { auto b = good; put_u32(b, 28, 0); expect_error(b, "not above"); }                    // block ids 0, 0
-  { auto b = good; put_u32(b, ids_at + 4, bs.object_face_ids[0]); expect_error(b, "not above"); }
-  { auto b = good; put_u32(b, ids_at, 12); expect_error(b, "out of range"); }          // id >= total faces
-  { auto b = good; put_u32(b, probe_nv_at, 0xfffffff0u); expect_error(b, "vertex count"); }
-  { auto b = good; put_u32(b, probe_nf_at, 0x7ffffff0u); expect_error(b, "face count"); }
-  { auto b = good; put_u32(b, 8, 0); expect_error(b, "leaf_faces"); }
-  { auto b = good; put_u32(b, 16, 1); expect_error(b, "block id"); }                     // blocks_total 1
-  { auto b = good; const double nan = std::nan(""); std::memcpy(b.data() + probe_at + 8, &nan, 8); expect_error(b, "finite"); }
-  { auto b = good; b.push_back(0); expect_error(b, "trailing"); }
-  { auto b = good; b[4] = 9; expect_error(b, "version"); }
+  {
+    auto b = good;
+    put_u32(b, probe_faces_at + 4, 1000);
+    expect_error(b, "out of range");
+  }
+  {
+    auto b = good;
+    put_u32(b, obj_faces_at, 1000);
+    expect_error(b, "out of range");
+  }
+  {
+    auto b = good;
+    put_u32(b, 28, 0);
+    expect_error(b, "not above");
+  }  // block ids 0, 0
+  {
+    auto b = good;
+    put_u32(b, ids_at + 4, bs.object_face_ids[0]);
+    expect_error(b, "not above");
+  }
+  {
+    auto b = good;
+    put_u32(b, ids_at, 12);
+    expect_error(b, "out of range");
+  }  // id >= total faces
+  {
+    auto b = good;
+    put_u32(b, probe_nv_at, 0xfffffff0u);
+    expect_error(b, "vertex count");
+  }
+  {
+    auto b = good;
+    put_u32(b, probe_nf_at, 0x7ffffff0u);
+    expect_error(b, "face count");
+  }
+  {
+    auto b = good;
+    put_u32(b, 8, 0);
+    expect_error(b, "leaf_faces");
+  }
+  {
+    auto b = good;
+    put_u32(b, 16, 1);
+    expect_error(b, "block id");
+  }  // blocks_total 1
+  {
+    auto b = good;
+    const double nan = std::nan("");
+    std::memcpy(b.data() + probe_at + 8, &nan, 8);
+    expect_error(b, "finite");
+  }
+  {
+    auto b = good;
+    b.push_back(0);
+    expect_error(b, "trailing");
+  }
+  {
+    auto b = good;
+    b[4] = 9;
+    expect_error(b, "version");
+  }
   std::mt19937_64 rng(7);
   for (int t = 0; t < 3000; ++t) {
     auto b = good;

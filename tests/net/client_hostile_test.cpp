@@ -26,7 +26,10 @@ class FakeWorker {
     endpoint_ = sock_.get(zmq::sockopt::last_endpoint);
     thread_ = std::thread([this] { loop(); });
   }
-  ~FakeWorker() { stop_ = true; thread_.join(); }
+  ~FakeWorker() {
+    stop_ = true;
+    thread_.join();
+  }
   const std::string& endpoint() const { return endpoint_; }
   int hostile_sent() const { return hostile_.load(); }
 
@@ -48,9 +51,15 @@ class FakeWorker {
       (void)sock_.recv(frame);
       auto m = decode({static_cast<const std::uint8_t*>(frame.data()), frame.size()}, default_limits());
       if (!m) continue;
-      if (auto* h = std::get_if<HeartbeatMsg>(&m.value())) { reply(id, encode(HelloMsg{0, 77, h->nonce, held_})); continue; }
+      if (auto* h = std::get_if<HeartbeatMsg>(&m.value())) {
+        reply(id, encode(HelloMsg{0, 77, h->nonce, held_}));
+        continue;
+      }
       if (auto* l = std::get_if<LoadBlocksMsg>(&m.value())) {
-        if (l->offset + l->data.size() == l->total_bytes) { held_ = {{l->hash, 1}}; reply(id, encode(HelloMsg{0, 77, 0, held_})); }
+        if (l->offset + l->data.size() == l->total_bytes) {
+          held_ = {{l->hash, 1}};
+          reply(id, encode(HelloMsg{0, 77, 0, held_}));
+        }
         continue;
       }
       auto* q = std::get_if<QueryMsg>(&m.value());
@@ -58,16 +67,37 @@ class FakeWorker {
       const ResultMsg good{q->seq, 0, q->hash, {}, {}};
       std::vector<std::uint8_t> b = encode(good);
       switch (n++ % 10) {
-        case 0: b.resize(b.size() - 1); break;                                          // truncated
-        case 1: b[4] = 7; break;                                                        // wrong version
-        case 2: for (auto& c : b) c = static_cast<std::uint8_t>(rng()); break;          // garbage
-        case 3: b = encode(ResultMsg{q->seq, 0, q->hash, {}, {{0, 0xfffffff0u}}}); break;  // face id out of range
-        case 4: b = encode(ResultMsg{q->seq - 1, 0, q->hash, {}, {}}); break;           // stale
-        case 5: reply(id, b, true); break;                                              // two frames
-        case 6: b = encode(ResultMsg{q->seq, 0, q->hash ^ 1, {}, {}}); break;           // wrong block set
-        case 7: { const std::uint32_t big = 0x7fffffff; std::memcpy(b.data() + b.size() - 4, &big, 4); break; }  // huge count
-        case 8: b.assign(64u << 10, 0x11); break;                                       // over the client's frame limit
-        case 9: break;                                                                  // valid
+        case 0:
+          b.resize(b.size() - 1);
+          break;  // truncated
+        case 1:
+          b[4] = 7;
+          break;  // wrong version
+        case 2:
+          for (auto& c : b) c = static_cast<std::uint8_t>(rng());
+          break;  // garbage
+        case 3:
+          b = encode(ResultMsg{q->seq, 0, q->hash, {}, {{0, 0xfffffff0u}}});
+          break;  // face id out of range
+        case 4:
+          b = encode(ResultMsg{q->seq - 1, 0, q->hash, {}, {}});
+          break;  // stale
+        case 5:
+          reply(id, b, true);
+          break;  // two frames
+        case 6:
+          b = encode(ResultMsg{q->seq, 0, q->hash ^ 1, {}, {}});
+          break;  // wrong block set
+        case 7: {
+          const std::uint32_t big = 0x7fffffff;
+          std::memcpy(b.data() + b.size() - 4, &big, 4);
+          break;
+        }  // huge count
+        case 8:
+          b.assign(64u << 10, 0x11);
+          break;  // over the client's frame limit
+        case 9:
+          break;  // valid
       }
       if (n % 10 != 0) hostile_++;
       reply(id, b);

@@ -124,7 +124,8 @@ TEST_CASE("write_key_pair refuses to overwrite without force; with force the new
   CHECK(slurp(prefix + ".key") == b.secret_z85 + "\n");
   CHECK(read_key_pair(prefix).value().public_z85 == b.public_z85);
   int files = 0;
-  for (const auto& e : std::filesystem::directory_iterator(dir.path)) files += e.path().filename().string().rfind("fleet", 0) == 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir.path))
+    files += e.path().filename().string().rfind("fleet", 0) == 0;
   CHECK(files == 2);  // no temporaries left
   // A pair that does not belong together is never written.
   CHECK_FALSE(write_key_pair(dir.file("mixed"), {a.public_z85, b.secret_z85}, false).ok());

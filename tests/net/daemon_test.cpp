@@ -38,11 +38,13 @@ struct Fleet {
     return v;
   }
   void start(int i) {
-    auto p = std::make_unique<test::Process>(
-        std::vector<std::string>{test::worker_binary(), "--bind", endpoint(i), "--id", std::to_string(i), "--log-level", "debug"},
-        dir.file("worker" + std::to_string(i) + ".log"));
-    if (static_cast<std::size_t>(i) < procs.size()) procs[i] = std::move(p);
-    else procs.push_back(std::move(p));
+    auto p = std::make_unique<test::Process>(std::vector<std::string>{test::worker_binary(), "--bind", endpoint(i),
+                                                                      "--id", std::to_string(i), "--log-level", "debug"},
+                                             dir.file("worker" + std::to_string(i) + ".log"));
+    if (static_cast<std::size_t>(i) < procs.size())
+      procs[i] = std::move(p);
+    else
+      procs.push_back(std::move(p));
   }
 };
 
@@ -84,7 +86,10 @@ TEST_CASE("daemons: pair sets identical to the single-process query for W = 1, 2
   const auto poses = test::contact_poses(s, 6);
   std::vector<std::vector<FacePair>> want;
   std::size_t contacts = 0;
-  for (const auto& p : poses) { want.push_back(reference_collide(s.probe, s.object, p)); contacts += want.back().size(); }
+  for (const auto& p : poses) {
+    want.push_back(reference_collide(s.probe, s.object, p));
+    contacts += want.back().size();
+  }
   REQUIRE(contacts > 100);  // the poses do touch
   zmq::context_t ctx;
   for (int n : {1, 2, 4, 8}) {
@@ -102,7 +107,9 @@ TEST_CASE("daemons: pair sets identical to the single-process query for W = 1, 2
   }
 }
 
-TEST_CASE("daemons: kill -9 while queries stream; rounds return, are incomplete until reassigned, exact again; restart reloads") {
+TEST_CASE(
+    "daemons: kill -9 while queries stream; rounds return, are incomplete until reassigned, exact again; restart "
+    "reloads") {
   const test::NetScene s = test::model_scene("hand.off", "bunny.off", 64);
   const auto poses = test::contact_poses(s, 5);
   std::vector<std::vector<FacePair>> want;
@@ -124,19 +131,27 @@ TEST_CASE("daemons: kill -9 while queries stream; rounds return, are incomplete 
     ++k;
   };
   bool complete = false, exact = false;
-  for (int i = 0; i < 10; ++i) { run(complete, exact); CHECK(complete); }
+  for (int i = 0; i < 10; ++i) {
+    run(complete, exact);
+    CHECK(complete);
+  }
 
   f.procs[1]->signal(SIGKILL);
   REQUIRE(f.procs[1]->wait(5s) != -1);
   int incomplete = 0;
   for (int i = 0; i < 300; ++i) {
     run(complete, exact);
-    if (!complete) ++incomplete;
-    else if (incomplete > 0) break;
+    if (!complete)
+      ++incomplete;
+    else if (incomplete > 0)
+      break;
   }
   CHECK(incomplete >= 3);  // K = 3 missed deadlines before the blocks move
   REQUIRE(complete);
-  for (int i = 0; i < 10; ++i) { run(complete, exact); CHECK(exact); }
+  for (int i = 0; i < 10; ++i) {
+    run(complete, exact);
+    CHECK(exact);
+  }
   auto ws = c->workers();
   CHECK_FALSE(ws[1].up);
   const std::uint64_t old_epoch = ws[1].epoch;
@@ -150,7 +165,10 @@ TEST_CASE("daemons: kill -9 while queries stream; rounds return, are incomplete 
   }
   REQUIRE(back);
   CHECK(ws[1].loads_sent == 2);
-  for (int i = 0; i < 10; ++i) { run(complete, exact); CHECK(exact); }
+  for (int i = 0; i < 10; ++i) {
+    run(complete, exact);
+    CHECK(exact);
+  }
   CHECK(f.procs[1]->log().find("loaded block set") != std::string::npos);
 }
 
@@ -166,12 +184,18 @@ TEST_CASE("daemon: hostile messages get an Error reply or a drop, never a crash,
 
   const auto q = encode(QueryMsg{1, 2, geom::Pose::Identity()});
   std::vector<std::vector<std::uint8_t>> hostile;
-  for (std::size_t n = 0; n < q.size(); ++n) hostile.emplace_back(q.begin(), q.begin() + static_cast<std::ptrdiff_t>(n));
-  auto v = q; v[4] = 2; hostile.push_back(v);                               // wrong version
-  v = q; v[6] = 0x42; hostile.push_back(v);                                 // unknown type
+  for (std::size_t n = 0; n < q.size(); ++n)
+    hostile.emplace_back(q.begin(), q.begin() + static_cast<std::ptrdiff_t>(n));
+  auto v = q;
+  v[4] = 2;
+  hostile.push_back(v);  // wrong version
+  v = q;
+  v[6] = 0x42;
+  hostile.push_back(v);  // unknown type
   auto r = encode(ResultMsg{1, 1, 1, {}, {}});
   const std::uint32_t huge = 0xfffffff0u;
-  std::memcpy(r.data() + r.size() - 4, &huge, 4); hostile.push_back(r);     // oversized count
+  std::memcpy(r.data() + r.size() - 4, &huge, 4);
+  hostile.push_back(r);  // oversized count
   std::mt19937_64 rng(11);
   for (int i = 0; i < 200; ++i) {
     std::vector<std::uint8_t> g(1 + rng() % 300);
@@ -270,7 +294,8 @@ TEST_CASE("daemon: refuses a non-loopback bind without --insecure; a config file
     CHECK(p.log().find("not a loopback address") != std::string::npos);
   }
   {
-    test::Process p({test::worker_binary(), "--bind", "tcp://0.0.0.0:" + std::to_string(port), "--insecure"}, dir.file("b.log"));
+    test::Process p({test::worker_binary(), "--bind", "tcp://0.0.0.0:" + std::to_string(port), "--insecure"},
+                    dir.file("b.log"));
     zmq::context_t ctx;
     zmq::socket_t d = dealer_to(ctx, "tcp://127.0.0.1:" + std::to_string(port), 5000);
     CHECK(std::holds_alternative<HelloMsg>(decoded(request(d, encode(HeartbeatMsg{1})))));
@@ -309,9 +334,11 @@ TEST_CASE("systemd units pass systemd-analyze verify") {
   REQUIRE(in.good());
   std::stringstream ss;
   ss << in.rdbuf();
-  const std::string unit = std::regex_replace(ss.str(), std::regex("ExecStart=\\S+"), "ExecStart=" + test::worker_binary());
+  const std::string unit =
+      std::regex_replace(ss.str(), std::regex("ExecStart=\\S+"), "ExecStart=" + test::worker_binary());
   test::write_file(dir.file("spheretouch-worker@1.service"), unit);
-  std::filesystem::copy_file(std::string(src) + "/daemons/systemd/spheretouch-workers.target", dir.file("spheretouch-workers.target"));
+  std::filesystem::copy_file(std::string(src) + "/daemons/systemd/spheretouch-workers.target",
+                             dir.file("spheretouch-workers.target"));
   const std::string out = dir.file("verify.txt");
   const std::string cmd = "systemd-analyze verify " + dir.file("spheretouch-worker@1.service") + " " +
                           dir.file("spheretouch-workers.target") + " > " + out + " 2>&1";
@@ -336,8 +363,9 @@ TEST_CASE("daemon with CURVE: a network bind without --insecure; allowed client 
   ::chmod(dir.file("worker.key").c_str(), 0600);
   const int port = test::free_port();
   // toml literal strings ('...') take Z85's punctuation as is.
-  test::write_file(dir.file("w.toml"), "bind = \"tcp://0.0.0.0:" + std::to_string(port) + "\"\n[curve]\nsecret_key_file = '" +
-                                           dir.file("worker.key") + "'\nallowed_clients = ['" + cpub + "']\n");
+  test::write_file(dir.file("w.toml"), "bind = \"tcp://0.0.0.0:" + std::to_string(port) +
+                                           "\"\n[curve]\nsecret_key_file = '" + dir.file("worker.key") +
+                                           "'\nallowed_clients = ['" + cpub + "']\n");
   test::Process p({test::worker_binary(), "--config", dir.file("w.toml")}, dir.file("w.log"));
   const test::NetScene s = test::small_scene(6);
   const std::string ep = "tcp://127.0.0.1:" + std::to_string(port);
@@ -345,7 +373,11 @@ TEST_CASE("daemon with CURVE: a network bind without --insecure; allowed client 
   auto make = [&](const char* pub, const char* sec, bool curve) {
     ScatterConfig cfg;
     cfg.endpoints = {ep};
-    if (curve) { cfg.curve_server_public = spub; cfg.curve_public = pub; cfg.curve_secret = sec; }
+    if (curve) {
+      cfg.curve_server_public = spub;
+      cfg.curve_public = pub;
+      cfg.curve_secret = sec;
+    }
     auto c = ScatterGather::create(ctx, cfg, s.probe, s.object, s.blocks);
     REQUIRE_MESSAGE(c.ok(), c.error());
     return std::move(c.value());

@@ -53,7 +53,10 @@ class Process {
     if (pid_ == 0) {
       ::prctl(PR_SET_PDEATHSIG, SIGKILL);  // a test that dies (crash, SIGPIPE) leaves no worker behind
       const int fd = ::open(log_.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-      if (fd >= 0) { ::dup2(fd, 1); ::dup2(fd, 2); }
+      if (fd >= 0) {
+        ::dup2(fd, 1);
+        ::dup2(fd, 2);
+      }
       std::vector<char*> a;
       for (const auto& s : argv) a.push_back(const_cast<char*>(s.c_str()));
       a.push_back(nullptr);
@@ -62,20 +65,27 @@ class Process {
     }
   }
   ~Process() {
-    if (pid_ > 0 && !reaped_) { ::kill(pid_, SIGKILL); int st; ::waitpid(pid_, &st, 0); }
+    if (pid_ > 0 && !reaped_) {
+      ::kill(pid_, SIGKILL);
+      int st;
+      ::waitpid(pid_, &st, 0);
+    }
   }
   Process(const Process&) = delete;
   Process& operator=(const Process&) = delete;
 
-  pid_t pid() const { return pid_; }                        ///< process id
-  void signal(int sig) const { ::kill(pid_, sig); }          ///< sends a signal
+  pid_t pid() const { return pid_; }                 ///< process id
+  void signal(int sig) const { ::kill(pid_, sig); }  ///< sends a signal
   /// Waits up to `limit` for the process to exit; its wait status, or -1 if it is still running.
   int wait(std::chrono::milliseconds limit) {
     const auto end = std::chrono::steady_clock::now() + limit;
     for (;;) {
       int st = 0;
       const pid_t r = ::waitpid(pid_, &st, WNOHANG);
-      if (r == pid_) { reaped_ = true; return st; }
+      if (r == pid_) {
+        reaped_ = true;
+        return st;
+      }
       if (std::chrono::steady_clock::now() >= end) return -1;
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
     }

@@ -96,7 +96,11 @@ TEST_CASE("trailing bytes are rejected") {
 
 TEST_CASE("wrong magic, version, type and flags are rejected, naming the field") {
   const auto good = encode(HeartbeatMsg{1});
-  struct Case { std::size_t at; std::uint8_t v; const char* word; };
+  struct Case {
+    std::size_t at;
+    std::uint8_t v;
+    const char* word;
+  };
   for (Case c : {Case{0, 'X', "magic"}, Case{4, 2, "version"}, Case{5, 1, "version"}, Case{6, 0, "type"},
                  Case{6, 7, "type"}, Case{7, 1, "flags"}}) {
     auto b = good;
@@ -201,7 +205,10 @@ TEST_CASE("bit flips and random garbage never crash and never decode into out-of
       const int flips = 1 + static_cast<int>(rng() % 4);
       for (int f = 0; f < flips; ++f) b[rng() % b.size()] ^= static_cast<std::uint8_t>(1u << (rng() % 8));
       auto d = decode(b, L);
-      if (!d.ok()) { ++refused; continue; }
+      if (!d.ok()) {
+        ++refused;
+        continue;
+      }
       ++decoded;
       if (auto* r = std::get_if<ResultMsg>(&d.value())) CHECK(r->pairs.size() <= L.max_pairs);
       if (auto* h = std::get_if<HelloMsg>(&d.value())) CHECK(h->held.size() <= L.max_held);
@@ -213,11 +220,17 @@ TEST_CASE("bit flips and random garbage never crash and never decode into out-of
     if (trial % 2 && b.size() >= kHeaderBytes) {  // valid header, garbage body: reaches the body decoders
       const std::uint32_t magic = kMagic, body = static_cast<std::uint32_t>(b.size() - kHeaderBytes);
       std::memcpy(b.data(), &magic, 4);
-      b[4] = kVersion; b[5] = 0; b[6] = static_cast<std::uint8_t>(1 + rng() % 6); b[7] = 0;
+      b[4] = kVersion;
+      b[5] = 0;
+      b[6] = static_cast<std::uint8_t>(1 + rng() % 6);
+      b[7] = 0;
       std::memcpy(b.data() + 8, &body, 4);
     }
     auto d = decode(b, L);
-    if (d.ok()) ++decoded; else ++refused;
+    if (d.ok())
+      ++decoded;
+    else
+      ++refused;
   }
   CHECK(refused > 0);
   MESSAGE("garbage: " << decoded << " decoded (harmless), " << refused << " refused");

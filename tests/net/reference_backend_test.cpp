@@ -11,11 +11,11 @@ using geom::Vec3;
 
 TEST_CASE("sat_tri_overlap: crossing, separated, touching at a vertex and an edge, coplanar") {
   const Vec3 a0(0, 0, 0), a1(1, 0, 0), a2(0, 1, 0);
-  CHECK(sat_tri_overlap(a0, a1, a2, Vec3(0.2, 0.2, -1), Vec3(0.2, 0.2, 1), Vec3(0.3, 0.4, 1)));   // pierces
-  CHECK_FALSE(sat_tri_overlap(a0, a1, a2, Vec3(0, 0, 0.1), Vec3(1, 0, 0.1), Vec3(0, 1, 0.1)));    // parallel above
+  CHECK(sat_tri_overlap(a0, a1, a2, Vec3(0.2, 0.2, -1), Vec3(0.2, 0.2, 1), Vec3(0.3, 0.4, 1)));  // pierces
+  CHECK_FALSE(sat_tri_overlap(a0, a1, a2, Vec3(0, 0, 0.1), Vec3(1, 0, 0.1), Vec3(0, 1, 0.1)));   // parallel above
   CHECK(sat_tri_overlap(a0, a1, a2, Vec3(1, 0, 0), Vec3(2, 0, 1), Vec3(2, 1, 1)));               // shares a vertex
-  CHECK(sat_tri_overlap(a0, a1, a2, Vec3(0.5, 0.5, 0), Vec3(1, 1, 1), Vec3(1, 1, -1)));           // touches the hypotenuse
-  CHECK(sat_tri_overlap(a0, a1, a2, Vec3(0.1, 0.1, 0), Vec3(2, 0.1, 0), Vec3(0.1, 2, 0)));        // coplanar overlap
+  CHECK(sat_tri_overlap(a0, a1, a2, Vec3(0.5, 0.5, 0), Vec3(1, 1, 1), Vec3(1, 1, -1)));     // touches the hypotenuse
+  CHECK(sat_tri_overlap(a0, a1, a2, Vec3(0.1, 0.1, 0), Vec3(2, 0.1, 0), Vec3(0.1, 2, 0)));  // coplanar overlap
   CHECK_FALSE(sat_tri_overlap(a0, a1, a2, Vec3(0.6, 0.6, 0), Vec3(2, 0.6, 0), Vec3(0.6, 2, 0)));  // coplanar apart
   CHECK(sat_tri_overlap(a0, a1, a2, Vec3(0.5, 0.5, 0), Vec3(2, 0.5, 0), Vec3(0.5, 2, 0)));        // coplanar, touching
 }

@@ -103,7 +103,8 @@ TEST_CASE("a worker that already holds a client's block set is not sent it again
   CHECK(c3->round(1, test::contact_poses(s, 1)[0], Clock::now() + 5s).complete);
 }
 
-TEST_CASE("a stopped worker: rounds return by their deadline, incomplete until reassigned, then exact; restart reloads") {
+TEST_CASE(
+    "a stopped worker: rounds return by their deadline, incomplete until reassigned, then exact; restart reloads") {
   zmq::context_t ctx;
   const test::NetScene s = test::small_scene(10, 24);
   const auto poses = test::contact_poses(s, 6);
@@ -129,7 +130,11 @@ TEST_CASE("a stopped worker: rounds return by their deadline, incomplete until r
     RoundResult r = c->round(++seq, pose, d);
     CHECK(Clock::now() < d + 500ms);  // liveness: returned, not 10x after its deadline
     ++rounds;
-    if (!r.complete) { ++incomplete; CHECK(r.blocks_covered < r.blocks_total); continue; }
+    if (!r.complete) {
+      ++incomplete;
+      CHECK(r.blocks_covered < r.blocks_total);
+      continue;
+    }
     CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
     exact_again = true;
     break;
@@ -140,7 +145,10 @@ TEST_CASE("a stopped worker: rounds return by their deadline, incomplete until r
   CHECK_FALSE(ws[2].up);
   CHECK(ws[2].target_blocks.empty());
   std::size_t reassigned = 0;
-  for (int i : {0, 1, 3}) { CHECK(ws[i].up); reassigned += ws[i].target_blocks.size(); }
+  for (int i : {0, 1, 3}) {
+    CHECK(ws[i].up);
+    reassigned += ws[i].target_blocks.size();
+  }
   CHECK(reassigned == s.blocks.size());
   for (int k = 0; k < 5; ++k) {
     const auto& pose = poses[k % poses.size()];
@@ -164,7 +172,8 @@ TEST_CASE("a stopped worker: rounds return by their deadline, incomplete until r
   }
   REQUIRE(back);
   CHECK(ws[2].loads_sent == loads_before[2] + 1);
-  for (int i = 0; i < 4; ++i) CHECK(ws[i].target_blocks == block_cyclic(static_cast<std::uint32_t>(s.blocks.size()), 4)[i]);
+  for (int i = 0; i < 4; ++i)
+    CHECK(ws[i].target_blocks == block_cyclic(static_cast<std::uint32_t>(s.blocks.size()), 4)[i]);
   // Survivors kept their own share in memory: only the returning worker was sent anything.
   for (int i : {0, 1, 3}) CHECK(ws[i].loads_sent == loads_before[i]);
 }
@@ -192,13 +201,18 @@ TEST_CASE("a worker answers hostile messages with an Error or drops them, and ke
   };
   CHECK(expect_error({1, 2, 3}, ErrorCode::BadMessage).find("header") != std::string::npos);
   auto q = encode(QueryMsg{1, 2, geom::Pose::Identity()});
-  auto bad_version = q; bad_version[4] = 9;
+  auto bad_version = q;
+  bad_version[4] = 9;
   CHECK(expect_error(bad_version, ErrorCode::BadMessage).find("version") != std::string::npos);
-  auto truncated = q; truncated.resize(q.size() - 1);
+  auto truncated = q;
+  truncated.resize(q.size() - 1);
   expect_error(truncated, ErrorCode::BadMessage);
   expect_error(encode(ResultMsg{}), ErrorCode::Unexpected);
   expect_error(q, ErrorCode::NotLoaded);
-  { zmq::message_t hello; REQUIRE(d.recv(hello)); }  // the Hello that follows NotLoaded
+  {
+    zmq::message_t hello;
+    REQUIRE(d.recv(hello));
+  }  // the Hello that follows NotLoaded
   // A chunk out of order, and a block set whose bytes do not match the hash.
   expect_error(encode(LoadBlocksMsg{7, 10, 4, {1, 2}}), ErrorCode::LoadFailed);
   expect_error(encode(LoadBlocksMsg{7, 3, 0, {1, 2, 3}}), ErrorCode::LoadFailed);
@@ -231,7 +245,8 @@ TEST_CASE("an oversized frame is cut off by ZMQ_MAXMSGSIZE before it is buffered
   const std::string t = tag();
   WorkerConfig wc;
   wc.limits.max_chunk_bytes = 1024;
-  auto w = LocalWorkers::start(ctx, 1, reference_backend_factory(), [&](int) { return std::string("tcp://127.0.0.1:*"); }, wc);
+  auto w = LocalWorkers::start(
+      ctx, 1, reference_backend_factory(), [&](int) { return std::string("tcp://127.0.0.1:*"); }, wc);
   REQUIRE(w.ok());
   zmq::socket_t d(ctx, zmq::socket_type::dealer);
   d.set(zmq::sockopt::linger, 0);
@@ -290,7 +305,8 @@ TEST_CASE("after a fault, idle reassigned sets are dropped by workers and client
   const std::string t = tag();
   WorkerConfig base;
   base.idle_set_ttl = 300ms;
-  auto wr = LocalWorkers::start(ctx, 4, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, base);
+  auto wr = LocalWorkers::start(
+      ctx, 4, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, base);
   REQUIRE(wr.ok());
   LocalWorkers& w = *wr.value();
   ScatterConfig cfg;
@@ -356,8 +372,9 @@ TEST_CASE("a block set of faces piled on each other: the worker refuses the quer
     WorkerConfig base;
     base.limits.max_pairs = 50'000;
     const std::string t = tag();
-    auto w = LocalWorkers::start(ctx, 1, tree ? tree_backend_factory() : reference_backend_factory(),
-                                 [&](int i) { return inproc_endpoint(i, t); }, base);
+    auto w = LocalWorkers::start(
+        ctx, 1, tree ? tree_backend_factory() : reference_backend_factory(),
+        [&](int i) { return inproc_endpoint(i, t); }, base);
     REQUIRE(w.ok());
     geom::Mesh pile;
     pile.name = "pile";
@@ -426,8 +443,7 @@ TEST_CASE("workers bound to tcp://localhost and tcp://[::1] serve a client (READ
   const test::NetScene s = test::small_scene(6);
   for (const std::string host : {"localhost", "[::1]"}) {
     CAPTURE(host);
-    auto w = LocalWorkers::start(ctx, 2, reference_backend_factory(),
-                                 [&](int) { return "tcp://" + host + ":*"; });
+    auto w = LocalWorkers::start(ctx, 2, reference_backend_factory(), [&](int) { return "tcp://" + host + ":*"; });
     if (!w.ok()) FAIL(w.error());
     check_one_exact_round(ctx, *w.value(), s);
   }

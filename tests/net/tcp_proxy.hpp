@@ -37,7 +37,10 @@ class TcpProxy {
   ~TcpProxy() {
     stop_.store(true);
     thread_.join();
-    for (const Link& l : links_) { ::close(l.client); ::close(l.upstream); }
+    for (const Link& l : links_) {
+      ::close(l.client);
+      ::close(l.upstream);
+    }
     ::close(listen_fd_);
   }
   TcpProxy(const TcpProxy&) = delete;

@@ -15,7 +15,8 @@ worker_id = 5
 log_level = "debug"
 max_sets = 4
 max_blockset_mb = 256
-)", "w.toml");
+)",
+                               "w.toml");
   REQUIRE_MESSAGE(c.ok(), c.error());
   CHECK(c.value().bind == "tcp://127.0.0.1:6000");
   CHECK(c.value().worker_id == 5);
@@ -90,7 +91,7 @@ TEST_CASE("allowed_clients_files: parsed, resolved against the config's director
   std::filesystem::create_directories(dir.file("clients"));
   st::test::write_file(dir.file("clients/alice.pub"), other + "\n");
   st::test::write_file(dir.file("w.toml"), "[curve]\nsecret_key_file = \"fleet.key\"\nallowed_clients = ['" + k40 +
-                                                "']\nallowed_clients_files = [\"clients/alice.pub\"]\n");
+                                               "']\nallowed_clients_files = [\"clients/alice.pub\"]\n");
   auto c = load_daemon_config(dir.file("w.toml"));
   REQUIRE_MESSAGE(c.ok(), c.error());
   CHECK(c.value().curve_secret_key_file == dir.file("fleet.key"));

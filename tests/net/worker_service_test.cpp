@@ -30,7 +30,8 @@ std::string ws_tag() {
 /// A raw client: a DEALER with a chosen routing id.
 struct RawClient {
   zmq::socket_t d;
-  RawClient(zmq::context_t& ctx, const std::string& endpoint, const std::string& id) : d(ctx, zmq::socket_type::dealer) {
+  RawClient(zmq::context_t& ctx, const std::string& endpoint, const std::string& id)
+      : d(ctx, zmq::socket_type::dealer) {
     d.set(zmq::sockopt::linger, 0);
     d.set(zmq::sockopt::rcvtimeo, 10000);
     d.set(zmq::sockopt::routing_id, zmq::buffer(id));
@@ -234,12 +235,14 @@ TEST_CASE("upload bounds: total buffered bytes, concurrent uploads, and abandone
     // The first upload's buffer grows to min(total, 1 MiB); a second one cannot fit.
     wc.max_upload_bytes = set.bytes.size() + set.bytes.size() / 2;
     const std::string t = ws_tag();
-    auto w = LocalWorkers::start(ctx, 1, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, wc);
+    auto w = LocalWorkers::start(
+        ctx, 1, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, wc);
     REQUIRE(w.ok());
     RawClient a(ctx, w.value()->endpoints()[0], "client-a"), b(ctx, w.value()->endpoints()[0], "client-b");
     a.upload(set.bytes, set.hash, chunk, 0, chunk);
     a.sync();  // a's upload is in before b's starts
-    const ErrorMsg e = error_of(b.ask(encode(LoadBlocksMsg{set.hash, set.bytes.size(), 0, {set.bytes.begin(), set.bytes.begin() + chunk}})));
+    const ErrorMsg e = error_of(
+        b.ask(encode(LoadBlocksMsg{set.hash, set.bytes.size(), 0, {set.bytes.begin(), set.bytes.begin() + chunk}})));
     CHECK(e.code == ErrorCode::TooLarge);
     CHECK(e.text.find("max_upload_bytes") != std::string::npos);
     a.upload(set.bytes, set.hash, chunk, chunk);
@@ -249,7 +252,8 @@ TEST_CASE("upload bounds: total buffered bytes, concurrent uploads, and abandone
     WorkerConfig wc;
     wc.max_uploads = 2;
     const std::string t = ws_tag();
-    auto w = LocalWorkers::start(ctx, 1, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, wc);
+    auto w = LocalWorkers::start(
+        ctx, 1, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, wc);
     REQUIRE(w.ok());
     const std::string ep = w.value()->endpoints()[0];
     RawClient a(ctx, ep, "client-a"), b(ctx, ep, "client-b"), c(ctx, ep, "client-c");
@@ -257,7 +261,8 @@ TEST_CASE("upload bounds: total buffered bytes, concurrent uploads, and abandone
     b.upload(set.bytes, set.hash, chunk, 0, chunk);
     a.sync();  // both uploads are in before c's starts
     b.sync();
-    const ErrorMsg e = error_of(c.ask(encode(LoadBlocksMsg{set.hash, set.bytes.size(), 0, {set.bytes.begin(), set.bytes.begin() + chunk}})));
+    const ErrorMsg e = error_of(
+        c.ask(encode(LoadBlocksMsg{set.hash, set.bytes.size(), 0, {set.bytes.begin(), set.bytes.begin() + chunk}})));
     CHECK(e.code == ErrorCode::TooLarge);
     CHECK(e.text.find("max_uploads") != std::string::npos);
     b.upload(set.bytes, set.hash, chunk, chunk);  // b finishes: a slot is free again
@@ -269,13 +274,15 @@ TEST_CASE("upload bounds: total buffered bytes, concurrent uploads, and abandone
     WorkerConfig wc;
     wc.upload_timeout = 100ms;
     const std::string t = ws_tag();
-    auto w = LocalWorkers::start(ctx, 1, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, wc);
+    auto w = LocalWorkers::start(
+        ctx, 1, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, wc);
     REQUIRE(w.ok());
     RawClient a(ctx, w.value()->endpoints()[0], "client-a");
     a.upload(set.bytes, set.hash, chunk, 0, chunk);
     // The worker looks for abandoned uploads once a second; wait well past timeout + check period.
     std::this_thread::sleep_for(2500ms);
-    const ErrorMsg e = error_of(a.ask(encode(LoadBlocksMsg{set.hash, set.bytes.size(), chunk, {set.bytes.begin() + chunk, set.bytes.begin() + 2 * chunk}})));
+    const ErrorMsg e = error_of(a.ask(encode(
+        LoadBlocksMsg{set.hash, set.bytes.size(), chunk, {set.bytes.begin() + chunk, set.bytes.begin() + 2 * chunk}})));
     CHECK(e.code == ErrorCode::LoadFailed);
     CHECK(e.text.find("out of order") != std::string::npos);
   }
@@ -324,8 +331,10 @@ TEST_CASE("ipc://: missing directories are made 0700, the socket 0600; other use
   REQUIRE(svc.bind(ep).ok());
   std::thread t([&] { svc.run(stop, 10ms); });
   CHECK(heartbeat_from_child(ep, -1) == 0);
-  if (::geteuid() == 0) CHECK(heartbeat_from_child(ep, 65534) == 1);
-  else MESSAGE("not root: the other-user half of this test needs root to switch user");
+  if (::geteuid() == 0)
+    CHECK(heartbeat_from_child(ep, 65534) == 1);
+  else
+    MESSAGE("not root: the other-user half of this test needs root to switch user");
   stop = true;
   t.join();
 }

@@ -15,9 +15,10 @@ using namespace st::rt;
 namespace {
 std::vector<double> nasty_inputs() {
   using L = std::numeric_limits<double>;
-  std::vector<double> v = {0.0, -0.0, L::denorm_min(), 2 * L::denorm_min(), L::min() / 3, L::min(),
-                           -1.0, -L::max(), L::max(), L::quiet_NaN(), -L::quiet_NaN(),
-                           L::signaling_NaN(), L::infinity(), -L::infinity(), L::epsilon()};
+  std::vector<double> v = {
+      0.0,           -0.0,           L::denorm_min(), 2 * L::denorm_min(), L::min() / 3,    L::min(),
+      -1.0,          -L::max(),      L::max(),        L::quiet_NaN(),      -L::quiet_NaN(), L::signaling_NaN(),
+      L::infinity(), -L::infinity(), L::epsilon()};
   for (int e = -300; e <= 300; e += 5) {
     v.push_back(std::pow(10.0, e));
     v.push_back(-std::pow(10.0, e));
@@ -114,5 +115,10 @@ TEST_CASE("force law: invalid configs are refused with the field named") {
   bad([](ForceLawConfig& c) { c.a = INFINITY; }, "a =");
   bad([](ForceLawConfig& c) { c.max_force_N = 0; }, "max_force_N");
   bad([](ForceLawConfig& c) { c.a = 1e6; }, "knee");  // base^a overflows: knee 0
-  bad([](ForceLawConfig& c) { c.kind = LawKind::linear; c.spring_N_per_mm = -0.5; }, "spring_N_per_mm");
+  bad(
+      [](ForceLawConfig& c) {
+        c.kind = LawKind::linear;
+        c.spring_N_per_mm = -0.5;
+      },
+      "spring_N_per_mm");
 }

@@ -40,15 +40,17 @@ struct CountingHandler : TickHandler {
   double slow_periods = 0;
   std::uint64_t slow_ticks = 0;
   void tick(const TickInfo& info) noexcept override {
-    if (calls > 0) index_gaps += info.deadline_index - last_index - 1;
-    else index_gaps += info.deadline_index;
+    if (calls > 0)
+      index_gaps += info.deadline_index - last_index - 1;
+    else
+      index_gaps += info.deadline_index;
     last_index = info.deadline_index;
     ++calls;
     if (slow_every && calls % slow_every == 0) {
       ++slow_ticks;
-      const std::int64_t until = info.woke_ns + static_cast<std::int64_t>(slow_periods * static_cast<double>(info.period_ns));
-      while (now_ns() < until) {
-      }
+      const std::int64_t until =
+          info.woke_ns + static_cast<std::int64_t>(slow_periods * static_cast<double>(info.period_ns));
+      while (now_ns() < until) {}
     }
   }
 };
@@ -82,7 +84,7 @@ TEST_CASE("HapticLoop: a tick that overruns 2.5 periods costs at least one miss,
   const LoopStats& s = loop->stats();
   CHECK(s.ticks + s.misses == 1000);
   CHECK(h.slow_ticks >= 5);
-  CHECK(s.misses >= h.slow_ticks);   // each slow tick spans >= 2 whole deadlines
+  CHECK(s.misses >= h.slow_ticks);  // each slow tick spans >= 2 whole deadlines
   CHECK(s.overruns >= h.slow_ticks);
   CHECK(s.misses == h.index_gaps);
 }
@@ -215,5 +217,6 @@ TEST_CASE("HapticLoop: the tick path allocates nothing") {
   loop->stop();
   CHECK(allocs == 0);
   MESSAGE("allocations during " << loop->stats().ticks - t0 << "+ ticks: " << allocs
-                                << std::string(st::test::counts_malloc() ? " (malloc and new counted)" : " (operator new counted)"));
+                                << std::string(st::test::counts_malloc() ? " (malloc and new counted)"
+                                                                         : " (operator new counted)"));
 }

@@ -124,8 +124,8 @@ TEST_CASE("HapticServo: renders contact from a slow collision side, finite, satu
     fmax = std::max(fmax, r.force_N.norm());
   }
   CHECK(fmax > 1.0);  // 4 mm deep: law gives ~1.4 N
-  MESSAGE("ticks " << ls.ticks << ", misses " << ls.misses << ", models " << servo.stats().models
-                   << ", max force " << fmax << " N, allocations while armed " << allocs);
+  MESSAGE("ticks " << ls.ticks << ", misses " << ls.misses << ", models " << servo.stats().models << ", max force "
+                   << fmax << " N, allocations while armed " << allocs);
 }
 
 TEST_CASE("HapticServo: when the collision side stops, the force fades to zero") {

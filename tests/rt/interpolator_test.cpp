@@ -204,8 +204,15 @@ TEST_CASE("interpolator: damping opposes motion along FD and never pulls") {
 TEST_CASE("interpolator + saturation: random sequences stay finite and within the ceiling") {
   std::mt19937_64 rng(12345);
   std::uniform_real_distribution<double> u(-1, 1);
-  const double nasty[] = {0.0, -0.0, 1e-300, -1e-300, 1e300, -1e300, std::numeric_limits<double>::quiet_NaN(),
-                          std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity(),
+  const double nasty[] = {0.0,
+                          -0.0,
+                          1e-300,
+                          -1e-300,
+                          1e300,
+                          -1e300,
+                          std::numeric_limits<double>::quiet_NaN(),
+                          std::numeric_limits<double>::infinity(),
+                          -std::numeric_limits<double>::infinity(),
                           std::numeric_limits<double>::denorm_min()};
   auto pick = [&](double scale) {
     const auto r = rng() % 20;

@@ -159,5 +159,5 @@ TEST_CASE("passivity: closed loop with the hand, the servo and the patch model: 
   }
   CHECK(servo.peak_force_N() > 0.5);  // it did press (the hand settles ~2.4 mm deep): not a contact-free run
   MESSAGE("contact cycles: " << cycles.size() << ", energy per cycle (mJ): " << cycles[0] << " " << cycles[1] << " "
-                              << cycles[2] << "; guard acted on " << servo.passivity().active_ticks() << " ticks");
+                             << cycles[2] << "; guard acted on " << servo.passivity().active_ticks() << " ticks");
 }
