@@ -132,7 +132,7 @@ void add_collide(CLI::App& app) {
   struct Args {
     std::string probe, object, poses, find_out, build_mesh, targets = "100,500,1000,1500";
     int runs = 200;
-    unsigned leaf = geom::DefaultTreeParams().leaf_faces;
+    unsigned leaf = geom::DefaultTreeConfig().leaf_faces;
     std::uint64_t seed = 1;
     bool fcl = false, json = false;
   };
@@ -276,7 +276,7 @@ void add_collide(CLI::App& app) {
           row.fcl_p95_us = percentile(theirs, 0.95);
           row.fcl_min_us = percentile(theirs, 0.0);
           const auto fp = peer->collide(pose);
-          geom::CollideOptions o;
+          geom::CollideConfig o;
           o.sort_pairs = true;
           geom::collide(s.probe, s.pt, s.object, s.ot, pose, o, sc, r);
           row.fcl_pairs = fp.size();

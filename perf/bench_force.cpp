@@ -24,7 +24,7 @@
 #include <memory>
 #include <sstream>
 
-#include "app/scene.hpp"
+#include "engine/scene.hpp"
 #include "bench.hpp"
 #include "bench_tables_common.hpp"
 #include "geom/collide.hpp"
@@ -493,7 +493,7 @@ void add_force(CLI::App& app) {
       mm.passivity.enabled = kind.value() == geom::ContactModelKind::patch;
       models.push_back(mm);
     }
-    const std::string dir = app::model_dir();
+    const std::string dir = engine::model_dir();
     std::vector<ForceScene> scenes;
     std::stringstream ss(a->scenes);
     for (std::string n; std::getline(ss, n, ',');) {

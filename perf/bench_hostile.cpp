@@ -61,7 +61,7 @@ struct Attacker {
   std::optional<net::Message> recv() {
     zmq::message_t m;
     if (!d.recv(m)) return std::nullopt;
-    auto r = net::decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, net::default_limits());
+    auto r = net::decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, net::DefaultLimits());
     if (!r) return std::nullopt;
     return r.value();
   }

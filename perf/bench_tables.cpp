@@ -27,9 +27,9 @@
 #include <sstream>
 #include <thread>
 
-#include "app/collision_loop.hpp"
-#include "app/distributed.hpp"
-#include "app/scene.hpp"
+#include "engine/collision_loop.hpp"
+#include "engine/distributed.hpp"
+#include "engine/scene.hpp"
 #include "bench.hpp"
 #include "bench_tables_common.hpp"
 #include "geom/pose_io.hpp"
@@ -100,10 +100,10 @@ std::vector<TaggedPose> read_tagged_poses(const std::string& path) {
 
 rt::Trajectory press_slide_script(const geom::Mesh& probe, const geom::Mesh& object, double duration_s, double press_mm,
                                   double slide_mm) {
-  app::Scene s = app::DefaultScene();  // fingertip along -z onto the object's top, identity orientation
+  engine::Scene s = engine::DefaultScene();  // fingertip along -z onto the object's top, identity orientation
   s.device.press_mm = press_mm;
   s.device.slide_mm = slide_mm;
-  rt::Trajectory t = app::builtin_script(s, probe, object);
+  rt::Trajectory t = engine::builtin_script(s, probe, object);
   const double scale = duration_s / t.duration_s();
   for (rt::TimedPose& k : t.keys) k.t_s *= scale;
   return t;
@@ -182,7 +182,7 @@ void add_rounds(CLI::App& app, const char* name, const char* what) {
   struct Args {
     std::string probe, object, poses, worker_bin = "build/daemons/spheretouch-worker", csv, workers = "0,1,2,4,8";
     int rounds = 200, warmup = 10;
-    std::uint32_t layer = 2, leaf = geom::DefaultTreeParams().leaf_faces;
+    std::uint32_t layer = 2, leaf = geom::DefaultTreeConfig().leaf_faces;
   };
   auto a = std::make_shared<Args>();
   const std::string table = name;
@@ -213,7 +213,7 @@ void add_rounds(CLI::App& app, const char* name, const char* what) {
     struct Config {
       int workers = 0;
       std::unique_ptr<Daemons> daemons;
-      std::unique_ptr<app::Fleet> fleet;
+      std::unique_ptr<engine::Fleet> fleet;
       geom::CollideScratch scratch;
       geom::CollideResult result;
       net::RoundResult round;
@@ -225,12 +225,12 @@ void add_rounds(CLI::App& app, const char* name, const char* what) {
       c->workers = w;
       if (w > 0) {
         c->daemons = std::make_unique<Daemons>(a->worker_bin, w);
-        app::FleetSpec spec;
+        engine::FleetSpec spec;
         spec.endpoints = c->daemons->endpoints();
         spec.layer = a->layer;
         spec.leaf_faces = a->leaf;
         spec.ready_timeout = std::chrono::milliseconds(120000);
-        auto f = app::start_fleet(spec, probe.mesh, object.mesh, object.tree);
+        auto f = engine::start_fleet(spec, probe.mesh, object.mesh, object.tree);
         if (!f) die(f.error());
         c->fleet = std::move(f).value();
       }
@@ -374,18 +374,18 @@ class PeakDevice final : public rt::Device {
 // (b) spheretouch: the 1 kHz HapticLoop + HapticServo, and the app's CollisionLoop answering
 // poses with collide() in its own thread (0 workers) or scatter-gather over in-process workers.
 RateResult spheretouch(const Body& probe, const Body& object, const rt::Trajectory& script, double seconds, int workers) {
-  std::unique_ptr<app::Fleet> fleet;
+  std::unique_ptr<engine::Fleet> fleet;
   if (workers > 0) {
-    app::FleetSpec spec;
+    engine::FleetSpec spec;
     spec.workers = workers;
     spec.leaf_faces = object.tree.params.leaf_faces;
-    auto f = app::start_fleet(spec, probe.mesh, object.mesh, object.tree);
+    auto f = engine::start_fleet(spec, probe.mesh, object.mesh, object.tree);
     if (!f) die(f.error());
     fleet = std::move(f).value();
   }
   geom::CollideScratch sc;
   geom::CollideResult r;
-  app::CollideFn fn = [&](std::uint64_t seq, const geom::Pose& pose, app::RoundOutput& out) {
+  engine::CollideFn fn = [&](std::uint64_t seq, const geom::Pose& pose, engine::RoundOutput& out) {
     if (fleet) {
       static thread_local net::RoundResult rr;
       fleet->client->round(seq, pose, net::Clock::now() + std::chrono::milliseconds(50), rr);
@@ -403,8 +403,8 @@ RateResult spheretouch(const Body& probe, const Body& object, const rt::Trajecto
   auto models = std::make_unique<rt::TripleBuffer<geom::ContactModel>>();
   rt::HapticServo servo(dev, *poses, *models, rt::ForceLaw{}, rt::DefaultInterpolatorConfig(),
                         rt::DefaultSaturationConfig(), nullptr);
-  app::CollisionLoop collision(probe.mesh, object.mesh, *poses, *models, fn, 0, std::size_t(seconds * 20000) + 1000,
-                               paper_contact());
+  engine::CollisionLoop collision(probe.mesh, object.mesh, *poses, *models, fn, 0, std::size_t(seconds * 20000) + 1000,
+                                  paper_contact());
   rt::HapticLoop loop(rt::DefaultHapticLoopConfig());
   collision.start();
   const std::int64_t t0 = rt::now_ns();
@@ -424,7 +424,7 @@ RateResult spheretouch(const Body& probe, const Body& object, const rt::Trajecto
   out.haptic_hz = double(out.ticks) / secs;
   out.collision_hz = double(out.rounds) / secs;
   std::vector<double> ms;
-  for (const app::RoundRecord& rec : collision.records()) {
+  for (const engine::RoundRecord& rec : collision.records()) {
     ms.push_back(double(rec.end_ns - rec.start_ns) * 1e-6);
     out.max_contacts = std::max(out.max_contacts, rec.contacts);
   }
@@ -515,7 +515,7 @@ void add_peers(CLI::App& app) {
                 "ours_pairs", "fcl_pairs", "jaccard", "identical");
     geom::CollideScratch sc;
     geom::CollideResult r;
-    geom::CollideOptions opt;
+    geom::CollideConfig opt;
     opt.sort_pairs = true;
     for (const TaggedPose& tp : read_tagged_poses(a->poses)) {
       std::vector<double> ours, theirs;

@@ -24,7 +24,7 @@ struct Body {
 
 /// Loads a mesh file, or generates "icosphere[:RADIUS_MM[:FREQUENCY]]" (default 50 mm, 7 → 980
 /// faces: the paper's ~960-face ball), and builds its tree. Exits (CLI error) on failure.
-Body load_body(const std::string& spec, std::uint32_t leaf_faces = geom::DefaultTreeParams().leaf_faces);
+Body load_body(const std::string& spec, std::uint32_t leaf_faces = geom::DefaultTreeConfig().leaf_faces);
 
 /// One pose of a pose file, with the contact count and target of its "# contacts N (target T)"
 /// comment (0 when absent).

@@ -57,7 +57,7 @@ double time_collide(const Body& probe, const Body& object, const std::vector<geo
                     const std::vector<std::size_t>& ticks, std::vector<std::vector<geom::FacePair>>* pairs_out) {
   geom::CollideScratch sc;
   geom::CollideResult r;
-  geom::CollideOptions opt;
+  geom::CollideConfig opt;
   opt.sort_pairs = true;
   std::vector<double> us;
   for (std::size_t i : ticks) {
@@ -164,7 +164,7 @@ void add_trade(CLI::App& app) {
   cmd->callback([a] {
     geom::ContactConfig contact = geom::DefaultContactConfig();
     contact.model = geom::parse_contact_model(a->contact).value();
-    const std::uint32_t default_leaf = geom::DefaultTreeParams().leaf_faces;
+    const std::uint32_t default_leaf = geom::DefaultTreeConfig().leaf_faces;
     const Body probe = load_body(a->probe, default_leaf);
     std::vector<std::string> paths;
     {
@@ -192,7 +192,7 @@ void add_trade(CLI::App& app) {
     for (LevelRun& L : lv) {
       geom::CollideScratch sc;
       geom::CollideResult r;
-      geom::CollideOptions opt;
+      geom::CollideConfig opt;
       opt.sort_pairs = true;
       L.pairs.resize(ticks);
       L.objfaces.resize(ticks);

@@ -16,7 +16,7 @@ void add_tree(CLI::App& app) {
   struct Args {
     std::vector<std::string> paths;
     int runs = 3;
-    unsigned leaf = geom::DefaultTreeParams().leaf_faces;
+    unsigned leaf = geom::DefaultTreeConfig().leaf_faces;
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("tree", "Median wall time to build the sphere tree of each mesh (single thread)");

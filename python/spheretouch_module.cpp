@@ -173,7 +173,7 @@ PYBIND11_MODULE(spheretouch, m) {
   m.def(
       "load_mesh",
       [](const std::string& path, const std::string& units, double scale) {
-        geom::LoadOptions o;
+        geom::LoadConfig o;
         o.units = units;
         o.scale = scale;
         return std::make_shared<Mesh>(take(geom::load_mesh(path, o)).mesh);
@@ -183,11 +183,11 @@ PYBIND11_MODULE(spheretouch, m) {
 
   py::class_<SphereTree, std::shared_ptr<SphereTree>>(m, "SphereTree", "Layered boundary spheres over one mesh.")
       .def(py::init([](const Mesh& mesh, std::uint32_t leaf_faces) {
-             TreeParams p = geom::DefaultTreeParams();
+             TreeConfig p = geom::DefaultTreeConfig();
              p.leaf_faces = leaf_faces;
              return std::make_shared<SphereTree>(take(SphereTree::build(mesh, p)));
            }),
-           py::arg("mesh"), py::arg("leaf_faces") = geom::DefaultTreeParams().leaf_faces,
+           py::arg("mesh"), py::arg("leaf_faces") = geom::DefaultTreeConfig().leaf_faces,
            "Builds the tree; every leaf holds at most leaf_faces (1..64) faces.")
       .def_property_readonly("num_nodes", &SphereTree::num_nodes)
       .def_property_readonly("num_leaves", &SphereTree::num_leaves)
@@ -198,7 +198,7 @@ PYBIND11_MODULE(spheretouch, m) {
       .def(py::init([](std::shared_ptr<Mesh> mesh, std::shared_ptr<SphereTree> tree, const Array3d& frame) {
              if (!mesh) throw py::value_error("Body: mesh is None");
              if (!tree) {
-               tree = std::make_shared<SphereTree>(take(SphereTree::build(*mesh, geom::DefaultTreeParams())));
+               tree = std::make_shared<SphereTree>(take(SphereTree::build(*mesh, geom::DefaultTreeConfig())));
              }
              return take(Body::make(std::move(mesh), std::move(tree), to_pose(frame, "frame")));
            }),

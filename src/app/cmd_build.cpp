@@ -6,16 +6,19 @@
 
 #include "app/commands.hpp"
 #include "app/mesh_options.hpp"
-#include "app/tree_cache.hpp"
+#include "engine/tree_cache.hpp"
 #include "geom/tree_io.hpp"
 
 namespace st::app {
 
+using engine::default_tree_cache_dir;
+using engine::tree_cache_path;
+
 void add_build(CLI::App& app) {
   struct Args {
     std::string mesh, out;
-    geom::LoadOptions load;
-    std::uint32_t leaf_faces = geom::DefaultTreeParams().leaf_faces;
+    geom::LoadConfig load;
+    std::uint32_t leaf_faces = geom::DefaultTreeConfig().leaf_faces;
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("build",
@@ -29,7 +32,7 @@ void add_build(CLI::App& app) {
       ->capture_default_str();
   cmd->callback([a] {
     const geom::LoadedMesh lm = load_or_exit(a->mesh, a->load);
-    geom::TreeParams params = geom::DefaultTreeParams();
+    geom::TreeConfig params = geom::DefaultTreeConfig();
     params.leaf_faces = a->leaf_faces;
     const auto t0 = std::chrono::steady_clock::now();
     Result<geom::SphereTree> tree = geom::SphereTree::build(lm.mesh, params);

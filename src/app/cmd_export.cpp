@@ -12,7 +12,7 @@ namespace {
 
 struct ExportArgs {
   std::string in, out;
-  geom::LoadOptions load;
+  geom::LoadConfig load;
   double diagonal_mm = 0;
   int levels = 0;
 };

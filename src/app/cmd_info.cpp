@@ -9,7 +9,7 @@ namespace {
 
 struct InfoArgs {
   std::vector<std::string> paths;
-  geom::LoadOptions load;
+  geom::LoadConfig load;
 };
 
 void print_info(const geom::LoadedMesh& lm) {

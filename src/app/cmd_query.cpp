@@ -7,20 +7,29 @@
 #include <cstdio>
 
 #include "app/commands.hpp"
-#include "app/distributed.hpp"
+#include "engine/distributed.hpp"
 #include "app/mesh_options.hpp"
-#include "app/tree_cache.hpp"
+#include "engine/tree_cache.hpp"
 #include "geom/collide.hpp"
 #include "geom/partition.hpp"
 #include "geom/pose_io.hpp"
 
 namespace st::app {
+
+using engine::CachedTree;
+using engine::ClientCurve;
+using engine::default_tree_cache_dir;
+using engine::Fleet;
+using engine::FleetSpec;
+using engine::load_client_curve;
+using engine::start_fleet;
+using engine::tree_for;
 namespace {
 
 struct QueryArgs {
   std::string probe, object, poses, cache_dir = default_tree_cache_dir();
-  geom::LoadOptions load;
-  std::uint32_t leaf_faces = geom::DefaultTreeParams().leaf_faces;
+  geom::LoadConfig load;
+  std::uint32_t leaf_faces = geom::DefaultTreeConfig().leaf_faces;
   std::uint32_t blocks = 0, layer = 2, block_size = 1;
   int repeat = 1;
   int workers = 0;
@@ -31,7 +40,7 @@ struct QueryArgs {
 };
 
 /// Loads a body's tree through the cache, reporting a rejected cache file on stderr.
-geom::SphereTree tree_or_exit(const geom::Mesh& mesh, const geom::TreeParams& params, const std::string& dir) {
+geom::SphereTree tree_or_exit(const geom::Mesh& mesh, const geom::TreeConfig& params, const std::string& dir) {
   Result<CachedTree> r = tree_for(mesh, params, dir);
   if (!r) {
     std::fprintf(stderr, "spheretouch: %s\n", r.error().c_str());
@@ -55,7 +64,7 @@ void run_query(const QueryArgs& a) {
     std::fprintf(stderr, "spheretouch: %s\n", poses.error().c_str());
     throw CLI::RuntimeError(2);
   }
-  geom::TreeParams params = geom::DefaultTreeParams();
+  geom::TreeConfig params = geom::DefaultTreeConfig();
   params.leaf_faces = a.leaf_faces;
   const std::string cache = a.no_cache ? "" : a.cache_dir;
   const geom::SphereTree ptree = tree_or_exit(probe.mesh, params, cache);
@@ -97,7 +106,7 @@ void run_query(const QueryArgs& a) {
     for (std::uint32_t w = 0; w < a.blocks; ++w) roots.push_back(part.value().worker_roots(w));
   }
 
-  geom::CollideOptions opt = geom::DefaultCollideOptions();
+  geom::CollideConfig opt = geom::DefaultCollideConfig();
   opt.stop_layer = a.approx_layer;
   geom::CollideScratch scratch;
   geom::CollideResult result;

@@ -2,9 +2,10 @@
 // root CLI11 app; a failing command throws CLI::RuntimeError(exit_code) after printing why.
 #pragma once
 #include <CLI/CLI.hpp>
-#include <cstdarg>
 #include <cstdio>
 #include <string>
+
+#include "engine/text.hpp"
 
 namespace st::app {
 
@@ -23,21 +24,6 @@ void add_keygen(CLI::App& app);   ///< spheretouch keygen --out PREFIX (CURVE ke
   throw CLI::RuntimeError(code);
 }
 
-/// Appends printf-style text to `out`, whatever its length; the compiler checks the format
-/// against the arguments.
-[[gnu::format(printf, 2, 3)]] inline void appendf(std::string& out, const char* fmt, ...) {
-  va_list ap, again;
-  va_start(ap, fmt);
-  va_copy(again, ap);
-  const int n = std::vsnprintf(nullptr, 0, fmt, ap);
-  va_end(ap);
-  if (n > 0) {
-    const std::size_t at = out.size();
-    out.resize(at + std::size_t(n) + 1);
-    std::vsnprintf(out.data() + at, std::size_t(n) + 1, fmt, again);
-    out.resize(at + std::size_t(n));
-  }
-  va_end(again);
-}
+using engine::appendf;  ///< printf-style append (engine/text.hpp)
 
 }  // namespace st::app

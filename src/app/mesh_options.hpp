@@ -7,7 +7,7 @@
 namespace st::app {
 
 /// Adds --units and --scale to `cmd`, writing into `opts`.
-inline void add_load_options(CLI::App* cmd, geom::LoadOptions& opts) {
+inline void add_load_options(CLI::App* cmd, geom::LoadConfig& opts) {
   cmd->add_option("--units", opts.units, "unit of the file's coordinates: um, mm, cm, m, in (converted to mm)")
       ->capture_default_str();
   cmd->add_option("--scale", opts.scale, "extra scale factor applied after the unit conversion")
@@ -16,7 +16,7 @@ inline void add_load_options(CLI::App* cmd, geom::LoadOptions& opts) {
 }
 
 /// Loads a mesh or prints the error and throws CLI::RuntimeError(2).
-inline geom::LoadedMesh load_or_exit(const std::string& path, const geom::LoadOptions& opts) {
+inline geom::LoadedMesh load_or_exit(const std::string& path, const geom::LoadConfig& opts) {
   Result<geom::LoadedMesh> r = geom::load_mesh(path, opts);
   if (!r) {
     std::fprintf(stderr, "spheretouch: %s\n", r.error().c_str());

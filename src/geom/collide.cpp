@@ -295,7 +295,7 @@ struct CollideQuery {
   const SphereTree& PT;
   const Mesh& O;
   const SphereTree& OT;
-  const CollideOptions& opt;
+  const CollideConfig& opt;
   CollideScratch& sc;
   CollideResult& res;
   RelTransform rt;
@@ -519,7 +519,7 @@ FaceCounts count_faces(std::span<const FacePair> pairs, std::vector<std::uint32_
 }
 
 void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree,
-             const Pose& pose, const CollideOptions& options, CollideScratch& scratch, CollideResult& result) {
+             const Pose& pose, const CollideConfig& options, CollideScratch& scratch, CollideResult& result) {
   result.clear();
   if (probe_tree.nodes.empty() || object_tree.nodes.empty()) return;
   if (!pose.matrix().allFinite()) return;  // boundaries validate poses; never crash here

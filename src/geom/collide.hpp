@@ -51,12 +51,12 @@ struct FaceCounts {
 /// Counts the pairs' distinct faces (any order; `scratch` is reused, no allocation once warm).
 FaceCounts count_faces(std::span<const FacePair> pairs, std::vector<std::uint32_t>& scratch);
 
-/// Approximate-mode stop layers (CollideOptions::stop_layer).
+/// Approximate-mode stop layers (CollideConfig::stop_layer).
 inline constexpr int kExact = -2;        ///< full exact descent (default)
 inline constexpr int kLeafSpheres = -1;  ///< stop at leaf spheres, no triangle tests
 
 /// What a query does.
-struct CollideOptions {
+struct CollideConfig {
   /// kExact: triangle tests. kLeafSpheres or a layer K >= 0: stop where both nodes are at layer K
   /// (or leaves) and report every face pair of the overlapping sphere pair (a superset of exact).
   int stop_layer = kExact;
@@ -71,7 +71,7 @@ struct CollideOptions {
   /// hostile block set (every face on top of every other) must not compute N² pairs first.
   std::size_t max_pairs = SIZE_MAX;
 };
-inline CollideOptions DefaultCollideOptions() { return {}; }  ///< exact, unsorted, whole object
+inline CollideConfig DefaultCollideConfig() { return {}; }  ///< exact, unsorted, whole object
 
 /// Counters of one query (Box2D-style, for tests and benchmarks).
 struct CollideStats {
@@ -81,7 +81,7 @@ struct CollideStats {
   std::uint64_t sphere_pairs = 0;  ///< approximate mode: overlapping sphere pairs reported
   /// traversals stopped: a tree deeper than its num_depths (or > kMaxTreeDepth); 0 for valid trees
   std::uint64_t truncated = 0;
-  bool pair_limit_hit = false;  ///< the traversal stopped at CollideOptions::max_pairs
+  bool pair_limit_hit = false;  ///< the traversal stopped at CollideConfig::max_pairs
 };
 
 /// Output of a query; caller-owned, reused across queries (clear() keeps capacity).
@@ -111,8 +111,8 @@ class CollideScratch {
 
  private:
   friend struct CollideQuery;
-  friend void collide(const Mesh&, const SphereTree&, const Mesh&, const SphereTree&, const Pose&,
-                      const CollideOptions&, CollideScratch&, CollideResult&);
+  friend void collide(const Mesh&, const SphereTree&, const Mesh&, const SphereTree&, const Pose&, const CollideConfig&,
+                      CollideScratch&, CollideResult&);
   std::uint32_t gen_ = 0;
   // Probe leaves as little meshes, so a query transforms a leaf's vertices in one sequential pass
   // (derived from the probe tree once, keyed by pkey_/phash_):
@@ -145,6 +145,6 @@ class CollideScratch {
 /// set is exactly {(p, o) : tri_tri_overlap(apply(rt, probe p's vertices), object o's vertices)}
 /// (restricted to object_roots if given). Never throws; allocates only while warming up.
 void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree,
-             const Pose& pose, const CollideOptions& options, CollideScratch& scratch, CollideResult& result);
+             const Pose& pose, const CollideConfig& options, CollideScratch& scratch, CollideResult& result);
 
 }  // namespace st::geom

@@ -105,7 +105,7 @@ Result<LoadedMesh> parse_mesh(std::string_view bytes, const std::string& ext, co
   return fail(name, ": parse_mesh reads .off, .obj, .ply and .stl, not '", ext, "'");
 }
 
-Result<LoadedMesh> load_mesh(const std::string& path, const LoadOptions& options) {
+Result<LoadedMesh> load_mesh(const std::string& path, const LoadConfig& options) {
   const auto t0 = std::chrono::steady_clock::now();
   Result<double> unit = unit_to_mm(options.units);
   if (!unit) return fail(path, ": ", unit.error());

@@ -13,7 +13,7 @@
 namespace st::geom {
 
 /// How a file is turned into a Mesh.
-struct LoadOptions {
+struct LoadConfig {
   double scale = 1.0;        ///< extra factor applied after the unit conversion
   std::string units = "mm";  ///< unit of the file's coordinates: um, mm, cm, m, in
   // Formats read by assimp (glTF, FBX, ...) are read in a child process, confined and budgeted:
@@ -54,7 +54,7 @@ Result<double> unit_to_mm(std::string_view units);
 
 /// Reads any supported mesh file. Face i of the result is the i-th triangle of the file,
 /// polygons fan-triangulated in order: (v0, v1, v2), (v0, v2, v3), ...
-Result<LoadedMesh> load_mesh(const std::string& path, const LoadOptions& options = {});
+Result<LoadedMesh> load_mesh(const std::string& path, const LoadConfig& options = {});
 
 /// Parses OFF / OBJ / PLY already in memory; `name` is used in messages.
 Result<LoadedMesh> parse_off(std::string_view text, const std::string& name);

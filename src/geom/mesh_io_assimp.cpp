@@ -83,7 +83,7 @@ AssimpOut read_with_assimp(const std::string& path, bool allow_external) {
     if (!io->refused.empty())
       out.error += st::fail(" (it refers to '", io->refused, "': files other than the mesh are not opened",
                             allow_external ? " outside its directory"
-                                           : "; LoadOptions::allow_external_files opens those in its directory",
+                                           : "; LoadConfig::allow_external_files opens those in its directory",
                             ")")
                        .message;
     return out;
@@ -170,7 +170,7 @@ bool read_all(int fd, void* data, std::size_t n) {
   return true;
 }
 
-[[noreturn]] void importer_child(int fd, const std::string& path, const LoadOptions& o, std::uint64_t budget) {
+[[noreturn]] void importer_child(int fd, const std::string& path, const LoadConfig& o, std::uint64_t budget) {
   // Memory: the address space this process has now, plus the budget; CPU time: the limit.
   std::uint64_t vm_pages = 0;
   if (std::FILE* f = std::fopen("/proc/self/statm", "r")) {
@@ -209,7 +209,7 @@ bool read_all(int fd, void* data, std::size_t n) {
 
 /// Reads `path` with assimp in a child process with a memory and CPU budget: a file that makes
 /// assimp allocate gigabytes, loop or crash costs the child, never this process.
-Result<LoadedMesh> detail::load_with_assimp(const std::string& path, const LoadOptions& o) {
+Result<LoadedMesh> detail::load_with_assimp(const std::string& path, const LoadConfig& o) {
   static_assert(sizeof(Tri) == 12);
   std::error_code ec;
   const std::uint64_t file_bytes = std::filesystem::file_size(path, ec);
@@ -275,7 +275,7 @@ Result<LoadedMesh> detail::load_with_assimp(const std::string& path, const LoadO
     const int sig = WTERMSIG(ws);
     if (sig == SIGXCPU || sig == SIGKILL)
       return fail(path, ": assimp took more than ", o.assimp_cpu_seconds,
-                  " s of CPU reading it (LoadOptions::assimp_cpu_seconds)");
+                  " s of CPU reading it (LoadConfig::assimp_cpu_seconds)");
     if (sig == SIGABRT)  // assimp's own abort, or a sanitizer build's allocator refusing past the budget
       return fail(path, ": assimp aborted reading it (signal ", sig, ", ", strsignal(sig),
                   "): the file is malformed or "
@@ -293,7 +293,7 @@ Result<LoadedMesh> detail::load_with_assimp(const std::string& path, const LoadO
   }
   if (result.error().find("out of memory") != std::string::npos || result.error().find("bad_alloc") != std::string::npos)
     return fail(path, ": assimp needed more than its budget of ", budget >> 20, " MiB reading a ", file_bytes,
-                "-byte file (LoadOptions::assimp_memory_floor_mb + assimp_memory_per_byte x input bytes): refused");
+                "-byte file (LoadConfig::assimp_memory_floor_mb + assimp_memory_per_byte x input bytes): refused");
   return result;
 }
 

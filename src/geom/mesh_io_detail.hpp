@@ -109,6 +109,6 @@ class Welder {
 /// True when assimp has an importer for this extension (".gltf").
 bool assimp_reads(const std::string& ext);
 /// Reads `path` with assimp in a confined, budgeted child process (mesh_io_assimp.cpp).
-Result<LoadedMesh> load_with_assimp(const std::string& path, const LoadOptions& o);
+Result<LoadedMesh> load_with_assimp(const std::string& path, const LoadConfig& o);
 
 }  // namespace st::geom::detail

@@ -22,7 +22,7 @@ struct Partition {
   }
   std::uint32_t owner(std::uint32_t block) const { return block % workers; }  ///< worker of a block
   std::span<const std::uint32_t> block(std::uint32_t k) const;                ///< node indices of block k
-  /// Subtree roots of worker w (its blocks' nodes, in block order): CollideOptions::object_roots.
+  /// Subtree roots of worker w (its blocks' nodes, in block order): CollideConfig::object_roots.
   std::vector<std::uint32_t> worker_roots(std::uint32_t w) const;
 };
 

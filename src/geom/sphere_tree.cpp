@@ -210,7 +210,7 @@ void min_sphere(std::vector<Vec3>& pts, Vec3& centre, double& radius) {
   radius = std::sqrt(m2);
 }
 
-std::uint64_t tree_hash(const Mesh& mesh, const TreeParams& params) {
+std::uint64_t tree_hash(const Mesh& mesh, const TreeConfig& params) {
   // Word-wise multiply-rotate hash (not cryptographic; detects a stale cache file).
   std::uint64_t h = 0x9e3779b97f4a7c15ull ^ (mesh.local.size() * 0x100000001b3ull) ^ (mesh.faces.size() << 32);
   auto mix = [&h](std::uint64_t w) {
@@ -240,7 +240,7 @@ std::uint64_t tree_hash(const Mesh& mesh, const TreeParams& params) {
   return h;
 }
 
-Result<SphereTree> SphereTree::build(const Mesh& mesh, const TreeParams& params) {
+Result<SphereTree> SphereTree::build(const Mesh& mesh, const TreeConfig& params) {
   if (params.leaf_faces < 1 || params.leaf_faces > kMaxLeafFaces)
     return fail(mesh.name, ": leaf_faces = ", params.leaf_faces, " out of range [1, ", kMaxLeafFaces, "]");
   if (mesh.faces.empty()) return fail(mesh.name, ": no faces to build a sphere tree over");

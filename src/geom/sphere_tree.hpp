@@ -10,7 +10,7 @@
 namespace st::geom {
 
 /// How a SphereTree is built. Part of the tree file's hash (tree_io.hpp).
-struct TreeParams {
+struct TreeConfig {
   /// Upper bound on faces per leaf; leaves hold floor(F/M) or ceil(F/M) faces, M = ceil(F/leaf_faces),
   /// so every leaf is in (leaf_faces/2, leaf_faces] once F >= leaf_faces. Default 24: since collide()
   /// filters a leaf pair's faces with 8-wide box masks, exact queries of hand_L2 x elephant at
@@ -18,7 +18,7 @@ struct TreeParams {
   /// leaf spheres (approximate mode) the smallest of those (perf/RESULTS.md, "Collision core").
   std::uint32_t leaf_faces = 24;
 };
-inline TreeParams DefaultTreeParams() { return {}; }  ///< Box2D-style default config
+inline TreeConfig DefaultTreeConfig() { return {}; }  ///< Box2D-style default config
 inline constexpr std::uint32_t kMaxLeafFaces = 64;    ///< collide() keeps a leaf's faces in 64-bit masks
 inline constexpr int kMaxChildren = 8;                ///< octree: up to 8 children per node
 /// Deepest tree a file may hold: build() splits each node's leaves in up to 8 equal groups, so
@@ -61,7 +61,7 @@ struct FaceBox {
 /// contiguous, and all descendants of a node are the contiguous range [first, desc_end), so a
 /// subtree is {node} + one node range + one face_order range (easy to extract and ship).
 struct SphereTree {
-  TreeParams params;                      ///< what it was built with
+  TreeConfig params;                      ///< what it was built with
   std::uint64_t mesh_hash = 0;            ///< hash of the mesh's vertices, faces and params (tree_io.hpp)
   std::uint32_t num_vertices = 0;         ///< vertex count of the mesh it was built for
   std::uint32_t num_depths = 0;           ///< number of layers (max depth + 1)
@@ -71,7 +71,7 @@ struct SphereTree {
   std::vector<FaceBox> face_boxes;        ///< per slot of face_order: outward-rounded face AABB
 
   /// Builds the tree (single thread). Fails on an empty or invalid mesh or leaf_faces out of [1, 64].
-  static Result<SphereTree> build(const Mesh& mesh, const TreeParams& params = DefaultTreeParams());
+  static Result<SphereTree> build(const Mesh& mesh, const TreeConfig& params = DefaultTreeConfig());
 
   std::uint32_t num_faces() const { return static_cast<std::uint32_t>(face_order.size()); }  ///< faces covered
   std::uint32_t num_nodes() const { return static_cast<std::uint32_t>(nodes.size()); }       ///< nodes
@@ -88,7 +88,7 @@ struct SphereTree {
 };
 
 /// 64-bit hash of the mesh's vertex bytes (local + origin), faces and the build parameters.
-std::uint64_t tree_hash(const Mesh& mesh, const TreeParams& params);
+std::uint64_t tree_hash(const Mesh& mesh, const TreeConfig& params);
 
 /// Minimal enclosing sphere of points (Welzl's algorithm, move-to-front variant, Gärtner 1999),
 /// radius then enlarged to the largest computed distance so it encloses every point. Reorders pts.

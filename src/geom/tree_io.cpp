@@ -239,7 +239,7 @@ SphereTree payload_of(const Header& h, std::span<const std::uint8_t> bytes) {
 }  // namespace
 
 Result<SphereTree> parse_tree(std::span<const std::uint8_t> bytes, const std::string& path, const Mesh& mesh,
-                              const TreeParams& params) {
+                              const TreeConfig& params) {
   Header h{};
   if (bytes.size() < sizeof h)
     return fail(path, ": corrupt: file of ", bytes.size(), " bytes is shorter than the 64-byte header");
@@ -260,7 +260,7 @@ Result<SphereTree> parse_tree(std::span<const std::uint8_t> bytes, const std::st
   return t;
 }
 
-Result<SphereTree> read_tree(const std::string& path, const Mesh& mesh, const TreeParams& params) {
+Result<SphereTree> read_tree(const std::string& path, const Mesh& mesh, const TreeConfig& params) {
   std::ifstream in(path, std::ios::binary | std::ios::ate);
   if (!in) return fail(path, ": cannot open");
   const auto file_size = static_cast<std::uint64_t>(in.tellg());
@@ -277,7 +277,7 @@ Result<SphereTree> read_tree(const std::string& path, const Mesh& mesh, const Tr
   return parse_tree(all, path, mesh, params);
 }
 
-void seal_tree_bytes(std::vector<std::uint8_t>& bytes, const Mesh& mesh, const TreeParams& params) {
+void seal_tree_bytes(std::vector<std::uint8_t>& bytes, const Mesh& mesh, const TreeConfig& params) {
   Header h{};
   if (bytes.size() < sizeof h) return;
   std::memcpy(&h, bytes.data(), sizeof h);

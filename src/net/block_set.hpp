@@ -19,7 +19,7 @@ namespace st::net {
 
 /// One worker's share of the work, as geometry.
 struct BlockSet {
-  std::uint32_t leaf_faces = geom::DefaultTreeParams().leaf_faces;  ///< sphere-tree leaf size the worker builds with
+  std::uint32_t leaf_faces = geom::DefaultTreeConfig().leaf_faces;  ///< sphere-tree leaf size the worker builds with
   std::uint32_t object_faces_total = 0;        ///< faces of the whole object (global ids are below it)
   std::uint32_t blocks_total = 0;              ///< blocks in the whole partition
   std::vector<std::uint32_t> blocks;           ///< global block ids held, strictly ascending

@@ -39,7 +39,7 @@ struct Limits {
 };
 
 /// Default limits (sized for multi-million-face meshes; workers may lower max_blockset_bytes).
-inline Limits default_limits() { return Limits{}; }
+inline Limits DefaultLimits() { return Limits{}; }
 
 /// One colliding pair: probe face index and (global) object face index, file order.
 /// The collision core's own pair type; on the wire as {u32 probe, u32 object} little-endian.

@@ -41,10 +41,10 @@ struct ScatterConfig {
   /// good after a protocol error (e.g. an oversized or garbled frame) and never reconnects it.
   std::chrono::milliseconds reconnect_after{1000};
   std::uint32_t chunk_bytes = 256u << 10;  ///< LoadBlocks chunk size (≤ limits.max_chunk_bytes)
-  std::uint32_t leaf_faces = geom::DefaultTreeParams().leaf_faces;  ///< tree parameter sent with every block set
-  int sndhwm = 8;                    ///< per-worker send queue, messages (small: no stale backlog)
-  int rcvhwm = 64;                   ///< per-worker receive queue, messages
-  Limits limits = default_limits();  ///< decode limits for replies
+  std::uint32_t leaf_faces = geom::DefaultTreeConfig().leaf_faces;  ///< tree parameter sent with every block set
+  int sndhwm = 8;                   ///< per-worker send queue, messages (small: no stale backlog)
+  int rcvhwm = 64;                  ///< per-worker receive queue, messages
+  Limits limits = DefaultLimits();  ///< decode limits for replies
   /// Busy-poll for replies this long before blocking in poll(), us: trades CPU on the collision
   /// thread's core for the wake-up latency of an idle core (tens of us on a VM). 0 = never spin.
   std::uint32_t spin_us = 0;

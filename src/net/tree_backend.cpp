@@ -13,7 +13,7 @@ namespace {
 class TreeBackend final : public CollisionBackend {
  public:
   Status load(const BlockSet& set) override {
-    geom::TreeParams params = geom::DefaultTreeParams();
+    geom::TreeConfig params = geom::DefaultTreeConfig();
     params.leaf_faces = std::clamp<std::uint32_t>(set.leaf_faces, 1, geom::kMaxLeafFaces);
     set_ = set;
     Result<geom::SphereTree> pt = geom::SphereTree::build(set_.probe, params);
@@ -35,7 +35,7 @@ class TreeBackend final : public CollisionBackend {
     const auto t0 = std::chrono::steady_clock::now();
     // The share keeps the object's origin and local coordinates bit for bit, so collide()
     // computes the same transformed doubles as a single-process query.
-    geom::CollideOptions opt = geom::DefaultCollideOptions();
+    geom::CollideConfig opt = geom::DefaultCollideConfig();
     opt.max_pairs = max_pairs;
     geom::collide(set_.probe, probe_tree_, set_.object, object_tree_, pose, opt, scratch_, result_);
     out.reserve(out.size() + result_.pairs.size());

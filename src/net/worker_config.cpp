@@ -4,111 +4,40 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
-#include <toml++/toml.h>
 
 #include <cctype>
 #include <cstdlib>
 
+#include "config/toml_reader.hpp"
 #include "net/worker_service.hpp"
 
 namespace st::net {
 
-namespace {
-
-std::string where(const std::string& source, const toml::node& n) {
-  return source + ":" + std::to_string(n.source().begin.line);
-}
-
-template <class T>
-Status get_int(const toml::node& n, const std::string& key, const std::string& source, T lo, T hi, T& out) {
-  auto v = n.value<std::int64_t>();
-  if (!n.is_integer() || !v) return fail(where(source, n), ": ", key, ": expected an integer");
-  if (*v < static_cast<std::int64_t>(lo) || *v > static_cast<std::int64_t>(hi))
-    return fail(where(source, n), ": ", key, ": ", *v, " outside [", lo, ", ", hi, "]");
-  out = static_cast<T>(*v);
-  return Ok{};
-}
-
-Status get_string(const toml::node& n, const std::string& key, const std::string& source, std::string& out) {
-  if (!n.is_string()) return fail(where(source, n), ": ", key, ": expected a string");
-  out = *n.value<std::string>();
-  return Ok{};
-}
-
-}  // namespace
-
 Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::string& source, DaemonConfig c) {
-  toml::table t;
-  try {
-    t = toml::parse(text, source);
-  } catch (const toml::parse_error& e) {
-    return fail(source, ":", e.source().begin.line, ":", e.source().begin.column, ": ", e.description());
-  }
-  for (auto&& [k, node] : t) {
-    const std::string key(k.str());
-    Status s = Ok{};
-    if (key == "bind")
-      s = get_string(node, key, source, c.bind);
-    else if (key == "worker_id")
-      s = get_int<std::uint32_t>(node, key, source, 0, 1u << 20, c.worker_id);
-    else if (key == "log_level")
-      s = get_string(node, key, source, c.log_level);
-    else if (key == "max_sets")
-      s = get_int<std::uint32_t>(node, key, source, 1, 64, c.max_sets);
-    else if (key == "idle_set_s")
-      s = get_int<std::uint32_t>(node, key, source, 0, 86400, c.idle_set_s);
-    else if (key == "max_blockset_mb")
-      s = get_int<std::uint64_t>(node, key, source, 1, 1u << 20, c.max_blockset_mb);
-    else if (key == "ipc_allowed_uids") {
-      const toml::array* a = node.as_array();
-      if (!a) return fail(where(source, node), ": ipc_allowed_uids: expected an array of user ids");
-      c.ipc_allowed_uids.clear();
-      for (const toml::node& u : *a) {
-        std::uint32_t uid = 0;
-        if (Status su = get_int<std::uint32_t>(u, "ipc_allowed_uids", source, 0, 0x7fffffffu, uid); !su)
-          return Error{su.error()};
-        c.ipc_allowed_uids.push_back(uid);
-      }
-    } else if (key == "insecure") {
-      if (!node.is_boolean()) return fail(where(source, node), ": insecure: expected true or false");
-      c.insecure = *node.value<bool>();
-    } else if (key == "curve") {
-      const toml::table* ct = node.as_table();
-      if (!ct) return fail(where(source, node), ": curve: expected a table [curve]");
-      for (auto&& [ck, cn] : *ct) {
-        const std::string ckey = "curve." + std::string(ck.str());
-        if (ckey == "curve.secret_key_file")
-          s = get_string(cn, ckey, source, c.curve_secret_key_file);
-        else if (ckey == "curve.allowed_clients") {
-          const toml::array* a = cn.as_array();
-          if (!a) return fail(where(source, cn), ": ", ckey, ": expected an array of Z85 public keys");
-          c.curve_allowed_clients.clear();
-          for (const toml::node& e : *a) {
-            if (!e.is_string() || e.value<std::string>()->size() != 40)
-              return fail(where(source, e), ": ", ckey, ": expected 40-character Z85 public keys");
-            c.curve_allowed_clients.push_back(*e.value<std::string>());
-          }
-        } else if (ckey == "curve.allowed_clients_files") {
-          const toml::array* a = cn.as_array();
-          if (!a) return fail(where(source, cn), ": ", ckey, ": expected an array of public key file paths");
-          c.curve_allowed_clients_files.clear();
-          for (const toml::node& e : *a) {
-            if (!e.is_string() || e.value<std::string>()->empty())
-              return fail(where(source, e), ": ", ckey, ": expected public key file paths (PREFIX.pub)");
-            c.curve_allowed_clients_files.push_back(*e.value<std::string>());
-          }
-        } else
-          return fail(where(source, cn), ": unknown key '", ckey,
-                      "' (known: secret_key_file, allowed_clients, allowed_clients_files)");
-        if (!s) return Error{s.error()};
-      }
-    } else {
-      return fail(where(source, node), ": unknown key '", key,
-                  "' (known: bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb, "
-                  "ipc_allowed_uids, [curve])");
-    }
-    if (!s) return Error{s.error()};
-  }
+  Result<toml::table> parsed = config::parse_toml(text, source);
+  if (!parsed) return Error{parsed.error()};
+  const toml::table& t = parsed.value();
+  config::TomlReader r(&t, "", source);
+  r.string("bind", c.bind);
+  r.integer("worker_id", c.worker_id, 0, 1 << 20);
+  r.string("log_level", c.log_level);
+  r.boolean("insecure", c.insecure);
+  r.integer("max_sets", c.max_sets, 1, 64);
+  r.integer("idle_set_s", c.idle_set_s, 0, 86400);
+  r.integer("max_blockset_mb", c.max_blockset_mb, 1, 1 << 20);
+  r.integers("ipc_allowed_uids", c.ipc_allowed_uids, 0, 0x7fffffff);
+  const toml::table* curve = r.table("curve");
+  if (Status s = r.finish(); !s) return Error{s.error()};
+
+  config::TomlReader cr(curve, "curve", source);
+  cr.string("secret_key_file", c.curve_secret_key_file);
+  cr.strings("allowed_clients", c.curve_allowed_clients);
+  for (const std::string& k : c.curve_allowed_clients)
+    if (k.size() != 40) cr.error("allowed_clients", "expected 40-character Z85 public keys (found '" + k + "')");
+  cr.strings("allowed_clients_files", c.curve_allowed_clients_files);
+  for (const std::string& f : c.curve_allowed_clients_files)
+    if (f.empty()) cr.error("allowed_clients_files", "expected public key file paths (PREFIX.pub), found ''");
+  if (Status s = cr.finish(); !s) return Error{s.error()};
   return c;
 }
 

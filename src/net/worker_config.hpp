@@ -28,7 +28,7 @@ struct DaemonConfig {
 };
 
 /// Default configuration (loopback, worker 0).
-inline DaemonConfig default_daemon_config() { return DaemonConfig{}; }
+inline DaemonConfig DefaultDaemonConfig() { return DaemonConfig{}; }
 
 /// Parses TOML text over `base`; unknown keys and wrong types are errors naming the key and line.
 Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::string& source, DaemonConfig base = {});

@@ -53,7 +53,7 @@ struct WorkerConfig {
   /// (kBuildMemoryFactor × its size at the peak); max_upload_bytes of uploads in progress or
   /// waiting for the loader; and, queued inside libzmq, at most rcvhwm frames of at most
   /// max_chunk_bytes per connection, max_connections connections.
-  Limits limits = default_limits();
+  Limits limits = DefaultLimits();
   /// Uploads in progress or waiting for the loader, over all clients; a client over the limit is
   /// told TooLarge ("busy") and may retry.
   std::uint32_t max_uploads = 4;

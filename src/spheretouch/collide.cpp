@@ -6,7 +6,7 @@
 
 namespace st {
 
-Result<Body> Body::make(Mesh mesh, const TreeParams& params, const Pose& frame) {
+Result<Body> Body::make(Mesh mesh, const TreeConfig& params, const Pose& frame) {
   if (Status s = mesh.validate(); !s.ok()) return fail(mesh.name, ": ", s.error());
   Result<SphereTree> tree = SphereTree::build(mesh, params);
   if (!tree.ok()) return fail(mesh.name, ": ", tree.error());
@@ -58,7 +58,7 @@ void run(const Body& probe, const Body& object, const Pose& relative, const Coll
     result.bad_request = true;
     return;
   }
-  geom::CollideOptions options = geom::DefaultCollideOptions();
+  geom::CollideConfig options = geom::DefaultCollideConfig();
   options.stop_layer = request.approximate_layer;
   // geom::collide stops once more than options.max_pairs are found: stop at the first max_pairs.
   options.max_pairs = request.max_pairs == SIZE_MAX ? SIZE_MAX : request.max_pairs - 1;
@@ -72,8 +72,8 @@ void run(const Body& probe, const Body& object, const Pose& relative, const Coll
     if (result.pairs.size() > request.max_pairs) {
       // The traversal finishes the leaf pair it was in: keep the first max_pairs and recount.
       result.pairs.resize(request.max_pairs);
-      std::vector<std::uint32_t> scratch;
-      const geom::FaceCounts counts = geom::count_faces(result.pairs, scratch);
+      std::vector<std::uint32_t> ids;
+      const geom::FaceCounts counts = geom::count_faces(result.pairs, ids);
       result.probe_faces = counts.probe_faces;
       result.object_faces = counts.object_faces;
     }

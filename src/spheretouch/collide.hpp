@@ -33,7 +33,7 @@ using geom::FacePair;
 using geom::Mesh;
 using geom::Pose;
 using geom::SphereTree;
-using geom::TreeParams;
+using geom::TreeConfig;
 using geom::Vec3;
 
 /// A collidable body: a mesh, the sphere tree built for it, and its frame (object or probe frame
@@ -41,7 +41,7 @@ using geom::Vec3;
 class Body {
  public:
   /// Validates the mesh and builds its tree. The error names the bad face or vertex.
-  static Result<Body> make(Mesh mesh, const TreeParams& params = geom::DefaultTreeParams(),
+  static Result<Body> make(Mesh mesh, const TreeConfig& params = geom::DefaultTreeConfig(),
                            const Pose& frame = Pose::Identity());
   /// A body from a mesh and a tree already built (or read from a file) for it. The error says
   /// when the tree was built for another mesh or with other parameters (its hash differs).

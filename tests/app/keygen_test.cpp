@@ -1,5 +1,5 @@
 // Tests `spheretouch keygen` (src/app/cmd_keygen.cpp) and the client side of CURVE in the app
-// (src/app/distributed.*, query/run --server-key/--client-key, scene [workers] keys) with real
+// (src/engine/distributed.*, query/run --server-key/--client-key, scene [workers] keys) with real
 // processes: a spheretouch-worker daemon with a CURVE config on a free tcp loopback port.
 #include <sys/stat.h>
 

@@ -32,7 +32,7 @@ std::string expected_output(const Fixture& f) {
   std::ostringstream out;
   geom::CollideScratch scratch;
   geom::CollideResult r;
-  geom::CollideOptions opt = geom::DefaultCollideOptions();
+  geom::CollideConfig opt = geom::DefaultCollideConfig();
   opt.sort_pairs = true;
   const auto poses = geom::read_poses(f.poses).value();
   for (std::size_t i = 0; i < poses.size(); ++i) {

@@ -8,7 +8,7 @@
 #include <sstream>
 
 #include "app/commands.hpp"
-#include "app/scene.hpp"
+#include "engine/scene.hpp"
 #include "app/process_util.hpp"
 #include "test_util.hpp"
 
@@ -188,15 +188,15 @@ TEST_CASE("run: a short scene ticks at its rate, presses with force, releases to
     if (line.rfind("element vertex ", 0) == 0) nv = std::stoul(line.substr(15));
     if (line.rfind("element face ", 0) == 0) nf = std::stoul(line.substr(13));
   }
-  st::app::BodySpec ball, finger;
+  st::engine::BodySpec ball, finger;
   ball.builtin = "icosphere";
   ball.radius_mm = 40;
   ball.frequency = 20;
   finger.builtin = "capsule";
   finger.radius_mm = 6;
   finger.length_mm = 30;
-  const st::geom::Mesh ball_mesh = st::app::load_body(ball, "object").value();
-  const st::geom::Mesh finger_mesh = st::app::load_body(finger, "probe").value();
+  const st::geom::Mesh ball_mesh = st::engine::load_body(ball, "object").value();
+  const st::geom::Mesh finger_mesh = st::engine::load_body(finger, "probe").value();
   CHECK(nf == ball_mesh.num_faces() + finger_mesh.num_faces());
   CHECK(nv == ball_mesh.num_vertices() + finger_mesh.num_vertices());
   std::size_t vlines = 0, flines = 0;
@@ -282,8 +282,8 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\npeak_n = -1\n",
        "force.peak_n: expected a value in"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[haptic]\nrate = 1000\n",
-       "haptic.rate: unknown key"},
-      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[telepathy]\n", "telepathy: unknown key"},
+       "unknown key 'haptic.rate' (known in [haptic]:"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[telepathy]\n", "unknown key 'telepathy'"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nmesh = \"nowhere.off\"\n", "object.mesh: file"},
       {"[probe]\nbuiltin = \"sphere\"\n[object]\nbuiltin = \"box\"\n",
        "probe.builtin: expected one of icosphere, box, capsule"},
@@ -308,7 +308,7 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
        "passivity.colgate_margin"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[passivity]\nenabled = 1\n", "passivity.enabled"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[passivity]\ndamping = 1\n",
-       "passivity.damping: unknown key"},
+       "unknown key 'passivity.damping'"},
       {"[probe]\nbuiltin = \"capsule\"\nmesh = \"a.off\"\n[object]\nbuiltin = \"box\"\n", "probe.mesh"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nserver_key = \"/nowhere/fleet.pub\"\n",
        "workers.client_key: server_key is set but client_key is not"},
@@ -328,7 +328,7 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
   for (const auto& item : cases) {
     const auto& text = item.first;  // not a structured binding: INFO captures it (clang < 16)
     const auto& want = item.second;
-    auto r = st::app::parse_scene(text, "bad.toml", ".");
+    auto r = st::engine::parse_scene(text, "bad.toml", ".");
     INFO(text);
     REQUIRE_FALSE(r.ok());
     INFO(r.error());
@@ -355,7 +355,7 @@ TEST_CASE("scene files: a path the system cannot look up is an error, not an exc
        "device.script: trajectory cannot look up"},
   };
   for (const auto& [text, want] : cases) {
-    st::Result<st::app::Scene> r = st::app::parse_scene(text, "long.toml", ".");
+    st::Result<st::engine::Scene> r = st::engine::parse_scene(text, "long.toml", ".");
     REQUIRE_FALSE(r.ok());
     INFO(r.error());
     CHECK(contains(r.error(), want));
@@ -365,13 +365,13 @@ TEST_CASE("scene files: a path the system cannot look up is an error, not an exc
 
 TEST_CASE("scene files: configs/demo.toml and configs/small.toml parse, with the documented values") {
   const std::string root = std::getenv("ST_SOURCE_ROOT") ? std::getenv("ST_SOURCE_ROOT") : ".";
-  auto demo = st::app::load_scene(root + "/configs/demo.toml");
+  auto demo = st::engine::load_scene(root + "/configs/demo.toml");
   REQUIRE_MESSAGE(demo.ok(), demo.error());
   CHECK(demo.value().haptic.rate_hz == 1000.0);
   CHECK(demo.value().law.a == 3.0);
   CHECK(demo.value().law.b_N == 0.8);
   CHECK(demo.value().saturation.peak_N == 3.3);
-  CHECK(demo.value().tree.leaf_faces == st::geom::DefaultTreeParams().leaf_faces);
+  CHECK(demo.value().tree.leaf_faces == st::geom::DefaultTreeConfig().leaf_faces);
   // The documented contact and passivity values are the defaults.
   CHECK(demo.value().contact.model == st::geom::DefaultContactConfig().model);
   CHECK(demo.value().contact.hold_margin_mm == st::geom::DefaultContactConfig().hold_margin_mm);
@@ -379,14 +379,14 @@ TEST_CASE("scene files: configs/demo.toml and configs/small.toml parse, with the
   CHECK(demo.value().passivity.enabled == st::rt::DefaultPassivityConfig().enabled);
   CHECK(demo.value().passivity.colgate_margin == st::rt::DefaultPassivityConfig().colgate_margin);
   CHECK(demo.value().passivity.max_damping_N_s_per_mm == st::rt::DefaultPassivityConfig().max_damping_N_s_per_mm);
-  auto paper = st::app::parse_scene(
+  auto paper = st::engine::parse_scene(
       "[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[contact]\nmodel = \"paper\"\n"
       "[passivity]\nenabled = false\n",
       "paper.toml", ".");
   REQUIRE_MESSAGE(paper.ok(), paper.error());
   CHECK(paper.value().contact.model == st::geom::ContactModelKind::paper);
   CHECK_FALSE(paper.value().passivity.enabled);
-  auto small = st::app::load_scene(root + "/configs/small.toml");
+  auto small = st::engine::load_scene(root + "/configs/small.toml");
   REQUIRE_MESSAGE(small.ok(), small.error());
   CHECK(small.value().object.builtin == "icosphere");
 }

@@ -1,4 +1,4 @@
-// Tests src/app/servo_process.* through `spheretouch run --split`: the servo as its own process
+// Tests src/engine/servo_process.* and src/app/cmd_servo.cpp through `spheretouch run --split`: the servo as its own process
 // produces the outputs of a normal run; with the collision process SIGKILLed mid-press it ticks
 // on to its duration, its force fades to exactly zero, and it says the collision side died.
 // Counts and states only, never wall-clock precision.
@@ -8,7 +8,7 @@
 #include <cerrno>
 #include <cmath>
 
-#include "app/servo_process.hpp"
+#include "engine/servo_process.hpp"
 #include "process_util.hpp"
 
 using namespace st::test;
@@ -79,7 +79,7 @@ TEST_CASE(
   }
   CHECK(contact > 0);
   CHECK(press_max > 0.1);
-  auto res = st::app::read_servo_results(out + "/servo.txt");
+  auto res = st::engine::read_servo_results(out + "/servo.txt");
   REQUIRE_MESSAGE(res.ok(), res.error());
   CHECK(res.value().ticks == rows.size());
   CHECK(res.value().collision_died == 0);
@@ -122,7 +122,7 @@ TEST_CASE(
   CHECK(contains(output, "summary (servo process only: the collision process died)"));
   CHECK_FALSE(shm_exists(name));  // the survivor removed the orphaned name
 
-  auto res = st::app::read_servo_results(out + "/servo.txt");
+  auto res = st::engine::read_servo_results(out + "/servo.txt");
   REQUIRE_MESSAGE(res.ok(), res.error());
   CHECK(res.value().collision_died == 1);
   CHECK(res.value().silences >= 1);
@@ -156,7 +156,7 @@ TEST_CASE(
 }
 
 TEST_CASE("SilenceWatch: reports a silent collision side once the force has faded, and its return") {
-  st::app::SilenceWatch w(200'000'000);
+  st::engine::SilenceWatch w(200'000'000);
   st::rt::ServoStatus st;
   CHECK(w.poll(st, 1'000'000'000).empty());  // no model yet: nothing to report
   st.model_seq = 5;

@@ -8,7 +8,7 @@
 #include <cstdlib>
 #include <string>
 
-#include "app/scene.hpp"
+#include "engine/scene.hpp"
 #include "fuzz_check.hpp"
 
 #ifndef ST_FUZZ_SCENE_DIR
@@ -17,7 +17,7 @@
 
 namespace {
 
-void check_body(const st::app::BodySpec& b) {
+void check_body(const st::engine::BodySpec& b) {
   ST_FUZZ_CHECK(b.mesh.empty() != b.builtin.empty(), "a body is a mesh or a builtin shape");
   ST_FUZZ_CHECK(std::isfinite(b.radius_mm) && b.radius_mm > 0, "radius");
   ST_FUZZ_CHECK(std::isfinite(b.length_mm) && b.length_mm >= 0, "length");
@@ -35,12 +35,12 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string text(reinterpret_cast<const char*>(data), size);
-  st::Result<st::app::Scene> r = st::app::parse_scene(text, "fuzz.toml", ST_FUZZ_SCENE_DIR);
+  st::Result<st::engine::Scene> r = st::engine::parse_scene(text, "fuzz.toml", ST_FUZZ_SCENE_DIR);
   if (!r) {
     ST_FUZZ_CHECK(!r.error().empty(), "a refusal says why");
     return 0;
   }
-  const st::app::Scene& s = r.value();
+  const st::engine::Scene& s = r.value();
   check_body(s.probe);
   check_body(s.object);
   ST_FUZZ_CHECK(s.probe_tip.allFinite() && s.probe_rotation_deg.allFinite(), "probe tip and rotation finite");

@@ -186,7 +186,7 @@ void worker_seeds(const fs::path& dir) {
 // fuzz_tree: the tree file of the harness's fixture (icosphere 10 mm, 2 subdivisions, 4 faces a leaf).
 void tree_seeds(const fs::path& dir) {
   const geom::Mesh object = geom::make_icosphere(10.0, 2);
-  geom::TreeParams params = geom::DefaultTreeParams();
+  geom::TreeConfig params = geom::DefaultTreeConfig();
   params.leaf_faces = 4;
   fs::create_directories(dir);
   if (Status s = geom::write_tree(geom::SphereTree::build(object, params).value(), (dir / "seed_icosphere.tree").string());

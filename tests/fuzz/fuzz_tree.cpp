@@ -23,8 +23,8 @@ using namespace st::geom;
 struct Fixture {
   Mesh object = make_icosphere(10.0, 2);  // 320 faces
   Mesh probe = make_box(Vec3(6, 6, 6));
-  TreeParams params = [] {
-    TreeParams p = DefaultTreeParams();
+  TreeConfig params = [] {
+    TreeConfig p = DefaultTreeConfig();
     p.leaf_faces = 4;  // several levels over 320 faces
     return p;
   }();
@@ -56,7 +56,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   CollideScratch scratch;
   CollideResult result;
   for (const Pose& pose : fx.poses) {
-    collide(fx.probe, fx.probe_tree, fx.object, t.value(), pose, DefaultCollideOptions(), scratch, result);
+    collide(fx.probe, fx.probe_tree, fx.object, t.value(), pose, DefaultCollideConfig(), scratch, result);
     std::vector<FacePair> got = result.pairs;
     std::sort(got.begin(), got.end());
     std::vector<st::net::FacePair> ref = st::net::reference_collide(fx.probe, fx.object, pose);

@@ -76,7 +76,7 @@ void check_block_set(std::span<const std::uint8_t> bytes, const Limits& L) {
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::span<const std::uint8_t> frame(data, size);
-  const Limits defaults = default_limits();
+  const Limits defaults = DefaultLimits();
   st::Result<Message> r = decode(frame, defaults);
   st::Result<Message> tight = decode(frame, tight_limits());
   if (tight) {

@@ -20,11 +20,11 @@ namespace {
 struct Body {
   Mesh mesh;
   SphereTree tree;
-  explicit Body(Mesh m, TreeParams p = DefaultTreeParams())
+  explicit Body(Mesh m, TreeConfig p = DefaultTreeConfig())
       : mesh(std::move(m)), tree(SphereTree::build(mesh, p).value()) {}
 };
 
-std::vector<FacePair> run(const Body& probe, const Body& object, const Pose& pose, CollideOptions opt = {}) {
+std::vector<FacePair> run(const Body& probe, const Body& object, const Pose& pose, CollideConfig opt = {}) {
   static CollideScratch scratch;
   CollideResult res;
   opt.sort_pairs = true;
@@ -213,7 +213,7 @@ TEST_CASE("approximate mode is a superset of exact") {
       CAPTURE(name);
       CAPTURE(stop);
       const auto exact = run(probe, object, pose);
-      CollideOptions o;
+      CollideConfig o;
       o.stop_layer = stop;
       const auto approx = run(probe, object, pose, o);
       CHECK(std::includes(approx.begin(), approx.end(), exact.begin(), exact.end()));

@@ -124,7 +124,7 @@ std::string gltf_external(const std::string& uri, std::string& bin) {
   return t.replace(a, b - a, uri);
 }
 
-std::string load_error(const std::string& path, const LoadOptions& o = {}) {
+std::string load_error(const std::string& path, const LoadConfig& o = {}) {
   Result<LoadedMesh> r = load_mesh(path, o);
   REQUIRE_FALSE(r.ok());
   return r.error();
@@ -270,7 +270,7 @@ TEST_CASE("bad input: each error names the file and the item") {
   write_file(d.file("bad.stl"), "solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 0\n");
   CHECK(contains(load_error(d.file("bad.stl")), "bad.stl"));
   write_file(d.file("u.off"), off_text());
-  LoadOptions bad_units;
+  LoadConfig bad_units;
   bad_units.units = "furlong";
   CHECK(contains(load_error(d.file("u.off"), bad_units), "units 'furlong' not known"));
 }
@@ -405,7 +405,7 @@ TEST_CASE("degenerate faces are reported and kept in place") {
 TEST_CASE("units and scale convert to millimetres") {
   TempDir d;
   write_file(d.file("p.off"), off_text());
-  LoadOptions o;
+  LoadConfig o;
   o.units = "cm";
   o.scale = 2;
   Result<LoadedMesh> r = load_mesh(d.file("p.off"), o);
@@ -473,7 +473,7 @@ TEST_CASE("assimp formats: a file opens no other file unless allowed, and never 
   CHECK(contains(e, "p.bin"));
   CHECK(contains(e, "not opened"));
   // Allowed: a buffer in the same directory loads, exactly.
-  LoadOptions allow;
+  LoadConfig allow;
   allow.allow_external_files = true;
   Result<LoadedMesh> r = load_mesh(d.file("mesh/ext.gltf"), allow);
   REQUIRE_MESSAGE(r.ok(), r.error());

@@ -21,7 +21,7 @@ TEST_CASE("block-cyclic partition: cover and union over workers") {
   const Pose pose = st::test::pose_near(hand, 0, ele, 0, normals[0], 3.0, Eigen::Matrix3d::Identity());
   CollideScratch scratch;
   CollideResult full, part;
-  CollideOptions opt;
+  CollideConfig opt;
   opt.sort_pairs = true;
   collide(hand, ht, ele, et, pose, opt, scratch, full);
   REQUIRE(!full.pairs.empty());
@@ -39,7 +39,7 @@ TEST_CASE("block-cyclic partition: cover and union over workers") {
           const std::vector<std::uint32_t> roots = p.worker_roots(w);
           for (std::uint32_t r : roots)
             for (const std::uint32_t* f = et.faces_begin(r); f != et.faces_end(r); ++f) ++cover[*f];
-          CollideOptions o;
+          CollideConfig o;
           o.object_roots = roots;
           o.restrict_object = true;
           collide(hand, ht, ele, et, pose, o, scratch, part);

@@ -26,7 +26,7 @@ st::Body api_body(st::geom::Mesh mesh) {
 std::vector<st::FacePair> api_inner_pairs(const st::Body& probe, const st::Body& object, const st::Pose& pose) {
   st::geom::CollideScratch scratch;
   st::geom::CollideResult res;
-  st::geom::CollideOptions opt = st::geom::DefaultCollideOptions();
+  st::geom::CollideConfig opt = st::geom::DefaultCollideConfig();
   opt.sort_pairs = true;
   st::geom::collide(probe.mesh(), probe.tree(), object.mesh(), object.tree(), pose, opt, scratch, res);
   return res.pairs;

@@ -68,7 +68,7 @@ TEST_CASE("encoding is canonical: round trip, equal sets hash equal, different s
   CHECK(block_set_hash(e1) == block_set_hash(e2));
   CHECK(block_set_hash(e1) != block_set_hash(e3));
   CHECK(block_set_hash(e1) != block_set_hash(e4));
-  auto d = decode_block_set(e1, default_limits());
+  auto d = decode_block_set(e1, DefaultLimits());
   REQUIRE_MESSAGE(d.ok(), d.error());
   CHECK(encode_block_set(d.value()) == e1);
   CHECK(d.value().blocks == std::vector<std::uint32_t>{0, 3, 5});
@@ -90,7 +90,7 @@ TEST_CASE("hostile block sets: truncation at every offset, bad indices, order, c
   const std::vector<std::uint32_t> ids{0, 2};
   const BlockSet bs = make_block_set(probe, object, blocks, ids, 2).value();
   const auto good = encode_block_set(bs);
-  const Limits L = default_limits();
+  const Limits L = DefaultLimits();
   REQUIRE(decode_block_set(good, L).ok());
   for (std::size_t n = 0; n < good.size(); ++n) {
     CAPTURE(n);

@@ -49,7 +49,7 @@ class FakeWorker {
       zmq::message_t id, frame;
       (void)sock_.recv(id);
       (void)sock_.recv(frame);
-      auto m = decode({static_cast<const std::uint8_t*>(frame.data()), frame.size()}, default_limits());
+      auto m = decode({static_cast<const std::uint8_t*>(frame.data()), frame.size()}, DefaultLimits());
       if (!m) continue;
       if (auto* h = std::get_if<HeartbeatMsg>(&m.value())) {
         reply(id, encode(HelloMsg{0, 77, h->nonce, held_}));

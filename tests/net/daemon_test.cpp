@@ -74,7 +74,7 @@ zmq::message_t request(zmq::socket_t& d, const std::vector<std::uint8_t>& bytes)
 }
 
 Message decoded(const zmq::message_t& m) {
-  auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, default_limits());
+  auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, DefaultLimits());
   REQUIRE_MESSAGE(r.ok(), r.error());
   return r.value();
 }

@@ -47,7 +47,7 @@ TEST_CASE("every message survives encode/decode unchanged") {
   for (const Message& m : samples()) {
     CAPTURE(type_name(m));
     const auto bytes = encode(m);
-    auto d = decode(bytes, default_limits());
+    auto d = decode(bytes, DefaultLimits());
     REQUIRE_MESSAGE(d.ok(), d.error());
     CHECK(d.value().index() == m.index());
     CHECK(d.value() == m);
@@ -67,7 +67,7 @@ TEST_CASE("a message truncated at every byte offset is rejected with a message")
     for (std::size_t n = 0; n < full.size(); ++n) {
       CAPTURE(type_name(m));
       CAPTURE(n);
-      auto d = decode(std::span(full).first(n), default_limits());
+      auto d = decode(std::span(full).first(n), DefaultLimits());
       REQUIRE_FALSE(d.ok());
       CHECK_FALSE(d.error().empty());
     }
@@ -79,7 +79,7 @@ TEST_CASE("truncating the body but fixing the length field still fails inside th
   b.resize(b.size() - 3);
   const std::uint32_t body = static_cast<std::uint32_t>(b.size() - kHeaderBytes);
   std::memcpy(b.data() + 8, &body, 4);
-  auto d = decode(b, default_limits());
+  auto d = decode(b, DefaultLimits());
   REQUIRE_FALSE(d.ok());
   CHECK(d.error().find("Result at byte") != std::string::npos);
   CHECK(d.error().find("pair count") != std::string::npos);
@@ -89,7 +89,7 @@ TEST_CASE("trailing bytes are rejected") {
   auto b = encode(HeartbeatMsg{1});
   b.push_back(0);
   b[8] += 1;
-  auto d = decode(b, default_limits());
+  auto d = decode(b, DefaultLimits());
   REQUIRE_FALSE(d.ok());
   CHECK(d.error().find("trailing") != std::string::npos);
 }
@@ -105,14 +105,14 @@ TEST_CASE("wrong magic, version, type and flags are rejected, naming the field")
                  Case{6, 7, "type"}, Case{7, 1, "flags"}}) {
     auto b = good;
     b[c.at] = c.v;
-    auto d = decode(b, default_limits());
+    auto d = decode(b, DefaultLimits());
     REQUIRE_FALSE(d.ok());
     CHECK_MESSAGE(d.error().find(c.word) != std::string::npos, d.error());
   }
 }
 
 TEST_CASE("oversized counts are refused before allocating") {
-  Limits L = default_limits();
+  Limits L = DefaultLimits();
   SUBCASE("pair count over the limit") {
     auto b = encode(ResultMsg{1, 1, 1, {}, {}});
     const std::uint32_t huge = 0xffffffffu;
@@ -170,33 +170,33 @@ TEST_CASE("non-finite and non-rigid poses are refused") {
   SUBCASE("NaN") {
     const double nan = std::numeric_limits<double>::quiet_NaN();
     std::memcpy(b.data() + pose_at + 8 * 3, &nan, 8);
-    auto d = decode(b, default_limits());
+    auto d = decode(b, DefaultLimits());
     REQUIRE_FALSE(d.ok());
     CHECK(d.error().find("finite") != std::string::npos);
   }
   SUBCASE("scaled rotation") {
     const double two = 2.0;
     std::memcpy(b.data() + pose_at, &two, 8);
-    auto d = decode(b, default_limits());
+    auto d = decode(b, DefaultLimits());
     REQUIRE_FALSE(d.ok());
     CHECK(d.error().find("rigid") != std::string::npos);
   }
   SUBCASE("reflection") {
     geom::Pose p = geom::Pose::Identity();
     p.matrix()(0, 0) = -1;
-    CHECK_FALSE(decode(encode(QueryMsg{1, 2, p}), default_limits()).ok());
+    CHECK_FALSE(decode(encode(QueryMsg{1, 2, p}), DefaultLimits()).ok());
   }
 }
 
 TEST_CASE("unknown error codes are refused") {
   auto b = encode(ErrorMsg{ErrorCode::BadMessage, 0, ""});
   b[kHeaderBytes] = 99;
-  CHECK_FALSE(decode(b, default_limits()).ok());
+  CHECK_FALSE(decode(b, DefaultLimits()).ok());
 }
 
 TEST_CASE("bit flips and random garbage never crash and never decode into out-of-limit values") {
   std::mt19937_64 rng(12345);
-  const Limits L = default_limits();
+  const Limits L = DefaultLimits();
   int decoded = 0, refused = 0;
   for (const Message& m : samples()) {
     const auto good = encode(m);

@@ -192,7 +192,7 @@ TEST_CASE("a worker answers hostile messages with an Error or drops them, and ke
     d.send(zmq::buffer(bytes), zmq::send_flags::none);
     zmq::message_t m;
     REQUIRE(d.recv(m));
-    auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, default_limits());
+    auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, DefaultLimits());
     REQUIRE(r.ok());
     auto* e = std::get_if<ErrorMsg>(&r.value());
     REQUIRE(e);
@@ -225,7 +225,7 @@ TEST_CASE("a worker answers hostile messages with an Error or drops them, and ke
   {
     zmq::message_t m;
     REQUIRE(d.recv(m));
-    auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, default_limits());
+    auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, DefaultLimits());
     REQUIRE(r.ok());
     CHECK(std::get<ErrorMsg>(r.value()).code == ErrorCode::BadMessage);
   }
@@ -263,7 +263,7 @@ TEST_CASE("an oversized frame is cut off by ZMQ_MAXMSGSIZE before it is buffered
   d2.connect(w.value()->endpoints()[0]);
   d2.send(zmq::buffer(encode(HeartbeatMsg{5})), zmq::send_flags::none);
   REQUIRE(d2.recv(m));
-  auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, default_limits());
+  auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, DefaultLimits());
   REQUIRE(r.ok());
   CHECK(std::get<HelloMsg>(r.value()).echo == 5);
 }
@@ -394,7 +394,7 @@ TEST_CASE("a block set of faces piled on each other: the worker refuses the quer
       d.send(zmq::buffer(msg), zmq::send_flags::none);
       zmq::message_t m;
       REQUIRE(d.recv(m));
-      auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, default_limits());
+      auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, DefaultLimits());
       REQUIRE(r.ok());
       return r.value();
     };
@@ -425,7 +425,7 @@ TEST_CASE("collide() stops its traversal at max_pairs") {
   const geom::SphereTree tree = geom::SphereTree::build(pile).value();
   geom::CollideScratch sc;
   geom::CollideResult r;
-  geom::CollideOptions opt;
+  geom::CollideConfig opt;
   opt.max_pairs = 10'000;
   geom::collide(pile, tree, pile, tree, geom::Pose::Identity(), opt, sc, r);
   CHECK(r.stats.pair_limit_hit);

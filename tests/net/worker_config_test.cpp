@@ -33,9 +33,10 @@ TEST_CASE("unknown keys, wrong types and bad values are errors naming the key an
     REQUIRE_FALSE(c.ok());
     return c.error();
   };
-  CHECK(e("bind = \"tcp://127.0.0.1:1\"\nbnid = 3\n").find("w.toml:2: unknown key 'bnid'") != std::string::npos);
+  CHECK(e("bind = \"tcp://127.0.0.1:1\"\nbnid = 3\n").find("w.toml:2: unknown key 'bnid' (known: bind, curve,") !=
+        std::string::npos);
   CHECK(e("worker_id = \"3\"\n").find("worker_id: expected an integer") != std::string::npos);
-  CHECK(e("worker_id = -1\n").find("outside") != std::string::npos);
+  CHECK(e("worker_id = -1\n").find("worker_id: expected a value in [0, 1048576] (found -1)") != std::string::npos);
   CHECK(e("insecure = 1\n").find("insecure") != std::string::npos);
   CHECK(e("[curve]\nsecret = \"x\"\n").find("unknown key 'curve.secret'") != std::string::npos);
   CHECK(e("bind = \n").find("w.toml:1") != std::string::npos);  // TOML syntax error, with its line

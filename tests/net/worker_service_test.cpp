@@ -41,7 +41,7 @@ struct RawClient {
   Message recv() {
     zmq::message_t m;
     REQUIRE(d.recv(m));
-    auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, default_limits());
+    auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, DefaultLimits());
     REQUIRE(r.ok());
     return r.value();
   }

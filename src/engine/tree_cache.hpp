@@ -5,7 +5,7 @@
 
 #include "geom/sphere_tree.hpp"
 
-namespace st::app {
+namespace st::engine {
 
 /// Where cached trees live: $ST_TREE_CACHE, else $XDG_CACHE_HOME/spheretouch/trees, else
 /// ~/.cache/spheretouch/trees.
@@ -24,9 +24,9 @@ struct CachedTree {
 
 /// The tree of `mesh` for `params`, from `cache_dir` when valid ("" = no cache). A bad cache file
 /// is never trusted: it is rebuilt and rewritten (a failed write is reported in `note`).
-Result<CachedTree> tree_for(const geom::Mesh& mesh, const geom::TreeParams& params, const std::string& cache_dir);
+Result<CachedTree> tree_for(const geom::Mesh& mesh, const geom::TreeConfig& params, const std::string& cache_dir);
 
 /// Cache file name for a mesh + params: <dir>/<16 hex digits of the mesh/params hash>.stree.
-std::string tree_cache_path(const std::string& dir, const geom::Mesh& mesh, const geom::TreeParams& params);
+std::string tree_cache_path(const std::string& dir, const geom::Mesh& mesh, const geom::TreeConfig& params);
 
-}  // namespace st::app
+}  // namespace st::engine

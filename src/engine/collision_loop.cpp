@@ -1,5 +1,5 @@
 // Collision thread: see collision_loop.hpp.
-#include "app/collision_loop.hpp"
+#include "engine/collision_loop.hpp"
 
 #include <cerrno>
 #include <chrono>
@@ -8,7 +8,7 @@
 #include "geom/pod.hpp"
 #include "rt/clock.hpp"
 
-namespace st::app {
+namespace st::engine {
 
 CollisionLoop::CollisionLoop(const geom::Mesh& probe, const geom::Mesh& object, rt::TripleBuffer<rt::PoseSample>& poses,
                              rt::TripleBuffer<geom::ContactModel>& models, CollideFn collide, double rate_hz,
@@ -119,4 +119,4 @@ void CollisionLoop::run() {
   }
 }
 
-}  // namespace st::app
+}  // namespace st::engine

@@ -1,16 +1,32 @@
-// Checked reading of one TOML table: every value is range-checked, every error names the file,
-// line, field path and what was expected, and keys nobody asked for are rejected at the end.
+// Checked reading of TOML configuration, the one reader of scene files (src/engine/scene.cpp) and
+// worker daemon configs (src/net/worker_config.cpp): every value is type- and range-checked,
+// every error names the file, line, field path and what was expected, and keys nobody asked for
+// are rejected at the end with the list of known ones. Header-only: the net library and the
+// application both use it, and neither installs it.
 #pragma once
 #include <toml++/toml.h>
 
+#include <algorithm>
 #include <cmath>
+#include <optional>
 #include <set>
+#include <sstream>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "geom/result.hpp"
 
-namespace st::app {
+namespace st::config {
+
+/// Parses TOML text; a syntax error names the file, line and column.
+inline Result<toml::table> parse_toml(std::string_view text, const std::string& file) {
+  try {
+    return toml::parse(text, file);
+  } catch (const toml::parse_error& e) {
+    return fail(file, ":", e.source().begin.line, ":", e.source().begin.column, ": TOML syntax: ", e.description());
+  }
+}
 
 /// Reads fields of one table; the first error sticks and later reads become no-ops.
 class TomlReader {
@@ -74,6 +90,22 @@ class TomlReader {
     }
     out = std::move(v);
   }
+  /// Optional array of integers, each in [lo, hi].
+  template <class Int>
+  void integers(const char* key, std::vector<Int>& out, long long lo, long long hi) {
+    const toml::node* n = find(key);
+    if (!n) return;
+    const toml::array* arr = n->as_array();
+    if (!arr) return bad(n, key, "an array of integers");
+    std::vector<Int> v;
+    for (const toml::node& e : *arr) {
+      if (!e.is_integer()) return bad(&e, key, "an integer for each element");
+      const long long x = e.as_integer()->get();
+      if (x < lo || x > hi) return bad(&e, key, range(double(lo), double(hi)), double(x));
+      v.push_back(static_cast<Int>(x));
+    }
+    out = std::move(v);
+  }
   /// Optional array of strings.
   void strings(const char* key, std::vector<std::string>& out) {
     const toml::node* n = find(key);
@@ -89,16 +121,31 @@ class TomlReader {
   }
   /// Marks a key as known without reading it here (a sub-table read by another reader).
   void known(const char* key) { seen_.insert(key); }
+  /// Optional sub-table `key` (marked known): null when absent or after an error; an error when
+  /// `key` is there but not a table.
+  const toml::table* table(const char* key) {
+    const toml::node* n = find(key);
+    if (!n) return nullptr;
+    if (!n->is_table()) {
+      bad(n, key, std::string("a [") + field(key) + "] table");
+      return nullptr;
+    }
+    return n->as_table();
+  }
   /// True when the table has `key`.
   bool has(const char* key) const { return t_ && t_->contains(key); }
-  /// Fails on the first error, or on any key that was never read ("unknown key").
+  /// Fails on the first error, or on any key that was never read: "unknown key 'path.key'"
+  /// with the keys this table knows (every reader asks for all its keys before finish()).
   Status finish() {
     if (!error_.empty()) return Error{error_};
     if (t_)
       for (const auto& [k, v] : *t_)
-        if (!seen_.count(std::string(k.str())))
-          return fail(where(&v), field(std::string(k.str())),
-                      ": unknown key (check the spelling; configs/demo.toml lists every field)");
+        if (!seen_.count(std::string(k.str()))) {
+          std::string list;
+          for (const std::string& s : seen_) list += (list.empty() ? "" : ", ") + s;
+          return fail(where(&v), "unknown key '", field(std::string(k.str())), "' (known",
+                      path_.empty() ? std::string() : " in [" + path_ + "]", ": ", list, ")");
+        }
     return Ok{};
   }
   /// Records an error about `key` from outside (cross-field checks).
@@ -118,9 +165,12 @@ class TomlReader {
     return file_ + ": ";
   }
   static std::string range(double lo, double hi) {
-    auto s = [](double x) {
+    auto s = [](double x) {  // integers in full (1048576, not 1.04858e+06)
       std::ostringstream o;
-      o << x;
+      if (x == std::floor(x) && std::abs(x) < 1e15)
+        o << static_cast<long long>(x);
+      else
+        o << x;
       return o.str();
     };
     return "a value in [" + s(lo) + ", " + s(hi) + "]";
@@ -140,4 +190,4 @@ class TomlReader {
   std::set<std::string> seen_;
 };
 
-}  // namespace st::app
+}  // namespace st::config

@@ -1,5 +1,5 @@
 // Tree cache policy: see tree_cache.hpp.
-#include "app/tree_cache.hpp"
+#include "engine/tree_cache.hpp"
 
 #include <cstdio>
 #include <cstdlib>
@@ -8,7 +8,7 @@
 
 #include "geom/tree_io.hpp"
 
-namespace st::app {
+namespace st::engine {
 
 std::string default_tree_cache_dir() {
   if (const char* d = std::getenv("ST_TREE_CACHE"); d && *d) return d;
@@ -17,13 +17,13 @@ std::string default_tree_cache_dir() {
   return ".cache/trees";
 }
 
-std::string tree_cache_path(const std::string& dir, const geom::Mesh& mesh, const geom::TreeParams& params) {
+std::string tree_cache_path(const std::string& dir, const geom::Mesh& mesh, const geom::TreeConfig& params) {
   char name[32];
   std::snprintf(name, sizeof name, "%016llx.stree", static_cast<unsigned long long>(geom::tree_hash(mesh, params)));
   return dir + "/" + name;
 }
 
-Result<CachedTree> tree_for(const geom::Mesh& mesh, const geom::TreeParams& params, const std::string& cache_dir) {
+Result<CachedTree> tree_for(const geom::Mesh& mesh, const geom::TreeConfig& params, const std::string& cache_dir) {
   CachedTree out{{}, TreeSource::built, "", ""};
   if (!cache_dir.empty()) {
     out.path = tree_cache_path(cache_dir, mesh, params);
@@ -57,4 +57,4 @@ Result<CachedTree> tree_for(const geom::Mesh& mesh, const geom::TreeParams& para
   return out;
 }
 
-}  // namespace st::app
+}  // namespace st::engine

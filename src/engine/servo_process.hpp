@@ -15,7 +15,7 @@
 #include "rt/shm_status.hpp"
 #include "rt/simulated_device.hpp"
 
-namespace st::app {
+namespace st::engine {
 
 /// What a servo reports at its end (servo.txt: one "key value" per line).
 struct ServoResults {
@@ -68,4 +68,4 @@ struct ServoArgs {
 /// Starts `spheretouch servo` (this executable, /proc/self/exe) with `a`; returns its pid.
 Result<pid_t> spawn_servo(const ServoArgs& a);
 
-}  // namespace st::app
+}  // namespace st::engine

@@ -16,7 +16,7 @@
 #include "net/local_workers.hpp"
 #include "net/scatter_gather.hpp"
 
-namespace st::app {
+namespace st::engine {
 
 /// A client's CURVE settings: the workers' public key and this client's key pair, Z85.
 struct ClientCurve {
@@ -36,7 +36,7 @@ struct FleetSpec {
   int workers = 0;                          ///< in-process workers (ignored when endpoints are given)
   std::vector<std::string> endpoints;       ///< worker daemons
   std::uint32_t layer = 2, block_size = 1;  ///< distribution: sphere layer, layer spheres per block
-  std::uint32_t leaf_faces = geom::DefaultTreeParams().leaf_faces;  ///< tree knob sent to workers
+  std::uint32_t leaf_faces = geom::DefaultTreeConfig().leaf_faces;  ///< tree knob sent to workers
   std::uint32_t miss_limit = 3;                                     ///< missed deadlines before a worker is marked down
   std::chrono::milliseconds ready_timeout{30000};                   ///< time allowed for the first upload
   /// A daemon silent this long is probed: a refused CURVE key or a security mismatch fails the
@@ -68,4 +68,4 @@ Status wait_for_fleet(Fleet& fleet, const FleetSpec& spec, const net::ScatterCon
 Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Mesh& probe, const geom::Mesh& object,
                                            const geom::SphereTree& object_tree);
 
-}  // namespace st::app
+}  // namespace st::engine

@@ -1,5 +1,5 @@
 // Run outputs: see run_outputs.hpp.
-#include "app/run_outputs.hpp"
+#include "engine/run_outputs.hpp"
 
 #include <charconv>
 #include <cmath>
@@ -10,7 +10,7 @@
 
 #include "geom/collide.hpp"
 
-namespace st::app {
+namespace st::engine {
 
 Status write_contact_ply(const std::string& path, const geom::Mesh& probe, const geom::Mesh& object,
                          const geom::Pose& pose, const std::vector<geom::FacePair>& pairs) {
@@ -116,4 +116,4 @@ Status write_trace_json(const std::string& path, const std::string& tick_csv, co
   return Ok{};
 }
 
-}  // namespace st::app
+}  // namespace st::engine

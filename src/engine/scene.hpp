@@ -16,7 +16,7 @@
 #include "rt/saturation.hpp"
 #include "rt/simulated_device.hpp"
 
-namespace st::app {
+namespace st::engine {
 
 /// One body: a mesh file, the model set ("model:NAME") or a generated shape.
 struct BodySpec {
@@ -46,7 +46,7 @@ struct Scene {
   bool probe_tip_auto = true;                         ///< fingertip = probe's lowest vertex along the approach
   geom::Vec3 probe_tip{geom::Vec3::Zero()};           ///< fingertip, probe file coordinates, mm
   geom::Vec3 probe_rotation_deg{geom::Vec3::Zero()};  ///< probe orientation (XYZ Euler, about the tip)
-  geom::TreeParams tree = geom::DefaultTreeParams();  ///< leaf size
+  geom::TreeConfig tree = geom::DefaultTreeConfig();  ///< leaf size
   bool tree_cache = true;                             ///< read/write trees in the tree cache
   std::uint32_t layer = 2, block_size = 1;            ///< distribution: sphere layer and blocks per worker
   int workers = 2;                                    ///< in-process workers (0 = collide in the collision thread)
@@ -93,4 +93,4 @@ rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, const geo
 /// Loads (or generates) a body; errors name the scene field.
 Result<geom::Mesh> load_body(const BodySpec& spec, const std::string& field);
 
-}  // namespace st::app
+}  // namespace st::engine

@@ -1,5 +1,5 @@
 // Scene file parsing: one TomlReader per section, defaults from the libraries' Default…().
-#include "app/scene.hpp"
+#include "engine/scene.hpp"
 
 #include <cmath>
 #include <filesystem>
@@ -8,12 +8,15 @@
 #include <sstream>
 #include <unistd.h>
 
-#include "app/toml_reader.hpp"
+#include "config/toml_reader.hpp"
 #include "geom/mesh_io.hpp"
 #include "geom/primitives.hpp"
 #include "net/curve_keys.hpp"
 
-namespace st::app {
+namespace st::engine {
+
+using config::TomlReader;
+
 namespace {
 
 constexpr double kMs = 1e6;  // ns per ms
@@ -82,12 +85,9 @@ Scene DefaultScene() {
 }
 
 Result<Scene> parse_scene(const std::string& text, const std::string& name, const std::string& dir) {
-  toml::table root;
-  try {
-    root = toml::parse(text, name);
-  } catch (const toml::parse_error& e) {
-    return fail(name, ":", e.source().begin.line, ":", e.source().begin.column, ": TOML syntax: ", e.description());
-  }
+  Result<toml::table> parsed = config::parse_toml(text, name);
+  if (!parsed) return Error{parsed.error()};
+  const toml::table& root = parsed.value();
   Scene s = DefaultScene();
   s.file = name;
   TomlReader top(&root, "", name);
@@ -361,7 +361,7 @@ Result<geom::Mesh> load_body(const BodySpec& b, const std::string& field) {
     if (b.builtin == "box") return geom::make_box(geom::Vec3::Constant(b.size_mm));
     return geom::make_capsule(b.radius_mm, b.length_mm, b.segments);
   }
-  geom::LoadOptions o;
+  geom::LoadConfig o;
   o.units = b.units;
   o.scale = b.scale;
   Result<geom::LoadedMesh> r = geom::load_mesh(b.mesh, o);
@@ -369,4 +369,4 @@ Result<geom::Mesh> load_body(const BodySpec& b, const std::string& field) {
   return std::move(r.value().mesh);
 }
 
-}  // namespace st::app
+}  // namespace st::engine

@@ -4,10 +4,10 @@
 #include <string>
 #include <vector>
 
-#include "app/collision_loop.hpp"
+#include "engine/collision_loop.hpp"
 #include "geom/mesh.hpp"
 
-namespace st::app {
+namespace st::engine {
 
 /// Writes both bodies in the object's frame (probe placed by `pose`) as one ASCII PLY with
 /// per-face colours: colliding faces red, the rest grey (object) or light blue (probe). Faces
@@ -20,4 +20,4 @@ Status write_contact_ply(const std::string& path, const geom::Mesh& probe, const
 /// CollisionLoop::write_rounds_csv). Both files are streamed: memory does not grow with the run.
 Status write_trace_json(const std::string& path, const std::string& tick_csv, const std::string& rounds_csv);
 
-}  // namespace st::app
+}  // namespace st::engine

@@ -1,5 +1,5 @@
 // Fleet start-up: see distributed.hpp.
-#include "app/distributed.hpp"
+#include "engine/distributed.hpp"
 
 #include <unistd.h>
 
@@ -11,7 +11,7 @@
 #include "net/tree_backend.hpp"
 #include "net/worker_config.hpp"
 
-namespace st::app {
+namespace st::engine {
 
 int Fleet::up() const {
   int n = 0;
@@ -156,4 +156,4 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
   return fleet;
 }
 
-}  // namespace st::app
+}  // namespace st::engine

@@ -16,7 +16,7 @@
 #include "rt/shm_status.hpp"
 #include "rt/triple_buffer.hpp"
 
-namespace st::app {
+namespace st::engine {
 
 /// One finished collision round, for the trace and the summary.
 struct RoundRecord {
@@ -100,4 +100,4 @@ class CollisionLoop {
   std::thread thread_;
 };
 
-}  // namespace st::app
+}  // namespace st::engine

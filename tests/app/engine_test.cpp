@@ -1,0 +1,94 @@
+// Tests src/engine/run_engine.*: the main job driven as a library, without the command line —
+// what a program or a benchmark does with it.
+#include <doctest/doctest.h>
+
+#include <chrono>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include "engine/run_engine.hpp"
+#include "test_util.hpp"
+
+namespace {
+
+std::string engine_scene_text(const std::string& extra) {
+  return "[probe]\nbuiltin = \"capsule\"\nradius_mm = 6.0\nlength_mm = 30.0\n"
+         "[object]\nbuiltin = \"icosphere\"\nradius_mm = 40.0\nfrequency = 12\n"
+         "[tree]\ncache = false\n" +
+         extra;
+}
+
+std::string engine_read(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+}  // namespace
+
+TEST_CASE("run engine: prepare, start, poll, finish and save without the command line") {
+  st::test::TempDir dir;
+  const std::string out = dir.file("run");
+  auto scene = st::engine::parse_scene(
+      engine_scene_text("[workers]\ncount = 0\n[run]\nduration_s = 2.5\n[output]\ndir = \"" + out + "\"\nstatus = \"off\"\n"),
+      "e.toml", ".");
+  REQUIRE_MESSAGE(scene.ok(), scene.error());
+  std::vector<std::string> notes;
+  st::engine::RunOptions opt;
+  opt.note = [&](const std::string& m) { notes.push_back(m); };
+  auto made = st::engine::RunEngine::prepare(scene.value(), opt);
+  REQUIRE_MESSAGE(made.ok(), made.error());
+  st::engine::RunEngine& run = *made.value();
+  CHECK(run.run_dir() == out);
+  CHECK(run.backend() == "in the collision thread");
+  CHECK_FALSE(run.has_fleet());
+  CHECK_FALSE(notes.empty());  // "loading probe and object ...", face counts
+  REQUIRE(run.start().ok());
+
+  std::vector<std::string> events;
+  int polls = 0;
+  while (run.poll(false, events)) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    REQUIRE(++polls < 2000);  // the run ends at its duration (2.5 s), not never
+  }
+  const st::engine::RunStatus st = run.status();
+  CHECK(st.elapsed_s >= 2.5);
+  CHECK(st.have_servo);
+  CHECK(st.ticks > 1000);  // counts, not timing: a 1 kHz loop for 2.5 s on any host
+  CHECK(st.rounds > 10);   // the collision thread answered poses
+  CHECK(st.force_N >= 0);
+
+  st::engine::RunReport report = run.finish(0);
+  CHECK(report.failures.empty());
+  CHECK(report.summary.rfind("summary\n", 0) == 0);
+  CHECK(report.summary.find("in the collision thread") != std::string::npos);
+  CHECK(report.summary.find("outputs         " + out + "/") != std::string::npos);
+  run.save(report);
+  CHECK(report.failures.empty());
+  CHECK(engine_read(out + "/summary.txt") == report.summary);
+  // The built-in script presses the capsule into the ball: contact reached the trace and the PLY.
+  CHECK(std::ifstream(out + "/contact.ply").good());
+  CHECK(std::ifstream(out + "/trace.json").good());
+}
+
+TEST_CASE("run engine: prepare fails with an error naming the field; nothing is left running") {
+  st::test::TempDir dir;
+  auto scene =
+      st::engine::parse_scene(engine_scene_text("[output]\ndir = \"" + dir.file("run") + "\"\n"), "e.toml", ".");
+  REQUIRE(scene.ok());
+  st::engine::Scene s = scene.value();
+  s.object.builtin.clear();
+  s.object.mesh = dir.file("missing.off");
+  auto bad = st::engine::RunEngine::prepare(s, {});
+  REQUIRE_FALSE(bad.ok());
+  CHECK(bad.error().find("e.toml: ") == 0);
+  CHECK(bad.error().find("missing.off") != std::string::npos);
+
+  st::engine::RunOptions split;
+  split.split = true;  // the split servo re-reads the scene file: it must be named
+  auto no_file = st::engine::RunEngine::prepare(scene.value(), split);
+  REQUIRE_FALSE(no_file.ok());
+  CHECK(no_file.error().find("scene_path") != std::string::npos);
+}
