@@ -28,17 +28,8 @@
 #include <limits>
 
 #include "geom/check.hpp"
+#include "geom/simd.hpp"
 #include "geom/tri_tri.hpp"
-
-// SIMD: AVX2 with -march=native, SSE2 on any other x86-64, scalar elsewhere or with -Dsimd=false
-// (ST_NO_SIMD). All three give the same masks.
-#if !defined(ST_NO_SIMD) && defined(__AVX2__)
-#define ST_COLLIDE_AVX2 1
-#include <immintrin.h>
-#elif !defined(ST_NO_SIMD) && defined(__SSE2__)
-#define ST_COLLIDE_SSE2 1
-#include <emmintrin.h>
-#endif
 
 namespace st::geom {
 namespace {
@@ -70,121 +61,63 @@ double accurate_sum(const double* prod_a, const double* prod_b, int np, const do
 
 inline Vec3 centre_of(const SphereNode& n) { return Vec3(n.centre[0], n.centre[1], n.centre[2]); }
 
+// The three filters below are written once over simd::Lanes (AVX2, SSE2 or scalar, chosen at
+// compile time), a step of Lanes::width lanes at a time; all three give the same masks.
+
 // Bit k (k < n <= 8) set when sphere k of a float SoA block (x at c[0], y at c[st], z at c[2 st],
 // radius at c[3 st]) meets the sphere (qx, qy, qz; qr): |c_k - q|^2 <= (r_k + qr)^2 in float.
-// Conservative by the slack in the probe radii (see the top of this file). Reads 8 lanes: the
-// SoA arrays are padded by kMaxChildren.
+// Conservative by the slack in the probe radii (see the top of this file). Reads whole steps past
+// n: the SoA arrays are padded by kMaxChildren.
 inline std::uint32_t sphere_mask(const float* c, std::size_t st, std::uint32_t n, float qx, float qy, float qz, float qr) {
-#if defined(ST_COLLIDE_AVX2)
-  const __m256 dx = _mm256_sub_ps(_mm256_loadu_ps(c), _mm256_set1_ps(qx));
-  const __m256 dy = _mm256_sub_ps(_mm256_loadu_ps(c + st), _mm256_set1_ps(qy));
-  const __m256 dz = _mm256_sub_ps(_mm256_loadu_ps(c + 2 * st), _mm256_set1_ps(qz));
-  const __m256 rr = _mm256_add_ps(_mm256_loadu_ps(c + 3 * st), _mm256_set1_ps(qr));
-  const __m256 d2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)), _mm256_mul_ps(dz, dz));
-  const auto m = static_cast<std::uint32_t>(_mm256_movemask_ps(_mm256_cmp_ps(d2, _mm256_mul_ps(rr, rr), _CMP_LE_OQ)));
-  return m & ((1u << n) - 1u);
-#elif defined(ST_COLLIDE_SSE2)
+  using simd::Lanes;
+  const Lanes x = Lanes::broadcast(qx), y = Lanes::broadcast(qy), z = Lanes::broadcast(qz), r = Lanes::broadcast(qr);
   std::uint32_t m = 0;
-  for (std::uint32_t k = 0; k < n; k += 4) {
-    const __m128 dx = _mm_sub_ps(_mm_loadu_ps(c + k), _mm_set1_ps(qx));
-    const __m128 dy = _mm_sub_ps(_mm_loadu_ps(c + st + k), _mm_set1_ps(qy));
-    const __m128 dz = _mm_sub_ps(_mm_loadu_ps(c + 2 * st + k), _mm_set1_ps(qz));
-    const __m128 rr = _mm_add_ps(_mm_loadu_ps(c + 3 * st + k), _mm_set1_ps(qr));
-    const __m128 d2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy)), _mm_mul_ps(dz, dz));
-    m |= static_cast<std::uint32_t>(_mm_movemask_ps(_mm_cmple_ps(d2, _mm_mul_ps(rr, rr)))) << k;
+  for (std::uint32_t k = 0; k < n; k += Lanes::width) {
+    const Lanes dx = Lanes::load(c + k) - x;
+    const Lanes dy = Lanes::load(c + st + k) - y;
+    const Lanes dz = Lanes::load(c + 2 * st + k) - z;
+    const Lanes rr = Lanes::load(c + 3 * st + k) + r;
+    m |= (dx * dx + dy * dy + dz * dz <= rr * rr).bits() << k;
   }
   return m & ((1u << n) - 1u);
-#else
-  std::uint32_t m = 0;
-  for (std::uint32_t k = 0; k < n; ++k) {
-    const float dx = c[k] - qx, dy = c[st + k] - qy, dz = c[2 * st + k] - qz, rr = c[3 * st + k] + qr;
-    m |= static_cast<std::uint32_t>(dx * dx + dy * dy + dz * dz <= rr * rr) << k;
-  }
-  return m;
-#endif
 }
 
 // Bit i (i < n <= 64) set when box i of a float SoA block (lo x at c[i], lo y at c[st + i], ...,
-// hi z at c[5 st + i]) meets box b (lo xyz, hi xyz). Pure comparisons, exact. Reads whole
-// 8-lane vectors past n: the SoA arrays are padded by kMaxLeafFaces.
+// hi z at c[5 st + i]) meets box b (lo xyz, hi xyz). Pure comparisons, exact. Reads whole steps
+// past n: the SoA arrays are padded by kMaxLeafFaces.
 inline std::uint64_t soa_box_mask(const float* c, std::size_t st, std::uint32_t n, const float* b) {
+  using simd::Lanes;
+  const Lanes blx = Lanes::broadcast(b[0]), bly = Lanes::broadcast(b[1]), blz = Lanes::broadcast(b[2]);
+  const Lanes bhx = Lanes::broadcast(b[3]), bhy = Lanes::broadcast(b[4]), bhz = Lanes::broadcast(b[5]);
   std::uint64_t m = 0;
-#if defined(ST_COLLIDE_AVX2)
-  const __m256 blx = _mm256_set1_ps(b[0]), bly = _mm256_set1_ps(b[1]), blz = _mm256_set1_ps(b[2]);
-  const __m256 bhx = _mm256_set1_ps(b[3]), bhy = _mm256_set1_ps(b[4]), bhz = _mm256_set1_ps(b[5]);
-  for (std::uint32_t i = 0; i < n; i += 8) {
-    __m256 h = _mm256_and_ps(_mm256_cmp_ps(_mm256_loadu_ps(c + i), bhx, _CMP_LE_OQ),
-                             _mm256_cmp_ps(_mm256_loadu_ps(c + st + i), bhy, _CMP_LE_OQ));
-    h = _mm256_and_ps(h, _mm256_cmp_ps(_mm256_loadu_ps(c + 2 * st + i), bhz, _CMP_LE_OQ));
-    h = _mm256_and_ps(h, _mm256_cmp_ps(_mm256_loadu_ps(c + 3 * st + i), blx, _CMP_GE_OQ));
-    h = _mm256_and_ps(h, _mm256_cmp_ps(_mm256_loadu_ps(c + 4 * st + i), bly, _CMP_GE_OQ));
-    h = _mm256_and_ps(h, _mm256_cmp_ps(_mm256_loadu_ps(c + 5 * st + i), blz, _CMP_GE_OQ));
-    m |= static_cast<std::uint64_t>(static_cast<std::uint32_t>(_mm256_movemask_ps(h))) << i;
+  for (std::uint32_t i = 0; i < n; i += Lanes::width) {
+    const simd::Mask h = (Lanes::load(c + i) <= bhx) & (Lanes::load(c + st + i) <= bhy) &
+                         (Lanes::load(c + 2 * st + i) <= bhz) & (Lanes::load(c + 3 * st + i) >= blx) &
+                         (Lanes::load(c + 4 * st + i) >= bly) & (Lanes::load(c + 5 * st + i) >= blz);
+    m |= std::uint64_t{h.bits()} << i;
   }
   return n >= 64 ? m : m & ((std::uint64_t{1} << n) - 1);
-#elif defined(ST_COLLIDE_SSE2)
-  const __m128 blx = _mm_set1_ps(b[0]), bly = _mm_set1_ps(b[1]), blz = _mm_set1_ps(b[2]);
-  const __m128 bhx = _mm_set1_ps(b[3]), bhy = _mm_set1_ps(b[4]), bhz = _mm_set1_ps(b[5]);
-  for (std::uint32_t i = 0; i < n; i += 4) {
-    __m128 h = _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(c + i), bhx), _mm_cmple_ps(_mm_loadu_ps(c + st + i), bhy));
-    h = _mm_and_ps(h, _mm_cmple_ps(_mm_loadu_ps(c + 2 * st + i), bhz));
-    h = _mm_and_ps(h, _mm_cmpge_ps(_mm_loadu_ps(c + 3 * st + i), blx));
-    h = _mm_and_ps(h, _mm_cmpge_ps(_mm_loadu_ps(c + 4 * st + i), bly));
-    h = _mm_and_ps(h, _mm_cmpge_ps(_mm_loadu_ps(c + 5 * st + i), blz));
-    m |= static_cast<std::uint64_t>(static_cast<std::uint32_t>(_mm_movemask_ps(h))) << i;
-  }
-  return n >= 64 ? m : m & ((std::uint64_t{1} << n) - 1);
-#else
-  for (std::uint32_t i = 0; i < n; ++i) {
-    const bool hit = (c[i] <= b[3]) & (c[st + i] <= b[4]) & (c[2 * st + i] <= b[5]) & (c[3 * st + i] >= b[0]) &
-                     (c[4 * st + i] >= b[1]) & (c[5 * st + i] >= b[2]);
-    m |= static_cast<std::uint64_t>(hit) << i;
-  }
-  return m;
-#endif
 }
 
-// Bit j (j < n <= 64) set when face box fb[j] meets box b (lo xyz, hi xyz). Exact.
+// Bit j (j < n <= 64) set when face box fb[j] meets box b (lo xyz, hi xyz). Exact. A step's boxes
+// are gathered from the 24-byte AoS, reading nothing past fb[n - 1] (face_boxes is not padded).
 inline std::uint64_t face_box_mask(const FaceBox* fb, std::uint32_t n, const float* b) {
   static_assert(sizeof(FaceBox) == 6 * sizeof(float), "face boxes are read as 6 packed floats");
-  std::uint64_t m = 0;
-#if defined(ST_COLLIDE_AVX2)
-  // 8 boxes at a time, gathered from the 24-byte AoS (masked: never reads past fb[n - 1]).
-  const __m256i idx = _mm256_setr_epi32(0, 6, 12, 18, 24, 30, 36, 42);
-  const float* base = fb[0].lo;
-  for (std::uint32_t j = 0; j < n; j += 8) {
-    const std::uint32_t left = n - j;
-    const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-    const __m256 live =
-        _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32(static_cast<int>(std::min(left, 8u))), lane));
-    const float* p = base + 6 * j;
-    auto g = [&](int k) { return _mm256_mask_i32gather_ps(_mm256_setzero_ps(), p + k, idx, live, 4); };
-    __m256 h = _mm256_and_ps(live, _mm256_cmp_ps(g(0), _mm256_set1_ps(b[3]), _CMP_LE_OQ));
-    h = _mm256_and_ps(h, _mm256_cmp_ps(g(1), _mm256_set1_ps(b[4]), _CMP_LE_OQ));
-    h = _mm256_and_ps(h, _mm256_cmp_ps(g(2), _mm256_set1_ps(b[5]), _CMP_LE_OQ));
-    h = _mm256_and_ps(h, _mm256_cmp_ps(g(3), _mm256_set1_ps(b[0]), _CMP_GE_OQ));
-    h = _mm256_and_ps(h, _mm256_cmp_ps(g(4), _mm256_set1_ps(b[1]), _CMP_GE_OQ));
-    h = _mm256_and_ps(h, _mm256_cmp_ps(g(5), _mm256_set1_ps(b[2]), _CMP_GE_OQ));
-    m |= static_cast<std::uint64_t>(static_cast<std::uint32_t>(_mm256_movemask_ps(h))) << j;
-  }
-#elif defined(ST_COLLIDE_SSE2)
-  // One box per step from the AoS: (lo x, lo y, lo z, hi x) <= (b hi xyz, +inf) and
-  // (lo z, hi x, hi y, hi z) >= (-inf, b lo xyz); both loads stay inside the 24-byte box.
-  const float inf = std::numeric_limits<float>::infinity();
-  const __m128 hi_b = _mm_setr_ps(b[3], b[4], b[5], inf);
-  const __m128 lo_b = _mm_setr_ps(-inf, b[0], b[1], b[2]);
+  using simd::Lanes;
+  const Lanes blx = Lanes::broadcast(b[0]), bly = Lanes::broadcast(b[1]), blz = Lanes::broadcast(b[2]);
+  const Lanes bhx = Lanes::broadcast(b[3]), bhy = Lanes::broadcast(b[4]), bhz = Lanes::broadcast(b[5]);
   const float* f = reinterpret_cast<const float*>(fb);
-  for (std::uint32_t j = 0; j < n; ++j, f += 6) {
-    const __m128 h = _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(f), hi_b), _mm_cmpge_ps(_mm_loadu_ps(f + 2), lo_b));
-    m |= static_cast<std::uint64_t>(_mm_movemask_ps(h) == 0xf) << j;
+  std::uint64_t m = 0;
+  for (std::uint32_t j = 0; j < n; j += Lanes::width) {
+    const std::uint32_t live = n - j;
+    const float* p = f + 6 * j;
+    // Lanes past the last box are gathered as 0 and may compare true: the live mask clears them.
+    const simd::Mask h = simd::Mask::first(live) & (Lanes::gather<6>(p, live) <= bhx) &
+                         (Lanes::gather<6>(p + 1, live) <= bhy) & (Lanes::gather<6>(p + 2, live) <= bhz) &
+                         (Lanes::gather<6>(p + 3, live) >= blx) & (Lanes::gather<6>(p + 4, live) >= bly) &
+                         (Lanes::gather<6>(p + 5, live) >= blz);
+    m |= std::uint64_t{h.bits()} << j;
   }
-#else
-  for (std::uint32_t j = 0; j < n; ++j) {
-    const bool hit = (fb[j].lo[0] <= b[3]) & (fb[j].lo[1] <= b[4]) & (fb[j].lo[2] <= b[5]) & (fb[j].hi[0] >= b[0]) &
-                     (fb[j].hi[1] >= b[1]) & (fb[j].hi[2] >= b[2]);
-    m |= static_cast<std::uint64_t>(hit) << j;
-  }
-#endif
   return m;
 }
 }  // namespace

@@ -49,7 +49,53 @@ bool is_superset(const std::vector<std::uint32_t>& big, const std::vector<std::u
   return std::includes(big.begin(), big.end(), small.begin(), small.end());
 }
 
-enum class Ask { None, Query, Heartbeat };
+// A worker's two state machines. link_after() and turn_after() are the tables in
+// scatter_gather.hpp, which also says what each state and event means; kNoLink / kNoTurn marks a
+// cell that is not a transition.
+enum class Link : std::uint8_t { Unknown, Live, Loading, Down };
+enum class LinkEvent : std::uint8_t { Hello, BlankHello, LoadStart, LoadEnd, MarkDown };
+enum class Turn : std::uint8_t { Idle, Queried, Unsent, Pinged, Answered, Greeted };
+enum class TurnEvent : std::uint8_t { NewRound, QuerySent, QueryUnsent, Ping, Result, NotLoaded, Hello };
+
+constexpr Link kNoLink = static_cast<Link>(0xff);
+constexpr Turn kNoTurn = static_cast<Turn>(0xff);
+
+constexpr Link link_after(Link from, LinkEvent e) {
+  using enum Link;
+  constexpr Link x = kNoLink;
+  // clang-format off
+  constexpr Link table[4][5] = {
+      // Hello    BlankHello  LoadStart  LoadEnd  MarkDown
+      {Live,      Unknown,    x,         x,       Down},  // Unknown
+      {Live,      Unknown,    Loading,   x,       Down},  // Live
+      {Loading,   x,          Loading,   Live,    Down},  // Loading
+      {Live,      Unknown,    x,         x,       x   },  // Down
+  };
+  // clang-format on
+  return table[static_cast<int>(from)][static_cast<int>(e)];
+}
+
+constexpr Turn turn_after(Turn from, TurnEvent e) {
+  using enum Turn;
+  constexpr Turn x = kNoTurn;
+  // clang-format off
+  constexpr Turn table[6][7] = {
+      // NewRound  QuerySent  QueryUnsent  Ping    Result    NotLoaded  Hello
+      {Idle,       Queried,   Unsent,      Pinged, x,        x,         Idle    },  // Idle
+      {Idle,       x,         x,           x,      Answered, Answered,  Queried },  // Queried
+      {Idle,       x,         x,           x,      x,        Answered,  Unsent  },  // Unsent
+      {Idle,       x,         x,           x,      x,        x,         Greeted },  // Pinged
+      {Idle,       x,         x,           x,      x,        Answered,  Answered},  // Answered
+      {Idle,       x,         x,           x,      x,        x,         Greeted },  // Greeted
+  };
+  // clang-format on
+  return table[static_cast<int>(from)][static_cast<int>(e)];
+}
+
+/// Up and heard from: it may be queried and sent block sets.
+constexpr bool heard(Link l) { return l == Link::Live || l == Link::Loading; }
+/// At the round's end: asked and not answered, a miss.
+constexpr bool missed(Turn t) { return t == Turn::Queried || t == Turn::Unsent || t == Turn::Pinged; }
 
 /// One long-lived thread that encodes block sets off the collision thread, jobs in order.
 /// A thread per job (std::async) maps a fresh stack for every fault, and a process that asked
@@ -108,29 +154,27 @@ struct ScatterGather::Impl {
   struct Peer {
     std::string endpoint;
     zmq::socket_t sock;
-    bool up = true;
+    Link link = Link::Unknown;
+    Turn turn = Turn::Idle;
     std::uint32_t worker_id = 0;
-    std::uint64_t epoch = 0;  // 0 until the first Hello
-    std::uint32_t misses = 0;
-    std::vector<std::uint64_t> held;      // hashes from its last Hello, MRU first
-    std::vector<std::uint32_t> original;  // its own blocks (block-cyclic)
-    std::vector<std::uint32_t> target;    // blocks it should hold now
-    std::uint64_t target_hash = 0;        // 0 while the target is being encoded
-    SetPtr upload;                        // block set being sent, or null
-    std::size_t upload_off = 0;           // bytes of `upload` handed to ZeroMQ
-    Clock::time_point upload_progress{};  // last chunk sent
-    std::uint64_t failed_hash = 0;        // a set it refused to load (not retried until load_timeout)
-    Clock::time_point failed_at{};
-    Clock::time_point next_heartbeat{};
-    Clock::time_point next_refresh{};  // next Heartbeat to a busy worker (held sets)
-    Clock::time_point last_heard{};    // last message received from it
-    Clock::time_point last_asked{};    // last Query or Heartbeat sent to it
-    Clock::time_point socket_opened{};
+    std::uint64_t epoch = 0;               // from its last Hello (0: none with an epoch yet)
+    std::uint32_t misses = 0;              // rounds missed in a row (0 while Down)
+    std::vector<std::uint64_t> held;       // hashes from its last Hello, MRU first
+    std::vector<std::uint32_t> original;   // its own blocks (block-cyclic)
+    std::vector<std::uint32_t> target;     // blocks it should hold now
+    std::uint64_t target_hash = 0;         // 0 while the target is being encoded
+    SetPtr upload;                         // the block set being sent: non-null exactly while Loading
+    std::size_t upload_off = 0;            // bytes of `upload` handed to ZeroMQ
+    Clock::time_point load_progress_at{};  // upload started or last chunk queued: load_timeout runs from here
+    std::uint64_t refused_hash = 0;        // a set it refused to load: not sent again for load_timeout
+    Clock::time_point refused_at{};        // when it refused `refused_hash`
+    Clock::time_point heartbeat_due{};     // next Heartbeat while it is not queried (heartbeat_period)
+    Clock::time_point held_refresh_due{};  // next Heartbeat to a queried worker (held_refresh_period)
+    // revive_silent(): asked after silent_since and nothing heard for reconnect_after.
+    Clock::time_point silent_since{};  // last message received from it, or its socket opened if later
+    Clock::time_point asked_at{};      // last Query or Heartbeat that wants an answer
     std::uint64_t nonce = 0;
-    // This round.
-    Ask ask = Ask::None;
-    bool replied = false;
-    SetPtr asked;  // the block set the Query named
+    SetPtr asked;  // the block set this round's Query named; null if no Query was queued
     // Totals.
     std::uint64_t bytes_sent = 0;
     std::uint32_t loads_sent = 0;
@@ -149,15 +193,41 @@ struct ScatterGather::Impl {
   std::map<std::vector<std::uint32_t>, SetPtr> by_blocks;
   std::unordered_map<std::uint64_t, SetPtr> by_hash;
   std::map<std::vector<std::uint32_t>, std::future<Result<SetPtr>>> encoding;
-  Encoder encoder;             // started with the client
-  bool dirty = false;          // up/down changed: reassign
-  bool prune_pending = false;  // a worker dropped a set: prune_sets()
+  Encoder encoder;                // started with the client
+  bool reassign_pending = false;  // a worker went down or came back: reassign()
+  bool prune_pending = false;     // a worker dropped a set: prune_sets()
   std::uint64_t cur_seq = 0;
   bool in_round = false;
   std::vector<std::uint8_t> covered;  // per block, this round
   std::vector<std::uint8_t> buf;      // encode buffer
   std::vector<zmq::pollitem_t> items;
   RoundResult* out = nullptr;
+
+  // ---- worker state ------------------------------------------------------------------------
+
+  /// The one place a worker's link state changes (the table in scatter_gather.hpp), with what
+  /// entering or leaving a state implies.
+  void step(Peer& p, LinkEvent e) {
+    const Link next = link_after(p.link, e);
+    ST_ASSERT(next != kNoLink, "a worker's link state changes only as the table says");
+    if (next == kNoLink) return;
+    if (p.link == Link::Loading && next != Link::Loading) p.upload = nullptr;
+    if ((p.link == Link::Down) != (next == Link::Down)) {
+      p.misses = 0;
+      reassign_pending = true;  // its blocks are dealt anew
+    }
+    p.link = next;
+    ST_ASSERT((p.link == Link::Loading) == (p.upload != nullptr), "a set is being sent exactly while Loading");
+  }
+
+  /// The one place a worker's turn in the round changes (the table in scatter_gather.hpp).
+  /// Replies that fit no transition are counted and dropped by the caller before they get here.
+  void step(Peer& p, TurnEvent e) {
+    const Turn next = turn_after(p.turn, e);
+    ST_ASSERT(next != kNoTurn, "a worker's turn changes only as the table says");
+    if (next != kNoTurn) p.turn = next;
+    ST_ASSERT(p.turn != Turn::Queried || p.asked, "a Query is out only with the set it named");
+  }
 
   // ---- block sets --------------------------------------------------------------------------
 
@@ -199,7 +269,7 @@ struct ScatterGather::Impl {
     for (const Peer& p : peers) {
       for (std::uint64_t h : p.held) keep[h] = true;
       if (p.target_hash) keep[p.target_hash] = true;
-      if (p.upload) keep[p.upload->hash] = true;
+      if (p.link == Link::Loading) keep[p.upload->hash] = true;
     }
     prune_pending = false;
     std::size_t dropped = 0;
@@ -220,23 +290,23 @@ struct ScatterGather::Impl {
 
   void refresh_targets() {
     for (Peer& p : peers)
-      if (p.up && !p.target_hash && !p.target.empty())
+      if (p.link != Link::Down && !p.target_hash && !p.target.empty())
         if (SetPtr s = get_set(p.target)) p.target_hash = s->hash;
   }
 
   /// Deals the blocks of down workers block-cyclically over the live ones (paper §3.4).
   void reassign() {
-    dirty = false;
+    reassign_pending = false;
     std::vector<std::size_t> alive;
     std::vector<std::uint32_t> orphans;
     for (std::size_t i = 0; i < peers.size(); ++i) {
-      if (peers[i].up)
+      if (peers[i].link != Link::Down)
         alive.push_back(i);
       else
         orphans.insert(orphans.end(), peers[i].original.begin(), peers[i].original.end());
     }
     std::sort(orphans.begin(), orphans.end());
-    for (Peer& p : peers) p.target = p.up ? p.original : std::vector<std::uint32_t>{};
+    for (Peer& p : peers) p.target = p.link != Link::Down ? p.original : std::vector<std::uint32_t>{};
     if (!alive.empty())
       for (std::size_t j = 0; j < orphans.size(); ++j) peers[alive[j % alive.size()]].target.push_back(orphans[j]);
     for (Peer& p : peers) {
@@ -248,7 +318,7 @@ struct ScatterGather::Impl {
   }
 
   Status open_socket(Peer& p) {
-    p.socket_opened = Clock::now();
+    p.silent_since = std::max(p.silent_since, Clock::now());
     p.sock = zmq::socket_t(*ctx, zmq::socket_type::dealer);
     set_common_options(p.sock, cfg.sndhwm, cfg.rcvhwm, cfg.limits.max_message_bytes);
     p.sock.set(zmq::sockopt::routing_id, zmq::buffer(routing_id));
@@ -279,23 +349,24 @@ struct ScatterGather::Impl {
   }
 
   void heartbeat(Peer& p, Clock::time_point now) {
-    p.next_heartbeat = now + cfg.heartbeat_period;
-    p.last_asked = now;
+    p.heartbeat_due = now + cfg.heartbeat_period;
+    p.asked_at = now;
     send(p, HeartbeatMsg{++p.nonce});
   }
 
   void maybe_start_upload(Peer& p, Clock::time_point now) {
-    if (!p.up || !p.epoch || !p.target_hash || p.holds(p.target_hash)) return;
-    if (p.upload && p.upload->hash == p.target_hash) return;
-    if (p.failed_hash == p.target_hash && now - p.failed_at < cfg.load_timeout) return;
-    p.upload = by_hash.at(p.target_hash);
+    if (!heard(p.link) || !p.target_hash || p.holds(p.target_hash)) return;
+    if (p.link == Link::Loading && p.upload->hash == p.target_hash) return;
+    if (p.refused_hash == p.target_hash && now - p.refused_at < cfg.load_timeout) return;
+    p.upload = by_hash.at(p.target_hash);  // replaces a set still being sent for an older target
     p.upload_off = 0;
-    p.upload_progress = now;
+    p.load_progress_at = now;
     ++p.loads_sent;
+    step(p, LinkEvent::LoadStart);
   }
 
   void pump_upload(Peer& p, Clock::time_point now) {
-    if (!p.upload || p.upload_off >= p.upload->bytes.size()) return;
+    if (p.link != Link::Loading || p.upload_off >= p.upload->bytes.size()) return;
     const auto& bytes = p.upload->bytes;
     const std::size_t chunk = std::max<std::size_t>(1, std::min(cfg.chunk_bytes, cfg.limits.max_chunk_bytes));
     LoadBlocksMsg m{p.upload->hash, bytes.size(), 0, {}};
@@ -307,29 +378,29 @@ struct ScatterGather::Impl {
       if (!send(p, m)) break;  // queue full or not connected: resume on POLLOUT / next round
       p.upload_off += n;
       p.bytes_sent += n;
-      p.upload_progress = now;
+      p.load_progress_at = now;
     }
   }
 
-  bool uploading(const Peer& p) const { return p.upload != nullptr; }
+  /// Loading, and nothing sent or acknowledged for load_timeout.
+  bool load_stuck(const Peer& p, Clock::time_point now) const {
+    return p.link == Link::Loading && now - p.load_progress_at > cfg.load_timeout;
+  }
 
   // ---- receiving ---------------------------------------------------------------------------
 
   void on_hello(Peer& p, const HelloMsg& h, Clock::time_point now) {
-    if (p.epoch && h.epoch != p.epoch) p.upload = nullptr;  // restarted: whatever was sent is gone
+    if (p.link == Link::Loading && h.epoch != p.epoch)
+      step(p, LinkEvent::LoadEnd);  // restarted: whatever was sent is gone
     p.epoch = h.epoch;
     p.worker_id = h.worker_id;
     const std::size_t had = p.held.size();
     p.held.clear();
     for (const Held& x : h.held) p.held.push_back(x.hash);
-    if (p.held.size() < had) prune_pending = true;                // it dropped a set: maybe ours can go too
-    if (p.upload && p.holds(p.upload->hash)) p.upload = nullptr;  // load acknowledged
-    if (!p.up) {
-      p.up = true;
-      p.misses = 0;
-      dirty = true;
-    }
-    if (p.ask == Ask::Heartbeat) p.replied = true;
+    if (p.held.size() < had) prune_pending = true;  // it dropped a set: maybe ours can go too
+    if (p.link == Link::Loading && p.holds(p.upload->hash)) step(p, LinkEvent::LoadEnd);  // load acknowledged
+    step(p, h.epoch ? LinkEvent::Hello : LinkEvent::BlankHello);
+    step(p, TurnEvent::Hello);
     maybe_start_upload(p, now);
   }
 
@@ -338,7 +409,7 @@ struct ScatterGather::Impl {
       ++out->stale_dropped;
       return;
     }
-    if (p.ask != Ask::Query || p.replied || !p.asked || r.hash != p.asked->hash) {
+    if (p.turn != Turn::Queried || r.hash != p.asked->hash) {
       ++out->bad_messages;
       return;
     }
@@ -347,7 +418,7 @@ struct ScatterGather::Impl {
         ++out->bad_messages;
         return;
       }
-    p.replied = true;
+    step(p, TurnEvent::Result);
     p.misses = 0;
     ++out->workers_replied;
     out->pairs.insert(out->pairs.end(), r.pairs.begin(), r.pairs.end());
@@ -358,14 +429,15 @@ struct ScatterGather::Impl {
   }
 
   void on_error(Peer& p, const ErrorMsg& e, Clock::time_point now) {
-    if (e.code == ErrorCode::NotLoaded && in_round && e.ref == cur_seq && p.ask == Ask::Query) {
-      p.replied = true;  // alive, just not holding what we asked for; its Hello follows
+    const bool query_turn = p.turn == Turn::Queried || p.turn == Turn::Unsent || p.turn == Turn::Answered;
+    if (e.code == ErrorCode::NotLoaded && in_round && e.ref == cur_seq && query_turn) {
+      step(p, TurnEvent::NotLoaded);  // alive, just not holding what we asked for; its Hello follows
       p.held.erase(std::remove(p.held.begin(), p.held.end(), p.asked ? p.asked->hash : 0), p.held.end());
     } else if (e.code == ErrorCode::LoadFailed || e.code == ErrorCode::TooLarge) {
-      if (p.upload && (e.ref == p.upload->hash || e.ref == 0)) {
-        p.failed_hash = p.upload->hash;
-        p.failed_at = now;
-        p.upload = nullptr;
+      if (p.link == Link::Loading && (e.ref == p.upload->hash || e.ref == 0)) {
+        p.refused_hash = p.upload->hash;
+        p.refused_at = now;
+        step(p, LinkEvent::LoadEnd);
       }
     } else if (out) {
       ++out->bad_messages;
@@ -394,7 +466,7 @@ struct ScatterGather::Impl {
         if (out) ++out->bad_messages;
         continue;
       }
-      p.last_heard = now;
+      p.silent_since = std::max(p.silent_since, now);
       if (auto* h = std::get_if<HelloMsg>(&m.value()))
         on_hello(p, *h, now);
       else if (auto* r = std::get_if<ResultMsg>(&m.value())) {
@@ -411,7 +483,7 @@ struct ScatterGather::Impl {
     items.clear();
     for (Peer& p : peers) {
       short ev = ZMQ_POLLIN;
-      if (p.upload && p.upload_off < p.upload->bytes.size()) ev |= ZMQ_POLLOUT;
+      if (p.link == Link::Loading && p.upload_off < p.upload->bytes.size()) ev |= ZMQ_POLLOUT;
       items.push_back({p.sock.handle(), 0, ev, 0});
     }
     const auto now = Clock::now();
@@ -444,7 +516,7 @@ struct ScatterGather::Impl {
     std::fill(covered.begin(), covered.end(), 0);
     for (Peer& p : peers) {
       p.asked = nullptr;
-      if (!p.up || !p.epoch) continue;
+      if (!heard(p.link)) continue;
       if (p.holds(p.target_hash))
         p.asked = by_hash.at(p.target_hash);
       else
@@ -457,7 +529,7 @@ struct ScatterGather::Impl {
     }
     if (std::all_of(covered.begin(), covered.end(), [](std::uint8_t c) { return c; })) return;
     for (Peer& p : peers) {
-      if (!p.up || !p.epoch) continue;
+      if (!heard(p.link)) continue;
       SetPtr best;
       std::size_t best_gain = 0;
       for (std::uint64_t h : p.held) {
@@ -481,17 +553,16 @@ struct ScatterGather::Impl {
   /// reconnect_after (unless it is busy loading what we sent).
   void revive_silent(Clock::time_point now) {
     for (Peer& p : peers) {
-      const auto since = std::max({p.last_heard, p.socket_opened});
-      if (p.last_asked <= since || now - since < cfg.reconnect_after) continue;
-      if (uploading(p) && now - p.upload_progress <= cfg.load_timeout) continue;
-      p.upload = nullptr;
+      if (p.asked_at <= p.silent_since || now - p.silent_since < cfg.reconnect_after) continue;
+      if (p.link == Link::Loading && !load_stuck(p, now)) continue;
+      if (p.link == Link::Loading) step(p, LinkEvent::LoadEnd);  // dropped with the old socket
       (void)open_socket(p);
     }
   }
 
   void begin_round_sends(const geom::Pose& pose, Clock::time_point now) {
     revive_silent(now);
-    if (dirty)
+    if (reassign_pending)
       reassign();
     else if (prune_pending)
       prune_sets();
@@ -500,24 +571,27 @@ struct ScatterGather::Impl {
     choose_sets();
     std::fill(covered.begin(), covered.end(), 0);
     for (Peer& p : peers) {
-      p.ask = Ask::None;
-      p.replied = false;
-      if (!p.up) {
-        if (now >= p.next_heartbeat) heartbeat(p, now);
+      step(p, TurnEvent::NewRound);
+      if (p.link == Link::Down) {
+        if (now >= p.heartbeat_due) heartbeat(p, now);
         continue;
       }
       if (p.asked) {
-        p.ask = Ask::Query;
         ++out->workers_asked;
-        p.last_asked = now;
-        if (!send(p, QueryMsg{cur_seq, p.asked->hash, pose})) p.asked = nullptr;  // counts as a miss
-        if (now >= p.next_refresh) {  // the Hello it answers with may arrive in any later round
-          p.next_refresh = now + cfg.held_refresh_period;
+        p.asked_at = now;
+        if (send(p, QueryMsg{cur_seq, p.asked->hash, pose})) {
+          step(p, TurnEvent::QuerySent);
+        } else {
+          p.asked = nullptr;
+          step(p, TurnEvent::QueryUnsent);  // counts as a miss
+        }
+        if (now >= p.held_refresh_due) {  // the Hello it answers with may arrive in any later round
+          p.held_refresh_due = now + cfg.held_refresh_period;
           send(p, HeartbeatMsg{++p.nonce});
         }
-      } else if (!uploading(p)) {
-        p.ask = Ask::Heartbeat;  // unknown or empty: it must at least say hello by the deadline
-        if (now >= p.next_heartbeat || !p.epoch) heartbeat(p, now);
+      } else if (p.link != Link::Loading) {
+        step(p, TurnEvent::Ping);  // unknown or empty: it must at least say hello by the deadline
+        if (now >= p.heartbeat_due || p.link == Link::Unknown) heartbeat(p, now);
       }
       pump_upload(p, now);
     }
@@ -526,21 +600,21 @@ struct ScatterGather::Impl {
   bool all_replied() const {
     bool any = false;
     for (const Peer& p : peers) {
-      if (p.ask == Ask::Query && p.asked) any = true;
-      if (p.ask != Ask::None && !p.replied && !(p.ask == Ask::Query && !p.asked)) return false;
+      if (p.asked) any = true;  // a Query is out (answered or not)
+      if (p.turn == Turn::Queried || p.turn == Turn::Pinged) return false;
     }
     return any;  // nobody to wait for: wait out the deadline instead of spinning the caller
   }
 
   void end_round(Clock::time_point now) {
     for (Peer& p : peers) {
-      if (!p.up) continue;
-      if (p.ask == Ask::None || p.replied) {
-        if (p.replied) p.misses = 0;
-        if (uploading(p) && now - p.upload_progress > cfg.load_timeout) mark_down(p);  // stuck load
+      if (p.link == Link::Down) continue;
+      if (!missed(p.turn)) {
+        if (p.turn != Turn::Idle) p.misses = 0;  // Answered or Greeted
+        if (load_stuck(p, now)) mark_down(p);
         continue;
       }
-      if (uploading(p) && now - p.upload_progress <= cfg.load_timeout) continue;  // busy loading: exempt
+      if (p.link == Link::Loading && !load_stuck(p, now)) continue;  // busy loading: exempt
       if (++p.misses >= cfg.miss_limit) mark_down(p);
     }
   }
@@ -549,11 +623,8 @@ struct ScatterGather::Impl {
     // A fresh socket drops whatever is queued for the dead worker, and re-arms the connection:
     // libzmq reconnects tcp:// and ipc:// by itself, but not inproc:// once its binder is gone.
     (void)open_socket(p);
-    p.up = false;
-    p.upload = nullptr;
-    p.misses = 0;
-    p.next_heartbeat = Clock::now();
-    dirty = true;
+    step(p, LinkEvent::MarkDown);
+    p.heartbeat_due = Clock::now();
   }
 };
 
@@ -662,20 +733,21 @@ bool ScatterGather::wait_ready(Clock::time_point deadline) {
   for (;;) {
     const auto now = Clock::now();
     m.revive_silent(now);
-    if (m.dirty) m.reassign();
+    if (m.reassign_pending) m.reassign();
     m.refresh_targets();
     bool ready = true;
     for (Impl::Peer& p : m.peers) {
-      if (!p.up) {
-        if (now >= p.next_heartbeat) m.heartbeat(p, now);
+      if (p.link == Link::Down) {
+        if (now >= p.heartbeat_due) m.heartbeat(p, now);
         continue;
       }
-      if (!p.epoch && now >= p.next_heartbeat) m.heartbeat(p, now);
+      if (p.link == Link::Unknown && now >= p.heartbeat_due) m.heartbeat(p, now);
       m.maybe_start_upload(p, now);
       m.pump_upload(p, now);
-      if (!p.epoch || (!p.target.empty() && !p.holds(p.target_hash))) ready = false;
+      if (p.link == Link::Unknown || (!p.target.empty() && !p.holds(p.target_hash))) ready = false;
     }
-    if (ready && std::any_of(m.peers.begin(), m.peers.end(), [](const Impl::Peer& p) { return p.up; })) return true;
+    const auto up = [](const Impl::Peer& p) { return p.link != Link::Down; };
+    if (ready && std::any_of(m.peers.begin(), m.peers.end(), up)) return true;
     if (now >= deadline) return false;
     m.wait_and_service(std::min(deadline, now + std::chrono::milliseconds(10)));
   }
@@ -684,8 +756,8 @@ bool ScatterGather::wait_ready(Clock::time_point deadline) {
 std::vector<WorkerStatus> ScatterGather::workers() const {
   std::vector<WorkerStatus> v;
   for (const Impl::Peer& p : impl_->peers)
-    v.push_back({p.endpoint, p.up, p.worker_id, p.epoch, p.misses, p.target, p.holds(p.target_hash), p.bytes_sent,
-                 p.loads_sent, p.held.size()});
+    v.push_back({p.endpoint, p.link != Link::Down, p.worker_id, p.epoch, p.misses, p.target, p.holds(p.target_hash),
+                 p.bytes_sent, p.loads_sent, p.held.size()});
   return v;
 }
 

@@ -11,6 +11,45 @@
 //
 // Never blocks without a timeout: sends are non-blocking (a full queue counts as a miss), and
 // every wait is bounded by the round's deadline. Not thread-safe: one thread owns it.
+//
+// Each worker is in a link state, kept across rounds, and has a turn in the current round. Two
+// machines, not one, because they are independent: a Loading worker is still queried with a set
+// it already holds. Each changes in one place, which stops on a cell marked `-` (ST_ASSERT; a
+// release build ignores the event); a reply that fits no transition of its worker's turn is
+// counted (bad_messages, stale_dropped) and dropped before it gets there.
+//
+//   link \ event  Hello    BlankHello  LoadStart  LoadEnd  MarkDown
+//   Unknown       Live     Unknown     -          -        Down      no Hello with an epoch yet
+//   Live          Live     Unknown     Loading    -        Down      up: queried with the best set it holds
+//   Loading       Loading  -           Loading    Live     Down      Live, and a block set is being sent to it
+//   Down          Live     Unknown     -          -        -         heartbeated; its blocks dealt to the others
+//
+//   Hello       a Hello with an epoch (one that also ends a load is a LoadEnd first)
+//   BlankHello  a Hello with epoch 0: says nothing about its memory, so it counts as never heard
+//   LoadStart   its target set (not held, not refused within load_timeout) is queued for upload; a
+//               newer target replaces a set still being sent
+//   LoadEnd     the set being sent is acknowledged (its Hello lists it), refused (LoadFailed,
+//               TooLarge), lost to a restart (new epoch), or dropped with its socket
+//   MarkDown    miss_limit missed rounds in a row, or a load with no progress for load_timeout
+// Entering or leaving Down resets the miss count and deals the blocks anew. Down and Pinged
+// workers get a Heartbeat every heartbeat_period, an Unknown one each round too, a Queried one
+// every held_refresh_period. Any worker asked (Query or Heartbeat) and then silent for
+// reconnect_after gets a fresh socket: not a state, as only the silence is timed anew.
+//
+//   turn \ event  NewRound  QuerySent  QueryUnsent  Ping    Result    NotLoaded  Hello
+//   Idle          Idle      Queried    Unsent       Pinged  -         -          Idle
+//   Queried       Idle      -          -            -       Answered  Answered   Queried
+//   Unsent        Idle      -          -            -       -         Answered   Unsent
+//   Pinged        Idle      -          -            -       -         -          Greeted
+//   Answered      Idle      -          -            -       -         Answered   Answered
+//   Greeted       Idle      -          -            -       -         -          Greeted
+//
+//   Idle      not asked: Down, or Loading with no held set to query
+//   Queried   its Query is queued; Unsent: its Query could not be queued
+//   Pinged    not queried (Unknown, or holds no set): it must say Hello by the deadline
+//   Answered  its Result, or a NotLoaded naming this round; Greeted: its Hello
+// At the round's end Queried, Unsent and Pinged count a miss (not while it is Loading within
+// load_timeout); Answered and Greeted reset the count.
 #pragma once
 #include <chrono>
 #include <cstdint>
