@@ -32,7 +32,7 @@ log() { printf '[run_all %4ds] %s\n' $(( $(date +%s) - t_start )) "$*"; }
 
 # gnuplot for the PNGs: a Debian package, installed the way scripts/setup.sh installs its own.
 if [ $plots = 1 ] && ! command -v gnuplot >/dev/null 2>&1; then
-  if ! dpkg-query -W -f='${Status}' gnuplot-nox 2>/dev/null | grep -q "install ok installed"; then
+  if [[ "$(dpkg-query -W -f='${Status}' gnuplot-nox 2>/dev/null)" != *"install ok installed"* ]]; then
     log "installing gnuplot-nox"
     sudo=""; [ "$(id -u)" -eq 0 ] || sudo="sudo"
     { $sudo apt-get update -qq && DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends gnuplot-nox; } \

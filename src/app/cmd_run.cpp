@@ -77,12 +77,7 @@ void run(const RunArgs& a) {
   if (!made) die(2, made.error());
   engine::RunEngine& run = *made.value();
 
-  struct sigaction sa {};
-  sa.sa_handler = on_signal;
-  sigemptyset(&sa.sa_mask);
-  sigaction(SIGINT, &sa, nullptr);
-  sigaction(SIGTERM, &sa, nullptr);
-  sigaction(SIGHUP, &sa, nullptr);  // a closed terminal ends the run like Ctrl-C: summary kept, segment removed
+  on_stop_signals(on_signal);
 
   if (Status st = run.start(); !st) die(1, st.error());
   std::fprintf(stderr, "running %.1f s: %s, collision %s, %s; shm %s; run directory %s (Ctrl-C stops)\n", s.duration_s,

@@ -69,12 +69,7 @@ void run_servo(const ServoArgs& a) {
                         s.passivity, 1.0 / s.haptic.rate_hz);
   servo.publish_status_to(&status.servo);
 
-  struct sigaction sa {};
-  sa.sa_handler = on_servo_signal;
-  sigemptyset(&sa.sa_mask);
-  sigaction(SIGINT, &sa, nullptr);
-  sigaction(SIGTERM, &sa, nullptr);
-  sigaction(SIGHUP, &sa, nullptr);  // a closed terminal ends the run like Ctrl-C: summary kept, segment removed
+  on_stop_signals(on_servo_signal);
 
   rt::HapticLoop loop(s.haptic);
   Result<rt::RtReport> rep = loop.start(servo);

@@ -2,6 +2,7 @@
 // root CLI11 app; a failing command throws CLI::RuntimeError(exit_code) after printing why.
 #pragma once
 #include <CLI/CLI.hpp>
+#include <csignal>
 #include <cstdio>
 #include <string>
 
@@ -22,6 +23,15 @@ void add_keygen(CLI::App& app);   ///< spheretouch keygen --out PREFIX (CURVE ke
 [[noreturn]] inline void fail_command(const char* who, int code, const std::string& msg) {
   std::fprintf(stderr, "%s: %s\n", who, msg.c_str());
   throw CLI::RuntimeError(code);
+}
+
+/// SIGINT, SIGTERM and SIGHUP call `handler` (it only records the signal): a closed terminal
+/// ends a run like Ctrl-C, with the summary kept and the shared-memory segment removed.
+inline void on_stop_signals(void (*handler)(int)) {
+  struct sigaction sa {};
+  sa.sa_handler = handler;
+  sigemptyset(&sa.sa_mask);
+  for (int sig : {SIGINT, SIGTERM, SIGHUP}) sigaction(sig, &sa, nullptr);
 }
 
 using engine::appendf;  ///< printf-style append (engine/text.hpp)

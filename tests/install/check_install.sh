@@ -47,7 +47,10 @@ c++ -std=c++20 -o "$scratch/touch_boxes" "$examples/touch_boxes.cpp" $(pkg-confi
 out=$("$scratch/touch_boxes") || { echo "$out"; fail "the example failed"; }
 echo "$out"
 [ "$(grep -c 'colliding 1' <<<"$out")" = 3 ] || fail "the example should see 3 touching steps"
-ldd "$scratch/touch_boxes" | grep -q "$libdir/libspheretouch.so" || fail "the example did not link the installed library"
+# Not `ldd | grep -q`: grep -q exits at the first match, ldd may then die of SIGPIPE, and
+# pipefail turns that into a failure.
+linked=$(ldd "$scratch/touch_boxes")
+grep -q "$libdir/libspheretouch.so" <<<"$linked" || fail "the example did not link the installed library ($linked)"
 
 # The Python module from the install tree.
 pyso=$(find "$scratch/root" -name 'spheretouch*.so' -path '*-packages*' | head -1)
