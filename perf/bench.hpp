@@ -17,5 +17,6 @@ void add_scatter(CLI::App& app);   ///< scatter-gather round trip of an empty qu
 void add_tables(CLI::App& app);  ///< the paper's tables: table1, table2, table3, peers, trade, icosphere (bench_tables.cpp)
 void add_force(CLI::App& app);    ///< force rendering quality per contact model, simulated time (bench_force.cpp)
 void add_hostile(CLI::App& app);  ///< security reproducers against a live worker (bench_hostile.cpp)
+void add_scale(CLI::App& app);    ///< scale-out model: worker shares timed alone per W and mapping (bench_scale.cpp)
 
 }  // namespace st::bench

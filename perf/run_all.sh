@@ -151,6 +151,18 @@ hostile_args=(--json)
 
 echo "load_end=$(cut -d' ' -f1-3 /proc/loadavg)" >> "$out/machine.txt"
 echo "elapsed_s=$(( $(date +%s) - t_start ))" >> "$out/machine.txt"
+log "scale-out model: worker shares timed alone per W and mapping, gather measured, 10/100 GbE predicted"
+if [ $quick = 1 ]; then
+  "$bench" scale --probe "$hand" --object "$models/elephant.off" --poses perf/poses/scale_hand_elephant.txt \
+    --max-workers 4 --runs 3 --gather-rounds 40 --json > "$out/scale_elephant.json"
+else
+  for o in elephant armadillo_L1 armadillo_L2; do
+    "$bench" scale --probe "$hand" --object "$models/$o.off" --poses "perf/poses/scale_hand_$o.txt" \
+      --max-workers 64 --json > "$out/scale_$o.json"
+  done
+fi
+[ $plots = 1 ] && python3 perf/scale_plot.py "$out/scale.png" "$out"/scale_*.json
+
 log "report"
 report_args=("$out")
 [ $quick = 1 ] || report_args+=(--results-md perf/RESULTS.md)

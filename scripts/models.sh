@@ -11,6 +11,10 @@
 #   hand.off            2,390 faces  (the hand at level 0, for quick tests)
 # The diagonal is set before subdividing, so all levels of a model share one frame (subdivided
 # levels shrink slightly inside it).
+# With --big (or ST_BIG_MODELS=1), also the million-face levels (not in the default set-up: about
+# 1 GB of OFF files and a minute or two of subdividing):
+#   armadillo_L3.off  3,328,000 faces  (3 Loop levels)
+#   armadillo_L4.off 13,312,000 faces  (4 Loop levels)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out="${ST_MODEL_DIR:-.cache/models}"
@@ -18,6 +22,15 @@ cache="${ST_CACHE_DIR:-.cache}/cgal"
 exe="${ST_EXE:-build/spheretouch}"
 mkdir -p "$out" "$cache"
 want=(hand.off hand_L2.off elephant.off armadillo.off armadillo_L1.off armadillo_L2.off bunny.off)
+big="${ST_BIG_MODELS:-0}"
+for arg in "$@"; do
+  case "$arg" in
+    --big) big=1 ;;
+    -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
+    *) echo "models: unknown argument '$arg' (expected --big)" >&2; exit 2 ;;
+  esac
+done
+[ "$big" = 1 ] && want+=(armadillo_L3.off armadillo_L4.off)
 done_all=1
 for f in "${want[@]}"; do [ -s "$out/$f" ] || done_all=0; done
 if [ "$done_all" = 1 ]; then echo "models: up to date in $out"; exit 0; fi
@@ -50,4 +63,8 @@ build armadillo.off    armadillo.off        200 0
 build armadillo_L1.off armadillo.off        200 1
 build armadillo_L2.off armadillo.off        200 2
 build bunny.off        bunny00.off          200 0
+if [ "$big" = 1 ]; then
+  build armadillo_L3.off armadillo.off        200 3
+  build armadillo_L4.off armadillo.off        200 4
+fi
 echo "models: ready in $out"

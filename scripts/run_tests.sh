@@ -6,7 +6,7 @@
 set -uo pipefail
 cd "$(dirname "$0")/.."
 jobs="${ST_JOBS:-2}"
-passed=0; failed=0; status=0
+passed=0; failed=0; status=0; failed_steps=""
 failures=$(mktemp); bg=$(mktemp -d); trap 'rm -rf "$failures" "$bg"' EXIT
 # Section headers carry the time since this script started (m:ss), so a slow CI run shows
 # which step the time went to.
@@ -17,7 +17,7 @@ run_suites() {  # build-dir [suite...]
   local args=()
   for s in "$@"; do args+=(--suite "$s"); done
   say "meson test -C $dir ${*:-(all suites)}"
-  meson test -C "$dir" --print-errorlogs --num-processes 1 --no-rebuild "${args[@]}" || status=1
+  meson test -C "$dir" --print-errorlogs --num-processes 1 --no-rebuild "${args[@]}" || { status=1; failed_steps+=" tests($dir)"; }
   local log="$dir/meson-logs/testlog.txt" p f
   if [ -f "$log" ]; then
     while read -r p f; do passed=$((passed + p)); failed=$((failed + f)); done < <(
@@ -42,7 +42,7 @@ configure() {  # build-dir meson-args...
 }
 
 say "scripts/format.sh --check"
-scripts/format.sh --check || { status=1; failed=$((failed + 1)); }
+scripts/format.sh --check || { status=1; failed=$((failed + 1)); failed_steps+=" format"; }
 
 say "release build"
 ninja -C build -j"$jobs" || exit 1
@@ -92,7 +92,7 @@ built() {  # name: waits for the background build, prints its log; false if it f
   done
   say "$1 build (in the background, done at $(cat "$bg/$1.done"))"
   cat "$bg/$1.log"
-  [ "$(cat "$bg/$1.rc")" = 0 ] || { echo "$1 build failed"; status=1; return 1; }
+  [ "$(cat "$bg/$1.rc")" = 0 ] || { echo "$1 build failed"; status=1; failed_steps+=" $1-build"; return 1; }
 }
 
 run_suites build
@@ -100,7 +100,7 @@ run_suites build
 # Every benchmark once, small (perf/run_all.sh --quick): proves they run; asserts nothing about speed.
 if [ "${ST_PERF_QUICK:-1}" != 0 ]; then
   say "perf/run_all.sh --quick"
-  perf/run_all.sh --quick || { echo "perf smoke run failed"; status=1; }
+  perf/run_all.sh --quick || { echo "perf smoke run failed"; status=1; failed_steps+=" perf-smoke"; }
 fi
 
 if [ "$sanitizers" != 0 ]; then
@@ -117,7 +117,7 @@ if [ "$sanitizers" != 0 ]; then
     # Four targets at a time on two cores (each gets half a core for ST_FUZZ seconds): CI's
     # fuzzing is a regression check of the corpora; the long runs are in perf/RESULTS.md.
     say "tests/fuzz/run_fuzz.sh $fuzz_secs (${ST_FUZZ_PARALLEL:-4} at a time)"
-    ST_JOBS="$jobs" ST_FUZZ_PARALLEL="${ST_FUZZ_PARALLEL:-4}" tests/fuzz/run_fuzz.sh "$fuzz_secs" || { echo "fuzzing failed (reproducers and logs named above)"; status=1; }
+    ST_JOBS="$jobs" ST_FUZZ_PARALLEL="${ST_FUZZ_PARALLEL:-4}" tests/fuzz/run_fuzz.sh "$fuzz_secs" || { echo "fuzzing failed (reproducers and logs named above)"; status=1; failed_steps+=" fuzz"; }
   fi
 fi
 wait
@@ -127,5 +127,10 @@ if [ -s "$failures" ]; then
   say "failures (repeated from the logs above)"
   cat "$failures"
 fi
+# One line per suite run and the reasons of any that did not pass, last: CI shows the end.
+say "suites"
+dirs=(build); [ "$sanitizers" != 0 ] && dirs+=(build-asan build-tsan)
+python3 scripts/test_summary.py "${dirs[@]}"
+[ -n "$failed_steps" ] && echo "failed steps:$failed_steps"
 echo "tests: $passed passed, $failed failed"
 exit $status

@@ -83,6 +83,7 @@ void run(const RunArgs& a) {
   std::fprintf(stderr, "running %.1f s: %s, collision %s, %s; shm %s; run directory %s (Ctrl-C stops)\n", s.duration_s,
                s.device.script == "builtin" ? "built-in approach/press/slide/release" : s.device.script.c_str(),
                run.backend().c_str(), run.servo_where().c_str(), run.shm_name().c_str(), run.run_dir().c_str());
+  if (const std::string split = run.split(); !split.empty()) std::fprintf(stderr, "split: %s\n", split.c_str());
 
   std::int64_t last_print = rt::now_ns();
   std::uint64_t last_ticks = 0, last_rounds = 0;

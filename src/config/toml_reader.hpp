@@ -55,6 +55,18 @@ class TomlReader {
     if (v < lo || v > hi) return bad(n, key, range(double(lo), double(hi)), double(v));
     out = static_cast<Int>(v);
   }
+  /// Optional integer in [lo, hi], or the string "auto" (then `out` = `auto_value`).
+  template <class Int>
+  void integer_or_auto(const char* key, Int& out, long long lo, long long hi, Int auto_value) {
+    const toml::node* n = find(key);
+    if (!n) return;
+    if (n->is_string() && n->as_string()->get() == "auto") {
+      out = auto_value;
+      return;
+    }
+    if (!n->is_integer()) return bad(n, key, "an integer or \"auto\"");
+    integer(key, out, lo, hi);
+  }
   /// Optional boolean.
   void boolean(const char* key, bool& out) {
     const toml::node* n = find(key);

@@ -101,10 +101,31 @@ Status wait_for_fleet(Fleet& fleet, const FleetSpec& spec, const net::ScatterCon
 Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Mesh& probe, const geom::Mesh& object,
                                            const geom::SphereTree& object_tree) {
   auto fleet = std::make_unique<Fleet>();
-  Result<net::Blocks> blocks = net::tree_blocks(object_tree, spec.layer, spec.block_size);
+  const std::size_t nworkers = spec.endpoints.empty() ? std::size_t(std::max(spec.workers, 0)) : spec.endpoints.size();
+  std::uint32_t layer = spec.layer, block_size = spec.block_size;
+  if (nworkers > 0 && (layer == geom::kFree || block_size == 0)) {
+    // The automatic split: the model's pick for this object and worker count (either knob may be
+    // pinned by the scene; the other is chosen).
+    geom::SplitModelConfig model;
+    model.contact_radius = spec.contact_radius;
+    Result<geom::SplitChoice> pick =
+        geom::choose_split(object_tree, std::uint32_t(nworkers), spec.mapping, model, layer, block_size);
+    if (!pick) return fail("distribution: ", pick.error());
+    layer = pick.value().layer;
+    block_size = pick.value().block_size;
+    fleet->split = pick.value().why + " (automatic; set [tree] layer and block_size to override)";
+  }
+  if (layer == geom::kFree) layer = 2;  // no workers: nothing is dealt
+  if (block_size == 0) block_size = 1;
+  Result<net::Blocks> blocks = net::tree_blocks(object_tree, layer, block_size);
   if (!blocks) return fail("distribution: ", blocks.error());
   fleet->blocks = static_cast<std::uint32_t>(blocks.value().size());
+  if (fleet->split.empty())
+    fleet->split = "layer " + std::to_string(layer) + ", block size " + std::to_string(block_size) + ": " +
+                   std::to_string(fleet->blocks) + " blocks, " + geom::to_string(spec.mapping) + " over " +
+                   std::to_string(nworkers) + " workers (set in the scene)";
   net::ScatterConfig cfg;
+  cfg.mapping = spec.mapping;
   cfg.miss_limit = spec.miss_limit;
   cfg.leaf_faces = spec.leaf_faces;
   if (spec.curve.enabled() && spec.endpoints.empty())
@@ -141,7 +162,7 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
     fleet->description = std::to_string(spec.workers) + " in-process worker" + (spec.workers == 1 ? "" : "s");
   }
   if (fleet->blocks < cfg.endpoints.size())
-    return fail("distribution: layer ", spec.layer, " gives ", fleet->blocks, " blocks for ", cfg.endpoints.size(),
+    return fail("distribution: layer ", layer, " gives ", fleet->blocks, " blocks for ", cfg.endpoints.size(),
                 " workers (choose a deeper layer or a smaller block size)");
   Result<std::unique_ptr<net::ScatterGather>> sg =
       net::ScatterGather::create(fleet->ctx, cfg, probe, object, std::move(blocks).value());

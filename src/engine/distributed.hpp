@@ -11,6 +11,7 @@
 #include <vector>
 #include <zmq.hpp>
 
+#include "geom/partition.hpp"
 #include "geom/sphere_tree.hpp"
 #include "net/curve_keys.hpp"
 #include "net/local_workers.hpp"
@@ -33,9 +34,13 @@ Result<ClientCurve> load_client_curve(const std::string& server_key_file, const 
 
 /// How to reach the workers.
 struct FleetSpec {
-  int workers = 0;                          ///< in-process workers (ignored when endpoints are given)
-  std::vector<std::string> endpoints;       ///< worker daemons
-  std::uint32_t layer = 2, block_size = 1;  ///< distribution: sphere layer, layer spheres per block
+  int workers = 0;                     ///< in-process workers (ignored when endpoints are given)
+  std::vector<std::string> endpoints;  ///< worker daemons
+  /// Distribution: sphere layer and layer spheres per block; geom::kFree / 0 = automatic
+  /// (geom::choose_split for this object and worker count, contact regions of contact_radius).
+  std::uint32_t layer = geom::kFree, block_size = 0;
+  geom::Mapping mapping = geom::Mapping::block_cyclic;              ///< how blocks are dealt
+  double contact_radius = 10;                                       ///< mm, for the automatic split
   std::uint32_t leaf_faces = geom::DefaultTreeConfig().leaf_faces;  ///< tree knob sent to workers
   std::uint32_t miss_limit = 3;                                     ///< missed deadlines before a worker is marked down
   std::chrono::milliseconds ready_timeout{30000};                   ///< time allowed for the first upload
@@ -54,6 +59,7 @@ struct Fleet {
   std::unique_ptr<net::ScatterGather> client;
   std::uint32_t blocks = 0;  ///< blocks dealt
   std::string description;   ///< "2 in-process workers" / "3 daemons"
+  std::string split;         ///< how the object was split and why ("layer 3, block size 1: ...")
   /// Workers currently up (not marked down).
   int up() const;
 };

@@ -142,6 +142,10 @@ Status RunEngine::State::prepare() {
     spec.endpoints = s.endpoints;
     spec.layer = s.layer;
     spec.block_size = s.block_size;
+    spec.mapping = s.mapping;
+    // A contact region for the automatic split: a quarter of the probe's bounding sphere (the
+    // patch a hand or tool presses into a surface), in object millimetres.
+    spec.contact_radius = 0.25 * double(ptree.tree.nodes[0].radius);
     spec.leaf_faces = s.tree.leaf_faces;
     spec.miss_limit = std::uint32_t(s.down_after);
     spec.curve = opt.curve;
@@ -400,6 +404,7 @@ RunReport RunEngine::finish(int signal) {
           static_cast<unsigned long long>(collision.rounds()), double(collision.rounds()) / secs,
           double(lat.percentile_ns(0.5)) * 1e-6, double(lat.percentile_ns(0.99)) * 1e-6,
           static_cast<unsigned long long>(collision.incomplete()), e.backend.c_str());
+  if (e.fleet) appendf(summary, "  split           %s\n", e.fleet->split.c_str());
   if (sres.silences)
     appendf(summary,
             "  silences        %llu: no contact model for the stale timeout, force faded to zero (longest %.0f ms)\n",
@@ -480,6 +485,7 @@ void RunEngine::save(RunReport& report) {
 
 const Scene& RunEngine::scene() const { return s_->s; }
 const std::string& RunEngine::backend() const { return s_->backend; }
+std::string RunEngine::split() const { return s_->fleet ? s_->fleet->split : std::string(); }
 const std::string& RunEngine::servo_where() const { return s_->servo_where; }
 const std::string& RunEngine::run_dir() const { return s_->dir; }
 const std::string& RunEngine::shm_name() const { return s_->shm->name(); }

@@ -88,6 +88,7 @@ class RunEngine {
   void save(RunReport& report);
 
   const Scene& scene() const;
+  std::string split() const;               ///< how the object was dealt to workers and why ("" without workers)
   const std::string& backend() const;      ///< "in the collision thread", "2 in-process workers", ...
   const std::string& servo_where() const;  ///< "servo thread" or "servo process pid N"
   const std::string& run_dir() const;      ///< the run directory

@@ -132,8 +132,11 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
   {
     TomlReader r(section("tree"), "tree", name);
     r.integer("leaf_faces", s.tree.leaf_faces, 1, geom::kMaxLeafFaces);
-    r.integer("layer", s.layer, 0, 20);
-    r.integer("block_size", s.block_size, 1, 1 << 20);
+    r.integer_or_auto("layer", s.layer, 0, 20, geom::kFree);
+    r.integer_or_auto("block_size", s.block_size, 1, 1 << 20, 0u);
+    std::string mapping = geom::to_string(s.mapping);
+    r.string("mapping", mapping, {"block-cyclic", "contiguous", "random"});
+    geom::parse_mapping(mapping, s.mapping);
     r.boolean("cache", s.tree_cache);
     if (Status st = r.finish(); !st) return Error{st.error()};
   }

@@ -8,6 +8,7 @@
 #include "geom/collide.hpp"
 #include "geom/contact.hpp"
 #include "geom/mesh.hpp"
+#include "geom/partition.hpp"
 #include "geom/sphere_tree.hpp"
 #include "rt/force_law.hpp"
 #include "rt/haptic_loop.hpp"
@@ -48,9 +49,12 @@ struct Scene {
   geom::Vec3 probe_rotation_deg{geom::Vec3::Zero()};  ///< probe orientation (XYZ Euler, about the tip)
   geom::TreeConfig tree = geom::DefaultTreeConfig();  ///< leaf size
   bool tree_cache = true;                             ///< read/write trees in the tree cache
-  std::uint32_t layer = 2, block_size = 1;            ///< distribution: sphere layer and blocks per worker
-  int workers = 2;                                    ///< in-process workers (0 = collide in the collision thread)
-  std::vector<std::string> endpoints;                 ///< worker daemons (overrides `workers`)
+  /// Distribution: sphere layer whose spheres are dealt in blocks, and layer spheres per block;
+  /// geom::kFree / 0 = chosen by geom::choose_split() for the scene and worker count ("auto").
+  std::uint32_t layer = geom::kFree, block_size = 0;
+  geom::Mapping mapping = geom::Mapping::block_cyclic;  ///< how blocks are dealt to workers
+  int workers = 2;                                      ///< in-process workers (0 = collide in the collision thread)
+  std::vector<std::string> endpoints;                   ///< worker daemons (overrides `workers`)
   std::string server_key;           ///< CURVE: the workers' public key file (resolved path; "" = plain)
   std::string client_key;           ///< CURVE: this client's key pair PREFIX (PREFIX.key, PREFIX.pub)
   double deadline_ms = 50;          ///< scatter-gather round deadline, ms

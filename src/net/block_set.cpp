@@ -196,11 +196,17 @@ Result<BlockSet> decode_block_set(std::span<const std::uint8_t> encoded, const L
   return s;
 }
 
-std::vector<std::vector<std::uint32_t>> block_cyclic(std::uint32_t num_blocks, std::uint32_t workers) {
+std::vector<std::vector<std::uint32_t>> deal_blocks(std::uint32_t num_blocks, std::uint32_t workers,
+                                                    geom::Mapping mapping, std::uint64_t seed) {
   std::vector<std::vector<std::uint32_t>> out(workers);
   if (workers == 0) return out;
-  for (std::uint32_t b = 0; b < num_blocks; ++b) out[b % workers].push_back(b);
+  const std::vector<std::uint32_t> owners = geom::block_owners(num_blocks, workers, mapping, seed);
+  for (std::uint32_t b = 0; b < num_blocks; ++b) out[owners[b]].push_back(b);
   return out;
+}
+
+std::vector<std::vector<std::uint32_t>> block_cyclic(std::uint32_t num_blocks, std::uint32_t workers) {
+  return deal_blocks(num_blocks, workers, geom::Mapping::block_cyclic);
 }
 
 Blocks spatial_blocks(const geom::Mesh& object, std::uint32_t faces_per_block) {

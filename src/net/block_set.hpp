@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "geom/mesh.hpp"
+#include "geom/partition.hpp"
 #include "geom/sphere_tree.hpp"
 #include "net/protocol.hpp"
 
@@ -51,6 +52,9 @@ std::uint64_t digest_key(const Digest& d);
 /// ids strictly ascending and below their totals, every coordinate finite.
 Result<BlockSet> decode_block_set(std::span<const std::uint8_t> encoded, const Limits& limits);
 
+/// The blocks of each worker, dealt by `mapping` (geom::block_owners), ascending in each list.
+std::vector<std::vector<std::uint32_t>> deal_blocks(std::uint32_t num_blocks, std::uint32_t workers,
+                                                    geom::Mapping mapping, std::uint64_t seed = 1);
 /// Block-cyclic mapping (paper §3.4, [10]): block b goes to worker b mod workers.
 std::vector<std::vector<std::uint32_t>> block_cyclic(std::uint32_t num_blocks, std::uint32_t workers);
 

@@ -160,7 +160,7 @@ struct ScatterGather::Impl {
     std::uint64_t epoch = 0;               // from its last Hello (0: none with an epoch yet)
     std::uint32_t misses = 0;              // rounds missed in a row (0 while Down)
     std::vector<std::uint64_t> held;       // hashes from its last Hello, MRU first
-    std::vector<std::uint32_t> original;   // its own blocks (block-cyclic)
+    std::vector<std::uint32_t> original;   // its own blocks (ScatterConfig::mapping)
     std::vector<std::uint32_t> target;     // blocks it should hold now
     std::uint64_t target_hash = 0;         // 0 while the target is being encoded
     SetPtr upload;                         // the block set being sent: non-null exactly while Loading
@@ -656,7 +656,8 @@ Result<std::unique_ptr<ScatterGather>> ScatterGather::create(zmq::context_t& ctx
       SceneData{std::move(probe), std::move(object), std::move(blocks), config.leaf_faces});
   impl->covered.assign(nblocks, 0);
   impl->cfg = std::move(config);
-  const auto share = block_cyclic(nblocks, static_cast<std::uint32_t>(impl->cfg.endpoints.size()));
+  const auto share = deal_blocks(nblocks, static_cast<std::uint32_t>(impl->cfg.endpoints.size()), impl->cfg.mapping,
+                                 impl->cfg.mapping_seed);
   for (std::size_t i = 0; i < impl->cfg.endpoints.size(); ++i) {
     Impl::Peer p;
     p.endpoint = impl->cfg.endpoints[i];

@@ -81,6 +81,8 @@ struct ScatterConfig {
   std::chrono::milliseconds reconnect_after{1000};
   std::uint32_t chunk_bytes = 256u << 10;  ///< LoadBlocks chunk size (≤ limits.max_chunk_bytes)
   std::uint32_t leaf_faces = geom::DefaultTreeConfig().leaf_faces;  ///< tree parameter sent with every block set
+  geom::Mapping mapping = geom::Mapping::block_cyclic;              ///< how blocks are dealt to the workers
+  std::uint64_t mapping_seed = 1;                                   ///< for geom::Mapping::random
   int sndhwm = 8;                   ///< per-worker send queue, messages (small: no stale backlog)
   int rcvhwm = 64;                  ///< per-worker receive queue, messages
   Limits limits = DefaultLimits();  ///< decode limits for replies

@@ -66,6 +66,9 @@ struct WorkerService::LoadJob {
       }
     }
     if (cancel.load() && error.empty() && !reuse && !backend) error = "worker stopping";
+    // The encoding, the decoded set and the build's scratch are gone: give the pages back, so a
+    // worker's resident memory is what it holds (its share), not its peak during the load.
+    if (!reuse) ::malloc_trim(0);
     ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     done.store(true, std::memory_order_release);
     const std::uint64_t one = 1;

@@ -73,6 +73,36 @@ TEST_CASE("run engine: prepare, start, poll, finish and save without the command
   CHECK(std::ifstream(out + "/trace.json").good());
 }
 
+TEST_CASE("run engine: with workers the split is chosen automatically and said in the summary; a pinned one is kept") {
+  st::test::TempDir dir;
+  // The scene text ends in [tree]: these keys land there.
+  for (const std::string tree : {std::string(), std::string("layer = 1\nblock_size = 2\nmapping = \"random\"\n")}) {
+    CAPTURE(tree);
+    auto scene = st::engine::parse_scene(
+        engine_scene_text(tree + "[workers]\ncount = 3\n[run]\nduration_s = 0.3\n[output]\ndir = \"" +
+                          dir.file(tree.empty() ? "auto" : "pinned") + "\"\nstatus = \"off\"\n"),
+        "e.toml", ".");
+    REQUIRE_MESSAGE(scene.ok(), scene.error());
+    auto made = st::engine::RunEngine::prepare(scene.value(), {});
+    REQUIRE_MESSAGE(made.ok(), made.error());
+    st::engine::RunEngine& run = *made.value();
+    const std::string split = run.split();
+    INFO(split);
+    if (tree.empty()) {
+      CHECK(split.find("(automatic;") != std::string::npos);
+      CHECK(split.find("block-cyclic over 3 workers") != std::string::npos);
+    } else {
+      CHECK(split.rfind("layer 1, block size 2: ", 0) == 0);
+      CHECK(split.find("random over 3 workers (set in the scene)") != std::string::npos);
+    }
+    REQUIRE(run.start().ok());
+    std::vector<std::string> events;
+    while (run.poll(false, events)) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    st::engine::RunReport report = run.finish(0);
+    CHECK(report.summary.find("  split           " + split) != std::string::npos);
+  }
+}
+
 TEST_CASE("run engine: prepare fails with an error naming the field; nothing is left running") {
   st::test::TempDir dir;
   auto scene =

@@ -319,6 +319,11 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
        "workers.server_key: file /nowhere/fleet.pub does not exist"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nserver_key = 3\n",
        "workers.server_key: expected a string"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[tree]\nlayer = \"deep\"\n",
+       "tree.layer: expected an integer or \"auto\""},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[tree]\nblock_size = 0\n", "tree.block_size"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[tree]\nmapping = \"diagonal\"\n",
+       "tree.mapping: expected one of block-cyclic, contiguous, random"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[haptic]\nthread_stack_kb = 16\n",
        "haptic.thread_stack_kb: expected 0 (glibc's default) or at least 64"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[haptic]\nthread_stack_kb = "
@@ -372,6 +377,10 @@ TEST_CASE("scene files: configs/demo.toml and configs/small.toml parse, with the
   CHECK(demo.value().law.b_N == 0.8);
   CHECK(demo.value().saturation.peak_N == 3.3);
   CHECK(demo.value().tree.leaf_faces == st::geom::DefaultTreeConfig().leaf_faces);
+  // The split is chosen for the scene and worker count unless the scene sets it.
+  CHECK(demo.value().layer == st::geom::kFree);
+  CHECK(demo.value().block_size == 0);
+  CHECK(demo.value().mapping == st::geom::Mapping::block_cyclic);
   // The documented contact and passivity values are the defaults.
   CHECK(demo.value().contact.model == st::geom::DefaultContactConfig().model);
   CHECK(demo.value().contact.hold_margin_mm == st::geom::DefaultContactConfig().hold_margin_mm);

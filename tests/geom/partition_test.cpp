@@ -1,6 +1,10 @@
 // Tests src/geom/partition.*: blocks cover every face once; the union over workers of collide
-// restricted to each worker's roots equals the unrestricted result, for W = 1..16.
+// restricted to each worker's roots equals the unrestricted result, for W = 1..16 and every
+// mapping (block-cyclic, contiguous, random); the automatic split never yields an empty or
+// out-of-range block and gives every worker a block, for any worker count it accepts.
 #include <doctest/doctest.h>
+
+#include <algorithm>
 
 #include "geom/collide.hpp"
 #include "geom/partition.hpp"
@@ -8,8 +12,9 @@
 #include "test_models.hpp"
 
 using namespace st::geom;
+using st::Result;
 
-TEST_CASE("block-cyclic partition: cover and union over workers") {
+TEST_CASE("partition, every mapping: cover and union over workers") {
   const Mesh* hp = st::test::model_mesh("hand_L2.off");
   const Mesh* ep = st::test::model_mesh("elephant.off");
   const Mesh hand = hp ? *hp : make_capsule(6, 20, 32);
@@ -28,11 +33,21 @@ TEST_CASE("block-cyclic partition: cover and union over workers") {
   MESSAGE("partition pose: ", full.contacts(), " contacts");
   for (std::uint32_t layer : {0u, 1u, 2u, 3u, et.num_depths}) {
     for (std::uint32_t B : {1u, 3u, 16u}) {
-      for (std::uint32_t W = 1; W <= 16; ++W) {
+      for (std::uint32_t i = 0; i < 3 * 16; ++i) {
+        const Mapping m = static_cast<Mapping>(i / 16);
+        const std::uint32_t W = i % 16 + 1;
+        if (m != Mapping::block_cyclic && W % 3 != 1 && W != 16) continue;  // 1, 4, 7, 10, 13, 16
         CAPTURE(layer);
         CAPTURE(B);
         CAPTURE(W);
-        const Partition p = make_partition(et, layer, W, B).value();
+        CAPTURE(to_string(m));
+        const Partition p = make_partition(et, layer, W, B, m, 7).value();
+        REQUIRE(p.owners.size() == p.num_blocks());
+        for (std::uint32_t k = 0; k < p.num_blocks(); ++k) CHECK(p.owner(k) < W);
+        if (m == Mapping::block_cyclic)
+          for (std::uint32_t k = 0; k < p.num_blocks(); ++k) CHECK(p.owner(k) == k % W);
+        if (m == Mapping::contiguous)
+          for (std::uint32_t k = 1; k < p.num_blocks(); ++k) CHECK(p.owner(k) >= p.owner(k - 1));
         std::vector<int> cover(ele.num_faces(), 0);
         std::vector<FacePair> uni;
         for (std::uint32_t w = 0; w < W; ++w) {
@@ -61,5 +76,83 @@ TEST_CASE("block-cyclic partition: cover and union over workers") {
       CHECK(et.cold[d].face_begin >= e.face_begin);
       CHECK(et.cold[d].face_end <= e.face_end);
     }
+  }
+}
+
+TEST_CASE("automatic split: in range, no empty block, every worker served; pinned knobs are kept") {
+  const Mesh* ep = st::test::model_mesh("elephant.off");
+  const Mesh ele = ep ? *ep : make_icosphere(30, 20);
+  std::vector<Mesh> meshes{ele, make_icosphere(10, 2), make_capsule(3, 8, 6)};
+  for (const Mesh& mesh : meshes) {
+    const SphereTree t = SphereTree::build(mesh).value();
+    CAPTURE(mesh.num_faces());
+    for (Mapping m : {Mapping::block_cyclic, Mapping::contiguous, Mapping::random}) {
+      for (std::uint32_t W : {1u, 2u, 3u, 4u, 7u, 8u, 16u, 33u, 64u, 200u}) {
+        CAPTURE(W);
+        const std::string mapping = to_string(m);
+        CAPTURE(mapping);
+        SplitModelConfig cfg;
+        cfg.contact_radius = 5;
+        Result<SplitChoice> c = choose_split(t, W, m, cfg);
+        if (!c) {
+          // Refused only when no layer has enough blocks for W workers (or, for a random deal,
+          // when every deal leaves some worker without a block).
+          CHECK((m == Mapping::random || t.layer(t.num_depths).size() < W));
+          continue;
+        }
+        const SplitChoice& s = c.value();
+        CHECK(s.layer < t.num_depths);
+        CHECK(s.block_size >= 1);
+        const Partition p = make_partition(t, s.layer, W, s.block_size, m).value();
+        CHECK(p.num_blocks() == s.blocks);
+        CHECK(p.num_blocks() >= W);
+        std::vector<std::uint32_t> held(W, 0);
+        for (std::uint32_t k = 0; k < p.num_blocks(); ++k) {
+          REQUIRE(p.owner(k) < W);
+          ++held[p.owner(k)];
+          const auto b = p.block(k);
+          REQUIRE(!b.empty());
+          std::size_t faces = 0;
+          for (std::uint32_t n : b) {
+            REQUIRE(n < t.num_nodes());
+            faces += t.cold[n].face_end - t.cold[n].face_begin;
+          }
+          CHECK(faces > 0);
+        }
+        CHECK(*std::min_element(held.begin(), held.end()) >= 1);
+        CHECK(s.imbalance() >= 1.0 - 1e-9);
+        CHECK(!s.why.empty());
+      }
+    }
+    // A pinned layer or block size is kept; the other knob is chosen.
+    if (t.num_depths > 2) {
+      Result<SplitChoice> pinned = choose_split(t, 2, Mapping::block_cyclic, {}, 1, 0);
+      if (pinned) CHECK(pinned.value().layer == 1);
+      Result<SplitChoice> sized = choose_split(t, 1, Mapping::block_cyclic, {}, kFree, 3);
+      REQUIRE(sized.ok());
+      CHECK(sized.value().block_size == 3);
+    }
+  }
+  const SphereTree et = SphereTree::build(ele).value();
+  CHECK(!choose_split(et, 0, Mapping::block_cyclic).ok());
+  // More workers than leaves: a clear refusal, never an empty worker.
+  const Result<SplitChoice> too_many = choose_split(et, 1u << 30, Mapping::block_cyclic);
+  REQUIRE(!too_many.ok());
+  CHECK(too_many.error().find("workers a block each") != std::string::npos);
+}
+
+TEST_CASE("automatic split: by its own model, the pick is no worse than the paper's layer 2, block size 1") {
+  const Mesh* ep = st::test::model_mesh("elephant.off");
+  const Mesh ele = ep ? *ep : make_icosphere(30, 20);
+  const SphereTree t = SphereTree::build(ele).value();
+  SplitModelConfig cfg;
+  cfg.contact_radius = 12;
+  for (std::uint32_t W : {2u, 8u}) {
+    const SplitChoice c = choose_split(t, W, Mapping::block_cyclic, cfg).value();
+    MESSAGE("W=", W, ": ", c.why);
+    CHECK(c.blocks >= W);
+    // The chosen split is no worse, by the model, than the paper's fixed layer 2, block size 1.
+    const Result<SplitChoice> fixed = choose_split(t, W, Mapping::block_cyclic, cfg, 2, 1);
+    if (fixed) CHECK(c.predicted_max <= fixed.value().predicted_max * (1 + cfg.tie) + 1e-9);
   }
 }

@@ -1,0 +1,686 @@
+// spheretouch-bench scale: the scale-out model, measured (issue 17).
+//
+// For W = 1, 2, 4, ... workers and each mapping of the object's blocks (block-cyclic, contiguous,
+// random), every worker's share is built exactly as a worker builds it (make_block_set, then the
+// tree backend's load) and its query at each pose is timed alone in one thread, so the critical
+// path (the slowest worker) and the total work are measured, not guessed. The gather is measured
+// too, on this machine: the raw ZeroMQ fan-out floor over inproc for W workers (what a round here
+// costs before any of our code), and the client's CPU per round over tcp with the echoes in a
+// separate process (what a client pays per worker on any network). A network adds its round trip
+// and its wire time; two published networks are modelled (README "When distribution pays"):
+//   10 GbE, kernel TCP: 16.25 us round trip (netperf TCP_RR, 1-byte, switched; Linux commit
+//     3a336cb17183 "cxgb4: Add low latency socket busy_poll support"), 10 Gbit/s;
+//   100 GbE with busy polling: 8.79 us round trip (same source, busy_poll on), 100 Gbit/s.
+// Per (pose, W, mapping): max and mean worker time, imbalance = max / mean over the W workers,
+// redundant work = sum / the single-thread collide(), and the predicted round
+//   compute = max_w (query_w + encode of its Result) + the client's decode and merge
+//   network   = compute + client CPU(W) + round trip + largest reply / bandwidth
+// with speed-up = single-thread collide() / predicted round. The model is checked where this
+// machine can: W = 1 and 2 in-process workers over inproc, predicted (floor(W) + compute) against
+// the measured round, same poses, same run.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <ctime>
+#include <memory>
+#include <string>
+#include <sys/wait.h>
+#include <thread>
+#include <unistd.h>
+#include <vector>
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <sys/socket.h>
+
+#include "bench.hpp"
+#include "fanout_floor.hpp"
+#include "geom/collide.hpp"
+#include "geom/mesh_io.hpp"
+#include "geom/partition.hpp"
+#include "geom/pose_io.hpp"
+#include "geom/sphere_tree.hpp"
+#include "net/block_set.hpp"
+#include "net/local_workers.hpp"
+#include "net/protocol.hpp"
+#include "net/scatter_gather.hpp"
+#include "net/tree_backend.hpp"
+
+namespace st::bench {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct ScaleArgs {
+  std::string probe, object, poses;
+  std::string layer = "auto", block_size = "auto";
+  std::uint32_t max_workers = 64;
+  int runs = 15;
+  int gather_rounds = 400;
+  bool json = false;
+  bool validate = true;
+};
+
+struct Network {
+  const char* name;
+  double rtt_us;        // round trip of a small message
+  double bytes_per_us;  // wire bandwidth
+  bool vm_client;       // the client's cost per round as this VM measures it (wake-ups included)
+};
+constexpr Network kNetworks[] = {
+    {"10GbE", 16.25, 1250.0, false},
+    {"10GbE-vm", 16.25, 1250.0, true},
+    {"100GbE-busypoll", 8.79, 12500.0, false},
+};
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+template <class F>
+double time_median_us(int runs, F&& f) {
+  f();  // warm
+  std::vector<double> t;
+  t.reserve(std::size_t(runs));
+  for (int r = 0; r < runs; ++r) {
+    const auto t0 = Clock::now();
+    f();
+    t.push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
+  }
+  return median(std::move(t));
+}
+
+double process_cpu_us() {
+  timespec ts{};
+  ::clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) * 1e6 + double(ts.tv_nsec) * 1e-3;
+}
+
+[[noreturn]] void die(const std::string& msg) {
+  std::fprintf(stderr, "spheretouch-bench scale: %s\n", msg.c_str());
+  throw CLI::RuntimeError(2);
+}
+
+/// The client's CPU per round over tcp: W DEALERs here, W ROUTER echoes in a child process (so
+/// this process's CPU time is the client's alone: its thread and its ZeroMQ I/O thread). Returns
+/// microseconds per round for each W. Runs before this process starts any other thread.
+std::vector<double> client_cpu_tcp(const std::vector<std::uint32_t>& ws, std::size_t reply_bytes, int rounds) {
+  std::vector<double> out;
+  for (std::uint32_t W : ws) {
+    std::vector<int> ports;
+    for (std::uint32_t i = 0; i < W; ++i) ports.push_back(free_tcp_port());
+    const pid_t pid = ::fork();
+    if (pid < 0) die("fork failed");
+    if (pid == 0) {
+      // The echoes: one thread polling W ROUTERs, answering with reply_bytes bytes.
+      zmq::context_t ctx(1);
+      std::vector<zmq::socket_t> socks;
+      for (int p : ports) {
+        socks.emplace_back(ctx, zmq::socket_type::router);
+        socks.back().set(zmq::sockopt::linger, 0);
+        socks.back().bind("tcp://127.0.0.1:" + std::to_string(p));
+      }
+      std::vector<std::uint8_t> reply(std::max<std::size_t>(reply_bytes, 8), 0);
+      std::vector<zmq::pollitem_t> items(socks.size());
+      for (;;) {
+        for (std::size_t i = 0; i < socks.size(); ++i) items[i] = {socks[i].handle(), 0, ZMQ_POLLIN, 0};
+        if (zmq::poll(items.data(), items.size(), std::chrono::milliseconds(5000)) <= 0) ::_exit(0);
+        for (std::size_t i = 0; i < socks.size(); ++i) {
+          zmq::message_t id, body;
+          while ((items[i].revents & ZMQ_POLLIN) && socks[i].recv(id, zmq::recv_flags::dontwait)) {
+            if (!id.more() || !socks[i].recv(body, zmq::recv_flags::dontwait)) break;
+            std::memcpy(reply.data(), body.data(), std::min<std::size_t>(body.size(), 8));
+            socks[i].send(id, zmq::send_flags::sndmore | zmq::send_flags::dontwait);
+            socks[i].send(zmq::buffer(reply), zmq::send_flags::dontwait);
+          }
+        }
+      }
+    }
+    double per_round = 0;
+    {
+      zmq::context_t ctx(1);
+      std::vector<zmq::socket_t> dl;
+      for (int p : ports) {
+        dl.emplace_back(ctx, zmq::socket_type::dealer);
+        dl.back().set(zmq::sockopt::linger, 0);
+        dl.back().connect("tcp://127.0.0.1:" + std::to_string(p));
+      }
+      std::vector<zmq::pollitem_t> items(dl.size());
+      std::uint64_t seq = 0;
+      auto one = [&]() {
+        const std::uint64_t word = ++seq;
+        std::uint8_t query[160] = {};  // a Query's size on the wire
+        std::memcpy(query, &word, sizeof word);
+        for (zmq::socket_t& d : dl) d.send(zmq::buffer(query, sizeof query), zmq::send_flags::dontwait);
+        std::size_t got = 0;
+        const auto end = Clock::now() + std::chrono::seconds(2);
+        while (got < dl.size() && Clock::now() < end) {
+          for (std::size_t i = 0; i < dl.size(); ++i) items[i] = {dl[i].handle(), 0, ZMQ_POLLIN, 0};
+          if (zmq::poll(items.data(), items.size(), std::chrono::milliseconds(100)) <= 0) continue;
+          for (std::size_t i = 0; i < dl.size(); ++i) {
+            zmq::message_t m;
+            while ((items[i].revents & ZMQ_POLLIN) && dl[i].recv(m, zmq::recv_flags::dontwait)) {
+              std::uint64_t back = 0;
+              if (m.size() >= sizeof back) std::memcpy(&back, m.data(), sizeof back);
+              got += back == word;
+            }
+          }
+        }
+      };
+      for (int r = 0; r < 50; ++r) one();  // connect and warm
+      const double c0 = process_cpu_us();
+      for (int r = 0; r < rounds; ++r) {
+        one();
+        std::this_thread::sleep_for(std::chrono::microseconds(200));  // spaced like a collision loop
+      }
+      per_round = (process_cpu_us() - c0) / rounds;
+    }
+    ::kill(pid, SIGTERM);
+    int st = 0;
+    ::waitpid(pid, &st, 0);
+    out.push_back(per_round);
+  }
+  return out;
+}
+
+/// The client's own work per worker message with no wake-up in it (this VM's wake-ups are VM exits
+/// that a bare-metal host does not pay): one thread, a ZeroMQ DEALER/ROUTER pair over inproc
+/// sending a Query-sized frame and a Result-sized reply without ever blocking, plus the kernel's
+/// work for the same two frames on a connected loopback TCP socket pair (write, read, write,
+/// read, never blocking). Half of each loop is the client's side. Microseconds per message pair.
+double client_message_work_us(std::size_t query_bytes, std::size_t reply_bytes, int n) {
+  double zmq_us = 0, tcp_us = 0;
+  {
+    zmq::context_t ctx(1);
+    zmq::socket_t r(ctx, zmq::socket_type::router), d(ctx, zmq::socket_type::dealer);
+    r.set(zmq::sockopt::linger, 0);
+    d.set(zmq::sockopt::linger, 0);
+    r.bind("inproc://scale-work");
+    d.connect("inproc://scale-work");
+    std::vector<std::uint8_t> q(query_bytes, 1), rep(reply_bytes, 2);
+    zmq::message_t id, body;
+    auto once = [&] {
+      d.send(zmq::buffer(q), zmq::send_flags::none);
+      while (!r.recv(id, zmq::recv_flags::dontwait)) {}
+      (void)r.recv(body, zmq::recv_flags::none);
+      r.send(id, zmq::send_flags::sndmore);
+      r.send(zmq::buffer(rep), zmq::send_flags::none);
+      while (!d.recv(body, zmq::recv_flags::dontwait)) {}
+    };
+    for (int i = 0; i < 200; ++i) once();
+    const double c0 = process_cpu_us();
+    for (int i = 0; i < n; ++i) once();
+    zmq_us = (process_cpu_us() - c0) / n / 2;
+  }
+  {
+    const int ls = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    socklen_t len = sizeof addr;
+    if (ls < 0 || ::bind(ls, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0 || ::listen(ls, 1) != 0 ||
+        ::getsockname(ls, reinterpret_cast<sockaddr*>(&addr), &len) != 0)
+      die("loopback tcp socket for the message-work measurement");
+    const int a = ::socket(AF_INET, SOCK_STREAM, 0);
+    if (::connect(a, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) die("loopback connect");
+    const int b = ::accept(ls, nullptr, nullptr);
+    const int one = 1;
+    ::setsockopt(a, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    ::setsockopt(b, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    std::vector<std::uint8_t> q(query_bytes, 1), rep(reply_bytes, 2), buf(std::max(query_bytes, reply_bytes));
+    auto xfer = [&](int from, int to, const std::vector<std::uint8_t>& m) {
+      if (::write(from, m.data(), m.size()) != ssize_t(m.size())) die("loopback write");
+      std::size_t got = 0;
+      while (got < m.size()) {
+        const ssize_t k = ::read(to, buf.data(), m.size() - got);
+        if (k <= 0) die("loopback read");
+        got += std::size_t(k);
+      }
+    };
+    for (int i = 0; i < 200; ++i) {
+      xfer(a, b, q);
+      xfer(b, a, rep);
+    }
+    const double c0 = process_cpu_us();
+    for (int i = 0; i < n; ++i) {
+      xfer(a, b, q);
+      xfer(b, a, rep);
+    }
+    tcp_us = (process_cpu_us() - c0) / n / 2;
+    ::close(a);
+    ::close(b);
+    ::close(ls);
+  }
+  return zmq_us + tcp_us;
+}
+
+/// Least-squares a + b W.
+std::pair<double, double> fit_line(const std::vector<std::uint32_t>& ws, const std::vector<double>& ys) {
+  double n = 0, sx = 0, sy = 0, sxx = 0, sxy = 0;
+  for (std::size_t i = 0; i < ws.size() && i < ys.size(); ++i) {
+    const double x = ws[i];
+    n += 1;
+    sx += x;
+    sy += ys[i];
+    sxx += x * x;
+    sxy += x * ys[i];
+  }
+  const double den = n * sxx - sx * sx;
+  if (n < 2 || den == 0) return {n ? sy / n : 0, 0};
+  const double b = (n * sxy - sx * sy) / den;
+  return {(sy - b * sx) / n, b};
+}
+
+struct Split {
+  std::uint32_t layer = 0, block_size = 1, blocks = 0;
+  bool automatic = false;
+};
+
+struct Row {
+  std::size_t pose = 0;
+  std::uint32_t contacts = 0, workers = 0, busy = 0;
+  geom::Mapping mapping = geom::Mapping::block_cyclic;
+  Split split;
+  double single_us = 0, max_us = 0, mean_us = 0, sum_us = 0;
+  double encode_max_us = 0;     // slowest worker's query + its Result's encoding, minus its query
+  double client_us = 0;         // the client's decode of every Result and the merge
+  double compute_round_us = 0;  // max_w (query_w + encode_w) + client
+  std::size_t max_reply_bytes = 0, total_reply_bytes = 0;
+  double imbalance() const { return mean_us > 0 ? max_us / mean_us : 0; }
+  double redundancy() const { return single_us > 0 ? sum_us / single_us : 0; }
+};
+
+struct Memory {
+  std::uint32_t workers = 0;
+  geom::Mapping mapping = geom::Mapping::block_cyclic;
+  double max_share_faces = 0;  // largest share, faces
+  double max_share_bytes = 0;  // its tree + faces + vertices
+};
+
+struct Check {
+  std::size_t pose = 0;
+  std::uint32_t workers = 0;
+  double predicted_us = 0, measured_us = 0, floor_us = 0;
+  double compute_alone_us = 0;     // the slowest worker's query timed alone (the model's term)
+  double compute_in_round_us = 0;  // the slowest worker's query inside the real rounds (median)
+  double gather_us = 0;            // our empty round at this W (the model's gather term here)
+};
+
+/// The worker's resident bytes for a share: its object tree and its mesh (the probe is shared by all).
+double share_bytes(const geom::Mesh& m, const geom::SphereTree& t) {
+  return double(t.bytes()) + double(m.faces.size() * sizeof(m.faces[0])) + double(m.local.size() * sizeof(m.local[0]));
+}
+
+void run_scale(const ScaleArgs& a) {
+  geom::Mesh probe, object;
+  for (auto [path, mesh] : {std::pair{&a.probe, &probe}, std::pair{&a.object, &object}}) {
+    auto m = geom::load_mesh(*path);
+    if (!m) die(m.error());
+    *mesh = std::move(m.value().mesh);
+  }
+  auto lines = geom::read_pose_lines(a.poses);
+  if (!lines) die(lines.error());
+  if (lines.value().empty()) die(a.poses + ": no poses");
+  std::vector<geom::Pose> poses;
+  for (const auto& l : lines.value()) poses.push_back(l.pose);
+  const auto parse_knob = [](const std::string& v, const char* what, std::uint32_t free) -> std::uint32_t {
+    if (v == "auto") return free;
+    try {
+      const unsigned long x = std::stoul(v);
+      if (x > (1u << 20)) throw std::out_of_range(what);
+      return std::uint32_t(x);
+    } catch (const std::exception&) {
+      die(std::string("--") + what + ": expected an integer or auto (found '" + v + "')");
+    }
+  };
+  const std::uint32_t fixed_layer = parse_knob(a.layer, "layer", geom::kFree);
+  const std::uint32_t fixed_block = parse_knob(a.block_size, "block-size", 0);
+  if (fixed_block == 0 && a.block_size != "auto") die("--block-size must be >= 1 or auto");
+
+  std::vector<std::uint32_t> ws;
+  for (std::uint32_t w = 1; w <= a.max_workers; w *= 2) ws.push_back(w);
+
+  // 1. The client's CPU per round over tcp (before any thread of ours exists: it forks).
+  const std::vector<std::uint32_t> cpu_ws = {1, 2, 4, 8, 16};
+  std::fprintf(stderr, "client CPU per round over tcp (echoes in another process), W = 1..16 ...\n");
+  const std::vector<double> cpu_tcp = client_cpu_tcp(cpu_ws, 8 * 64, std::max(50, a.gather_rounds / 2));
+  const auto [cpu_a, cpu_b] = fit_line(cpu_ws, cpu_tcp);
+  const double msg_work = client_message_work_us(160, 8 * 64, std::max(2000, a.gather_rounds * 10));
+
+  std::fprintf(stderr, "building trees ...\n");
+  const geom::SphereTree pt = geom::SphereTree::build(probe).value();
+  const geom::SphereTree ot = geom::SphereTree::build(object).value();
+  const double object_bytes = share_bytes(object, ot);
+  geom::SplitModelConfig model;
+  model.contact_radius = 0.25 * double(pt.nodes[0].radius);
+
+  // 2. Single thread: collide() over the whole object (the collision thread's own mode).
+  geom::CollideScratch scratch;
+  geom::CollideResult result;
+  std::vector<double> single(poses.size());
+  std::vector<std::uint32_t> contacts(poses.size());
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    const geom::CollideConfig full = geom::DefaultCollideConfig();
+    single[i] = time_median_us(a.runs, [&] { geom::collide(probe, pt, object, ot, poses[i], full, scratch, result); });
+    contacts[i] = std::uint32_t(result.contacts());
+    std::fprintf(stderr, "pose %zu: %u contacts, %zu pairs, single thread %.1f us\n", i + 1, contacts[i],
+                 result.pairs.size(), single[i]);
+  }
+
+  const auto split_for = [&](std::uint32_t W, geom::Mapping m) -> Split {
+    Split s;
+    if (fixed_layer != geom::kFree && fixed_block != 0) {
+      s.layer = fixed_layer;
+      s.block_size = fixed_block;
+    } else {
+      auto pick = geom::choose_split(ot, W, m, model, fixed_layer, fixed_block);
+      if (!pick) die(pick.error());
+      s.layer = pick.value().layer;
+      s.block_size = pick.value().block_size;
+      s.automatic = true;
+    }
+    return s;
+  };
+
+  // 3. Every worker's share, built as a worker builds it, timed alone at every pose.
+  const geom::Mapping mappings[] = {geom::Mapping::block_cyclic, geom::Mapping::contiguous, geom::Mapping::random};
+  std::vector<Row> rows;
+  std::vector<Memory> memory;
+  const net::Limits limits = net::DefaultLimits();
+  for (std::uint32_t W : ws) {
+    for (geom::Mapping m : mappings) {
+      Split sp = split_for(W, m);
+      auto blocks = net::tree_blocks(ot, sp.layer, sp.block_size);
+      if (!blocks) die(blocks.error());
+      sp.blocks = std::uint32_t(blocks.value().size());
+      if (sp.blocks < W) {
+        std::fprintf(stderr, "W=%u %s: only %u blocks at layer %u, skipped\n", W, geom::to_string(m), sp.blocks, sp.layer);
+        continue;
+      }
+      std::fprintf(stderr, "W=%u %s: layer %u, block size %u, %u blocks%s\n", W, geom::to_string(m), sp.layer,
+                   sp.block_size, sp.blocks, sp.automatic ? " (automatic)" : "");
+      const auto share = net::deal_blocks(sp.blocks, W, m, 1);
+      std::vector<Row> prow(poses.size());
+      for (std::size_t i = 0; i < poses.size(); ++i) {
+        prow[i].pose = i + 1;
+        prow[i].contacts = contacts[i];
+        prow[i].workers = W;
+        prow[i].mapping = m;
+        prow[i].split = sp;
+        prow[i].single_us = single[i];
+      }
+      std::vector<std::vector<std::vector<std::uint8_t>>> replies(poses.size());  // encoded Results per pose
+      std::vector<std::vector<net::FacePair>> all_pairs(poses.size());
+      Memory mem;
+      mem.workers = W;
+      mem.mapping = m;
+      for (std::uint32_t w = 0; w < W; ++w) {
+        if (share[w].empty()) continue;
+        auto set = net::make_block_set(probe, object, blocks.value(), share[w], geom::DefaultTreeConfig().leaf_faces);
+        if (!set) die(set.error());
+        std::unique_ptr<net::CollisionBackend> be = net::tree_backend_factory()();
+        if (Status st = be->load(set.value()); !st) die(st.error());
+        {
+          // What this worker holds of the object: its share's tree (rebuilt here to size it) and mesh.
+          const geom::SphereTree st = geom::SphereTree::build(set.value().object).value();
+          const double bytes = share_bytes(set.value().object, st);
+          if (bytes > mem.max_share_bytes) {
+            mem.max_share_bytes = bytes;
+            mem.max_share_faces = double(set.value().object.faces.size());
+          }
+        }
+        std::vector<net::FacePair> out;
+        for (std::size_t i = 0; i < poses.size(); ++i) {
+          const double q = time_median_us(a.runs, [&] {
+            out.clear();
+            be->query(poses[i], out, limits.max_pairs);
+          });
+          net::ResultMsg msg;
+          msg.seq = 1;
+          msg.worker_id = w;
+          msg.pairs = out;
+          std::vector<std::uint8_t> frame;
+          const double enc = time_median_us(a.runs, [&] { net::encode(msg, frame); });
+          Row& r = prow[i];
+          ++r.busy;
+          r.sum_us += q;
+          r.max_us = std::max(r.max_us, q);
+          r.encode_max_us = std::max(r.encode_max_us, q + enc);  // the slowest worker including its encode
+          r.max_reply_bytes = std::max(r.max_reply_bytes, frame.size());
+          r.total_reply_bytes += frame.size();
+          replies[i].push_back(frame);
+          all_pairs[i].insert(all_pairs[i].end(), out.begin(), out.end());
+        }
+      }
+      memory.push_back(mem);
+      for (std::size_t i = 0; i < poses.size(); ++i) {
+        Row& r = prow[i];
+        r.mean_us = r.sum_us / W;
+        // The client: decode every Result, merge (sort, deduplicate) their pairs.
+        r.client_us = time_median_us(a.runs, [&] {
+          std::vector<net::FacePair> merged;
+          for (const auto& f : replies[i]) {
+            auto d = net::decode(f, limits);
+            if (d)
+              if (const auto* res = std::get_if<net::ResultMsg>(&d.value()))
+                merged.insert(merged.end(), res->pairs.begin(), res->pairs.end());
+          }
+          std::sort(merged.begin(), merged.end());
+          merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
+        });
+        r.compute_round_us = r.encode_max_us + r.client_us;
+        rows.push_back(r);
+      }
+    }
+  }
+
+  // 4. The gather on this machine: raw inproc fan-out floor for small W, with a reply of the
+  //    mean size, and the model checked against real in-process rounds at W = 1 and 2.
+  std::vector<std::pair<std::uint32_t, double>> floors;  // W, p50 us (inproc)
+  std::vector<Check> checks;
+  std::vector<std::pair<std::uint32_t, double>> ours;  // W, p50 us of our empty round (inproc)
+  {
+    zmq::context_t ctx(1);
+    std::size_t reply = 64;
+    for (const Row& r : rows)
+      if (r.workers == 1) reply = std::max(reply, r.max_reply_bytes);
+    for (std::uint32_t W : {1u, 2u, 4u, 8u}) {
+      if (W > a.max_workers) break;
+      FanOutFloor fl(ctx, "inproc", int(W), reply / W);
+      std::vector<double> t;
+      for (int r = 0; r < a.gather_rounds + 50; ++r) {
+        const auto t0 = Clock::now();
+        fl.round(std::chrono::milliseconds(100));
+        if (r >= 50) t.push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
+        std::this_thread::sleep_for(std::chrono::microseconds(500));
+      }
+      floors.push_back({W, median(t)});
+    }
+    if (a.validate) {
+      for (std::uint32_t W : {1u, 2u}) {
+        if (W > a.max_workers) break;
+        const Split sp = split_for(W, geom::Mapping::block_cyclic);
+        auto blocks = net::tree_blocks(ot, sp.layer, sp.block_size);
+        if (!blocks || blocks.value().size() < W) continue;
+        static int tag = 0;
+        const std::string t = "scale-" + std::to_string(::getpid()) + "-" + std::to_string(tag++);
+        auto lw = net::LocalWorkers::start(ctx, int(W), net::tree_backend_factory(),
+                                           [&](int i) { return net::inproc_endpoint(i, t); });
+        if (!lw) die(lw.error());
+        net::ScatterConfig cfg;
+        cfg.endpoints = lw.value()->endpoints();
+        auto sg = net::ScatterGather::create(ctx, cfg, probe, object, std::move(blocks).value());
+        if (!sg) die(sg.error());
+        if (!sg.value()->wait_ready(Clock::now() + std::chrono::seconds(60))) die("in-process workers not ready");
+        const double fl = std::find_if(floors.begin(), floors.end(), [&](auto& f) { return f.first == W; })->second;
+        net::RoundResult rr;
+        std::uint64_t seq = 0;
+        // Our own gather: the same workers answering an empty query (probe far away): the floor plus
+        // everything of ours in a round (encode, worker service, decode, merge bookkeeping).
+        geom::Pose far = geom::Pose::Identity();
+        far.translation() = geom::Vec3(1e5, 0, 0);
+        std::vector<double> empty;
+        for (int r = 0; r < a.gather_rounds + 20; ++r) {
+          const auto t0 = Clock::now();
+          sg.value()->round(++seq, far, Clock::now() + std::chrono::milliseconds(200), rr);
+          if (r >= 20 && rr.complete)
+            empty.push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
+          std::this_thread::sleep_for(std::chrono::microseconds(500));
+        }
+        const double gather = median(std::move(empty));
+        ours.push_back({W, gather});
+        for (std::size_t i = 0; i < poses.size(); ++i) {
+          std::vector<double> t, inside;
+          for (int r = 0; r < a.gather_rounds / 4 + 20; ++r) {
+            const auto t0 = Clock::now();
+            sg.value()->round(++seq, poses[i], Clock::now() + std::chrono::milliseconds(200), rr);
+            if (r >= 20 && rr.complete) {
+              t.push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
+              inside.push_back(double(rr.stats.compute_ns) * 1e-3);
+            }
+            std::this_thread::sleep_for(std::chrono::microseconds(500));
+          }
+          const auto it = std::find_if(rows.begin(), rows.end(), [&](const Row& r) {
+            return r.pose == i + 1 && r.workers == W && r.mapping == geom::Mapping::block_cyclic;
+          });
+          if (it == rows.end()) continue;
+          checks.push_back({i + 1, W, gather + it->compute_round_us, median(std::move(t)), fl, it->max_us,
+                            median(std::move(inside)), gather});
+        }
+      }
+    }
+  }
+
+  // The client's side of the gather: W message pairs of work (wake-up free), or this VM's measured
+  // CPU per round (a + b W, its wake-ups included).
+  const auto client_gather = [&](std::uint32_t W, const Network& n) {
+    return n.vm_client ? cpu_a + cpu_b * W : msg_work * W;
+  };
+  const auto predicted = [&](const Row& r, const Network& n) {
+    return r.compute_round_us + client_gather(r.workers, n) + n.rtt_us + double(r.max_reply_bytes) / n.bytes_per_us;
+  };
+
+  if (a.json) {
+    std::printf("{\"bench\": \"scale\", \"probe\": \"%s\", \"object\": \"%s\", \"object_faces\": %zu, \"runs\": %d,\n",
+                a.probe.c_str(), a.object.c_str(), object.faces.size(), a.runs);
+    std::printf(" \"contact_radius_mm\": %.3f, \"object_bytes\": %.0f,\n", model.contact_radius, object_bytes);
+    std::printf(" \"client_cpu_tcp\": {\"workers\": [1, 2, 4, 8, 16], \"us_per_round\": [");
+    for (std::size_t i = 0; i < cpu_tcp.size(); ++i) std::printf("%s%.2f", i ? ", " : "", cpu_tcp[i]);
+    std::printf("], \"fit_a_us\": %.2f, \"fit_b_us_per_worker\": %.3f},\n", cpu_a, cpu_b);
+    std::printf(" \"client_message_work_us\": %.3f,\n", msg_work);
+    std::printf(" \"networks\": [");
+    for (std::size_t k = 0; k < std::size(kNetworks); ++k)
+      std::printf("%s{\"name\": \"%s\", \"rtt_us\": %.2f, \"bytes_per_us\": %.0f, \"vm_client\": %s}", k ? ", " : "",
+                  kNetworks[k].name, kNetworks[k].rtt_us, kNetworks[k].bytes_per_us,
+                  kNetworks[k].vm_client ? "true" : "false");
+    std::printf("],\n \"inproc_floor\": [");
+    for (std::size_t k = 0; k < floors.size(); ++k)
+      std::printf("%s{\"workers\": %u, \"p50_us\": %.2f}", k ? ", " : "", floors[k].first, floors[k].second);
+    std::printf("],\n \"validation\": [");
+    for (std::size_t k = 0; k < checks.size(); ++k)
+      std::printf(
+          "%s\n  {\"pose\": %zu, \"workers\": %u, \"floor_us\": %.2f, \"predicted_us\": %.2f, "
+          "\"measured_us\": %.2f, \"compute_alone_us\": %.2f, \"compute_in_round_us\": %.2f, "
+          "\"gather_us\": %.2f}",
+          k ? "," : "", checks[k].pose, checks[k].workers, checks[k].floor_us, checks[k].predicted_us,
+          checks[k].measured_us, checks[k].compute_alone_us, checks[k].compute_in_round_us, checks[k].gather_us);
+    std::printf("],\n \"memory\": [");
+    for (std::size_t k = 0; k < memory.size(); ++k)
+      std::printf(
+          "%s\n  {\"workers\": %u, \"mapping\": \"%s\", \"max_share_faces\": %.0f, \"max_share_bytes\": %.0f, "
+          "\"per_worker_over_single\": %.4f}",
+          k ? "," : "", memory[k].workers, geom::to_string(memory[k].mapping), memory[k].max_share_faces,
+          memory[k].max_share_bytes, memory[k].max_share_bytes / object_bytes);
+    std::printf("],\n \"rows\": [");
+    for (std::size_t k = 0; k < rows.size(); ++k) {
+      const Row& r = rows[k];
+      std::printf(
+          "%s\n  {\"pose\": %zu, \"contacts\": %u, \"workers\": %u, \"mapping\": \"%s\", \"layer\": %u, "
+          "\"block_size\": %u, \"blocks\": %u, \"auto_split\": %s, \"busy_workers\": %u, \"single_us\": %.2f, "
+          "\"max_worker_us\": %.2f, \"mean_worker_us\": %.2f, \"sum_worker_us\": %.2f, \"imbalance\": %.3f, "
+          "\"redundancy\": %.3f, \"client_us\": %.2f, \"compute_round_us\": %.2f, \"max_reply_bytes\": %zu, "
+          "\"compute_speedup\": %.3f",
+          k ? "," : "", r.pose, r.contacts, r.workers, geom::to_string(r.mapping), r.split.layer, r.split.block_size,
+          r.split.blocks, r.split.automatic ? "true" : "false", r.busy, r.single_us, r.max_us, r.mean_us, r.sum_us,
+          r.imbalance(), r.redundancy(), r.client_us, r.compute_round_us, r.max_reply_bytes,
+          r.single_us / r.compute_round_us);
+      for (const Network& n : kNetworks)
+        std::printf(", \"round_%s_us\": %.2f, \"speedup_%s\": %.3f", n.name, predicted(r, n), n.name,
+                    r.single_us / predicted(r, n));
+      std::printf("}");
+    }
+    std::printf("\n]}\n");
+    return;
+  }
+
+  std::printf(
+      "scale-out model: %s x %s (%zu faces); %d runs per share (medians); contact radius %.1f mm for the "
+      "automatic split\n",
+      a.probe.c_str(), a.object.c_str(), object.faces.size(), a.runs, model.contact_radius);
+  std::printf("client CPU per round over tcp (measured): ");
+  for (std::size_t i = 0; i < cpu_tcp.size(); ++i) std::printf("W=%u %.1f us  ", cpu_ws[i], cpu_tcp[i]);
+  std::printf("-> %.1f + %.2f W us\nclient work per worker message, no wake-up (measured): %.2f us\n", cpu_a, cpu_b,
+              msg_work);
+  std::printf("inproc fan-out floor p50 (measured): ");
+  for (auto& f : floors) std::printf("W=%u %.1f us  ", f.first, f.second);
+  std::printf("\n%4s %8s %3s %-12s %5s %4s %8s %8s %8s %6s %6s %8s %8s %7s %7s %7s\n", "pose", "contacts", "W",
+              "mapping", "layer", "B", "single", "max", "mean", "imbal", "redund", "compute", "10GbE", "x10GbE", "xvm",
+              "x100GbE");
+  for (const Row& r : rows)
+    std::printf("%4zu %8u %3u %-12s %5u %4u %8.1f %8.1f %8.1f %6.2f %6.2f %8.1f %8.1f %7.2f %7.2f %7.2f\n", r.pose,
+                r.contacts, r.workers, geom::to_string(r.mapping), r.split.layer, r.split.block_size, r.single_us,
+                r.max_us, r.mean_us, r.imbalance(), r.redundancy(), r.compute_round_us, predicted(r, kNetworks[0]),
+                r.single_us / predicted(r, kNetworks[0]), r.single_us / predicted(r, kNetworks[1]),
+                r.single_us / predicted(r, kNetworks[2]));
+  std::printf(
+      "single/max/mean: us per round (one thread; slowest worker; mean over W); imbal = max/mean; redund = sum "
+      "over workers / single; compute = slowest worker with its encode + the client's decode and merge; "
+      "10GbE = compute + W x message work + 16.25 us + largest reply at 10 Gbit/s; x = single / predicted "
+      "round (xvm: with this VM's client CPU per round instead)\n");
+  std::printf("model check (in-process workers over inproc, block-cyclic): predicted = our empty round + compute\n");
+  for (const Check& c : checks)
+    std::printf(
+        "  pose %zu W=%u: predicted %.1f us (empty round %.1f, raw floor %.1f), measured p50 %.1f us, error %+.1f %%; "
+        "slowest worker's query alone %.1f us, inside the rounds %.1f us\n",
+        c.pose, c.workers, c.predicted_us, c.gather_us, c.floor_us, c.measured_us,
+        100.0 * (c.predicted_us - c.measured_us) / c.measured_us, c.compute_alone_us, c.compute_in_round_us);
+  std::printf("memory: largest share / whole object (tree + mesh):");
+  for (const Memory& m : memory)
+    if (m.mapping == geom::Mapping::block_cyclic)
+      std::printf("  W=%u %.3f", m.workers, m.max_share_bytes / object_bytes);
+  std::printf("\n");
+}
+
+}  // namespace
+
+void add_scale(CLI::App& app) {
+  auto a = std::make_shared<ScaleArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "scale",
+      "Scale-out model: each worker's share of a collision round timed alone, for W = 1, 2, 4, ... workers and the\n"
+      "block-cyclic, contiguous and random mappings (critical path, imbalance, redundant work), the gather measured\n"
+      "here (inproc floor, client CPU over tcp) and predicted on 10 GbE / 100 GbE; checked against real rounds at W = "
+      "1, 2");
+  cmd->add_option("--probe", a->probe, "probe mesh (the hand)")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--object", a->object, "object mesh")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--poses", a->poses, "pose file (16 numbers a line)")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--layer", a->layer, "sphere layer dealt in blocks, or auto (the run's automatic split per W)")
+      ->capture_default_str();
+  cmd->add_option("--block-size", a->block_size, "layer spheres per block, or auto")->capture_default_str();
+  cmd->add_option("--max-workers", a->max_workers, "largest W (powers of two from 1)")
+      ->check(CLI::Range(1u, 1024u))
+      ->capture_default_str();
+  cmd->add_option("--runs", a->runs, "timed runs per share and pose (median)")->check(CLI::Range(1, 100000))->capture_default_str();
+  cmd->add_option("--gather-rounds", a->gather_rounds, "rounds per floor / client-CPU / validation point")
+      ->check(CLI::Range(20, 1000000))
+      ->capture_default_str();
+  cmd->add_flag("!--no-validate", a->validate, "skip the W = 1, 2 in-process rounds that check the model");
+  cmd->add_flag("--json", a->json, "print one JSON object instead of the table");
+  cmd->callback([a] { run_scale(*a); });
+}
+
+}  // namespace st::bench

@@ -1,0 +1,102 @@
+// The raw ZeroMQ fan-out and gather, with nothing of ours in it: N ROUTER echo threads and N
+// DEALERs in the caller. What a scatter-gather round over N workers costs on this machine before
+// any of our code (spheretouch-bench scatter's floor; spheretouch-bench scale's gather term).
+#pragma once
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <cstring>
+#include <string>
+#include <thread>
+#include <unistd.h>
+#include <vector>
+#include <zmq.hpp>
+
+#include "net/local_workers.hpp"
+
+namespace st::bench {
+
+inline std::string endpoint_for(const std::string& transport, int i, const std::string& tag = "bench") {
+  if (transport == "inproc") return net::inproc_endpoint(i, tag);
+  if (transport == "ipc")
+    return "ipc:///tmp/spheretouch-" + tag + "-" + std::to_string(::getpid()) + "-" + std::to_string(i) + ".sock";
+  return "tcp://127.0.0.1:*";
+}
+
+/// N ROUTER echo threads and N DEALERs. Each echo answers with `reply_bytes` bytes (at least the
+/// 8-byte round number), so the gather can carry what a worker's Result would.
+class FanOutFloor {
+ public:
+  FanOutFloor(zmq::context_t& ctx, const std::string& transport, int n, std::size_t reply_bytes = 8)
+      : reply_bytes_(std::max<std::size_t>(reply_bytes, 8)) {
+    static std::atomic<int> instances{0};  // inproc names are per context: each floor its own
+    const std::string tag = "bench-floor-" + std::to_string(instances++);
+    for (int i = 0; i < n; ++i) {
+      zmq::socket_t s(ctx, zmq::socket_type::router);
+      s.set(zmq::sockopt::linger, 0);
+      const std::string ep = endpoint_for(transport, i, tag);
+      s.bind(ep);
+      const std::string bound = s.get(zmq::sockopt::last_endpoint);
+      echoes_.emplace_back([this, s = std::move(s)]() mutable { echo(s); });
+      zmq::socket_t dl(ctx, zmq::socket_type::dealer);
+      dl.set(zmq::sockopt::linger, 0);
+      dl.connect(bound);
+      dealers_.push_back(std::move(dl));
+    }
+    items_.resize(dealers_.size());
+  }
+  ~FanOutFloor() {
+    stop_ = true;
+    for (std::thread& t : echoes_) t.join();
+  }
+  FanOutFloor(const FanOutFloor&) = delete;
+  FanOutFloor& operator=(const FanOutFloor&) = delete;
+
+  /// One frame to every echo, then wait for all of them; false if the deadline passed first.
+  bool round(std::chrono::milliseconds deadline) {
+    const std::uint64_t word = ++seq_;
+    for (zmq::socket_t& dl : dealers_) dl.send(zmq::buffer(&word, sizeof word), zmq::send_flags::dontwait);
+    std::size_t got = 0;
+    const auto end = std::chrono::steady_clock::now() + deadline;
+    while (got < dealers_.size()) {
+      for (std::size_t i = 0; i < dealers_.size(); ++i) items_[i] = {dealers_[i].handle(), 0, ZMQ_POLLIN, 0};
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(end - std::chrono::steady_clock::now());
+      if (left.count() <= 0 || zmq::poll(items_.data(), items_.size(), left) <= 0) return false;
+      for (std::size_t i = 0; i < dealers_.size(); ++i) {
+        zmq::message_t m;
+        while ((items_[i].revents & ZMQ_POLLIN) && dealers_[i].recv(m, zmq::recv_flags::dontwait)) {
+          std::uint64_t back = 0;
+          if (m.size() >= sizeof back) std::memcpy(&back, m.data(), sizeof back);
+          got += back == word;  // an echo of a round that timed out earlier is not this round's
+        }
+      }
+    }
+    return true;
+  }
+
+ private:
+  void echo(zmq::socket_t& s) {
+    std::vector<std::uint8_t> reply(reply_bytes_, 0);
+    while (!stop_) {
+      zmq::pollitem_t it{s.handle(), 0, ZMQ_POLLIN, 0};
+      if (zmq::poll(&it, 1, std::chrono::milliseconds(20)) <= 0) continue;
+      zmq::message_t id, body;
+      while (s.recv(id, zmq::recv_flags::dontwait)) {
+        if (!id.more() || !s.recv(body, zmq::recv_flags::dontwait)) break;
+        std::memcpy(reply.data(), body.data(), std::min<std::size_t>(body.size(), 8));
+        s.send(id, zmq::send_flags::sndmore | zmq::send_flags::dontwait);
+        s.send(zmq::buffer(reply), zmq::send_flags::dontwait);
+      }
+    }
+  }
+
+  std::size_t reply_bytes_;
+  std::vector<std::thread> echoes_;
+  std::vector<zmq::socket_t> dealers_;
+  std::vector<zmq::pollitem_t> items_;
+  std::atomic<bool> stop_{false};
+  std::uint64_t seq_ = 0;
+};
+
+}  // namespace st::bench
