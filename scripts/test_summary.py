@@ -36,7 +36,12 @@ def main(dirs):
         for t in tests:
             out = (t.get('stdout') or '') + (t.get('stderr') or '')
             m = COUNT.search(out)
-            line = m.group(0) if m else '(no test-case count: ended before its summary)'
+            if m:
+                line = m.group(0)
+            elif t['result'] == 'OK':
+                line = '(prints no test-case count)'
+            else:
+                line = '(no test-case count: it ended before its summary)'
             print(f"{d}: {t['name']:<40} {t['result']:<8} {t['duration']:7.1f} s  {line}")
             if t['result'] not in ('OK', 'EXPECTEDFAIL', 'SKIP'):
                 picked, tail = why_lines(out)
