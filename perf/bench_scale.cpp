@@ -129,52 +129,21 @@ std::vector<double> client_cpu_tcp(const std::vector<std::uint32_t>& ws, std::si
       for (;;) {
         for (std::size_t i = 0; i < socks.size(); ++i) items[i] = {socks[i].handle(), 0, ZMQ_POLLIN, 0};
         if (zmq::poll(items.data(), items.size(), std::chrono::milliseconds(5000)) <= 0) ::_exit(0);
-        for (std::size_t i = 0; i < socks.size(); ++i) {
-          zmq::message_t id, body;
-          while ((items[i].revents & ZMQ_POLLIN) && socks[i].recv(id, zmq::recv_flags::dontwait)) {
-            if (!id.more() || !socks[i].recv(body, zmq::recv_flags::dontwait)) break;
-            std::memcpy(reply.data(), body.data(), std::min<std::size_t>(body.size(), 8));
-            socks[i].send(id, zmq::send_flags::sndmore | zmq::send_flags::dontwait);
-            socks[i].send(zmq::buffer(reply), zmq::send_flags::dontwait);
-          }
-        }
+        for (std::size_t i = 0; i < socks.size(); ++i)
+          if (items[i].revents & ZMQ_POLLIN) echo_pending(socks[i], reply);
       }
     }
     double per_round = 0;
     {
       zmq::context_t ctx(1);
-      std::vector<zmq::socket_t> dl;
-      for (int p : ports) {
-        dl.emplace_back(ctx, zmq::socket_type::dealer);
-        dl.back().set(zmq::sockopt::linger, 0);
-        dl.back().connect("tcp://127.0.0.1:" + std::to_string(p));
-      }
-      std::vector<zmq::pollitem_t> items(dl.size());
-      std::uint64_t seq = 0;
-      auto one = [&]() {
-        const std::uint64_t word = ++seq;
-        std::uint8_t query[160] = {};  // a Query's size on the wire
-        std::memcpy(query, &word, sizeof word);
-        for (zmq::socket_t& d : dl) d.send(zmq::buffer(query, sizeof query), zmq::send_flags::dontwait);
-        std::size_t got = 0;
-        const auto end = Clock::now() + std::chrono::seconds(2);
-        while (got < dl.size() && Clock::now() < end) {
-          for (std::size_t i = 0; i < dl.size(); ++i) items[i] = {dl[i].handle(), 0, ZMQ_POLLIN, 0};
-          if (zmq::poll(items.data(), items.size(), std::chrono::milliseconds(100)) <= 0) continue;
-          for (std::size_t i = 0; i < dl.size(); ++i) {
-            zmq::message_t m;
-            while ((items[i].revents & ZMQ_POLLIN) && dl[i].recv(m, zmq::recv_flags::dontwait)) {
-              std::uint64_t back = 0;
-              if (m.size() >= sizeof back) std::memcpy(&back, m.data(), sizeof back);
-              got += back == word;
-            }
-          }
-        }
-      };
-      for (int r = 0; r < 50; ++r) one();  // connect and warm
+      std::vector<std::string> endpoints;
+      for (int p : ports) endpoints.push_back("tcp://127.0.0.1:" + std::to_string(p));
+      FanOutGather gather(ctx, endpoints);
+      constexpr std::size_t kQueryBytes = 160;                                          // a Query's size on the wire
+      for (int r = 0; r < 50; ++r) gather.round(std::chrono::seconds(2), kQueryBytes);  // connect and warm
       const double c0 = process_cpu_us();
       for (int r = 0; r < rounds; ++r) {
-        one();
+        gather.round(std::chrono::seconds(2), kQueryBytes);
         std::this_thread::sleep_for(std::chrono::microseconds(200));  // spaced like a collision loop
       }
       per_round = (process_cpu_us() - c0) / rounds;
@@ -482,7 +451,6 @@ void run_scale(const ScaleArgs& a) {
   //    mean size, and the model checked against real in-process rounds at W = 1 and 2.
   std::vector<std::pair<std::uint32_t, double>> floors;  // W, p50 us (inproc)
   std::vector<Check> checks;
-  std::vector<std::pair<std::uint32_t, double>> ours;  // W, p50 us of our empty round (inproc)
   {
     zmq::context_t ctx(1);
     std::size_t reply = 64;
@@ -506,10 +474,10 @@ void run_scale(const ScaleArgs& a) {
         const Split sp = split_for(W, geom::Mapping::block_cyclic);
         auto blocks = net::tree_blocks(ot, sp.layer, sp.block_size);
         if (!blocks || blocks.value().size() < W) continue;
-        static int tag = 0;
-        const std::string t = "scale-" + std::to_string(::getpid()) + "-" + std::to_string(tag++);
+        static int fleets = 0;
+        const std::string tag = "scale-" + std::to_string(::getpid()) + "-" + std::to_string(fleets++);
         auto lw = net::LocalWorkers::start(ctx, int(W), net::tree_backend_factory(),
-                                           [&](int i) { return net::inproc_endpoint(i, t); });
+                                           [&](int i) { return net::inproc_endpoint(i, tag); });
         if (!lw) die(lw.error());
         net::ScatterConfig cfg;
         cfg.endpoints = lw.value()->endpoints();
@@ -532,7 +500,6 @@ void run_scale(const ScaleArgs& a) {
           std::this_thread::sleep_for(std::chrono::microseconds(500));
         }
         const double gather = median(std::move(empty));
-        ours.push_back({W, gather});
         for (std::size_t i = 0; i < poses.size(); ++i) {
           std::vector<double> t, inside;
           for (int r = 0; r < a.gather_rounds / 4 + 20; ++r) {

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cstdint>
 #include <cstring>
+#include <memory>
 #include <string>
 #include <thread>
 #include <unistd.h>
@@ -24,39 +25,37 @@ inline std::string endpoint_for(const std::string& transport, int i, const std::
   return "tcp://127.0.0.1:*";
 }
 
-/// N ROUTER echo threads and N DEALERs. Each echo answers with `reply_bytes` bytes (at least the
-/// 8-byte round number), so the gather can carry what a worker's Result would.
-class FanOutFloor {
+/// Answers every request waiting on ROUTER `s` with `reply` (its first 8 bytes: the request's).
+inline void echo_pending(zmq::socket_t& s, std::vector<std::uint8_t>& reply) {
+  zmq::message_t id, body;
+  while (s.recv(id, zmq::recv_flags::dontwait)) {
+    if (!id.more() || !s.recv(body, zmq::recv_flags::dontwait)) break;
+    std::memcpy(reply.data(), body.data(), std::min<std::size_t>({body.size(), reply.size(), 8}));
+    s.send(id, zmq::send_flags::sndmore | zmq::send_flags::dontwait);
+    s.send(zmq::buffer(reply), zmq::send_flags::dontwait);
+  }
+}
+
+/// N DEALERs, one per echo endpoint: one frame to every echo, then wait for all of them.
+class FanOutGather {
  public:
-  FanOutFloor(zmq::context_t& ctx, const std::string& transport, int n, std::size_t reply_bytes = 8)
-      : reply_bytes_(std::max<std::size_t>(reply_bytes, 8)) {
-    static std::atomic<int> instances{0};  // inproc names are per context: each floor its own
-    const std::string tag = "bench-floor-" + std::to_string(instances++);
-    for (int i = 0; i < n; ++i) {
-      zmq::socket_t s(ctx, zmq::socket_type::router);
-      s.set(zmq::sockopt::linger, 0);
-      const std::string ep = endpoint_for(transport, i, tag);
-      s.bind(ep);
-      const std::string bound = s.get(zmq::sockopt::last_endpoint);
-      echoes_.emplace_back([this, s = std::move(s)]() mutable { echo(s); });
+  FanOutGather(zmq::context_t& ctx, const std::vector<std::string>& endpoints) {
+    for (const std::string& ep : endpoints) {
       zmq::socket_t dl(ctx, zmq::socket_type::dealer);
       dl.set(zmq::sockopt::linger, 0);
-      dl.connect(bound);
+      dl.connect(ep);
       dealers_.push_back(std::move(dl));
     }
     items_.resize(dealers_.size());
   }
-  ~FanOutFloor() {
-    stop_ = true;
-    for (std::thread& t : echoes_) t.join();
-  }
-  FanOutFloor(const FanOutFloor&) = delete;
-  FanOutFloor& operator=(const FanOutFloor&) = delete;
 
-  /// One frame to every echo, then wait for all of them; false if the deadline passed first.
-  bool round(std::chrono::milliseconds deadline) {
+  /// Sends `query_bytes` (at least the 8-byte round number) to every echo and waits for all the
+  /// echoes of this round; false if the deadline passed first.
+  bool round(std::chrono::milliseconds deadline, std::size_t query_bytes = 8) {
     const std::uint64_t word = ++seq_;
-    for (zmq::socket_t& dl : dealers_) dl.send(zmq::buffer(&word, sizeof word), zmq::send_flags::dontwait);
+    query_.assign(std::max<std::size_t>(query_bytes, sizeof word), 0);
+    std::memcpy(query_.data(), &word, sizeof word);
+    for (zmq::socket_t& dl : dealers_) dl.send(zmq::buffer(query_), zmq::send_flags::dontwait);
     std::size_t got = 0;
     const auto end = std::chrono::steady_clock::now() + deadline;
     while (got < dealers_.size()) {
@@ -76,27 +75,53 @@ class FanOutFloor {
   }
 
  private:
+  std::vector<zmq::socket_t> dealers_;
+  std::vector<zmq::pollitem_t> items_;
+  std::vector<std::uint8_t> query_;
+  std::uint64_t seq_ = 0;
+};
+
+/// N ROUTER echo threads and a FanOutGather to them. Each echo answers with `reply_bytes` bytes
+/// (at least the 8-byte round number), so the gather can carry what a worker's Result would.
+class FanOutFloor {
+ public:
+  FanOutFloor(zmq::context_t& ctx, const std::string& transport, int n, std::size_t reply_bytes = 8)
+      : reply_bytes_(std::max<std::size_t>(reply_bytes, 8)) {
+    static std::atomic<int> instances{0};  // inproc names are per context: each floor its own
+    const std::string tag = "bench-floor-" + std::to_string(instances++);
+    std::vector<std::string> bound;
+    for (int i = 0; i < n; ++i) {
+      zmq::socket_t s(ctx, zmq::socket_type::router);
+      s.set(zmq::sockopt::linger, 0);
+      s.bind(endpoint_for(transport, i, tag));
+      bound.push_back(s.get(zmq::sockopt::last_endpoint));
+      echoes_.emplace_back([this, s = std::move(s)]() mutable { echo(s); });
+    }
+    gather_ = std::make_unique<FanOutGather>(ctx, bound);
+  }
+  ~FanOutFloor() {
+    stop_ = true;
+    for (std::thread& t : echoes_) t.join();
+  }
+  FanOutFloor(const FanOutFloor&) = delete;
+  FanOutFloor& operator=(const FanOutFloor&) = delete;
+
+  /// One frame to every echo, then wait for all of them; false if the deadline passed first.
+  bool round(std::chrono::milliseconds deadline) { return gather_->round(deadline); }
+
+ private:
   void echo(zmq::socket_t& s) {
     std::vector<std::uint8_t> reply(reply_bytes_, 0);
     while (!stop_) {
       zmq::pollitem_t it{s.handle(), 0, ZMQ_POLLIN, 0};
-      if (zmq::poll(&it, 1, std::chrono::milliseconds(20)) <= 0) continue;
-      zmq::message_t id, body;
-      while (s.recv(id, zmq::recv_flags::dontwait)) {
-        if (!id.more() || !s.recv(body, zmq::recv_flags::dontwait)) break;
-        std::memcpy(reply.data(), body.data(), std::min<std::size_t>(body.size(), 8));
-        s.send(id, zmq::send_flags::sndmore | zmq::send_flags::dontwait);
-        s.send(zmq::buffer(reply), zmq::send_flags::dontwait);
-      }
+      if (zmq::poll(&it, 1, std::chrono::milliseconds(20)) > 0) echo_pending(s, reply);
     }
   }
 
   std::size_t reply_bytes_;
   std::vector<std::thread> echoes_;
-  std::vector<zmq::socket_t> dealers_;
-  std::vector<zmq::pollitem_t> items_;
+  std::unique_ptr<FanOutGather> gather_;
   std::atomic<bool> stop_{false};
-  std::uint64_t seq_ = 0;
 };
 
 }  // namespace st::bench

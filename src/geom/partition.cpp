@@ -226,7 +226,7 @@ Result<SplitChoice> choose_split(const SphereTree& tree, std::uint32_t workers, 
       }
       const double cost = sum_max / nsites;
       ++best.candidates;
-      // Candidates come in order of more blocks within a layer; prefer fewer blocks on a tie.
+      // The cheapest wins; within cfg.tie of the best, the one with fewer blocks.
       const bool better =
           !have || cost < best_cost * (1 - cfg.tie) || (cost <= best_cost * (1 + cfg.tie) && nb < best.blocks);
       if (better) {
