@@ -182,9 +182,10 @@ constexpr std::uint32_t kDiscoverEvery = 4;
 /// each other; a longer walk means the point is not over the patch.
 constexpr int kMaxWalkSteps = 16;
 
-/// Unit normal of a triangle; false when degenerate (kDegenerateRel) or non-finite.
-bool unit_normal(const Vec3& a, const Vec3& b, const Vec3& c, Vec3& n) {
-  const Vec3 cr = (b - a).cross(c - a);
+/// Unit normal n of a triangle and its unnormalised normal cr = (b−a)×(c−a); false when
+/// degenerate (kDegenerateRel) or non-finite.
+bool unit_normal(const Vec3& a, const Vec3& b, const Vec3& c, Vec3& n, Vec3& cr) {
+  cr = (b - a).cross(c - a);
   const double longest2 = std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
   const double len = cr.norm();
   if (!std::isfinite(len) || !(len > kDegenerateRel * longest2)) return false;
@@ -206,6 +207,17 @@ void ContactBuilder::Patch::BodyState::reset(const Mesh& m) {
   face_stamp.assign(nf, 0);
   face_slot.assign(nf, 0);
   memory = {};
+  face_normals.clear();
+}
+
+void ContactBuilder::Patch::BodyState::compute_face_normals() {
+  face_normals.assign(nf, Vec3::Zero());
+  Vec3 n, cr;
+  for (std::size_t f = 0; f < nf; ++f) {
+    const Tri& t = mesh->faces[f];
+    if (t[0] < nv && t[1] < nv && t[2] < nv && unit_normal(mesh->local[t[0]], mesh->local[t[1]], mesh->local[t[2]], n, cr))
+      face_normals[f] = n;
+  }
 }
 
 void ContactBuilder::Patch::BodyState::clear_stamps() {
@@ -218,12 +230,13 @@ std::size_t ContactBuilder::Patch::BodyState::bytes() const {
          (visit_stamp.capacity() + path_stamp.capacity() + exit_face.capacity() + face_stamp.capacity() +
           face_slot.capacity() + faces.capacity()) *
              4 +
-         depth.capacity() * sizeof(double) + normals.capacity() * sizeof(Vec3);
+         depth.capacity() * sizeof(double) + (normals.capacity() + face_normals.capacity()) * sizeof(Vec3);
 }
 
 void ContactBuilder::Patch::prepare(const Mesh& probe, const Mesh& object) {
   if (!probe_s.sized_for(probe)) {
     probe_s.reset(probe);
+    probe_s.compute_face_normals();
     probe_world.assign(probe_s.nv, Vec3::Zero());
     probe_xform_stamp.assign(probe_s.nv, 0);
     epoch = 0;
@@ -567,17 +580,16 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   // give no direction.
   Vec3 n_faces = Vec3::Zero();  // Σ unnormalised normals: 2 × the area-weighted mean normal (fallback)
   double n_faces_abs = 0;       // Σ of their lengths
-  Vec3 nf;
+  Vec3 nf, cr;
   object_s.normals.resize(object_s.faces.size());
   for (std::size_t i = 0; i < object_s.faces.size(); ++i) {
     const Tri& t = object.faces[object_s.faces[i]];
     object_s.normals[i].setZero();
-    if (!tri_ok(t, object_s.nv) || !unit_normal(object.local[t[0]], object.local[t[1]], object.local[t[2]], nf)) {
+    if (!tri_ok(t, object_s.nv) || !unit_normal(object.local[t[0]], object.local[t[1]], object.local[t[2]], nf, cr)) {
       ++m.degenerate_faces;
       continue;
     }
     object_s.normals[i] = nf;
-    const Vec3 cr = (object.local[t[1]] - object.local[t[0]]).cross(object.local[t[2]] - object.local[t[0]]);
     n_faces += cr;
     n_faces_abs += cr.norm();
   }
@@ -587,8 +599,8 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     const Tri& t = probe.faces[probe_s.faces[i]];
     probe_s.normals[i].setZero();
     if (!tri_ok(t, probe_s.nv)) continue;
-    for (std::uint32_t v : t) (void)probe_point(v, probe);  // transform each vertex once, in face order
-    if (unit_normal(probe.local[t[0]], probe.local[t[1]], probe.local[t[2]], nf)) probe_s.normals[i] = R * nf;
+    for (std::uint32_t v : t) (void)probe_point(v, probe);            // transform each vertex once, in face order
+    probe_s.normals[i] = R * probe_s.face_normals[probe_s.faces[i]];  // zero stays zero (degenerate)
   }
 
   // The vector area of the object surface inside the probe, from the intersection curve:
@@ -733,11 +745,12 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   m.contact_point = m.plane_point;
 
   // Held-contact footprint: how far the intersection curve reaches from the plane point.
-  double radius = 0;
+  double radius2 = 0;
   for (const Vec3& x : curve) {
     const Vec3 rel = x - plane_pt;
-    radius = std::max(radius, (rel - rel.dot(n) * n).norm());
+    radius2 = std::max(radius2, (rel - rel.dot(n) * n).squaredNorm());
   }
+  const double radius = std::sqrt(radius2);
   have_prev = true;
   prev_n = n;
   held_valid = true;

@@ -74,11 +74,13 @@ struct ContactBuilder::Patch {
     std::vector<std::uint32_t> face_slot;    ///< its index in `faces`
     std::vector<std::uint32_t> faces;        ///< distinct colliding faces this round
     std::vector<Vec3> normals;               ///< their unit normals, object-local (zero: degenerate)
-    Memory memory;                           ///< last round's deepest vertices
+    std::vector<Vec3> face_normals;  ///< every face's unit normal, local frame (zero: degenerate); the probe's only
+    Memory memory;                   ///< last round's deepest vertices
     bool sized_for(const Mesh& m) const { return mesh == &m && nv == m.local.size() && nf == m.faces.size(); }
-    void reset(const Mesh& m);  ///< builds vf and sizes the state for m
-    void clear_stamps();        ///< after the round counter wrapped
-    std::size_t bytes() const;  ///< memory held
+    void reset(const Mesh& m);    ///< builds vf and sizes the state for m
+    void clear_stamps();          ///< after the round counter wrapped
+    void compute_face_normals();  ///< fills face_normals (once per mesh: the probe's rotate with the pose)
+    std::size_t bytes() const;    ///< memory held
   };
 
   ContactConfig config;
