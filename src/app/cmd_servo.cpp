@@ -57,15 +57,26 @@ void run_servo(const ServoArgs& a) {
   Result<rt::ForceLaw> law = rt::ForceLaw::make(s.law);
   if (!law) servo_die(2, s.file + ": " + law.error());
   // Commanded forces go to the per-tick trace, not into device records: memory stays flat.
-  rt::SimulatedDevice sim(std::move(script).value(), s.device.user, 0, s.saturation.peak_N);
+  rt::SimulatedDevice sim(script.value(), s.device.user, 0, s.saturation.peak_N);
   sim.set_repeat(s.device.repeat);
+  // [device] kind = "udp": the driver's poses instead; the trajectory file holds the grip.
+  std::unique_ptr<rt::UdpDevice> udp;
+  if (s.device.kind == "udp") {
+    rt::UdpDeviceConfig uc = s.device.udp;
+    uc.max_force_N = s.saturation.peak_N;
+    Result<std::unique_ptr<rt::UdpDevice>> u = rt::UdpDevice::open(uc, script.value().keys.front().pose);
+    if (!u) servo_die(2, s.file + ": " + u.error());
+    udp = std::move(u).value();
+    std::fprintf(stderr, "spheretouch servo: udp device listening on %s\n", udp->address().c_str());
+  }
+  rt::Device& device = udp ? static_cast<rt::Device&>(*udp) : static_cast<rt::Device&>(sim);
   std::unique_ptr<rt::Telemetry> telemetry;
   if (s.write_trace || s.write_perfetto) {
     Result<std::unique_ptr<rt::Telemetry>> t = rt::Telemetry::open(a.out + "/ticks.csv");
     if (!t) servo_die(2, t.error());
     telemetry = std::move(t).value();
   }
-  rt::HapticServo servo(sim, shm.poses(), shm.models(), law.value(), s.interp, s.saturation, telemetry.get(),
+  rt::HapticServo servo(device, shm.poses(), shm.models(), law.value(), s.interp, s.saturation, telemetry.get(),
                         s.passivity, 1.0 / s.haptic.rate_hz);
   servo.publish_status_to(&status.servo);
 
@@ -126,6 +137,9 @@ void run_servo(const ServoArgs& a) {
     res.telemetry_dropped = telemetry->stats().dropped;
   }
   res.device_dropped = sim.dropped_records();
+  if (udp)
+    std::fprintf(stderr, "spheretouch servo: device %s; %llu ticks without a pose\n", udp->summary().c_str(),
+                 static_cast<unsigned long long>(servo.stats().pose_failures));
   res.silences = silence.episodes();
   res.longest_silence_ms = silence.longest_ms();
   res.signal = g_servo_signal.load();

@@ -64,6 +64,7 @@ struct RunEngine::State {
   std::unique_ptr<rt::ForceLaw> law;
   std::unique_ptr<rt::ShmSegment> shm;
   std::unique_ptr<rt::SimulatedDevice> sim;  // in-process servo (no split): device, telemetry, servo
+  std::unique_ptr<rt::UdpDevice> udp;        // [device] kind = "udp" (instead of sim)
   std::unique_ptr<rt::Telemetry> telemetry;
   std::unique_ptr<rt::HapticServo> servo;
   std::unique_ptr<rt::HapticLoop> loop;
@@ -120,7 +121,10 @@ Status RunEngine::State::prepare() {
     note(line);
   }
 
-  if (s.device.script == "builtin") {
+  if (s.device.kind == "udp") {
+    // The device drives the probe; the split servo gets the grip as a one-pose trajectory.
+    script.keys = {rt::TimedPose{0.0, probe_grip(s, probe)}};
+  } else if (s.device.script == "builtin") {
     script = builtin_script(s, probe, object);
   } else {
     Result<rt::Trajectory> t = rt::load_trajectory(s.device.script);
@@ -191,14 +195,26 @@ Status RunEngine::State::prepare() {
   loop = std::make_unique<rt::HapticLoop>(s.haptic);
   if (!opt.split) {
     // Commanded forces go to the per-tick trace, not into device records: memory stays flat however long the run.
-    sim = std::make_unique<rt::SimulatedDevice>(script, s.device.user, 0, s.saturation.peak_N);
-    sim->set_repeat(s.device.repeat);
+    rt::Device* device = nullptr;
+    if (s.device.kind == "udp") {
+      rt::UdpDeviceConfig uc = s.device.udp;
+      uc.max_force_N = s.saturation.peak_N;
+      Result<std::unique_ptr<rt::UdpDevice>> u = rt::UdpDevice::open(uc, script.keys.front().pose);
+      if (!u) return fail(s.file, ": ", u.error());
+      udp = std::move(u).value();
+      device = udp.get();
+      note("udp device: listening on " + udp->address() + " (pose datagrams in, force datagrams out)");
+    } else {
+      sim = std::make_unique<rt::SimulatedDevice>(script, s.device.user, 0, s.saturation.peak_N);
+      sim->set_repeat(s.device.repeat);
+      device = sim.get();
+    }
     if (s.write_trace || s.write_perfetto) {
       Result<std::unique_ptr<rt::Telemetry>> t = rt::Telemetry::open(csv);
       if (!t) return Error{t.error()};
       telemetry = std::move(t).value();
     }
-    servo = std::make_unique<rt::HapticServo>(*sim, shm->poses(), shm->models(), *law, s.interp, s.saturation,
+    servo = std::make_unique<rt::HapticServo>(*device, shm->poses(), shm->models(), *law, s.interp, s.saturation,
                                               telemetry.get(), s.passivity, 1.0 / s.haptic.rate_hz);
     servo->publish_status_to(&status.servo);
   } else {
@@ -384,7 +400,7 @@ RunReport RunEngine::finish(int signal) {
       sres.telemetry_pushed = e.telemetry->stats().pushed;
       sres.telemetry_dropped = e.telemetry->stats().dropped;
     }
-    sres.device_dropped = e.sim->dropped_records();
+    if (e.sim) sres.device_dropped = e.sim->dropped_records();
     if (e.telemetry && !e.telemetry->error().empty()) failures.push_back(e.telemetry->error());
     sres.silences = e.silence->episodes();
     sres.longest_silence_ms = e.silence->longest_ms();
@@ -423,6 +439,9 @@ RunReport RunEngine::finish(int signal) {
           static_cast<unsigned long long>(sres.telemetry_pushed), static_cast<unsigned long long>(sres.telemetry_dropped));
   if (sres.device_dropped)
     appendf(summary, "  device records  %llu dropped\n", static_cast<unsigned long long>(sres.device_dropped));
+  if (e.udp)
+    appendf(summary, "  device          %s; %llu ticks without a pose\n", e.udp->summary().c_str(),
+            static_cast<unsigned long long>(e.servo->stats().pose_failures));
   if (e.rss_start && e.rss_end)
     appendf(summary, "  memory          RSS %.1f MB after %.1f s, %.1f MB at the end (%+.2f MB)\n",
             double(e.rss_start) / 1e6, std::min(1.0, s.duration_s / 2), double(e.rss_end) / 1e6,

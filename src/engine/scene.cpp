@@ -263,8 +263,16 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
   }
   {
     TomlReader r(section("device"), "device", name);
-    std::string kind = "simulated";
-    r.string("kind", kind, {"simulated"});
+    r.string("kind", s.device.kind, {"simulated", "udp"});
+    rt::UdpDeviceConfig& u = s.device.udp;
+    r.string("bind", u.bind);
+    r.string("peer", u.peer);
+    r.number("silence_ms", u.silence_ms, 1, 10000);
+    r.number("fade_ms", u.fade_ms, 1, 10000);
+    r.number("scale", u.scale, 1e-6, 1e6);
+    std::vector<double> offset;
+    r.numbers("offset_mm", offset, 3);
+    if (!offset.empty()) u.offset_mm = {offset[0], offset[1], offset[2]};
     r.string("script", s.device.script);
     if (s.device.script != "builtin" && !std::filesystem::path(s.device.script).is_absolute())
       s.device.script = dir + "/" + s.device.script;
@@ -334,6 +342,18 @@ rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, const geo
         target = object.vertex(i);
       }
   }
+  const geom::Pose grip = probe_grip(s, probe);
+  rt::Trajectory t = rt::builtin_press_slide(target, n, s.device.press_mm, s.device.slide_mm);
+  for (rt::TimedPose& k : t.keys) {
+    geom::Pose p = geom::Pose::Identity();
+    p.translate(k.pose.translation());
+    k.pose = p * grip;
+  }
+  return t;
+}
+
+geom::Pose probe_grip(const Scene& s, const geom::Mesh& probe) {
+  const geom::Vec3 n = s.device.normal;
   const geom::Vec3 r = s.probe_rotation_deg * (M_PI / 180.0);
   const Eigen::Matrix3d R = (Eigen::AngleAxisd(r.x(), geom::Vec3::UnitX()) *
                              Eigen::AngleAxisd(r.y(), geom::Vec3::UnitY()) * Eigen::AngleAxisd(r.z(), geom::Vec3::UnitZ()))
@@ -347,15 +367,10 @@ rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, const geo
         tip = probe.vertex(i);
       }
   }
-  rt::Trajectory t = rt::builtin_press_slide(target, n, s.device.press_mm, s.device.slide_mm);
-  for (rt::TimedPose& k : t.keys) {
-    geom::Pose p = geom::Pose::Identity();
-    p.translate(k.pose.translation());
-    p.rotate(R);
-    p.translate(-tip);
-    k.pose = p;
-  }
-  return t;
+  geom::Pose g = geom::Pose::Identity();
+  g.rotate(R);
+  g.translate(-tip);
+  return g;
 }
 
 Result<geom::Mesh> load_body(const BodySpec& b, const std::string& field) {

@@ -16,6 +16,7 @@
 #include "rt/passivity.hpp"
 #include "rt/saturation.hpp"
 #include "rt/simulated_device.hpp"
+#include "rt/udp_device.hpp"
 
 namespace st::engine {
 
@@ -29,10 +30,12 @@ struct BodySpec {
   double scale = 1;                                     ///< extra factor
 };
 
-/// The simulated device's script.
+/// The device: a simulated one (a script) or a real one behind the UDP bridge.
 struct DeviceSpec {
-  std::string script = "builtin";          ///< "builtin" or a trajectory file (t + 16 numbers a line)
-  bool target_top = true;                  ///< builtin: touch the object's highest point along +z
+  std::string kind = "simulated";                          ///< "simulated" or "udp"
+  rt::UdpDeviceConfig udp = rt::DefaultUdpDeviceConfig();  ///< kind = "udp"
+  std::string script = "builtin";                          ///< "builtin" or a trajectory file (t + 16 numbers a line)
+  bool target_top = true;                                  ///< builtin: touch the object's highest point along +z
   geom::Vec3 target{geom::Vec3::Zero()};   ///< builtin: surface point, object frame, mm (target_top false)
   geom::Vec3 normal{geom::Vec3::UnitZ()};  ///< builtin: approach against this outward normal
   double press_mm = 3, slide_mm = 20;      ///< builtin: press depth and slide length, mm
@@ -93,6 +96,9 @@ std::string model_dir();
 /// approaches the object's surface point (scene target, or its extreme vertex along the normal)
 /// against the normal, presses, slides and releases (rt::builtin_press_slide moves the fingertip).
 rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, const geom::Mesh& object);
+/// The probe as the device holds it: probe file coordinates to the tool frame (the fingertip at
+/// the origin, the scene's probe rotation). A device pose is Trans(tip position) · Rot · grip.
+geom::Pose probe_grip(const Scene& s, const geom::Mesh& probe);
 
 /// Loads (or generates) a body; errors name the scene field.
 Result<geom::Mesh> load_body(const BodySpec& spec, const std::string& field);
