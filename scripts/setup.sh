@@ -16,7 +16,9 @@ packages=(g++ meson ninja-build pkg-config
           doctest-dev libtomlplusplus-dev libcli11-dev libsystemd-dev libfcl-dev systemd
           clang libclang-rt-14-dev   # clang + libFuzzer runtime: tests/fuzz/run_fuzz.sh
           clang-format               # scripts/format.sh --check
-          pybind11-dev python3-dev python3-numpy)  # the Python module (python/)
+          pybind11-dev python3-dev python3-numpy   # the Python module (python/)
+          libcivetweb-dev libjs-three              # the live view (spheretouch run --view)
+          chromium)                                # the live view's browser tests (headless)
 missing=()
 for p in "${packages[@]}"; do
   [[ "$(dpkg-query -W -f='${Status}' "$p" 2>/dev/null)" == *"install ok installed"* ]] || missing+=("$p")

@@ -10,6 +10,7 @@
 #include <thread>
 
 #include "app/commands.hpp"
+#include "view/view_server.hpp"
 #include "engine/run_engine.hpp"
 #include "rt/clock.hpp"
 
@@ -27,6 +28,7 @@ struct RunArgs {
   std::string server_key, client_key;  ///< CURVE key files (override [workers] server_key, client_key)
   bool split = false;                  ///< the servo as its own process
   std::string shm_name;                ///< segment name ("" = /spheretouch-<pid>)
+  std::string view;                    ///< live view ADDR:PORT ("" = none)
 };
 
 [[noreturn]] void die(int code, const std::string& msg) { fail_command("spheretouch", code, msg); }
@@ -77,6 +79,19 @@ void run(const RunArgs& a) {
   if (!made) die(2, made.error());
   engine::RunEngine& run = *made.value();
 
+  // The live view: its frames come from the collision thread's feed, the figures from the status area.
+  std::unique_ptr<view::ViewServer> viewer;
+  if (!a.view.empty()) {
+    view::ViewServerConfig vc;
+    vc.listen = a.view;
+    vc.out_dir = run.run_dir();
+    Result<std::unique_ptr<view::ViewServer>> v =
+        view::ViewServer::start(vc, run.probe(), run.object(), run.enable_view(vc.rate_hz), run.shm_status());
+    if (!v) die(2, v.error());
+    viewer = std::move(v).value();
+    std::fprintf(stderr, "view: %s (open it in a browser)\n", viewer->url().c_str());
+  }
+
   on_stop_signals(on_signal);
 
   if (Status st = run.start(); !st) die(1, st.error());
@@ -120,6 +135,10 @@ void run(const RunArgs& a) {
     }
   }
   engine::RunReport report = run.finish(g_signal.load());
+  if (viewer) {
+    report.summary += "  view            " + viewer->summary() + "\n";
+    viewer.reset();  // pages see the stream end
+  }
   if (tty && show) std::printf("\n");
   if (g_signal.load()) std::fprintf(stderr, "stopped by signal %d\n", g_signal.load());
   // The summary goes to stdout whatever happened to the files; failures follow on stderr.
@@ -157,6 +176,11 @@ void add_run(CLI::App& app) {
                   "in the workers' allowed_clients (overrides [workers] client_key)")
       ->type_name("PREFIX");
   cmd->add_option("--out", a->out, "run directory (default: a new runs/<timestamp>)");
+  cmd->add_option("--view", a->view,
+                  "serve a live view of the run at ADDR:PORT (default 127.0.0.1:8080): the object, the probe, "
+                  "the colliding faces in red, the force, the figures; open the printed URL in a browser")
+      ->expected(0, 1)
+      ->default_str("127.0.0.1:8080");
   cmd->add_flag("--split", a->split,
                 "run the haptic servo as its own process on the shared-memory segment: it keeps the device\n"
                 "safe (force fades to zero) and finishes its run if the collision side dies");

@@ -88,6 +88,7 @@ void CollisionLoop::run() {
     models_.write(m);
     const std::int64_t t1 = m.published_ns;
     rounds_.fetch_add(1, std::memory_order_relaxed);
+    if (view_) view_->offer(m.seq, sample.seq, pose, out.pairs, m, t1 - t0);
     if (!out.complete) incomplete_.fetch_add(1, std::memory_order_relaxed);
     last_latency_ns_.store(t1 - t0, std::memory_order_relaxed);
     last_contacts_.store(m.contacts, std::memory_order_relaxed);

@@ -15,6 +15,7 @@
 #include "rt/pose_sample.hpp"
 #include "rt/shm_status.hpp"
 #include "rt/triple_buffer.hpp"
+#include "engine/view_feed.hpp"
 
 namespace st::engine {
 
@@ -49,6 +50,8 @@ class CollisionLoop {
                 rt::TripleBuffer<geom::ContactModel>& models, CollideFn collide, double rate_hz, std::size_t max_rounds,
                 const geom::ContactConfig& contact = geom::DefaultContactConfig());
   ~CollisionLoop();
+  /// Offer every round to a live viewer's feed (null = off); before start().
+  void show_to(ViewFeed* feed) { view_ = feed; }
   /// Publish a CollisionStatus after every round into `status` (null = off); before start().
   void publish_status_to(rt::SeqLock<rt::CollisionStatus>* status) { status_ = status; }
   /// Streams one line per round (RoundRecord's fields) to `path`; before start(). The file is
@@ -84,6 +87,7 @@ class CollisionLoop {
   CollideFn collide_;
   geom::ContactBuilder builder_;
   rt::SeqLock<rt::CollisionStatus>* status_ = nullptr;
+  ViewFeed* view_ = nullptr;
   double rate_hz_;
   std::size_t max_rounds_;
   std::atomic<bool> stop_{false};

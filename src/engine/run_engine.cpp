@@ -69,7 +69,8 @@ struct RunEngine::State {
   std::unique_ptr<rt::HapticServo> servo;
   std::unique_ptr<rt::HapticLoop> loop;
   std::unique_ptr<CollisionLoop> collision;
-  std::string script_file;  // split: the trajectory as a file for the servo process
+  std::unique_ptr<ViewFeed> view;  // --view: frames for a live viewer
+  std::string script_file;         // split: the trajectory as a file for the servo process
   // Running.
   bool started = false, finished = false;
   pid_t servo_pid = 0;
@@ -502,6 +503,16 @@ void RunEngine::save(RunReport& report) {
   }
 }
 
+ViewFeed& RunEngine::enable_view(double rate_hz) {
+  if (!s_->view) {
+    s_->view = std::make_unique<ViewFeed>(rate_hz);
+    s_->collision->show_to(s_->view.get());
+  }
+  return *s_->view;
+}
+const geom::Mesh& RunEngine::probe() const { return s_->probe; }
+const geom::Mesh& RunEngine::object() const { return s_->object; }
+const rt::ShmStatus& RunEngine::shm_status() const { return s_->shm->status(); }
 const Scene& RunEngine::scene() const { return s_->s; }
 const std::string& RunEngine::backend() const { return s_->backend; }
 std::string RunEngine::split() const { return s_->fleet ? s_->fleet->split : std::string(); }

@@ -22,6 +22,8 @@
 
 #include "engine/distributed.hpp"
 #include "engine/scene.hpp"
+#include "engine/view_feed.hpp"
+#include "rt/shm_status.hpp"
 #include "geom/result.hpp"
 
 namespace st::engine {
@@ -87,6 +89,11 @@ class RunEngine {
   /// asked for no trace; failures are added to `report`.
   void save(RunReport& report);
 
+  /// A live viewer's feed of the collision rounds (created on the first call; before start()).
+  ViewFeed& enable_view(double rate_hz = 60);
+  const geom::Mesh& probe() const;          ///< the probe as loaded
+  const geom::Mesh& object() const;         ///< the object as loaded
+  const rt::ShmStatus& shm_status() const;  ///< the run's status area (servo and collision)
   const Scene& scene() const;
   std::string split() const;               ///< how the object was dealt to workers and why ("" without workers)
   const std::string& backend() const;      ///< "in the collision thread", "2 in-process workers", ...

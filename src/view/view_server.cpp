@@ -1,0 +1,295 @@
+// ViewServer: see view_server.hpp.
+#include "view/view_server.hpp"
+
+#include <civetweb.h>
+
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <string_view>
+
+#include "rt/clock.hpp"
+
+namespace st::view {
+
+namespace assets {
+extern const std::string_view view_html;
+extern const std::string_view view_js;
+}  // namespace assets
+
+namespace {
+
+constexpr std::size_t kMaxSnapshotBytes = 16u << 20;  // a PNG of a page's canvas
+constexpr std::size_t kMaxTextBytes = 4096;           // a page's stats report
+
+void put(std::vector<char>& b, const void* p, std::size_t n) {
+  const char* c = static_cast<const char*>(p);
+  b.insert(b.end(), c, c + n);
+}
+template <class T>
+void put(std::vector<char>& b, T v) {
+  static_assert(std::endian::native == std::endian::little, "the view's wire format is little-endian");
+  put(b, &v, sizeof v);
+}
+
+Result<std::string> slurp(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return fail(path, ": cannot read (install Debian's libjs-three)");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+int send_text(mg_connection* conn, int code, const char* type, std::string_view body) {
+  mg_printf(conn,
+            "HTTP/1.1 %d %s\r\nContent-Type: %s\r\nContent-Length: %zu\r\nCache-Control: no-store\r\n"
+            "X-Content-Type-Options: nosniff\r\nConnection: close\r\n\r\n",
+            code, code == 200 ? "OK" : "Not Found", type, body.size());
+  mg_write(conn, body.data(), body.size());
+  return code;
+}
+
+// C trampolines.
+int on_request(mg_connection* c, void* self) { return static_cast<ViewServer*>(self)->serve(c); }
+int on_ws_connect(const mg_connection*, void*) { return 0; }
+void on_ws_ready(mg_connection* c, void* self) { static_cast<ViewServer*>(self)->ready(c); }
+int on_ws_data(mg_connection* c, int bits, char* data, std::size_t len, void* self) {
+  return static_cast<ViewServer*>(self)->data(c, bits, data, len);
+}
+void on_ws_close(const mg_connection* c, void* self) { static_cast<ViewServer*>(self)->closed(c); }
+int on_log(const mg_connection*, const char*) { return 1; }  // civetweb's own log lines: not on our terminal
+
+}  // namespace
+
+Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& c, const geom::Mesh& probe,
+                                                      const geom::Mesh& object, engine::ViewFeed& feed,
+                                                      const rt::ShmStatus& status) {
+  const auto colon = c.listen.rfind(':');
+  if (colon == std::string::npos || colon + 1 == c.listen.size() ||
+      c.listen.find_first_not_of("0123456789", colon + 1) != std::string::npos)
+    return fail("--view: '", c.listen, "': expected ADDR:PORT (e.g. 127.0.0.1:8080)");
+  if (!(c.rate_hz > 0 && c.rate_hz <= 240)) return fail("--view: rate must be in (0, 240] frames per second");
+  std::unique_ptr<ViewServer> s(new ViewServer(c, probe, object, feed, status));
+  Result<std::string> three = slurp(c.three_dir + "/three.min.js");
+  if (!three) return Error{three.error()};
+  Result<std::string> controls = slurp(c.three_dir + "/examples/js/controls/OrbitControls.js");
+  if (!controls) return Error{controls.error()};
+  s->three_js_ = std::move(three).value();
+  s->controls_js_ = std::move(controls).value();
+
+  // The meshes, once: local coordinates (f32 is exact enough near each body's origin) and origins.
+  std::vector<char>& m = s->mesh_msg_;
+  put(m, "STVM", 4);
+  put<std::uint32_t>(m, 1);
+  for (const geom::Mesh* b : {&object, &probe})
+    for (int i = 0; i < 3; ++i) put<double>(m, b->origin[i]);
+  put<std::uint32_t>(m, std::uint32_t(probe.local.size()));
+  put<std::uint32_t>(m, std::uint32_t(probe.faces.size()));
+  put<std::uint32_t>(m, std::uint32_t(object.local.size()));
+  put<std::uint32_t>(m, std::uint32_t(object.faces.size()));
+  for (const geom::Mesh* b : {&probe, &object}) {
+    for (const geom::Vec3& v : b->local)
+      for (int i = 0; i < 3; ++i) put<float>(m, float(v[i]));
+    for (const geom::Tri& t : b->faces)
+      for (std::uint32_t v : t) put<std::uint32_t>(m, v);
+  }
+
+  mg_init_library(0);
+  const std::string port_opt = c.listen;
+  const char* options[] = {"listening_ports",      port_opt.c_str(), "num_threads", "4", "enable_keep_alive", "no",
+                           "websocket_timeout_ms", "3600000",        nullptr};
+  mg_callbacks cb{};
+  cb.log_message = on_log;
+  s->ctx_ = mg_start(&cb, s.get(), options);
+  if (!s->ctx_) return fail("--view: cannot listen on ", c.listen, " (in use, or not an address of this machine)");
+  mg_set_request_handler(s->ctx_, "/", on_request, s.get());
+  mg_set_websocket_handler(s->ctx_, "/ws", on_ws_connect, on_ws_ready, on_ws_data, on_ws_close, s.get());
+  mg_server_port ports[4];
+  const int n = mg_get_server_ports(s->ctx_, 4, ports);
+  const int port = n > 0 ? ports[0].port : 0;
+  s->url_ = "http://" + c.listen.substr(0, colon) + ":" + std::to_string(port) + "/";
+  s->pusher_ = std::thread([p = s.get()] { p->push(); });
+  return s;
+}
+
+ViewServer::ViewServer(const ViewServerConfig& c, const geom::Mesh& probe, const geom::Mesh& object,
+                       engine::ViewFeed& feed, const rt::ShmStatus& status)
+    : config_(c), probe_(probe), object_(object), feed_(feed), status_(status) {}
+
+ViewServer::~ViewServer() {
+  stop_.store(true);
+  if (pusher_.joinable()) pusher_.join();
+  if (ctx_) mg_stop(ctx_);  // closes every connection (close handlers run) and joins civetweb's threads
+}
+
+int ViewServer::serve(mg_connection* conn) {
+  const mg_request_info* ri = mg_get_request_info(conn);
+  const std::string uri = ri && ri->local_uri ? ri->local_uri : "";
+  if (uri == "/" || uri == "/index.html") return send_text(conn, 200, "text/html; charset=utf-8", assets::view_html);
+  if (uri == "/view.js") return send_text(conn, 200, "text/javascript; charset=utf-8", assets::view_js);
+  if (uri == "/three.min.js") return send_text(conn, 200, "text/javascript; charset=utf-8", three_js_);
+  if (uri == "/OrbitControls.js") return send_text(conn, 200, "text/javascript; charset=utf-8", controls_js_);
+  return send_text(conn, 404, "text/plain", "not found\n");
+}
+
+void ViewServer::ready(mg_connection* conn) {
+  mg_lock_connection(conn);
+  const int w = mg_websocket_write(conn, MG_WEBSOCKET_OPCODE_BINARY, mesh_msg_.data(), mesh_msg_.size());
+  mg_unlock_connection(conn);
+  std::lock_guard<std::mutex> l(mu_);
+  ++stats_.clients;
+  if (w > 0) {
+    stats_.bytes += mesh_msg_.size();
+    clients_.push_back(conn);
+  }
+}
+
+void ViewServer::note_bad(const std::string& why) {
+  std::lock_guard<std::mutex> l(mu_);
+  if (stats_.bad_messages++ == 0)
+    std::fprintf(stderr, "view: a page sent a bad message (%s); further ones are counted\n", why.c_str());
+}
+
+int ViewServer::data(mg_connection*, int bits, const char* data, std::size_t len) {
+  const int opcode = bits & 0x0f;
+  if (opcode == MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE) return 0;
+  if (opcode == MG_WEBSOCKET_OPCODE_PING || opcode == MG_WEBSOCKET_OPCODE_PONG) return 1;
+  if (opcode == MG_WEBSOCKET_OPCODE_TEXT) {
+    // {"fps": F, "frames": N, "red": R}: numbers after their keys; anything else is refused.
+    const std::string_view t(data, len);
+    auto number = [&](std::string_view key, double& out) {
+      const auto at = t.find(key);
+      if (at == std::string_view::npos) return false;
+      const std::string tail(t.substr(at + key.size(), 32));
+      char* end = nullptr;
+      out = std::strtod(tail.c_str(), &end);
+      return end != tail.c_str() && std::isfinite(out) && out >= 0 && out < 1e12;
+    };
+    double fps = 0, frames = 0, seconds = 0;
+    if (len > kMaxTextBytes || !number("\"fps\":", fps) || !number("\"frames\":", frames)) {
+      note_bad(len > kMaxTextBytes ? "text message too long" : "expected {\"fps\": F, \"frames\": N}");
+      return 1;
+    }
+    if (!number("\"seconds\":", seconds)) seconds = 0;
+    std::lock_guard<std::mutex> l(mu_);
+    stats_.page_fps = fps;
+    stats_.page_frames = std::uint64_t(frames);
+    stats_.page_seconds = seconds;
+    ++stats_.page_reports;
+    return 1;
+  }
+  if (opcode == MG_WEBSOCKET_OPCODE_BINARY) {
+    static constexpr unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+    if (len < 12 || len > kMaxSnapshotBytes || std::memcmp(data, "STVS", 4) != 0 || std::memcmp(data + 4, kPng, 8) != 0) {
+      note_bad("expected \"STVS\" and a PNG of at most 16 MiB");
+      return 1;
+    }
+    if (config_.out_dir.empty()) return 1;
+    const std::string path = config_.out_dir + "/view.png";
+    std::ofstream o(path + ".tmp", std::ios::binary);
+    o.write(data + 4, std::streamsize(len - 4));
+    o.close();
+    if (o && std::rename((path + ".tmp").c_str(), path.c_str()) == 0) {
+      std::lock_guard<std::mutex> l(mu_);
+      ++stats_.snapshots;
+    } else {
+      std::remove((path + ".tmp").c_str());
+      note_bad(path + ": cannot write the snapshot");
+    }
+    return 1;
+  }
+  note_bad("unexpected WebSocket opcode");
+  return 1;
+}
+
+void ViewServer::closed(const mg_connection* conn) {
+  std::lock_guard<std::mutex> l(mu_);
+  clients_.erase(std::remove(clients_.begin(), clients_.end(), conn), clients_.end());
+}
+
+void ViewServer::push() {
+  auto frame = std::make_unique<engine::ViewFrame>();
+  frame->n_probe = frame->n_object = 0;
+  std::vector<char> msg;
+  const std::int64_t t0 = rt::now_ns();
+  const auto period = std::chrono::nanoseconds(std::int64_t(1e9 / config_.rate_hz));
+  auto next = std::chrono::steady_clock::now();
+  std::vector<mg_connection*> to;
+  while (!stop_.load(std::memory_order_relaxed)) {
+    next += period;
+    std::this_thread::sleep_until(next);
+    if (std::chrono::steady_clock::now() - next > 4 * period) next = std::chrono::steady_clock::now();
+    {
+      std::lock_guard<std::mutex> l(mu_);
+      to = clients_;
+    }
+    if (to.empty()) continue;
+    feed_.take(*frame);  // the newest frame, or the last one again
+    rt::ServoStatus servo{};
+    status_.servo.load(servo);
+    rt::CollisionStatus col{};
+    status_.collision.load(col);
+    // "STVF" layout: 0 magic, 4 u32 flags, 8 u64 round, 16 f64 pose[12], 112 f64 force_dir[3],
+    // 136 f64 contact_point[3], 160 f64 penetration_mm, 168 f64 round_ms, 176 f64 force_N[3]
+    // (the servo's, this tick), 200 u64 servo ticks, 208 u64 misses, 216 u64 collision rounds,
+    // 224 f64 seconds since the view started, 232 u32 contacts, 236 u32 n_probe, 240 u32 n_object,
+    // 244 u32 reserved, 248 u32 probe faces[n_probe], then u32 object faces[n_object].
+    msg.clear();
+    put(msg, "STVF", 4);
+    put<std::uint32_t>(msg, frame->flags);
+    put<std::uint64_t>(msg, frame->round);
+    for (double v : frame->pose) put<double>(msg, v);
+    for (double v : frame->force_dir) put<double>(msg, v);
+    for (double v : frame->contact_point) put<double>(msg, v);
+    put<double>(msg, frame->penetration_mm);
+    put<double>(msg, frame->round_ms);
+    for (double v : servo.force_N) put<double>(msg, std::isfinite(v) ? v : 0.0);
+    put<std::uint64_t>(msg, servo.ticks);
+    put<std::uint64_t>(msg, servo.misses);
+    put<std::uint64_t>(msg, col.rounds);
+    put<double>(msg, double(rt::now_ns() - t0) * 1e-9);
+    put<std::uint32_t>(msg, frame->contacts);
+    put<std::uint32_t>(msg, frame->n_probe);
+    put<std::uint32_t>(msg, frame->n_object);
+    put<std::uint32_t>(msg, 0);
+    put(msg, frame->probe_faces, 4 * std::size_t(frame->n_probe));
+    put(msg, frame->object_faces, 4 * std::size_t(frame->n_object));
+    std::uint64_t sent = 0, bytes = 0;
+    for (mg_connection* c : to) {
+      std::lock_guard<std::mutex> l(mu_);  // a connection closed meanwhile is no longer listed
+      if (std::find(clients_.begin(), clients_.end(), c) == clients_.end()) continue;
+      mg_lock_connection(c);
+      const int w = mg_websocket_write(c, MG_WEBSOCKET_OPCODE_BINARY, msg.data(), msg.size());
+      mg_unlock_connection(c);
+      if (w > 0) ++sent, bytes += msg.size();
+    }
+    std::lock_guard<std::mutex> l(mu_);
+    stats_.frames += sent;
+    stats_.bytes += bytes;
+  }
+}
+
+ViewStats ViewServer::stats() const {
+  std::lock_guard<std::mutex> l(mu_);
+  return stats_;
+}
+
+std::string ViewServer::summary() const {
+  const ViewStats s = stats();
+  char line[512];
+  std::snprintf(line, sizeof line,
+                "%s: %llu page(s), %llu frames sent (%.1f MB); page drew %.1f fps (last second; %llu frames in %.1f s, "
+                "%.1f fps)%s%s",
+                url_.c_str(), static_cast<unsigned long long>(s.clients), static_cast<unsigned long long>(s.frames),
+                double(s.bytes) / 1e6, s.page_fps, static_cast<unsigned long long>(s.page_frames), s.page_seconds,
+                s.page_seconds > 0 ? double(s.page_frames) / s.page_seconds : 0.0, s.snapshots ? ", snapshot view.png" : "",
+                s.bad_messages ? (", " + std::to_string(s.bad_messages) + " bad messages refused").c_str() : "");
+  return line;
+}
+
+}  // namespace st::view

@@ -1,0 +1,99 @@
+// ViewServer: the live view of a run (spheretouch run --view). An embedded HTTP/WebSocket server
+// (civetweb) serves a page (web/view.html, web/view.js, three.js from Debian's libjs-three) that
+// draws the object and the probe as shaded meshes, the colliding faces in red, the force as an
+// arrow, the status figures and a plot of |F| over the last seconds.
+//
+// Data path: the collision thread offers frames to a ViewFeed (triple buffer, at most rate_hz);
+// the servo's and collision thread's status come from the run's shared-memory status area
+// (seqlocks). This server's own thread reads both and writes each frame to every connected page;
+// neither real-time thread ever waits for it, and a slow page only slows its own connection.
+//
+// WebSocket /ws, binary messages, little-endian (web/view.js reads them):
+//   server -> page, once: "STVM" u32 version, f64 object origin[3], f64 probe origin[3],
+//     u32 probe vertices, u32 probe faces, u32 object vertices, u32 object faces,
+//     f32 probe local vertices (x y z), u32 probe faces (a b c), f32 object local vertices, u32 object faces
+//   server -> page, every frame: "STVF" (layout in view_server.cpp, write_frame)
+//   page -> server: text {"fps": F, "frames": N, "seconds": S, "red": R} once a second; binary "STVS" + a PNG
+//     of the canvas (saved as view.png in the run directory) when the page was opened with
+//     ?snapshot=1 and it has drawn colliding faces.
+#pragma once
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "engine/view_feed.hpp"
+#include "geom/mesh.hpp"
+#include "geom/result.hpp"
+#include "rt/shm_status.hpp"
+
+struct mg_context;
+struct mg_connection;
+
+namespace st::view {
+
+struct ViewServerConfig {
+  std::string listen = "127.0.0.1:8080";                  ///< ADDR:PORT (port 0: any free port)
+  double rate_hz = 60;                                    ///< frames per second sent to each page
+  std::string three_dir = "/usr/share/javascript/three";  ///< Debian's libjs-three
+  std::string out_dir;                                    ///< where snapshots go (view.png); "" = none
+};
+
+struct ViewStats {
+  std::uint64_t clients = 0;       ///< pages that connected
+  std::uint64_t frames = 0;        ///< frames written (all pages)
+  std::uint64_t bytes = 0;         ///< bytes written (all pages)
+  double page_fps = 0;             ///< the last rate a page reported drawing at (its last second)
+  std::uint64_t page_frames = 0;   ///< frames it had drawn by then
+  double page_seconds = 0;         ///< over this many seconds since it loaded
+  std::uint64_t page_reports = 0;  ///< reports received
+  std::uint64_t snapshots = 0;     ///< view.png written
+  std::uint64_t bad_messages = 0;  ///< messages from a page that were refused
+};
+
+class ViewServer {
+ public:
+  /// Starts serving. The meshes, feed and status must outlive the server.
+  static Result<std::unique_ptr<ViewServer>> start(const ViewServerConfig& config, const geom::Mesh& probe,
+                                                   const geom::Mesh& object, engine::ViewFeed& feed,
+                                                   const rt::ShmStatus& status);
+  ~ViewServer();
+  ViewServer(const ViewServer&) = delete;
+  ViewServer& operator=(const ViewServer&) = delete;
+  std::string url() const { return url_; }  ///< http://ADDR:PORT/
+  ViewStats stats() const;
+  /// One line for the run's summary.
+  std::string summary() const;
+
+  // civetweb callbacks (public for the C trampolines).
+  int serve(mg_connection* conn);
+  void ready(mg_connection* conn);
+  int data(mg_connection* conn, int bits, const char* data, std::size_t len);
+  void closed(const mg_connection* conn);
+
+ private:
+  ViewServer(const ViewServerConfig& c, const geom::Mesh& probe, const geom::Mesh& object, engine::ViewFeed& feed,
+             const rt::ShmStatus& status);
+  void push();  // the writer thread
+  void note_bad(const std::string& why);
+
+  ViewServerConfig config_;
+  const geom::Mesh& probe_;
+  const geom::Mesh& object_;
+  engine::ViewFeed& feed_;
+  const rt::ShmStatus& status_;
+  std::string url_;
+  std::string three_js_, controls_js_;  // read once at start
+  std::vector<char> mesh_msg_;          // the "STVM" message, built once
+  mg_context* ctx_ = nullptr;
+  mutable std::mutex mu_;  // clients_, stats_
+  std::vector<mg_connection*> clients_;
+  ViewStats stats_;
+  std::atomic<bool> stop_{false};
+  std::thread pusher_;
+};
+
+}  // namespace st::view

@@ -1,0 +1,211 @@
+// The live view (spheretouch run --view): the page and its scripts are served, the WebSocket
+// stream carries the meshes and frames whose colliding faces match the run's contacts, a page's
+// bad messages are refused without harm, and a real browser (Debian's headless Chromium) draws
+// the colliding faces in red (a snapshot the page sends back, checked pixel by pixel).
+#include <civetweb.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+
+#include <cstring>
+#include <fstream>
+#include <mutex>
+#include <sstream>
+
+#include "app/process_util.hpp"
+#include "doctest/doctest.h"
+#include "test_util.hpp"
+
+namespace {
+
+int view_free_port() {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
+  socklen_t len = sizeof a;
+  getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
+  ::close(fd);
+  return ntohs(a.sin_port);
+}
+
+std::string view_slurp(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+/// Starts a pressing run with --view on a free port; returns its pid once the view is up.
+pid_t view_start_run(const st::test::TempDir& d, int port, double seconds, const std::string& object) {
+  const std::string scene = "[probe]\nbuiltin = \"capsule\"\nradius_mm = 8.0\nlength_mm = 40.0\n" + object +
+                            "[workers]\ncount = 0\n[device]\npress_mm = 4.0\n"
+                            "[output]\nstatus = \"off\"\nply = false\n[run]\nduration_s = " +
+                            std::to_string(seconds) + "\n";
+  st::test::write_file(d.file("scene.toml"), scene);
+  const pid_t pid = st::test::spawn_spheretouch(
+      {"run", d.file("scene.toml"), "--out", d.file("out"), "--view", "127.0.0.1:" + std::to_string(port)},
+      d.file("run.log"));
+  bool up = false;
+  for (int i = 0; i < 3000 && !up; ++i) {
+    up = st::test::contains(view_slurp(d.file("run.log")), "view: http://127.0.0.1:" + std::to_string(port) + "/");
+    if (!up) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  INFO(view_slurp(d.file("run.log")));
+  REQUIRE(up);
+  return pid;
+}
+
+/// GET path from the view; the body ("" on failure) and the status code.
+std::pair<int, std::string> view_get(int port, const std::string& path) {
+  char err[256] = "";
+  mg_connection* c = mg_download("127.0.0.1", port, 0, err, sizeof err, "GET %s HTTP/1.0\r\n\r\n", path.c_str());
+  if (!c) return {0, err};
+  const mg_response_info* ri = mg_get_response_info(c);
+  const int code = ri ? ri->status_code : 0;
+  std::string body;
+  char buf[65536];
+  for (int n; (n = mg_read(c, buf, sizeof buf)) > 0;) body.append(buf, std::size_t(n));
+  mg_close_connection(c);
+  return {code, body};
+}
+
+struct ViewMessages {
+  std::mutex mu;
+  std::vector<std::string> binary;
+};
+int view_on_data(mg_connection*, int bits, char* data, std::size_t len, void* user) {
+  auto* m = static_cast<ViewMessages*>(user);
+  if ((bits & 0x0f) == MG_WEBSOCKET_OPCODE_BINARY) {
+    std::lock_guard<std::mutex> l(m->mu);
+    m->binary.emplace_back(data, len);
+  }
+  return 1;
+}
+
+template <class T>
+T view_at(const std::string& s, std::size_t off) {
+  T v;
+  std::memcpy(&v, s.data() + off, sizeof v);
+  return v;
+}
+
+}  // namespace
+
+TEST_CASE("run --view: the page and scripts are served; the stream carries the meshes and frames with the contacts") {
+  mg_init_library(0);
+  st::test::TempDir d;
+  const int port = view_free_port();
+  const pid_t pid =
+      view_start_run(d, port, 4.0, "[object]\nbuiltin = \"icosphere\"\nradius_mm = 50.0\nfrequency = 12\n");
+
+  const auto page = view_get(port, "/");
+  CHECK(page.first == 200);
+  CHECK(st::test::contains(page.second, "<script src=\"/view.js\">"));
+  const auto js = view_get(port, "/view.js");
+  CHECK(js.first == 200);
+  CHECK(st::test::contains(js.second, "STVF"));
+  const auto three = view_get(port, "/three.min.js");
+  CHECK(three.first == 200);
+  CHECK(three.second.size() > 100000);
+  CHECK(view_get(port, "/../../etc/passwd").first == 404);
+  CHECK(view_get(port, "/nothing").first == 404);
+
+  ViewMessages msgs;
+  char err[256] = "";
+  mg_connection* ws =
+      mg_connect_websocket_client("127.0.0.1", port, 0, err, sizeof err, "/ws", nullptr, view_on_data, nullptr, &msgs);
+  INFO(err);
+  REQUIRE(ws != nullptr);
+  // A page's bad messages: refused, counted, and the stream goes on.
+  const char junk_text[] = "not json at all";
+  mg_websocket_client_write(ws, MG_WEBSOCKET_OPCODE_TEXT, junk_text, sizeof junk_text - 1);
+  const std::string junk_bin(1000, '\x7f');
+  mg_websocket_client_write(ws, MG_WEBSOCKET_OPCODE_BINARY, junk_bin.data(), junk_bin.size());
+  const char report[] = "{\"fps\":42.5,\"frames\":17,\"red\":3}";
+  mg_websocket_client_write(ws, MG_WEBSOCKET_OPCODE_TEXT, report, sizeof report - 1);
+  const int rc = st::test::wait_for(pid, 60);
+  mg_close_connection(ws);
+  const std::string log = view_slurp(d.file("run.log"));
+  INFO(log);
+  CHECK(rc == 0);
+
+  std::lock_guard<std::mutex> l(msgs.mu);
+  REQUIRE(msgs.binary.size() > 20);
+  // The meshes first.
+  const std::string& mesh = msgs.binary.front();
+  REQUIRE(mesh.size() >= 72);
+  CHECK(mesh.compare(0, 4, "STVM") == 0);
+  const std::uint32_t pnv = view_at<std::uint32_t>(mesh, 56), pnf = view_at<std::uint32_t>(mesh, 60);
+  const std::uint32_t onv = view_at<std::uint32_t>(mesh, 64), onf = view_at<std::uint32_t>(mesh, 68);
+  CHECK(pnf > 0);
+  CHECK(onf == 2880);  // icosphere, frequency 12: 20 · 12²
+  CHECK(mesh.size() == 72 + 12 * std::size_t(pnv + pnf + onv + onf));
+  // Then frames: face ids in range, distinct and ascending; contact seen, its faces listed.
+  std::size_t frames = 0, with_faces = 0;
+  for (std::size_t i = 1; i < msgs.binary.size(); ++i) {
+    const std::string& f = msgs.binary[i];
+    REQUIRE(f.size() >= 248);
+    REQUIRE(f.compare(0, 4, "STVF") == 0);
+    ++frames;
+    const std::uint32_t np = view_at<std::uint32_t>(f, 236), no = view_at<std::uint32_t>(f, 240);
+    REQUIRE(f.size() == 248 + 4 * std::size_t(np + no));
+    const std::uint32_t flags = view_at<std::uint32_t>(f, 4);
+    if (no > 0) {
+      ++with_faces;
+      CHECK((flags & 1) != 0);                           // in contact
+      CHECK(view_at<std::uint32_t>(f, 232) == np + no);  // contacts = distinct colliding faces (paper §3.5)
+    }
+    for (std::uint32_t k = 0; k < np; ++k) CHECK(view_at<std::uint32_t>(f, 248 + 4 * k) < pnf);
+    for (std::uint32_t k = 1; k < no; ++k)
+      CHECK(view_at<std::uint32_t>(f, 248 + 4 * (np + k - 1)) < view_at<std::uint32_t>(f, 248 + 4 * (np + k)));
+    for (std::uint32_t k = 0; k < no; ++k) CHECK(view_at<std::uint32_t>(f, 248 + 4 * (np + k)) < onf);
+  }
+  CHECK(frames > 20);
+  CHECK(with_faces > 5);
+  CHECK(st::test::contains(log, "page drew 42.5 fps (last second; 17 frames in 0.0 s"));
+  CHECK(st::test::contains(log, "2 bad messages refused"));
+}
+
+TEST_CASE("run --view in headless Chromium: the page draws, reports its frame rate, and paints the contact red") {
+  mg_init_library(0);
+  REQUIRE(std::filesystem::exists("/usr/bin/chromium"));  // scripts/setup.sh installs it
+  st::test::TempDir d;
+  const int port = view_free_port();
+  const pid_t pid =
+      view_start_run(d, port, 8.0, "[object]\nbuiltin = \"icosphere\"\nradius_mm = 50.0\nfrequency = 24\n");
+  const std::string profile = d.file("chromium-profile");
+  const pid_t browser = fork();
+  REQUIRE(browser >= 0);
+  if (browser == 0) {
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (!std::freopen(d.file("chromium.log").c_str(), "a", stdout) || dup2(fileno(stdout), 2) < 0) _exit(120);
+    const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/?snapshot=1";
+    const std::string user = "--user-data-dir=" + profile;
+    execl("/usr/bin/chromium", "chromium", "--headless=new", "--no-sandbox", "--disable-gpu",
+          "--enable-unsafe-swiftshader", "--use-angle=swiftshader", "--disable-quic", "--no-first-run",
+          "--disable-background-networking", "--disable-component-update", "--disable-sync", "--window-size=800,600",
+          "--remote-debugging-port=0", user.c_str(), url.c_str(), nullptr);
+    _exit(121);
+  }
+  const int rc = st::test::wait_for(pid, 90);
+  kill(browser, SIGKILL);
+  st::test::wait_for(browser, 10);
+  const std::string log = view_slurp(d.file("run.log"));
+  INFO(log);
+  INFO(view_slurp(d.file("chromium.log")));
+  CHECK(rc == 0);
+  CHECK(st::test::contains(log, "1 page(s)"));
+  // The page's own frame count reached the server (whatever the rate; the rate is a benchmark).
+  const auto at = log.find("page drew ");
+  REQUIRE(at != std::string::npos);
+  CHECK(std::strtod(log.c_str() + at + 10, nullptr) > 0);
+  // Its snapshot, taken on a frame with colliding faces: red pixels where the contact is.
+  const std::string png = d.file("out") + "/view.png";
+  REQUIRE(std::filesystem::exists(png));
+  const char* root = std::getenv("ST_SOURCE_ROOT");
+  const auto red = st::test::run_command("python3 " + std::string(root ? root : ".") + "/tests/app/png_red.py " + png);
+  INFO(red.output);
+  REQUIRE(red.exit_code == 0);
+  CHECK(std::strtol(red.output.c_str(), nullptr, 10) > 20);  // red pixels (the page's red is #ff1a1a)
+}

@@ -1,0 +1,252 @@
+// spheretouch live view: draws what the run's /ws stream says (src/view/view_server.hpp has the
+// message layouts). three.js r111 (Debian's libjs-three) as the global THREE.
+(function () {
+  'use strict';
+  const params = new URLSearchParams(location.search);
+  const wantSnapshot = params.get('snapshot') === '1';
+  const statusEl = document.getElementById('status');
+  const errorEl = document.getElementById('error');
+  const plot = document.getElementById('plot');
+  const plotCtx = plot.getContext('2d');
+
+  const renderer = new THREE.WebGLRenderer({ antialias: false });
+  renderer.setPixelRatio(1);
+  renderer.setSize(window.innerWidth, window.innerHeight);
+  renderer.setClearColor(0x15181c);
+  document.getElementById('view').appendChild(renderer.domElement);
+  const scene = new THREE.Scene();
+  const camera = new THREE.PerspectiveCamera(40, window.innerWidth / window.innerHeight, 0.1, 1e6);
+  const controls = new THREE.OrbitControls(camera, renderer.domElement);
+  scene.add(new THREE.AmbientLight(0xffffff, 0.35));
+  const sun = new THREE.DirectionalLight(0xffffff, 0.75);
+  camera.add(sun);
+  sun.position.set(0.3, 0.6, 1);
+  scene.add(camera);
+  window.addEventListener('resize', () => {
+    camera.aspect = window.innerWidth / window.innerHeight;
+    camera.updateProjectionMatrix();
+    renderer.setSize(window.innerWidth, window.innerHeight);
+  });
+
+  // Lighting baked into vertex colours (a fixed light over the object): software WebGL
+  // (SwiftShader, headless or without a GPU) is bound by per-vertex work, and an unlit material
+  // draws the elephant and the hand ~1.4x as fast as a lit one.
+  const grey = new THREE.MeshBasicMaterial({ vertexColors: THREE.VertexColors });
+  const blue = new THREE.MeshBasicMaterial({ vertexColors: THREE.VertexColors });
+  const light = new THREE.Vector3(0.35, -0.55, 0.76).normalize();
+  function bake(g, base) {
+    const n = g.attributes.normal.array, c = new Float32Array(n.length);
+    for (let i = 0; i < n.length; i += 3) {
+      const k = 0.38 + 0.62 * Math.max(0, n[i] * light.x + n[i + 1] * light.y + n[i + 2] * light.z);
+      c[i] = base[0] * k; c[i + 1] = base[1] * k; c[i + 2] = base[2] * k;
+    }
+    g.setAttribute('color', new THREE.BufferAttribute(c, 3));
+  }
+  const red = new THREE.MeshBasicMaterial({ color: 0xff1a1a, side: THREE.DoubleSide,
+    polygonOffset: true, polygonOffsetFactor: -2, polygonOffsetUnits: -2 });
+
+  // A body: its mesh (indexed, smooth-shaded), and a red overlay built from the colliding faces.
+  function makeBody(vertices, faces, material, base) {
+    const g = new THREE.BufferGeometry();
+    g.setAttribute('position', new THREE.BufferAttribute(vertices, 3));
+    g.setIndex(new THREE.BufferAttribute(faces, 1));
+    g.computeVertexNormals();
+    bake(g, base);
+    const mesh = new THREE.Mesh(g, material);
+    const hg = new THREE.BufferGeometry();
+    const hpos = new THREE.BufferAttribute(new Float32Array(9 * 16384), 3);
+    hpos.setUsage ? hpos.setUsage(THREE.DynamicDrawUsage) : (hpos.dynamic = true);
+    hg.setAttribute('position', hpos);
+    hg.setDrawRange(0, 0);
+    const overlay = new THREE.Mesh(hg, red);
+    overlay.frustumCulled = false;
+    const group = new THREE.Group();
+    group.add(mesh);
+    group.add(overlay);
+    return { vertices, faces, mesh, overlay, group, count: 0 };
+  }
+  function highlight(body, ids) {
+    const pos = body.overlay.geometry.attributes.position;
+    const n = Math.min(ids.length, pos.count / 3);
+    const v = body.vertices, f = body.faces, out = pos.array;
+    let k = 0;
+    for (let i = 0; i < n; ++i) {
+      const face = ids[i];
+      if (3 * face + 2 >= f.length) continue;
+      for (let j = 0; j < 3; ++j) {
+        const a = 3 * f[3 * face + j];
+        out[k++] = v[a]; out[k++] = v[a + 1]; out[k++] = v[a + 2];
+      }
+    }
+    body.overlay.geometry.setDrawRange(0, k / 3);
+    pos.needsUpdate = true;
+    body.count = k / 9;
+  }
+
+  let object = null, probe = null, objectOrigin = null, probeOrigin = null, radius = 100;
+  const arrow = new THREE.ArrowHelper(new THREE.Vector3(0, 0, 1), new THREE.Vector3(), 1, 0xffd54f);
+  arrow.visible = false;
+  scene.add(arrow);
+  const forces = [];  // [t, |F|]
+  let last = null, fresh = false, prevTicks = 0, prevRounds = 0, prevT = 0, hapticHz = 0, collisionHz = 0;
+  let startedAt = performance.now(), textAt = 0, drawn = 0, fps = 0, fpsFrames = 0, fpsSince = performance.now(), snapshotSent = false, meshAt = 0;
+
+  function onMesh(buf) {
+    const d = new DataView(buf);
+    let o = 8;
+    const f64 = () => { const x = d.getFloat64(o, true); o += 8; return x; };
+    const u32 = () => { const x = d.getUint32(o, true); o += 4; return x; };
+    objectOrigin = [f64(), f64(), f64()];
+    probeOrigin = [f64(), f64(), f64()];
+    const pnv = u32(), pnf = u32(), onv = u32(), onf = u32();
+    const take = (Type, n) => { const a = new Type(buf.slice(o, o + 4 * n)); o += 4 * n; return a; };
+    const pv = take(Float32Array, 3 * pnv), pf = take(Uint32Array, 3 * pnf);
+    const ov = take(Float32Array, 3 * onv), of = take(Uint32Array, 3 * onf);
+    if (object) scene.remove(object.group);
+    if (probe) scene.remove(probe.group);
+    object = makeBody(ov, of, grey, [0.72, 0.70, 0.65]);
+    probe = makeBody(pv, pf, blue, [0.50, 0.65, 0.85]);
+    probe.group.matrixAutoUpdate = false;
+    scene.add(object.group);
+    scene.add(probe.group);
+    object.mesh.geometry.computeBoundingSphere();
+    const bs = object.mesh.geometry.boundingSphere;
+    radius = bs.radius;
+    // From the front, above the object: a touch from above (the usual script) stays in view.
+    camera.position.set(bs.center.x + 1.7 * radius, bs.center.y - 2.6 * radius, bs.center.z + 2.0 * radius);
+    camera.up.set(0, 0, 1);
+    controls.target.copy(bs.center);
+    controls.update();
+    meshAt = performance.now();
+  }
+
+  function onFrame(buf) {
+    const d = new DataView(buf);
+    const f = (off) => d.getFloat64(off, true);
+    const u64 = (off) => Number(d.getBigUint64(off, true));
+    const fr = {
+      flags: d.getUint32(4, true), round: u64(8),
+      pose: Array.from({ length: 12 }, (_, i) => f(16 + 8 * i)),
+      fd: [f(112), f(120), f(128)], cp: [f(136), f(144), f(152)],
+      pd: f(160), roundMs: f(168), force: [f(176), f(184), f(192)],
+      ticks: u64(200), misses: u64(208), rounds: u64(216), t: f(224),
+      contacts: d.getUint32(232, true), np: d.getUint32(236, true), no: d.getUint32(240, true),
+    };
+    const ids = new Uint32Array(buf.slice(248, 248 + 4 * (fr.np + fr.no)));
+    fr.probeFaces = ids.subarray(0, fr.np);
+    fr.objectFaces = ids.subarray(fr.np);
+    if (prevT && fr.t > prevT + 0.25) {
+      hapticHz = (fr.ticks - prevTicks) / (fr.t - prevT);
+      collisionHz = (fr.rounds - prevRounds) / (fr.t - prevT);
+      prevT = fr.t; prevTicks = fr.ticks; prevRounds = fr.rounds;
+    } else if (!prevT) {
+      prevT = fr.t; prevTicks = fr.ticks; prevRounds = fr.rounds;
+    }
+    const fmag = Math.hypot(fr.force[0], fr.force[1], fr.force[2]);
+    forces.push([fr.t, fmag]);
+    while (forces.length && forces[0][0] < fr.t - 5) forces.shift();
+    last = fr;
+    fresh = true;
+  }
+
+  function apply(fr) {
+    if (!object) return;
+    // Probe: object-local = T(-object origin) · pose · T(probe origin) · probe-local.
+    const p = fr.pose;
+    const m = new THREE.Matrix4().set(p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7], p[8], p[9], p[10], p[11], 0, 0, 0, 1);
+    const pre = new THREE.Matrix4().makeTranslation(probeOrigin[0], probeOrigin[1], probeOrigin[2]);
+    const post = new THREE.Matrix4().makeTranslation(-objectOrigin[0], -objectOrigin[1], -objectOrigin[2]);
+    probe.group.matrix.copy(post.multiply(m).multiply(pre));
+    probe.group.matrixWorldNeedsUpdate = true;
+    highlight(object, fr.objectFaces);
+    highlight(probe, fr.probeFaces);
+    const fmag = Math.hypot(fr.force[0], fr.force[1], fr.force[2]);
+    if (fmag > 1e-3 && (fr.flags & 1)) {
+      arrow.visible = true;
+      arrow.position.set(fr.cp[0] - objectOrigin[0], fr.cp[1] - objectOrigin[1], fr.cp[2] - objectOrigin[2]);
+      arrow.setDirection(new THREE.Vector3(fr.force[0] / fmag, fr.force[1] / fmag, fr.force[2] / fmag));
+      const len = 0.15 * radius * Math.min(fmag, 5);
+      arrow.setLength(len, 0.25 * len, 0.12 * len);
+    } else {
+      arrow.visible = false;
+    }
+    if (performance.now() - textAt < 200) return;  // text and plot 5 times a second: page layout is not free
+    textAt = performance.now();
+    drawPlot();
+    statusEl.textContent =
+      `t ${fr.t.toFixed(1)} s | haptic ${hapticHz.toFixed(0)} Hz, ${fr.misses} misses | ` +
+      `collision ${collisionHz.toFixed(0)} Hz, ${fr.roundMs.toFixed(2)} ms | ${fr.contacts} contacts | ` +
+      `PD ${fr.pd.toFixed(3)} mm | |F| ${fmag.toFixed(3)} N | view ${fps.toFixed(0)} fps` +
+      (fr.flags & 2 ? ' | faces truncated' : '');
+  }
+
+  function drawPlot() {
+    const w = plot.width, h = plot.height;
+    plotCtx.clearRect(0, 0, w, h);
+    plotCtx.fillStyle = '#8899aa';
+    plotCtx.fillText('|F| N, last 5 s', 6, 12);
+    if (forces.length < 2) return;
+    const t1 = forces[forces.length - 1][0], t0 = t1 - 5;
+    let fmax = 0.5;
+    for (const [, v] of forces) fmax = Math.max(fmax, v);
+    plotCtx.fillText(fmax.toFixed(2), w - 40, 12);
+    plotCtx.strokeStyle = '#ffd54f';
+    plotCtx.beginPath();
+    forces.forEach(([t, v], i) => {
+      const x = ((t - t0) / 5) * w, y = h - 4 - (v / fmax) * (h - 20);
+      if (i) plotCtx.lineTo(x, y); else plotCtx.moveTo(x, y);
+    });
+    plotCtx.stroke();
+  }
+
+  let ws = null;
+  function connect() {
+    ws = new WebSocket(`ws://${location.host}/ws`);
+    ws.binaryType = 'arraybuffer';
+    ws.onopen = () => { errorEl.textContent = ''; };
+    ws.onmessage = (ev) => {
+      if (!(ev.data instanceof ArrayBuffer) || ev.data.byteLength < 8) return;
+      const magic = String.fromCharCode(...new Uint8Array(ev.data, 0, 4));
+      if (magic === 'STVM') onMesh(ev.data);
+      else if (magic === 'STVF' && ev.data.byteLength >= 248) onFrame(ev.data);
+    };
+    ws.onclose = () => {
+      errorEl.textContent = 'disconnected from the run (it ended, or the server stopped); retrying ...';
+      setTimeout(connect, 1000);
+    };
+  }
+  connect();
+
+  function sendSnapshot() {
+    const url = renderer.domElement.toDataURL('image/png');
+    const bin = atob(url.slice(url.indexOf(',') + 1));
+    const out = new Uint8Array(4 + bin.length);
+    out.set([83, 84, 86, 83]);  // "STVS"
+    for (let i = 0; i < bin.length; ++i) out[4 + i] = bin.charCodeAt(i);
+    ws.send(out.buffer);
+  }
+
+  function tick(now) {
+    requestAnimationFrame(tick);
+    if (last && fresh) apply(last);  // only what changed: a frame's overlays are rebuilt once
+    fresh = false;
+    controls.update();
+    renderer.render(scene, camera);
+    ++drawn;
+    ++fpsFrames;
+    if (wantSnapshot && !snapshotSent && object && object.count > 0 && now - meshAt > 1000 &&
+        ws && ws.readyState === 1) {
+      sendSnapshot();  // right after render: the drawing buffer still holds this frame
+      snapshotSent = true;
+    }
+    if (now - fpsSince >= 1000) {
+      fps = (1000 * fpsFrames) / (now - fpsSince);
+      fpsFrames = 0;
+      fpsSince = now;
+      if (ws && ws.readyState === 1)
+        ws.send(JSON.stringify({ fps: fps, frames: drawn, seconds: (now - startedAt) / 1000, red: object ? object.count : 0 }));
+    }
+    window.stView = { frames: drawn, fps: fps, red: object ? object.count : 0, connected: !!(ws && ws.readyState === 1) };
+  }
+  requestAnimationFrame(tick);
+})();
