@@ -199,12 +199,116 @@
     plotCtx.stroke();
   }
 
+  // The browser device ([device] kind = "browser"): left-drag moves the tip in the horizontal
+  // plane (as seen from the camera), the wheel (and PageUp/PageDown, Q/E) moves it up and down,
+  // arrow keys/WASD step it, a gamepad's sticks move it; right-drag turns the view. The tip's pose
+  // goes to the run at the page's frame rate; the run upsamples it to the servo's 1 kHz.
+  const drive = { on: false, tip: null, dirty: false, sentAt: 0, seq: 0, drag: null, press: params.get('drive') };
+  const mmPerWheel = 0.01;  // mm per wheel delta unit (a notch is ~100: 1 mm)
+  function startDriving(home) {
+    drive.on = true;
+    drive.tip = home.slice();
+    drive.dirty = true;
+    controls.enableZoom = false;
+    controls.mouseButtons = { LEFT: -1, MIDDLE: THREE.MOUSE.DOLLY, RIGHT: THREE.MOUSE.ROTATE };
+    errorEl.textContent = '';
+    statusEl.dataset.drive = '1';
+  }
+  function planeAxes() {  // camera right and forward, projected on the horizontal plane
+    const f = new THREE.Vector3();
+    camera.getWorldDirection(f);
+    f.z = 0;
+    if (f.lengthSq() < 1e-12) f.set(0, 1, 0);
+    f.normalize();
+    return { right: new THREE.Vector3(f.y, -f.x, 0), forward: f };
+  }
+  function moveTip(dx, dy, dz) {
+    if (!drive.on) return;
+    const v = [dx, dy, dz];
+    if (!v.every(Number.isFinite)) return;  // never send a NaN
+    for (let i = 0; i < 3; ++i) drive.tip[i] += v[i];
+    drive.dirty = true;
+  }
+  const canvas = renderer.domElement;
+  canvas.addEventListener('pointerdown', (e) => { if (drive.on && e.button === 0) drive.drag = [e.clientX, e.clientY]; });
+  window.addEventListener('pointerup', () => { drive.drag = null; });
+  window.addEventListener('pointermove', (e) => {
+    if (!drive.drag) return;
+    const dist = camera.position.distanceTo(controls.target);
+    const mmPerPx = (2 * dist * Math.tan((camera.fov * Math.PI) / 360)) / canvas.clientHeight;
+    const { right, forward } = planeAxes();
+    const dx = (e.clientX - drive.drag[0]) * mmPerPx, dy = -(e.clientY - drive.drag[1]) * mmPerPx;
+    drive.drag = [e.clientX, e.clientY];
+    moveTip(right.x * dx + forward.x * dy, right.y * dx + forward.y * dy, 0);
+  });
+  canvas.addEventListener('wheel', (e) => {
+    if (!drive.on) return;
+    e.preventDefault();
+    moveTip(0, 0, -e.deltaY * mmPerWheel * (e.shiftKey ? 0.1 : 1));
+  }, { passive: false });
+  window.addEventListener('keydown', (e) => {
+    if (!drive.on) return;
+    const step = e.shiftKey ? 0.1 : 1;  // mm
+    const { right, forward } = planeAxes();
+    const k = e.key;
+    if (k === 'ArrowLeft' || k === 'a') moveTip(-right.x * step, -right.y * step, 0);
+    else if (k === 'ArrowRight' || k === 'd') moveTip(right.x * step, right.y * step, 0);
+    else if (k === 'ArrowUp' || k === 'w') moveTip(forward.x * step, forward.y * step, 0);
+    else if (k === 'ArrowDown' || k === 's') moveTip(-forward.x * step, -forward.y * step, 0);
+    else if (k === 'PageUp' || k === 'q') moveTip(0, 0, step);
+    else if (k === 'PageDown' || k === 'e') moveTip(0, 0, -step);
+    else return;
+    e.preventDefault();
+  });
+  let padAt = 0;
+  function pollGamepad(now) {
+    const dt = padAt ? Math.min(0.1, (now - padAt) / 1000) : 0;
+    padAt = now;
+    if (!drive.on || !navigator.getGamepads) return;
+    for (const pad of navigator.getGamepads()) {
+      if (!pad || pad.axes.length < 2) continue;
+      const ax = (i) => (i < pad.axes.length && Math.abs(pad.axes[i]) > 0.15 ? pad.axes[i] : 0);
+      const speed = 20;  // mm/s at full deflection
+      const { right, forward } = planeAxes();
+      const x = ax(0) * speed * dt, y = -ax(1) * speed * dt, z = -ax(3) * speed * dt;
+      if (x || y || z) moveTip(right.x * x + forward.x * y, right.y * x + forward.y * y, z);
+      break;
+    }
+  }
+  // ?drive=press: synthetic input for tests and demos: wheel events down until the contact shows,
+  // then 3 mm more, as a hand would press.
+  let pressedAfterContact = 0;
+  function synthetic() {
+    if (drive.press !== 'press' || !drive.on || !object) return;
+    const inContact = last && (last.flags & 1);
+    if (inContact) pressedAfterContact += 0.2;
+    if (pressedAfterContact >= 3) return;
+    canvas.dispatchEvent(new WheelEvent('wheel', { deltaY: 20, bubbles: true, cancelable: true }));
+  }
+  function sendPose(now) {
+    if (!drive.on || !ws || ws.readyState !== 1) return;
+    if (!drive.dirty && now - drive.sentAt < 100) return;  // unchanged: a keep-alive every 100 ms
+    const b = new ArrayBuffer(64), d = new DataView(b);
+    [83, 84, 86, 80].forEach((c, i) => d.setUint8(i, c));  // "STVP"
+    d.setUint32(4, 0, true);
+    const v = [drive.tip[0], drive.tip[1], drive.tip[2], 1, 0, 0, 0];
+    v.forEach((x, i) => d.setFloat64(8 + 8 * i, x, true));
+    ws.send(b);
+    drive.dirty = false;
+    drive.sentAt = now;
+  }
+
   let ws = null;
   function connect() {
     ws = new WebSocket(`ws://${location.host}/ws`);
     ws.binaryType = 'arraybuffer';
     ws.onopen = () => { errorEl.textContent = ''; };
     ws.onmessage = (ev) => {
+      if (typeof ev.data === 'string') {
+        const m = JSON.parse(ev.data);
+        if (m.device === 'browser' && Array.isArray(m.home)) startDriving(m.home);
+        return;
+      }
       if (!(ev.data instanceof ArrayBuffer) || ev.data.byteLength < 8) return;
       const magic = String.fromCharCode(...new Uint8Array(ev.data, 0, 4));
       if (magic === 'STVM') onMesh(ev.data);
@@ -228,6 +332,9 @@
 
   function tick(now) {
     requestAnimationFrame(tick);
+    pollGamepad(now);
+    synthetic();
+    sendPose(now);
     if (last && fresh) apply(last);  // only what changed: a frame's overlays are rebuilt once
     fresh = false;
     controls.update();

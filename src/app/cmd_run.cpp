@@ -81,12 +81,14 @@ void run(const RunArgs& a) {
 
   // The live view: its frames come from the collision thread's feed, the figures from the status area.
   std::unique_ptr<view::ViewServer> viewer;
+  if (run.pose_feed() && a.view.empty())
+    die(2, s.file + ": device.kind = \"browser\" is driven from the live view's page: add --view [ADDR:PORT]");
   if (!a.view.empty()) {
     view::ViewServerConfig vc;
     vc.listen = a.view;
     vc.out_dir = run.run_dir();
-    Result<std::unique_ptr<view::ViewServer>> v =
-        view::ViewServer::start(vc, run.probe(), run.object(), run.enable_view(vc.rate_hz), run.shm_status());
+    Result<std::unique_ptr<view::ViewServer>> v = view::ViewServer::start(
+        vc, run.probe(), run.object(), run.enable_view(vc.rate_hz), run.shm_status(), run.pose_feed());
     if (!v) die(2, v.error());
     viewer = std::move(v).value();
     std::fprintf(stderr, "view: %s (open it in a browser)\n", viewer->url().c_str());
@@ -96,7 +98,10 @@ void run(const RunArgs& a) {
 
   if (Status st = run.start(); !st) die(1, st.error());
   std::fprintf(stderr, "running %.1f s: %s, collision %s, %s; shm %s; run directory %s (Ctrl-C stops)\n", s.duration_s,
-               s.device.script == "builtin" ? "built-in approach/press/slide/release" : s.device.script.c_str(),
+               s.device.kind == "udp"         ? "a device over UDP"
+               : s.device.kind == "browser"   ? "the live view's page as the device"
+               : s.device.script == "builtin" ? "built-in approach/press/slide/release"
+                                              : s.device.script.c_str(),
                run.backend().c_str(), run.servo_where().c_str(), run.shm_name().c_str(), run.run_dir().c_str());
   if (const std::string split = run.split(); !split.empty()) std::fprintf(stderr, "split: %s\n", split.c_str());
 

@@ -23,6 +23,7 @@
 #include "rt/clock.hpp"
 #include "rt/haptic_loop.hpp"
 #include "rt/haptic_servo.hpp"
+#include "rt/pose_feed_device.hpp"
 #include "rt/shm_segment.hpp"
 #include "rt/telemetry.hpp"
 
@@ -65,6 +66,7 @@ struct RunEngine::State {
   std::unique_ptr<rt::ShmSegment> shm;
   std::unique_ptr<rt::SimulatedDevice> sim;  // in-process servo (no split): device, telemetry, servo
   std::unique_ptr<rt::UdpDevice> udp;        // [device] kind = "udp" (instead of sim)
+  std::unique_ptr<rt::PoseFeedDevice> feed;  // [device] kind = "browser": poses from the live view's page
   std::unique_ptr<rt::Telemetry> telemetry;
   std::unique_ptr<rt::HapticServo> servo;
   std::unique_ptr<rt::HapticLoop> loop;
@@ -124,6 +126,9 @@ Status RunEngine::State::prepare() {
 
   if (s.device.kind == "udp") {
     // The device drives the probe; the split servo gets the grip as a one-pose trajectory.
+    script.keys = {rt::TimedPose{0.0, probe_grip(s, probe)}};
+  } else if (s.device.kind == "browser") {
+    if (opt.split) return fail(s.file, ": device.kind = \"browser\" drives the run's own servo thread (not --split)");
     script.keys = {rt::TimedPose{0.0, probe_grip(s, probe)}};
   } else if (s.device.script == "builtin") {
     script = builtin_script(s, probe, object);
@@ -205,6 +210,12 @@ Status RunEngine::State::prepare() {
       udp = std::move(u).value();
       device = udp.get();
       note("udp device: listening on " + udp->address() + " (pose datagrams in, force datagrams out)");
+    } else if (s.device.kind == "browser") {
+      // The page starts the tip where the built-in script starts: above the target, off the surface.
+      const geom::Pose grip = script.keys.front().pose;
+      const geom::Vec3 home = (builtin_script(s, probe, object).keys.front().pose * grip.inverse()).translation();
+      feed = std::make_unique<rt::PoseFeedDevice>(grip, home, s.saturation.peak_N);
+      device = feed.get();
     } else {
       sim = std::make_unique<rt::SimulatedDevice>(script, s.device.user, 0, s.saturation.peak_N);
       sim->set_repeat(s.device.repeat);
@@ -510,6 +521,7 @@ ViewFeed& RunEngine::enable_view(double rate_hz) {
   }
   return *s_->view;
 }
+rt::PoseFeedDevice* RunEngine::pose_feed() const { return s_->feed.get(); }
 const geom::Mesh& RunEngine::probe() const { return s_->probe; }
 const geom::Mesh& RunEngine::object() const { return s_->object; }
 const rt::ShmStatus& RunEngine::shm_status() const { return s_->shm->status(); }

@@ -26,6 +26,10 @@
 #include "rt/shm_status.hpp"
 #include "geom/result.hpp"
 
+namespace st::rt {
+class PoseFeedDevice;
+}
+
 namespace st::engine {
 
 /// What the caller adds to a scene.
@@ -91,6 +95,8 @@ class RunEngine {
 
   /// A live viewer's feed of the collision rounds (created on the first call; before start()).
   ViewFeed& enable_view(double rate_hz = 60);
+  /// [device] kind = "browser": the device the live view's page drives (null otherwise).
+  rt::PoseFeedDevice* pose_feed() const;
   const geom::Mesh& probe() const;          ///< the probe as loaded
   const geom::Mesh& object() const;         ///< the object as loaded
   const rt::ShmStatus& shm_status() const;  ///< the run's status area (servo and collision)

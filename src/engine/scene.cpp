@@ -263,7 +263,7 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
   }
   {
     TomlReader r(section("device"), "device", name);
-    r.string("kind", s.device.kind, {"simulated", "udp"});
+    r.string("kind", s.device.kind, {"simulated", "udp", "browser"});
     rt::UdpDeviceConfig& u = s.device.udp;
     r.string("bind", u.bind);
     r.string("peer", u.peer);

@@ -68,13 +68,13 @@ int on_log(const mg_connection*, const char*) { return 1; }  // civetweb's own l
 
 Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& c, const geom::Mesh& probe,
                                                       const geom::Mesh& object, engine::ViewFeed& feed,
-                                                      const rt::ShmStatus& status) {
+                                                      const rt::ShmStatus& status, rt::PoseFeedDevice* device) {
   const auto colon = c.listen.rfind(':');
   if (colon == std::string::npos || colon + 1 == c.listen.size() ||
       c.listen.find_first_not_of("0123456789", colon + 1) != std::string::npos)
     return fail("--view: '", c.listen, "': expected ADDR:PORT (e.g. 127.0.0.1:8080)");
   if (!(c.rate_hz > 0 && c.rate_hz <= 240)) return fail("--view: rate must be in (0, 240] frames per second");
-  std::unique_ptr<ViewServer> s(new ViewServer(c, probe, object, feed, status));
+  std::unique_ptr<ViewServer> s(new ViewServer(c, probe, object, feed, status, device));
   Result<std::string> three = slurp(c.three_dir + "/three.min.js");
   if (!three) return Error{three.error()};
   Result<std::string> controls = slurp(c.three_dir + "/examples/js/controls/OrbitControls.js");
@@ -100,6 +100,7 @@ Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& c,
   }
 
   mg_init_library(0);
+  s->library_ = true;
   const std::string port_opt = c.listen;
   const char* options[] = {"listening_ports",      port_opt.c_str(), "num_threads", "4", "enable_keep_alive", "no",
                            "websocket_timeout_ms", "3600000",        nullptr};
@@ -118,13 +119,14 @@ Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& c,
 }
 
 ViewServer::ViewServer(const ViewServerConfig& c, const geom::Mesh& probe, const geom::Mesh& object,
-                       engine::ViewFeed& feed, const rt::ShmStatus& status)
-    : config_(c), probe_(probe), object_(object), feed_(feed), status_(status) {}
+                       engine::ViewFeed& feed, const rt::ShmStatus& status, rt::PoseFeedDevice* device)
+    : config_(c), probe_(probe), object_(object), feed_(feed), status_(status), device_(device) {}
 
 ViewServer::~ViewServer() {
   stop_.store(true);
   if (pusher_.joinable()) pusher_.join();
   if (ctx_) mg_stop(ctx_);  // closes every connection (close handlers run) and joins civetweb's threads
+  if (library_) mg_exit_library();
 }
 
 int ViewServer::serve(mg_connection* conn) {
@@ -139,7 +141,14 @@ int ViewServer::serve(mg_connection* conn) {
 
 void ViewServer::ready(mg_connection* conn) {
   mg_lock_connection(conn);
-  const int w = mg_websocket_write(conn, MG_WEBSOCKET_OPCODE_BINARY, mesh_msg_.data(), mesh_msg_.size());
+  int w = mg_websocket_write(conn, MG_WEBSOCKET_OPCODE_BINARY, mesh_msg_.data(), mesh_msg_.size());
+  if (w > 0 && device_) {  // the page is the device: where its tip starts
+    char text[256];
+    const Eigen::Vector3d h = device_->home() + object_.origin;
+    const int n =
+        std::snprintf(text, sizeof text, "{\"device\": \"browser\", \"home\": [%.9g, %.9g, %.9g]}", h.x(), h.y(), h.z());
+    w = mg_websocket_write(conn, MG_WEBSOCKET_OPCODE_TEXT, text, std::size_t(n));
+  }
   mg_unlock_connection(conn);
   std::lock_guard<std::mutex> l(mu_);
   ++stats_.clients;
@@ -155,7 +164,7 @@ void ViewServer::note_bad(const std::string& why) {
     std::fprintf(stderr, "view: a page sent a bad message (%s); further ones are counted\n", why.c_str());
 }
 
-int ViewServer::data(mg_connection*, int bits, const char* data, std::size_t len) {
+int ViewServer::data(mg_connection* conn, int bits, const char* data, std::size_t len) {
   const int opcode = bits & 0x0f;
   if (opcode == MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE) return 0;
   if (opcode == MG_WEBSOCKET_OPCODE_PING || opcode == MG_WEBSOCKET_OPCODE_PONG) return 1;
@@ -181,6 +190,32 @@ int ViewServer::data(mg_connection*, int bits, const char* data, std::size_t len
     stats_.page_frames = std::uint64_t(frames);
     stats_.page_seconds = seconds;
     ++stats_.page_reports;
+    return 1;
+  }
+  if (opcode == MG_WEBSOCKET_OPCODE_BINARY && len >= 4 && std::memcmp(data, "STVP", 4) == 0) {
+    if (!device_ || len != 64) {
+      note_bad(device_ ? "a pose message is 64 bytes" : "a pose, but this run's device is not the browser");
+      return 1;
+    }
+    bool mine = false;
+    {
+      std::lock_guard<std::mutex> l(mu_);
+      if (!driver_) driver_ = conn;  // the first page to send a pose drives
+      mine = driver_ == conn;
+    }
+    if (!mine) {
+      note_bad("another page is driving the device");
+      return 1;
+    }
+    double v[7];
+    std::memcpy(v, data + 8, sizeof v);
+    const Eigen::Vector3d tip = Eigen::Vector3d(v[0], v[1], v[2]) - object_.origin;
+    if (!device_->offer(tip, Eigen::Quaterniond(v[3], v[4], v[5], v[6]), rt::now_ns())) {
+      note_bad("a pose with a NaN, infinite or out-of-range number, or a quaternion that is not unit");
+      return 1;
+    }
+    std::lock_guard<std::mutex> l(mu_);
+    ++stats_.poses;
     return 1;
   }
   if (opcode == MG_WEBSOCKET_OPCODE_BINARY) {
@@ -209,6 +244,7 @@ int ViewServer::data(mg_connection*, int bits, const char* data, std::size_t len
 
 void ViewServer::closed(const mg_connection* conn) {
   std::lock_guard<std::mutex> l(mu_);
+  if (driver_ == conn) driver_ = nullptr;  // another page may drive now
   clients_.erase(std::remove(clients_.begin(), clients_.end(), conn), clients_.end());
 }
 
@@ -289,7 +325,9 @@ std::string ViewServer::summary() const {
                 double(s.bytes) / 1e6, s.page_fps, static_cast<unsigned long long>(s.page_frames), s.page_seconds,
                 s.page_seconds > 0 ? double(s.page_frames) / s.page_seconds : 0.0, s.snapshots ? ", snapshot view.png" : "",
                 s.bad_messages ? (", " + std::to_string(s.bad_messages) + " bad messages refused").c_str() : "");
-  return line;
+  std::string out = line;
+  if (device_) out += "; browser device: " + std::to_string(s.poses) + " poses taken";
+  return out;
 }
 
 }  // namespace st::view

@@ -16,6 +16,9 @@
 //   page -> server: text {"fps": F, "frames": N, "seconds": S, "red": R} once a second; binary "STVS" + a PNG
 //     of the canvas (saved as view.png in the run directory) when the page was opened with
 //     ?snapshot=1 and it has drawn colliding faces.
+//   With [device] kind = "browser": server -> page text {"device": "browser", "home": [x, y, z]}
+//   after the meshes; page -> server binary "STVP" u32 0, f64 tip x y z (object file mm), f64 qw qx
+//   qy qz, 64 bytes, at the page's frame rate; the first page to send one drives, others are refused.
 #pragma once
 #include <atomic>
 #include <cstdint>
@@ -28,6 +31,7 @@
 #include "engine/view_feed.hpp"
 #include "geom/mesh.hpp"
 #include "geom/result.hpp"
+#include "rt/pose_feed_device.hpp"
 #include "rt/shm_status.hpp"
 
 struct mg_context;
@@ -52,14 +56,16 @@ struct ViewStats {
   std::uint64_t page_reports = 0;  ///< reports received
   std::uint64_t snapshots = 0;     ///< view.png written
   std::uint64_t bad_messages = 0;  ///< messages from a page that were refused
+  std::uint64_t poses = 0;         ///< browser device: poses a page sent that were taken
 };
 
 class ViewServer {
  public:
   /// Starts serving. The meshes, feed and status must outlive the server.
+  /// `device` (may be null): the run's browser device, which the first page to send a pose drives.
   static Result<std::unique_ptr<ViewServer>> start(const ViewServerConfig& config, const geom::Mesh& probe,
                                                    const geom::Mesh& object, engine::ViewFeed& feed,
-                                                   const rt::ShmStatus& status);
+                                                   const rt::ShmStatus& status, rt::PoseFeedDevice* device = nullptr);
   ~ViewServer();
   ViewServer(const ViewServer&) = delete;
   ViewServer& operator=(const ViewServer&) = delete;
@@ -76,7 +82,7 @@ class ViewServer {
 
  private:
   ViewServer(const ViewServerConfig& c, const geom::Mesh& probe, const geom::Mesh& object, engine::ViewFeed& feed,
-             const rt::ShmStatus& status);
+             const rt::ShmStatus& status, rt::PoseFeedDevice* device);
   void push();  // the writer thread
   void note_bad(const std::string& why);
 
@@ -85,10 +91,13 @@ class ViewServer {
   const geom::Mesh& object_;
   engine::ViewFeed& feed_;
   const rt::ShmStatus& status_;
+  rt::PoseFeedDevice* device_;             // the browser device, or null
+  const mg_connection* driver_ = nullptr;  // the page driving it (under mu_)
   std::string url_;
   std::string three_js_, controls_js_;  // read once at start
   std::vector<char> mesh_msg_;          // the "STVM" message, built once
   mg_context* ctx_ = nullptr;
+  bool library_ = false;   // mg_init_library called (mg_exit_library in the destructor)
   mutable std::mutex mu_;  // clients_, stats_
   std::vector<mg_connection*> clients_;
   ViewStats stats_;

@@ -37,11 +37,12 @@ std::string view_slurp(const std::string& path) {
 }
 
 /// Starts a pressing run with --view on a free port; returns its pid once the view is up.
-pid_t view_start_run(const st::test::TempDir& d, int port, double seconds, const std::string& object) {
+pid_t view_start_run(const st::test::TempDir& d, int port, double seconds, const std::string& object,
+                     const std::string& device = "press_mm = 4.0\n") {
   const std::string scene = "[probe]\nbuiltin = \"capsule\"\nradius_mm = 8.0\nlength_mm = 40.0\n" + object +
-                            "[workers]\ncount = 0\n[device]\npress_mm = 4.0\n"
-                            "[output]\nstatus = \"off\"\nply = false\n[run]\nduration_s = " +
-                            std::to_string(seconds) + "\n";
+                            "[workers]\ncount = 0\n[device]\n" + device +
+                            "[output]\nstatus = \"off\"\nply = false\n[run]\nduration_s = " + std::to_string(seconds) +
+                            "\n";
   st::test::write_file(d.file("scene.toml"), scene);
   const pid_t pid = st::test::spawn_spheretouch(
       {"run", d.file("scene.toml"), "--out", d.file("out"), "--view", "127.0.0.1:" + std::to_string(port)},
@@ -54,6 +55,24 @@ pid_t view_start_run(const st::test::TempDir& d, int port, double seconds, const
   INFO(view_slurp(d.file("run.log")));
   REQUIRE(up);
   return pid;
+}
+
+/// Debian's Chromium, headless with software WebGL, on the view's page with `query`; its pid.
+pid_t view_chromium(const st::test::TempDir& d, int port, const std::string& query) {
+  const pid_t browser = fork();
+  REQUIRE(browser >= 0);
+  if (browser == 0) {
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (!std::freopen(d.file("chromium.log").c_str(), "a", stdout) || dup2(fileno(stdout), 2) < 0) _exit(120);
+    const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/?" + query;
+    const std::string user = "--user-data-dir=" + d.file("chromium-profile");
+    execl("/usr/bin/chromium", "chromium", "--headless=new", "--no-sandbox", "--disable-gpu",
+          "--enable-unsafe-swiftshader", "--use-angle=swiftshader", "--disable-quic", "--no-first-run",
+          "--disable-background-networking", "--disable-component-update", "--disable-sync", "--window-size=800,600",
+          "--remote-debugging-port=0", user.c_str(), url.c_str(), nullptr);
+    _exit(121);
+  }
+  return browser;
 }
 
 /// GET path from the view; the body ("" on failure) and the status code.
@@ -165,6 +184,7 @@ TEST_CASE("run --view: the page and scripts are served; the stream carries the m
   CHECK(with_faces > 5);
   CHECK(st::test::contains(log, "page drew 42.5 fps (last second; 17 frames in 0.0 s"));
   CHECK(st::test::contains(log, "2 bad messages refused"));
+  mg_exit_library();
 }
 
 TEST_CASE("run --view in headless Chromium: the page draws, reports its frame rate, and paints the contact red") {
@@ -174,20 +194,7 @@ TEST_CASE("run --view in headless Chromium: the page draws, reports its frame ra
   const int port = view_free_port();
   const pid_t pid =
       view_start_run(d, port, 8.0, "[object]\nbuiltin = \"icosphere\"\nradius_mm = 50.0\nfrequency = 24\n");
-  const std::string profile = d.file("chromium-profile");
-  const pid_t browser = fork();
-  REQUIRE(browser >= 0);
-  if (browser == 0) {
-    prctl(PR_SET_PDEATHSIG, SIGKILL);
-    if (!std::freopen(d.file("chromium.log").c_str(), "a", stdout) || dup2(fileno(stdout), 2) < 0) _exit(120);
-    const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/?snapshot=1";
-    const std::string user = "--user-data-dir=" + profile;
-    execl("/usr/bin/chromium", "chromium", "--headless=new", "--no-sandbox", "--disable-gpu",
-          "--enable-unsafe-swiftshader", "--use-angle=swiftshader", "--disable-quic", "--no-first-run",
-          "--disable-background-networking", "--disable-component-update", "--disable-sync", "--window-size=800,600",
-          "--remote-debugging-port=0", user.c_str(), url.c_str(), nullptr);
-    _exit(121);
-  }
+  const pid_t browser = view_chromium(d, port, "snapshot=1");
   const int rc = st::test::wait_for(pid, 90);
   kill(browser, SIGKILL);
   st::test::wait_for(browser, 10);
@@ -208,4 +215,46 @@ TEST_CASE("run --view in headless Chromium: the page draws, reports its frame ra
   INFO(red.output);
   REQUIRE(red.exit_code == 0);
   CHECK(std::strtol(red.output.c_str(), nullptr, 10) > 20);  // red pixels (the page's red is #ff1a1a)
+  mg_exit_library();
+}
+
+TEST_CASE("device kind browser: synthetic wheel events in headless Chromium press the probe into the object") {
+  mg_init_library(0);
+  REQUIRE(std::filesystem::exists("/usr/bin/chromium"));
+  st::test::TempDir d;
+  const int port = view_free_port();
+  const pid_t pid = view_start_run(
+      d, port, 10.0, "[object]\nbuiltin = \"icosphere\"\nradius_mm = 50.0\nfrequency = 24\n", "kind = \"browser\"\n");
+  const pid_t browser = view_chromium(d, port, "drive=press");
+  const int rc = st::test::wait_for(pid, 90);
+  kill(browser, SIGKILL);
+  st::test::wait_for(browser, 10);
+  const std::string log = view_slurp(d.file("run.log"));
+  INFO(log);
+  INFO(view_slurp(d.file("chromium.log")));
+  CHECK(rc == 0);
+  CHECK(st::test::contains(log, "the live view's page as the device"));
+  const auto taken = log.find("browser device: ");
+  REQUIRE(taken != std::string::npos);
+  CHECK(std::strtol(log.c_str() + taken + 16, nullptr, 10) > 10);  // poses taken
+  // The page pressed until it saw the contact, then 3 mm more: the run felt it.
+  const auto pd = log.find("peak penetration ");
+  REQUIRE(pd != std::string::npos);
+  CHECK(std::strtod(log.c_str() + pd + 17, nullptr) > 1.0);
+  const auto force = log.find("force           peak ");
+  REQUIRE(force != std::string::npos);
+  CHECK(std::strtod(log.c_str() + force + 21, nullptr) > 0.1);
+  mg_exit_library();
+}
+
+TEST_CASE("device kind browser without --view is refused, naming what to add") {
+  st::test::TempDir d;
+  st::test::write_file(d.file("scene.toml"),
+                       "[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\ncount = 0\n"
+                       "[device]\nkind = \"browser\"\n[output]\nstatus = \"off\"\n");
+  const auto r = st::test::run_command(st::test::spheretouch_exe() + " run " + d.file("scene.toml") + " --out " +
+                                       d.file("out") + " --duration 0.5");
+  INFO(r.output);
+  CHECK(r.exit_code == 2);
+  CHECK(st::test::contains(r.output, "device.kind = \"browser\" is driven from the live view's page: add --view"));
 }
