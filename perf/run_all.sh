@@ -163,6 +163,11 @@ else
 fi
 [ $plots = 1 ] && python3 perf/scale_plot.py "$out/scale.png" "$out"/scale_*.json
 
+if [ $quick = 0 ]; then  # needs the browser and ~3 minutes; the browser tests cover the page in CI
+  log "live view and UDP bridge: haptic misses with and without a viewer, page frame rate, pose-to-force time"
+  perf/view_bench.sh 12 3 > "$out/view.txt"
+fi
+
 log "report"
 report_args=("$out")
 [ $quick = 1 ] || report_args+=(--results-md perf/RESULTS.md)

@@ -56,7 +56,7 @@ TEST_CASE("run: a device behind the UDP bridge at 1 kHz: no pose lost, a force e
         std::to_string(port) +
         "\"\n"
         "[output]\nstatus = \"off\"\nply = false\n"
-        "[run]\nduration_s = 6.0\n";
+        "[run]\nduration_s = 4.5\n";
     st::test::write_file(d.file("scene.toml"), scene);
     const std::string log = d.file("run.log");
     std::vector<std::string> args = {"run", d.file("scene.toml"), "--out", d.file("out")};

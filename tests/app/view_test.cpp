@@ -188,6 +188,9 @@ TEST_CASE("run --view: the page and scripts are served; the stream carries the m
 }
 
 TEST_CASE("run --view in headless Chromium: the page draws, reports its frame rate, and paints the contact red") {
+  // The browser is not instrumented and the run under a sanitizer is covered by the stream test
+  // above; the sanitizer suites skip the ~10 s this costs (CI time), the release suite runs it.
+  if (st::test::kSanitizerBuild) return;
   mg_init_library(0);
   REQUIRE(std::filesystem::exists("/usr/bin/chromium"));  // scripts/setup.sh installs it
   st::test::TempDir d;
@@ -219,6 +222,9 @@ TEST_CASE("run --view in headless Chromium: the page draws, reports its frame ra
 }
 
 TEST_CASE("device kind browser: synthetic wheel events in headless Chromium press the probe into the object") {
+  // The browser is not instrumented and the run under a sanitizer is covered by the stream test
+  // above; the sanitizer suites skip the ~10 s this costs (CI time), the release suite runs it.
+  if (st::test::kSanitizerBuild) return;
   mg_init_library(0);
   REQUIRE(std::filesystem::exists("/usr/bin/chromium"));
   st::test::TempDir d;
