@@ -37,7 +37,7 @@ run_one() {  # scene viewer(0|1) label -> appends "label ticks misses fps frames
     /usr/bin/chromium --headless=new --no-sandbox --disable-gpu --enable-unsafe-swiftshader --use-angle=swiftshader \
       --disable-quic --no-first-run --disable-background-networking --disable-component-update --disable-sync \
       --window-size=800,600 --remote-debugging-port=0 --user-data-dir="$work/profile$RANDOM" \
-      "http://127.0.0.1:$port/?snapshot=1" > "$work/chromium.log" 2>&1 &
+      "http://127.0.0.1:$port/?snapshot=1&follow=1" > "$work/chromium.log" 2>&1 &
     browser=$!
   fi
   wait "$pid" || true

@@ -4,6 +4,7 @@
   'use strict';
   const params = new URLSearchParams(location.search);
   const wantSnapshot = params.get('snapshot') === '1';
+  const follow = params.get('follow') === '1';  // the camera follows the contact, closer in
   const statusEl = document.getElementById('status');
   const errorEl = document.getElementById('error');
   const plot = document.getElementById('plot');
@@ -42,8 +43,9 @@
     }
     g.setAttribute('color', new THREE.BufferAttribute(c, 3));
   }
-  const red = new THREE.MeshBasicMaterial({ color: 0xff1a1a, side: THREE.DoubleSide,
-    polygonOffset: true, polygonOffsetFactor: -2, polygonOffsetUnits: -2 });
+  // Colliding faces lie inside the other body, so they are drawn over everything (no depth test,
+  // last): the contact patch stays in view whatever hides it.
+  const red = new THREE.MeshBasicMaterial({ color: 0xff1a1a, side: THREE.DoubleSide, depthTest: false });
 
   // A body: its mesh (indexed, smooth-shaded), and a red overlay built from the colliding faces.
   function makeBody(vertices, faces, material, base) {
@@ -60,6 +62,7 @@
     hg.setDrawRange(0, 0);
     const overlay = new THREE.Mesh(hg, red);
     overlay.frustumCulled = false;
+    overlay.renderOrder = 10;
     const group = new THREE.Group();
     group.add(mesh);
     group.add(overlay);
@@ -86,6 +89,11 @@
   let object = null, probe = null, objectOrigin = null, probeOrigin = null, radius = 100;
   const arrow = new THREE.ArrowHelper(new THREE.Vector3(0, 0, 1), new THREE.Vector3(), 1, 0xffd54f);
   arrow.visible = false;
+  arrow.line.material.depthTest = false;  // the force at the contact, drawn over the bodies like the patch
+  arrow.cone.material.depthTest = false;
+  arrow.renderOrder = 11;
+  arrow.line.renderOrder = 11;
+  arrow.cone.renderOrder = 11;
   scene.add(arrow);
   const forces = [];  // [t, |F|]
   let last = null, fresh = false, prevTicks = 0, prevRounds = 0, prevT = 0, hapticHz = 0, collisionHz = 0;
@@ -112,8 +120,9 @@
     object.mesh.geometry.computeBoundingSphere();
     const bs = object.mesh.geometry.boundingSphere;
     radius = bs.radius;
-    // From the front, above the object: a touch from above (the usual script) stays in view.
-    camera.position.set(bs.center.x + 1.7 * radius, bs.center.y - 2.6 * radius, bs.center.z + 2.0 * radius);
+    // From the front, a little above the object: a touch from above (the usual script) is seen
+    // from the side, the red contact between the bodies in view.
+    camera.position.set(bs.center.x + 1.9 * radius, bs.center.y - 2.8 * radius, bs.center.z + 0.9 * radius);
     camera.up.set(0, 0, 1);
     controls.target.copy(bs.center);
     controls.update();
@@ -161,6 +170,12 @@
     highlight(object, fr.objectFaces);
     highlight(probe, fr.probeFaces);
     const fmag = Math.hypot(fr.force[0], fr.force[1], fr.force[2]);
+    if (follow && (fr.flags & 1)) {  // keep the camera's direction, centre the contact, 0.7 radii away
+      const c = new THREE.Vector3(fr.cp[0] - objectOrigin[0], fr.cp[1] - objectOrigin[1], fr.cp[2] - objectOrigin[2]);
+      const dir = camera.position.clone().sub(controls.target).normalize();
+      controls.target.copy(c);
+      camera.position.copy(c).addScaledVector(dir, 0.7 * radius);
+    }
     if (fmag > 1e-3 && (fr.flags & 1)) {
       arrow.visible = true;
       arrow.position.set(fr.cp[0] - objectOrigin[0], fr.cp[1] - objectOrigin[1], fr.cp[2] - objectOrigin[2]);
@@ -341,7 +356,7 @@
     renderer.render(scene, camera);
     ++drawn;
     ++fpsFrames;
-    if (wantSnapshot && !snapshotSent && object && object.count > 0 && now - meshAt > 1000 &&
+    if (wantSnapshot && !snapshotSent && object && object.count >= 30 && now - meshAt > 300 &&
         ws && ws.readyState === 1) {
       sendSnapshot();  // right after render: the drawing buffer still holds this frame
       snapshotSent = true;

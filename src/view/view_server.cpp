@@ -168,6 +168,42 @@ int ViewServer::data(mg_connection* conn, int bits, const char* data, std::size_
   const int opcode = bits & 0x0f;
   if (opcode == MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE) return 0;
   if (opcode == MG_WEBSOCKET_OPCODE_PING || opcode == MG_WEBSOCKET_OPCODE_PONG) return 1;
+  // A message may come in fragments (browsers split large ones, e.g. a snapshot, at 128 KiB):
+  // collect them per page, bounded, and handle the whole message.
+  const bool fin = (bits & 0x80) != 0;
+  if (opcode == MG_WEBSOCKET_OPCODE_CONTINUATION || !fin) {
+    std::string whole;
+    int whole_opcode = 0;
+    const char* bad = nullptr;
+    {
+      std::lock_guard<std::mutex> l(mu_);
+      Partial& p = partial_[conn];
+      if (opcode != MG_WEBSOCKET_OPCODE_CONTINUATION) {
+        p.opcode = opcode;
+        p.data.clear();
+      }
+      if (p.opcode == 0) {
+        bad = "a continuation frame without a first frame";
+      } else if (p.data.size() + len > kMaxSnapshotBytes + 16) {
+        bad = "a fragmented message over 16 MiB";
+      } else {
+        p.data.append(data, len);
+        if (!fin) return 1;
+        whole.swap(p.data);
+        whole_opcode = p.opcode;
+      }
+      partial_.erase(conn);
+    }
+    if (bad) {
+      note_bad(bad);
+      return 1;
+    }
+    return handle(conn, whole_opcode, whole.data(), whole.size());
+  }
+  return handle(conn, opcode, data, len);
+}
+
+int ViewServer::handle(mg_connection* conn, int opcode, const char* data, std::size_t len) {
   if (opcode == MG_WEBSOCKET_OPCODE_TEXT) {
     // {"fps": F, "frames": N, "red": R}: numbers after their keys; anything else is refused.
     const std::string_view t(data, len);
@@ -244,6 +280,7 @@ int ViewServer::data(mg_connection* conn, int bits, const char* data, std::size_
 
 void ViewServer::closed(const mg_connection* conn) {
   std::lock_guard<std::mutex> l(mu_);
+  partial_.erase(conn);
   if (driver_ == conn) driver_ = nullptr;  // another page may drive now
   clients_.erase(std::remove(clients_.begin(), clients_.end(), conn), clients_.end());
 }

@@ -22,6 +22,7 @@
 #pragma once
 #include <atomic>
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -79,6 +80,7 @@ class ViewServer {
   void ready(mg_connection* conn);
   int data(mg_connection* conn, int bits, const char* data, std::size_t len);
   void closed(const mg_connection* conn);
+  int handle(mg_connection* conn, int opcode, const char* data, std::size_t len);  // a whole message
 
  private:
   ViewServer(const ViewServerConfig& c, const geom::Mesh& probe, const geom::Mesh& object, engine::ViewFeed& feed,
@@ -100,6 +102,11 @@ class ViewServer {
   bool library_ = false;   // mg_init_library called (mg_exit_library in the destructor)
   mutable std::mutex mu_;  // clients_, stats_
   std::vector<mg_connection*> clients_;
+  struct Partial {
+    int opcode = 0;
+    std::string data;
+  };
+  std::map<const mg_connection*, Partial> partial_;  // fragmented messages being collected, per page
   ViewStats stats_;
   std::atomic<bool> stop_{false};
   std::thread pusher_;
