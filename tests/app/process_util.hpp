@@ -1,7 +1,9 @@
 // Helpers for the app suites that drive `spheretouch run --split` as a real process: start it
 // with fork+exec (output to a file), wait for its segment's servo to tick, reap with a timeout.
 #pragma once
+#include <netinet/in.h>
 #include <signal.h>
+#include <sys/socket.h>
 #include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -16,6 +18,27 @@
 #include "test_util.hpp"
 
 namespace st::test {
+
+/// A loopback port (SOCK_STREAM or SOCK_DGRAM) that was free a moment ago.
+inline int free_loopback_port(int type) {
+  const int fd = ::socket(AF_INET, type, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
+  socklen_t len = sizeof a;
+  getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
+  ::close(fd);
+  return ntohs(a.sin_port);
+}
+
+/// The whole of a file ("" if it cannot be read).
+inline std::string slurp(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
 
 /// Starts `spheretouch ARGS...` with stdout and stderr appended to `log`; returns its pid.
 inline pid_t spawn_spheretouch(const std::vector<std::string>& args, const std::string& log) {

@@ -14,26 +14,6 @@
 
 namespace {
 
-/// A loopback UDP port free a moment ago.
-int udp_free_port() {
-  const int fd = ::socket(AF_INET, SOCK_DGRAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
-  socklen_t len = sizeof a;
-  getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
-  ::close(fd);
-  return ntohs(a.sin_port);
-}
-
-std::string udp_slurp(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 /// The number after "KEY": in a one-line JSON object (NaN when absent).
 double udp_json_number(const std::string& json, const std::string& key) {
   const auto at = json.find("\"" + key + "\": ");
@@ -47,7 +27,7 @@ TEST_CASE("run: a device behind the UDP bridge at 1 kHz: no pose lost, a force e
   for (const bool split : {false, true}) {
     CAPTURE(split);
     st::test::TempDir d;
-    const int port = udp_free_port();
+    const int port = st::test::free_loopback_port(SOCK_DGRAM);
     const std::string scene =
         "[probe]\nbuiltin = \"capsule\"\nradius_mm = 8.0\nlength_mm = 40.0\n"
         "[object]\nbuiltin = \"icosphere\"\nradius_mm = 50.0\nfrequency = 12\n"
@@ -64,7 +44,7 @@ TEST_CASE("run: a device behind the UDP bridge at 1 kHz: no pose lost, a force e
     const pid_t pid = st::test::spawn_spheretouch(args, log);
     bool listening = false;
     for (int i = 0; i < 3000 && !listening; ++i) {  // up to 30 s (sanitizer builds load slowly)
-      listening = st::test::contains(udp_slurp(log), "listening on 127.0.0.1:" + std::to_string(port));
+      listening = st::test::contains(st::test::slurp(log), "listening on 127.0.0.1:" + std::to_string(port));
       if (!listening) std::this_thread::sleep_for(std::chrono::milliseconds(10));
     }
     REQUIRE(listening);
@@ -75,7 +55,7 @@ TEST_CASE("run: a device behind the UDP bridge at 1 kHz: no pose lost, a force e
     INFO(em.output);
     REQUIRE(em.exit_code == 0);
     const int rc = st::test::wait_for(pid, 60);
-    const std::string out = udp_slurp(log);
+    const std::string out = st::test::slurp(log);
     INFO(out);
     CHECK(rc == 0);
 

@@ -17,25 +17,6 @@
 
 namespace {
 
-int view_free_port() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
-  socklen_t len = sizeof a;
-  getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
-  ::close(fd);
-  return ntohs(a.sin_port);
-}
-
-std::string view_slurp(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 /// Starts a pressing run with --view on a free port; returns its pid once the view is up.
 pid_t view_start_run(const st::test::TempDir& d, int port, double seconds, const std::string& object,
                      const std::string& device = "press_mm = 4.0\n") {
@@ -49,10 +30,10 @@ pid_t view_start_run(const st::test::TempDir& d, int port, double seconds, const
       d.file("run.log"));
   bool up = false;
   for (int i = 0; i < 3000 && !up; ++i) {
-    up = st::test::contains(view_slurp(d.file("run.log")), "view: http://127.0.0.1:" + std::to_string(port) + "/");
+    up = st::test::contains(st::test::slurp(d.file("run.log")), "view: http://127.0.0.1:" + std::to_string(port) + "/");
     if (!up) std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  INFO(view_slurp(d.file("run.log")));
+  INFO(st::test::slurp(d.file("run.log")));
   REQUIRE(up);
   return pid;
 }
@@ -73,6 +54,24 @@ pid_t view_chromium(const st::test::TempDir& d, int port, const std::string& que
     _exit(121);
   }
   return browser;
+}
+
+/// A pressing run with --view and headless Chromium on its page (`query`) until the run ends;
+/// the run's log (its summary). Checks that the run ended well.
+std::string view_run_with_browser(const st::test::TempDir& d, double seconds, const std::string& device,
+                                  const std::string& query) {
+  const int port = st::test::free_loopback_port(SOCK_STREAM);
+  const pid_t pid =
+      view_start_run(d, port, seconds, "[object]\nbuiltin = \"icosphere\"\nradius_mm = 50.0\nfrequency = 24\n", device);
+  const pid_t browser = view_chromium(d, port, query);
+  const int rc = st::test::wait_for(pid, 90);
+  kill(browser, SIGKILL);
+  st::test::wait_for(browser, 10);
+  const std::string log = st::test::slurp(d.file("run.log"));
+  INFO(log);
+  INFO(st::test::slurp(d.file("chromium.log")));
+  CHECK(rc == 0);
+  return log;
 }
 
 /// GET path from the view; the body ("" on failure) and the status code.
@@ -114,7 +113,7 @@ T view_at(const std::string& s, std::size_t off) {
 TEST_CASE("run --view: the page and scripts are served; the stream carries the meshes and frames with the contacts") {
   mg_init_library(0);
   st::test::TempDir d;
-  const int port = view_free_port();
+  const int port = st::test::free_loopback_port(SOCK_STREAM);
   const pid_t pid =
       view_start_run(d, port, 4.0, "[object]\nbuiltin = \"icosphere\"\nradius_mm = 50.0\nfrequency = 12\n");
 
@@ -145,7 +144,7 @@ TEST_CASE("run --view: the page and scripts are served; the stream carries the m
   mg_websocket_client_write(ws, MG_WEBSOCKET_OPCODE_TEXT, report, sizeof report - 1);
   const int rc = st::test::wait_for(pid, 60);
   mg_close_connection(ws);
-  const std::string log = view_slurp(d.file("run.log"));
+  const std::string log = st::test::slurp(d.file("run.log"));
   INFO(log);
   CHECK(rc == 0);
 
@@ -194,17 +193,8 @@ TEST_CASE("run --view in headless Chromium: the page draws, reports its frame ra
   mg_init_library(0);
   REQUIRE(std::filesystem::exists("/usr/bin/chromium"));  // scripts/setup.sh installs it
   st::test::TempDir d;
-  const int port = view_free_port();
-  const pid_t pid =
-      view_start_run(d, port, 8.0, "[object]\nbuiltin = \"icosphere\"\nradius_mm = 50.0\nfrequency = 24\n");
-  const pid_t browser = view_chromium(d, port, "snapshot=1");
-  const int rc = st::test::wait_for(pid, 90);
-  kill(browser, SIGKILL);
-  st::test::wait_for(browser, 10);
-  const std::string log = view_slurp(d.file("run.log"));
+  const std::string log = view_run_with_browser(d, 8.0, "press_mm = 4.0\n", "snapshot=1");
   INFO(log);
-  INFO(view_slurp(d.file("chromium.log")));
-  CHECK(rc == 0);
   CHECK(st::test::contains(log, "1 page(s)"));
   // The page's own frame count reached the server (whatever the rate; the rate is a benchmark).
   const auto at = log.find("page drew ");
@@ -228,17 +218,8 @@ TEST_CASE("device kind browser: synthetic wheel events in headless Chromium pres
   mg_init_library(0);
   REQUIRE(std::filesystem::exists("/usr/bin/chromium"));
   st::test::TempDir d;
-  const int port = view_free_port();
-  const pid_t pid = view_start_run(
-      d, port, 10.0, "[object]\nbuiltin = \"icosphere\"\nradius_mm = 50.0\nfrequency = 24\n", "kind = \"browser\"\n");
-  const pid_t browser = view_chromium(d, port, "drive=press");
-  const int rc = st::test::wait_for(pid, 90);
-  kill(browser, SIGKILL);
-  st::test::wait_for(browser, 10);
-  const std::string log = view_slurp(d.file("run.log"));
+  const std::string log = view_run_with_browser(d, 10.0, "kind = \"browser\"\n", "drive=press");
   INFO(log);
-  INFO(view_slurp(d.file("chromium.log")));
-  CHECK(rc == 0);
   CHECK(st::test::contains(log, "the live view's page as the device"));
   const auto taken = log.find("browser device: ");
   REQUIRE(taken != std::string::npos);
