@@ -32,14 +32,6 @@ inline int free_loopback_port(int type) {
   return ntohs(a.sin_port);
 }
 
-/// The whole of a file ("" if it cannot be read).
-inline std::string slurp(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 /// Starts `spheretouch ARGS...` with stdout and stderr appended to `log`; returns its pid.
 inline pid_t spawn_spheretouch(const std::vector<std::string>& args, const std::string& log) {
   std::vector<std::string> all = {spheretouch_exe()};
@@ -126,8 +118,9 @@ inline std::uint64_t tick_periods(const std::vector<TickCsvRow>& rows) {
   return rows.empty() ? 0 : rows.size() + rows.back().misses;
 }
 
+/// The whole of a file ("" if it cannot be read).
 inline std::string slurp_file(const std::string& path) {
-  std::ifstream in(path);
+  std::ifstream in(path, std::ios::binary);
   std::stringstream ss;
   ss << in.rdbuf();
   return ss.str();

@@ -44,7 +44,7 @@ TEST_CASE("run: a device behind the UDP bridge at 1 kHz: no pose lost, a force e
     const pid_t pid = st::test::spawn_spheretouch(args, log);
     bool listening = false;
     for (int i = 0; i < 3000 && !listening; ++i) {  // up to 30 s (sanitizer builds load slowly)
-      listening = st::test::contains(st::test::slurp(log), "listening on 127.0.0.1:" + std::to_string(port));
+      listening = st::test::contains(st::test::slurp_file(log), "listening on 127.0.0.1:" + std::to_string(port));
       if (!listening) std::this_thread::sleep_for(std::chrono::milliseconds(10));
     }
     REQUIRE(listening);
@@ -55,7 +55,7 @@ TEST_CASE("run: a device behind the UDP bridge at 1 kHz: no pose lost, a force e
     INFO(em.output);
     REQUIRE(em.exit_code == 0);
     const int rc = st::test::wait_for(pid, 60);
-    const std::string out = st::test::slurp(log);
+    const std::string out = st::test::slurp_file(log);
     INFO(out);
     CHECK(rc == 0);
 

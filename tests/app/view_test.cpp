@@ -30,10 +30,11 @@ pid_t view_start_run(const st::test::TempDir& d, int port, double seconds, const
       d.file("run.log"));
   bool up = false;
   for (int i = 0; i < 3000 && !up; ++i) {
-    up = st::test::contains(st::test::slurp(d.file("run.log")), "view: http://127.0.0.1:" + std::to_string(port) + "/");
+    up = st::test::contains(st::test::slurp_file(d.file("run.log")),
+                            "view: http://127.0.0.1:" + std::to_string(port) + "/");
     if (!up) std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  INFO(st::test::slurp(d.file("run.log")));
+  INFO(st::test::slurp_file(d.file("run.log")));
   REQUIRE(up);
   return pid;
 }
@@ -67,9 +68,9 @@ std::string view_run_with_browser(const st::test::TempDir& d, double seconds, co
   const int rc = st::test::wait_for(pid, 90);
   kill(browser, SIGKILL);
   st::test::wait_for(browser, 10);
-  const std::string log = st::test::slurp(d.file("run.log"));
+  const std::string log = st::test::slurp_file(d.file("run.log"));
   INFO(log);
-  INFO(st::test::slurp(d.file("chromium.log")));
+  INFO(st::test::slurp_file(d.file("chromium.log")));
   CHECK(rc == 0);
   return log;
 }
@@ -144,7 +145,7 @@ TEST_CASE("run --view: the page and scripts are served; the stream carries the m
   mg_websocket_client_write(ws, MG_WEBSOCKET_OPCODE_TEXT, report, sizeof report - 1);
   const int rc = st::test::wait_for(pid, 60);
   mg_close_connection(ws);
-  const std::string log = st::test::slurp(d.file("run.log"));
+  const std::string log = st::test::slurp_file(d.file("run.log"));
   INFO(log);
   CHECK(rc == 0);
 
