@@ -65,6 +65,8 @@ void run(const RunArgs& a) {
     die(2, "CURVE keys (" + server_what + ", " + client_what +
                ") are for worker daemons: give their endpoints "
                "([workers] endpoints or --connect)");
+  if (!a.view.empty())
+    if (const std::string bad = view::check_listen(a.view); !bad.empty()) die(2, bad);  // before anything loads
   const bool tty = s.status == "tty" || (s.status == "auto" && ::isatty(STDOUT_FILENO));
   const bool show = s.status != "off";
 

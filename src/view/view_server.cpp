@@ -66,13 +66,19 @@ int on_log(const mg_connection*, const char*) { return 1; }  // civetweb's own l
 
 }  // namespace
 
+std::string check_listen(const std::string& listen) {
+  const auto colon = listen.rfind(':');
+  if (colon == std::string::npos || colon == 0 || colon + 1 == listen.size() || colon + 6 < listen.size() ||
+      listen.find_first_not_of("0123456789", colon + 1) != std::string::npos || std::stoi(listen.substr(colon + 1)) > 65535)
+    return "--view: '" + listen + "': expected ADDR:PORT (e.g. 127.0.0.1:8080)";
+  return "";
+}
+
 Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& c, const geom::Mesh& probe,
                                                       const geom::Mesh& object, engine::ViewFeed& feed,
                                                       const rt::ShmStatus& status, rt::PoseFeedDevice* device) {
+  if (const std::string bad = check_listen(c.listen); !bad.empty()) return fail(bad);
   const auto colon = c.listen.rfind(':');
-  if (colon == std::string::npos || colon + 1 == c.listen.size() ||
-      c.listen.find_first_not_of("0123456789", colon + 1) != std::string::npos)
-    return fail("--view: '", c.listen, "': expected ADDR:PORT (e.g. 127.0.0.1:8080)");
   if (!(c.rate_hz > 0 && c.rate_hz <= 240)) return fail("--view: rate must be in (0, 240] frames per second");
   std::unique_ptr<ViewServer> s(new ViewServer(c, probe, object, feed, status, device));
   Result<std::string> three = slurp(c.three_dir + "/three.min.js");

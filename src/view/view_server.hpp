@@ -60,6 +60,10 @@ struct ViewStats {
   std::uint64_t poses = 0;         ///< browser device: poses a page sent that were taken
 };
 
+/// "" when `listen` has the ADDR:PORT form --view takes, else the error (checked before a run
+/// loads anything; start() checks it again).
+std::string check_listen(const std::string& listen);
+
 class ViewServer {
  public:
   /// Starts serving. The meshes, feed and status must outlive the server.

@@ -104,13 +104,6 @@ struct Json {
   }
 };
 
-std::string slurp(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 const char* kScene = R"(
 [probe]
 builtin = "capsule"
@@ -175,7 +168,7 @@ TEST_CASE("run: a short scene ticks at its rate, presses with force, releases to
     CHECK(contains(r.output, "collision       " + std::to_string(n) + " rounds"));
   }
 
-  const std::string trace = slurp(out + "/trace.json");
+  const std::string trace = st::test::slurp_file(out + "/trace.json");
   CHECK(Json{trace}.document());
   CHECK(contains(trace, "\"name\":\"round\""));
   CHECK(contains(trace, "\"name\":\"tick\""));
@@ -266,7 +259,7 @@ TEST_CASE("run: SIGHUP (a closed terminal) ends the run like Ctrl-C: summary pri
   REQUIRE(st.ticks >= 200);
   REQUIRE(kill(pid, SIGHUP) == 0);
   const int code = st::test::wait_for(pid, 20.0);
-  const std::string out = slurp(log);
+  const std::string out = st::test::slurp_file(log);
   INFO(out);
   CHECK(code == 0);
   CHECK(contains(out, "stopped by signal " + std::to_string(SIGHUP)));

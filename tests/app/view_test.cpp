@@ -235,6 +235,19 @@ TEST_CASE("device kind browser: synthetic wheel events in headless Chromium pres
   mg_exit_library();
 }
 
+TEST_CASE("run --view with a malformed address is refused before anything loads") {
+  for (const char* bad : {"nonsense", "127.0.0.1:", ":8080", "127.0.0.1:99999", "127.0.0.1:80a"}) {
+    CAPTURE(bad);
+    const auto r = st::test::run_command(st::test::spheretouch_exe() + " run " +
+                                         std::string(std::getenv("ST_SOURCE_ROOT") ? std::getenv("ST_SOURCE_ROOT") : ".") +
+                                         "/configs/small.toml --duration 0.5 --view '" + bad + "'");
+    INFO(r.output);
+    CHECK(r.exit_code == 2);
+    CHECK(st::test::contains(r.output, "expected ADDR:PORT"));
+    CHECK_FALSE(st::test::contains(r.output, "loading probe"));
+  }
+}
+
 TEST_CASE("device kind browser without --view is refused, naming what to add") {
   st::test::TempDir d;
   st::test::write_file(d.file("scene.toml"),
