@@ -124,11 +124,10 @@ Status RunEngine::State::prepare() {
     note(line);
   }
 
-  if (s.device.kind == "udp") {
-    // The device drives the probe; the split servo gets the grip as a one-pose trajectory.
-    script.keys = {rt::TimedPose{0.0, probe_grip(s, probe)}};
-  } else if (s.device.kind == "browser") {
-    if (opt.split) return fail(s.file, ": device.kind = \"browser\" drives the run's own servo thread (not --split)");
+  if (s.device.kind == "browser" && opt.split)
+    return fail(s.file, ": device.kind = \"browser\" drives the run's own servo thread (not --split)");
+  if (s.device.kind == "udp" || s.device.kind == "browser") {
+    // A device drives the probe; the script is the grip (for the split servo, as a one-pose trajectory).
     script.keys = {rt::TimedPose{0.0, probe_grip(s, probe)}};
   } else if (s.device.script == "builtin") {
     script = builtin_script(s, probe, object);

@@ -93,7 +93,11 @@ std::string to_text(const sockaddr_storage& a) {
   if (a.ss_family == AF_INET6) {
     const auto& x = reinterpret_cast<const sockaddr_in6&>(a);
     inet_ntop(AF_INET6, &x.sin6_addr, host, sizeof host);
-    return "[" + std::string(host) + "]:" + std::to_string(ntohs(x.sin6_port));
+    std::string text = "[";  // appended, not operator+: GCC 12 warns falsely on "[" + std::string (bug 105329)
+    text += host;
+    text += "]:";
+    text += std::to_string(ntohs(x.sin6_port));
+    return text;
   }
   return "?";
 }
@@ -182,9 +186,13 @@ Result<std::unique_ptr<UdpDevice>> UdpDevice::open(const UdpDeviceConfig& c, con
   if (!(c.silence_ms > 0) || !(c.fade_ms > 0)) return fail("device: silence_ms and fade_ms must be > 0");
   if (!(c.scale > 0) || !std::isfinite(c.scale)) return fail("device: scale must be a finite number > 0");
   if (!(c.max_force_N > 0)) return fail("device: max_force_N must be > 0");
-  if (!c.peer.empty()) {  // checked now, compared on the receiver thread
+  sockaddr_storage pinned{};  // the pinned driver, resolved once (the receiver thread compares)
+  socklen_t pinned_len = 0;
+  if (!c.peer.empty()) {
     Result<addrinfo*> p = resolve(c.peer, "device.peer", false);
     if (!p) return Error{p.error()};
+    std::memcpy(&pinned, p.value()->ai_addr, p.value()->ai_addrlen);
+    pinned_len = p.value()->ai_addrlen;
     freeaddrinfo(p.value());
   }
   Result<addrinfo*> r = resolve(c.bind, "device.bind", true);
@@ -205,12 +213,13 @@ Result<std::unique_ptr<UdpDevice>> UdpDevice::open(const UdpDeviceConfig& c, con
   sockaddr_storage self{};
   socklen_t len = sizeof self;
   getsockname(fd, reinterpret_cast<sockaddr*>(&self), &len);
-  return std::unique_ptr<UdpDevice>(new UdpDevice(c, grip, fd, to_text(self)));
+  return std::unique_ptr<UdpDevice>(new UdpDevice(c, grip, fd, to_text(self), pinned, pinned_len));
 }
 
-UdpDevice::UdpDevice(const UdpDeviceConfig& c, const Eigen::Isometry3d& grip, int fd, std::string bound)
+UdpDevice::UdpDevice(const UdpDeviceConfig& c, const Eigen::Isometry3d& grip, int fd, std::string bound,
+                     const sockaddr_storage& pinned, socklen_t pinned_len)
     : config_(c), grip_(grip), fd_(fd), bound_(std::move(bound)) {
-  rx_ = std::thread([this] { receive(); });
+  rx_ = std::thread([this, pinned, pinned_len] { receive(pinned, pinned_len); });
 }
 
 UdpDevice::~UdpDevice() {
@@ -219,20 +228,9 @@ UdpDevice::~UdpDevice() {
   ::close(fd_);
 }
 
-void UdpDevice::receive() noexcept {
-  // The peer: pinned by config, or the first sender of a valid pose.
-  sockaddr_storage peer{};
-  socklen_t peer_len = 0;
-  bool have_peer = false;
-  if (!config_.peer.empty()) {
-    Result<addrinfo*> p = resolve(config_.peer, "device.peer", false);
-    if (p) {
-      std::memcpy(&peer, p.value()->ai_addr, p.value()->ai_addrlen);
-      peer_len = p.value()->ai_addrlen;
-      have_peer = true;
-      freeaddrinfo(p.value());
-    }
-  }
+void UdpDevice::receive(sockaddr_storage peer, socklen_t peer_len) noexcept {
+  // The peer: pinned by config (peer_len > 0), or the first sender of a valid pose.
+  bool have_peer = peer_len > 0;
   std::uint64_t last_seq = 0;
   bool any = false;
   std::uint8_t buf[256];

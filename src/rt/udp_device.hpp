@@ -133,8 +133,9 @@ class UdpDevice final : public Device {
     sockaddr_storage from{};
     socklen_t from_len = 0;
   };
-  UdpDevice(const UdpDeviceConfig& c, const Eigen::Isometry3d& grip, int fd, std::string bound);
-  void receive() noexcept;  // the receiver thread
+  UdpDevice(const UdpDeviceConfig& c, const Eigen::Isometry3d& grip, int fd, std::string bound,
+            const sockaddr_storage& pinned, socklen_t pinned_len);
+  void receive(sockaddr_storage peer, socklen_t peer_len) noexcept;  // the receiver thread (peer_len 0: latch)
   double gain(std::int64_t now_ns) noexcept;
 
   UdpDeviceConfig config_;

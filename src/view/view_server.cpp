@@ -4,7 +4,6 @@
 #include <civetweb.h>
 
 #include <algorithm>
-#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -13,6 +12,7 @@
 #include <sstream>
 #include <string_view>
 
+#include "net/wire.hpp"
 #include "rt/clock.hpp"
 
 namespace st::view {
@@ -26,16 +26,6 @@ namespace {
 
 constexpr std::size_t kMaxSnapshotBytes = 16u << 20;  // a PNG of a page's canvas
 constexpr std::size_t kMaxTextBytes = 4096;           // a page's stats report
-
-void put(std::vector<char>& b, const void* p, std::size_t n) {
-  const char* c = static_cast<const char*>(p);
-  b.insert(b.end(), c, c + n);
-}
-template <class T>
-void put(std::vector<char>& b, T v) {
-  static_assert(std::endian::native == std::endian::little, "the view's wire format is little-endian");
-  put(b, &v, sizeof v);
-}
 
 Result<std::string> slurp(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -89,20 +79,23 @@ Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& c,
   s->controls_js_ = std::move(controls).value();
 
   // The meshes, once: local coordinates (f32 is exact enough near each body's origin) and origins.
-  std::vector<char>& m = s->mesh_msg_;
-  put(m, "STVM", 4);
-  put<std::uint32_t>(m, 1);
+  net::Writer m(s->mesh_msg_);
+  m.raw("STVM", 4);
+  m.u32(1);
   for (const geom::Mesh* b : {&object, &probe})
-    for (int i = 0; i < 3; ++i) put<double>(m, b->origin[i]);
-  put<std::uint32_t>(m, std::uint32_t(probe.local.size()));
-  put<std::uint32_t>(m, std::uint32_t(probe.faces.size()));
-  put<std::uint32_t>(m, std::uint32_t(object.local.size()));
-  put<std::uint32_t>(m, std::uint32_t(object.faces.size()));
+    for (int i = 0; i < 3; ++i) m.f64(b->origin[i]);
+  m.u32(std::uint32_t(probe.local.size()));
+  m.u32(std::uint32_t(probe.faces.size()));
+  m.u32(std::uint32_t(object.local.size()));
+  m.u32(std::uint32_t(object.faces.size()));
   for (const geom::Mesh* b : {&probe, &object}) {
     for (const geom::Vec3& v : b->local)
-      for (int i = 0; i < 3; ++i) put<float>(m, float(v[i]));
+      for (int i = 0; i < 3; ++i) {
+        const float f = float(v[i]);
+        m.raw(&f, 4);
+      }
     for (const geom::Tri& t : b->faces)
-      for (std::uint32_t v : t) put<std::uint32_t>(m, v);
+      for (std::uint32_t v : t) m.u32(v);
   }
 
   mg_init_library(0);
@@ -147,7 +140,8 @@ int ViewServer::serve(mg_connection* conn) {
 
 void ViewServer::ready(mg_connection* conn) {
   mg_lock_connection(conn);
-  int w = mg_websocket_write(conn, MG_WEBSOCKET_OPCODE_BINARY, mesh_msg_.data(), mesh_msg_.size());
+  int w = mg_websocket_write(conn, MG_WEBSOCKET_OPCODE_BINARY, reinterpret_cast<const char*>(mesh_msg_.data()),
+                             mesh_msg_.size());
   if (w > 0 && device_) {  // the page is the device: where its tip starts
     char text[256];
     const Eigen::Vector3d h = device_->home() + object_.origin;
@@ -294,7 +288,7 @@ void ViewServer::closed(const mg_connection* conn) {
 void ViewServer::push() {
   auto frame = std::make_unique<engine::ViewFrame>();
   frame->n_probe = frame->n_object = 0;
-  std::vector<char> msg;
+  std::vector<std::uint8_t> msg;
   const std::int64_t t0 = rt::now_ns();
   const auto period = std::chrono::nanoseconds(std::int64_t(1e9 / config_.rate_hz));
   auto next = std::chrono::steady_clock::now();
@@ -319,33 +313,35 @@ void ViewServer::push() {
     // 224 f64 seconds since the view started, 232 u32 contacts, 236 u32 n_probe, 240 u32 n_object,
     // 244 u32 reserved, 248 u32 probe faces[n_probe], then u32 object faces[n_object].
     msg.clear();
-    put(msg, "STVF", 4);
-    put<std::uint32_t>(msg, frame->flags);
-    put<std::uint64_t>(msg, frame->round);
-    for (double v : frame->pose) put<double>(msg, v);
-    for (double v : frame->force_dir) put<double>(msg, v);
-    for (double v : frame->contact_point) put<double>(msg, v);
-    put<double>(msg, frame->penetration_mm);
-    put<double>(msg, frame->round_ms);
-    for (double v : servo.force_N) put<double>(msg, std::isfinite(v) ? v : 0.0);
-    put<std::uint64_t>(msg, servo.ticks);
-    put<std::uint64_t>(msg, servo.misses);
-    put<std::uint64_t>(msg, col.rounds);
-    put<double>(msg, double(rt::now_ns() - t0) * 1e-9);
-    put<std::uint32_t>(msg, frame->contacts);
-    put<std::uint32_t>(msg, frame->n_probe);
-    put<std::uint32_t>(msg, frame->n_object);
-    put<std::uint32_t>(msg, 0);
-    put(msg, frame->probe_faces, 4 * std::size_t(frame->n_probe));
-    put(msg, frame->object_faces, 4 * std::size_t(frame->n_object));
+    net::Writer w(msg);
+    w.raw("STVF", 4);
+    w.u32(frame->flags);
+    w.u64(frame->round);
+    for (double v : frame->pose) w.f64(v);
+    for (double v : frame->force_dir) w.f64(v);
+    for (double v : frame->contact_point) w.f64(v);
+    w.f64(frame->penetration_mm);
+    w.f64(frame->round_ms);
+    for (double v : servo.force_N) w.f64(std::isfinite(v) ? v : 0.0);
+    w.u64(servo.ticks);
+    w.u64(servo.misses);
+    w.u64(col.rounds);
+    w.f64(double(rt::now_ns() - t0) * 1e-9);
+    w.u32(frame->contacts);
+    w.u32(frame->n_probe);
+    w.u32(frame->n_object);
+    w.u32(0);
+    w.raw(frame->probe_faces, 4 * std::size_t(frame->n_probe));
+    w.raw(frame->object_faces, 4 * std::size_t(frame->n_object));
     std::uint64_t sent = 0, bytes = 0;
     for (mg_connection* c : to) {
       std::lock_guard<std::mutex> l(mu_);  // a connection closed meanwhile is no longer listed
       if (std::find(clients_.begin(), clients_.end(), c) == clients_.end()) continue;
       mg_lock_connection(c);
-      const int w = mg_websocket_write(c, MG_WEBSOCKET_OPCODE_BINARY, msg.data(), msg.size());
+      const int n =
+          mg_websocket_write(c, MG_WEBSOCKET_OPCODE_BINARY, reinterpret_cast<const char*>(msg.data()), msg.size());
       mg_unlock_connection(c);
-      if (w > 0) ++sent, bytes += msg.size();
+      if (n > 0) ++sent, bytes += msg.size();
     }
     std::lock_guard<std::mutex> l(mu_);
     stats_.frames += sent;

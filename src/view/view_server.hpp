@@ -101,7 +101,7 @@ class ViewServer {
   const mg_connection* driver_ = nullptr;  // the page driving it (under mu_)
   std::string url_;
   std::string three_js_, controls_js_;  // read once at start
-  std::vector<char> mesh_msg_;          // the "STVM" message, built once
+  std::vector<std::uint8_t> mesh_msg_;  // the "STVM" message, built once
   mg_context* ctx_ = nullptr;
   bool library_ = false;   // mg_init_library called (mg_exit_library in the destructor)
   mutable std::mutex mu_;  // clients_, stats_

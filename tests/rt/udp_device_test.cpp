@@ -331,3 +331,28 @@ TEST_CASE("udp bridge: a flood of garbage is counted and the next valid pose sti
   CHECK(dev.stats().poses.load() == 1);
   CHECK(dev.stats().malformed.load() >= 1);
 }
+
+TEST_CASE("udp bridge: a pinned peer is the only driver taken, even when another sends first") {
+  UdpDriver probe_port("127.0.0.1:9");  // a bound socket, to learn a free port for the pinned driver
+  sockaddr_in self{};
+  self.sin_family = AF_INET;
+  inet_pton(AF_INET, "127.0.0.1", &self.sin_addr);
+  REQUIRE(::bind(probe_port.fd, reinterpret_cast<sockaddr*>(&self), sizeof self) == 0);
+  socklen_t len = sizeof self;
+  getsockname(probe_port.fd, reinterpret_cast<sockaddr*>(&self), &len);
+  st::rt::UdpDeviceConfig c;
+  c.bind = "127.0.0.1:0";
+  c.peer = "127.0.0.1:" + std::to_string(ntohs(self.sin_port));
+  auto dev_r = st::rt::UdpDevice::open(c, Eigen::Isometry3d::Identity());
+  REQUIRE(dev_r);
+  st::rt::UdpDevice& dev = *dev_r.value();
+  UdpDriver pinned(dev.address());
+  std::swap(pinned.fd, probe_port.fd);  // the bound socket drives
+  UdpDriver other(dev.address());
+  other.send_pose(1, {7, 7, 7});
+  REQUIRE(udp_wait_count(dev.stats().foreign, 1));
+  pinned.send_pose(1, {1, 2, 3});
+  Eigen::Isometry3d pose;
+  CHECK(udp_wait_pose(dev, Eigen::Vector3d(1, 2, 3), pose));
+  CHECK(dev.stats().poses.load() == 1);
+}
