@@ -7,6 +7,8 @@
 #include <sys/socket.h>
 
 #include <cstring>
+#include <filesystem>
+#include <functional>
 #include <fstream>
 #include <mutex>
 #include <sstream>
@@ -57,24 +59,6 @@ pid_t view_chromium(const st::test::TempDir& d, int port, const std::string& que
   return browser;
 }
 
-/// A pressing run with --view and headless Chromium on its page (`query`) until the run ends;
-/// the run's log (its summary). Checks that the run ended well.
-std::string view_run_with_browser(const st::test::TempDir& d, double seconds, const std::string& device,
-                                  const std::string& query) {
-  const int port = st::test::free_loopback_port(SOCK_STREAM);
-  const pid_t pid =
-      view_start_run(d, port, seconds, "[object]\nbuiltin = \"icosphere\"\nradius_mm = 50.0\nfrequency = 24\n", device);
-  const pid_t browser = view_chromium(d, port, query);
-  const int rc = st::test::wait_for(pid, 90);
-  kill(browser, SIGKILL);
-  st::test::wait_for(browser, 10);
-  const std::string log = st::test::slurp_file(d.file("run.log"));
-  INFO(log);
-  INFO(st::test::slurp_file(d.file("chromium.log")));
-  CHECK(rc == 0);
-  return log;
-}
-
 /// GET path from the view; the body ("" on failure) and the status code.
 std::pair<int, std::string> view_get(int port, const std::string& path) {
   char err[256] = "";
@@ -107,6 +91,33 @@ T view_at(const std::string& s, std::size_t off) {
   T v;
   std::memcpy(&v, s.data() + off, sizeof v);
   return v;
+}
+
+/// A run with --view (a long one: the simulated device repeats its press) and headless Chromium
+/// on its page (`query`), until `done()` holds (polled every 50 ms, for at most 90 s, so that a
+/// browser slow to start under load still gets its turn) and a second more (the page reports its
+/// frame rate once a second); then the run is stopped by SIGINT. The run's log (its summary);
+/// checks that the run ended well.
+std::string view_run_with_browser(const st::test::TempDir& d, int port, const std::string& device,
+                                  const std::string& query, const std::function<bool()>& done) {
+  const pid_t pid =
+      view_start_run(d, port, 120.0, "[object]\nbuiltin = \"icosphere\"\nradius_mm = 50.0\nfrequency = 24\n", device);
+  const pid_t browser = view_chromium(d, port, query);
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(90);
+  bool reached = false;
+  while (!(reached = done()) && std::chrono::steady_clock::now() < until && waitpid(pid, nullptr, WNOHANG) == 0)
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  if (reached) std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  kill(pid, SIGINT);
+  const int rc = st::test::wait_for(pid, 30);
+  kill(browser, SIGKILL);
+  st::test::wait_for(browser, 10);
+  const std::string log = st::test::slurp_file(d.file("run.log"));
+  INFO(log);
+  INFO(st::test::slurp_file(d.file("chromium.log")));
+  CHECK(reached);
+  CHECK(rc == 0);
+  return log;
 }
 
 }  // namespace
@@ -194,7 +205,10 @@ TEST_CASE("run --view in headless Chromium: the page draws, reports its frame ra
   mg_init_library(0);
   REQUIRE(std::filesystem::exists("/usr/bin/chromium"));  // scripts/setup.sh installs it
   st::test::TempDir d;
-  const std::string log = view_run_with_browser(d, 8.0, "press_mm = 4.0\n", "snapshot=1");
+  const std::string png = d.file("out") + "/view.png";
+  const std::string log =
+      view_run_with_browser(d, st::test::free_loopback_port(SOCK_STREAM), "press_mm = 4.0\nrepeat = true\n",
+                            "snapshot=1", [&] { return std::filesystem::exists(png); });
   INFO(log);
   CHECK(st::test::contains(log, "1 page(s)"));
   // The page's own frame count reached the server (whatever the rate; the rate is a benchmark).
@@ -202,7 +216,6 @@ TEST_CASE("run --view in headless Chromium: the page draws, reports its frame ra
   REQUIRE(at != std::string::npos);
   CHECK(std::strtod(log.c_str() + at + 10, nullptr) > 0);
   // Its snapshot, taken on a frame with colliding faces: red pixels where the contact is.
-  const std::string png = d.file("out") + "/view.png";
   REQUIRE(std::filesystem::exists(png));
   const char* root = std::getenv("ST_SOURCE_ROOT");
   const auto red = st::test::run_command("python3 " + std::string(root ? root : ".") + "/tests/app/png_red.py " + png);
@@ -219,7 +232,22 @@ TEST_CASE("device kind browser: synthetic wheel events in headless Chromium pres
   mg_init_library(0);
   REQUIRE(std::filesystem::exists("/usr/bin/chromium"));
   st::test::TempDir d;
-  const std::string log = view_run_with_browser(d, 10.0, "kind = \"browser\"\n", "drive=press");
+  // Watch the run's own stream (a second page) for the pressed contact.
+  const int port = st::test::free_loopback_port(SOCK_STREAM);
+  ViewMessages msgs;
+  mg_connection* ws = nullptr;
+  const auto pressed = [&] {
+    char err[256] = "";
+    if (!ws)
+      ws = mg_connect_websocket_client("127.0.0.1", port, 0, err, sizeof err, "/ws", nullptr, view_on_data, nullptr, &msgs);
+    std::lock_guard<std::mutex> l(msgs.mu);
+    for (const std::string& f : msgs.binary)
+      if (f.size() >= 248 && f.compare(0, 4, "STVF") == 0 && view_at<double>(f, 160) > 1.5) return true;
+    msgs.binary.clear();
+    return false;
+  };
+  const std::string log = view_run_with_browser(d, port, "kind = \"browser\"\n", "drive=press", pressed);
+  if (ws) mg_close_connection(ws);
   INFO(log);
   CHECK(st::test::contains(log, "the live view's page as the device"));
   const auto taken = log.find("browser device: ");
