@@ -56,6 +56,7 @@ using Clock = std::chrono::steady_clock;
 struct ScaleArgs {
   std::string probe, object, poses;
   std::string layer = "auto", block_size = "auto";
+  std::string share_tree = "per-block";
   std::uint32_t max_workers = 64;
   int runs = 15;
   int gather_rounds = 400;
@@ -259,8 +260,12 @@ struct Row {
   double client_us = 0;         // the client's decode of every Result and the merge
   double compute_round_us = 0;  // max_w (query_w + encode_w) + client
   std::size_t max_reply_bytes = 0, total_reply_bytes = 0;
+  // Counted work (deterministic, unlike the times): sphere-pair and triangle-pair tests.
+  std::uint64_t single_spheres = 0, single_tris = 0, sum_spheres = 0, sum_tris = 0;
   double imbalance() const { return mean_us > 0 ? max_us / mean_us : 0; }
   double redundancy() const { return single_us > 0 ? sum_us / single_us : 0; }
+  double sphere_ratio() const { return single_spheres ? double(sum_spheres) / double(single_spheres) : 0; }
+  double tri_ratio() const { return single_tris ? double(sum_tris) / double(single_tris) : 0; }
 };
 
 struct Memory {
@@ -306,6 +311,7 @@ void run_scale(const ScaleArgs& a) {
       die(std::string("--") + what + ": expected an integer or auto (found '" + v + "')");
     }
   };
+  const bool per_block = a.share_tree == "per-block";
   const std::uint32_t fixed_layer = parse_knob(a.layer, "layer", geom::kFree);
   const std::uint32_t fixed_block = parse_knob(a.block_size, "block-size", 0);
   if (fixed_block == 0 && a.block_size != "auto") die("--block-size must be >= 1 or auto");
@@ -332,10 +338,13 @@ void run_scale(const ScaleArgs& a) {
   geom::CollideResult result;
   std::vector<double> single(poses.size());
   std::vector<std::uint32_t> contacts(poses.size());
+  std::vector<std::uint64_t> single_spheres(poses.size()), single_tris(poses.size());
   for (std::size_t i = 0; i < poses.size(); ++i) {
     const geom::CollideConfig full = geom::DefaultCollideConfig();
     single[i] = time_median_us(a.runs, [&] { geom::collide(probe, pt, object, ot, poses[i], full, scratch, result); });
     contacts[i] = std::uint32_t(result.contacts());
+    single_spheres[i] = result.stats.node_pairs;
+    single_tris[i] = result.stats.tri_pairs;
     std::fprintf(stderr, "pose %zu: %u contacts, %zu pairs, single thread %.1f us\n", i + 1, contacts[i],
                  result.pairs.size(), single[i]);
   }
@@ -381,6 +390,8 @@ void run_scale(const ScaleArgs& a) {
         prow[i].mapping = m;
         prow[i].split = sp;
         prow[i].single_us = single[i];
+        prow[i].single_spheres = single_spheres[i];
+        prow[i].single_tris = single_tris[i];
       }
       std::vector<std::vector<std::vector<std::uint8_t>>> replies(poses.size());  // encoded Results per pose
       std::vector<std::vector<net::FacePair>> all_pairs(poses.size());
@@ -391,11 +402,14 @@ void run_scale(const ScaleArgs& a) {
         if (share[w].empty()) continue;
         auto set = net::make_block_set(probe, object, blocks.value(), share[w], geom::DefaultTreeConfig().leaf_faces);
         if (!set) die(set.error());
-        std::unique_ptr<net::CollisionBackend> be = net::tree_backend_factory()();
+        std::unique_ptr<net::CollisionBackend> be = net::tree_backend_factory(per_block)();
         if (Status st = be->load(set.value()); !st) die(st.error());
         {
           // What this worker holds of the object: its share's tree (rebuilt here to size it) and mesh.
-          const geom::SphereTree st = geom::SphereTree::build(set.value().object).value();
+          const geom::SphereTree st =
+              geom::SphereTree::build(set.value().object, geom::DefaultTreeConfig(),
+                                      per_block ? set.value().block_faces : std::vector<std::uint32_t>{})
+                  .value();
           const double bytes = share_bytes(set.value().object, st);
           if (bytes > mem.max_share_bytes) {
             mem.max_share_bytes = bytes;
@@ -404,9 +418,10 @@ void run_scale(const ScaleArgs& a) {
         }
         std::vector<net::FacePair> out;
         for (std::size_t i = 0; i < poses.size(); ++i) {
+          net::QueryStats counted;
           const double q = time_median_us(a.runs, [&] {
             out.clear();
-            be->query(poses[i], out, limits.max_pairs);
+            counted = be->query(poses[i], out, limits.max_pairs);
           });
           net::ResultMsg msg;
           msg.seq = 1;
@@ -417,6 +432,8 @@ void run_scale(const ScaleArgs& a) {
           Row& r = prow[i];
           ++r.busy;
           r.sum_us += q;
+          r.sum_spheres += counted.sphere_tests;
+          r.sum_tris += counted.tri_tests;
           r.max_us = std::max(r.max_us, q);
           r.encode_max_us = std::max(r.encode_max_us, q + enc);  // the slowest worker including its encode
           r.max_reply_bytes = std::max(r.max_reply_bytes, frame.size());
@@ -476,7 +493,7 @@ void run_scale(const ScaleArgs& a) {
         if (!blocks || blocks.value().size() < W) continue;
         static int fleets = 0;
         const std::string tag = "scale-" + std::to_string(::getpid()) + "-" + std::to_string(fleets++);
-        auto lw = net::LocalWorkers::start(ctx, int(W), net::tree_backend_factory(),
+        auto lw = net::LocalWorkers::start(ctx, int(W), net::tree_backend_factory(per_block),
                                            [&](int i) { return net::inproc_endpoint(i, tag); });
         if (!lw) die(lw.error());
         net::ScatterConfig cfg;
@@ -534,7 +551,8 @@ void run_scale(const ScaleArgs& a) {
   if (a.json) {
     std::printf("{\"bench\": \"scale\", \"probe\": \"%s\", \"object\": \"%s\", \"object_faces\": %zu, \"runs\": %d,\n",
                 a.probe.c_str(), a.object.c_str(), object.faces.size(), a.runs);
-    std::printf(" \"contact_radius_mm\": %.3f, \"object_bytes\": %.0f,\n", model.contact_radius, object_bytes);
+    std::printf(" \"share_tree\": \"%s\", \"contact_radius_mm\": %.3f, \"object_bytes\": %.0f,\n", a.share_tree.c_str(),
+                model.contact_radius, object_bytes);
     std::printf(" \"client_cpu_tcp\": {\"workers\": [1, 2, 4, 8, 16], \"us_per_round\": [");
     for (std::size_t i = 0; i < cpu_tcp.size(); ++i) std::printf("%s%.2f", i ? ", " : "", cpu_tcp[i]);
     std::printf("], \"fit_a_us\": %.2f, \"fit_b_us_per_worker\": %.3f},\n", cpu_a, cpu_b);
@@ -570,11 +588,11 @@ void run_scale(const ScaleArgs& a) {
           "\"block_size\": %u, \"blocks\": %u, \"auto_split\": %s, \"busy_workers\": %u, \"single_us\": %.2f, "
           "\"max_worker_us\": %.2f, \"mean_worker_us\": %.2f, \"sum_worker_us\": %.2f, \"imbalance\": %.3f, "
           "\"redundancy\": %.3f, \"client_us\": %.2f, \"compute_round_us\": %.2f, \"max_reply_bytes\": %zu, "
-          "\"compute_speedup\": %.3f",
+          "\"compute_speedup\": %.3f, \"sphere_tests_ratio\": %.3f, \"tri_tests_ratio\": %.3f",
           k ? "," : "", r.pose, r.contacts, r.workers, geom::to_string(r.mapping), r.split.layer, r.split.block_size,
           r.split.blocks, r.split.automatic ? "true" : "false", r.busy, r.single_us, r.max_us, r.mean_us, r.sum_us,
           r.imbalance(), r.redundancy(), r.client_us, r.compute_round_us, r.max_reply_bytes,
-          r.single_us / r.compute_round_us);
+          r.single_us / r.compute_round_us, r.sphere_ratio(), r.tri_ratio());
       for (const Network& n : kNetworks)
         std::printf(", \"round_%s_us\": %.2f, \"speedup_%s\": %.3f", n.name, predicted(r, n), n.name,
                     r.single_us / predicted(r, n));
@@ -586,26 +604,27 @@ void run_scale(const ScaleArgs& a) {
 
   std::printf(
       "scale-out model: %s x %s (%zu faces); %d runs per share (medians); contact radius %.1f mm for the "
-      "automatic split\n",
-      a.probe.c_str(), a.object.c_str(), object.faces.size(), a.runs, model.contact_radius);
+      "automatic split; share trees %s\n",
+      a.probe.c_str(), a.object.c_str(), object.faces.size(), a.runs, model.contact_radius, a.share_tree.c_str());
   std::printf("client CPU per round over tcp (measured): ");
   for (std::size_t i = 0; i < cpu_tcp.size(); ++i) std::printf("W=%u %.1f us  ", cpu_ws[i], cpu_tcp[i]);
   std::printf("-> %.1f + %.2f W us\nclient work per worker message, no wake-up (measured): %.2f us\n", cpu_a, cpu_b,
               msg_work);
   std::printf("inproc fan-out floor p50 (measured): ");
   for (auto& f : floors) std::printf("W=%u %.1f us  ", f.first, f.second);
-  std::printf("\n%4s %8s %3s %-12s %5s %4s %8s %8s %8s %6s %6s %8s %8s %7s %7s %7s\n", "pose", "contacts", "W",
-              "mapping", "layer", "B", "single", "max", "mean", "imbal", "redund", "compute", "10GbE", "x10GbE", "xvm",
-              "x100GbE");
+  std::printf("\n%4s %8s %3s %-12s %5s %4s %8s %8s %8s %6s %6s %6s %6s %8s %8s %7s %7s %7s\n", "pose", "contacts", "W",
+              "mapping", "layer", "B", "single", "max", "mean", "imbal", "redund", "xsph", "xtri", "compute", "10GbE",
+              "x10GbE", "xvm", "x100GbE");
   for (const Row& r : rows)
-    std::printf("%4zu %8u %3u %-12s %5u %4u %8.1f %8.1f %8.1f %6.2f %6.2f %8.1f %8.1f %7.2f %7.2f %7.2f\n", r.pose,
-                r.contacts, r.workers, geom::to_string(r.mapping), r.split.layer, r.split.block_size, r.single_us,
-                r.max_us, r.mean_us, r.imbalance(), r.redundancy(), r.compute_round_us, predicted(r, kNetworks[0]),
-                r.single_us / predicted(r, kNetworks[0]), r.single_us / predicted(r, kNetworks[1]),
-                r.single_us / predicted(r, kNetworks[2]));
+    std::printf("%4zu %8u %3u %-12s %5u %4u %8.1f %8.1f %8.1f %6.2f %6.2f %6.2f %6.2f %8.1f %8.1f %7.2f %7.2f %7.2f\n",
+                r.pose, r.contacts, r.workers, geom::to_string(r.mapping), r.split.layer, r.split.block_size,
+                r.single_us, r.max_us, r.mean_us, r.imbalance(), r.redundancy(), r.sphere_ratio(), r.tri_ratio(),
+                r.compute_round_us, predicted(r, kNetworks[0]), r.single_us / predicted(r, kNetworks[0]),
+                r.single_us / predicted(r, kNetworks[1]), r.single_us / predicted(r, kNetworks[2]));
   std::printf(
       "single/max/mean: us per round (one thread; slowest worker; mean over W); imbal = max/mean; redund = sum "
-      "over workers / single; compute = slowest worker with its encode + the client's decode and merge; "
+      "over workers / single (time); xsph, xtri = sphere-pair and triangle-pair tests summed over workers / single "
+      "(counted); compute = slowest worker with its encode + the client's decode and merge; "
       "10GbE = compute + W x message work + 16.25 us + largest reply at 10 Gbit/s; x = single / predicted "
       "round (xvm: with this VM's client CPU per round instead)\n");
   std::printf("model check (in-process workers over inproc, block-cyclic): predicted = our empty round + compute\n");
@@ -646,6 +665,11 @@ void add_scale(CLI::App& app) {
       ->check(CLI::Range(20, 1000000))
       ->capture_default_str();
   cmd->add_flag("!--no-validate", a->validate, "skip the W = 1, 2 in-process rounds that check the model");
+  cmd->add_option("--share-tree", a->share_tree,
+                  "how a worker's tree over its share is built: per-block (one subtree per block, what workers do) or "
+                  "one (one tree over the whole share, as before; to measure the difference)")
+      ->check(CLI::IsMember({"per-block", "one"}))
+      ->capture_default_str();
   cmd->add_flag("--json", a->json, "print one JSON object instead of the table");
   cmd->callback([a] { run_scale(*a); });
 }

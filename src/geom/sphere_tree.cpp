@@ -129,8 +129,11 @@ struct Builder {
   std::uint32_t F, M;
   std::vector<Cent> cents;
   SphereTree& t;
+  std::vector<std::uint32_t> leaf_slot;  // grouped build: first slot of each leaf (M + 1 entries)
 
-  std::uint32_t slot_of_leaf(std::uint64_t j) const { return static_cast<std::uint32_t>(j * F / M); }
+  std::uint32_t slot_of_leaf(std::uint64_t j) const {
+    return leaf_slot.empty() ? static_cast<std::uint32_t>(j * F / M) : leaf_slot[j];
+  }
 
   struct Group {
     std::uint32_t j0, j1;
@@ -190,6 +193,103 @@ struct Builder {
     }
     t.cold[node].desc_end = static_cast<std::uint32_t>(t.nodes.size());
   }
+
+  // Grouped build: the groups in the order of `order` occupy consecutive slots and leaves
+  // (group_slot[p], group_leaf[p]: first slot and leaf of the group at position p, G + 1 entries).
+  struct Run {
+    float c[3];           // centroid of its face centroids
+    std::uint32_t first;  // first face, mesh order
+    std::uint32_t size;   // faces
+  };
+  std::vector<Run> runs;
+  std::vector<std::uint32_t> order, group_slot, group_leaf;
+
+  // Binary median splits of the groups at positions [a, b) down `levels` levels, as split() does
+  // for leaves; with `reorder` false only the boundaries (the same ones: they depend on a, b only).
+  void split_groups(std::uint32_t a, std::uint32_t b, int levels, bool reorder, Group* out, int& n) {
+    if (levels == 0 || b - a == 1) {
+      out[n++] = {a, b};
+      return;
+    }
+    const std::uint32_t m = a + (b - a + 1) / 2;
+    if (reorder) {
+      float bl[3] = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max(),
+                     std::numeric_limits<float>::max()};
+      float bh[3] = {-bl[0], -bl[1], -bl[2]};
+      for (std::uint32_t p = a; p < b; ++p)
+        for (int k = 0; k < 3; ++k) {
+          bl[k] = std::min(bl[k], runs[order[p]].c[k]);
+          bh[k] = std::max(bh[k], runs[order[p]].c[k]);
+        }
+      int axis = 0;
+      for (int k = 1; k < 3; ++k)
+        if (bh[k] - bl[k] > bh[axis] - bl[axis]) axis = k;
+      std::nth_element(order.begin() + a, order.begin() + m, order.begin() + b,
+                       [this, axis](std::uint32_t x, std::uint32_t y) { return runs[x].c[axis] < runs[y].c[axis]; });
+    }
+    split_groups(a, m, levels - 1, reorder, out, n);
+    split_groups(m, b, levels - 1, reorder, out, n);
+  }
+  void order_groups(std::uint32_t a, std::uint32_t b) {
+    if (b - a <= 1) return;
+    Group g[8];
+    int n = 0;
+    split_groups(a, b, 3, true, g, n);
+    for (int k = 0; k < n; ++k) order_groups(g[k].j0, g[k].j1);
+  }
+  void build_top(std::uint32_t node, std::uint32_t a, std::uint32_t b, std::uint32_t depth) {
+    if (b - a == 1) {
+      build(node, group_leaf[a], group_leaf[b], depth);
+      return;
+    }
+    SphereNodeCold& cn = t.cold[node];
+    cn.face_begin = group_slot[a];
+    cn.face_end = group_slot[b];
+    t.nodes[node].depth = static_cast<std::uint8_t>(depth);
+    t.num_depths = std::max(t.num_depths, depth + 1);
+    Group g[8];
+    int n = 0;
+    split_groups(a, b, 3, false, g, n);
+    const auto first = static_cast<std::uint32_t>(t.nodes.size());
+    t.nodes.resize(first + n);
+    t.cold.resize(first + n);
+    t.nodes[node].leaf = 0;
+    t.nodes[node].first = first;
+    t.nodes[node].count = static_cast<std::uint16_t>(n);
+    for (int k = 0; k < n; ++k) {
+      t.cold[first + k].parent = node;
+      build_top(first + static_cast<std::uint32_t>(k), g[k].j0, g[k].j1, depth + 1);
+    }
+    t.cold[node].desc_end = static_cast<std::uint32_t>(t.nodes.size());
+  }
+
+  // Lays the groups out: orders them (top levels), permutes the centroids into slot order and
+  // gives each group its own leaves. Returns the total leaf count.
+  std::uint32_t layout_groups(std::uint32_t leaf_faces) {
+    const auto G = static_cast<std::uint32_t>(runs.size());
+    order.resize(G);
+    for (std::uint32_t g = 0; g < G; ++g) order[g] = g;
+    order_groups(0, G);
+    std::vector<Cent> by_slot;
+    by_slot.reserve(F);
+    group_slot.assign(G + 1, 0);
+    group_leaf.assign(G + 1, 0);
+    leaf_slot.clear();
+    for (std::uint32_t p = 0; p < G; ++p) {
+      const Run& r = runs[order[p]];
+      group_slot[p] = static_cast<std::uint32_t>(by_slot.size());
+      group_leaf[p] = static_cast<std::uint32_t>(leaf_slot.size());
+      by_slot.insert(by_slot.end(), cents.begin() + r.first, cents.begin() + r.first + r.size);
+      const std::uint32_t m = (r.size + leaf_faces - 1) / leaf_faces;
+      for (std::uint64_t j = 0; j < m; ++j)
+        leaf_slot.push_back(group_slot[p] + static_cast<std::uint32_t>(j * r.size / m));
+    }
+    group_slot[G] = F;
+    group_leaf[G] = static_cast<std::uint32_t>(leaf_slot.size());
+    leaf_slot.push_back(F);
+    cents.swap(by_slot);
+    return group_leaf[G];
+  }
 };
 
 }  // namespace
@@ -210,7 +310,7 @@ void min_sphere(std::vector<Vec3>& pts, Vec3& centre, double& radius) {
   radius = std::sqrt(m2);
 }
 
-std::uint64_t tree_hash(const Mesh& mesh, const TreeConfig& params) {
+std::uint64_t tree_hash(const Mesh& mesh, const TreeConfig& params, std::span<const std::uint32_t> groups) {
   // Word-wise multiply-rotate hash (not cryptographic; detects a stale cache file).
   std::uint64_t h = 0x9e3779b97f4a7c15ull ^ (mesh.local.size() * 0x100000001b3ull) ^ (mesh.faces.size() << 32);
   auto mix = [&h](std::uint64_t w) {
@@ -233,6 +333,10 @@ std::uint64_t tree_hash(const Mesh& mesh, const TreeConfig& params) {
   if (!mesh.local.empty()) bytes(mesh.local.data(), mesh.local.size() * sizeof(Vec3));
   if (!mesh.faces.empty()) bytes(mesh.faces.data(), mesh.faces.size() * sizeof(Tri));
   mix(params.leaf_faces);
+  if (!groups.empty()) {
+    mix(0x47524f555053ull ^ groups.size());  // "GROUPS"
+    bytes(groups.data(), groups.size() * sizeof(std::uint32_t));
+  }
   mix(0x5354524545ull);  // "STREE" + layout generation of the build algorithm
   h ^= h >> 33;
   h *= 0xff51afd7ed558ccdull;
@@ -240,21 +344,26 @@ std::uint64_t tree_hash(const Mesh& mesh, const TreeConfig& params) {
   return h;
 }
 
-Result<SphereTree> SphereTree::build(const Mesh& mesh, const TreeConfig& params) {
+Result<SphereTree> SphereTree::build(const Mesh& mesh, const TreeConfig& params, std::span<const std::uint32_t> groups) {
   if (params.leaf_faces < 1 || params.leaf_faces > kMaxLeafFaces)
     return fail(mesh.name, ": leaf_faces = ", params.leaf_faces, " out of range [1, ", kMaxLeafFaces, "]");
   if (mesh.faces.empty()) return fail(mesh.name, ": no faces to build a sphere tree over");
   if (mesh.faces.size() >= (1ull << 31)) return fail(mesh.name, ": too many faces (", mesh.faces.size(), ")");
   if (Status s = mesh.validate(); !s) return Error{s.error()};
 
+  const auto F = static_cast<std::uint32_t>(mesh.faces.size());
+  std::uint64_t grouped_faces = 0, nonempty = 0;
+  for (std::uint32_t g : groups) grouped_faces += g, nonempty += g > 0;
+  if (!groups.empty() && grouped_faces != F)
+    return fail(mesh.name, ": face groups cover ", grouped_faces, " faces, the mesh has ", F);
+
   SphereTree t;
   t.params = params;
-  t.mesh_hash = tree_hash(mesh, params);
+  t.mesh_hash = tree_hash(mesh, params, groups);
   t.num_vertices = static_cast<std::uint32_t>(mesh.local.size());
-  const auto F = static_cast<std::uint32_t>(mesh.faces.size());
-  const std::uint32_t M = (F + params.leaf_faces - 1) / params.leaf_faces;
+  std::uint32_t M = (F + params.leaf_faces - 1) / params.leaf_faces;
 
-  Builder b{mesh, F, M, {}, t};
+  Builder b{mesh, F, M, {}, t, {}, {}, {}, {}, {}};
   b.cents.resize(F);
   std::vector<FaceBox> boxes(F);  // file order; permuted into slot order below
   for (std::uint32_t f = 0; f < F; ++f) {
@@ -274,7 +383,21 @@ Result<SphereTree> SphereTree::build(const Mesh& mesh, const TreeConfig& params)
   t.nodes.resize(1);
   t.cold.resize(1);
   t.cold[0].parent = kNoNode;
-  b.build(0, 0, M, 0);
+  if (nonempty > 1) {
+    for (std::uint32_t first = 0; std::uint32_t size : groups) {
+      if (size > 0) {
+        float c[3] = {0, 0, 0};
+        for (std::uint32_t f = first; f < first + size; ++f)
+          for (int k = 0; k < 3; ++k) c[k] += b.cents[f].c[k] / static_cast<float>(size);
+        b.runs.push_back({{c[0], c[1], c[2]}, first, size});
+      }
+      first += size;
+    }
+    M = b.M = b.layout_groups(params.leaf_faces);
+    b.build_top(0, 0, static_cast<std::uint32_t>(b.runs.size()), 0);
+  } else {
+    b.build(0, 0, M, 0);
+  }
   t.nodes.shrink_to_fit();
   t.cold.shrink_to_fit();
 

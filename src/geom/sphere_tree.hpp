@@ -3,6 +3,7 @@
 // (M = ceil(F/leaf_faces)), the "almost constant number of faces per leaf" of the paper.
 #pragma once
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "geom/mesh.hpp"
@@ -71,7 +72,13 @@ struct SphereTree {
   std::vector<FaceBox> face_boxes;        ///< per slot of face_order: outward-rounded face AABB
 
   /// Builds the tree (single thread). Fails on an empty or invalid mesh or leaf_faces out of [1, 64].
-  static Result<SphereTree> build(const Mesh& mesh, const TreeConfig& params = DefaultTreeConfig());
+  /// `groups` (optional): sizes of consecutive runs of faces in the mesh's face order (summing to
+  /// the face count; empty runs are skipped) that no node below the top levels mixes. Each run
+  /// gets the subtree a tree over that run alone would have, and the top levels split whole runs
+  /// by the median of their centroids. A worker's share of the object's blocks is built this way:
+  /// the blocks lie apart, and a leaf or sphere spanning two of them would enclose the gap.
+  static Result<SphereTree> build(const Mesh& mesh, const TreeConfig& params = DefaultTreeConfig(),
+                                  std::span<const std::uint32_t> groups = {});
 
   std::uint32_t num_faces() const { return static_cast<std::uint32_t>(face_order.size()); }  ///< faces covered
   std::uint32_t num_nodes() const { return static_cast<std::uint32_t>(nodes.size()); }       ///< nodes
@@ -87,8 +94,9 @@ struct SphereTree {
   std::size_t bytes() const;  ///< heap bytes held by the tree
 };
 
-/// 64-bit hash of the mesh's vertex bytes (local + origin), faces and the build parameters.
-std::uint64_t tree_hash(const Mesh& mesh, const TreeConfig& params);
+/// 64-bit hash of the mesh's vertex bytes (local + origin), faces, the build parameters and the
+/// face groups (if any).
+std::uint64_t tree_hash(const Mesh& mesh, const TreeConfig& params, std::span<const std::uint32_t> groups = {});
 
 /// Minimal enclosing sphere of points (Welzl's algorithm, move-to-front variant, Gärtner 1999),
 /// radius then enlarged to the largest computed distance so it encloses every point. Reorders pts.

@@ -13,7 +13,7 @@ namespace st::net {
 namespace {
 
 constexpr std::uint32_t kBlockSetMagic = 0x53425453;  // "STBS" read as a little-endian u32
-constexpr std::uint16_t kBlockSetVersion = 1;
+constexpr std::uint16_t kBlockSetVersion = 2;         // 2: faces grouped by block, block_faces
 
 void put_mesh(Writer& w, const geom::Mesh& m) {
   for (int k = 0; k < 3; ++k) w.f64(m.origin[k]);
@@ -96,14 +96,18 @@ Result<BlockSet> make_block_set(const geom::Mesh& probe, const geom::Mesh& objec
       return fail("block set: block ", s.blocks[i], " out of range [0, ", blocks.size(), ")");
     if (i > 0 && s.blocks[i] == s.blocks[i - 1]) return fail("block set: block ", s.blocks[i], " listed twice");
   }
-  for (std::uint32_t b : s.blocks)
+  std::vector<bool> taken(object.faces.size(), false);
+  for (std::uint32_t b : s.blocks) {
+    const std::size_t start = s.object_face_ids.size();
     for (std::uint32_t f : blocks[b]) {
       if (f >= object.faces.size())
         return fail("block set: block ", b, ": face ", f, " out of range [0, ", object.faces.size(), ")");
-      s.object_face_ids.push_back(f);
+      if (!taken[f]) s.object_face_ids.push_back(f);
+      taken[f] = true;
     }
-  std::sort(s.object_face_ids.begin(), s.object_face_ids.end());
-  s.object_face_ids.erase(std::unique(s.object_face_ids.begin(), s.object_face_ids.end()), s.object_face_ids.end());
+    std::sort(s.object_face_ids.begin() + static_cast<std::ptrdiff_t>(start), s.object_face_ids.end());
+    s.block_faces.push_back(static_cast<std::uint32_t>(s.object_face_ids.size() - start));
+  }
 
   // Vertices used by the share, in ascending original order, renumbered densely.
   constexpr std::uint32_t kUnused = 0xffffffffu;
@@ -144,6 +148,7 @@ std::vector<std::uint8_t> encode_block_set(const BlockSet& s) {
   for (std::uint32_t b : s.blocks) w.u32(b);
   put_mesh(w, s.probe);
   put_mesh(w, s.object);
+  for (std::uint32_t n : s.block_faces) w.u32(n);
   for (std::uint32_t f : s.object_face_ids) w.u32(f);
   return out;
 }
@@ -187,9 +192,43 @@ Result<BlockSet> decode_block_set(std::span<const std::uint8_t> encoded, const L
   get_ascending(r, s.blocks, nb, s.blocks_total, "block id");
   if (r.ok()) get_mesh(r, s.probe, "probe", L.max_faces, L);
   if (r.ok()) get_mesh(r, s.object, "object share", s.object_faces_total, L);
-  if (r.ok())
-    get_ascending(r, s.object_face_ids, static_cast<std::uint32_t>(s.object.faces.size()), s.object_faces_total,
-                  "object face id");
+  // Faces per block (they sum to the share's faces), then the share's global face ids: ascending
+  // within each block, none twice.
+  const auto share = static_cast<std::uint32_t>(s.object.faces.size());
+  if (r.ok() && r.count_ok(nb, s.blocks_total, 4, "block face count")) {
+    std::uint64_t sum = 0;
+    s.block_faces.resize(nb);
+    for (std::uint32_t i = 0; i < nb && r.ok(); ++i) {
+      const std::size_t at = r.offset();
+      s.block_faces[i] = r.u32("block face count");
+      sum += s.block_faces[i];
+      if (r.ok() && sum > share)
+        r.fail_at(at, "block face count", " ", i, ": the counts so far (", sum, ") exceed the share's ", share,
+                  " faces");
+    }
+    if (r.ok() && sum != share)
+      r.fail_at(r.offset(), "block face count", "s: sum ", sum, ", the share has ", share, " faces");
+  }
+  if (r.ok() && r.count_ok(share, s.object_faces_total, 4, "object face id")) {
+    s.object_face_ids.resize(share);
+    std::uint32_t i = 0;
+    for (std::uint32_t blk = 0; blk < nb && r.ok(); ++blk)
+      for (std::uint32_t k = 0; k < s.block_faces[blk] && r.ok(); ++k, ++i) {
+        const std::size_t at = r.offset();
+        const std::uint32_t id = s.object_face_ids[i] = r.u32("object face id");
+        if (r.ok() && id >= s.object_faces_total)
+          r.fail_at(at, "object face id", " ", i, ": ", id, " out of range [0, ", s.object_faces_total, ")");
+        if (r.ok() && k > 0 && id <= s.object_face_ids[i - 1])
+          r.fail_at(at, "object face id", " ", i, ": ", id, " not above the previous ", s.object_face_ids[i - 1],
+                    " of its block");
+      }
+    if (r.ok()) {
+      std::vector<std::uint32_t> sorted = s.object_face_ids;
+      std::sort(sorted.begin(), sorted.end());
+      if (const auto dup = std::adjacent_find(sorted.begin(), sorted.end()); dup != sorted.end())
+        r.fail_at(r.offset(), "object face id", "s: ", *dup, " listed twice");
+    }
+  }
   if (!r.expect_end()) return Error{r.error()};
   s.probe.name = "probe";
   s.object.name = "object share";

@@ -26,19 +26,23 @@ struct BlockSet {
   std::vector<std::uint32_t> blocks;           ///< global block ids held, strictly ascending
   geom::Mesh probe;                            ///< the whole probe: origin, local vertices, faces
   geom::Mesh object;                           ///< the share: object origin, used vertices, faces into them
-  std::vector<std::uint32_t> object_face_ids;  ///< global index of each share face, strictly ascending
+  std::vector<std::uint32_t> object_face_ids;  ///< global index of each share face: by block, ascending within one
+  std::vector<std::uint32_t> block_faces;      ///< share faces of each held block (same order as `blocks`)
 };
 
 /// The object's faces grouped in blocks (global face ids per block); block b of the sphere
 /// tree's layer n becomes blocks[b].
 using Blocks = std::vector<std::vector<std::uint32_t>>;
 
-/// Builds the block set of `block_ids` (any order, no duplicates): their faces in ascending global
-/// order, the object vertices they use in ascending original order, the whole probe.
+/// Builds the block set of `block_ids` (any order, no duplicates): their faces block by block
+/// (blocks ascending, each block's faces in ascending global order; a face listed by an earlier
+/// block too is kept there only), the object vertices they use in ascending original order, the
+/// whole probe. The worker builds one subtree per block (SphereTree::build's groups).
 Result<BlockSet> make_block_set(const geom::Mesh& probe, const geom::Mesh& object, const Blocks& blocks,
                                 std::span<const std::uint32_t> block_ids, std::uint32_t leaf_faces);
 
-/// Canonical little-endian encoding ("STBS" v1); equal block sets give equal bytes.
+/// Canonical little-endian encoding ("STBS" v2: v1 plus the faces per block, the share's faces
+/// grouped by block); equal block sets give equal bytes.
 std::vector<std::uint8_t> encode_block_set(const BlockSet& s);
 /// Content digest of an encoding: BLAKE2b-256 (libsodium's crypto_generichash) over every byte.
 using Digest = std::array<std::uint8_t, 32>;

@@ -12,6 +12,7 @@ namespace {
 
 class TreeBackend final : public CollisionBackend {
  public:
+  explicit TreeBackend(bool per_block) : per_block_(per_block) {}
   Status load(const BlockSet& set) override {
     geom::TreeConfig params = geom::DefaultTreeConfig();
     params.leaf_faces = std::clamp<std::uint32_t>(set.leaf_faces, 1, geom::kMaxLeafFaces);
@@ -21,7 +22,11 @@ class TreeBackend final : public CollisionBackend {
     probe_tree_ = std::move(pt).value();
     empty_ = set_.object.faces.empty();
     if (!empty_) {
-      Result<geom::SphereTree> ot = geom::SphereTree::build(set_.object, params);
+      // One subtree per block: the blocks of a share lie apart (block-cyclic, random), and one
+      // tree over all of them would put spheres around the gaps between blocks.
+      Result<geom::SphereTree> ot = geom::SphereTree::build(
+          set_.object, params,
+          per_block_ ? std::span<const std::uint32_t>(set_.block_faces) : std::span<const std::uint32_t>());
       if (!ot) return fail("object share tree: ", ot.error());
       object_tree_ = std::move(ot).value();
     }
@@ -53,12 +58,13 @@ class TreeBackend final : public CollisionBackend {
   geom::CollideScratch scratch_;
   geom::CollideResult result_;
   bool empty_ = true;
+  bool per_block_ = true;
 };
 
 }  // namespace
 
-BackendFactory tree_backend_factory() {
-  return [] { return std::make_unique<TreeBackend>(); };
+BackendFactory tree_backend_factory(bool per_block) {
+  return [per_block] { return std::make_unique<TreeBackend>(per_block); };
 }
 
 Result<Blocks> tree_blocks(const geom::SphereTree& tree, std::uint32_t layer, std::uint32_t block_size) {

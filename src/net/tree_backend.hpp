@@ -8,8 +8,10 @@
 
 namespace st::net {
 
-/// Factory of sphere-tree backends (the daemon's and the in-process workers' default).
-BackendFactory tree_backend_factory();
+/// Factory of sphere-tree backends (the daemon's and the in-process workers' default). A worker
+/// builds one subtree per block of its share; `per_block` false builds one tree over the whole
+/// share instead (what workers did before; kept to measure the difference, bench scale --share-tree).
+BackendFactory tree_backend_factory(bool per_block = true);
 
 /// The object's faces grouped by the partition of `tree`'s layer `layer` into runs of
 /// `block_size` consecutive layer spheres (geom::make_partition): blocks[b] = faces of block b.

@@ -8,6 +8,7 @@
 //    decoded as the worker does once the chunks are assembled (the worker checks the content
 //    hash first; the harness skips that, since no mutation would pass it). A block set that
 //    decodes satisfies the decoder's contract and re-encodes to the identical bytes.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -48,7 +49,7 @@ void check_mesh(const st::geom::Mesh& m, const char* which) {
     for (std::uint32_t i : f) ST_FUZZ_CHECK(i < m.local.size(), which);
 }
 
-void check_ascending(const std::vector<std::uint32_t>& ids, std::uint32_t total, const char* which) {
+void check_ascending(std::span<const std::uint32_t> ids, std::uint32_t total, const char* which) {
   for (std::size_t i = 0; i < ids.size(); ++i) {
     ST_FUZZ_CHECK(ids[i] < total, which);
     ST_FUZZ_CHECK(i == 0 || ids[i] > ids[i - 1], which);
@@ -62,8 +63,18 @@ void check_block_set(std::span<const std::uint8_t> bytes, const Limits& L) {
   ST_FUZZ_CHECK(s.leaf_faces >= 1 && s.leaf_faces <= L.max_leaf_faces, "block set leaf_faces");
   ST_FUZZ_CHECK(s.object_faces_total <= L.max_faces && s.blocks_total <= L.max_blocks, "block set totals");
   check_ascending(s.blocks, s.blocks_total, "block ids");
-  check_ascending(s.object_face_ids, s.object_faces_total, "object face ids");
   ST_FUZZ_CHECK(s.object_face_ids.size() == s.object.faces.size(), "one global id per share face");
+  ST_FUZZ_CHECK(s.block_faces.size() == s.blocks.size(), "a face count per block");
+  std::size_t at = 0;
+  for (std::uint32_t n : s.block_faces) {
+    ST_FUZZ_CHECK(at + n <= s.object_face_ids.size(), "block face counts within the share");
+    check_ascending(std::span(s.object_face_ids).subspan(at, n), s.object_faces_total, "a block's face ids");
+    at += n;
+  }
+  ST_FUZZ_CHECK(at == s.object_face_ids.size(), "block face counts add up to the share");
+  std::vector<std::uint32_t> sorted = s.object_face_ids;
+  std::sort(sorted.begin(), sorted.end());
+  ST_FUZZ_CHECK(std::adjacent_find(sorted.begin(), sorted.end()) == sorted.end(), "no face id twice");
   ST_FUZZ_CHECK(s.probe.local.size() <= L.max_vertices && s.object.local.size() <= L.max_vertices, "vertex limit");
   check_mesh(s.probe, "block set probe");
   check_mesh(s.object, "block set object share");

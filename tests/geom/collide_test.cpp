@@ -106,6 +106,35 @@ Mesh shifted(Mesh m, const Vec3& d) {
 
 }  // namespace
 
+TEST_CASE("a grouped object tree (a worker's share of apart blocks) gives exactly the brute-force pairs") {
+  const Mesh ico = make_icosphere(40, 12);
+  const SphereTree whole = SphereTree::build(ico, {8}).value();
+  Mesh share;
+  share.origin = ico.origin;
+  share.local = ico.local;
+  std::vector<std::uint32_t> runs;
+  const std::vector<std::uint32_t> blocks = whole.layer(2);
+  for (std::size_t b = 0; b < blocks.size(); b += 2) {
+    runs.push_back(std::uint32_t(whole.faces_end(blocks[b]) - whole.faces_begin(blocks[b])));
+    for (const std::uint32_t* f = whole.faces_begin(blocks[b]); f != whole.faces_end(blocks[b]); ++f)
+      share.faces.push_back(ico.faces[*f]);
+  }
+  REQUIRE(runs.size() > 4);
+  // Only the vertices the share uses (a touch pose needs its extreme vertex on a face).
+  std::vector<std::uint32_t> remap(share.local.size(), ~0u);
+  std::vector<Vec3> used;
+  for (Tri& f : share.faces)
+    for (std::uint32_t& v : f) {
+      if (remap[v] == ~0u) remap[v] = std::uint32_t(used.size()), used.push_back(share.local[v]);
+      v = remap[v];
+    }
+  share.local = used;
+  Body object(share);
+  object.tree = SphereTree::build(share, {8}, runs).value();
+  const Body probe(make_capsule(6, 25, 10));
+  compare_at(probe, object, poses_for(probe.mesh, object.mesh, 12, 91));
+}
+
 TEST_CASE("transform_to_object: t is accurate with origins at 1e6 mm") {
   Mesh a = make_box({1, 1, 1}), b = make_box({1, 1, 1});
   a.origin = Vec3(1e6 + 0.25, -3e6, 7e6);

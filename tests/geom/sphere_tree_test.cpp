@@ -2,6 +2,7 @@
 // float padding), balanced leaves, layers, tightness, persistence errors.
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <fstream>
 #include <random>
@@ -15,13 +16,25 @@ using namespace st::geom;
 
 namespace {
 
-void check_tree(const Mesh& m, const SphereTree& t) {
+// `groups`: the runs of faces the tree was built with (empty: one run of all faces).
+void check_tree(const Mesh& m, const SphereTree& t, std::vector<std::uint32_t> groups = {}) {
   const std::uint32_t F = static_cast<std::uint32_t>(m.num_faces());
   REQUIRE(t.num_faces() == F);
   REQUIRE(t.cold.size() == t.nodes.size());
-  // Every face in exactly one leaf, and leaves balanced: floor(F/M) or ceil(F/M) faces, <= leaf_faces.
+  // Every face in exactly one leaf, and leaves balanced within their run: floor(n/M) or ceil(n/M)
+  // faces, M = ceil(n/leaf_faces), <= leaf_faces; no leaf holds faces of two runs.
   const std::uint32_t L = t.params.leaf_faces;
-  const std::uint32_t M = (F + L - 1) / L;
+  if (groups.empty()) groups.push_back(F);
+  std::vector<std::uint32_t> run_end;  // exclusive end face of each run
+  std::uint32_t M = 0;
+  for (std::uint32_t at = 0; std::uint32_t n : groups) {
+    run_end.push_back(at += n);
+    M += (n + L - 1) / L;
+  }
+  REQUIRE(run_end.back() == F);
+  const auto run_of = [&](std::uint32_t f) {
+    return std::size_t(std::upper_bound(run_end.begin(), run_end.end(), f) - run_end.begin());
+  };
   std::vector<int> seen(F, 0);
   std::uint32_t leaves = 0;
   for (std::uint32_t i = 0; i < t.num_nodes(); ++i) {
@@ -29,9 +42,13 @@ void check_tree(const Mesh& m, const SphereTree& t) {
     const SphereNodeCold& c = t.cold[i];
     if (h.leaf) {
       ++leaves;
-      CHECK(h.count >= F / M);
-      CHECK(h.count <= (F + M - 1) / M);
+      REQUIRE(h.count >= 1);
+      const std::size_t g = run_of(t.face_order[h.first]);
+      const std::uint32_t n = groups[g], Mg = (n + L - 1) / L;
+      CHECK(h.count >= n / Mg);
+      CHECK(h.count <= (n + Mg - 1) / Mg);
       CHECK(h.count <= L);
+      for (std::uint32_t s = h.first; s < h.first + h.count; ++s) CHECK(run_of(t.face_order[s]) == g);
       CHECK(h.first == c.face_begin);
       for (std::uint32_t s = h.first; s < h.first + h.count; ++s) ++seen[t.face_order[s]];
     } else {
@@ -134,6 +151,65 @@ TEST_CASE("SphereTree invariants on real meshes") {
       check_tree(*m, t.value());
     }
   }
+}
+
+TEST_CASE("SphereTree grouped build: each run of faces its own subtrees, invariants hold") {
+  // Three icospheres far apart, faces in runs of unequal sizes; and the elephant's faces reordered
+  // by the blocks of one worker's block-cyclic share (layer 3 of its own tree, every 3rd block).
+  Mesh three = make_icosphere(10, 6);
+  const std::size_t per = three.faces.size();
+  for (const Vec3& shift : {Vec3(100, 0, 0), Vec3(0, -80, 30)}) {
+    const Mesh more = make_icosphere(shift.x() > 0 ? 20 : 5, shift.x() > 0 ? 9 : 3);
+    const auto base = static_cast<std::uint32_t>(three.local.size());
+    for (const Vec3& v : more.local) three.local.push_back(v + more.origin - three.origin + shift);
+    for (const Tri& f : more.faces) three.faces.push_back({f[0] + base, f[1] + base, f[2] + base});
+  }
+  const std::uint32_t big = static_cast<std::uint32_t>(make_icosphere(20, 9).faces.size());
+  const std::vector<std::uint32_t> runs{static_cast<std::uint32_t>(per), big,
+                                        static_cast<std::uint32_t>(three.faces.size() - per - big)};
+  for (std::uint32_t L : {1u, 5u, 24u, 64u}) {
+    CAPTURE(L);
+    check_tree(three, SphereTree::build(three, {L}, runs).value(), runs);
+  }
+  // Empty runs are skipped; one non-empty run is the plain build.
+  const std::vector<std::uint32_t> with_empty{0, static_cast<std::uint32_t>(per), 0, big, runs[2], 0};
+  check_tree(three, SphereTree::build(three, {8}, with_empty).value(), runs);
+  const SphereTree one =
+      SphereTree::build(three, {8}, std::vector<std::uint32_t>{0, std::uint32_t(three.faces.size())}).value();
+  const SphereTree plain = SphereTree::build(three, {8}).value();
+  CHECK(one.face_order == plain.face_order);
+
+  const Mesh* el = st::test::model_mesh("elephant.off");
+  const SphereTree et = SphereTree::build(*el).value();
+  const std::vector<std::uint32_t> blocks = et.layer(3);
+  Mesh share;
+  share.origin = el->origin;
+  share.local = el->local;
+  std::vector<std::uint32_t> share_runs;
+  for (std::size_t b = 0; b < blocks.size(); b += 3) {
+    share_runs.push_back(std::uint32_t(et.faces_end(blocks[b]) - et.faces_begin(blocks[b])));
+    for (const std::uint32_t* f = et.faces_begin(blocks[b]); f != et.faces_end(blocks[b]); ++f)
+      share.faces.push_back(el->faces[*f]);
+  }
+  REQUIRE(share_runs.size() > 8);
+  const SphereTree grouped = SphereTree::build(share, {}, share_runs).value();
+  check_tree(share, grouped, share_runs);
+  // Apart blocks kept apart: every leaf lies within its block, so its sphere is no larger than
+  // the block's sphere in the elephant's own tree (the points of a subset; float padding aside).
+  std::vector<double> block_r;
+  for (std::size_t b = 0; b < blocks.size(); b += 3) block_r.push_back(et.nodes[blocks[b]].radius);
+  std::vector<std::uint32_t> block_end;
+  for (std::uint32_t at = 0; std::uint32_t n : share_runs) block_end.push_back(at += n);
+  for (const SphereNode& n : grouped.nodes)
+    if (n.leaf) {
+      const std::uint32_t f = grouped.face_order[n.first];
+      const std::size_t b = std::size_t(std::upper_bound(block_end.begin(), block_end.end(), f) - block_end.begin());
+      CHECK(n.radius <= block_r[b] * (1 + 1e-5));
+    }
+  // Runs that do not cover the faces are refused.
+  auto bad = SphereTree::build(three, {8}, std::vector<std::uint32_t>{runs[0], runs[1]});
+  REQUIRE(!bad.ok());
+  CHECK(bad.error().find("face groups cover") != std::string::npos);
 }
 
 TEST_CASE("SphereTree::build rejects bad input") {

@@ -45,7 +45,18 @@ TEST_CASE("a share holds its blocks' faces with global ids and only the vertices
     REQUIRE(bs.ok());
     const BlockSet& b = bs.value();
     REQUIRE(b.object.faces.size() == b.object_face_ids.size());
-    CHECK(std::is_sorted(b.object_face_ids.begin(), b.object_face_ids.end()));
+    // Faces block by block, each block's in ascending global order: exactly the block's faces.
+    REQUIRE(b.block_faces.size() == ids.size());
+    std::size_t at = 0;
+    for (std::size_t k = 0; k < ids.size(); ++k) {
+      const auto first = b.object_face_ids.begin() + static_cast<std::ptrdiff_t>(at);
+      const std::vector<std::uint32_t> got(first, first + b.block_faces[k]);
+      std::vector<std::uint32_t> want = s.blocks[b.blocks[k]];
+      std::sort(want.begin(), want.end());
+      CHECK(got == want);
+      at += b.block_faces[k];
+    }
+    CHECK(at == b.object_face_ids.size());
     for (std::size_t i = 0; i < b.object.faces.size(); ++i)
       for (int k = 0; k < 3; ++k)  // same doubles as the original: results cannot differ
         CHECK(b.object.vertex(b.object.faces[i][k]) == s.object.vertex(s.object.faces[b.object_face_ids[i]][k]));
@@ -102,7 +113,8 @@ TEST_CASE("hostile block sets: truncation at every offset, bad indices, order, c
   const std::size_t probe_faces_at = probe_nf_at + 4 + probe.local.size() * 24;
   const std::size_t obj_at = probe_faces_at + probe.faces.size() * 12;
   const std::size_t obj_faces_at = obj_at + 32 + bs.object.local.size() * 24;
-  const std::size_t ids_at = obj_faces_at + bs.object.faces.size() * 12;
+  const std::size_t counts_at = obj_faces_at + bs.object.faces.size() * 12;
+  const std::size_t ids_at = counts_at + 4 * ids.size();
   auto expect_error = [&](std::vector<std::uint8_t> b, const char* word) {
     INFO("expecting: " << std::string(word));
     auto d = decode_block_set(b, L);
@@ -128,6 +140,24 @@ TEST_CASE("hostile block sets: truncation at every offset, bad indices, order, c
     auto b = good;
     put_u32(b, ids_at + 4, bs.object_face_ids[0]);
     expect_error(b, "not above");
+  }
+  {
+    auto b = good;  // the first block's first face again as the second block's first (still ascending)
+    const std::uint32_t n0 = bs.block_faces[0];
+    REQUIRE((n0 >= 1 && bs.block_faces[1] >= 1));
+    REQUIRE((bs.block_faces[1] == 1 || bs.object_face_ids[0] < bs.object_face_ids[n0 + 1]));
+    put_u32(b, ids_at + 4 * n0, bs.object_face_ids[0]);
+    expect_error(b, "listed twice");
+  }
+  {
+    auto b = good;  // counts that do not add up to the share's faces
+    put_u32(b, counts_at, bs.block_faces[0] + 1);
+    expect_error(b, "block face count");
+  }
+  {
+    auto b = good;
+    put_u32(b, counts_at, 0xffffffffu);
+    expect_error(b, "exceed the share");
   }
   {
     auto b = good;
