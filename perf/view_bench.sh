@@ -4,7 +4,8 @@
 #   1. haptic misses of the same run (configs/demo.toml: hand_L2 x elephant) without a viewer and
 #      with the live view open in headless Chromium, interleaved, PAIRS times; also with the
 #      haptic thread at SCHED_FIFO 80 (what a deployment would set);
-#   2. the page's own frame rate while it draws that run (frames it counted / seconds);
+#   2. the page's own frame rate while it draws that run (frames it counted / seconds), with the
+#      object drawn once per camera move (the default) and every frame (?cache=0), same session;
 #   3. the UDP bridge's pose-to-force time on loopback (examples/udp_device_emulator.py at 1 kHz).
 # usage: perf/view_bench.sh [SECONDS] [PAIRS]    (default 12 s, 3 pairs); writes perf/results/view.json
 # and perf/results/view.png (the page's snapshot: README's screenshot).
@@ -25,8 +26,8 @@ cp "$work/demo_fifo.toml" configs/.view_bench_fifo.toml
 trap 'pkill -P $$ 2>/dev/null || true; rm -rf "$work" configs/.view_bench_fifo.toml' EXIT
 
 port=18080
-run_one() {  # scene viewer(0|1) label -> appends "label ticks misses fps frames secs" to $work/rows
-  local scene=$1 viewer=$2 label=$3 out="$work/run$RANDOM"
+run_one() {  # scene viewer(0|1) label [page query] -> appends "label ticks misses fps frames secs" to $work/rows
+  local scene=$1 viewer=$2 label=$3 query=${4:-snapshot=1&follow=1} out="$work/run$RANDOM"
   local args=(run "$scene" --duration "$secs" --out "$out")
   [ "$viewer" = 1 ] && args+=(--view "127.0.0.1:$port")
   build/spheretouch "${args[@]}" > "$out.log" 2>&1 &
@@ -37,7 +38,7 @@ run_one() {  # scene viewer(0|1) label -> appends "label ticks misses fps frames
     /usr/bin/chromium --headless=new --no-sandbox --disable-gpu --enable-unsafe-swiftshader --use-angle=swiftshader \
       --disable-quic --no-first-run --disable-background-networking --disable-component-update --disable-sync \
       --window-size=800,600 --remote-debugging-port=0 --user-data-dir="$work/profile$RANDOM" \
-      "http://127.0.0.1:$port/?snapshot=1&follow=1" > "$work/chromium.log" 2>&1 &
+      "http://127.0.0.1:$port/?$query" > "$work/chromium.log" 2>&1 &
     browser=$!
   fi
   wait "$pid" || true
@@ -49,7 +50,7 @@ run_one() {  # scene viewer(0|1) label -> appends "label ticks misses fps frames
     frames=$(sed -n 's/.*last second; \([0-9]*\) frames in \([0-9.]*\) s, \([0-9.]*\) fps.*/\1/p' "$out.log")
     vsecs=$(sed -n 's/.*last second; \([0-9]*\) frames in \([0-9.]*\) s, \([0-9.]*\) fps.*/\2/p' "$out.log")
     fps=$(sed -n 's/.*last second; \([0-9]*\) frames in \([0-9.]*\) s, \([0-9.]*\) fps.*/\3/p' "$out.log")
-    [ -f "$out/view.png" ] && cp "$out/view.png" perf/results/view.png
+    [ -f "$out/view.png" ] && [ "$label" = viewer ] && cp "$out/view.png" perf/results/view.png
   fi
   echo "$label ${ticks:-0} ${misses:-0} ${fps:-0} ${frames:-0} ${vsecs:-0}" >> "$work/rows"
   echo "view_bench: $label: ${ticks:-?} ticks, ${misses:-?} misses${fps:+, page ${fps} fps}" >&2
@@ -59,6 +60,7 @@ run_one() {  # scene viewer(0|1) label -> appends "label ticks misses fps frames
 for i in $(seq "$pairs"); do
   run_one configs/demo.toml 0 plain
   run_one configs/demo.toml 1 viewer
+  run_one configs/demo.toml 1 nocache_viewer "follow=1&cache=0"  # the page drawing the object every frame
   run_one configs/.view_bench_fifo.toml 0 fifo_plain
   run_one configs/.view_bench_fifo.toml 1 fifo_viewer
 done
@@ -88,9 +90,9 @@ for label, ticks, misses, fps, frames, vsecs in rows:
 out["totals"] = {k: {"ticks": v[0], "misses": v[1], "misses_per_10k": 1e4 * v[1] / max(1, v[0]),
                      **({"page_fps": v[2] / v[3]} if v[3] > 0 else {})} for k, v in agg.items()}
 json.dump(out, open("perf/results/view.json", "w"), indent=1)
-print("run          ticks   misses  misses/10k  page fps")
+print("run             ticks   misses  misses/10k  page fps")
 for k, v in out["totals"].items():
-    print(f"{k:12s} {v['ticks']:7d} {v['misses']:7d} {v['misses_per_10k']:10.1f}  {v.get('page_fps', float('nan')):8.1f}")
+    print(f"{k:15s} {v['ticks']:7d} {v['misses']:7d} {v['misses_per_10k']:10.1f}  {v.get('page_fps', float('nan')):8.1f}")
 for a, b in (("plain", "viewer"), ("fifo_plain", "fifo_viewer")):
     t = out["totals"]
     print(f"viewer adds {t[b]['misses_per_10k'] - t[a]['misses_per_10k']:.1f} misses per 10,000 ticks ({a} -> {b})")

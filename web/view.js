@@ -15,7 +15,8 @@
   renderer.setSize(window.innerWidth, window.innerHeight);
   renderer.setClearColor(0x15181c);
   document.getElementById('view').appendChild(renderer.domElement);
-  const scene = new THREE.Scene();
+  const scene = new THREE.Scene();        // what moves: the probe, the red faces, the force arrow
+  const stillScene = new THREE.Scene();   // what does not: the object
   const camera = new THREE.PerspectiveCamera(40, window.innerWidth / window.innerHeight, 0.1, 1e6);
   const controls = new THREE.OrbitControls(camera, renderer.domElement);
   scene.add(new THREE.AmbientLight(0xffffff, 0.35));
@@ -27,7 +28,69 @@
     camera.aspect = window.innerWidth / window.innerHeight;
     camera.updateProjectionMatrix();
     renderer.setSize(window.innerWidth, window.innerHeight);
+    still.key = '';
   });
+
+  // The object does not move in its own frame: it is drawn into a texture (colour and depth) only
+  // when the camera moves, and each frame composites that texture (writing its depth, so the probe
+  // is hidden where the object is in front of it) and draws the probe and the overlays over it.
+  // Software WebGL (SwiftShader: headless, or no GPU) pays per vertex, and the object is most of
+  // the vertices (elephant 85,532 faces against hand_L2's 38,240). Without the two WebGL 1
+  // extensions this needs, every frame draws the object.
+  // ?cache=0 draws the object every frame (to measure what the cache saves).
+  const still = { target: null, quad: null, key: '', draws: 0,
+                  ok: params.get('cache') !== '0' && !!(renderer.extensions.get('WEBGL_depth_texture') &&
+                                                          renderer.extensions.get('EXT_frag_depth')) };
+  const quadCamera = new THREE.OrthographicCamera(-1, 1, 1, -1, 0, 1);
+  const quadScene = new THREE.Scene();
+  function stillTarget() {
+    const size = renderer.getDrawingBufferSize(new THREE.Vector2());
+    if (still.target && still.target.width === size.x && still.target.height === size.y) return still.target;
+    if (still.target) still.target.dispose();
+    const t = new THREE.WebGLRenderTarget(size.x, size.y, {
+      minFilter: THREE.NearestFilter, magFilter: THREE.NearestFilter, format: THREE.RGBAFormat, stencilBuffer: false });
+    t.texture.generateMipmaps = false;
+    t.depthTexture = new THREE.DepthTexture(size.x, size.y);
+    t.depthTexture.type = THREE.UnsignedIntType;
+    if (!still.quad) {
+      still.quad = new THREE.Mesh(new THREE.PlaneBufferGeometry(2, 2), new THREE.ShaderMaterial({
+        uniforms: { tColor: { value: null }, tDepth: { value: null } },
+        vertexShader: 'varying vec2 vUv; void main() { vUv = uv; gl_Position = vec4(position.xy, 0.0, 1.0); }',
+        fragmentShader: 'uniform sampler2D tColor; uniform sampler2D tDepth; varying vec2 vUv;\n' +
+          'void main() { gl_FragColor = texture2D(tColor, vUv); gl_FragDepthEXT = texture2D(tDepth, vUv).x; }',
+        extensions: { fragDepth: true }, depthTest: true, depthWrite: true, depthFunc: THREE.AlwaysDepth }));
+      still.quad.frustumCulled = false;
+      quadScene.add(still.quad);
+    }
+    still.quad.material.uniforms.tColor.value = t.texture;
+    still.quad.material.uniforms.tDepth.value = t.depthTexture;
+    still.target = t;
+    still.key = '';
+    return t;
+  }
+  function draw() {
+    renderer.autoClear = false;
+    camera.updateMatrixWorld();
+    if (!still.ok) {
+      renderer.clear();
+      renderer.render(stillScene, camera);
+      renderer.render(scene, camera);
+      return;
+    }
+    const t = stillTarget();
+    const key = camera.matrixWorld.elements.join() + '|' + camera.projectionMatrix.elements.join();
+    if (key !== still.key) {  // the camera moved (or the meshes came): the object again
+      renderer.setRenderTarget(t);
+      renderer.clear();
+      renderer.render(stillScene, camera);
+      renderer.setRenderTarget(null);
+      still.key = key;
+      ++still.draws;
+    }
+    renderer.clear();
+    renderer.render(quadScene, quadCamera);
+    renderer.render(scene, camera);
+  }
 
   // Lighting baked into vertex colours (a fixed light over the object): software WebGL
   // (SwiftShader, headless or without a GPU) is bound by per-vertex work, and an unlit material
@@ -63,7 +126,7 @@
     const overlay = new THREE.Mesh(hg, red);
     overlay.frustumCulled = false;
     overlay.renderOrder = 10;
-    const group = new THREE.Group();
+    const group = new THREE.Group();  // the probe moves as one; the object's parts go to two scenes
     group.add(mesh);
     group.add(overlay);
     return { vertices, faces, mesh, overlay, group, count: 0 };
@@ -82,6 +145,8 @@
       }
     }
     body.overlay.geometry.setDrawRange(0, k / 3);
+    pos.updateRange.offset = 0;
+    pos.updateRange.count = Math.max(k, 1);  // upload what is drawn, not the whole buffer
     pos.needsUpdate = true;
     body.count = k / 9;
   }
@@ -110,16 +175,20 @@
     const take = (Type, n) => { const a = new Type(buf.slice(o, o + 4 * n)); o += 4 * n; return a; };
     const pv = take(Float32Array, 3 * pnv), pf = take(Uint32Array, 3 * pnf);
     const ov = take(Float32Array, 3 * onv), of = take(Uint32Array, 3 * onf);
-    if (object) scene.remove(object.group);
+    if (object) stillScene.remove(object.mesh), scene.remove(object.overlay);
     if (probe) scene.remove(probe.group);
     object = makeBody(ov, of, grey, [0.72, 0.70, 0.65]);
     probe = makeBody(pv, pf, blue, [0.50, 0.65, 0.85]);
     probe.group.matrixAutoUpdate = false;
-    scene.add(object.group);
+    stillScene.add(object.mesh);
+    scene.add(object.overlay);
     scene.add(probe.group);
     object.mesh.geometry.computeBoundingSphere();
     const bs = object.mesh.geometry.boundingSphere;
     radius = bs.radius;
+    camera.near = radius / 200;  // depth resolution where the bodies are, not over 0.1 mm .. 1 km
+    camera.far = radius * 200;
+    camera.updateProjectionMatrix();
     // From the front, a little above the object: a touch from above (the usual script) is seen
     // from the side, the red contact between the bodies in view.
     camera.position.set(bs.center.x + 1.9 * radius, bs.center.y - 2.8 * radius, bs.center.z + 0.9 * radius);
@@ -171,10 +240,15 @@
     highlight(probe, fr.probeFaces);
     const fmag = Math.hypot(fr.force[0], fr.force[1], fr.force[2]);
     if (follow && (fr.flags & 1)) {  // keep the camera's direction, centre the contact, 0.7 radii away
+      // ... when it has left the middle of the view (a tenth of the distance off centre): a camera
+      // that moved with every contact point would shake, and would redraw the object each frame.
       const c = new THREE.Vector3(fr.cp[0] - objectOrigin[0], fr.cp[1] - objectOrigin[1], fr.cp[2] - objectOrigin[2]);
-      const dir = camera.position.clone().sub(controls.target).normalize();
-      controls.target.copy(c);
-      camera.position.copy(c).addScaledVector(dir, 0.7 * radius);
+      const near = camera.position.distanceTo(controls.target) < 0.71 * radius;
+      if (!near || c.distanceTo(controls.target) > 0.07 * radius) {
+        const dir = camera.position.clone().sub(controls.target).normalize();
+        controls.target.copy(c);
+        camera.position.copy(c).addScaledVector(dir, 0.7 * radius);
+      }
     }
     if (fmag > 1e-3 && (fr.flags & 1)) {
       arrow.visible = true;
@@ -353,7 +427,7 @@
     if (last && fresh) apply(last);  // only what changed: a frame's overlays are rebuilt once
     fresh = false;
     controls.update();
-    renderer.render(scene, camera);
+    draw();
     ++drawn;
     ++fpsFrames;
     if (wantSnapshot && !snapshotSent && object && object.count >= 30 && now - meshAt > 300 &&
@@ -368,7 +442,8 @@
       if (ws && ws.readyState === 1)
         ws.send(JSON.stringify({ fps: fps, frames: drawn, seconds: (now - startedAt) / 1000, red: object ? object.count : 0 }));
     }
-    window.stView = { frames: drawn, fps: fps, red: object ? object.count : 0, connected: !!(ws && ws.readyState === 1) };
+    window.stView = { frames: drawn, fps: fps, red: object ? object.count : 0, objectDraws: still.draws,
+                      connected: !!(ws && ws.readyState === 1) };
   }
   requestAnimationFrame(tick);
 })();
