@@ -81,7 +81,7 @@ void run(const RunArgs& a) {
   if (!made) die(2, made.error());
   engine::RunEngine& run = *made.value();
 
-  // The live view: its frames come from the collision thread's feed, the figures from the status area.
+  // The live view: frames and figures come from the run's shared-memory status area.
   std::unique_ptr<view::ViewServer> viewer;
   if (run.pose_feed() && a.view.empty())
     die(2, s.file + ": device.kind = \"browser\" is driven from the live view's page: add --view [ADDR:PORT]");
@@ -89,8 +89,8 @@ void run(const RunArgs& a) {
     view::ViewServerConfig vc;
     vc.listen = a.view;
     vc.out_dir = run.run_dir();
-    Result<std::unique_ptr<view::ViewServer>> v = view::ViewServer::start(
-        vc, run.probe(), run.object(), run.enable_view(vc.rate_hz), run.shm_status(), run.pose_feed());
+    Result<std::unique_ptr<view::ViewServer>> v =
+        view::ViewServer::start(vc, run.probe(), run.object(), run.shm_status().view, run.shm_status(), run.pose_feed());
     if (!v) die(2, v.error());
     viewer = std::move(v).value();
     std::fprintf(stderr, "view: %s (open it in a browser)\n", viewer->url().c_str());

@@ -71,7 +71,7 @@ struct RunEngine::State {
   std::unique_ptr<rt::HapticServo> servo;
   std::unique_ptr<rt::HapticLoop> loop;
   std::unique_ptr<CollisionLoop> collision;
-  std::unique_ptr<ViewFeed> view;  // --view: frames for a live viewer
+  std::unique_ptr<ViewFeed> view;  // frames for a live viewer, into the segment's status area
   std::string script_file;         // split: the trajectory as a file for the servo process
   // Running.
   bool started = false, finished = false;
@@ -188,12 +188,16 @@ Status RunEngine::State::prepare() {
   law = std::make_unique<rt::ForceLaw>(made.value());
 
   // The triple buffers live in a named shared-memory segment in both modes, so `spheretouch
-  // monitor` can watch any run; with a split servo the servo process attaches to it.
+  // monitor` can watch any run; with a split servo the servo process attaches to it. The run
+  // says at once which scene and meshes it loaded (monitor --view loads the same).
+  const auto ref = std::make_unique<rt::SceneRef>(
+      scene_ref(opt.scene_path.empty() ? "" : std::filesystem::absolute(opt.scene_path).string(), probe, object));
   const std::string shm_name = opt.shm_name.empty() ? "/spheretouch-" + std::to_string(getpid()) : opt.shm_name;
   Result<std::unique_ptr<rt::ShmSegment>> segr = rt::ShmSegment::create(shm_name);
   if (!segr) return Error{segr.error()};
   shm = std::move(segr).value();
   rt::ShmStatus& status = shm->status();
+  status.scene.store(*ref);
 
   csv = dir + "/ticks.csv";
   rounds_csv = dir + "/rounds.csv";
@@ -236,6 +240,10 @@ Status RunEngine::State::prepare() {
   collision = std::make_unique<CollisionLoop>(probe, object, shm->poses(), shm->models(), collide_fn,
                                               s.collision_rate_hz, 0, s.contact);
   collision->publish_status_to(&status.collision);
+  // Every run publishes view frames, so that a live view (run --view, or monitor --view
+  // attached at any time) can show it.
+  view = std::make_unique<ViewFeed>(status.view);
+  collision->show_to(view.get());
   if (s.write_trace || s.write_perfetto)
     if (Status st = collision->write_rounds_csv(rounds_csv); !st) return st;
   silence = std::make_unique<SilenceWatch>(s.interp.stale_timeout_ns);
@@ -513,13 +521,6 @@ void RunEngine::save(RunReport& report) {
   }
 }
 
-ViewFeed& RunEngine::enable_view(double rate_hz) {
-  if (!s_->view) {
-    s_->view = std::make_unique<ViewFeed>(rate_hz);
-    s_->collision->show_to(s_->view.get());
-  }
-  return *s_->view;
-}
 rt::PoseFeedDevice* RunEngine::pose_feed() const { return s_->feed.get(); }
 const geom::Mesh& RunEngine::probe() const { return s_->probe; }
 const geom::Mesh& RunEngine::object() const { return s_->object; }

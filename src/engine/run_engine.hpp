@@ -22,7 +22,6 @@
 
 #include "engine/distributed.hpp"
 #include "engine/scene.hpp"
-#include "engine/view_feed.hpp"
 #include "rt/shm_status.hpp"
 #include "geom/result.hpp"
 
@@ -93,13 +92,12 @@ class RunEngine {
   /// asked for no trace; failures are added to `report`.
   void save(RunReport& report);
 
-  /// A live viewer's feed of the collision rounds (created on the first call; before start()).
-  ViewFeed& enable_view(double rate_hz = 60);
   /// [device] kind = "browser": the device the live view's page drives (null otherwise).
   rt::PoseFeedDevice* pose_feed() const;
-  const geom::Mesh& probe() const;          ///< the probe as loaded
-  const geom::Mesh& object() const;         ///< the object as loaded
-  const rt::ShmStatus& shm_status() const;  ///< the run's status area (servo and collision)
+  const geom::Mesh& probe() const;   ///< the probe as loaded
+  const geom::Mesh& object() const;  ///< the object as loaded
+  /// The run's status area: servo and collision status, the scene reference and the view frames.
+  const rt::ShmStatus& shm_status() const;
   const Scene& scene() const;
   std::string split() const;               ///< how the object was dealt to workers and why ("" without workers)
   const std::string& backend() const;      ///< "in the collision thread", "2 in-process workers", ...

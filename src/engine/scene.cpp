@@ -2,6 +2,8 @@
 #include "engine/scene.hpp"
 
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <limits>
 #include <fstream>
@@ -385,6 +387,38 @@ Result<geom::Mesh> load_body(const BodySpec& b, const std::string& field) {
   Result<geom::LoadedMesh> r = geom::load_mesh(b.mesh, o);
   if (!r) return fail("[", field, "] ", r.error());
   return std::move(r.value().mesh);
+}
+
+rt::SceneRef scene_ref(const std::string& scene_path, const geom::Mesh& probe, const geom::Mesh& object) {
+  rt::SceneRef r;
+  if (scene_path.size() < rt::SceneRef::kMaxPath) std::memcpy(r.scene_path, scene_path.c_str(), scene_path.size() + 1);
+  r.probe_hash = geom::mesh_hash(probe);
+  r.object_hash = geom::mesh_hash(object);
+  r.probe_vertices = std::uint32_t(probe.num_vertices());
+  r.probe_faces = std::uint32_t(probe.num_faces());
+  r.object_vertices = std::uint32_t(object.num_vertices());
+  r.object_faces = std::uint32_t(object.num_faces());
+  return r;
+}
+
+std::string compare_scene_ref(const rt::SceneRef& ref, const geom::Mesh& probe, const geom::Mesh& object) {
+  std::string out;
+  auto body = [&out](const char* what, const geom::Mesh& m, std::uint32_t nv, std::uint32_t nf, std::uint64_t hash) {
+    if (!out.empty()) return;
+    char line[256];
+    if (m.num_vertices() != nv || m.num_faces() != nf)
+      std::snprintf(line, sizeof line, "the %s has %zu vertices and %zu faces, the run's had %u and %u", what,
+                    m.num_vertices(), m.num_faces(), nv, nf);
+    else if (geom::mesh_hash(m) != hash)
+      std::snprintf(line, sizeof line, "the %s has the run's %zu vertices and %zu faces but other coordinates or faces",
+                    what, m.num_vertices(), m.num_faces());
+    else
+      return;
+    out = line;
+  };
+  body("probe", probe, ref.probe_vertices, ref.probe_faces, ref.probe_hash);
+  body("object", object, ref.object_vertices, ref.object_faces, ref.object_hash);
+  return out;
 }
 
 }  // namespace st::engine

@@ -15,6 +15,7 @@
 #include "rt/interpolator.hpp"
 #include "rt/passivity.hpp"
 #include "rt/saturation.hpp"
+#include "rt/shm_status.hpp"
 #include "rt/simulated_device.hpp"
 #include "rt/udp_device.hpp"
 
@@ -102,5 +103,13 @@ geom::Pose probe_grip(const Scene& s, const geom::Mesh& probe);
 
 /// Loads (or generates) a body; errors name the scene field.
 Result<geom::Mesh> load_body(const BodySpec& spec, const std::string& field);
+
+/// What a run records in its segment about its scene and meshes (rt::SceneRef): `scene_path`
+/// (absolute; "" = none, and a path longer than SceneRef::kMaxPath - 1 is recorded as none) and
+/// the meshes' counts and geom::mesh_hash.
+rt::SceneRef scene_ref(const std::string& scene_path, const geom::Mesh& probe, const geom::Mesh& object);
+/// "" when `probe` and `object` are the meshes `ref` describes, else what differs (counts, or the
+/// same counts and other coordinates or faces).
+std::string compare_scene_ref(const rt::SceneRef& ref, const geom::Mesh& probe, const geom::Mesh& object);
 
 }  // namespace st::engine

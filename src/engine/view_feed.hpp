@@ -1,51 +1,37 @@
-// ViewFeed: what the collision thread shows a live viewer (spheretouch run --view): the newest
-// round's pose, its colliding probe and object faces and the contact model, at most `rate_hz`
-// times a second. The collision thread fills a frame only when one is due (a few tens of
-// microseconds each time, not every round) and publishes it through a triple buffer: it never
-// waits for the viewer, and the viewer never sees a frame being written.
+// ViewFeed: what the collision thread shows a live viewer: the newest round's pose, its colliding
+// probe and object faces and the contact model, at most rt::kViewRateHz times a second, as an
+// rt::ViewFrame stored into the run's shared-memory status area (ShmStatus::view, a SeqLock).
+// Every run publishes frames, so the run's own view (`run --view`) and a monitor attached at any
+// time (`monitor --view`) read the same ones. The collision thread fills a frame only when one is
+// due (a few tens of microseconds each time, not every round) and stores only the part in use:
+// it never waits for a viewer, and a viewer never sees a frame being written.
 #pragma once
 #include <algorithm>
-#include <atomic>
 #include <cstdint>
+#include <cstring>
+#include <memory>
 #include <span>
 
 #include "geom/contact.hpp"
 #include "rt/clock.hpp"
-#include "rt/triple_buffer.hpp"
+#include "rt/seqlock.hpp"
+#include "rt/view_frame.hpp"
 
 namespace st::engine {
 
-/// Colliding faces a frame carries per body; more are counted (ViewFrame::kTruncated).
-inline constexpr std::uint32_t kViewMaxFaces = 16384;
-
-struct ViewFrame {
-  static constexpr std::uint32_t kInContact = 1, kTruncated = 2;
-  std::uint64_t round = 0;                                 ///< collision round (0: no frame yet)
-  std::uint64_t pose_seq = 0;                              ///< the pose it answered
-  std::int64_t made_ns = 0;                                ///< when the frame was filled, CLOCK_MONOTONIC
-  double pose[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};  ///< probe → object file coordinates, rows of [R | t]
-  double force_dir[3] = {};                                ///< the contact model's FD
-  double contact_point[3] = {};                            ///< its contact point, object file coordinates
-  double penetration_mm = 0;                               ///< its PD
-  double round_ms = 0;                                     ///< the round's time
-  std::uint32_t contacts = 0;                              ///< paper §3.5 contacts
-  std::uint32_t flags = 0;                                 ///< kInContact, kTruncated
-  std::uint32_t n_probe = 0, n_object = 0;                 ///< colliding faces listed below (distinct, ascending)
-  std::uint32_t probe_faces[kViewMaxFaces];
-  std::uint32_t object_faces[kViewMaxFaces];
-};
-static_assert(std::is_trivially_copyable_v<ViewFrame>);
-
 class ViewFeed {
  public:
-  explicit ViewFeed(double rate_hz = 60) : period_ns_(std::int64_t(1e9 / std::max(1.0, rate_hz))) {}
-  /// Collision thread, after each round: fills and publishes a frame when one is due.
+  /// Frames go to `out` (the run's ShmStatus::view), at most `rate_hz` a second.
+  explicit ViewFeed(rt::SeqLock<rt::ViewFrame>& out, double rate_hz = rt::kViewRateHz)
+      : out_(out), period_ns_(std::int64_t(1e9 / std::max(1.0, rate_hz))), frame_(std::make_unique<rt::ViewFrame>()) {}
+  /// Collision thread, after each round: fills and publishes a frame when one is due. No
+  /// allocation, no lock; the store is one pass over the frame's used words.
   void offer(std::uint64_t round, std::uint64_t pose_seq, const geom::Pose& pose, std::span<const geom::FacePair> pairs,
              const geom::ContactModel& m, std::int64_t round_ns) noexcept {
     const std::int64_t now = rt::now_ns();
     if (now - last_ns_ < period_ns_) return;
     last_ns_ = now;
-    ViewFrame& f = frames_.input();
+    rt::ViewFrame& f = *frame_;
     f.round = round;
     f.pose_seq = pose_seq;
     f.made_ns = now;
@@ -58,25 +44,25 @@ class ViewFeed {
     f.penetration_mm = m.penetration_mm;
     f.round_ms = double(round_ns) * 1e-6;
     f.contacts = m.contacts;
-    f.flags = m.in_contact() ? ViewFrame::kInContact : 0;
-    f.n_probe = f.n_object = 0;
+    f.flags = m.in_contact() ? rt::ViewFrame::kInContact : 0;
+    // Probe ids in the first half, object ids in the second; each made distinct, then the
+    // object's moved down behind the probe's.
+    std::uint32_t* probe = f.faces;
+    std::uint32_t* object = f.faces + rt::kViewMaxFaces;
+    std::uint32_t n = 0;
     for (const geom::FacePair& p : pairs) {
-      if (f.n_probe == kViewMaxFaces || f.n_object == kViewMaxFaces) {
-        f.flags |= ViewFrame::kTruncated;
+      if (n == rt::kViewMaxFaces) {
+        f.flags |= rt::ViewFrame::kTruncated;
         break;
       }
-      f.probe_faces[f.n_probe++] = p.probe;
-      f.object_faces[f.n_object++] = p.object;
+      probe[n] = p.probe;
+      object[n] = p.object;
+      ++n;
     }
-    f.n_probe = distinct(f.probe_faces, f.n_probe);
-    f.n_object = distinct(f.object_faces, f.n_object);
-    frames_.publish();
-  }
-  /// Viewer thread: the newest frame, if one came since the last call.
-  bool take(ViewFrame& out) noexcept {
-    if (!frames_.update()) return false;
-    out = frames_.output();
-    return true;
+    f.n_probe = distinct(probe, n);
+    f.n_object = distinct(object, n);
+    std::memmove(f.faces + f.n_probe, object, 4 * std::size_t(f.n_object));
+    out_.store(f, f.used_bytes());
   }
 
  private:
@@ -84,9 +70,10 @@ class ViewFeed {
     std::sort(a, a + n);
     return std::uint32_t(std::unique(a, a + n) - a);
   }
+  rt::SeqLock<rt::ViewFrame>& out_;
   std::int64_t period_ns_;
   std::int64_t last_ns_ = 0;
-  rt::TripleBuffer<ViewFrame> frames_;
+  std::unique_ptr<rt::ViewFrame> frame_;  // filled here, then stored (128 KiB: not on the stack)
 };
 
 }  // namespace st::engine

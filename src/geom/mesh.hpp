@@ -67,6 +67,11 @@ struct Mesh {
   Status validate() const;
 };
 
+/// 64-bit hash of the mesh's origin, local vertices and faces, bytes as stored (not
+/// cryptographic): tells whether two loads gave the same mesh (`spheretouch monitor --view`
+/// checks the scene file still gives the run's meshes).
+std::uint64_t mesh_hash(const Mesh& mesh);
+
 /// Builds a mesh from vertex positions in the body's frame (recentred) and faces.
 Mesh make_mesh(std::string name, const std::vector<Vec3>& positions, std::vector<Tri> faces);
 

@@ -38,8 +38,9 @@ struct alignas(kCacheLine) ShmHeader {
 inline constexpr std::uint64_t kShmMagic = 0x3154524D48535453ull;
 /// Bump on any change of ShmHeader, ShmLayout, PoseSample, ContactModel or ShmStatus.
 /// 2: the status area (ShmStatus) after the triple buffers. 3: ContactModel 288 B (contact model
-/// kind, inside vertex counts).
-inline constexpr std::uint32_t kShmLayoutVersion = 3;
+/// kind, inside vertex counts). 4: ShmStatus ends with the scene reference and the view frame
+/// (SceneRef, ViewFrame: the live view reads the segment).
+inline constexpr std::uint32_t kShmLayoutVersion = 4;
 
 /// The whole segment.
 struct ShmLayout {

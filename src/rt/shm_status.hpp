@@ -1,13 +1,17 @@
 // ShmStatus: the live status area of the shared-memory segment (after the two triple buffers).
-// The haptic servo and the collision thread each publish a small struct through a SeqLock, so
-// any number of read-only attachers (`spheretouch monitor`, the run's own status line) can
-// watch a session without consuming the triple buffers' single reader's updates.
+// The haptic servo and the collision thread each publish a small struct through a SeqLock, the
+// collision thread also a view frame (ViewFrame), and the run says once which scene and meshes
+// it loaded (SceneRef), so any number of read-only attachers (`spheretouch monitor`, its
+// `--view`, the run's own status line and view) can watch a session without consuming the
+// triple buffers' single reader's updates.
 #pragma once
 #include <atomic>
+#include <cstddef>
 #include <cstdint>
 #include <type_traits>
 
 #include "rt/seqlock.hpp"
+#include "rt/view_frame.hpp"
 
 namespace st::rt {
 
@@ -44,6 +48,19 @@ struct CollisionStatus {
 };
 static_assert(std::is_trivially_copyable_v<CollisionStatus> && sizeof(CollisionStatus) == 56);
 
+/// Which scene file and meshes the run loaded, written once before it starts: a monitor serving
+/// the live view (`spheretouch monitor --view`) loads the same meshes from the file and checks
+/// them against the counts and hashes (the file may have changed since). No command-line flag of
+/// `run` changes the meshes, so the file is all it needs.
+struct SceneRef {
+  static constexpr std::size_t kMaxPath = 4096;  ///< PATH_MAX on Linux, with the NUL
+  char scene_path[kMaxPath] = {};                ///< absolute, NUL-terminated; "" = none (not from a file, or too long)
+  std::uint64_t probe_hash = 0, object_hash = 0;        ///< geom::mesh_hash of each body as loaded
+  std::uint32_t probe_vertices = 0, probe_faces = 0;    ///< the probe's counts
+  std::uint32_t object_vertices = 0, object_faces = 0;  ///< the object's counts
+};
+static_assert(std::is_trivially_copyable_v<SceneRef> && sizeof(SceneRef) == 4128);
+
 /// Servo process states, in ShmStatus::servo_state.
 enum class ServoState : std::uint32_t { none = 0, starting = 1, running = 2, finished = 3 };
 
@@ -56,6 +73,8 @@ struct alignas(kCacheLine) ShmStatus {
   std::atomic<std::uint32_t> collision_lost{0};     ///< servo's verdict: 1 collision side silent, 2 dead
   SeqLock<ServoStatus> servo;                       ///< written by the servo tick
   SeqLock<CollisionStatus> collision;               ///< written by the collision thread
+  SeqLock<SceneRef> scene;                          ///< written once, before the run starts
+  SeqLock<ViewFrame> view;                          ///< written by the collision thread, at most kViewRateHz
 };
 
 /// The servo publishes its status every this many ticks: 100 Hz at 1 kHz, plenty for a display,

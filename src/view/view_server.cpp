@@ -65,12 +65,12 @@ std::string check_listen(const std::string& listen) {
 }
 
 Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& c, const geom::Mesh& probe,
-                                                      const geom::Mesh& object, engine::ViewFeed& feed,
+                                                      const geom::Mesh& object, const rt::SeqLock<rt::ViewFrame>& frames,
                                                       const rt::ShmStatus& status, rt::PoseFeedDevice* device) {
   if (const std::string bad = check_listen(c.listen); !bad.empty()) return fail(bad);
   const auto colon = c.listen.rfind(':');
   if (!(c.rate_hz > 0 && c.rate_hz <= 240)) return fail("--view: rate must be in (0, 240] frames per second");
-  std::unique_ptr<ViewServer> s(new ViewServer(c, probe, object, feed, status, device));
+  std::unique_ptr<ViewServer> s(new ViewServer(c, probe, object, frames, status, device));
   Result<std::string> three = slurp(c.three_dir + "/three.min.js");
   if (!three) return Error{three.error()};
   Result<std::string> controls = slurp(c.three_dir + "/examples/js/controls/OrbitControls.js");
@@ -118,8 +118,8 @@ Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& c,
 }
 
 ViewServer::ViewServer(const ViewServerConfig& c, const geom::Mesh& probe, const geom::Mesh& object,
-                       engine::ViewFeed& feed, const rt::ShmStatus& status, rt::PoseFeedDevice* device)
-    : config_(c), probe_(probe), object_(object), feed_(feed), status_(status), device_(device) {}
+                       const rt::SeqLock<rt::ViewFrame>& frames, const rt::ShmStatus& status, rt::PoseFeedDevice* device)
+    : config_(c), probe_(probe), object_(object), frames_(frames), status_(status), device_(device) {}
 
 ViewServer::~ViewServer() {
   stop_.store(true);
@@ -162,6 +162,12 @@ void ViewServer::note_bad(const std::string& why) {
   std::lock_guard<std::mutex> l(mu_);
   if (stats_.bad_messages++ == 0)
     std::fprintf(stderr, "view: a page sent a bad message (%s); further ones are counted\n", why.c_str());
+}
+
+void ViewServer::note_bad_frame(const char* why) {
+  std::lock_guard<std::mutex> l(mu_);
+  if (stats_.bad_frames++ == 0)
+    std::fprintf(stderr, "view: a frame failed its checks (%s): not sent; further ones are counted\n", why);
 }
 
 int ViewServer::data(mg_connection* conn, int bits, const char* data, std::size_t len) {
@@ -230,7 +236,9 @@ int ViewServer::handle(mg_connection* conn, int opcode, const char* data, std::s
   }
   if (opcode == MG_WEBSOCKET_OPCODE_BINARY && len >= 4 && std::memcmp(data, "STVP", 4) == 0) {
     if (!device_ || len != 64) {
-      note_bad(device_ ? "a pose message is 64 bytes" : "a pose, but this run's device is not the browser");
+      note_bad(device_ ? "a pose message is 64 bytes"
+                       : "a pose, but this view drives no device (the run's device is not the browser, or this "
+                         "is a monitor's read-only view)");
       return 1;
     }
     bool mine = false;
@@ -286,23 +294,37 @@ void ViewServer::closed(const mg_connection* conn) {
 }
 
 void ViewServer::push() {
-  auto frame = std::make_unique<engine::ViewFrame>();
+  // The frame sent (the newest good one) and the one being read; 128 KiB each, not on the stack.
+  auto frame = std::make_unique<rt::ViewFrame>(), next = std::make_unique<rt::ViewFrame>();
   frame->n_probe = frame->n_object = 0;
+  const auto probe_faces = std::uint32_t(probe_.faces.size()), object_faces = std::uint32_t(object_.faces.size());
+  std::uint64_t seen = 0;  // the frames' SeqLock version last read
   std::vector<std::uint8_t> msg;
   const std::int64_t t0 = rt::now_ns();
   const auto period = std::chrono::nanoseconds(std::int64_t(1e9 / config_.rate_hz));
-  auto next = std::chrono::steady_clock::now();
+  auto next_at = std::chrono::steady_clock::now();
   std::vector<mg_connection*> to;
   while (!stop_.load(std::memory_order_relaxed)) {
-    next += period;
-    std::this_thread::sleep_until(next);
-    if (std::chrono::steady_clock::now() - next > 4 * period) next = std::chrono::steady_clock::now();
+    next_at += period;
+    std::this_thread::sleep_until(next_at);
+    if (std::chrono::steady_clock::now() - next_at > 4 * period) next_at = std::chrono::steady_clock::now();
     {
       std::lock_guard<std::mutex> l(mu_);
       to = clients_;
     }
     if (to.empty()) continue;
-    feed_.take(*frame);  // the newest frame, or the last one again
+    // The newest frame if one came (a few tries: a writer that keeps the SeqLock busy costs this
+    // thread little), checked; else the last good one again.
+    if (const std::uint64_t v = frames_.version(); v != seen) {
+      seen = v;
+      const char* why = "";
+      if (frames_.load(*next, 8)) {
+        if (rt::sanitize_view_frame(*next, probe_faces, object_faces, &why))
+          std::swap(frame, next);
+        else
+          note_bad_frame(why);
+      }
+    }
     rt::ServoStatus servo{};
     status_.servo.load(servo);
     rt::CollisionStatus col{};
@@ -331,8 +353,7 @@ void ViewServer::push() {
     w.u32(frame->n_probe);
     w.u32(frame->n_object);
     w.u32(0);
-    w.raw(frame->probe_faces, 4 * std::size_t(frame->n_probe));
-    w.raw(frame->object_faces, 4 * std::size_t(frame->n_object));
+    w.raw(frame->faces, 4 * (std::size_t(frame->n_probe) + frame->n_object));
     std::uint64_t sent = 0, bytes = 0;
     for (mg_connection* c : to) {
       std::lock_guard<std::mutex> l(mu_);  // a connection closed meanwhile is no longer listed
@@ -365,6 +386,7 @@ std::string ViewServer::summary() const {
                 s.page_seconds > 0 ? double(s.page_frames) / s.page_seconds : 0.0, s.snapshots ? ", snapshot view.png" : "",
                 s.bad_messages ? (", " + std::to_string(s.bad_messages) + " bad messages refused").c_str() : "");
   std::string out = line;
+  if (s.bad_frames) out += ", " + std::to_string(s.bad_frames) + " bad frames not sent";
   if (device_) out += "; browser device: " + std::to_string(s.poses) + " poses taken";
   return out;
 }

@@ -1,12 +1,17 @@
-// ViewServer: the live view of a run (spheretouch run --view). An embedded HTTP/WebSocket server
-// (civetweb) serves a page (web/view.html, web/view.js, three.js from Debian's libjs-three) that
-// draws the object and the probe as shaded meshes, the colliding faces in red, the force as an
-// arrow, the status figures and a plot of |F| over the last seconds.
+// ViewServer: the live view of a run (spheretouch run --view, spheretouch monitor --view). An
+// embedded HTTP/WebSocket server (civetweb) serves a page (web/view.html, web/view.js, three.js
+// from Debian's libjs-three) that draws the object and the probe as shaded meshes, the colliding
+// faces in red, the force as an arrow, the status figures and a plot of |F| over the last seconds.
 //
-// Data path: the collision thread offers frames to a ViewFeed (triple buffer, at most rate_hz);
-// the servo's and collision thread's status come from the run's shared-memory status area
-// (seqlocks). This server's own thread reads both and writes each frame to every connected page;
-// neither real-time thread ever waits for it, and a slow page only slows its own connection.
+// Data path: every run's collision thread stores a frame (rt::ViewFrame, at most 60 a second)
+// into its shared-memory status area (ShmStatus::view, a SeqLock) next to the servo's and its
+// own status. This server's thread reads the frames (a new one when the SeqLock's version moved)
+// and the status and writes each frame to every connected page; neither real-time thread ever
+// waits for it, and a slow page only slows its own connection. `run --view` hands it the run's
+// own status area; `monitor --view` a process-local copy that its main thread refreshes from the
+// read-only mapping (so only that thread, with its SIGBUS guard armed, touches the mapping).
+// A frame is checked before it is sent (rt::sanitize_view_frame: counts within the frame, face
+// ids within the meshes, numbers finite): one that fails is not sent and is counted.
 //
 // WebSocket /ws, binary messages, little-endian (web/view.js reads them):
 //   server -> page, once: "STVM" u32 version, f64 object origin[3], f64 probe origin[3],
@@ -29,11 +34,12 @@
 #include <thread>
 #include <vector>
 
-#include "engine/view_feed.hpp"
 #include "geom/mesh.hpp"
 #include "geom/result.hpp"
 #include "rt/pose_feed_device.hpp"
+#include "rt/seqlock.hpp"
 #include "rt/shm_status.hpp"
+#include "rt/view_frame.hpp"
 
 struct mg_context;
 struct mg_connection;
@@ -57,6 +63,7 @@ struct ViewStats {
   std::uint64_t page_reports = 0;  ///< reports received
   std::uint64_t snapshots = 0;     ///< view.png written
   std::uint64_t bad_messages = 0;  ///< messages from a page that were refused
+  std::uint64_t bad_frames = 0;    ///< frames that failed their checks (rt::sanitize_view_frame), not sent
   std::uint64_t poses = 0;         ///< browser device: poses a page sent that were taken
 };
 
@@ -66,10 +73,11 @@ std::string check_listen(const std::string& listen);
 
 class ViewServer {
  public:
-  /// Starts serving. The meshes, feed and status must outlive the server.
-  /// `device` (may be null): the run's browser device, which the first page to send a pose drives.
+  /// Starts serving. The meshes, frames and status must outlive the server; the frames' face ids
+  /// refer to these meshes. `device` (may be null): the run's browser device, which the first
+  /// page to send a pose drives (a monitor's view passes null: the run owns its device).
   static Result<std::unique_ptr<ViewServer>> start(const ViewServerConfig& config, const geom::Mesh& probe,
-                                                   const geom::Mesh& object, engine::ViewFeed& feed,
+                                                   const geom::Mesh& object, const rt::SeqLock<rt::ViewFrame>& frames,
                                                    const rt::ShmStatus& status, rt::PoseFeedDevice* device = nullptr);
   ~ViewServer();
   ViewServer(const ViewServer&) = delete;
@@ -87,15 +95,16 @@ class ViewServer {
   int handle(mg_connection* conn, int opcode, const char* data, std::size_t len);  // a whole message
 
  private:
-  ViewServer(const ViewServerConfig& c, const geom::Mesh& probe, const geom::Mesh& object, engine::ViewFeed& feed,
-             const rt::ShmStatus& status, rt::PoseFeedDevice* device);
+  ViewServer(const ViewServerConfig& c, const geom::Mesh& probe, const geom::Mesh& object,
+             const rt::SeqLock<rt::ViewFrame>& frames, const rt::ShmStatus& status, rt::PoseFeedDevice* device);
   void push();  // the writer thread
   void note_bad(const std::string& why);
+  void note_bad_frame(const char* why);
 
   ViewServerConfig config_;
   const geom::Mesh& probe_;
   const geom::Mesh& object_;
-  engine::ViewFeed& feed_;
+  const rt::SeqLock<rt::ViewFrame>& frames_;
   const rt::ShmStatus& status_;
   rt::PoseFeedDevice* device_;             // the browser device, or null
   const mg_connection* driver_ = nullptr;  // the page driving it (under mu_)

@@ -4,10 +4,13 @@
 
 #include <chrono>
 #include <fstream>
+#include <memory>
 #include <sstream>
 #include <thread>
 
 #include "engine/run_engine.hpp"
+#include "geom/primitives.hpp"
+#include "rt/view_frame.hpp"
 #include "test_util.hpp"
 
 namespace {
@@ -62,6 +65,17 @@ TEST_CASE("run engine: prepare, start, poll, finish and save without the command
 
   st::engine::RunReport report = run.finish(0);
   CHECK(report.failures.empty());
+  // Every run published view frames of its meshes and its scene reference (no scene file here).
+  auto frame = std::make_unique<st::rt::ViewFrame>();
+  REQUIRE(run.shm_status().view.load(*frame));
+  CHECK(frame->round > 0);
+  CHECK(st::rt::sanitize_view_frame(*frame, std::uint32_t(run.probe().num_faces()),
+                                    std::uint32_t(run.object().num_faces())));
+  st::rt::SceneRef ref;
+  REQUIRE(run.shm_status().scene.load(ref));
+  CHECK(std::string(ref.scene_path).empty());
+  CHECK(ref.object_faces == run.object().num_faces());
+  CHECK(st::engine::compare_scene_ref(ref, run.probe(), run.object()).empty());
   CHECK(report.summary.rfind("summary\n", 0) == 0);
   CHECK(report.summary.find("in the collision thread") != std::string::npos);
   CHECK(report.summary.find("outputs         " + out + "/") != std::string::npos);
@@ -121,4 +135,20 @@ TEST_CASE("run engine: prepare fails with an error naming the field; nothing is 
   auto no_file = st::engine::RunEngine::prepare(scene.value(), split);
   REQUIRE_FALSE(no_file.ok());
   CHECK(no_file.error().find("scene_path") != std::string::npos);
+}
+
+TEST_CASE("scene reference: records the path and the meshes; tells other meshes apart") {
+  const st::geom::Mesh probe = st::geom::make_capsule(6, 30, 24);
+  st::geom::Mesh object = st::geom::make_icosphere(40, 12);
+  const st::rt::SceneRef ref = st::engine::scene_ref("/some/scene.toml", probe, object);
+  CHECK(std::string(ref.scene_path) == "/some/scene.toml");
+  CHECK(ref.probe_faces == probe.num_faces());
+  CHECK(ref.object_vertices == object.num_vertices());
+  CHECK(st::engine::compare_scene_ref(ref, probe, object).empty());
+  CHECK(st::engine::compare_scene_ref(ref, probe, st::geom::make_icosphere(40, 13)).find("the object has ") == 0);
+  object.local[17].x() += 1e-9;  // one coordinate, one ulp-ish: another mesh
+  CHECK(st::engine::compare_scene_ref(ref, probe, object).find("other coordinates") != std::string::npos);
+  CHECK(st::engine::compare_scene_ref(ref, object, object).find("the probe has ") == 0);
+  const std::string long_path(st::rt::SceneRef::kMaxPath, 'x');  // too long to record: none
+  CHECK(std::string(st::engine::scene_ref(long_path, probe, object).scene_path).empty());
 }

@@ -14,10 +14,15 @@
 #include <sstream>
 
 #include "app/process_util.hpp"
+#include "app/view_client.hpp"
 #include "doctest/doctest.h"
 #include "test_util.hpp"
 
 namespace {
+
+using st::test::view_at;
+using st::test::view_on_data;
+using st::test::ViewMessages;
 
 /// Starts a pressing run with --view on a free port; returns its pid once the view is up.
 pid_t view_start_run(const st::test::TempDir& d, int port, double seconds, const std::string& object,
@@ -71,26 +76,6 @@ std::pair<int, std::string> view_get(int port, const std::string& path) {
   for (int n; (n = mg_read(c, buf, sizeof buf)) > 0;) body.append(buf, std::size_t(n));
   mg_close_connection(c);
   return {code, body};
-}
-
-struct ViewMessages {
-  std::mutex mu;
-  std::vector<std::string> binary;
-};
-int view_on_data(mg_connection*, int bits, char* data, std::size_t len, void* user) {
-  auto* m = static_cast<ViewMessages*>(user);
-  if ((bits & 0x0f) == MG_WEBSOCKET_OPCODE_BINARY) {
-    std::lock_guard<std::mutex> l(m->mu);
-    m->binary.emplace_back(data, len);
-  }
-  return 1;
-}
-
-template <class T>
-T view_at(const std::string& s, std::size_t off) {
-  T v;
-  std::memcpy(&v, s.data() + off, sizeof v);
-  return v;
 }
 
 /// A run with --view (a long one: the simulated device repeats its press) and headless Chromium
@@ -172,25 +157,8 @@ TEST_CASE("run --view: the page and scripts are served; the stream carries the m
   CHECK(onf == 2880);  // icosphere, frequency 12: 20 · 12²
   CHECK(mesh.size() == 72 + 12 * std::size_t(pnv + pnf + onv + onf));
   // Then frames: face ids in range, distinct and ascending; contact seen, its faces listed.
-  std::size_t frames = 0, with_faces = 0;
-  for (std::size_t i = 1; i < msgs.binary.size(); ++i) {
-    const std::string& f = msgs.binary[i];
-    REQUIRE(f.size() >= 248);
-    REQUIRE(f.compare(0, 4, "STVF") == 0);
-    ++frames;
-    const std::uint32_t np = view_at<std::uint32_t>(f, 236), no = view_at<std::uint32_t>(f, 240);
-    REQUIRE(f.size() == 248 + 4 * std::size_t(np + no));
-    const std::uint32_t flags = view_at<std::uint32_t>(f, 4);
-    if (no > 0) {
-      ++with_faces;
-      CHECK((flags & 1) != 0);                           // in contact
-      CHECK(view_at<std::uint32_t>(f, 232) == np + no);  // contacts = distinct colliding faces (paper §3.5)
-    }
-    for (std::uint32_t k = 0; k < np; ++k) CHECK(view_at<std::uint32_t>(f, 248 + 4 * k) < pnf);
-    for (std::uint32_t k = 1; k < no; ++k)
-      CHECK(view_at<std::uint32_t>(f, 248 + 4 * (np + k - 1)) < view_at<std::uint32_t>(f, 248 + 4 * (np + k)));
-    for (std::uint32_t k = 0; k < no; ++k) CHECK(view_at<std::uint32_t>(f, 248 + 4 * (np + k)) < onf);
-  }
+  const st::test::ViewFrameCounts counts = st::test::view_check_frames(msgs.binary, 1, pnf, onf);
+  const std::size_t frames = counts.frames, with_faces = counts.with_faces;
   CHECK(frames > 20);
   CHECK(with_faces > 5);
   CHECK(st::test::contains(log, "page drew 42.5 fps (last second; 17 frames in 0.0 s"));

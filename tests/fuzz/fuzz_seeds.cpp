@@ -5,10 +5,12 @@
 // Scene and pose seeds are copies of real files (configs/*.toml, perf/poses/). Usage:
 //   build-fuzz/tests/fuzz/fuzz_seeds tests/fuzz/corpus
 // (overwrites the seed_* files it writes; run from any build, it needs no libFuzzer).
+#include <algorithm>
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -214,6 +216,16 @@ void shm_seeds(const fs::path& dir) {
   m.force_dir = geom::to_pod(geom::Vec3(0, 0, 1));
   m.penetration_mm = 0.8;
   seg.value()->models().write(m);
+  // A view frame with a few faces (what a run publishes for a live view).
+  auto f = std::make_unique<rt::ViewFrame>();
+  f->round = 3;
+  f->flags = rt::ViewFrame::kInContact;
+  f->n_probe = 2;
+  f->n_object = 3;
+  const std::uint32_t faces[5] = {1, 4, 10, 11, 12};
+  std::copy(faces, faces + 5, f->faces);
+  f->contacts = 5;
+  seg.value()->status().view.store(*f, f->used_bytes());
   const int fd = ::shm_open(name.c_str(), O_RDONLY, 0);
   std::vector<std::uint8_t> bytes(sizeof(rt::ShmLayout));
   if (fd < 0 || ::pread(fd, bytes.data(), bytes.size(), 0) != static_cast<ssize_t>(bytes.size())) {

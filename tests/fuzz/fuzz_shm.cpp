@@ -1,18 +1,23 @@
 // libFuzzer target: the shared-memory segment as its readers see it (rt/shm_segment.hpp). The
 // input becomes the contents of a real POSIX shared-memory segment, any size; its creator pid
 // and start time are set to this process (a live creator, as an attacker writing into a live
-// run's segment has). Then the monitor's read-only attach reads the header and status, and a
-// read-write attach runs the haptic servo for a few ticks on the segment's pose and contact-model
-// buffers (indices, flags, model contents all fuzzed).
+// run's segment has). Then the monitor's read-only attach reads the header and status (with the
+// scene reference and the view frame, which a view checks before sending), and a read-write
+// attach runs the haptic servo for a few ticks on the segment's pose and contact-model buffers
+// (indices, flags, model contents all fuzzed).
 // Properties, beyond "no crash, leak, UB or hang":
 //  * every commanded force is finite and within the device limit;
+//  * a view frame that passes rt::sanitize_view_frame has its counts within the frame, its face
+//    ids within the meshes and finite numbers;
 //  * a refused attach says why.
 #include <fcntl.h>
 #include <sys/mman.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -60,6 +65,17 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     CollisionStatus c;
     (void)ro.value()->status().servo.load(s);
     (void)ro.value()->status().collision.load(c);
+    SceneRef ref;
+    (void)ro.value()->status().scene.load(ref);
+    static auto frame = std::make_unique<ViewFrame>();
+    constexpr std::uint32_t kFaces = 1000;  // the meshes a view would draw
+    if (ro.value()->status().view.load(*frame, 8) && sanitize_view_frame(*frame, kFaces, kFaces)) {
+      ST_FUZZ_CHECK(frame->n_probe <= kViewMaxFaces && frame->n_object <= kViewMaxFaces, "counts within the frame");
+      for (std::uint32_t i = 0; i < frame->n_probe + frame->n_object; ++i)
+        ST_FUZZ_CHECK(frame->faces[i] < kFaces, "face ids within the meshes");
+      for (double v : frame->pose) ST_FUZZ_CHECK(std::isfinite(v), "pose finite");
+      ST_FUZZ_CHECK(std::isfinite(frame->penetration_mm) && std::isfinite(frame->round_ms), "figures finite");
+    }
     (void)ro.value()->creator_alive();
   } else {
     ST_FUZZ_CHECK(!ro.error().empty(), "a refused attach says why");

@@ -1,10 +1,12 @@
 // Tests src/rt/seqlock.hpp: nothing before the first store, the newest value after, and a
-// two-thread hammer (one writer, two readers): no torn copy, versions never go back.
+// two-thread hammer (one writer, two readers): no torn copy, versions never go back; the same
+// for a payload large enough to be read in place (no stack copy), written in prefixes.
 #include "rt/seqlock.hpp"
 
 #include <doctest/doctest.h>
 
 #include <atomic>
+#include <memory>
 #include <thread>
 
 using st::rt::SeqLock;
@@ -68,4 +70,49 @@ TEST_CASE("SeqLock: one writer, two readers hammering: no torn copy, never backw
   Payload last;
   REQUIRE(s.load(last));
   CHECK(last.seq == kWrites);
+}
+
+namespace {
+struct BigPayload {  // over SeqLock's kStackBytes: read in place
+  std::uint64_t seq = 0;
+  std::uint64_t words[255] = {};  // words[i] = seq * (i + 1) for i < used, the rest from earlier stores
+};
+static_assert(sizeof(BigPayload) > SeqLock<BigPayload>::kStackBytes);
+}  // namespace
+
+TEST_CASE("SeqLock: a large payload stored in prefixes: no torn prefix, never backwards") {
+  auto s = std::make_unique<SeqLock<BigPayload>>();
+  std::atomic<bool> done{false};
+  constexpr std::uint64_t kWrites = 200'000;
+  std::atomic<std::uint64_t> torn{0}, backwards{0}, reads{0};
+  auto reader = [&] {
+    std::uint64_t last = 0;
+    auto p = std::make_unique<BigPayload>();
+    while (!done.load(std::memory_order_acquire)) {
+      if (!s->load(*p)) continue;
+      reads.fetch_add(1, std::memory_order_relaxed);
+      const std::uint64_t used = 1 + p->seq % 200;  // what the writer stored of this one
+      for (std::uint64_t i = 0; i < used; ++i)
+        if (p->words[i] != p->seq * (i + 1)) {
+          torn.fetch_add(1);
+          break;
+        }
+      if (p->seq < last) backwards.fetch_add(1);
+      last = p->seq;
+    }
+  };
+  std::thread r1(reader), r2(reader);
+  auto v = std::make_unique<BigPayload>();
+  for (std::uint64_t i = 1; i <= kWrites; ++i) {
+    v->seq = i;
+    const std::uint64_t used = 1 + i % 200;
+    for (std::uint64_t k = 0; k < used; ++k) v->words[k] = i * (k + 1);
+    s->store(*v, 8 * (1 + used));
+  }
+  done.store(true, std::memory_order_release);
+  r1.join();
+  r2.join();
+  CHECK(torn.load() == 0);
+  CHECK(backwards.load() == 0);
+  CHECK(reads.load() > 0);
 }

@@ -1,0 +1,78 @@
+// A WebSocket client of the live view for the app suites (civetweb's client API): collects the
+// binary messages ("STVM" meshes, "STVF" frames) a view sends, and reads their fields.
+#pragma once
+#include <civetweb.h>
+#include <doctest/doctest.h>
+
+#include <cstdint>
+#include <cstring>
+#include <mutex>
+#include <string>
+#include <vector>
+
+namespace st::test {
+
+/// Binary messages received, in order (civetweb's client thread appends).
+struct ViewMessages {
+  std::mutex mu;
+  std::vector<std::string> binary;
+};
+
+/// civetweb data handler: pass a ViewMessages* as the user data.
+inline int view_on_data(mg_connection*, int bits, char* data, std::size_t len, void* user) {
+  auto* m = static_cast<ViewMessages*>(user);
+  if ((bits & 0x0f) == MG_WEBSOCKET_OPCODE_BINARY) {
+    std::lock_guard<std::mutex> l(m->mu);
+    m->binary.emplace_back(data, len);
+  }
+  return 1;
+}
+
+/// Connects to ws://127.0.0.1:port/ws collecting into `msgs`; null on failure (`err` says why).
+inline mg_connection* view_connect(int port, ViewMessages& msgs, char (&err)[256]) {
+  return mg_connect_websocket_client("127.0.0.1", port, 0, err, sizeof err, "/ws", nullptr, view_on_data, nullptr, &msgs);
+}
+
+/// A little-endian field of a message.
+template <class T>
+T view_at(const std::string& s, std::size_t off) {
+  T v;
+  std::memcpy(&v, s.data() + off, sizeof v);
+  return v;
+}
+
+/// What a stream of frames showed.
+struct ViewFrameCounts {
+  std::size_t frames = 0;      ///< "STVF" messages
+  std::size_t with_faces = 0;  ///< of which listed colliding object faces
+};
+
+/// Checks every "STVF" message in `binary` from index `first` on against meshes of `probe_faces`
+/// and `object_faces` faces: its size matches its face counts; face ids in range, object ids
+/// distinct and ascending; a frame listing object faces is in contact and its contacts (paper
+/// §3.5) are the faces it lists.
+inline ViewFrameCounts view_check_frames(const std::vector<std::string>& binary, std::size_t first,
+                                         std::uint32_t probe_faces, std::uint32_t object_faces) {
+  ViewFrameCounts c;
+  for (std::size_t i = first; i < binary.size(); ++i) {
+    const std::string& f = binary[i];
+    REQUIRE(f.size() >= 248);
+    REQUIRE(f.compare(0, 4, "STVF") == 0);
+    ++c.frames;
+    const std::uint32_t np = view_at<std::uint32_t>(f, 236), no = view_at<std::uint32_t>(f, 240);
+    REQUIRE(f.size() == 248 + 4 * std::size_t(np + no));
+    const std::uint32_t flags = view_at<std::uint32_t>(f, 4);
+    if (no > 0) {
+      ++c.with_faces;
+      CHECK((flags & 1) != 0);                           // in contact
+      CHECK(view_at<std::uint32_t>(f, 232) == np + no);  // contacts = distinct colliding faces
+    }
+    for (std::uint32_t k = 0; k < np; ++k) CHECK(view_at<std::uint32_t>(f, 248 + 4 * k) < probe_faces);
+    for (std::uint32_t k = 1; k < no; ++k)
+      CHECK(view_at<std::uint32_t>(f, 248 + 4 * (np + k - 1)) < view_at<std::uint32_t>(f, 248 + 4 * (np + k)));
+    for (std::uint32_t k = 0; k < no; ++k) CHECK(view_at<std::uint32_t>(f, 248 + 4 * (np + k)) < object_faces);
+  }
+  return c;
+}
+
+}  // namespace st::test
