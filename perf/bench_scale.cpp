@@ -19,6 +19,7 @@
 // machine can: W = 1 and 2 in-process workers over inproc, predicted (floor(W) + compute) against
 // the measured round, same poses, same run.
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <csignal>
@@ -282,7 +283,36 @@ struct Check {
   double compute_alone_us = 0;     // the slowest worker's query timed alone (the model's term)
   double compute_in_round_us = 0;  // the slowest worker's query inside the real rounds (median)
   double gather_us = 0;            // our empty round at this W (the model's gather term here)
+  // The W shares' queries run at once, one thread each (median of the slowest): what the
+  // in-process workers compute when they share this machine's two cores and memory system,
+  // which a cluster's workers do not. predicted_corun uses it instead of compute_alone_us.
+  double compute_corun_us = 0, predicted_corun_us = 0;
 };
+
+/// The slowest of the shares' queries at `pose` when all run at once, one thread each (started
+/// together), median over `runs` trials spaced 0.5 ms as the rounds are.
+double corun_us(std::vector<std::unique_ptr<net::CollisionBackend>>& shares, const geom::Pose& pose, int runs,
+                std::size_t max_pairs) {
+  std::vector<double> slowest;
+  for (int r = 0; r < runs; ++r) {
+    std::vector<double> took(shares.size());
+    std::atomic<std::size_t> ready{0};
+    std::vector<std::thread> threads;
+    for (std::size_t w = 0; w < shares.size(); ++w)
+      threads.emplace_back([&, w] {
+        std::vector<net::FacePair> out;
+        ready.fetch_add(1);
+        while (ready.load() < shares.size()) {}
+        const auto t0 = Clock::now();
+        shares[w]->query(pose, out, max_pairs);
+        took[w] = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
+      });
+    for (std::thread& t : threads) t.join();
+    slowest.push_back(*std::max_element(took.begin(), took.end()));
+    std::this_thread::sleep_for(std::chrono::microseconds(500));
+  }
+  return median(std::move(slowest));
+}
 
 /// The worker's resident bytes for a share: its object tree and its mesh (the probe is shared by all).
 double share_bytes(const geom::Mesh& m, const geom::SphereTree& t) {
@@ -517,6 +547,19 @@ void run_scale(const ScaleArgs& a) {
           std::this_thread::sleep_for(std::chrono::microseconds(500));
         }
         const double gather = median(std::move(empty));
+        // The same shares as the workers hold, queried at once in this process's threads.
+        std::vector<std::unique_ptr<net::CollisionBackend>> shares;
+        {
+          auto bl = net::tree_blocks(ot, sp.layer, sp.block_size);
+          if (!bl) die(bl.error());
+          for (const auto& ids : net::deal_blocks(std::uint32_t(bl.value().size()), W, geom::Mapping::block_cyclic, 1)) {
+            if (ids.empty()) continue;
+            auto set = net::make_block_set(probe, object, bl.value(), ids, geom::DefaultTreeConfig().leaf_faces);
+            if (!set) die(set.error());
+            shares.push_back(net::tree_backend_factory(per_block)());
+            if (Status st = shares.back()->load(set.value()); !st) die(st.error());
+          }
+        }
         for (std::size_t i = 0; i < poses.size(); ++i) {
           std::vector<double> t, inside;
           for (int r = 0; r < a.gather_rounds / 4 + 20; ++r) {
@@ -532,8 +575,11 @@ void run_scale(const ScaleArgs& a) {
             return r.pose == i + 1 && r.workers == W && r.mapping == geom::Mapping::block_cyclic;
           });
           if (it == rows.end()) continue;
-          checks.push_back({i + 1, W, gather + it->compute_round_us, median(std::move(t)), fl, it->max_us,
-                            median(std::move(inside)), gather});
+          Check c{i + 1, W,          gather + it->compute_round_us, median(std::move(t)),
+                  fl,    it->max_us, median(std::move(inside)),     gather};
+          c.compute_corun_us = corun_us(shares, poses[i], a.gather_rounds / 4 + 20, limits.max_pairs);
+          c.predicted_corun_us = c.predicted_us - c.compute_alone_us + c.compute_corun_us;
+          checks.push_back(c);
         }
       }
     }
@@ -570,9 +616,10 @@ void run_scale(const ScaleArgs& a) {
       std::printf(
           "%s\n  {\"pose\": %zu, \"workers\": %u, \"floor_us\": %.2f, \"predicted_us\": %.2f, "
           "\"measured_us\": %.2f, \"compute_alone_us\": %.2f, \"compute_in_round_us\": %.2f, "
-          "\"gather_us\": %.2f}",
+          "\"gather_us\": %.2f, \"compute_corun_us\": %.2f, \"predicted_corun_us\": %.2f}",
           k ? "," : "", checks[k].pose, checks[k].workers, checks[k].floor_us, checks[k].predicted_us,
-          checks[k].measured_us, checks[k].compute_alone_us, checks[k].compute_in_round_us, checks[k].gather_us);
+          checks[k].measured_us, checks[k].compute_alone_us, checks[k].compute_in_round_us, checks[k].gather_us,
+          checks[k].compute_corun_us, checks[k].predicted_corun_us);
     std::printf("],\n \"memory\": [");
     for (std::size_t k = 0; k < memory.size(); ++k)
       std::printf(
@@ -631,9 +678,11 @@ void run_scale(const ScaleArgs& a) {
   for (const Check& c : checks)
     std::printf(
         "  pose %zu W=%u: predicted %.1f us (empty round %.1f, raw floor %.1f), measured p50 %.1f us, error %+.1f %%; "
-        "slowest worker's query alone %.1f us, inside the rounds %.1f us\n",
+        "slowest worker's query alone %.1f us, inside the rounds %.1f us; with the shares' queries run at once "
+        "(%.1f us): predicted %.1f us, error %+.1f %%\n",
         c.pose, c.workers, c.predicted_us, c.gather_us, c.floor_us, c.measured_us,
-        100.0 * (c.predicted_us - c.measured_us) / c.measured_us, c.compute_alone_us, c.compute_in_round_us);
+        100.0 * (c.predicted_us - c.measured_us) / c.measured_us, c.compute_alone_us, c.compute_in_round_us,
+        c.compute_corun_us, c.predicted_corun_us, 100.0 * (c.predicted_corun_us - c.measured_us) / c.measured_us);
   std::printf("memory: largest share / whole object (tree + mesh):");
   for (const Memory& m : memory)
     if (m.mapping == geom::Mapping::block_cyclic)
