@@ -116,33 +116,36 @@ Status Mesh::validate() const {
   return Ok{};
 }
 
-std::uint64_t mesh_hash(const Mesh& mesh) {
-  // Word-wise multiply-rotate hash with a final avalanche, as tree_hash (sphere_tree.cpp).
-  std::uint64_t h = 0x9e3779b97f4a7c15ull ^ (mesh.local.size() * 0x100000001b3ull) ^ (mesh.faces.size() << 32);
-  auto mix = [&h](std::uint64_t w) {
-    h ^= w * 0x87c37b91114253d5ull;
-    h = std::rotl(h, 31) * 0x4cf5ad432745937full + 0x52dce729ull;
-  };
-  auto bytes = [&mix](const void* p, std::size_t n) {
-    const auto* c = static_cast<const unsigned char*>(p);
-    std::size_t i = 0;
-    for (; i + 8 <= n; i += 8) {
-      std::uint64_t w;
-      std::memcpy(&w, c + i, 8);
-      mix(w);
-    }
-    std::uint64_t w = 0;
-    std::memcpy(&w, c + i, n - i);
-    mix(w ^ (static_cast<std::uint64_t>(n - i) << 56));
-  };
-  bytes(mesh.origin.data(), sizeof(double) * 3);
-  if (!mesh.local.empty()) bytes(mesh.local.data(), mesh.local.size() * sizeof(Vec3));
-  if (!mesh.faces.empty()) bytes(mesh.faces.data(), mesh.faces.size() * sizeof(Tri));
+void WordHash::bytes(const void* p, std::size_t n) {
+  const auto* c = static_cast<const unsigned char*>(p);
+  std::size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    std::uint64_t w;
+    std::memcpy(&w, c + i, 8);
+    word(w);
+  }
+  std::uint64_t w = 0;
+  std::memcpy(&w, c + i, n - i);
+  word(w ^ (static_cast<std::uint64_t>(n - i) << 56));
+}
+
+std::uint64_t WordHash::finish() const {
+  std::uint64_t h = h_;
   h ^= h >> 33;
   h *= 0xff51afd7ed558ccdull;
   h ^= h >> 33;
   return h;
 }
+
+WordHash mesh_words(const Mesh& mesh) {
+  WordHash h(0x9e3779b97f4a7c15ull ^ (mesh.local.size() * 0x100000001b3ull) ^ (mesh.faces.size() << 32));
+  h.bytes(mesh.origin.data(), sizeof(double) * 3);
+  if (!mesh.local.empty()) h.bytes(mesh.local.data(), mesh.local.size() * sizeof(Vec3));
+  if (!mesh.faces.empty()) h.bytes(mesh.faces.data(), mesh.faces.size() * sizeof(Tri));
+  return h;
+}
+
+std::uint64_t mesh_hash(const Mesh& mesh) { return mesh_words(mesh).finish(); }
 
 Mesh make_mesh(std::string name, const std::vector<Vec3>& positions, std::vector<Tri> faces) {
   Mesh m;

@@ -10,6 +10,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <array>
+#include <bit>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -67,9 +68,30 @@ struct Mesh {
   Status validate() const;
 };
 
-/// 64-bit hash of the mesh's origin, local vertices and faces, bytes as stored (not
-/// cryptographic): tells whether two loads gave the same mesh (`spheretouch monitor --view`
-/// checks the scene file still gives the run's meshes).
+/// Word-wise multiply-rotate hash with a final avalanche (not cryptographic: it tells a changed
+/// mesh or a stale cache file, not a forged one).
+class WordHash {
+ public:
+  explicit WordHash(std::uint64_t seed) : h_(seed) {}
+  void word(std::uint64_t w) {
+    h_ ^= w * 0x87c37b91114253d5ull;
+    h_ = std::rotl(h_, 31) * 0x4cf5ad432745937full + 0x52dce729ull;
+  }
+  /// Bytes as 8-byte little-endian words; the last, partial one tagged with its length.
+  void bytes(const void* p, std::size_t n);
+  std::uint64_t finish() const;
+
+ private:
+  std::uint64_t h_;
+};
+
+/// A WordHash over the mesh's vertex and face counts, origin, local vertices and faces, bytes as
+/// stored (tree_hash goes on from it with the build parameters).
+WordHash mesh_words(const Mesh& mesh);
+
+/// 64-bit hash of the mesh's origin, local vertices and faces (mesh_words, finished): tells
+/// whether two loads gave the same mesh (`spheretouch monitor --view` checks the scene file still
+/// gives the run's meshes).
 std::uint64_t mesh_hash(const Mesh& mesh);
 
 /// Builds a mesh from vertex positions in the body's frame (recentred) and faces.

@@ -124,6 +124,24 @@ struct Cent {
   std::uint32_t id;
 };
 
+// The axis along which the points point(i), i in [lo, hi), extend furthest.
+template <class Point>
+int longest_axis(std::uint32_t lo, std::uint32_t hi, Point&& point) {
+  float bl[3] = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max(), std::numeric_limits<float>::max()};
+  float bh[3] = {-bl[0], -bl[1], -bl[2]};
+  for (std::uint32_t i = lo; i < hi; ++i) {
+    const float* c = point(i);
+    for (int k = 0; k < 3; ++k) {
+      bl[k] = std::min(bl[k], c[k]);
+      bh[k] = std::max(bh[k], c[k]);
+    }
+  }
+  int axis = 0;
+  for (int k = 1; k < 3; ++k)
+    if (bh[k] - bl[k] > bh[axis] - bl[axis]) axis = k;
+  return axis;
+}
+
 struct Builder {
   const Mesh& mesh;
   std::uint32_t F, M;
@@ -148,16 +166,7 @@ struct Builder {
     const std::uint32_t lo = slot_of_leaf(j0), hi = slot_of_leaf(j1);
     const std::uint32_t jm = j0 + (j1 - j0 + 1) / 2;
     const std::uint32_t mid = slot_of_leaf(jm);
-    float bl[3] = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max(), std::numeric_limits<float>::max()};
-    float bh[3] = {-bl[0], -bl[1], -bl[2]};
-    for (std::uint32_t s = lo; s < hi; ++s)
-      for (int k = 0; k < 3; ++k) {
-        bl[k] = std::min(bl[k], cents[s].c[k]);
-        bh[k] = std::max(bh[k], cents[s].c[k]);
-      }
-    int axis = 0;
-    for (int k = 1; k < 3; ++k)
-      if (bh[k] - bl[k] > bh[axis] - bl[axis]) axis = k;
+    const int axis = longest_axis(lo, hi, [this](std::uint32_t s) { return cents[s].c; });
     std::nth_element(cents.begin() + lo, cents.begin() + mid, cents.begin() + hi,
                      [axis](const Cent& a, const Cent& b) { return a.c[axis] < b.c[axis]; });
     split(j0, jm, levels - 1, out, n);
@@ -180,6 +189,13 @@ struct Builder {
     Group g[8];
     int n = 0;
     split(j0, j1, 3, g, n);
+    add_children(node, g, n, [&](std::uint32_t child, const Group& c) { build(child, c.j0, c.j1, depth + 1); });
+  }
+
+  // Appends node's n children contiguously, then builds each (`build_child(index, its group)`),
+  // so that every subtree is {node} + one node range.
+  template <class BuildChild>
+  void add_children(std::uint32_t node, const Group* g, int n, BuildChild&& build_child) {
     const auto first = static_cast<std::uint32_t>(t.nodes.size());
     t.nodes.resize(first + n);
     t.cold.resize(first + n);
@@ -189,7 +205,7 @@ struct Builder {
     t.nodes[node].count = static_cast<std::uint16_t>(n);
     for (int k = 0; k < n; ++k) {
       t.cold[first + k].parent = node;
-      build(first + static_cast<std::uint32_t>(k), g[k].j0, g[k].j1, depth + 1);
+      build_child(first + static_cast<std::uint32_t>(k), g[k]);
     }
     t.cold[node].desc_end = static_cast<std::uint32_t>(t.nodes.size());
   }
@@ -213,17 +229,7 @@ struct Builder {
     }
     const std::uint32_t m = a + (b - a + 1) / 2;
     if (reorder) {
-      float bl[3] = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max(),
-                     std::numeric_limits<float>::max()};
-      float bh[3] = {-bl[0], -bl[1], -bl[2]};
-      for (std::uint32_t p = a; p < b; ++p)
-        for (int k = 0; k < 3; ++k) {
-          bl[k] = std::min(bl[k], runs[order[p]].c[k]);
-          bh[k] = std::max(bh[k], runs[order[p]].c[k]);
-        }
-      int axis = 0;
-      for (int k = 1; k < 3; ++k)
-        if (bh[k] - bl[k] > bh[axis] - bl[axis]) axis = k;
+      const int axis = longest_axis(a, b, [this](std::uint32_t p) { return runs[order[p]].c; });
       std::nth_element(order.begin() + a, order.begin() + m, order.begin() + b,
                        [this, axis](std::uint32_t x, std::uint32_t y) { return runs[x].c[axis] < runs[y].c[axis]; });
     }
@@ -250,17 +256,7 @@ struct Builder {
     Group g[8];
     int n = 0;
     split_groups(a, b, 3, false, g, n);
-    const auto first = static_cast<std::uint32_t>(t.nodes.size());
-    t.nodes.resize(first + n);
-    t.cold.resize(first + n);
-    t.nodes[node].leaf = 0;
-    t.nodes[node].first = first;
-    t.nodes[node].count = static_cast<std::uint16_t>(n);
-    for (int k = 0; k < n; ++k) {
-      t.cold[first + k].parent = node;
-      build_top(first + static_cast<std::uint32_t>(k), g[k].j0, g[k].j1, depth + 1);
-    }
-    t.cold[node].desc_end = static_cast<std::uint32_t>(t.nodes.size());
+    add_children(node, g, n, [&](std::uint32_t child, const Group& c) { build_top(child, c.j0, c.j1, depth + 1); });
   }
 
   // Lays the groups out: orders them (top levels), permutes the centroids into slot order and
@@ -311,37 +307,14 @@ void min_sphere(std::vector<Vec3>& pts, Vec3& centre, double& radius) {
 }
 
 std::uint64_t tree_hash(const Mesh& mesh, const TreeConfig& params, std::span<const std::uint32_t> groups) {
-  // Word-wise multiply-rotate hash (not cryptographic; detects a stale cache file).
-  std::uint64_t h = 0x9e3779b97f4a7c15ull ^ (mesh.local.size() * 0x100000001b3ull) ^ (mesh.faces.size() << 32);
-  auto mix = [&h](std::uint64_t w) {
-    h ^= w * 0x87c37b91114253d5ull;
-    h = std::rotl(h, 31) * 0x4cf5ad432745937full + 0x52dce729ull;
-  };
-  auto bytes = [&mix](const void* p, std::size_t n) {
-    const auto* c = static_cast<const unsigned char*>(p);
-    std::size_t i = 0;
-    for (; i + 8 <= n; i += 8) {
-      std::uint64_t w;
-      std::memcpy(&w, c + i, 8);
-      mix(w);
-    }
-    std::uint64_t w = 0;
-    std::memcpy(&w, c + i, n - i);
-    mix(w ^ (static_cast<std::uint64_t>(n - i) << 56));
-  };
-  bytes(mesh.origin.data(), sizeof(double) * 3);
-  if (!mesh.local.empty()) bytes(mesh.local.data(), mesh.local.size() * sizeof(Vec3));
-  if (!mesh.faces.empty()) bytes(mesh.faces.data(), mesh.faces.size() * sizeof(Tri));
-  mix(params.leaf_faces);
+  WordHash h = mesh_words(mesh);  // not cryptographic: detects a stale cache file
+  h.word(params.leaf_faces);
   if (!groups.empty()) {
-    mix(0x47524f555053ull ^ groups.size());  // "GROUPS"
-    bytes(groups.data(), groups.size() * sizeof(std::uint32_t));
+    h.word(0x47524f555053ull ^ groups.size());  // "GROUPS"
+    h.bytes(groups.data(), groups.size() * sizeof(std::uint32_t));
   }
-  mix(0x5354524545ull);  // "STREE" + layout generation of the build algorithm
-  h ^= h >> 33;
-  h *= 0xff51afd7ed558ccdull;
-  h ^= h >> 33;
-  return h;
+  h.word(0x5354524545ull);  // "STREE" + layout generation of the build algorithm
+  return h.finish();
 }
 
 Result<SphereTree> SphereTree::build(const Mesh& mesh, const TreeConfig& params, std::span<const std::uint32_t> groups) {

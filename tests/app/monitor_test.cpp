@@ -173,18 +173,13 @@ TEST_CASE(
   const auto [probe, object] = monitor_meshes(d.file("scene.toml"));
   std::lock_guard<std::mutex> l(msgs.mu);
   REQUIRE(msgs.binary.size() > 20);
-  const std::string& mesh = msgs.binary.front();
-  REQUIRE(mesh.size() >= 72);
-  CHECK(mesh.compare(0, 4, "STVM") == 0);
-  const std::uint32_t pnv = view_at<std::uint32_t>(mesh, 56), pnf = view_at<std::uint32_t>(mesh, 60);
-  const std::uint32_t onv = view_at<std::uint32_t>(mesh, 64), onf = view_at<std::uint32_t>(mesh, 68);
-  CHECK(pnv == probe.num_vertices());
-  CHECK(pnf == probe.num_faces());
-  CHECK(onv == object.num_vertices());
-  CHECK(onf == object.num_faces());
-  CHECK(onf == 2880);  // icosphere, frequency 12: 20 · 12²
-  CHECK(mesh.size() == 72 + 12 * std::size_t(pnv + pnf + onv + onf));
-  const ViewFrameCounts counts = view_check_frames(msgs.binary, 1, pnf, onf);
+  const ViewMeshCounts m = view_mesh_counts(msgs.binary.front());
+  CHECK(m.probe_vertices == probe.num_vertices());
+  CHECK(m.probe_faces == probe.num_faces());
+  CHECK(m.object_vertices == object.num_vertices());
+  CHECK(m.object_faces == object.num_faces());
+  CHECK(m.object_faces == 2880);  // icosphere, frequency 12: 20 · 12²
+  const ViewFrameCounts counts = view_check_frames(msgs.binary, 1, m.probe_faces, m.object_faces);
   CHECK(counts.frames > 20);
   CHECK(counts.with_faces >= 5);
   mg_exit_library();

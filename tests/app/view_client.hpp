@@ -41,6 +41,19 @@ T view_at(const std::string& s, std::size_t off) {
   return v;
 }
 
+/// The counts in a "STVM" message (the meshes), checked against its size.
+struct ViewMeshCounts {
+  std::uint32_t probe_vertices = 0, probe_faces = 0, object_vertices = 0, object_faces = 0;
+};
+inline ViewMeshCounts view_mesh_counts(const std::string& mesh) {
+  REQUIRE(mesh.size() >= 72);
+  CHECK(mesh.compare(0, 4, "STVM") == 0);
+  const ViewMeshCounts c{view_at<std::uint32_t>(mesh, 56), view_at<std::uint32_t>(mesh, 60),
+                         view_at<std::uint32_t>(mesh, 64), view_at<std::uint32_t>(mesh, 68)};
+  CHECK(mesh.size() == 72 + 12 * (std::size_t(c.probe_vertices) + c.probe_faces + c.object_vertices + c.object_faces));
+  return c;
+}
+
 /// What a stream of frames showed.
 struct ViewFrameCounts {
   std::size_t frames = 0;      ///< "STVF" messages

@@ -148,16 +148,11 @@ TEST_CASE("run --view: the page and scripts are served; the stream carries the m
   std::lock_guard<std::mutex> l(msgs.mu);
   REQUIRE(msgs.binary.size() > 20);
   // The meshes first.
-  const std::string& mesh = msgs.binary.front();
-  REQUIRE(mesh.size() >= 72);
-  CHECK(mesh.compare(0, 4, "STVM") == 0);
-  const std::uint32_t pnv = view_at<std::uint32_t>(mesh, 56), pnf = view_at<std::uint32_t>(mesh, 60);
-  const std::uint32_t onv = view_at<std::uint32_t>(mesh, 64), onf = view_at<std::uint32_t>(mesh, 68);
-  CHECK(pnf > 0);
-  CHECK(onf == 2880);  // icosphere, frequency 12: 20 · 12²
-  CHECK(mesh.size() == 72 + 12 * std::size_t(pnv + pnf + onv + onf));
+  const st::test::ViewMeshCounts m = st::test::view_mesh_counts(msgs.binary.front());
+  CHECK(m.probe_faces > 0);
+  CHECK(m.object_faces == 2880);  // icosphere, frequency 12: 20 · 12²
   // Then frames: face ids in range, distinct and ascending; contact seen, its faces listed.
-  const st::test::ViewFrameCounts counts = st::test::view_check_frames(msgs.binary, 1, pnf, onf);
+  const st::test::ViewFrameCounts counts = st::test::view_check_frames(msgs.binary, 1, m.probe_faces, m.object_faces);
   const std::size_t frames = counts.frames, with_faces = counts.with_faces;
   CHECK(frames > 20);
   CHECK(with_faces > 5);
