@@ -182,6 +182,7 @@
     probe.group.matrixAutoUpdate = false;
     stillScene.add(object.mesh);
     scene.add(object.overlay);
+    still.key = '';  // a new object: drawn again whatever the camera does
     scene.add(probe.group);
     object.mesh.geometry.computeBoundingSphere();
     const bs = object.mesh.geometry.boundingSphere;
@@ -243,8 +244,8 @@
       // ... when it has left the middle of the view (a tenth of the distance off centre): a camera
       // that moved with every contact point would shake, and would redraw the object each frame.
       const c = new THREE.Vector3(fr.cp[0] - objectOrigin[0], fr.cp[1] - objectOrigin[1], fr.cp[2] - objectOrigin[2]);
-      const near = camera.position.distanceTo(controls.target) < 0.71 * radius;
-      if (!near || c.distanceTo(controls.target) > 0.07 * radius) {
+      const closeIn = camera.position.distanceTo(controls.target) < 0.71 * radius;
+      if (!closeIn || c.distanceTo(controls.target) > 0.07 * radius) {
         const dir = camera.position.clone().sub(controls.target).normalize();
         controls.target.copy(c);
         camera.position.copy(c).addScaledVector(dir, 0.7 * radius);
