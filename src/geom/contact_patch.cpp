@@ -50,6 +50,10 @@ void SurfaceWalk::set_direction(const Vec3& dir) {
   w = d.cross(u);
 }
 
+bool SurfaceWalk::facing(double det, const Vec3& a, const Vec3& b, const Vec3& c) {
+  return det > 0 && det * det > kFrontCos * kFrontCos * (b - a).cross(c - a).squaredNorm();
+}
+
 Vec3 SurfaceWalk::at(std::uint32_t v) { return patch ? patch->probe_point(v, *mesh) : mesh->local[v]; }
 
 std::uint32_t SurfaceWalk::across(std::uint32_t f, std::uint32_t a, std::uint32_t b) const {
@@ -75,7 +79,7 @@ bool SurfaceWalk::exit(const Vec3& x, std::uint32_t& face, double& dist, int max
     // det = (b−a)×(c−a)·d (u × w = d): the projected area, > 0 when the face faces d. Only faces
     // turned less than acos(kFrontCos) from d are walked (never a silhouette or a back face).
     const double det = e1u * e2w - e2u * e1w;
-    if (!(det > 0) || det * det <= kFrontCos * kFrontCos * (b - a).cross(c - a).squaredNorm()) return false;
+    if (!facing(det, a, b, c)) return false;
     const double pu = qu - au, pw = qw - aw;
     const double b1 = (pu * e2w - e2u * pw) / det, b2 = (e1u * pw - pu * e1w) / det, b0 = 1 - b1 - b2;
     constexpr double kTol = 1e-9;  // closed triangles: a point over a shared edge is found from either side
@@ -108,55 +112,89 @@ bool SurfaceWalk::exit(const Vec3& x, std::uint32_t& face, double& dist, int max
 
 namespace {
 
-/// Where triangle (p0, p1, p2), with signed distances d[] to the other triangle's plane, crosses
-/// that plane, as an interval [t0, t1] of x·L along the line direction L (the points x0, x1 at its
-/// ends). False when it does not cross (all distances of one strict sign) or lies
-/// in the plane.
-//
+inline double min_of(double a, double b) {
+  return b < a ? b : a;
+}  // plain selects: std::min's reference blocks vectorising
+inline double max_of(double a, double b) { return a < b ? b : a; }
+
+/// Where a triangle with signed distances d0..d2 to the other triangle's plane and heights
+/// t0..t2 = x·L along the line direction L crosses that plane: the interval [lo, hi] of x·L, ok
+/// when it crosses (not all distances of one strict sign). Branch-free (the kernel below is
+/// vectorised): an edge crossing the plane at d_i / (d_i − d_j) along it counts when its ends'
+/// signs differ, the quotient of the others is discarded.
+///
 /// A vertex exactly on the plane (d = 0) counts as on its positive side (a symbolic perturbation,
 /// as in Edelsbrunner & Mücke's simulation of simplicity): the decision depends on the vertex and
 /// the plane only, so two faces sharing an edge that lies in the plane agree, and the curve is
 /// counted once instead of twice or not at all.
-bool crossing(const Vec3* p[3], const double d[3], const Vec3& L, double& t0, double& t1, Vec3& x0, Vec3& x1) {
-  const bool neg[3] = {d[0] < 0, d[1] < 0, d[2] < 0};
-  if ((neg[0] && neg[1] && neg[2]) || (!neg[0] && !neg[1] && !neg[2])) return false;
-  int n = 0;
-  Vec3 pts[2];
-  for (int i = 0; i < 3; ++i) {
-    const int j = (i + 1) % 3;
-    if (neg[i] != neg[j] && n < 2) {
-      const double s = d[i] / (d[i] - d[j]);  // d[j] = 0 gives the vertex itself
-      pts[n++] = *p[i] + s * (*p[j] - *p[i]);
-    }
-  }
-  if (n < 2) return false;
-  t0 = std::numeric_limits<double>::infinity();
-  t1 = -t0;
-  for (int k = 0; k < n; ++k) {
-    const double t = pts[k].dot(L);
-    if (t < t0) t0 = t, x0 = pts[k];
-    if (t > t1) t1 = t, x1 = pts[k];
-  }
-  return true;
+[[gnu::always_inline]] inline void crossing(double d0, double d1, double d2, double t0, double t1, double t2,
+                                            double& lo, double& hi, bool& ok) {
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  const bool n0 = d0 < 0, n1 = d1 < 0, n2 = d2 < 0;
+  const bool c01 = n0 != n1, c12 = n1 != n2, c20 = n2 != n0;
+  // Unconditional divisions (a select around them would make them conditional, and a division
+  // that may trap is never if-converted): 0/0 on an edge that does not cross is never selected.
+  const double s01 = d0 / (d0 - d1), s12 = d1 / (d1 - d2), s20 = d2 / (d2 - d0);  // d_j = 0 gives vertex j
+  const double e01 = t0 + s01 * (t1 - t0), e12 = t1 + s12 * (t2 - t1), e20 = t2 + s20 * (t0 - t2);
+  lo = min_of(min_of(c01 ? e01 : inf, c12 ? e12 : inf), c20 ? e20 : inf);
+  hi = max_of(max_of(c01 ? e01 : -inf, c12 ? e12 : -inf), c20 ? e20 : -inf);
+  ok = c01 | c12 | c20;
 }
 
-/// Intersection segment [s0, s1] of object triangle a (unit normal na) and probe triangle b (unit
-/// normal nb), oriented along na × nb (the boundary of the object surface inside the probe runs
-/// that way, with the inside on its left seen from outside). False when there is no segment.
-bool segment(const Vec3* a[3], const Vec3& na, const Vec3* b[3], const Vec3& nb, Vec3& s0, Vec3& s1) {
-  const Vec3 L = na.cross(nb);                   // unit normals: |L| = sin of the angle between the planes
-  if (!(L.squaredNorm() > 1e-24)) return false;  // parallel planes: touching or coplanar, no curve
-  double db[3], da[3];
-  for (int k = 0; k < 3; ++k) db[k] = na.dot(*b[k] - *a[0]);
-  for (int k = 0; k < 3; ++k) da[k] = nb.dot(*a[k] - *b[0]);
-  double ta0, ta1, tb0, tb1;
-  Vec3 xa0, xa1, xb0, xb1;
-  if (!crossing(a, da, L, ta0, ta1, xa0, xa1) || !crossing(b, db, L, tb0, tb1, xb0, xb1)) return false;
-  const double lo = std::max(ta0, tb0), hi = std::min(ta1, tb1);
-  if (!(hi > lo)) return false;  // a point or nothing: no length, no area
-  s0 = ta0 >= tb0 ? xa0 : xb0;
-  s1 = ta1 <= tb1 ? xa1 : xb1;
-  return true;
+/// The intersection segments of rows [0, n) of a batch: per row, the segment of object face a
+/// and probe face b (unit normals) along L = n_a × n_b, the direction the boundary of the object
+/// surface inside the probe runs (the inside on its left seen from outside), as its vector area
+/// ½ (s0 − o) × (s1 − o) and its end points s0, s1 relative to o; OK = 0 when there is none
+/// (parallel planes, no crossing, or the intervals meet in a point). With t = x·L on the line,
+/// s1 − s0 = (hi − lo) L / |L|², and (s0 − o) × L = c_b n_a − c_a n_b for any point of the line
+/// (c = n·(v0 − o); the component along L drops out). The line's point nearest o is
+/// x0 = (c_a (n_b × L) + c_b (L × n_a)) / |L|² (x0·L = 0), so s = x0 + (t − o·L) L / |L|²; the
+/// heights t are measured from o (the vertices are relative to it) so o·L = 0.
+void segment_kernel(SegmentBatch& bt, int n) {
+  using B = SegmentBatch;
+  for (int i = 0; i < n; ++i) {
+    const double anx = bt.in[B::ANX][i], any = bt.in[B::ANY][i], anz = bt.in[B::ANZ][i];
+    const double bnx = bt.in[B::BNX][i], bny = bt.in[B::BNY][i], bnz = bt.in[B::BNZ][i];
+    const double lx = any * bnz - anz * bny, ly = anz * bnx - anx * bnz, lz = anx * bny - any * bnx;
+    const double l2 = lx * lx + ly * ly + lz * lz;  // unit normals: |L| = sin of the angle between the planes
+    const double ax[3] = {bt.in[B::AX0][i], bt.in[B::AX1][i], bt.in[B::AX2][i]};
+    const double ay[3] = {bt.in[B::AY0][i], bt.in[B::AY1][i], bt.in[B::AY2][i]};
+    const double az[3] = {bt.in[B::AZ0][i], bt.in[B::AZ1][i], bt.in[B::AZ2][i]};
+    const double bx[3] = {bt.in[B::BX0][i], bt.in[B::BX1][i], bt.in[B::BX2][i]};
+    const double by[3] = {bt.in[B::BY0][i], bt.in[B::BY1][i], bt.in[B::BY2][i]};
+    const double bz[3] = {bt.in[B::BZ0][i], bt.in[B::BZ1][i], bt.in[B::BZ2][i]};
+    double da[3], db[3], ta[3], tb[3];
+    for (int k = 0; k < 3; ++k) {
+      da[k] = bnx * (ax[k] - bx[0]) + bny * (ay[k] - by[0]) + bnz * (az[k] - bz[0]);  // a's vertices vs b's plane
+      db[k] = anx * (bx[k] - ax[0]) + any * (by[k] - ay[0]) + anz * (bz[k] - az[0]);  // b's vertices vs a's plane
+      ta[k] = ax[k] * lx + ay[k] * ly + az[k] * lz;
+      tb[k] = bx[k] * lx + by[k] * ly + bz[k] * lz;
+    }
+    double alo, ahi, blo, bhi;
+    bool aok, bok;
+    crossing(da[0], da[1], da[2], ta[0], ta[1], ta[2], alo, ahi, aok);
+    crossing(db[0], db[1], db[2], tb[0], tb[1], tb[2], blo, bhi, bok);
+    const double lo = max_of(alo, blo), hi = min_of(ahi, bhi);
+    const bool ok = (l2 > 1e-24) & aok & bok & (hi > lo);  // parallel planes: touching or coplanar, no curve
+    const double inv = 1 / l2;
+    const double scale = ok ? 0.5 * (hi - lo) * inv : 0.0;
+    const double ac = bt.in[B::AC][i], bc = bt.in[B::BC][i];
+    const double vx = bc * anx - ac * bnx, vy = bc * any - ac * bny, vz = bc * anz - ac * bnz;
+    bt.out[B::PX][i] = scale * vx;
+    bt.out[B::PY][i] = scale * vy;
+    bt.out[B::PZ][i] = scale * vz;
+    bt.out[B::PABS2][i] = scale * scale * (vx * vx + vy * vy + vz * vz);
+    const double x0 = (ac * (bny * lz - bnz * ly) + bc * (ly * anz - lz * any)) * inv;
+    const double y0 = (ac * (bnz * lx - bnx * lz) + bc * (lz * anx - lx * anz)) * inv;
+    const double z0 = (ac * (bnx * ly - bny * lx) + bc * (lx * any - ly * anx)) * inv;
+    bt.out[B::S0X][i] = x0 + lo * inv * lx;
+    bt.out[B::S0Y][i] = y0 + lo * inv * ly;
+    bt.out[B::S0Z][i] = z0 + lo * inv * lz;
+    bt.out[B::S1X][i] = x0 + hi * inv * lx;
+    bt.out[B::S1Y][i] = y0 + hi * inv * ly;
+    bt.out[B::S1Z][i] = z0 + hi * inv * lz;
+    bt.out[B::OK][i] = ok ? 1.0 : 0.0;
+  }
 }
 
 /// Vector area below this fraction of the colliding object faces' area is noise, not a direction.
@@ -182,18 +220,32 @@ constexpr std::uint32_t kDiscoverEvery = 4;
 /// each other; a longer walk means the point is not over the patch.
 constexpr int kMaxWalkSteps = 16;
 
-/// Unit normal n of a triangle and its unnormalised normal cr = (b−a)×(c−a); false when
+/// Unit normal n of a triangle, its unnormalised normal cr = (b−a)×(c−a) and |cr|; false when
 /// degenerate (kDegenerateRel) or non-finite.
-bool unit_normal(const Vec3& a, const Vec3& b, const Vec3& c, Vec3& n, Vec3& cr) {
+bool unit_normal(const Vec3& a, const Vec3& b, const Vec3& c, Vec3& n, Vec3& cr, double& len) {
   cr = (b - a).cross(c - a);
   const double longest2 = std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
-  const double len = cr.norm();
+  len = cr.norm();
   if (!std::isfinite(len) || !(len > kDegenerateRel * longest2)) return false;
-  n = cr / len;
+  n = cr * (1 / len);  // one division (divisions are slow here, and this runs per colliding face)
   return true;
 }
 
 }  // namespace
+
+void SegmentBatch::set(int r, const FaceRec& a, const FaceRec& b) {
+  for (int k = 0; k < 3; ++k)
+    for (int c = 0; c < 3; ++c) {
+      in[AX0 + 3 * k + c][r] = a.v[k][c];
+      in[BX0 + 3 * k + c][r] = b.v[k][c];
+    }
+  for (int c = 0; c < 3; ++c) {
+    in[ANX + c][r] = a.n[c];
+    in[BNX + c][r] = b.n[c];
+  }
+  in[AC][r] = a.c;
+  in[BC][r] = b.c;
+}
 
 void ContactBuilder::Patch::BodyState::reset(const Mesh& m) {
   vf = VertexFaces::build(m);
@@ -213,9 +265,11 @@ void ContactBuilder::Patch::BodyState::reset(const Mesh& m) {
 void ContactBuilder::Patch::BodyState::compute_face_normals() {
   face_normals.assign(nf, Vec3::Zero());
   Vec3 n, cr;
+  double len;
   for (std::size_t f = 0; f < nf; ++f) {
     const Tri& t = mesh->faces[f];
-    if (t[0] < nv && t[1] < nv && t[2] < nv && unit_normal(mesh->local[t[0]], mesh->local[t[1]], mesh->local[t[2]], n, cr))
+    if (t[0] < nv && t[1] < nv && t[2] < nv &&
+        unit_normal(mesh->local[t[0]], mesh->local[t[1]], mesh->local[t[2]], n, cr, len))
       face_normals[f] = n;
   }
 }
@@ -230,7 +284,7 @@ std::size_t ContactBuilder::Patch::BodyState::bytes() const {
          (visit_stamp.capacity() + path_stamp.capacity() + exit_face.capacity() + face_stamp.capacity() +
           face_slot.capacity() + faces.capacity()) *
              4 +
-         depth.capacity() * sizeof(double) + (normals.capacity() + face_normals.capacity()) * sizeof(Vec3);
+         depth.capacity() * sizeof(double) + recs.capacity() * sizeof(FaceRec) + face_normals.capacity() * sizeof(Vec3);
 }
 
 void ContactBuilder::Patch::prepare(const Mesh& probe, const Mesh& object) {
@@ -257,7 +311,8 @@ void ContactBuilder::Patch::reset() {
 
 std::size_t ContactBuilder::Patch::bytes() const {
   return probe_s.bytes() + object_s.bytes() + (probe_world.capacity() + curve.capacity()) * sizeof(Vec3) +
-         (probe_xform_stamp.capacity() + climb.capacity()) * 4 + valid.capacity() * sizeof(ContactPair);
+         (batch ? sizeof(SegmentBatch) : 0) + (probe_xform_stamp.capacity() + climb.capacity()) * 4 +
+         valid.capacity() * sizeof(ContactPair);
 }
 
 const Vec3& ContactBuilder::Patch::probe_point(std::uint32_t v, const Mesh& probe) {
@@ -372,8 +427,10 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
             }
       }
       if (next == UINT32_MAX) {  // a local maximum: remember it (deepest first)
+        // Full: the shallowest gives way, or v is not kept. (Only a slot already filled is
+        // compared: the old test read the last slot on the way to filling it, uninitialised.)
+        if (n_maxima == Memory::kSize && maxima_depth[Memory::kSize - 1] >= depth[v]) return;
         int i = n_maxima < Memory::kSize ? n_maxima++ : Memory::kSize - 1;
-        if (i == Memory::kSize - 1 && n_maxima == Memory::kSize && maxima_depth[i] >= depth[v]) return;
         maxima[i] = v;
         maxima_depth[i] = depth[v];
         for (; i > 0 && maxima_depth[i] > maxima_depth[i - 1]; --i)
@@ -445,26 +502,33 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   // the deepest vertex, and over every colliding pair when the patch is small or no vertex is
   // inside (a convex edge of one body pressed into a face of the other between its vertices).
   std::uint32_t won_a = UINT32_MAX, won_b = UINT32_MAX;  // the test edge whose crossing won last
+  // A crossing lies on an edge of a surface face that faces d, so the surface's height there is
+  // the edge's (no walk needed); the face must face d, as a walk would require.
   auto refine_edge = [&](std::uint32_t ia, std::uint32_t ib, std::uint32_t sface) {
-    const Vec3 a = test_pos(ia), b = test_pos(ib);
     const Tri& t = surface.faces[sface];
-    const double au = a.dot(walk.u), aw = a.dot(walk.w), ru = b.dot(walk.u) - au, rw = b.dot(walk.w) - aw;
+    const std::size_t surface_nv = surface.local.size();
+    if (t[0] >= surface_nv || t[1] >= surface_nv || t[2] >= surface_nv) return;
+    const Vec3 p[3] = {walk.at(t[0]), walk.at(t[1]), walk.at(t[2])};
+    double pu[3], pw[3], ph[3];
+    for (int k = 0; k < 3; ++k) pu[k] = p[k].dot(walk.u), pw[k] = p[k].dot(walk.w), ph[k] = p[k].dot(walk.d);
+    if (!SurfaceWalk::facing((pu[1] - pu[0]) * (pw[2] - pw[0]) - (pu[2] - pu[0]) * (pw[1] - pw[0]), p[0], p[1], p[2]))
+      return;
+    const Vec3 a = test_pos(ia), b = test_pos(ib);
+    const double au = a.dot(walk.u), aw = a.dot(walk.w), ah = a.dot(walk.d);
+    const double ru = b.dot(walk.u) - au, rw = b.dot(walk.w) - aw, rh = b.dot(walk.d) - ah;
     for (int e = 0; e < 3; ++e) {
-      if (t[e] >= surface.local.size() || t[(e + 1) % 3] >= surface.local.size()) return;
-      const Vec3 p0 = walk.at(t[e]), p1 = walk.at(t[(e + 1) % 3]);
-      const double su = p1.dot(walk.u) - p0.dot(walk.u), sw = p1.dot(walk.w) - p0.dot(walk.w);
+      const int j = e == 2 ? 0 : e + 1;
+      const double su = pu[j] - pu[e], sw = pw[j] - pw[e];
       const double den = ru * sw - rw * su;
       if (!(std::abs(den) > 0)) continue;  // parallel
-      const double qu = p0.dot(walk.u) - au, qw = p0.dot(walk.w) - aw;
-      const double s = (qu * sw - qw * su) / den, r = (qu * rw - qw * ru) / den;
+      const double qu = pu[e] - au, qw = pw[e] - aw, inv = 1 / den;
+      const double s = (qu * sw - qw * su) * inv, r = (qu * rw - qw * ru) * inv;
       if (s < 0 || s > 1 || r < 0 || r > 1) continue;
-      const Vec3 x = a + s * (b - a);
-      std::uint32_t f = sface;
-      double dist = 0;
-      if (walk.exit(x, f, dist, 4) && dist > best.depth) {
+      const double dist = (ph[e] + r * (ph[j] - ph[e])) - (ah + s * rh);
+      if (dist > best.depth) {
         best.depth = dist;
-        best.point = x;
-        best.face = f;
+        best.point = a + s * (b - a);
+        best.face = sface;
         best.vertex = UINT32_MAX;  // an edge point
         won_a = ia, won_b = ib;
       }
@@ -575,68 +639,90 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   const Eigen::Matrix3d& R = rot;
   auto tri_ok = [](const Tri& t, std::size_t nv) { return t[0] < nv && t[1] < nv && t[2] < nv; };
 
-  // Unit normals of the colliding faces, once per face (zero: degenerate, no direction); the
-  // probe's are rotated into the object frame. Degenerate object faces count as contacts but
-  // give no direction.
-  Vec3 n_faces = Vec3::Zero();  // Σ unnormalised normals: 2 × the area-weighted mean normal (fallback)
-  double n_faces_abs = 0;       // Σ of their lengths
-  Vec3 nf, cr;
-  object_s.normals.resize(object_s.faces.size());
-  for (std::size_t i = 0; i < object_s.faces.size(); ++i) {
-    const Tri& t = object.faces[object_s.faces[i]];
-    object_s.normals[i].setZero();
-    if (!tri_ok(t, object_s.nv) || !unit_normal(object.local[t[0]], object.local[t[1]], object.local[t[2]], nf, cr)) {
-      ++m.degenerate_faces;
-      continue;
-    }
-    object_s.normals[i] = nf;
-    n_faces += cr;
-    n_faces_abs += cr.norm();
-  }
-  if (m.degenerate_faces) m.flags |= kDegenerateSkipped;
-  probe_s.normals.resize(probe_s.faces.size());
-  for (std::size_t i = 0; i < probe_s.faces.size(); ++i) {
-    const Tri& t = probe.faces[probe_s.faces[i]];
-    probe_s.normals[i].setZero();
-    if (!tri_ok(t, probe_s.nv)) continue;
-    for (std::uint32_t v : t) (void)probe_point(v, probe);            // transform each vertex once, in face order
-    probe_s.normals[i] = R * probe_s.face_normals[probe_s.faces[i]];  // zero stays zero (degenerate)
-  }
-
-  // The vector area of the object surface inside the probe, from the intersection curve:
-  // A = ½ Σ (s0 − o) × (s1 − o) over the pairs' segments (o: any point; near the patch for
-  // rounding). Split into the part on faces not turned away from the previous FD (front) and all.
+  // One record per colliding face: vertices in the object frame (the probe's transformed once
+  // per round), unit normal (zero: degenerate, no direction; the probe's are rotated) and plane
+  // offset from an origin o near the patch (for rounding). Degenerate object faces count as
+  // contacts but give no direction.
   Vec3 origin = Vec3::Zero();
   if (!valid.empty() && tri_ok(object.faces[valid.front().object], object_s.nv))
     origin = object.local[object.faces[valid.front().object][0]];
+  Vec3 n_faces = Vec3::Zero();  // Σ unnormalised normals: 2 × the area-weighted mean normal (fallback)
+  double n_faces_abs = 0;       // Σ of their lengths
+  Vec3 cr;
+  double cr_len;
+  object_s.recs.resize(object_s.faces.size());
+  for (std::size_t i = 0; i < object_s.faces.size(); ++i) {
+    const Tri& t = object.faces[object_s.faces[i]];
+    FaceRec& r = object_s.recs[i];
+    r.n.setZero();
+    r.c = 0;
+    if (!tri_ok(t, object_s.nv)) {
+      ++m.degenerate_faces;
+      continue;
+    }
+    for (int k = 0; k < 3; ++k) r.v[k] = object.local[t[k]] - origin;
+    if (!unit_normal(r.v[0], r.v[1], r.v[2], r.n, cr, cr_len)) {
+      r.n.setZero();
+      ++m.degenerate_faces;
+      continue;
+    }
+    r.c = r.n.dot(r.v[0]);
+    n_faces += cr;
+    n_faces_abs += cr_len;
+  }
+  if (m.degenerate_faces) m.flags |= kDegenerateSkipped;
+  probe_s.recs.resize(probe_s.faces.size());
+  for (std::size_t i = 0; i < probe_s.faces.size(); ++i) {
+    const Tri& t = probe.faces[probe_s.faces[i]];
+    FaceRec& r = probe_s.recs[i];
+    r.n.setZero();
+    r.c = 0;
+    if (!tri_ok(t, probe_s.nv)) continue;
+    for (int k = 0; k < 3; ++k) r.v[k] = probe_point(t[k], probe) - origin;  // transform each vertex once
+    r.n = R * probe_s.face_normals[probe_s.faces[i]];                        // zero stays zero (degenerate)
+    r.c = r.n.dot(r.v[0]);
+  }
+
+  // The vector area of the object surface inside the probe, from the intersection curve:
+  // A = ½ Σ (s0 − o) × (s1 − o) over the pairs' segments, in batches through the vectorised
+  // kernel. Split into the part on faces not turned away from the previous FD (front) and all.
   Vec3 a_all = Vec3::Zero(), a_front = Vec3::Zero();
   double abs_all = 0, abs_front = 0;
   bool any_front_face = false;
   curve.clear();
-  Vec3 s0, s1;
-  for (const ContactPair& p : valid) {
-    const Tri& to = object.faces[p.object];
-    const Tri& tp = probe.faces[p.probe];
-    if (!tri_ok(to, object_s.nv) || !tri_ok(tp, probe_s.nv)) continue;
-    const Vec3& na = object_s.normals[object_s.face_slot[p.object]];
-    const Vec3& nb = probe_s.normals[probe_s.face_slot[p.probe]];
-    if (na.squaredNorm() == 0 || nb.squaredNorm() == 0) continue;  // degenerate: no direction
-    const Vec3* a[3] = {&object.local[to[0]], &object.local[to[1]], &object.local[to[2]]};
-    const bool front = have_prev && na.dot(prev_n) > kBackCos;
-    any_front_face |= front;
-    const Vec3* b[3] = {&probe_world[tp[0]], &probe_world[tp[1]], &probe_world[tp[2]]};  // transformed above
-    if (!segment(a, na, b, nb, s0, s1)) continue;
-    const Vec3 piece = 0.5 * (s0 - origin).cross(s1 - origin);
-    const double piece_abs = piece.norm();
-    a_all += piece;
-    abs_all += piece_abs;
-    if (front) {
-      a_front += piece;
-      abs_front += piece_abs;
+  if (!batch) batch = std::make_unique<SegmentBatch>();
+  SegmentBatch& bt = *batch;
+  int rows = 0;
+  auto flush = [&] {
+    segment_kernel(bt, rows);
+    for (int r = 0; r < rows; ++r) {
+      if (bt.out[SegmentBatch::OK][r] == 0) continue;
+      const Vec3 piece(bt.out[SegmentBatch::PX][r], bt.out[SegmentBatch::PY][r], bt.out[SegmentBatch::PZ][r]);
+      const double piece_abs = std::sqrt(bt.out[SegmentBatch::PABS2][r]);
+      a_all += piece;
+      abs_all += piece_abs;
+      if (bt.front[r]) {
+        a_front += piece;
+        abs_front += piece_abs;
+      }
+      curve.push_back(origin +
+                      Vec3(bt.out[SegmentBatch::S0X][r], bt.out[SegmentBatch::S0Y][r], bt.out[SegmentBatch::S0Z][r]));
+      curve.push_back(origin +
+                      Vec3(bt.out[SegmentBatch::S1X][r], bt.out[SegmentBatch::S1Y][r], bt.out[SegmentBatch::S1Z][r]));
     }
-    curve.push_back(s0);
-    curve.push_back(s1);
+    rows = 0;
+  };
+  for (const ContactPair& p : valid) {
+    const FaceRec& ra = object_s.recs[object_s.face_slot[p.object]];
+    const FaceRec& rb = probe_s.recs[probe_s.face_slot[p.probe]];
+    if (ra.n.squaredNorm() == 0 || rb.n.squaredNorm() == 0) continue;  // degenerate: no direction
+    const bool front = have_prev && ra.n.dot(prev_n) > kBackCos;
+    any_front_face |= front;
+    bt.front[rows] = front;
+    bt.set(rows, ra, rb);
+    if (++rows == SegmentBatch::kRows) flush();
   }
+  flush();
 
   // FD: the front part of the curve while contact continues (thin plates, wedges), all of it at
   // first contact; then the fallbacks.

@@ -2,6 +2,7 @@
 // contact.hpp. Internal to src/geom: contact.cpp owns one per builder.
 #pragma once
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <vector>
 
@@ -15,6 +16,58 @@ bool face_frame(const Mesh& m, std::uint32_t f, Vec3& centroid, Vec3& normal);
 /// Point location on one body's surface seen along a direction d: walks from a start face across
 /// edges (Guibas & Stolfi's walk) over the faces that face d, to the face above a point, and
 /// answers how far the point must travel along d to leave through it.
+/// A colliding face as the patch model's segment computation reads it: its vertices in the common
+/// (object-local) frame relative to the round's origin o (a point near the patch, for rounding),
+/// its unit normal (zero: degenerate, no direction) and its plane's offset c = n·v0.
+struct FaceRec {
+  Vec3 v[3];
+  Vec3 n;
+  double c;
+};
+
+/// Up to kRows (object face, probe face) pairs laid out by columns, so that the compiler
+/// vectorises the intersection segment kernel over rows (contact_patch.cpp): the two faces'
+/// records in, the segment's vector area and end points out. Fixed size, so that every column
+/// is a known distinct array (no aliasing for the vectoriser to rule out). 19 KB.
+struct SegmentBatch {
+  static constexpr int kRows = 64;
+  enum In {
+    AX0,
+    AY0,
+    AZ0,
+    AX1,
+    AY1,
+    AZ1,
+    AX2,
+    AY2,
+    AZ2,
+    ANX,
+    ANY,
+    ANZ,
+    AC,
+    BX0,
+    BY0,
+    BZ0,
+    BX1,
+    BY1,
+    BZ1,
+    BX2,
+    BY2,
+    BZ2,
+    BNX,
+    BNY,
+    BNZ,
+    BC,
+    kIn
+  };
+  enum Out { PX, PY, PZ, PABS2, S0X, S0Y, S0Z, S1X, S1Y, S1Z, OK, kOut };
+  alignas(64) double in[kIn][kRows];    ///< records of face a (object) and b (probe), rows = pairs
+  alignas(64) double out[kOut][kRows];  ///< vector area, its squared length, end points − o, 1 if a segment
+  bool front[kRows];                    ///< the object face is not turned away from the previous FD
+  /// Writes the two records into row r.
+  void set(int r, const FaceRec& a, const FaceRec& b);
+};
+
 struct SurfaceWalk {
   const Mesh* mesh = nullptr;              ///< the surface's body
   const VertexFaces* vf = nullptr;         ///< its faces around each vertex
@@ -22,6 +75,9 @@ struct SurfaceWalk {
   Vec3 d{Vec3::UnitZ()}, u{Vec3::UnitX()}, w{Vec3::UnitY()};  ///< direction and the plane ⊥ d
   /// Sets the direction (unit) and derives the plane basis.
   void set_direction(const Vec3& dir);
+  /// The walk's test that a face (a, b, c) faces d, from det = its projected area's orientation
+  /// ((b−a)×(c−a)·d): turned less than acos(kFrontCos) from d.
+  static bool facing(double det, const Vec3& a, const Vec3& b, const Vec3& c);
   /// Vertex v in the common frame.
   Vec3 at(std::uint32_t v);
   /// Walks from `face` to the face above (or below) x seen along d; on success `face` is that
@@ -73,7 +129,7 @@ struct ContactBuilder::Patch {
     std::vector<std::uint32_t> face_stamp;   ///< round in which a face was counted as colliding
     std::vector<std::uint32_t> face_slot;    ///< its index in `faces`
     std::vector<std::uint32_t> faces;        ///< distinct colliding faces this round
-    std::vector<Vec3> normals;               ///< their unit normals, object-local (zero: degenerate)
+    std::vector<FaceRec> recs;               ///< their records, in the order of `faces`
     std::vector<Vec3> face_normals;  ///< every face's unit normal, local frame (zero: degenerate); the probe's only
     Memory memory;                   ///< last round's deepest vertices
     bool sized_for(const Mesh& m) const { return mesh == &m && nv == m.local.size() && nf == m.faces.size(); }
@@ -97,6 +153,7 @@ struct ContactBuilder::Patch {
   std::vector<ContactPair> valid;
   std::vector<Vec3> probe_world;                                ///< probe vertices, object-local (valid where stamped)
   std::vector<Vec3> curve;                                      ///< intersection segment end points, object-local
+  std::unique_ptr<SegmentBatch> batch;                          ///< scratch of the segment kernel
   std::vector<std::uint32_t> probe_xform_stamp;                 ///< round in which probe_world[v] was computed
   std::uint32_t climb_serial = 0;                               ///< climbs so far (path stamps)
   Eigen::Matrix3d rot{Eigen::Matrix3d::Identity()};             ///< this round's pose rotation
