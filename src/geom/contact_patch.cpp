@@ -81,7 +81,8 @@ bool SurfaceWalk::exit(const Vec3& x, std::uint32_t& face, double& dist, int max
     const double det = e1u * e2w - e2u * e1w;
     if (!facing(det, a, b, c)) return false;
     const double pu = qu - au, pw = qw - aw;
-    const double b1 = (pu * e2w - e2u * pw) / det, b2 = (e1u * pw - pu * e1w) / det, b0 = 1 - b1 - b2;
+    const double inv = 1 / det;
+    const double b1 = (pu * e2w - e2u * pw) * inv, b2 = (e1u * pw - pu * e1w) * inv, b0 = 1 - b1 - b2;
     constexpr double kTol = 1e-9;  // closed triangles: a point over a shared edge is found from either side
     if (b0 >= -kTol && b1 >= -kTol && b2 >= -kTol) {
       face = f;
@@ -183,7 +184,7 @@ void segment_kernel(SegmentBatch& bt, int n) {
     bt.out[B::PX][i] = scale * vx;
     bt.out[B::PY][i] = scale * vy;
     bt.out[B::PZ][i] = scale * vz;
-    bt.out[B::PABS2][i] = scale * scale * (vx * vx + vy * vy + vz * vz);
+    bt.out[B::PABS2][i] = scale * scale * (vx * vx + vy * vy + vz * vz);  // sqrt outside: errno blocks vectorising
     const double x0 = (ac * (bny * lz - bnz * ly) + bc * (ly * anz - lz * any)) * inv;
     const double y0 = (ac * (bnz * lx - bnx * lz) + bc * (lz * anx - lx * anz)) * inv;
     const double z0 = (ac * (bnx * ly - bny * lx) + bc * (lx * any - ly * anx)) * inv;
@@ -256,10 +257,12 @@ void ContactBuilder::Patch::BodyState::reset(const Mesh& m) {
   path_stamp.assign(nv, 0);
   depth.assign(nv, 0);
   exit_face.assign(nv, UINT32_MAX);
-  face_stamp.assign(nf, 0);
-  face_slot.assign(nf, 0);
+  face_mark.assign(nf, {});
   memory = {};
   face_normals.clear();
+  fixed.clear();
+  prev_fixed.clear();
+  fixed_epoch = 0;
 }
 
 void ContactBuilder::Patch::BodyState::compute_face_normals() {
@@ -276,15 +279,18 @@ void ContactBuilder::Patch::BodyState::compute_face_normals() {
 
 void ContactBuilder::Patch::BodyState::clear_stamps() {
   std::fill(visit_stamp.begin(), visit_stamp.end(), 0);
-  std::fill(face_stamp.begin(), face_stamp.end(), 0);
+  std::fill(face_mark.begin(), face_mark.end(), FaceMark{});
+  fixed_epoch = 0;
 }
 
 std::size_t ContactBuilder::Patch::BodyState::bytes() const {
   return vf.bytes() +
-         (visit_stamp.capacity() + path_stamp.capacity() + exit_face.capacity() + face_stamp.capacity() +
-          face_slot.capacity() + faces.capacity()) *
+         (visit_stamp.capacity() + path_stamp.capacity() + exit_face.capacity() + 2 * face_mark.capacity() +
+          faces.capacity()) *
              4 +
-         depth.capacity() * sizeof(double) + recs.capacity() * sizeof(FaceRec) + face_normals.capacity() * sizeof(Vec3);
+         depth.capacity() * sizeof(double) + recs.capacity() * sizeof(FaceRec) +
+         (fixed.capacity() + prev_fixed.capacity()) * sizeof(Fixed) + from_prev.capacity() * 4 +
+         face_normals.capacity() * sizeof(Vec3);
 }
 
 void ContactBuilder::Patch::prepare(const Mesh& probe, const Mesh& object) {
@@ -312,7 +318,7 @@ void ContactBuilder::Patch::reset() {
 std::size_t ContactBuilder::Patch::bytes() const {
   return probe_s.bytes() + object_s.bytes() + (probe_world.capacity() + curve.capacity()) * sizeof(Vec3) +
          (batch ? sizeof(SegmentBatch) : 0) + (probe_xform_stamp.capacity() + climb.capacity()) * 4 +
-         valid.capacity() * sizeof(ContactPair);
+         valid.capacity() * sizeof(ContactPair) + valid_slots.capacity() * 8;
 }
 
 const Vec3& ContactBuilder::Patch::probe_point(std::uint32_t v, const Mesh& probe) {
@@ -502,39 +508,51 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   // the deepest vertex, and over every colliding pair when the patch is small or no vertex is
   // inside (a convex edge of one body pressed into a face of the other between its vertices).
   std::uint32_t won_a = UINT32_MAX, won_b = UINT32_MAX;  // the test edge whose crossing won last
-  // A crossing lies on an edge of a surface face that faces d, so the surface's height there is
-  // the edge's (no walk needed); the face must face d, as a walk would require.
-  auto refine_edge = [&](std::uint32_t ia, std::uint32_t ib, std::uint32_t sface) {
-    const Tri& t = surface.faces[sface];
-    const std::size_t surface_nv = surface.local.size();
-    if (t[0] >= surface_nv || t[1] >= surface_nv || t[2] >= surface_nv) return;
-    const Vec3 p[3] = {walk.at(t[0]), walk.at(t[1]), walk.at(t[2])};
+  // A surface face seen along d: its corners in the plane ⊥ d and their heights.
+  struct Seen {
+    std::uint32_t face;
     double pu[3], pw[3], ph[3];
-    for (int k = 0; k < 3; ++k) pu[k] = p[k].dot(walk.u), pw[k] = p[k].dot(walk.w), ph[k] = p[k].dot(walk.d);
-    if (!SurfaceWalk::facing((pu[1] - pu[0]) * (pw[2] - pw[0]) - (pu[2] - pu[0]) * (pw[1] - pw[0]), p[0], p[1], p[2]))
-      return;
+  };
+  // False when the face has a bad index or does not face d (a walk would not cross it).
+  auto see = [&](std::uint32_t f, Seen& sn) {
+    const Tri& t = surface.faces[f];
+    const std::size_t surface_nv = surface.local.size();
+    if (t[0] >= surface_nv || t[1] >= surface_nv || t[2] >= surface_nv) return false;
+    const Vec3 p[3] = {walk.at(t[0]), walk.at(t[1]), walk.at(t[2])};
+    sn.face = f;
+    for (int k = 0; k < 3; ++k) sn.pu[k] = p[k].dot(walk.u), sn.pw[k] = p[k].dot(walk.w), sn.ph[k] = p[k].dot(walk.d);
+    return SurfaceWalk::facing(
+        (sn.pu[1] - sn.pu[0]) * (sn.pw[2] - sn.pw[0]) - (sn.pu[2] - sn.pu[0]) * (sn.pw[1] - sn.pw[0]), p[0], p[1], p[2]);
+  };
+  // Where test edge (ia, ib) crosses the edges of seen faces along d. A crossing lies on an edge
+  // of a surface face that faces d, so the surface's height there is the edge's (no walk needed).
+  auto refine_edge = [&](std::uint32_t ia, std::uint32_t ib, const Seen* seen, int n_seen) {
     const Vec3 a = test_pos(ia), b = test_pos(ib);
     const double au = a.dot(walk.u), aw = a.dot(walk.w), ah = a.dot(walk.d);
     const double ru = b.dot(walk.u) - au, rw = b.dot(walk.w) - aw, rh = b.dot(walk.d) - ah;
-    for (int e = 0; e < 3; ++e) {
-      const int j = e == 2 ? 0 : e + 1;
-      const double su = pu[j] - pu[e], sw = pw[j] - pw[e];
-      const double den = ru * sw - rw * su;
-      if (!(std::abs(den) > 0)) continue;  // parallel
-      const double qu = pu[e] - au, qw = pw[e] - aw, inv = 1 / den;
-      const double s = (qu * sw - qw * su) * inv, r = (qu * rw - qw * ru) * inv;
-      if (s < 0 || s > 1 || r < 0 || r > 1) continue;
-      const double dist = (ph[e] + r * (ph[j] - ph[e])) - (ah + s * rh);
-      if (dist > best.depth) {
-        best.depth = dist;
-        best.point = a + s * (b - a);
-        best.face = sface;
-        best.vertex = UINT32_MAX;  // an edge point
-        won_a = ia, won_b = ib;
+    for (int i = 0; i < n_seen; ++i) {
+      const Seen& sn = seen[i];
+      for (int e = 0; e < 3; ++e) {
+        const int j = e == 2 ? 0 : e + 1;
+        const double su = sn.pu[j] - sn.pu[e], sw = sn.pw[j] - sn.pw[e];
+        const double den = ru * sw - rw * su;
+        if (!(std::abs(den) > 0)) continue;  // parallel
+        const double qu = sn.pu[e] - au, qw = sn.pw[e] - aw, inv = 1 / den;
+        const double sa = (qu * sw - qw * su) * inv, r = (qu * rw - qw * ru) * inv;
+        if (sa < 0 || sa > 1 || r < 0 || r > 1) continue;
+        const double dist = (sn.ph[e] + r * (sn.ph[j] - sn.ph[e])) - (ah + sa * rh);
+        if (dist > best.depth) {
+          best.depth = dist;
+          best.point = a + sa * (b - a);
+          best.face = sn.face;
+          best.vertex = UINT32_MAX;  // an edge point
+          won_a = ia, won_b = ib;
+        }
       }
     }
   };
-  // Every edge of the faces around vertex c against the faces its neighbourhood leaves through.
+  // Every edge of the faces around vertex c (once) against the faces its neighbourhood leaves
+  // through.
   auto refine_around = [&](std::uint32_t c) {
     std::uint32_t near[8];
     int n_near = 0;
@@ -553,11 +571,22 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
         }
     // Over one face of the other side both heights are linear: no crossing can beat the vertices.
     if (n_near < 2) return;
+    Seen seen[8];
+    int n_seen = 0;
+    for (int i = 0; i < n_near; ++i) n_seen += see(near[i], seen[n_seen]) ? 1 : 0;
+    std::uint32_t done_a[48], done_b[48];  // edges crossed already (each is shared by two faces)
+    int n_done = 0;
     for (std::uint32_t k = test_vf.first[c]; k < test_vf.first[c + 1]; ++k) {
       const Tri& t = test.faces[test_vf.faces[k]];
       if (t[0] >= test_nv || t[1] >= test_nv || t[2] >= test_nv) continue;
-      for (int e = 0; e < 3; ++e)
-        for (int i = 0; i < n_near; ++i) refine_edge(t[e], t[(e + 1) % 3], near[i]);
+      for (int e = 0; e < 3; ++e) {
+        const std::uint32_t ia = t[e], ib = t[e == 2 ? 0 : e + 1];
+        bool done = false;
+        for (int i = 0; i < n_done && !done; ++i) done = done_a[i] == ib && done_b[i] == ia;
+        if (done) continue;
+        if (n_done < 48) done_a[n_done] = ia, done_b[n_done++] = ib;
+        refine_edge(ia, ib, seen, n_seen);
+      }
     }
   };
   if (deepest_vertex != UINT32_MAX) {
@@ -581,8 +610,9 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
     for (const ContactPair& p : valid) {
       const std::uint32_t tf = probe_side ? p.probe : p.object, sf = probe_side ? p.object : p.probe;
       const Tri& t = test.faces[tf];
-      if (t[0] >= test_nv || t[1] >= test_nv || t[2] >= test_nv) continue;
-      for (int e = 0; e < 3; ++e) refine_edge(t[e], t[(e + 1) % 3], sf);
+      Seen sn;
+      if (t[0] >= test_nv || t[1] >= test_nv || t[2] >= test_nv || !see(sf, sn)) continue;
+      for (int e = 0; e < 3; ++e) refine_edge(t[e], t[(e + 1) % 3], &sn, 1);
     }
   }
   return best;
@@ -604,24 +634,30 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   if (!pose_ok) m.flags |= kBadInput;
 
   valid.clear();
-  probe_s.faces.clear();
-  object_s.faces.clear();
+  valid_slots.clear();
+  // A face that collided in the last round (when its records were made) keeps its fixed part.
+  auto first_sight = [&](BodyState& b, std::uint32_t f) {
+    BodyState::FaceMark& mark = b.face_mark[f];
+    if (mark.stamp == epoch) return;
+    const bool again = b.fixed_epoch != 0 && b.fixed_epoch == epoch - 1 && mark.stamp == epoch - 1;
+    b.from_prev.push_back(again ? mark.slot : UINT32_MAX);
+    mark = {epoch, std::uint32_t(b.faces.size())};
+    b.faces.push_back(f);
+  };
+  for (BodyState* b : {&probe_s, &object_s}) {
+    b->faces.clear();
+    b->from_prev.clear();
+    std::swap(b->fixed, b->prev_fixed);
+  }
   for (const ContactPair& p : pairs) {
     if (p.probe >= probe.faces.size() || p.object >= object.faces.size()) {
       ++m.skipped_pairs;
       continue;
     }
     valid.push_back(p);
-    if (probe_s.face_stamp[p.probe] != epoch) {
-      probe_s.face_stamp[p.probe] = epoch;
-      probe_s.face_slot[p.probe] = std::uint32_t(probe_s.faces.size());
-      probe_s.faces.push_back(p.probe);
-    }
-    if (object_s.face_stamp[p.object] != epoch) {
-      object_s.face_stamp[p.object] = epoch;
-      object_s.face_slot[p.object] = std::uint32_t(object_s.faces.size());
-      object_s.faces.push_back(p.object);
-    }
+    first_sight(probe_s, p.probe);
+    first_sight(object_s, p.object);
+    valid_slots.push_back({object_s.face_mark[p.object].slot, probe_s.face_mark[p.probe].slot});
   }
   if (m.skipped_pairs) m.flags |= kBadInput;
   m.probe_faces = static_cast<std::uint32_t>(probe_s.faces.size());
@@ -648,40 +684,59 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     origin = object.local[object.faces[valid.front().object][0]];
   Vec3 n_faces = Vec3::Zero();  // Σ unnormalised normals: 2 × the area-weighted mean normal (fallback)
   double n_faces_abs = 0;       // Σ of their lengths
-  Vec3 cr;
-  double cr_len;
+  object_s.fixed.resize(object_s.faces.size());
   object_s.recs.resize(object_s.faces.size());
   for (std::size_t i = 0; i < object_s.faces.size(); ++i) {
-    const Tri& t = object.faces[object_s.faces[i]];
+    BodyState::Fixed& fx = object_s.fixed[i];
+    if (object_s.from_prev[i] != UINT32_MAX) {
+      fx = object_s.prev_fixed[object_s.from_prev[i]];
+    } else {
+      const Tri& t = object.faces[object_s.faces[i]];
+      fx.bad_index = !tri_ok(t, object_s.nv);
+      fx.n.setZero();
+      if (!fx.bad_index) {
+        for (int k = 0; k < 3; ++k) fx.v[k] = object.local[t[k]];
+        if (!unit_normal(fx.v[0], fx.v[1], fx.v[2], fx.n, fx.cr, fx.len)) fx.n.setZero();
+      }
+    }
     FaceRec& r = object_s.recs[i];
     r.n.setZero();
     r.c = 0;
-    if (!tri_ok(t, object_s.nv)) {
+    if (fx.bad_index || fx.n.squaredNorm() == 0) {
       ++m.degenerate_faces;
       continue;
     }
-    for (int k = 0; k < 3; ++k) r.v[k] = object.local[t[k]] - origin;
-    if (!unit_normal(r.v[0], r.v[1], r.v[2], r.n, cr, cr_len)) {
-      r.n.setZero();
-      ++m.degenerate_faces;
-      continue;
-    }
+    for (int k = 0; k < 3; ++k) r.v[k] = fx.v[k] - origin;
+    r.n = fx.n;
     r.c = r.n.dot(r.v[0]);
-    n_faces += cr;
-    n_faces_abs += cr_len;
+    n_faces += fx.cr;
+    n_faces_abs += fx.len;
   }
+  object_s.fixed_epoch = epoch;
   if (m.degenerate_faces) m.flags |= kDegenerateSkipped;
+  probe_s.fixed.resize(probe_s.faces.size());
   probe_s.recs.resize(probe_s.faces.size());
+  const Vec3 to_rec = shift - origin;  // probe-local → record frame: R·x + to_rec
   for (std::size_t i = 0; i < probe_s.faces.size(); ++i) {
-    const Tri& t = probe.faces[probe_s.faces[i]];
+    BodyState::Fixed& fx = probe_s.fixed[i];
+    if (probe_s.from_prev[i] != UINT32_MAX) {
+      fx = probe_s.prev_fixed[probe_s.from_prev[i]];
+    } else {
+      const Tri& t = probe.faces[probe_s.faces[i]];
+      fx.bad_index = !tri_ok(t, probe_s.nv);
+      if (!fx.bad_index)
+        for (int k = 0; k < 3; ++k) fx.v[k] = probe.local[t[k]];
+      fx.n = probe_s.face_normals[probe_s.faces[i]];  // zero: degenerate
+    }
     FaceRec& r = probe_s.recs[i];
     r.n.setZero();
     r.c = 0;
-    if (!tri_ok(t, probe_s.nv)) continue;
-    for (int k = 0; k < 3; ++k) r.v[k] = probe_point(t[k], probe) - origin;  // transform each vertex once
-    r.n = R * probe_s.face_normals[probe_s.faces[i]];                        // zero stays zero (degenerate)
+    if (fx.bad_index) continue;
+    for (int k = 0; k < 3; ++k) r.v[k] = R * fx.v[k] + to_rec;
+    r.n = R * fx.n;  // zero stays zero (degenerate)
     r.c = r.n.dot(r.v[0]);
   }
+  probe_s.fixed_epoch = epoch;
 
   // The vector area of the object surface inside the probe, from the intersection curve:
   // A = ½ Σ (s0 − o) × (s1 − o) over the pairs' segments, in batches through the vectorised
@@ -712,9 +767,9 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     }
     rows = 0;
   };
-  for (const ContactPair& p : valid) {
-    const FaceRec& ra = object_s.recs[object_s.face_slot[p.object]];
-    const FaceRec& rb = probe_s.recs[probe_s.face_slot[p.probe]];
+  for (const auto& [slot_a, slot_b] : valid_slots) {
+    const FaceRec& ra = object_s.recs[slot_a];
+    const FaceRec& rb = probe_s.recs[slot_b];
     if (ra.n.squaredNorm() == 0 || rb.n.squaredNorm() == 0) continue;  // degenerate: no direction
     const bool front = have_prev && ra.n.dot(prev_n) > kBackCos;
     any_front_face |= front;

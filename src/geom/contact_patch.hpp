@@ -1,6 +1,7 @@
 // The patch contact model's state and scratch (ContactBuilder::Patch); the model is defined in
 // contact.hpp. Internal to src/geom: contact.cpp owns one per builder.
 #pragma once
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -126,10 +127,29 @@ struct ContactBuilder::Patch {
     std::vector<std::uint32_t> path_stamp;   ///< serial of the climb that stood on a vertex
     std::vector<double> depth;               ///< per-vertex exit distance this round (where visited)
     std::vector<std::uint32_t> exit_face;    ///< and the face it was found on
-    std::vector<std::uint32_t> face_stamp;   ///< round in which a face was counted as colliding
-    std::vector<std::uint32_t> face_slot;    ///< its index in `faces`
-    std::vector<std::uint32_t> faces;        ///< distinct colliding faces this round
-    std::vector<FaceRec> recs;               ///< their records, in the order of `faces`
+    /// Per face: the round in which it was counted as colliding and its index in `faces` then
+    /// (side by side: the two are read together, at random, for every pair).
+    struct FaceMark {
+      std::uint32_t stamp = 0;
+      std::uint32_t slot = 0;
+    };
+    std::vector<FaceMark> face_mark;
+    std::vector<std::uint32_t> faces;  ///< distinct colliding faces this round
+    std::vector<FaceRec> recs;         ///< their records, in the order of `faces`
+    /// What a colliding face's record is made from that does not change with the pose: vertices
+    /// in the body's local frame, unit normal (zero: degenerate or bad indices), (b−a)×(c−a) and
+    /// its length. Kept from one round to the next (most faces collide again), so that the mesh,
+    /// scattered and just swept out of the caches by the collision round, is read for new faces only.
+    struct Fixed {
+      Vec3 v[3];
+      Vec3 n;
+      Vec3 cr;
+      double len = 0;
+      bool bad_index = false;  ///< a vertex index out of range: no record
+    };
+    std::vector<Fixed> fixed, prev_fixed;  ///< per slot, this round and the last
+    std::vector<std::uint32_t> from_prev;  ///< per slot: its slot in the last round, UINT32_MAX if new
+    std::uint32_t fixed_epoch = 0;         ///< the round `fixed` was filled in
     std::vector<Vec3> face_normals;  ///< every face's unit normal, local frame (zero: degenerate); the probe's only
     Memory memory;                   ///< last round's deepest vertices
     bool sized_for(const Mesh& m) const { return mesh == &m && nv == m.local.size() && nf == m.faces.size(); }
@@ -151,6 +171,7 @@ struct ContactBuilder::Patch {
   double held_radius = 0;           ///< the patch footprint around held_point, mm
   // Scratch.
   std::vector<ContactPair> valid;
+  std::vector<std::array<std::uint32_t, 2>> valid_slots;        ///< per valid pair: its object and probe record slots
   std::vector<Vec3> probe_world;                                ///< probe vertices, object-local (valid where stamped)
   std::vector<Vec3> curve;                                      ///< intersection segment end points, object-local
   std::unique_ptr<SegmentBatch> batch;                          ///< scratch of the segment kernel
