@@ -217,6 +217,11 @@ constexpr int kRidgeSteps = 8;
 constexpr double kRidgeGainMm = 1e-4;
 /// Rounds between searches for new contact regions while the remembered ones still hold.
 constexpr std::uint32_t kDiscoverEvery = 4;
+/// Every this many searches for new regions, one starts from the whole patch; the others only
+/// from outside the last round's footprint (where a new region appears). Inside it the
+/// remembered maxima are followed every round, and a climb from there would mostly retrace one
+/// (a search over the whole patch costs ~4x a round at ~1,000 contacts).
+constexpr std::uint32_t kFullDiscoverEvery = 8;
 /// Steps a walk may take from its start face: neighbouring vertices land within a face or two of
 /// each other; a longer walk means the point is not over the patch.
 constexpr int kMaxWalkSteps = 16;
@@ -464,6 +469,13 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   // While the remembered maxima hold, new regions are looked for every kDiscoverEvery rounds
   // (a region starts at depth 0, so one found a few rounds late has not grown much).
   const bool discover = !remembered || epoch % kDiscoverEvery == 0;
+  const bool full = !remembered || !held_valid || (epoch / kDiscoverEvery) % kFullDiscoverEvery == 0;
+  // Inside last round's footprint (the curve's reach from its plane point, across its normal).
+  auto in_footprint = [&](const Vec3& x) {
+    if (full) return false;
+    const Vec3 rel = x - held_point;
+    return (rel - rel.dot(held_n) * held_n).squaredNorm() < held_radius * held_radius;
+  };
   std::uint32_t low_v[kLowSeeds], low_f[kLowSeeds];
   double low_key[kLowSeeds];
   int n_low = 0;
@@ -473,8 +485,9 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
     const std::uint32_t tf = probe_side ? p.probe : p.object, sf = probe_side ? p.object : p.probe;
     for (std::uint32_t v : test.faces[tf]) {
       if (v >= test_nv) continue;
-      const double key = -test_pos(v).dot(d);
-      if (n_low == kLowSeeds && key <= low_key[n_low - 1]) continue;
+      const Vec3& x = test_pos(v);
+      const double key = -x.dot(d);
+      if ((n_low == kLowSeeds && key <= low_key[n_low - 1]) || in_footprint(x)) continue;
       bool dup = false;
       for (int i = 0; i < n_low; ++i) dup |= low_v[i] == v;
       if (dup) continue;
@@ -491,7 +504,7 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
     const ContactPair& p = valid[i];
     const std::uint32_t tf = probe_side ? p.probe : p.object, sf = probe_side ? p.object : p.probe;
     for (std::uint32_t v : test.faces[tf])
-      if (v < test_nv && visit[v] != epoch && eval(v, sf) > 0) climb.push_back(v);
+      if (v < test_nv && visit[v] != epoch && !in_footprint(test_pos(v)) && eval(v, sf) > 0) climb.push_back(v);
   }
   std::sort(climb.begin(), climb.end(), [&](std::uint32_t a, std::uint32_t b) { return depth[a] > depth[b]; });
   for (std::uint32_t v : climb) climb_from(v);

@@ -87,6 +87,29 @@ TEST_CASE("contact patch: sphere pressed into a box face: FD = +z, PD = depth fr
   }
 }
 
+TEST_CASE("contact patch: tiny and huge scales: PD and the plane scale with the meshes, FD does not") {
+  // The same press (2 mm into a 40 mm box with a 10 mm ball) at scales 1e-30 .. 1e30: the vector
+  // area goes with the square of the scale and the segment kernel divides by products of
+  // distances, so nothing may underflow, overflow or lose the direction.
+  for (double s : {1e-30, 1e-9, 1e-6, 1e-3, 1.0, 1e3, 1e6, 1e9, 1e30}) {
+    CAPTURE(s);
+    const Mesh box = make_box({40 * s, 40 * s, 40 * s});
+    const Mesh ball = make_icosphere(10 * s, 16);
+    ContactBuilder b;
+    for (int k = 0; k < 6; ++k) {  // a few rounds: the first and the ones with history
+      const double d = 2.0 + 0.1 * k;
+      const Pose p = pose_at(s * Vec3(1.3, -2.1, 30.0 - d));
+      const ContactModel m = model_at(b, ball, box, p);
+      REQUIRE(m.in_contact());
+      CHECK(finite_model(m));
+      CHECK(angle_deg(fd(m), Vec3::UnitZ()) < 1e-6);
+      CHECK(std::abs(m.penetration_mm - d * s) <= kDepthTol * s);
+      CHECK(depth_below_plane(m, p) == doctest::Approx(m.penetration_mm).epsilon(1e-9));
+      CHECK((m.flags & (kHeld | kNormalFallback | kBadInput | kNormalsDisagree)) == 0);
+    }
+  }
+}
+
 TEST_CASE("contact patch: box edge and corner: FD on the bisector, PD = depth") {
   const Vec3 edge_dir = Vec3(1, 0, 1).normalized(), corner_dir = Vec3(1, 1, 1).normalized();
   for (double d : {0.5, 2.0, 5.0}) {
