@@ -218,9 +218,9 @@ constexpr double kRidgeGainMm = 1e-4;
 /// Rounds between searches for new contact regions while the remembered ones still hold.
 constexpr std::uint32_t kDiscoverEvery = 4;
 /// Every this many searches for new regions, one starts from the whole patch; the others only
-/// from outside the last round's footprint (where a new region appears). Inside it the
-/// remembered maxima are followed every round, and a climb from there would mostly retrace one
-/// (a search over the whole patch costs ~4x a round at ~1,000 contacts).
+/// from the regions no remembered maximum follows (where the remembered ones are climbed every
+/// round, a climb from the patch's rim mostly retraces one: a search over the whole patch costs
+/// ~4x a round at ~1,000 contacts).
 constexpr std::uint32_t kFullDiscoverEvery = 8;
 /// Steps a walk may take from its start face: neighbouring vertices land within a face or two of
 /// each other; a longer walk means the point is not over the patch.
@@ -284,18 +284,18 @@ void ContactBuilder::Patch::BodyState::compute_face_normals() {
 
 void ContactBuilder::Patch::BodyState::clear_stamps() {
   std::fill(visit_stamp.begin(), visit_stamp.end(), 0);
-  std::fill(face_mark.begin(), face_mark.end(), FaceMark{});
+  std::fill(face_mark.begin(), face_mark.end(), Mark{});
   fixed_epoch = 0;
 }
 
 std::size_t ContactBuilder::Patch::BodyState::bytes() const {
   return vf.bytes() +
          (visit_stamp.capacity() + path_stamp.capacity() + exit_face.capacity() + 2 * face_mark.capacity() +
-          faces.capacity()) *
+          faces.capacity() + group_parent.capacity() + 2 * group_table.capacity()) *
              4 +
-         depth.capacity() * sizeof(double) + recs.capacity() * sizeof(FaceRec) +
-         (fixed.capacity() + prev_fixed.capacity()) * sizeof(Fixed) + from_prev.capacity() * 4 +
-         face_normals.capacity() * sizeof(Vec3);
+         (depth.capacity() + group_box.capacity()) * sizeof(double) + group_open.capacity() +
+         recs.capacity() * sizeof(FaceRec) + (fixed.capacity() + prev_fixed.capacity()) * sizeof(Fixed) +
+         from_prev.capacity() * 4 + face_normals.capacity() * sizeof(Vec3);
 }
 
 void ContactBuilder::Patch::prepare(const Mesh& probe, const Mesh& object) {
@@ -322,7 +322,8 @@ void ContactBuilder::Patch::reset() {
 
 std::size_t ContactBuilder::Patch::bytes() const {
   return probe_s.bytes() + object_s.bytes() + (probe_world.capacity() + curve.capacity()) * sizeof(Vec3) +
-         (batch ? sizeof(SegmentBatch) : 0) + (probe_xform_stamp.capacity() + climb.capacity()) * 4 +
+         (batch ? sizeof(SegmentBatch) : 0) +
+         (probe_xform_stamp.capacity() + climb.capacity() + seed_pairs.capacity()) * 4 +
          valid.capacity() * sizeof(ContactPair) + valid_slots.capacity() * 8;
 }
 
@@ -391,6 +392,13 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   std::uint32_t maxima[Memory::kSize];
   double maxima_depth[Memory::kSize];
   int n_maxima = 0;
+  // Known for the next searches for new regions: local maxima found beyond the kSize deepest,
+  // and a vertex of each group this search climbed from (its region is not new any more).
+  std::uint32_t known[Memory::kKnown];
+  int n_known = 0;
+  auto drop = [&](std::uint32_t v) {
+    if (n_known < Memory::kKnown) known[n_known++] = v;
+  };
   if (climb_serial > 0xF0000000u) {  // serials about to wrap: forget every path (once per ~4e9 climbs)
     std::fill(probe_s.path_stamp.begin(), probe_s.path_stamp.end(), 0);
     std::fill(object_s.path_stamp.begin(), object_s.path_stamp.end(), 0);
@@ -440,7 +448,11 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
       if (next == UINT32_MAX) {  // a local maximum: remember it (deepest first)
         // Full: the shallowest gives way, or v is not kept. (Only a slot already filled is
         // compared: the old test read the last slot on the way to filling it, uninitialised.)
-        if (n_maxima == Memory::kSize && maxima_depth[Memory::kSize - 1] >= depth[v]) return;
+        if (n_maxima == Memory::kSize && maxima_depth[Memory::kSize - 1] >= depth[v]) {
+          drop(v);
+          return;
+        }
+        if (n_maxima == Memory::kSize) drop(maxima[Memory::kSize - 1]);
         int i = n_maxima < Memory::kSize ? n_maxima++ : Memory::kSize - 1;
         maxima[i] = v;
         maxima_depth[i] = depth[v];
@@ -467,27 +479,96 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
     }
   }
   // While the remembered maxima hold, new regions are looked for every kDiscoverEvery rounds
-  // (a region starts at depth 0, so one found a few rounds late has not grown much).
+  // (a region starts at depth 0, so one found a few rounds late has not grown much): climbs
+  // start from the colliding pairs' vertices lowest along d (over a flat surface the deepest)
+  // and from a sample of the pairs whose offset turns every round. Every kFullDiscoverEvery-th
+  // time (and with nothing remembered) from the whole patch; otherwise only from the regions
+  // where no remembered maximum lies: this body's colliding faces fall into groups connected
+  // through shared vertices (a ring around each region the other body entered), and a group
+  // whose extent across d holds none of this round's maxima is a region not followed yet.
   const bool discover = !remembered || epoch % kDiscoverEvery == 0;
-  const bool full = !remembered || !held_valid || (epoch / kDiscoverEvery) % kFullDiscoverEvery == 0;
-  // Inside last round's footprint (the curve's reach from its plane point, across its normal).
-  auto in_footprint = [&](const Vec3& x) {
-    if (full) return false;
-    const Vec3 rel = x - held_point;
-    return (rel - rel.dot(held_n) * held_n).squaredNorm() < held_radius * held_radius;
-  };
+  const bool full = !remembered || (epoch / kDiscoverEvery) % kFullDiscoverEvery == 0;
+  std::vector<std::uint32_t>& open = seed_pairs;  // indices into valid
+  open.clear();
+  if (discover && full) {
+    for (std::uint32_t i = 0; i < valid.size(); ++i) open.push_back(i);
+  } else if (discover) {
+    // Union-find over the slots: faces sharing a vertex join. Each vertex remembers the first
+    // slot it was seen in, in a small hash table (scratch, stays in cache; a per-vertex array
+    // would be read at random over the whole mesh).
+    std::vector<std::uint32_t>& parent = T.group_parent;
+    const auto n_slots = static_cast<std::uint32_t>(T.faces.size());
+    parent.resize(n_slots);
+    for (std::uint32_t i = 0; i < n_slots; ++i) parent[i] = i;
+    auto root = [&](std::uint32_t i) {
+      while (parent[i] != i) i = parent[i] = parent[parent[i]];
+      return i;
+    };
+    std::vector<std::uint64_t>& table = T.group_table;  // (vertex + 1) << 32 | slot; 0 = empty
+    std::size_t size = 64;
+    while (size < 6 * std::size_t(n_slots)) size *= 2;  // at most half full
+    table.assign(size, 0);
+    for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
+      if (T.fixed[slot].bad_index) continue;
+      for (std::uint32_t v : T.fixed[slot].vid) {
+        const std::uint64_t key = std::uint64_t(v) + 1;
+        for (std::size_t h = (v * 0x9E3779B97F4A7C15ull) >> 40 & (size - 1);; h = (h + 1) & (size - 1)) {
+          if (table[h] == 0) {
+            table[h] = key << 32 | slot;
+            break;
+          }
+          if (table[h] >> 32 == key) {
+            const std::uint32_t a = root(std::uint32_t(table[h])), b = root(slot);
+            if (a != b) parent[std::max(a, b)] = std::min(a, b);
+            break;
+          }
+        }
+      }
+    }
+    // Each group's extent across d (from the records: vertices relative to the round's origin),
+    // and whether one of this round's maxima lies in it.
+    std::vector<double>& box = T.group_box;  // per root: lo_u, hi_u, lo_w, hi_w
+    box.assign(4 * std::size_t(n_slots), 0);
+    for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
+      const std::uint32_t r = root(slot);
+      double* bx = &box[4 * std::size_t(r)];
+      if (r == slot) bx[0] = bx[2] = std::numeric_limits<double>::infinity(), bx[1] = bx[3] = -bx[0];
+      if (T.fixed[slot].bad_index) continue;
+      for (const Vec3& x : T.recs[slot].v) {
+        const double xu = x.dot(walk.u), xw = x.dot(walk.w);
+        bx[0] = std::min(bx[0], xu), bx[1] = std::max(bx[1], xu), bx[2] = std::min(bx[2], xw), bx[3] = std::max(bx[3], xw);
+      }
+    }
+    std::vector<std::uint8_t>& group_open = T.group_open;  // per root: no maximum in its extent
+    group_open.assign(n_slots, 0);
+    for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
+      if (root(slot) != slot) continue;
+      const double* bx = &box[4 * std::size_t(slot)];
+      bool followed = false;
+      auto inside = [&](std::uint32_t v) {
+        const Vec3 x = test_pos(v) - rec_origin;
+        const double xu = x.dot(walk.u), xw = x.dot(walk.w);
+        return xu >= bx[0] && xu <= bx[1] && xw >= bx[2] && xw <= bx[3];
+      };
+      for (int i = 0; i < n_maxima && !followed; ++i) followed = inside(maxima[i]);
+      for (int i = 0; i < Memory::kKnown && !followed; ++i)
+        followed = memory.known[i] < test_nv && inside(memory.known[i]);
+      group_open[slot] = followed ? 0 : 1;
+      if (!followed && !T.fixed[slot].bad_index) drop(T.fixed[slot].vid[0]);
+    }
+    for (std::uint32_t i = 0; i < valid.size(); ++i)
+      if (group_open[root(valid_slots[i][probe_side ? 1 : 0])]) open.push_back(i);
+  }
   std::uint32_t low_v[kLowSeeds], low_f[kLowSeeds];
   double low_key[kLowSeeds];
   int n_low = 0;
-  const std::span<const ContactPair> seed_pairs =
-      discover ? std::span<const ContactPair>(valid) : std::span<const ContactPair>();
-  for (const ContactPair& p : seed_pairs) {
+  for (std::uint32_t pi : open) {
+    const ContactPair& p = valid[pi];
     const std::uint32_t tf = probe_side ? p.probe : p.object, sf = probe_side ? p.object : p.probe;
     for (std::uint32_t v : test.faces[tf]) {
       if (v >= test_nv) continue;
-      const Vec3& x = test_pos(v);
-      const double key = -x.dot(d);
-      if ((n_low == kLowSeeds && key <= low_key[n_low - 1]) || in_footprint(x)) continue;
+      const double key = -test_pos(v).dot(d);
+      if (n_low == kLowSeeds && key <= low_key[n_low - 1]) continue;
       bool dup = false;
       for (int i = 0; i < n_low; ++i) dup |= low_v[i] == v;
       if (dup) continue;
@@ -499,21 +580,27 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   }
   for (int i = 0; i < n_low; ++i)
     if (visit[low_v[i]] != epoch && eval(low_v[i], low_f[i]) > 0) climb.push_back(low_v[i]);
-  const std::size_t stride = std::max<std::size_t>(1, valid.size() / kSeedPairs);
-  for (std::size_t i = (epoch / kDiscoverEvery) % stride; discover && i < valid.size(); i += stride) {
-    const ContactPair& p = valid[i];
+  const std::size_t stride = std::max<std::size_t>(1, open.size() / kSeedPairs);
+  for (std::size_t i = (epoch / kDiscoverEvery) % stride; i < open.size(); i += stride) {
+    const ContactPair& p = valid[open[i]];
     const std::uint32_t tf = probe_side ? p.probe : p.object, sf = probe_side ? p.object : p.probe;
     for (std::uint32_t v : test.faces[tf])
-      if (v < test_nv && visit[v] != epoch && !in_footprint(test_pos(v)) && eval(v, sf) > 0) climb.push_back(v);
+      if (v < test_nv && visit[v] != epoch && eval(v, sf) > 0) climb.push_back(v);
   }
   std::sort(climb.begin(), climb.end(), [&](std::uint32_t a, std::uint32_t b) { return depth[a] > depth[b]; });
   for (std::uint32_t v : climb) climb_from(v);
   const std::uint32_t deepest_vertex = best.vertex;
+  const Memory last = memory;
   memory = Memory{};
   for (int i = 0; i < n_maxima; ++i) {
     memory.vertex[i] = maxima[i];
     memory.face[i] = exitf[maxima[i]];
   }
+  // What the last search that climbed knew.
+  if (climb.empty())
+    std::copy(std::begin(last.known), std::end(last.known), std::begin(memory.known));
+  else
+    std::copy(known, known + n_known, std::begin(memory.known));
   if (deepest_vertex != UINT32_MAX) best.point = test_pos(deepest_vertex);
 
   // Between vertices: the maximum of two piecewise-linear heights lies on a vertex of their
@@ -650,7 +737,7 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   valid_slots.clear();
   // A face that collided in the last round (when its records were made) keeps its fixed part.
   auto first_sight = [&](BodyState& b, std::uint32_t f) {
-    BodyState::FaceMark& mark = b.face_mark[f];
+    BodyState::Mark& mark = b.face_mark[f];
     if (mark.stamp == epoch) return;
     const bool again = b.fixed_epoch != 0 && b.fixed_epoch == epoch - 1 && mark.stamp == epoch - 1;
     b.from_prev.push_back(again ? mark.slot : UINT32_MAX);
@@ -695,6 +782,7 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   Vec3 origin = Vec3::Zero();
   if (!valid.empty() && tri_ok(object.faces[valid.front().object], object_s.nv))
     origin = object.local[object.faces[valid.front().object][0]];
+  rec_origin = origin;
   Vec3 n_faces = Vec3::Zero();  // Σ unnormalised normals: 2 × the area-weighted mean normal (fallback)
   double n_faces_abs = 0;       // Σ of their lengths
   object_s.fixed.resize(object_s.faces.size());
@@ -707,6 +795,7 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
       const Tri& t = object.faces[object_s.faces[i]];
       fx.bad_index = !tri_ok(t, object_s.nv);
       fx.n.setZero();
+      fx.vid = t;
       if (!fx.bad_index) {
         for (int k = 0; k < 3; ++k) fx.v[k] = object.local[t[k]];
         if (!unit_normal(fx.v[0], fx.v[1], fx.v[2], fx.n, fx.cr, fx.len)) fx.n.setZero();
@@ -737,6 +826,7 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     } else {
       const Tri& t = probe.faces[probe_s.faces[i]];
       fx.bad_index = !tri_ok(t, probe_s.nv);
+      fx.vid = t;
       if (!fx.bad_index)
         for (int k = 0; k < 3; ++k) fx.v[k] = probe.local[t[k]];
       fx.n = probe_s.face_normals[probe_s.faces[i]];  // zero: degenerate

@@ -112,9 +112,16 @@ struct ContactBuilder::Patch {
   /// What one side remembers between rounds: its deepest vertex and the face it left through
   /// (the next round's climb starts there).
   struct Memory {
-    static constexpr int kSize = 4;  ///< local maxima remembered (separate contact regions)
+    static constexpr int kSize = 4;   ///< local maxima remembered (separate contact regions)
+    static constexpr int kKnown = 8;  ///< vertices known to lie in followed regions (see `known`)
     std::uint32_t vertex[kSize] = {UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX};
     std::uint32_t face[kSize] = {UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX};
+    /// Vertices whose regions count as followed when new regions are looked for, from the last
+    /// search that climbed: local maxima it found beyond the kSize deepest (not climbed each
+    /// round), and a vertex of each group it climbed from (a region is new once: else a patch
+    /// with more than kSize peaks, or a rim around a hole, would be searched every time).
+    std::uint32_t known[kKnown] = {UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX,
+                                   UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX};
   };
 
   /// What the model keeps per body: the faces around each vertex, and per-vertex and per-face
@@ -127,15 +134,19 @@ struct ContactBuilder::Patch {
     std::vector<std::uint32_t> path_stamp;   ///< serial of the climb that stood on a vertex
     std::vector<double> depth;               ///< per-vertex exit distance this round (where visited)
     std::vector<std::uint32_t> exit_face;    ///< and the face it was found on
-    /// Per face: the round in which it was counted as colliding and its index in `faces` then
-    /// (side by side: the two are read together, at random, for every pair).
-    struct FaceMark {
+    /// A round stamp and a slot, side by side (read together, at random).
+    struct Mark {
       std::uint32_t stamp = 0;
       std::uint32_t slot = 0;
     };
-    std::vector<FaceMark> face_mark;
+    std::vector<Mark> face_mark;       ///< per face: the round it was counted as colliding, its index in `faces` then
     std::vector<std::uint32_t> faces;  ///< distinct colliding faces this round
-    std::vector<FaceRec> recs;         ///< their records, in the order of `faces`
+    // Scratch for grouping the colliding faces into regions (a search for new regions).
+    std::vector<std::uint64_t> group_table;   ///< vertex → the first slot it was seen in (hash table)
+    std::vector<std::uint32_t> group_parent;  ///< union-find over the slots
+    std::vector<double> group_box;            ///< per group root: its extent across d (u, w)
+    std::vector<std::uint8_t> group_open;     ///< per group root: no remembered maximum in it
+    std::vector<FaceRec> recs;                ///< their records, in the order of `faces`
     /// What a colliding face's record is made from that does not change with the pose: vertices
     /// in the body's local frame, unit normal (zero: degenerate or bad indices), (b−a)×(c−a) and
     /// its length. Kept from one round to the next (most faces collide again), so that the mesh,
@@ -145,6 +156,7 @@ struct ContactBuilder::Patch {
       Vec3 n;
       Vec3 cr;
       double len = 0;
+      Tri vid{};               ///< its vertex indices
       bool bad_index = false;  ///< a vertex index out of range: no record
     };
     std::vector<Fixed> fixed, prev_fixed;  ///< per slot, this round and the last
@@ -179,9 +191,11 @@ struct ContactBuilder::Patch {
   std::uint32_t climb_serial = 0;                               ///< climbs so far (path stamps)
   Eigen::Matrix3d rot{Eigen::Matrix3d::Identity()};             ///< this round's pose rotation
   Vec3 shift{Vec3::Zero()};                                     ///< and translation, probe-local → object-local
+  Vec3 rec_origin{Vec3::Zero()};                                ///< this round's FaceRec origin o, object-local
   const Vec3& probe_point(std::uint32_t v, const Mesh& probe);  ///< probe vertex v, object-local
   std::uint32_t epoch = 0;
-  std::vector<std::uint32_t> climb;  ///< scratch: vertices to climb from
+  std::vector<std::uint32_t> climb;       ///< scratch: vertices to climb from
+  std::vector<std::uint32_t> seed_pairs;  ///< scratch: valid pairs a search for new regions starts from
 };
 
 }  // namespace st::geom

@@ -110,6 +110,40 @@ TEST_CASE("contact patch: tiny and huge scales: PD and the plane scale with the 
   }
 }
 
+TEST_CASE("contact patch: a second contact region is found when it appears, and PD follows it") {
+  // A dumbbell (two 10 mm balls 30 mm apart) rocks on a box's top face: ball A held 1 mm deep,
+  // ball B coming down from 2 mm above until it is the deeper (depth 1 + 30 sin θ). Both
+  // patches lie on the top face, so FD = +z exactly; PD must reach B's depth within the rounds
+  // that look for new regions (B appears outside the footprint A's patch had).
+  Mesh dumbbell;
+  for (double x : {-15.0, 15.0}) {
+    const Mesh ball = make_icosphere(10, 16);
+    const auto base = std::uint32_t(dumbbell.local.size());
+    for (const Vec3& v : ball.local) dumbbell.local.push_back(ball.origin + v + Vec3(x, 0, 0));
+    for (const Tri& t : ball.faces) dumbbell.faces.push_back({t[0] + base, t[1] + base, t[2] + base});
+  }
+  const Mesh box = make_box({100, 100, 40});  // top face z = 20, the balls well inside its edges
+  ContactBuilder b;
+  int checked = 0;
+  for (int k = 0; k <= 40; ++k) {
+    const double theta = -0.1 + 0.0035 * k;  // rotation about y: A (x = −15) at height 15 sin θ
+    Pose p = Pose::Identity();
+    p.linear() = Eigen::AngleAxisd(theta, Vec3::UnitY()).toRotationMatrix();
+    p.translation() = Vec3(0, 0, 29 - 15 * std::sin(theta));  // A's depth stays 1 mm
+    const double depth_a = 1.0, depth_b = 1 + 30 * std::sin(theta);
+    CAPTURE(k);
+    const ContactModel m = model_at(b, dumbbell, box, p);
+    REQUIRE(m.in_contact());
+    CHECK(angle_deg(fd(m), Vec3::UnitZ()) < 1e-6);
+    CHECK(m.penetration_mm <= std::max(depth_a, depth_b) + 1e-9);  // never deeper than the balls
+    if (k >= 24) {  // B touches from k = 20 (θ > −1/30): found within the 4 rounds between searches
+      CHECK(std::abs(m.penetration_mm - std::max(depth_a, depth_b)) <= kDepthTol);
+      ++checked;
+    }
+  }
+  CHECK(checked == 17);
+}
+
 TEST_CASE("contact patch: box edge and corner: FD on the bisector, PD = depth") {
   const Vec3 edge_dir = Vec3(1, 0, 1).normalized(), corner_dir = Vec3(1, 1, 1).normalized();
   for (double d : {0.5, 2.0, 5.0}) {
