@@ -321,7 +321,8 @@ void ContactBuilder::Patch::reset() {
 }
 
 std::size_t ContactBuilder::Patch::bytes() const {
-  return probe_s.bytes() + object_s.bytes() + (probe_world.capacity() + curve.capacity()) * sizeof(Vec3) +
+  return probe_s.bytes() + object_s.bytes() +
+         (probe_world.capacity() + curve.capacity() + held_curve.capacity()) * sizeof(Vec3) +
          (batch ? sizeof(SegmentBatch) : 0) +
          (probe_xform_stamp.capacity() + climb.capacity() + seed_pairs.capacity()) * 4 +
          valid.capacity() * sizeof(ContactPair) + valid_slots.capacity() * 8;
@@ -914,6 +915,14 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     // feature's far side): keep the last plane while the tracked point is below it and over
     // the patch's footprint.
     if (held_valid) {
+      if (held_radius < 0) {  // the footprint: how far the held round's curve reaches from its plane point
+        double radius2 = 0;
+        for (const Vec3& c : held_curve) {
+          const Vec3 rel = c - held_point;
+          radius2 = std::max(radius2, (rel - rel.dot(held_n) * held_n).squaredNorm());
+        }
+        held_radius = std::sqrt(radius2);
+      }
       const Vec3 x = R * held_tracked + shift;
       const Vec3 rel = x - held_point;
       const double depth = -rel.dot(held_n);
@@ -988,20 +997,15 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   m.plane_point = to_pod(plane_pt + object.origin);
   m.contact_point = m.plane_point;
 
-  // Held-contact footprint: how far the intersection curve reaches from the plane point.
-  double radius2 = 0;
-  for (const Vec3& x : curve) {
-    const Vec3 rel = x - plane_pt;
-    radius2 = std::max(radius2, (rel - rel.dot(n) * n).squaredNorm());
-  }
-  const double radius = std::sqrt(radius2);
+  // The curve is kept for the held contact's footprint, measured only if it is held.
+  std::swap(curve, held_curve);
+  held_radius = -1;
   have_prev = true;
   prev_n = n;
   held_valid = true;
   held_n = n;
   held_point = plane_pt;
   held_tracked = tracked_local;
-  held_radius = radius;
   return m;
 }
 

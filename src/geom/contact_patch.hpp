@@ -180,7 +180,8 @@ struct ContactBuilder::Patch {
   Vec3 held_n{Vec3::Zero()};        ///< its normal
   Vec3 held_point{Vec3::Zero()};    ///< a point of it, object-local, mm
   Vec3 held_tracked{Vec3::Zero()};  ///< the probe point held against it, probe-local, mm
-  double held_radius = 0;           ///< the patch footprint around held_point, mm
+  std::vector<Vec3> held_curve;     ///< the intersection curve of the round it was set in, object-local
+  double held_radius = -1;          ///< the footprint around held_point (from held_curve), mm; < 0 not yet measured
   // Scratch.
   std::vector<ContactPair> valid;
   std::vector<std::array<std::uint32_t, 2>> valid_slots;        ///< per valid pair: its object and probe record slots
