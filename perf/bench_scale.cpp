@@ -12,13 +12,17 @@
 //     3a336cb17183 "cxgb4: Add low latency socket busy_poll support"), 10 Gbit/s;
 //   100 GbE with busy polling: 8.79 us round trip (same source, busy_poll on), 100 Gbit/s.
 // Per (pose, W, mapping): max and mean worker time, imbalance = max / mean over the W workers,
-// redundant work = sum / the single-thread collide(), and the predicted round
+// redundant work = sum / the single-thread collide(); the same two from the counted sphere-pair
+// and triangle-pair tests, weighted by a cost per test fitted to every query of the run (these do
+// not move with the host's speed from one share's timing to the next); and the predicted round
 //   compute = max_w (query_w + encode of its Result) + the client's decode and merge
 //   network   = compute + client CPU(W) + round trip + largest reply / bandwidth
 // with speed-up = single-thread collide() / predicted round. The model is checked where this
-// machine can: W = 1 and 2 in-process workers over inproc, predicted (floor(W) + compute) against
-// the measured round, same poses, same run.
+// machine can: W = 1 and 2 in-process workers over inproc, predicted (our empty round + the
+// slowest share's query + encode and merge) against the measured round, same poses, the terms and
+// the rounds timed in interleaved blocks so that all see the host at the same speed.
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -263,6 +267,12 @@ struct Row {
   std::size_t max_reply_bytes = 0, total_reply_bytes = 0;
   // Counted work (deterministic, unlike the times): sphere-pair and triangle-pair tests.
   std::uint64_t single_spheres = 0, single_tris = 0, sum_spheres = 0, sum_tris = 0;
+  std::vector<std::array<double, 3>> shares;  // per busy worker: sphere tests, triangle tests, query µs
+  // The counted work in µs (tests weighted by the run's fitted cost per test): max and mean over
+  // the W workers, and the single thread's.
+  double work_max = 0, work_mean = 0, work_single = 0;
+  double work_imbalance() const { return work_mean > 0 ? work_max / work_mean : 0; }
+  double work_redundancy() const { return work_single > 0 ? work_mean * workers / work_single : 0; }
   double imbalance() const { return mean_us > 0 ? max_us / mean_us : 0; }
   double redundancy() const { return single_us > 0 ? sum_us / single_us : 0; }
   double sphere_ratio() const { return single_spheres ? double(sum_spheres) / double(single_spheres) : 0; }
@@ -464,6 +474,7 @@ void run_scale(const ScaleArgs& a) {
           r.sum_us += q;
           r.sum_spheres += counted.sphere_tests;
           r.sum_tris += counted.tri_tests;
+          r.shares.push_back({double(counted.sphere_tests), double(counted.tri_tests), q});
           r.max_us = std::max(r.max_us, q);
           r.encode_max_us = std::max(r.encode_max_us, q + enc);  // the slowest worker including its encode
           r.max_reply_bytes = std::max(r.max_reply_bytes, frame.size());
@@ -491,6 +502,36 @@ void run_scale(const ScaleArgs& a) {
         r.compute_round_us = r.encode_max_us + r.client_us;
         rows.push_back(r);
       }
+    }
+  }
+
+  // Counted work: the cost of a sphere-pair and a triangle-pair test, fitted (least squares, no
+  // intercept) to every query timed above, weights the tests into µs. Imbalance and redundancy of
+  // the counted work are then deterministic for a given fit: the same shares give the same
+  // figures whatever the host's speed at the moment each was timed.
+  double fit_sphere_us = 0, fit_tri_us = 0;
+  {
+    double ss = 0, st = 0, tt = 0, sq = 0, tq = 0;
+    auto add = [&](double S, double T, double q) {
+      ss += S * S, st += S * T, tt += T * T, sq += S * q, tq += T * q;
+    };
+    for (std::size_t i = 0; i < poses.size(); ++i) add(double(single_spheres[i]), double(single_tris[i]), single[i]);
+    for (const Row& r : rows)
+      for (const auto& w : r.shares) add(w[0], w[1], w[2]);
+    const double det = ss * tt - st * st;
+    if (det > 0) {
+      fit_sphere_us = (sq * tt - tq * st) / det;
+      fit_tri_us = (tq * ss - sq * st) / det;
+    }
+    for (Row& r : rows) {
+      double sum = 0;
+      for (const auto& w : r.shares) {
+        const double work = fit_sphere_us * w[0] + fit_tri_us * w[1];
+        r.work_max = std::max(r.work_max, work);
+        sum += work;
+      }
+      r.work_mean = sum / r.workers;
+      r.work_single = fit_sphere_us * double(r.single_spheres) + fit_tri_us * double(r.single_tris);
     }
   }
 
@@ -538,15 +579,6 @@ void run_scale(const ScaleArgs& a) {
         // everything of ours in a round (encode, worker service, decode, merge bookkeeping).
         geom::Pose far = geom::Pose::Identity();
         far.translation() = geom::Vec3(1e5, 0, 0);
-        std::vector<double> empty;
-        for (int r = 0; r < a.gather_rounds + 20; ++r) {
-          const auto t0 = Clock::now();
-          sg.value()->round(++seq, far, Clock::now() + std::chrono::milliseconds(200), rr);
-          if (r >= 20 && rr.complete)
-            empty.push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
-          std::this_thread::sleep_for(std::chrono::microseconds(500));
-        }
-        const double gather = median(std::move(empty));
         // The same shares as the workers hold, queried at once in this process's threads.
         std::vector<std::unique_ptr<net::CollisionBackend>> shares;
         {
@@ -560,25 +592,60 @@ void run_scale(const ScaleArgs& a) {
             if (Status st = shares.back()->load(set.value()); !st) die(st.error());
           }
         }
+        // Per pose, the real round, the empty round, the shares' queries one after the other
+        // (alone) and all at once, interleaved in short blocks: the prediction's terms and the
+        // measured round then see the same host (this VM's speed moves by up to 2x in minutes).
+        const int block = std::max(5, a.gather_rounds / 16);
+        constexpr int kTrials = 4;
+        std::vector<net::FacePair> scratch_pairs;
         for (std::size_t i = 0; i < poses.size(); ++i) {
-          std::vector<double> t, inside;
-          for (int r = 0; r < a.gather_rounds / 4 + 20; ++r) {
-            const auto t0 = Clock::now();
-            sg.value()->round(++seq, poses[i], Clock::now() + std::chrono::milliseconds(200), rr);
-            if (r >= 20 && rr.complete) {
-              t.push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
-              inside.push_back(double(rr.stats.compute_ns) * 1e-3);
-            }
-            std::this_thread::sleep_for(std::chrono::microseconds(500));
-          }
           const auto it = std::find_if(rows.begin(), rows.end(), [&](const Row& r) {
             return r.pose == i + 1 && r.workers == W && r.mapping == geom::Mapping::block_cyclic;
           });
           if (it == rows.end()) continue;
-          Check c{i + 1, W,          gather + it->compute_round_us, median(std::move(t)),
-                  fl,    it->max_us, median(std::move(inside)),     gather};
-          c.compute_corun_us = corun_us(shares, poses[i], a.gather_rounds / 4 + 20, limits.max_pairs);
-          c.predicted_corun_us = c.predicted_us - c.compute_alone_us + c.compute_corun_us;
+          std::vector<double> t, inside, empty_here, alone, corun;
+          auto real_rounds = [&](const geom::Pose& pose, int n, std::vector<double>* into, std::vector<double>* in) {
+            for (int r = 0; r < n; ++r) {
+              const auto t0 = Clock::now();
+              sg.value()->round(++seq, pose, Clock::now() + std::chrono::milliseconds(200), rr);
+              if (into && rr.complete) {
+                into->push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
+                if (in) in->push_back(double(rr.stats.compute_ns) * 1e-3);
+              }
+              std::this_thread::sleep_for(std::chrono::microseconds(500));
+            }
+          };
+          real_rounds(poses[i], 20, nullptr, nullptr);  // warm
+          for (int trial = 0; trial < kTrials; ++trial) {
+            real_rounds(poses[i], block, &t, &inside);
+            real_rounds(far, block, &empty_here, nullptr);
+            for (int r = 0; r < block; ++r) {
+              double slowest = 0;
+              for (auto& sh : shares) {
+                const auto t0 = Clock::now();
+                scratch_pairs.clear();
+                sh->query(poses[i], scratch_pairs, limits.max_pairs);
+                slowest = std::max(slowest, std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
+              }
+              alone.push_back(slowest);
+              std::this_thread::sleep_for(std::chrono::microseconds(500));
+            }
+            corun.push_back(corun_us(shares, poses[i], block, limits.max_pairs));
+          }
+          // The rest of the compute term as the row measured it: the slowest worker's encode and
+          // the client's decode and merge.
+          const double rest = it->compute_round_us - it->max_us;
+          Check c;
+          c.pose = i + 1;
+          c.workers = W;
+          c.floor_us = fl;
+          c.gather_us = median(std::move(empty_here));
+          c.compute_alone_us = median(std::move(alone));
+          c.predicted_us = c.gather_us + c.compute_alone_us + rest;
+          c.measured_us = median(std::move(t));
+          c.compute_in_round_us = median(std::move(inside));
+          c.compute_corun_us = median(std::move(corun));
+          c.predicted_corun_us = c.gather_us + c.compute_corun_us + rest;
           checks.push_back(c);
         }
       }
@@ -603,6 +670,8 @@ void run_scale(const ScaleArgs& a) {
     for (std::size_t i = 0; i < cpu_tcp.size(); ++i) std::printf("%s%.2f", i ? ", " : "", cpu_tcp[i]);
     std::printf("], \"fit_a_us\": %.2f, \"fit_b_us_per_worker\": %.3f},\n", cpu_a, cpu_b);
     std::printf(" \"client_message_work_us\": %.3f,\n", msg_work);
+    std::printf(" \"work_fit\": {\"us_per_sphere_test\": %.6f, \"us_per_tri_test\": %.6f},\n", fit_sphere_us,
+                fit_tri_us);
     std::printf(" \"networks\": [");
     for (std::size_t k = 0; k < std::size(kNetworks); ++k)
       std::printf("%s{\"name\": \"%s\", \"rtt_us\": %.2f, \"bytes_per_us\": %.0f, \"vm_client\": %s}", k ? ", " : "",
@@ -635,11 +704,12 @@ void run_scale(const ScaleArgs& a) {
           "\"block_size\": %u, \"blocks\": %u, \"auto_split\": %s, \"busy_workers\": %u, \"single_us\": %.2f, "
           "\"max_worker_us\": %.2f, \"mean_worker_us\": %.2f, \"sum_worker_us\": %.2f, \"imbalance\": %.3f, "
           "\"redundancy\": %.3f, \"client_us\": %.2f, \"compute_round_us\": %.2f, \"max_reply_bytes\": %zu, "
-          "\"compute_speedup\": %.3f, \"sphere_tests_ratio\": %.3f, \"tri_tests_ratio\": %.3f",
+          "\"compute_speedup\": %.3f, \"sphere_tests_ratio\": %.3f, \"tri_tests_ratio\": %.3f, "
+          "\"imbalance_counted\": %.3f, \"redundancy_counted\": %.3f",
           k ? "," : "", r.pose, r.contacts, r.workers, geom::to_string(r.mapping), r.split.layer, r.split.block_size,
           r.split.blocks, r.split.automatic ? "true" : "false", r.busy, r.single_us, r.max_us, r.mean_us, r.sum_us,
           r.imbalance(), r.redundancy(), r.client_us, r.compute_round_us, r.max_reply_bytes,
-          r.single_us / r.compute_round_us, r.sphere_ratio(), r.tri_ratio());
+          r.single_us / r.compute_round_us, r.sphere_ratio(), r.tri_ratio(), r.work_imbalance(), r.work_redundancy());
       for (const Network& n : kNetworks)
         std::printf(", \"round_%s_us\": %.2f, \"speedup_%s\": %.3f", n.name, predicted(r, n), n.name,
                     r.single_us / predicted(r, n));
@@ -659,22 +729,30 @@ void run_scale(const ScaleArgs& a) {
               msg_work);
   std::printf("inproc fan-out floor p50 (measured): ");
   for (auto& f : floors) std::printf("W=%u %.1f us  ", f.first, f.second);
-  std::printf("\n%4s %8s %3s %-12s %5s %4s %8s %8s %8s %6s %6s %6s %6s %8s %8s %7s %7s %7s\n", "pose", "contacts", "W",
-              "mapping", "layer", "B", "single", "max", "mean", "imbal", "redund", "xsph", "xtri", "compute", "10GbE",
-              "x10GbE", "xvm", "x100GbE");
+  std::printf("counted work: %.4f us per sphere-pair test, %.4f us per triangle-pair test (fitted to every query)\n",
+              fit_sphere_us, fit_tri_us);
+  std::printf("\n%4s %8s %3s %-12s %5s %4s %8s %8s %8s %6s %6s %6s %6s %6s %6s %8s %8s %7s %7s %7s\n", "pose",
+              "contacts", "W", "mapping", "layer", "B", "single", "max", "mean", "imbal", "redund", "imbal#", "redun#",
+              "xsph", "xtri", "compute", "10GbE", "x10GbE", "xvm", "x100GbE");
   for (const Row& r : rows)
-    std::printf("%4zu %8u %3u %-12s %5u %4u %8.1f %8.1f %8.1f %6.2f %6.2f %6.2f %6.2f %8.1f %8.1f %7.2f %7.2f %7.2f\n",
+    std::printf(
+        "%4zu %8u %3u %-12s %5u %4u %8.1f %8.1f %8.1f %6.2f %6.2f %6.2f %6.2f %6.2f %6.2f %8.1f %8.1f %7.2f %7.2f "
+        "%7.2f\n",
                 r.pose, r.contacts, r.workers, geom::to_string(r.mapping), r.split.layer, r.split.block_size,
-                r.single_us, r.max_us, r.mean_us, r.imbalance(), r.redundancy(), r.sphere_ratio(), r.tri_ratio(),
+                r.single_us, r.max_us, r.mean_us, r.imbalance(), r.redundancy(), r.work_imbalance(),
+                r.work_redundancy(), r.sphere_ratio(), r.tri_ratio(),
                 r.compute_round_us, predicted(r, kNetworks[0]), r.single_us / predicted(r, kNetworks[0]),
                 r.single_us / predicted(r, kNetworks[1]), r.single_us / predicted(r, kNetworks[2]));
   std::printf(
       "single/max/mean: us per round (one thread; slowest worker; mean over W); imbal = max/mean; redund = sum "
-      "over workers / single (time); xsph, xtri = sphere-pair and triangle-pair tests summed over workers / single "
+      "over workers / single (time); imbal#, redun#: the same from the counted tests weighted by the fitted cost "
+      "per test (deterministic); xsph, xtri = sphere-pair and triangle-pair tests summed over workers / single "
       "(counted); compute = slowest worker with its encode + the client's decode and merge; "
       "10GbE = compute + W x message work + 16.25 us + largest reply at 10 Gbit/s; x = single / predicted "
       "round (xvm: with this VM's client CPU per round instead)\n");
-  std::printf("model check (in-process workers over inproc, block-cyclic): predicted = our empty round + compute\n");
+  std::printf(
+      "model check (in-process workers over inproc, block-cyclic; rounds, empty rounds and the shares' queries "
+      "interleaved): predicted = our empty round + the slowest share's query + its encode + the client's merge\n");
   for (const Check& c : checks)
     std::printf(
         "  pose %zu W=%u: predicted %.1f us (empty round %.1f, raw floor %.1f), measured p50 %.1f us, error %+.1f %%; "
