@@ -113,9 +113,9 @@ bool SurfaceWalk::exit(const Vec3& x, std::uint32_t& face, double& dist, int max
 
 namespace {
 
-inline double min_of(double a, double b) {
-  return b < a ? b : a;
-}  // plain selects: std::min's reference blocks vectorising
+// Plain selects on values (std::min and std::max return references, which keeps the kernel below
+// from being vectorised).
+inline double min_of(double a, double b) { return b < a ? b : a; }
 inline double max_of(double a, double b) { return a < b ? b : a; }
 
 /// Where a triangle with signed distances d0..d2 to the other triangle's plane and heights

@@ -14,9 +14,6 @@ namespace st::geom {
 /// Unit normal and centroid of face f of m, m's local frame; false when degenerate or non-finite.
 bool face_frame(const Mesh& m, std::uint32_t f, Vec3& centroid, Vec3& normal);
 
-/// Point location on one body's surface seen along a direction d: walks from a start face across
-/// edges (Guibas & Stolfi's walk) over the faces that face d, to the face above a point, and
-/// answers how far the point must travel along d to leave through it.
 /// A colliding face as the patch model's segment computation reads it: its vertices in the common
 /// (object-local) frame relative to the round's origin o (a point near the patch, for rounding),
 /// its unit normal (zero: degenerate, no direction) and its plane's offset c = n·v0.
@@ -69,6 +66,9 @@ struct SegmentBatch {
   void set(int r, const FaceRec& a, const FaceRec& b);
 };
 
+/// Point location on one body's surface seen along a direction d: walks from a start face across
+/// edges (Guibas & Stolfi's walk) over the faces that face d, to the face above a point, and
+/// answers how far the point must travel along d to leave through it.
 struct SurfaceWalk {
   const Mesh* mesh = nullptr;              ///< the surface's body
   const VertexFaces* vf = nullptr;         ///< its faces around each vertex
@@ -140,13 +140,8 @@ struct ContactBuilder::Patch {
       std::uint32_t slot = 0;
     };
     std::vector<Mark> face_mark;       ///< per face: the round it was counted as colliding, its index in `faces` then
-    std::vector<std::uint32_t> faces;  ///< distinct colliding faces this round
-    // Scratch for grouping the colliding faces into regions (a search for new regions).
-    std::vector<std::uint64_t> group_table;   ///< vertex → the first slot it was seen in (hash table)
-    std::vector<std::uint32_t> group_parent;  ///< union-find over the slots
-    std::vector<double> group_box;            ///< per group root: its extent across d (u, w)
-    std::vector<std::uint8_t> group_open;     ///< per group root: no remembered maximum in it
-    std::vector<FaceRec> recs;                ///< their records, in the order of `faces`
+    std::vector<std::uint32_t> faces;  ///< distinct colliding faces this round (slot = index)
+    std::vector<FaceRec> recs;         ///< their records, per slot
     /// What a colliding face's record is made from that does not change with the pose: vertices
     /// in the body's local frame, unit normal (zero: degenerate or bad indices), (b−a)×(c−a) and
     /// its length. Kept from one round to the next (most faces collide again), so that the mesh,
@@ -161,7 +156,14 @@ struct ContactBuilder::Patch {
     };
     std::vector<Fixed> fixed, prev_fixed;  ///< per slot, this round and the last
     std::vector<std::uint32_t> from_prev;  ///< per slot: its slot in the last round, UINT32_MAX if new
-    std::uint32_t fixed_epoch = 0;         ///< the round `fixed` was filled in
+    /// The round whose records were filled last (in `fixed` until the next round swaps them
+    /// into `prev_fixed`); 0 = none.
+    std::uint32_t fixed_epoch = 0;
+    // Scratch for grouping the colliding faces into regions (a search for new regions).
+    std::vector<std::uint64_t> group_table;   ///< vertex → the first slot it was seen in (hash table)
+    std::vector<std::uint32_t> group_parent;  ///< union-find over the slots
+    std::vector<double> group_box;            ///< per group root: its extent across d (u, w)
+    std::vector<std::uint8_t> group_open;     ///< per group root: no remembered maximum in it
     std::vector<Vec3> face_normals;  ///< every face's unit normal, local frame (zero: degenerate); the probe's only
     Memory memory;                   ///< last round's deepest vertices
     bool sized_for(const Mesh& m) const { return mesh == &m && nv == m.local.size() && nf == m.faces.size(); }
