@@ -282,6 +282,22 @@ void ContactBuilder::Patch::BodyState::compute_face_normals() {
   }
 }
 
+const ContactBuilder::Patch::BodyState::Fixed& ContactBuilder::Patch::BodyState::fixed_part(std::size_t i) {
+  Fixed& fx = fixed[i];
+  if (from_prev[i] != UINT32_MAX) return fx = prev_fixed[from_prev[i]];
+  const Tri& t = mesh->faces[faces[i]];
+  fx.vid = t;
+  fx.bad_index = !(t[0] < nv && t[1] < nv && t[2] < nv);
+  fx.n.setZero();
+  if (fx.bad_index) return fx;
+  for (int k = 0; k < 3; ++k) fx.v[k] = mesh->local[t[k]];
+  if (!face_normals.empty())
+    fx.n = face_normals[faces[i]];  // computed once per mesh (the probe's; zero: degenerate)
+  else if (!unit_normal(fx.v[0], fx.v[1], fx.v[2], fx.n, fx.cr, fx.len))
+    fx.n.setZero();
+  return fx;
+}
+
 void ContactBuilder::Patch::BodyState::clear_stamps() {
   std::fill(visit_stamp.begin(), visit_stamp.end(), 0);
   std::fill(face_mark.begin(), face_mark.end(), Mark{});
@@ -789,19 +805,7 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   object_s.fixed.resize(object_s.faces.size());
   object_s.recs.resize(object_s.faces.size());
   for (std::size_t i = 0; i < object_s.faces.size(); ++i) {
-    BodyState::Fixed& fx = object_s.fixed[i];
-    if (object_s.from_prev[i] != UINT32_MAX) {
-      fx = object_s.prev_fixed[object_s.from_prev[i]];
-    } else {
-      const Tri& t = object.faces[object_s.faces[i]];
-      fx.bad_index = !tri_ok(t, object_s.nv);
-      fx.n.setZero();
-      fx.vid = t;
-      if (!fx.bad_index) {
-        for (int k = 0; k < 3; ++k) fx.v[k] = object.local[t[k]];
-        if (!unit_normal(fx.v[0], fx.v[1], fx.v[2], fx.n, fx.cr, fx.len)) fx.n.setZero();
-      }
-    }
+    const BodyState::Fixed& fx = object_s.fixed_part(i);
     FaceRec& r = object_s.recs[i];
     r.n.setZero();
     r.c = 0;
@@ -821,17 +825,7 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   probe_s.recs.resize(probe_s.faces.size());
   const Vec3 to_rec = shift - origin;  // probe-local → record frame: R·x + to_rec
   for (std::size_t i = 0; i < probe_s.faces.size(); ++i) {
-    BodyState::Fixed& fx = probe_s.fixed[i];
-    if (probe_s.from_prev[i] != UINT32_MAX) {
-      fx = probe_s.prev_fixed[probe_s.from_prev[i]];
-    } else {
-      const Tri& t = probe.faces[probe_s.faces[i]];
-      fx.bad_index = !tri_ok(t, probe_s.nv);
-      fx.vid = t;
-      if (!fx.bad_index)
-        for (int k = 0; k < 3; ++k) fx.v[k] = probe.local[t[k]];
-      fx.n = probe_s.face_normals[probe_s.faces[i]];  // zero: degenerate
-    }
+    const BodyState::Fixed& fx = probe_s.fixed_part(i);
     FaceRec& r = probe_s.recs[i];
     r.n.setZero();
     r.c = 0;

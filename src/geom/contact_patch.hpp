@@ -155,6 +155,9 @@ struct ContactBuilder::Patch {
       bool bad_index = false;  ///< a vertex index out of range: no record
     };
     std::vector<Fixed> fixed, prev_fixed;  ///< per slot, this round and the last
+    /// Fills and returns fixed[i] (sized): last round's when face faces[i] collided then, else read
+    /// from the mesh (the unit normal from face_normals when those are kept, else computed).
+    const Fixed& fixed_part(std::size_t i);
     std::vector<std::uint32_t> from_prev;  ///< per slot: its slot in the last round, UINT32_MAX if new
     /// The round whose records were filled last (in `fixed` until the next round swaps them
     /// into `prev_fixed`); 0 = none.
