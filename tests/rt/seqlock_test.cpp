@@ -38,35 +38,61 @@ TEST_CASE("SeqLock: empty until the first store, then the newest value") {
   CHECK(s.version() == 2);
 }
 
-TEST_CASE("SeqLock: one writer, two readers hammering: no torn copy, never backwards") {
-  SeqLock<Payload> s;
+namespace {
+/// What two readers saw while one writer stored.
+struct Hammered {
+  std::uint64_t torn = 0, backwards = 0, reads = 0;
+};
+/// One writer calls write(i) for i = 1 .. writes while two readers each call a reader made by
+/// make_reader(): reader(seq, whole) is false when there was nothing to read, else gives the
+/// copy's sequence and whether it was whole.
+template <class Write, class MakeReader>
+Hammered hammer(std::uint64_t writes, Write write, MakeReader make_reader) {
   std::atomic<bool> done{false};
-  constexpr std::uint64_t kWrites = 2'000'000;
   std::atomic<std::uint64_t> torn{0}, backwards{0}, reads{0};
   auto reader = [&] {
-    std::uint64_t last = 0;
-    Payload p;
+    auto read = make_reader();
+    std::uint64_t last = 0, seq = 0;
+    bool whole = false;
     while (!done.load(std::memory_order_acquire)) {
-      if (!s.load(p)) continue;
+      if (!read(seq, whole)) continue;
       reads.fetch_add(1, std::memory_order_relaxed);
-      if (!consistent(p)) torn.fetch_add(1);
-      if (p.seq < last) backwards.fetch_add(1);
-      last = p.seq;
+      if (!whole) torn.fetch_add(1);
+      if (seq < last) backwards.fetch_add(1);
+      last = seq;
     }
   };
   std::thread r1(reader), r2(reader);
-  Payload v;
-  for (std::uint64_t i = 1; i <= kWrites; ++i) {
-    v.seq = i;
-    for (std::uint64_t k = 0; k < 7; ++k) v.words[k] = i * (k + 1);
-    s.store(v);
-  }
+  for (std::uint64_t i = 1; i <= writes; ++i) write(i);
   done.store(true, std::memory_order_release);
   r1.join();
   r2.join();
-  CHECK(torn.load() == 0);
-  CHECK(backwards.load() == 0);
-  CHECK(reads.load() > 0);
+  return {torn.load(), backwards.load(), reads.load()};
+}
+}  // namespace
+
+TEST_CASE("SeqLock: one writer, two readers hammering: no torn copy, never backwards") {
+  SeqLock<Payload> s;
+  constexpr std::uint64_t kWrites = 2'000'000;
+  Payload v;
+  const Hammered h = hammer(
+      kWrites,
+      [&](std::uint64_t i) {
+        v.seq = i;
+        for (std::uint64_t k = 0; k < 7; ++k) v.words[k] = i * (k + 1);
+        s.store(v);
+      },
+      [&] {
+        return [&s, p = Payload{}](std::uint64_t& seq, bool& whole) mutable {
+          if (!s.load(p)) return false;
+          seq = p.seq;
+          whole = consistent(p);
+          return true;
+        };
+      });
+  CHECK(h.torn == 0);
+  CHECK(h.backwards == 0);
+  CHECK(h.reads > 0);
   Payload last;
   REQUIRE(s.load(last));
   CHECK(last.seq == kWrites);
@@ -82,37 +108,26 @@ static_assert(sizeof(BigPayload) > SeqLock<BigPayload>::kStackBytes);
 
 TEST_CASE("SeqLock: a large payload stored in prefixes: no torn prefix, never backwards") {
   auto s = std::make_unique<SeqLock<BigPayload>>();
-  std::atomic<bool> done{false};
-  constexpr std::uint64_t kWrites = 200'000;
-  std::atomic<std::uint64_t> torn{0}, backwards{0}, reads{0};
-  auto reader = [&] {
-    std::uint64_t last = 0;
-    auto p = std::make_unique<BigPayload>();
-    while (!done.load(std::memory_order_acquire)) {
-      if (!s->load(*p)) continue;
-      reads.fetch_add(1, std::memory_order_relaxed);
-      const std::uint64_t used = 1 + p->seq % 200;  // what the writer stored of this one
-      for (std::uint64_t i = 0; i < used; ++i)
-        if (p->words[i] != p->seq * (i + 1)) {
-          torn.fetch_add(1);
-          break;
-        }
-      if (p->seq < last) backwards.fetch_add(1);
-      last = p->seq;
-    }
-  };
-  std::thread r1(reader), r2(reader);
   auto v = std::make_unique<BigPayload>();
-  for (std::uint64_t i = 1; i <= kWrites; ++i) {
-    v->seq = i;
-    const std::uint64_t used = 1 + i % 200;
-    for (std::uint64_t k = 0; k < used; ++k) v->words[k] = i * (k + 1);
-    s->store(*v, 8 * (1 + used));
-  }
-  done.store(true, std::memory_order_release);
-  r1.join();
-  r2.join();
-  CHECK(torn.load() == 0);
-  CHECK(backwards.load() == 0);
-  CHECK(reads.load() > 0);
+  const Hammered h = hammer(
+      200'000,
+      [&](std::uint64_t i) {
+        v->seq = i;
+        const std::uint64_t used = 1 + i % 200;
+        for (std::uint64_t k = 0; k < used; ++k) v->words[k] = i * (k + 1);
+        s->store(*v, 8 * (1 + used));
+      },
+      [&] {
+        return [&s, p = std::make_unique<BigPayload>()](std::uint64_t& seq, bool& whole) {
+          if (!s->load(*p)) return false;
+          seq = p->seq;
+          const std::uint64_t used = 1 + p->seq % 200;  // what the writer stored of this one
+          whole = true;
+          for (std::uint64_t i = 0; i < used && whole; ++i) whole = p->words[i] == p->seq * (i + 1);
+          return true;
+        };
+      });
+  CHECK(h.torn == 0);
+  CHECK(h.backwards == 0);
+  CHECK(h.reads > 0);
 }
