@@ -13,7 +13,7 @@
 //   100 GbE with busy polling: 8.79 us round trip (same source, busy_poll on), 100 Gbit/s.
 // Per (pose, W, mapping): max and mean worker time, imbalance = max / mean over the W workers,
 // redundant work = sum / the single-thread collide(); the same two from the counted sphere-pair
-// and triangle-pair tests, weighted by a cost per test fitted to every query of the run (these do
+// and triangle-pair tests, weighted by a cost per test measured on the single thread (these do
 // not move with the host's speed from one share's timing to the next); and the predicted round
 //   compute = max_w (query_w + encode of its Result) + the client's decode and merge
 //   network   = compute + client CPU(W) + round trip + largest reply / bandwidth
@@ -29,6 +29,8 @@
 #include <csignal>
 #include <cstdio>
 #include <ctime>
+#include <functional>
+#include <map>
 #include <memory>
 #include <string>
 #include <sys/wait.h>
@@ -274,6 +276,11 @@ struct Row {
   double work_max = 0, work_mean = 0, work_single = 0;
   double work_imbalance() const { return work_mean > 0 ? work_max / work_mean : 0; }
   double work_redundancy() const { return work_single > 0 ? work_mean * workers / work_single : 0; }
+  // The same blocks dealt by an oracle that knows this pose's work per block (largest first, each
+  // to the least loaded worker): what no static mapping can beat; its max / mean. Counted work of
+  // each block alone (collide() restricted to the block's spheres of the tree they are cut from).
+  const std::vector<std::array<std::uint64_t, 2>>* block_tests = nullptr;
+  double oracle_imbalance = 0;
   double imbalance() const { return mean_us > 0 ? max_us / mean_us : 0; }
   double redundancy() const { return single_us > 0 ? sum_us / single_us : 0; }
   double sphere_ratio() const { return single_spheres ? double(sum_spheres) / double(single_spheres) : 0; }
@@ -323,6 +330,19 @@ double corun_us(std::vector<std::unique_ptr<net::CollisionBackend>>& shares, con
     std::this_thread::sleep_for(std::chrono::microseconds(500));
   }
   return median(std::move(slowest));
+}
+
+/// Imbalance (max / mean load) of `work` dealt to `workers` by longest processing time first (each
+/// item to the least loaded worker): within 4/3 of the best deal (Graham 1969).
+double oracle_imbalance(std::vector<double> work, std::uint32_t workers) {
+  std::sort(work.begin(), work.end(), std::greater<>());
+  std::vector<double> load(workers, 0.0);
+  double total = 0;
+  for (double w : work) {
+    *std::min_element(load.begin(), load.end()) += w;
+    total += w;
+  }
+  return total > 0 ? *std::max_element(load.begin(), load.end()) * workers / total : 1.0;
 }
 
 /// The worker's resident bytes for a share: its object tree and its mesh (the probe is shared by all).
@@ -390,9 +410,19 @@ void run_scale(const ScaleArgs& a) {
   std::vector<double> single(poses.size());
   std::vector<std::uint32_t> contacts(poses.size());
   std::vector<std::uint64_t> single_spheres(poses.size()), single_tris(poses.size());
+  std::vector<double> single_spheres_us(poses.size());  // the same descent stopped at the leaf spheres
   for (std::size_t i = 0; i < poses.size(); ++i) {
+    geom::CollideConfig spheres_only = geom::DefaultCollideConfig();
+    spheres_only.stop_layer = geom::kLeafSpheres;
+    spheres_only.approx_face_pairs = false;
+    single_spheres_us[i] =
+        time_median_us(a.runs, [&] { geom::collide(probe, pt, object, ot, poses[i], spheres_only, scratch, result); });
+    const std::uint64_t sphere_tests = result.stats.node_pairs;
     const geom::CollideConfig full = geom::DefaultCollideConfig();
     single[i] = time_median_us(a.runs, [&] { geom::collide(probe, pt, object, ot, poses[i], full, scratch, result); });
+    if (result.stats.node_pairs != sphere_tests)
+      die("pose " + std::to_string(i + 1) + ": the descent stopped at the leaf spheres made " +
+          std::to_string(sphere_tests) + " sphere tests, the exact one " + std::to_string(result.stats.node_pairs));
     contacts[i] = std::uint32_t(result.contacts());
     single_spheres[i] = result.stats.node_pairs;
     single_tris[i] = result.stats.tri_pairs;
@@ -415,6 +445,26 @@ void run_scale(const ScaleArgs& a) {
     return s;
   };
 
+  // Counted tests of each block alone at each pose, per split (layer, block size): for the oracle
+  // deal (Row::oracle_imbalance).
+  std::map<std::pair<std::uint32_t, std::uint32_t>, std::vector<std::vector<std::array<std::uint64_t, 2>>>> block_tests;
+  const auto tests_per_block = [&](const Split& sp) -> const std::vector<std::vector<std::array<std::uint64_t, 2>>>& {
+    auto [it, fresh] = block_tests.try_emplace({sp.layer, sp.block_size});
+    if (!fresh) return it->second;
+    auto part = geom::make_partition(part_tree, sp.layer, 1, sp.block_size);
+    if (!part) die(part.error());
+    it->second.resize(poses.size());
+    for (std::size_t i = 0; i < poses.size(); ++i)
+      for (std::uint32_t b = 0; b < part.value().num_blocks(); ++b) {
+        geom::CollideConfig c = geom::DefaultCollideConfig();
+        c.restrict_object = true;
+        c.object_roots = part.value().block(b);
+        geom::collide(probe, pt, object, part_tree, poses[i], c, scratch, result);
+        it->second[i].push_back({result.stats.node_pairs, result.stats.tri_pairs});
+      }
+    return it->second;
+  };
+
   // 3. Every worker's share, built as a worker builds it, timed alone at every pose.
   const geom::Mapping mappings[] = {geom::Mapping::block_cyclic, geom::Mapping::contiguous, geom::Mapping::random};
   std::vector<Row> rows;
@@ -433,6 +483,7 @@ void run_scale(const ScaleArgs& a) {
       std::fprintf(stderr, "W=%u %s: layer %u, block size %u, %u blocks%s\n", W, geom::to_string(m), sp.layer,
                    sp.block_size, sp.blocks, sp.automatic ? " (automatic)" : "");
       const auto share = net::deal_blocks(sp.blocks, W, m, 1);
+      const auto& per_block_tests = tests_per_block(sp);
       std::vector<Row> prow(poses.size());
       for (std::size_t i = 0; i < poses.size(); ++i) {
         prow[i].pose = i + 1;
@@ -443,6 +494,7 @@ void run_scale(const ScaleArgs& a) {
         prow[i].single_us = single[i];
         prow[i].single_spheres = single_spheres[i];
         prow[i].single_tris = single_tris[i];
+        prow[i].block_tests = &per_block_tests[i];
       }
       std::vector<std::vector<std::vector<std::uint8_t>>> replies(poses.size());  // encoded Results per pose
       std::vector<std::vector<net::FacePair>> all_pairs(poses.size());
@@ -516,26 +568,24 @@ void run_scale(const ScaleArgs& a) {
     }
   }
 
-  // Counted work: the cost of a sphere-pair and a triangle-pair test, fitted (least squares, no
-  // intercept) to every query timed above, weights the tests into µs. Imbalance and redundancy of
-  // the counted work are then deterministic for a given fit: the same shares give the same
-  // figures whatever the host's speed at the moment each was timed.
+  // Counted work: the cost of a sphere-pair test and of a triangle-pair test weights the tests
+  // into µs, measured apart on the single thread's queries: the same descent stopped at the leaf
+  // spheres (every sphere test, no face test) costs the sphere tests; the rest of the exact query
+  // (face boxes and triangle tests of the leaf pairs) costs the triangle tests. Imbalance and
+  // redundancy of the counted work are then deterministic for given costs, and the costs, two
+  // sums over all poses, move only with the host's speed. (A least-squares fit of both to every
+  // query moved them by up to 8x between runs: the two counts grow together.)
   double fit_sphere_us = 0, fit_tri_us = 0;
   {
-    double ss = 0, st = 0, tt = 0, sq = 0, tq = 0;
-    auto add = [&](double S, double T, double q) { ss += S * S, st += S * T, tt += T * T, sq += S * q, tq += T * q; };
-    for (std::size_t i = 0; i < poses.size(); ++i) add(double(single_spheres[i]), double(single_tris[i]), single[i]);
-    for (const Row& r : rows)
-      for (const auto& w : r.shares) add(w[0], w[1], w[2]);
-    const double det = ss * tt - st * st;
-    if (det > 0) {
-      fit_sphere_us = (sq * tt - tq * st) / det;
-      fit_tri_us = (tq * ss - sq * st) / det;
+    double t_exact = 0, t_spheres = 0, n_spheres = 0, n_tris = 0;
+    for (std::size_t i = 0; i < poses.size(); ++i) {
+      t_exact += single[i];
+      t_spheres += single_spheres_us[i];
+      n_spheres += double(single_spheres[i]);
+      n_tris += double(single_tris[i]);
     }
-    // A cost is never negative: where the fit makes one so (the other kind of test explains the
-    // times), it is 0 and the other is fitted alone.
-    if (fit_sphere_us < 0 || !(det > 0)) fit_sphere_us = 0, fit_tri_us = tt > 0 ? tq / tt : 0;
-    if (fit_tri_us < 0) fit_tri_us = 0, fit_sphere_us = ss > 0 ? sq / ss : 0;
+    if (n_spheres > 0) fit_sphere_us = t_spheres / n_spheres;
+    if (n_tris > 0) fit_tri_us = std::max(0.0, t_exact - t_spheres) / n_tris;
     for (Row& r : rows) {
       double sum = 0;
       for (const auto& w : r.shares) {
@@ -545,8 +595,44 @@ void run_scale(const ScaleArgs& a) {
       }
       r.work_mean = sum / r.workers;
       r.work_single = fit_sphere_us * double(r.single_spheres) + fit_tri_us * double(r.single_tris);
+      std::vector<double> work;
+      for (const auto& t : *r.block_tests) work.push_back(fit_sphere_us * double(t[0]) + fit_tri_us * double(t[1]));
+      r.oracle_imbalance = oracle_imbalance(std::move(work), r.workers);
     }
   }
+
+  // Over the poses, per (W, mapping): how the imbalance and the redundant work spread (one pose's
+  // figure is one draw: which worker a contact's heavy blocks fall to changes with the pose).
+  struct Spread {
+    double mean = 0, median = 0, max = 0;
+  };
+  struct Summary {
+    std::uint32_t workers = 0;
+    geom::Mapping mapping = geom::Mapping::block_cyclic;
+    std::size_t poses = 0;
+    Spread imbalance_counted, imbalance, redundancy_counted, redundancy, oracle;
+  };
+  std::vector<Summary> summaries;
+  for (std::uint32_t W : ws)
+    for (geom::Mapping m : mappings) {
+      std::vector<double> v[5];
+      for (const Row& r : rows)
+        if (r.workers == W && r.mapping == m) {
+          v[0].push_back(r.work_imbalance());
+          v[1].push_back(r.imbalance());
+          v[2].push_back(r.work_redundancy());
+          v[3].push_back(r.redundancy());
+          v[4].push_back(r.oracle_imbalance);
+        }
+      if (v[0].empty()) continue;
+      const auto spread = [](const std::vector<double>& x) {
+        Spread sp;
+        for (double e : x) sp.mean += e / double(x.size()), sp.max = std::max(sp.max, e);
+        sp.median = median(x);
+        return sp;
+      };
+      summaries.push_back({W, m, v[0].size(), spread(v[0]), spread(v[1]), spread(v[2]), spread(v[3]), spread(v[4])});
+    }
 
   // 4. The gather on this machine: raw inproc fan-out floor for small W, with a reply of the
   //    mean size, and the model checked against real in-process rounds at W = 1 and 2.
@@ -717,14 +803,26 @@ void run_scale(const ScaleArgs& a) {
           "\"max_worker_us\": %.2f, \"mean_worker_us\": %.2f, \"sum_worker_us\": %.2f, \"imbalance\": %.3f, "
           "\"redundancy\": %.3f, \"client_us\": %.2f, \"compute_round_us\": %.2f, \"max_reply_bytes\": %zu, "
           "\"compute_speedup\": %.3f, \"sphere_tests_ratio\": %.3f, \"tri_tests_ratio\": %.3f, "
-          "\"imbalance_counted\": %.3f, \"redundancy_counted\": %.3f",
+          "\"imbalance_counted\": %.3f, \"redundancy_counted\": %.3f, \"oracle_imbalance\": %.3f",
           k ? "," : "", r.pose, r.contacts, r.workers, geom::to_string(r.mapping), r.split.layer, r.split.block_size,
           r.split.blocks, r.split.automatic ? "true" : "false", r.busy, r.single_us, r.max_us, r.mean_us, r.sum_us,
           r.imbalance(), r.redundancy(), r.client_us, r.compute_round_us, r.max_reply_bytes,
-          r.single_us / r.compute_round_us, r.sphere_ratio(), r.tri_ratio(), r.work_imbalance(), r.work_redundancy());
+          r.single_us / r.compute_round_us, r.sphere_ratio(), r.tri_ratio(), r.work_imbalance(), r.work_redundancy(),
+          r.oracle_imbalance);
       for (const Network& n : kNetworks)
         std::printf(", \"round_%s_us\": %.2f, \"speedup_%s\": %.3f", n.name, predicted(r, n), n.name,
                     r.single_us / predicted(r, n));
+      std::printf("}");
+    }
+    std::printf("\n],\n \"summary\": [");
+    for (std::size_t k = 0; k < summaries.size(); ++k) {
+      const Summary& u = summaries[k];
+      std::printf("%s\n  {\"workers\": %u, \"mapping\": \"%s\", \"poses\": %zu", k ? "," : "", u.workers,
+                  geom::to_string(u.mapping), u.poses);
+      for (auto [name, sp] : {std::pair{"imbalance_counted", &u.imbalance_counted}, std::pair{"imbalance", &u.imbalance},
+                              std::pair{"redundancy_counted", &u.redundancy_counted},
+                              std::pair{"redundancy", &u.redundancy}, std::pair{"oracle_imbalance", &u.oracle}})
+        std::printf(", \"%s\": {\"mean\": %.3f, \"median\": %.3f, \"max\": %.3f}", name, sp->mean, sp->median, sp->max);
       std::printf("}");
     }
     std::printf("\n]}\n");
@@ -741,8 +839,10 @@ void run_scale(const ScaleArgs& a) {
               msg_work);
   std::printf("inproc fan-out floor p50 (measured): ");
   for (auto& f : floors) std::printf("W=%u %.1f us  ", f.first, f.second);
-  std::printf("counted work: %.4f us per sphere-pair test, %.4f us per triangle-pair test (fitted to every query)\n",
-              fit_sphere_us, fit_tri_us);
+  std::printf(
+      "counted work: %.4f us per sphere-pair test, %.4f us per triangle-pair test (measured: the single thread's "
+      "queries stopped at the leaf spheres, and the rest of the exact ones)\n",
+      fit_sphere_us, fit_tri_us);
   std::printf("\n%4s %8s %3s %-12s %5s %4s %8s %8s %8s %6s %6s %6s %6s %6s %6s %8s %8s %7s %7s %7s\n", "pose",
               "contacts", "W", "mapping", "layer", "B", "single", "max", "mean", "imbal", "redund", "imbal#", "redun#",
               "xsph", "xtri", "compute", "10GbE", "x10GbE", "xvm", "x100GbE");
@@ -756,11 +856,23 @@ void run_scale(const ScaleArgs& a) {
         r.single_us / predicted(r, kNetworks[1]), r.single_us / predicted(r, kNetworks[2]));
   std::printf(
       "single/max/mean: us per round (one thread; slowest worker; mean over W); imbal = max/mean; redund = sum "
-      "over workers / single (time); imbal#, redun#: the same from the counted tests weighted by the fitted cost "
+      "over workers / single (time); imbal#, redun#: the same from the counted tests weighted by the measured cost "
       "per test (deterministic); xsph, xtri = sphere-pair and triangle-pair tests summed over workers / single "
       "(counted); compute = slowest worker with its encode + the client's decode and merge; "
       "10GbE = compute + W x message work + 16.25 us + largest reply at 10 Gbit/s; x = single / predicted "
       "round (xvm: with this VM's client CPU per round instead)\n");
+  std::printf(
+      "\nover the %zu poses (mean / median / max): imbal#, imbal, redun#, redun as above; oracle = the same blocks "
+      "dealt knowing the pose (largest first to the least loaded worker, counted work): what no static mapping "
+      "beats\n",
+      poses.size());
+  std::printf("%3s %-12s %20s %20s %20s %20s %20s\n", "W", "mapping", "imbal#", "imbal", "redun#", "redun", "oracle");
+  for (const Summary& u : summaries) {
+    std::printf("%3u %-12s", u.workers, geom::to_string(u.mapping));
+    for (const Spread* sp : {&u.imbalance_counted, &u.imbalance, &u.redundancy_counted, &u.redundancy, &u.oracle})
+      std::printf("   %5.2f / %5.2f / %5.2f", sp->mean, sp->median, sp->max);
+    std::printf("\n");
+  }
   std::printf(
       "model check (in-process workers over inproc, block-cyclic; rounds, empty rounds and the shares' queries "
       "interleaved): predicted = our empty round + the slowest share's query + its encode + the client's merge\n");

@@ -159,6 +159,9 @@ else
   for o in elephant armadillo_L1 armadillo_L2; do
     "$bench" scale --probe "$hand" --object "$models/$o.off" --poses "perf/poses/scale_hand_$o.txt" \
       --max-workers 64 --json > "$out/scale_$o.json"
+    # The spread over 12 poses near 1,000 contacts: one pose's imbalance is one draw.
+    "$bench" scale --probe "$hand" --object "$models/$o.off" --poses "perf/poses/scale_hand_${o}_1000x12.txt" \
+      --max-workers 16 --no-validate --json > "$out/spread_$o.json"
   done
 fi
 [ $plots = 1 ] && python3 perf/scale_plot.py "$out/scale.png" "$out"/scale_*.json
