@@ -28,9 +28,11 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <deque>
 #include <ctime>
 #include <functional>
 #include <map>
+#include <random>
 #include <memory>
 #include <string>
 #include <sys/wait.h>
@@ -65,6 +67,8 @@ struct ScaleArgs {
   std::string layer = "auto", block_size = "auto";
   std::string share_tree = "per-block";
   std::uint32_t partition_leaf_faces = 0;  // 0: the object tree's own leaves
+  double ship_motion_mm = 0.1;             // the probe's motion between two rounds, for the shipping model
+  std::uint32_t ship_blocks = 8;           // blocks the shipping model may move per round
   std::uint32_t max_workers = 64;
   int runs = 15;
   int gather_rounds = 400;
@@ -281,6 +285,15 @@ struct Row {
   // each block alone (collide() restricted to the block's spheres of the tree they are cut from).
   const std::vector<std::array<std::uint64_t, 2>>* block_tests = nullptr;
   double oracle_imbalance = 0;
+  // Work shipping (a model; not built): before the round, the client moves a few blocks from the
+  // busiest worker to the least busy one (their faces travel in the Query), judged by the per-block
+  // work of the round before (the pose moved by --ship-motion-mm); ship() below. Imbalance of the
+  // deal with and without the moves, on this pose's work of each block alone.
+  const std::vector<std::array<std::uint64_t, 2>>* block_tests_before = nullptr;
+  const std::vector<std::uint32_t>* owners = nullptr;       // block -> worker of this row's mapping
+  const std::vector<std::uint32_t>* block_faces = nullptr;  // faces per block
+  double block_imbalance = 0, shipped_imbalance = 0;
+  std::uint32_t shipped_blocks = 0, shipped_faces = 0;
   double imbalance() const { return mean_us > 0 ? max_us / mean_us : 0; }
   double redundancy() const { return single_us > 0 ? sum_us / single_us : 0; }
   double sphere_ratio() const { return single_spheres ? double(sum_spheres) / double(single_spheres) : 0; }
@@ -341,6 +354,43 @@ double oracle_imbalance(std::vector<double> work, std::uint32_t workers) {
   for (double w : work) {
     *std::min_element(load.begin(), load.end()) += w;
     total += w;
+  }
+  return total > 0 ? *std::max_element(load.begin(), load.end()) * workers / total : 1.0;
+}
+
+/// The work shipping model: from `owner` (block -> worker), moves up to `max_moves` blocks, each
+/// the busiest worker's heaviest block by `before` that is lighter than the gap to the least busy
+/// worker (so the move lowers the larger of the two loads), to that worker. Returns the moved
+/// blocks' indices; `owner` holds the new deal.
+std::vector<std::uint32_t> ship(const std::vector<double>& before, std::vector<std::uint32_t>& owner,
+                                std::uint32_t workers, std::uint32_t max_moves) {
+  std::vector<double> load(workers, 0.0);
+  for (std::size_t k = 0; k < owner.size(); ++k) load[owner[k]] += before[k];
+  std::vector<std::uint32_t> moved;
+  while (moved.size() < max_moves) {
+    const auto busiest = std::uint32_t(std::max_element(load.begin(), load.end()) - load.begin());
+    const auto idlest = std::uint32_t(std::min_element(load.begin(), load.end()) - load.begin());
+    const double gap = load[busiest] - load[idlest];
+    std::size_t pick = owner.size();
+    for (std::size_t k = 0; k < owner.size(); ++k)
+      if (owner[k] == busiest && before[k] > 0 && before[k] < gap && (pick == owner.size() || before[k] > before[pick]))
+        pick = k;
+    if (pick == owner.size()) break;
+    owner[pick] = idlest;
+    load[busiest] -= before[pick];
+    load[idlest] += before[pick];
+    moved.push_back(std::uint32_t(pick));
+  }
+  return moved;
+}
+
+/// max / mean of the workers' loads when block k (work[k]) is dealt to owner[k].
+double deal_imbalance(const std::vector<double>& work, const std::vector<std::uint32_t>& owner, std::uint32_t workers) {
+  std::vector<double> load(workers, 0.0);
+  double total = 0;
+  for (std::size_t k = 0; k < owner.size(); ++k) {
+    load[owner[k]] += work[k];
+    total += work[k];
   }
   return total > 0 ? *std::max_element(load.begin(), load.end()) * workers / total : 1.0;
 }
@@ -445,24 +495,48 @@ void run_scale(const ScaleArgs& a) {
     return s;
   };
 
-  // Counted tests of each block alone at each pose, per split (layer, block size): for the oracle
-  // deal (Row::oracle_imbalance).
-  std::map<std::pair<std::uint32_t, std::uint32_t>, std::vector<std::vector<std::array<std::uint64_t, 2>>>> block_tests;
-  const auto tests_per_block = [&](const Split& sp) -> const std::vector<std::vector<std::array<std::uint64_t, 2>>>& {
+  // Counted tests of each block alone at each pose and at the pose of the round before (moved by
+  // --ship-motion-mm in a direction drawn per pose), per split (layer, block size): for the oracle
+  // deal and the shipping model.
+  std::vector<geom::Pose> poses_before = poses;
+  {
+    std::mt19937_64 rng(17);
+    std::normal_distribution<double> normal;
+    for (geom::Pose& p : poses_before) {
+      geom::Vec3 d(normal(rng), normal(rng), normal(rng));
+      p.translation() += a.ship_motion_mm * d.normalized();
+    }
+  }
+  using Tests = std::vector<std::array<std::uint64_t, 2>>;  // per block: sphere tests, triangle tests
+  struct BlockTests {
+    std::vector<Tests> now, before;                 // per pose
+    std::vector<std::uint32_t> faces;               // per block
+    std::deque<std::vector<std::uint32_t>> owners;  // block -> worker, one per (W, mapping) dealt (a deque: rows point in)
+  };
+  std::map<std::pair<std::uint32_t, std::uint32_t>, BlockTests> block_tests;
+  const auto tests_per_block = [&](const Split& sp) -> BlockTests& {
     auto [it, fresh] = block_tests.try_emplace({sp.layer, sp.block_size});
     if (!fresh) return it->second;
     auto part = geom::make_partition(part_tree, sp.layer, 1, sp.block_size);
     if (!part) die(part.error());
-    it->second.resize(poses.size());
-    for (std::size_t i = 0; i < poses.size(); ++i)
-      for (std::uint32_t b = 0; b < part.value().num_blocks(); ++b) {
-        geom::CollideConfig c = geom::DefaultCollideConfig();
-        c.restrict_object = true;
-        c.object_roots = part.value().block(b);
-        geom::collide(probe, pt, object, part_tree, poses[i], c, scratch, result);
-        it->second[i].push_back({result.stats.node_pairs, result.stats.tri_pairs});
-      }
-    return it->second;
+    BlockTests& bt = it->second;
+    for (std::uint32_t b = 0; b < part.value().num_blocks(); ++b) {
+      std::uint32_t f = 0;
+      for (std::uint32_t n : part.value().block(b)) f += part_tree.cold[n].face_end - part_tree.cold[n].face_begin;
+      bt.faces.push_back(f);
+    }
+    for (auto [list, out] : {std::pair{&poses, &bt.now}, std::pair{&poses_before, &bt.before}}) {
+      out->resize(poses.size());
+      for (std::size_t i = 0; i < poses.size(); ++i)
+        for (std::uint32_t b = 0; b < part.value().num_blocks(); ++b) {
+          geom::CollideConfig c = geom::DefaultCollideConfig();
+          c.restrict_object = true;
+          c.object_roots = part.value().block(b);
+          geom::collide(probe, pt, object, part_tree, (*list)[i], c, scratch, result);
+          (*out)[i].push_back({result.stats.node_pairs, result.stats.tri_pairs});
+        }
+    }
+    return bt;
   };
 
   // 3. Every worker's share, built as a worker builds it, timed alone at every pose.
@@ -483,7 +557,11 @@ void run_scale(const ScaleArgs& a) {
       std::fprintf(stderr, "W=%u %s: layer %u, block size %u, %u blocks%s\n", W, geom::to_string(m), sp.layer,
                    sp.block_size, sp.blocks, sp.automatic ? " (automatic)" : "");
       const auto share = net::deal_blocks(sp.blocks, W, m, 1);
-      const auto& per_block_tests = tests_per_block(sp);
+      BlockTests& per_block_tests = tests_per_block(sp);
+      per_block_tests.owners.emplace_back(sp.blocks);
+      std::vector<std::uint32_t>& owners = per_block_tests.owners.back();
+      for (std::uint32_t w = 0; w < W; ++w)
+        for (std::uint32_t k : share[w]) owners[k] = w;
       std::vector<Row> prow(poses.size());
       for (std::size_t i = 0; i < poses.size(); ++i) {
         prow[i].pose = i + 1;
@@ -494,7 +572,10 @@ void run_scale(const ScaleArgs& a) {
         prow[i].single_us = single[i];
         prow[i].single_spheres = single_spheres[i];
         prow[i].single_tris = single_tris[i];
-        prow[i].block_tests = &per_block_tests[i];
+        prow[i].block_tests = &per_block_tests.now[i];
+        prow[i].block_tests_before = &per_block_tests.before[i];
+        prow[i].owners = &owners;
+        prow[i].block_faces = &per_block_tests.faces;
       }
       std::vector<std::vector<std::vector<std::uint8_t>>> replies(poses.size());  // encoded Results per pose
       std::vector<std::vector<net::FacePair>> all_pairs(poses.size());
@@ -595,8 +676,16 @@ void run_scale(const ScaleArgs& a) {
       }
       r.work_mean = sum / r.workers;
       r.work_single = fit_sphere_us * double(r.single_spheres) + fit_tri_us * double(r.single_tris);
-      std::vector<double> work;
+      std::vector<double> work, before;
       for (const auto& t : *r.block_tests) work.push_back(fit_sphere_us * double(t[0]) + fit_tri_us * double(t[1]));
+      for (const auto& t : *r.block_tests_before)
+        before.push_back(fit_sphere_us * double(t[0]) + fit_tri_us * double(t[1]));
+      r.block_imbalance = deal_imbalance(work, *r.owners, r.workers);
+      std::vector<std::uint32_t> shipped_owner = *r.owners;
+      const std::vector<std::uint32_t> moved = ship(before, shipped_owner, r.workers, a.ship_blocks);
+      r.shipped_imbalance = deal_imbalance(work, shipped_owner, r.workers);
+      r.shipped_blocks = std::uint32_t(moved.size());
+      for (std::uint32_t k : moved) r.shipped_faces += r.block_faces->at(k);
       r.oracle_imbalance = oracle_imbalance(std::move(work), r.workers);
     }
   }
@@ -610,12 +699,12 @@ void run_scale(const ScaleArgs& a) {
     std::uint32_t workers = 0;
     geom::Mapping mapping = geom::Mapping::block_cyclic;
     std::size_t poses = 0;
-    Spread imbalance_counted, imbalance, redundancy_counted, redundancy, oracle;
+    Spread imbalance_counted, imbalance, redundancy_counted, redundancy, oracle, block, shipped;
   };
   std::vector<Summary> summaries;
   for (std::uint32_t W : ws)
     for (geom::Mapping m : mappings) {
-      std::vector<double> v[5];
+      std::vector<double> v[7];
       for (const Row& r : rows)
         if (r.workers == W && r.mapping == m) {
           v[0].push_back(r.work_imbalance());
@@ -623,6 +712,8 @@ void run_scale(const ScaleArgs& a) {
           v[2].push_back(r.work_redundancy());
           v[3].push_back(r.redundancy());
           v[4].push_back(r.oracle_imbalance);
+          v[5].push_back(r.block_imbalance);
+          v[6].push_back(r.shipped_imbalance);
         }
       if (v[0].empty()) continue;
       const auto spread = [](const std::vector<double>& x) {
@@ -631,7 +722,8 @@ void run_scale(const ScaleArgs& a) {
         sp.median = median(x);
         return sp;
       };
-      summaries.push_back({W, m, v[0].size(), spread(v[0]), spread(v[1]), spread(v[2]), spread(v[3]), spread(v[4])});
+      summaries.push_back({W, m, v[0].size(), spread(v[0]), spread(v[1]), spread(v[2]), spread(v[3]), spread(v[4]),
+                           spread(v[5]), spread(v[6])});
     }
 
   // 4. The gather on this machine: raw inproc fan-out floor for small W, with a reply of the
@@ -803,12 +895,13 @@ void run_scale(const ScaleArgs& a) {
           "\"max_worker_us\": %.2f, \"mean_worker_us\": %.2f, \"sum_worker_us\": %.2f, \"imbalance\": %.3f, "
           "\"redundancy\": %.3f, \"client_us\": %.2f, \"compute_round_us\": %.2f, \"max_reply_bytes\": %zu, "
           "\"compute_speedup\": %.3f, \"sphere_tests_ratio\": %.3f, \"tri_tests_ratio\": %.3f, "
-          "\"imbalance_counted\": %.3f, \"redundancy_counted\": %.3f, \"oracle_imbalance\": %.3f",
+          "\"imbalance_counted\": %.3f, \"redundancy_counted\": %.3f, \"oracle_imbalance\": %.3f, "
+          "\"block_imbalance\": %.3f, \"shipped_imbalance\": %.3f, \"shipped_blocks\": %u, \"shipped_faces\": %u",
           k ? "," : "", r.pose, r.contacts, r.workers, geom::to_string(r.mapping), r.split.layer, r.split.block_size,
           r.split.blocks, r.split.automatic ? "true" : "false", r.busy, r.single_us, r.max_us, r.mean_us, r.sum_us,
           r.imbalance(), r.redundancy(), r.client_us, r.compute_round_us, r.max_reply_bytes,
           r.single_us / r.compute_round_us, r.sphere_ratio(), r.tri_ratio(), r.work_imbalance(), r.work_redundancy(),
-          r.oracle_imbalance);
+          r.oracle_imbalance, r.block_imbalance, r.shipped_imbalance, r.shipped_blocks, r.shipped_faces);
       for (const Network& n : kNetworks)
         std::printf(", \"round_%s_us\": %.2f, \"speedup_%s\": %.3f", n.name, predicted(r, n), n.name,
                     r.single_us / predicted(r, n));
@@ -821,7 +914,8 @@ void run_scale(const ScaleArgs& a) {
                   geom::to_string(u.mapping), u.poses);
       for (auto [name, sp] : {std::pair{"imbalance_counted", &u.imbalance_counted}, std::pair{"imbalance", &u.imbalance},
                               std::pair{"redundancy_counted", &u.redundancy_counted},
-                              std::pair{"redundancy", &u.redundancy}, std::pair{"oracle_imbalance", &u.oracle}})
+                              std::pair{"redundancy", &u.redundancy}, std::pair{"oracle_imbalance", &u.oracle},
+                              std::pair{"block_imbalance", &u.block}, std::pair{"shipped_imbalance", &u.shipped}})
         std::printf(", \"%s\": {\"mean\": %.3f, \"median\": %.3f, \"max\": %.3f}", name, sp->mean, sp->median, sp->max);
       std::printf("}");
     }
@@ -862,14 +956,17 @@ void run_scale(const ScaleArgs& a) {
       "10GbE = compute + W x message work + 16.25 us + largest reply at 10 Gbit/s; x = single / predicted "
       "round (xvm: with this VM's client CPU per round instead)\n");
   std::printf(
-      "\nover the %zu poses (mean / median / max): imbal#, imbal, redun#, redun as above; oracle = the same blocks "
-      "dealt knowing the pose (largest first to the least loaded worker, counted work): what no static mapping "
-      "beats\n",
-      poses.size());
-  std::printf("%3s %-12s %20s %20s %20s %20s %20s\n", "W", "mapping", "imbal#", "imbal", "redun#", "redun", "oracle");
+      "\nover the %zu poses (mean / median / max): imbal#, imbal, redun#, redun as above; from the counted work of "
+      "each block alone: blocks = the mapping's deal, oracle = the same blocks dealt knowing the pose (largest "
+      "first to the least loaded worker: what no static mapping beats), shipped = the deal after the work shipping "
+      "model moved up to %u blocks judged by the round before (the probe %.3g mm away; a model, not built)\n",
+      poses.size(), a.ship_blocks, a.ship_motion_mm);
+  std::printf("%3s %-12s %20s %20s %20s %20s %20s %20s %20s\n", "W", "mapping", "imbal#", "imbal", "redun#", "redun",
+              "blocks", "oracle", "shipped");
   for (const Summary& u : summaries) {
     std::printf("%3u %-12s", u.workers, geom::to_string(u.mapping));
-    for (const Spread* sp : {&u.imbalance_counted, &u.imbalance, &u.redundancy_counted, &u.redundancy, &u.oracle})
+    for (const Spread* sp :
+         {&u.imbalance_counted, &u.imbalance, &u.redundancy_counted, &u.redundancy, &u.block, &u.oracle, &u.shipped})
       std::printf("   %5.2f / %5.2f / %5.2f", sp->mean, sp->median, sp->max);
     std::printf("\n");
   }
@@ -924,6 +1021,13 @@ void add_scale(CLI::App& app) {
                   "how a worker's tree over its share is built: per-block (one subtree per block, what workers do) or "
                   "one (one tree over the whole share, as before; to measure the difference)")
       ->check(CLI::IsMember({"per-block", "one"}))
+      ->capture_default_str();
+  cmd->add_option("--ship-motion-mm", a->ship_motion_mm,
+                  "work shipping model: the probe's motion between two rounds (0.1 mm: 100 mm/s at 1 kHz)")
+      ->check(CLI::Range(0.0, 1e3))
+      ->capture_default_str();
+  cmd->add_option("--ship-blocks", a->ship_blocks, "work shipping model: blocks moved per round at most")
+      ->check(CLI::Range(0u, 100000u))
       ->capture_default_str();
   cmd->add_flag("--json", a->json, "print one JSON object instead of the table");
   cmd->callback([a] { run_scale(*a); });
