@@ -28,12 +28,12 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
-#include <deque>
 #include <ctime>
+#include <deque>
 #include <functional>
 #include <map>
-#include <random>
 #include <memory>
+#include <random>
 #include <string>
 #include <sys/wait.h>
 #include <thread>
@@ -656,7 +656,7 @@ void run_scale(const ScaleArgs& a) {
   // redundancy of the counted work are then deterministic for given costs, and the costs, two
   // sums over all poses, move only with the host's speed. (A least-squares fit of both to every
   // query moved them by up to 8x between runs: the two counts grow together.)
-  double fit_sphere_us = 0, fit_tri_us = 0;
+  double cost_sphere_us = 0, cost_tri_us = 0;
   {
     double t_exact = 0, t_spheres = 0, n_spheres = 0, n_tris = 0;
     for (std::size_t i = 0; i < poses.size(); ++i) {
@@ -665,21 +665,21 @@ void run_scale(const ScaleArgs& a) {
       n_spheres += double(single_spheres[i]);
       n_tris += double(single_tris[i]);
     }
-    if (n_spheres > 0) fit_sphere_us = t_spheres / n_spheres;
-    if (n_tris > 0) fit_tri_us = std::max(0.0, t_exact - t_spheres) / n_tris;
+    if (n_spheres > 0) cost_sphere_us = t_spheres / n_spheres;
+    if (n_tris > 0) cost_tri_us = std::max(0.0, t_exact - t_spheres) / n_tris;
     for (Row& r : rows) {
       double sum = 0;
       for (const auto& w : r.shares) {
-        const double work = fit_sphere_us * w[0] + fit_tri_us * w[1];
+        const double work = cost_sphere_us * w[0] + cost_tri_us * w[1];
         r.work_max = std::max(r.work_max, work);
         sum += work;
       }
       r.work_mean = sum / r.workers;
-      r.work_single = fit_sphere_us * double(r.single_spheres) + fit_tri_us * double(r.single_tris);
+      r.work_single = cost_sphere_us * double(r.single_spheres) + cost_tri_us * double(r.single_tris);
       std::vector<double> work, before;
-      for (const auto& t : *r.block_tests) work.push_back(fit_sphere_us * double(t[0]) + fit_tri_us * double(t[1]));
+      for (const auto& t : *r.block_tests) work.push_back(cost_sphere_us * double(t[0]) + cost_tri_us * double(t[1]));
       for (const auto& t : *r.block_tests_before)
-        before.push_back(fit_sphere_us * double(t[0]) + fit_tri_us * double(t[1]));
+        before.push_back(cost_sphere_us * double(t[0]) + cost_tri_us * double(t[1]));
       r.block_imbalance = deal_imbalance(work, *r.owners, r.workers);
       std::vector<std::uint32_t> shipped_owner = *r.owners;
       const std::vector<std::uint32_t> moved = ship(before, shipped_owner, r.workers, a.ship_blocks);
@@ -861,7 +861,7 @@ void run_scale(const ScaleArgs& a) {
     for (std::size_t i = 0; i < cpu_tcp.size(); ++i) std::printf("%s%.2f", i ? ", " : "", cpu_tcp[i]);
     std::printf("], \"fit_a_us\": %.2f, \"fit_b_us_per_worker\": %.3f},\n", cpu_a, cpu_b);
     std::printf(" \"client_message_work_us\": %.3f,\n", msg_work);
-    std::printf(" \"work_fit\": {\"us_per_sphere_test\": %.6f, \"us_per_tri_test\": %.6f},\n", fit_sphere_us, fit_tri_us);
+    std::printf(" \"test_cost\": {\"us_per_sphere_test\": %.6f, \"us_per_tri_test\": %.6f},\n", cost_sphere_us, cost_tri_us);
     std::printf(" \"networks\": [");
     for (std::size_t k = 0; k < std::size(kNetworks); ++k)
       std::printf("%s{\"name\": \"%s\", \"rtt_us\": %.2f, \"bytes_per_us\": %.0f, \"vm_client\": %s}", k ? ", " : "",
@@ -936,7 +936,7 @@ void run_scale(const ScaleArgs& a) {
   std::printf(
       "counted work: %.4f us per sphere-pair test, %.4f us per triangle-pair test (measured: the single thread's "
       "queries stopped at the leaf spheres, and the rest of the exact ones)\n",
-      fit_sphere_us, fit_tri_us);
+      cost_sphere_us, cost_tri_us);
   std::printf("\n%4s %8s %3s %-12s %5s %4s %8s %8s %8s %6s %6s %6s %6s %6s %6s %8s %8s %7s %7s %7s\n", "pose",
               "contacts", "W", "mapping", "layer", "B", "single", "max", "mean", "imbal", "redund", "imbal#", "redun#",
               "xsph", "xtri", "compute", "10GbE", "x10GbE", "xvm", "x100GbE");
@@ -997,7 +997,8 @@ void add_scale(CLI::App& app) {
       "Scale-out model: each worker's share of a collision round timed alone, for W = 1, 2, 4, ... workers and the\n"
       "block-cyclic, contiguous and random mappings (critical path, imbalance, redundant work), the gather measured\n"
       "here (inproc floor, client CPU over tcp) and predicted on 10 GbE / 100 GbE; checked against real rounds at W = "
-      "1, 2");
+      "1, 2.\nOver the poses: the spread of imbalance and redundancy, the oracle deal of the same blocks, and a work\n"
+      "shipping model (a few blocks moved each round by the round before's work).");
   cmd->add_option("--probe", a->probe, "probe mesh (the hand)")->required()->check(CLI::ExistingFile);
   cmd->add_option("--object", a->object, "object mesh")->required()->check(CLI::ExistingFile);
   cmd->add_option("--poses", a->poses, "pose file (16 numbers a line)")->required()->check(CLI::ExistingFile);
