@@ -374,14 +374,18 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
 
   std::vector<std::uint32_t>& path = T.path_stamp;
 
-  // Exit distance of a vertex, walking from a face near it; once per vertex and round.
+  // Exit distance of a vertex, walking from a face near it; once per vertex and round. The walk
+  // starts from the face the vertex left through last round when it was evaluated then (the
+  // probe moves little in a round: the walk takes no step), else from `hint`, a face near it.
   std::uint32_t evaluated = 0;
   auto eval = [&](std::uint32_t v, std::uint32_t hint) -> double {
     if (visit[v] == epoch) return depth[v];
+    const std::uint32_t own = visit[v] == epoch - 1 ? exitf[v] : UINT32_MAX;
     visit[v] = epoch;
     depth[v] = -std::numeric_limits<double>::infinity();
     exitf[v] = UINT32_MAX;
     if (hint == UINT32_MAX) return depth[v];
+    if (own != UINT32_MAX) hint = own;
     if (++evaluated > config.max_inside_vertices) {
       best.capped = true;
       return depth[v];
