@@ -376,7 +376,8 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
 
   // Exit distance of a vertex, walking from a face near it; once per vertex and round. The walk
   // starts from the face the vertex left through last round when it was evaluated then (the
-  // probe moves little in a round: the walk takes no step), else from `hint`, a face near it.
+  // probe moves little in a round: the walk takes no step), and from `hint`, a face near it,
+  // when there is none or that walk fails (the face has turned away from d since).
   std::uint32_t evaluated = 0;
   auto eval = [&](std::uint32_t v, std::uint32_t hint) -> double {
     if (visit[v] == epoch) return depth[v];
@@ -385,14 +386,17 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
     depth[v] = -std::numeric_limits<double>::infinity();
     exitf[v] = UINT32_MAX;
     if (hint == UINT32_MAX) return depth[v];
-    if (own != UINT32_MAX) hint = own;
     if (++evaluated > config.max_inside_vertices) {
       best.capped = true;
       return depth[v];
     }
-    std::uint32_t f = hint;
+    const Vec3 x = test_pos(v);
+    std::uint32_t f = own;
     double dist = 0;
-    if (!walk.exit(test_pos(v), f, dist, kMaxWalkSteps)) return depth[v];
+    if (own == UINT32_MAX || !walk.exit(x, f, dist, kMaxWalkSteps)) {
+      f = hint;
+      if (own == hint || !walk.exit(x, f, dist, kMaxWalkSteps)) return depth[v];
+    }
     depth[v] = dist;
     exitf[v] = f;
     if (dist > 0) {

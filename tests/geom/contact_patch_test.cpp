@@ -181,6 +181,28 @@ TEST_CASE("contact patch: sphere into sphere: FD radial, PD = r1 + r2 - distance
   }
 }
 
+TEST_CASE("contact patch: a builder that follows the probe gives the depth a fresh one finds at each pose") {
+  // The following builder starts each vertex's exit walk where that vertex left the other body's
+  // surface the round before, a fresh one from a face near it: the same surface point either way.
+  const Mesh object = make_icosphere(20, 16);
+  const Vec3 u = Vec3(1, 2, 3).normalized(), side = u.cross(Vec3::UnitZ()).normalized();
+  ContactBuilder follow;
+  int compared = 0;
+  for (int k = 0; k <= 200; ++k) {
+    CAPTURE(k);
+    const Pose p = pose_at((27.0 + 0.005 * k) * u + 0.05 * k * side);  // slides 10 mm, 1 mm shallower
+    const ContactModel warm = model_at(follow, ball10(), object, p);
+    ContactBuilder fresh;
+    const ContactModel cold = model_at(fresh, ball10(), object, p);
+    REQUIRE(warm.in_contact());
+    REQUIRE(cold.in_contact());
+    CHECK(warm.penetration_mm == doctest::Approx(cold.penetration_mm).epsilon(1e-12));
+    CHECK(angle_deg(fd(warm), fd(cold)) < 1e-9);
+    ++compared;
+  }
+  CHECK(compared == 201);
+}
+
 TEST_CASE("contact patch: force never rises while the probe is pulled out") {
   ContactBuilder b;
   double last = std::numeric_limits<double>::infinity();
