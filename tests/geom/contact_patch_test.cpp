@@ -124,7 +124,6 @@ TEST_CASE("contact patch: a second contact region is found when it appears, and 
   }
   const Mesh box = make_box({100, 100, 40});  // top face z = 20, the balls well inside its edges
   ContactBuilder b;
-  int checked = 0;
   for (int k = 0; k <= 40; ++k) {
     const double theta = -0.1 + 0.0035 * k;  // rotation about y: A (x = −15) at height 15 sin θ
     Pose p = Pose::Identity();
@@ -136,12 +135,9 @@ TEST_CASE("contact patch: a second contact region is found when it appears, and 
     REQUIRE(m.in_contact());
     CHECK(angle_deg(fd(m), Vec3::UnitZ()) < 1e-6);
     CHECK(m.penetration_mm <= std::max(depth_a, depth_b) + 1e-9);  // never deeper than the balls
-    if (k >= 24) {  // B touches from k = 20 (θ > −1/30): found within the 4 rounds between searches
+    if (k >= 24)  // B touches from k = 20 (θ > −1/30): found within the 4 rounds between searches
       CHECK(std::abs(m.penetration_mm - std::max(depth_a, depth_b)) <= kDepthTol);
-      ++checked;
-    }
   }
-  CHECK(checked == 17);
 }
 
 TEST_CASE("contact patch: box edge and corner: FD on the bisector, PD = depth") {
@@ -189,7 +185,6 @@ TEST_CASE("contact patch: a builder that follows the probe gives the depth a fre
   const Mesh object = make_icosphere(20, 16);
   const Vec3 u = Vec3(1, 2, 3).normalized(), side = u.cross(Vec3::UnitZ()).normalized();
   ContactBuilder follow;
-  int compared = 0;
   for (int k = 0; k <= 200; ++k) {
     CAPTURE(k);
     const Pose p = pose_at((27.0 + 0.005 * k) * u + 0.05 * k * side);  // slides 10 mm, 1 mm shallower
@@ -200,9 +195,7 @@ TEST_CASE("contact patch: a builder that follows the probe gives the depth a fre
     REQUIRE(cold.in_contact());
     CHECK(warm.penetration_mm == doctest::Approx(cold.penetration_mm).epsilon(1e-12));
     CHECK((fd(warm) - fd(cold)).norm() < 1e-12);
-    ++compared;
   }
-  CHECK(compared == 201);
 }
 
 TEST_CASE("contact patch: force never rises while the probe is pulled out") {
