@@ -244,7 +244,7 @@ void add_hostile(CLI::App& app) {
                if (!x.upload(bytes, h) || !is_hello(x.recv())) return Outcome::stalled;
                geom::Pose shifted = geom::Pose::Identity();
                shifted.translation() = geom::Vec3(1, 1, 0);
-               x.send(net::encode(net::QueryMsg{1, h, shifted}));
+               x.send(net::encode(net::QueryMsg{1, h, shifted, {}}));
                const auto r = x.recv();
                return is_error(r) ? Outcome::refused : r ? Outcome::answered : Outcome::stalled;
              });
@@ -329,7 +329,7 @@ void add_hostile(CLI::App& app) {
                // The key the honest client uses is public in any capture (and here recomputed from the
                // same scene); knowing it is not enough.
                const Set s = encode_set(probe, object, 32);
-               x.send(net::encode(net::QueryMsg{5, s.hash, touch}));
+               x.send(net::encode(net::QueryMsg{5, s.hash, touch, {}}));
                const auto r = x.recv();     // NotLoaded ...
                const auto list = x.recv();  // ... and the Hello after it: the sets this client may see
                const bool hidden = is_hello(list) && std::get<net::HelloMsg>(*list).held.empty();

@@ -127,6 +127,7 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
   net::ScatterConfig cfg;
   cfg.mapping = spec.mapping;
   cfg.miss_limit = spec.miss_limit;
+  cfg.assist_blocks = spec.assist_blocks;
   cfg.leaf_faces = spec.leaf_faces;
   if (spec.curve.enabled() && spec.endpoints.empty())
     return fail(

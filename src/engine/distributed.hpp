@@ -43,7 +43,8 @@ struct FleetSpec {
   double contact_radius = 10;                                       ///< mm, for the automatic split
   std::uint32_t leaf_faces = geom::DefaultTreeConfig().leaf_faces;  ///< tree knob sent to workers
   std::uint32_t miss_limit = 3;                                     ///< missed deadlines before a worker is marked down
-  std::chrono::milliseconds ready_timeout{30000};                   ///< time allowed for the first upload
+  std::uint32_t assist_blocks = 0;  ///< blocks the client answers itself each round (net::ScatterConfig::assist_blocks)
+  std::chrono::milliseconds ready_timeout{30000};  ///< time allowed for the first upload
   /// A daemon silent this long is probed: a refused CURVE key or a security mismatch fails the
   /// start at once (waiting cannot help); anything else waits out ready_timeout.
   std::chrono::milliseconds hello_timeout{2000};

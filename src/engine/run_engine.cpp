@@ -157,6 +157,7 @@ Status RunEngine::State::prepare() {
     spec.contact_radius = 0.25 * double(ptree.tree.nodes[0].radius);
     spec.leaf_faces = s.tree.leaf_faces;
     spec.miss_limit = std::uint32_t(s.down_after);
+    spec.assist_blocks = std::uint32_t(s.assist_blocks);
     spec.curve = opt.curve;
     spec.note = opt.note;
     note("starting workers and loading their blocks ...");

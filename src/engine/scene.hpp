@@ -63,6 +63,7 @@ struct Scene {
   std::string client_key;           ///< CURVE: this client's key pair PREFIX (PREFIX.key, PREFIX.pub)
   double deadline_ms = 50;          ///< scatter-gather round deadline, ms
   int down_after = 3;               ///< missed deadlines before a worker is marked down
+  int assist_blocks = 0;            ///< blocks the collision thread answers itself each round (0 = off)
   double collision_rate_hz = 0;     ///< cap on collision rounds per second (0 = as fast as possible)
   int approx_layer = geom::kExact;  ///< kExact, or a sphere layer for the approximate mode
   rt::HapticLoopConfig haptic = rt::DefaultHapticLoopConfig();  ///< servo loop

@@ -464,6 +464,35 @@ Result<SphereTree> SphereTree::build(const Mesh& mesh, const TreeConfig& params,
   return t;
 }
 
+std::vector<std::vector<std::uint32_t>> group_roots(const SphereTree& tree, std::size_t num_faces,
+                                                    std::span<const std::uint32_t> groups) {
+  std::vector<std::uint32_t> group_of(num_faces, UINT32_MAX);
+  std::size_t f = 0;
+  for (std::size_t g = 0; g < groups.size(); ++g)
+    for (std::uint32_t k = 0; k < groups[g] && f < num_faces; ++k) group_of[f++] = static_cast<std::uint32_t>(g);
+  if (f != num_faces || tree.nodes.empty() || tree.num_faces() != num_faces) return {};
+  std::vector<std::vector<std::uint32_t>> roots(groups.size());
+  std::vector<std::uint32_t> stack{0};
+  while (!stack.empty()) {
+    const std::uint32_t i = stack.back();
+    stack.pop_back();
+    const std::uint32_t* b = tree.faces_begin(i);
+    const std::uint32_t* e = tree.faces_end(i);
+    if (b == e) continue;
+    const std::uint32_t g = b[0] < num_faces ? group_of[b[0]] : UINT32_MAX;
+    const bool one =
+        g != UINT32_MAX && std::all_of(b, e, [&](std::uint32_t x) { return x < num_faces && group_of[x] == g; });
+    if (one) {
+      roots[g].push_back(i);
+    } else if (tree.nodes[i].leaf) {
+      return {};  // a leaf mixes groups: they cannot be collided apart
+    } else {
+      for (std::uint32_t c = tree.nodes[i].first + tree.nodes[i].count; c-- > tree.nodes[i].first;) stack.push_back(c);
+    }
+  }
+  return roots;
+}
+
 std::uint32_t SphereTree::num_leaves() const {
   std::uint32_t n = 0;
   for (const SphereNode& h : nodes) n += h.leaf;

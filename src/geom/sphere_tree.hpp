@@ -94,6 +94,14 @@ struct SphereTree {
   std::size_t bytes() const;  ///< heap bytes held by the tree
 };
 
+/// Per group of faces (SphereTree::build()'s `groups`: sizes of consecutive runs of the face ids
+/// 0..num_faces-1), the largest nodes whose faces all lie in that group, in depth-first order:
+/// the roots to collide() that group alone from (CollideConfig::object_roots). A tree built with
+/// these groups has one such node per non-empty group. Empty when a leaf mixes two groups (a tree
+/// built without them) or the groups do not cover the faces.
+std::vector<std::vector<std::uint32_t>> group_roots(const SphereTree& tree, std::size_t num_faces,
+                                                    std::span<const std::uint32_t> groups);
+
 /// 64-bit hash of the mesh's vertex bytes (local + origin), faces, the build parameters and the
 /// face groups (if any).
 std::uint64_t tree_hash(const Mesh& mesh, const TreeConfig& params, std::span<const std::uint32_t> groups = {});

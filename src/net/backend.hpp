@@ -5,6 +5,7 @@
 #pragma once
 #include <functional>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include "net/block_set.hpp"
@@ -19,10 +20,13 @@ class CollisionBackend {
   /// Builds the backend's structures (e.g. its own sphere tree with set.leaf_faces) for `set`.
   virtual Status load(const BlockSet& set) = 0;
   /// Appends every colliding (probe face, GLOBAL object face) pair at `pose` (probe file coords →
-  /// object file coords) to `out`, in any order, each pair once; returns the work counters. Stops
-  /// as soon as more than `max_pairs` pairs were appended (then out holds more than max_pairs, at
-  /// most a few thousand more): the caller answers "too many pairs" without computing them all.
-  virtual QueryStats query(const geom::Pose& pose, std::vector<FacePair>& out, std::size_t max_pairs) = 0;
+  /// object file coords) to `out`, in any order, each pair once, leaving out the faces of the
+  /// blocks in `skip` (global block ids, ascending; ids not held are ignored); returns the work
+  /// counters. Stops as soon as more than `max_pairs` pairs were appended (then out holds more
+  /// than max_pairs, at most a few thousand more): the caller answers "too many pairs" without
+  /// computing them all.
+  virtual QueryStats query(const geom::Pose& pose, std::span<const std::uint32_t> skip, std::vector<FacePair>& out,
+                           std::size_t max_pairs) = 0;
 };
 
 /// Makes an empty backend; a worker calls it once per block set it loads.

@@ -53,6 +53,8 @@ struct BodyEncoder {
     w.u64(m.seq);
     w.u64(m.hash);
     put_pose(w, m.pose);
+    w.u32(static_cast<std::uint32_t>(m.skip.size()));
+    for (std::uint32_t b : m.skip) w.u32(b);
   }
   void operator()(const ResultMsg& m) {
     w.u64(m.seq);
@@ -121,6 +123,18 @@ Result<Message> decode_body(MsgType type, Reader& r, const Limits& L) {
       m.seq = r.u64("seq");
       m.hash = r.u64("hash");
       m.pose = get_pose(r);
+      const std::uint32_t n = r.u32("skip count");
+      if (r.count_ok(n, L.max_skip, 4, "skip count")) {
+        m.skip.resize(n);
+        for (std::uint32_t i = 0; i < n && r.ok(); ++i) {
+          const std::size_t at = r.offset();
+          m.skip[i] = r.u32("skip");
+          if (r.ok() && m.skip[i] >= L.max_blocks)
+            r.fail_at(at, "skip", ": block ", m.skip[i], " is not below max_blocks = ", L.max_blocks);
+          if (r.ok() && i > 0 && m.skip[i] <= m.skip[i - 1])
+            r.fail_at(at, "skip", ": block ", m.skip[i], " after ", m.skip[i - 1], " (must be strictly ascending)");
+        }
+      }
       out = std::move(m);
       break;
     }

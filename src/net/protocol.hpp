@@ -18,7 +18,7 @@
 namespace st::net {
 
 inline constexpr std::uint32_t kMagic = 0x504E5453;  ///< "STNP" read as a little-endian u32
-inline constexpr std::uint16_t kVersion = 1;         ///< bumped on any incompatible change
+inline constexpr std::uint16_t kVersion = 2;         ///< bumped on any incompatible change (2: Query skip list)
 inline constexpr std::size_t kHeaderBytes = 12;      ///< magic, version, type, flags, body length
 
 /// Upper bounds applied while decoding; a message over any of them is rejected, not truncated.
@@ -35,6 +35,7 @@ struct Limits {
   std::uint32_t max_vertices = 64u << 20;   ///< per mesh in a block set
   std::uint32_t max_faces = 64u << 20;      ///< per mesh in a block set
   std::uint32_t max_blocks = 1u << 20;      ///< blocks in a partition
+  std::uint32_t max_skip = 256;             ///< blocks a Query may ask the worker to leave out
   std::uint32_t max_leaf_faces = 1u << 16;  ///< sphere-tree leaf size parameter
 };
 
@@ -84,13 +85,17 @@ struct LoadBlocksMsg {
   friend bool operator==(const LoadBlocksMsg&, const LoadBlocksMsg&) = default;
 };
 
-/// Client → worker: collide the probe at `pose` against block set `hash`.
+/// Client → worker: collide the probe at `pose` against block set `hash`, leaving out the blocks
+/// in `skip` (the client answers those itself this round: ScatterConfig::assist_blocks).
 struct QueryMsg {
   std::uint64_t seq = 0;                     ///< round sequence number, echoed in the Result
   std::uint64_t hash = 0;                    ///< block set to answer with (content-addressed)
   geom::Pose pose = geom::Pose::Identity();  ///< probe file coords → object file coords (rigid)
+  /// Global block ids to leave out, strictly ascending, at most Limits::max_skip; ids the set
+  /// does not hold are ignored.
+  std::vector<std::uint32_t> skip;
   friend bool operator==(const QueryMsg& a, const QueryMsg& b) {
-    return a.seq == b.seq && a.hash == b.hash && a.pose.matrix() == b.pose.matrix();
+    return a.seq == b.seq && a.hash == b.hash && a.pose.matrix() == b.pose.matrix() && a.skip == b.skip;
   }
 };
 

@@ -69,13 +69,24 @@ class GridBackend final : public CollisionBackend {
     }
     stamp_.assign(nf, 0);
     epoch_ = 0;
+    blocks_ = s.blocks;
+    face_block_.resize(nf);
+    for (std::size_t b = 0, f = 0; b < s.block_faces.size(); ++b)
+      for (std::uint32_t k = 0; k < s.block_faces[b] && f < nf; ++k) face_block_[f++] = static_cast<std::uint32_t>(b);
+    skipped_.assign(blocks_.size(), 0);
     return Ok{};
   }
 
-  QueryStats query(const geom::Pose& pose, std::vector<FacePair>& out, std::size_t max_pairs) override {
+  QueryStats query(const geom::Pose& pose, std::span<const std::uint32_t> skip, std::vector<FacePair>& out,
+                   std::size_t max_pairs) override {
     const std::size_t start = out.size();
     const auto t0 = std::chrono::steady_clock::now();
     QueryStats st;
+    std::fill(skipped_.begin(), skipped_.end(), 0);
+    bool any_skipped = false;
+    for (std::uint32_t b : skip)
+      if (auto it = std::lower_bound(blocks_.begin(), blocks_.end(), b); it != blocks_.end() && *it == b)
+        skipped_[std::size_t(it - blocks_.begin())] = 1, any_skipped = true;
     // Relative transform probe-local → object-local, composed once in double (large
     // offsets live only in poses and origins; never transform through the far-away file frame per vertex).
     const geom::Pose rel = Eigen::Translation3d(-object_.origin) * pose * Eigen::Translation3d(probe_.origin);
@@ -102,6 +113,7 @@ class GridBackend final : public CollisionBackend {
             for (std::uint32_t of : it->second) {
               if (stamp_[of] == epoch_) continue;
               stamp_[of] = epoch_;
+              if (any_skipped && skipped_[face_block_[of]]) continue;
               ++st.sphere_tests;
               if (!pb.overlaps(boxes_[of])) continue;  // exact filter: the result cannot depend on the grid
               const auto& u = object_.faces[of];
@@ -139,6 +151,9 @@ class GridBackend final : public CollisionBackend {
   std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> cells_;
   std::vector<std::uint32_t> stamp_;
   std::uint32_t epoch_ = 0;
+  std::vector<std::uint32_t> blocks_;      // global ids of the held blocks, ascending
+  std::vector<std::uint32_t> face_block_;  // share face -> index into blocks_
+  std::vector<std::uint8_t> skipped_;      // per held block: left out of this query
   std::vector<Vec3> moved_;
 };
 
@@ -180,7 +195,7 @@ std::vector<FacePair> reference_collide(const geom::Mesh& probe, const geom::Mes
   if (!set) return out;
   GridBackend b;
   (void)b.load(set.value());
-  b.query(pose, out, SIZE_MAX);
+  b.query(pose, {}, out, SIZE_MAX);
   std::sort(out.begin(), out.end());
   return out;
 }

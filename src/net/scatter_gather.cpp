@@ -2,6 +2,8 @@
 #include "net/scatter_gather.hpp"
 
 #include "geom/check.hpp"
+#include "geom/collide.hpp"
+#include "geom/sphere_tree.hpp"
 #include "net/worker_config.hpp"
 
 #include <malloc.h>
@@ -174,7 +176,8 @@ struct ScatterGather::Impl {
     Clock::time_point silent_since{};  // last message received from it, or its socket opened if later
     Clock::time_point asked_at{};      // last Query or Heartbeat that wants an answer
     std::uint64_t nonce = 0;
-    SetPtr asked;  // the block set this round's Query named; null if no Query was queued
+    SetPtr asked;                     // the block set this round's Query named; null if no Query was queued
+    std::vector<std::uint32_t> skip;  // blocks of `asked` the client answers this round (assist)
     // Totals.
     std::uint64_t bytes_sent = 0;
     std::uint32_t loads_sent = 0;
@@ -200,6 +203,22 @@ struct ScatterGather::Impl {
   bool in_round = false;
   std::vector<std::uint8_t> covered;  // per block, this round
   std::vector<std::uint8_t> buf;      // encode buffer
+  // Client assist (cfg.assist_blocks): what the client needs to answer blocks itself.
+  struct LocalBlock {
+    geom::Mesh mesh;                 // the block's faces and the vertices they use (object origin, local coords)
+    geom::SphereTree tree;           // built as a worker builds a block's subtree
+    std::vector<std::uint32_t> ids;  // global face id of each face
+    std::uint64_t used = 0;          // last round it was answered in
+  };
+  geom::SphereTree probe_tree;                          // the probe's tree (built when assist is on)
+  std::vector<std::uint32_t> face_block;                // object face -> its block
+  std::vector<double> block_work;                       // per block: pairs it gave last round (0 where none)
+  std::vector<std::uint32_t> worked;                    // blocks with block_work > 0
+  std::vector<std::uint32_t> taken;                     // blocks the client answers this round, ascending
+  std::vector<BlockWork> candidates;                    // scratch for choose_assist
+  std::unordered_map<std::uint32_t, LocalBlock> local;  // blocks answered so far (bounded, LRU)
+  geom::CollideScratch assist_scratch;
+  geom::CollideResult assist_result;
   std::vector<zmq::pollitem_t> items;
   RoundResult* out = nullptr;
 
@@ -422,7 +441,8 @@ struct ScatterGather::Impl {
     p.misses = 0;
     ++out->workers_replied;
     out->pairs.insert(out->pairs.end(), r.pairs.begin(), r.pairs.end());
-    for (std::uint32_t b : p.asked->blocks) covered[b] = 1;
+    for (std::uint32_t b : p.asked->blocks)
+      if (!std::binary_search(p.skip.begin(), p.skip.end(), b)) covered[b] = 1;
     out->stats.sphere_tests += r.stats.sphere_tests;
     out->stats.tri_tests += r.stats.tri_tests;
     out->stats.compute_ns = std::max(out->stats.compute_ns, r.stats.compute_ns);
@@ -569,6 +589,7 @@ struct ScatterGather::Impl {
     refresh_targets();
     for (Peer& p : peers) maybe_start_upload(p, now);
     choose_sets();
+    choose_assisted();
     std::fill(covered.begin(), covered.end(), 0);
     for (Peer& p : peers) {
       step(p, TurnEvent::NewRound);
@@ -579,7 +600,7 @@ struct ScatterGather::Impl {
       if (p.asked) {
         ++out->workers_asked;
         p.asked_at = now;
-        if (send(p, QueryMsg{cur_seq, p.asked->hash, pose})) {
+        if (send(p, QueryMsg{cur_seq, p.asked->hash, pose, p.skip})) {
           step(p, TurnEvent::QuerySent);
         } else {
           p.asked = nullptr;
@@ -594,6 +615,101 @@ struct ScatterGather::Impl {
         if (now >= p.heartbeat_due || p.link == Link::Unknown) heartbeat(p, now);
       }
       pump_upload(p, now);
+    }
+  }
+
+  // ---- client assist ----------------------------------------------------------------------
+
+  /// The blocks the client answers this round (choose_assist() over last round's pairs per
+  /// block) and each asked worker's share of them (its Query's skip list).
+  void choose_assisted() {
+    taken.clear();
+    for (Peer& p : peers) p.skip.clear();
+    if (cfg.assist_blocks == 0 || worked.empty()) return;
+    candidates.clear();
+    for (std::uint32_t b : worked)
+      for (std::uint32_t i = 0; i < peers.size(); ++i)
+        if (const Peer& p = peers[i]; p.asked && std::binary_search(p.asked->blocks.begin(), p.asked->blocks.end(), b)) {
+          candidates.push_back({b, i, block_work[b]});
+          break;
+        }
+    taken = choose_assist(candidates, static_cast<std::uint32_t>(peers.size()), cfg.assist_blocks);
+    for (Peer& p : peers)
+      if (p.asked)
+        for (std::uint32_t b : taken)
+          if (std::binary_search(p.asked->blocks.begin(), p.asked->blocks.end(), b)) p.skip.push_back(b);
+  }
+
+  /// The client's own block: its faces, the vertices they use and its tree, made once and kept
+  /// (the least recently used go beyond 8 × assist_blocks + 64).
+  LocalBlock* local_block(std::uint32_t b) {
+    auto it = local.find(b);
+    if (it == local.end()) {
+      const std::size_t cap = 8 * std::size_t(cfg.assist_blocks) + 64;
+      if (local.size() >= cap) {
+        auto oldest = local.begin();
+        for (auto j = local.begin(); j != local.end(); ++j)
+          if (j->second.used < oldest->second.used) oldest = j;
+        local.erase(oldest);
+      }
+      const geom::Mesh& object = scene->object;
+      LocalBlock lb;
+      lb.ids = scene->blocks[b];
+      std::sort(lb.ids.begin(), lb.ids.end());
+      std::vector<std::uint32_t> verts;
+      for (std::uint32_t f : lb.ids) verts.insert(verts.end(), object.faces[f].begin(), object.faces[f].end());
+      std::sort(verts.begin(), verts.end());
+      verts.erase(std::unique(verts.begin(), verts.end()), verts.end());
+      lb.mesh.name = object.name + " (block)";
+      lb.mesh.origin = object.origin;
+      for (std::uint32_t v : verts) lb.mesh.local.push_back(object.local[v]);
+      auto at = [&](std::uint32_t v) {
+        return static_cast<std::uint32_t>(std::lower_bound(verts.begin(), verts.end(), v) - verts.begin());
+      };
+      for (std::uint32_t f : lb.ids)
+        lb.mesh.faces.push_back({at(object.faces[f][0]), at(object.faces[f][1]), at(object.faces[f][2])});
+      geom::TreeConfig params = geom::DefaultTreeConfig();
+      params.leaf_faces = std::clamp<std::uint32_t>(scene->leaf_faces, 1, geom::kMaxLeafFaces);
+      Result<geom::SphereTree> t = geom::SphereTree::build(lb.mesh, params);
+      ST_ASSERT(t.ok(), "a block of our own object builds a tree");
+      if (!t) return nullptr;
+      lb.tree = std::move(t).value();
+      it = local.emplace(b, std::move(lb)).first;
+    }
+    it->second.used = cur_seq;
+    return &it->second;
+  }
+
+  /// Answers the taken blocks while the Queries are out: the same collide() a worker runs on its
+  /// block's subtree, so the pairs are the ones the worker would have found.
+  void answer_taken(const geom::Pose& pose) {
+    for (std::uint32_t b : taken) {
+      LocalBlock* lb = local_block(b);
+      if (!lb) continue;  // not covered: the round says it is incomplete
+      geom::CollideConfig opt = geom::DefaultCollideConfig();
+      opt.max_pairs = cfg.limits.max_pairs;
+      geom::collide(scene->probe, probe_tree, lb->mesh, lb->tree, pose, opt, assist_scratch, assist_result);
+      if (assist_result.stats.pair_limit_hit) continue;
+      for (const geom::FacePair& fp : assist_result.pairs) out->pairs.push_back({fp.probe, lb->ids[fp.object]});
+      out->assist.sphere_tests += assist_result.stats.node_pairs;
+      out->assist.tri_tests += assist_result.stats.tri_pairs;
+      ++out->blocks_assisted;
+      covered[b] = 1;
+    }
+    out->stats.sphere_tests += out->assist.sphere_tests;
+    out->stats.tri_tests += out->assist.tri_tests;
+  }
+
+  /// Each block's pairs in this round's result: what choose_assisted() weighs next round.
+  void note_block_work(const std::vector<FacePair>& pairs) {
+    if (cfg.assist_blocks == 0) return;
+    for (std::uint32_t b : worked) block_work[b] = 0;
+    worked.clear();
+    for (const FacePair& fp : pairs) {
+      const std::uint32_t b = face_block[fp.object];
+      if (b == UINT32_MAX) continue;
+      if (block_work[b] == 0) worked.push_back(b);
+      block_work[b] += 1;
     }
   }
 
@@ -654,8 +770,24 @@ Result<std::unique_ptr<ScatterGather>> ScatterGather::create(zmq::context_t& ctx
   const auto nblocks = static_cast<std::uint32_t>(blocks.size());
   impl->scene = std::make_shared<const SceneData>(
       SceneData{std::move(probe), std::move(object), std::move(blocks), config.leaf_faces});
+  if (config.assist_blocks > config.limits.max_skip)
+    return fail("scatter-gather: assist_blocks = ", config.assist_blocks, " exceeds the skip list limit ",
+                config.limits.max_skip);
   impl->covered.assign(nblocks, 0);
   impl->cfg = std::move(config);
+  if (impl->cfg.assist_blocks > 0) {
+    const SceneData& sc = *impl->scene;
+    geom::TreeConfig params = geom::DefaultTreeConfig();
+    params.leaf_faces = std::clamp<std::uint32_t>(sc.leaf_faces, 1, geom::kMaxLeafFaces);
+    Result<geom::SphereTree> pt = geom::SphereTree::build(sc.probe, params);
+    if (!pt) return fail("scatter-gather: client assist: probe tree: ", pt.error());
+    impl->probe_tree = std::move(pt).value();
+    impl->face_block.assign(sc.object.faces.size(), UINT32_MAX);
+    for (std::uint32_t b = 0; b < nblocks; ++b)
+      for (std::uint32_t f : sc.blocks[b])
+        if (f < impl->face_block.size() && impl->face_block[f] == UINT32_MAX) impl->face_block[f] = b;
+    impl->block_work.assign(nblocks, 0);
+  }
   const auto share = deal_blocks(nblocks, static_cast<std::uint32_t>(impl->cfg.endpoints.size()), impl->cfg.mapping,
                                  impl->cfg.mapping_seed);
   for (std::size_t i = 0; i < impl->cfg.endpoints.size(); ++i) {
@@ -693,12 +825,15 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   out.blocks_total = static_cast<std::uint32_t>(m.covered.size());
   out.stale_dropped = out.bad_messages = 0;
   out.stats = {};
+  out.blocks_assisted = 0;
+  out.assist = {};
   m.out = &out;
   m.in_round = false;
   m.service_now();  // old replies are dropped here, Hellos applied
   m.cur_seq = seq;
   m.in_round = true;
   m.begin_round_sends(pose, Clock::now());
+  m.answer_taken(pose);  // while the workers compute
   const auto spin_until = std::min(deadline, Clock::now() + std::chrono::microseconds(m.cfg.spin_us));
   while (!m.all_replied()) {
     const auto now = Clock::now();
@@ -721,6 +856,7 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   out.object_faces.erase(std::unique(out.object_faces.begin(), out.object_faces.end()), out.object_faces.end());
   out.blocks_covered = static_cast<std::uint32_t>(std::count(m.covered.begin(), m.covered.end(), 1));
   out.complete = out.blocks_covered == out.blocks_total;
+  m.note_block_work(out.pairs);
 }
 
 RoundResult ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time_point deadline) {
@@ -765,6 +901,32 @@ std::vector<WorkerStatus> ScatterGather::workers() const {
 std::size_t ScatterGather::encoded_sets() const { return impl_->by_blocks.size(); }
 
 std::uint32_t ScatterGather::blocks_total() const { return static_cast<std::uint32_t>(impl_->covered.size()); }
+
+std::vector<std::uint32_t> choose_assist(std::span<const BlockWork> worked, std::uint32_t workers, std::uint32_t max_blocks) {
+  std::vector<double> load(workers, 0.0);
+  for (const BlockWork& w : worked)
+    if (w.owner < workers && w.work > 0) load[w.owner] += w.work;
+  std::vector<std::uint8_t> moved(worked.size(), 0);
+  std::vector<std::uint32_t> out;
+  double client = 0;
+  while (out.size() < max_blocks && workers > 0) {
+    const auto busiest = static_cast<std::uint32_t>(std::max_element(load.begin(), load.end()) - load.begin());
+    const double gap = load[busiest] - client;  // a block lighter than this shortens the longer of the two
+    std::size_t pick = worked.size();
+    for (std::size_t i = 0; i < worked.size(); ++i)
+      if (!moved[i] && worked[i].owner == busiest && worked[i].work > 0 && worked[i].work < gap &&
+          (pick == worked.size() || worked[i].work > worked[pick].work))
+        pick = i;
+    if (pick == worked.size()) break;
+    moved[pick] = 1;
+    load[busiest] -= worked[pick].work;
+    client += worked[pick].work;
+    out.push_back(worked[pick].block);
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
 
 std::size_t count_contacts(const std::vector<FacePair>& pairs) {
   std::vector<std::uint32_t> scratch;

@@ -9,6 +9,14 @@
 // answers again is given back its own blocks (reloaded if its epoch changed). A round says whether
 // it is complete: whether the block sets of the replies it merged cover every block.
 //
+// Client assist (ScatterConfig::assist_blocks, off by default): a static deal leaves one worker
+// with more of a contact's work than the others, a different one at each pose. Each round the
+// client takes a few of the busiest workers' heaviest blocks (judged by the pairs each block gave
+// the round before: the probe moves little between rounds), those workers skip them (the Query's
+// skip list), and the collision thread answers them itself while the Queries are out, from its
+// own copy of the object (it holds it to encode the block sets). A block counts as covered when
+// its answer is merged, whoever gave it.
+//
 // Never blocks without a timeout: sends are non-blocking (a full queue counts as a miss), and
 // every wait is bounded by the round's deadline. Not thread-safe: one thread owns it.
 //
@@ -56,6 +64,7 @@
 #include <future>
 #include <map>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 #include <zmq.hpp>
@@ -97,6 +106,13 @@ struct ScatterConfig {
   /// identity: keep it secret. Empty (the default): 16 random bytes per client, so a restarted
   /// client loads its sets again; under CURVE the client key is the identity instead.
   std::string routing_id;
+  /// Client assist: each round the collision thread answers up to this many blocks itself while
+  /// the Queries are out (their workers skip them, QueryMsg::skip): the heaviest blocks of the
+  /// busiest workers by the pairs each block gave the round before (choose_assist()). The
+  /// collision thread waits for the gather anyway; this is work it takes off the slowest worker.
+  /// Costs a sphere tree of the probe and of each block it has answered (cached, at most
+  /// 8 × assist_blocks + 64 blocks) and 4 bytes per object face. 0 = off (the default).
+  std::uint32_t assist_blocks = 0;
 };
 
 /// What the collision thread gets back from one round.
@@ -113,6 +129,8 @@ struct RoundResult {
   std::uint32_t stale_dropped = 0;          ///< replies of older rounds dropped
   std::uint32_t bad_messages = 0;           ///< undecodable or unexpected replies dropped
   QueryStats stats;                         ///< summed counters; compute_ns is the slowest worker's
+  std::uint32_t blocks_assisted = 0;        ///< blocks the client answered itself (ScatterConfig::assist_blocks)
+  QueryStats assist;                        ///< the client's own work on them (also in `stats`)
   /// "Contacts" (paper §3.5): distinct colliding probe faces + distinct colliding object faces.
   std::size_t contacts() const { return probe_faces.size() + object_faces.size(); }
 };
@@ -158,6 +176,18 @@ class ScatterGather {
   explicit ScatterGather(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };
+
+/// A block's work in the round before, as the client assist judges it (choose_assist()).
+struct BlockWork {
+  std::uint32_t block = 0;  ///< global block id
+  std::uint32_t owner = 0;  ///< the worker asked for it this round (< workers)
+  double work = 0;          ///< its work the round before (the client counts the pairs it gave), > 0
+};
+/// The blocks the client answers itself this round (ScatterConfig::assist_blocks), ascending: up
+/// to `max_blocks` times, the busiest worker's heaviest block lighter than that worker's load
+/// minus the client's, so each move shortens the longest of the two. `worked` lists the blocks
+/// with work (the others weigh nothing), each once.
+std::vector<std::uint32_t> choose_assist(std::span<const BlockWork> worked, std::uint32_t workers, std::uint32_t max_blocks);
 
 /// "Contacts" (paper §3.5, geom::count_faces): distinct probe faces + distinct object faces in `pairs`.
 std::size_t count_contacts(const std::vector<FacePair>& pairs);

@@ -29,12 +29,59 @@ class TreeBackend final : public CollisionBackend {
           per_block_ ? std::span<const std::uint32_t>(set_.block_faces) : std::span<const std::uint32_t>());
       if (!ot) return fail("object share tree: ", ot.error());
       object_tree_ = std::move(ot).value();
+      // One tree over the whole share (per_block_ false) mixes blocks in its leaves: no roots,
+      // and a Query's skip list is then ignored (the skipped blocks are answered too).
+      block_roots_.clear();
+      if (per_block_) block_roots_ = geom::group_roots(object_tree_, set_.object_face_ids.size(), set_.block_faces);
+      is_root_.assign(object_tree_.num_nodes(), 0);
+      for (const auto& roots : block_roots_)
+        for (std::uint32_t r : roots) is_root_[r] = 1;
+      cut_.assign(object_tree_.num_nodes(), 0);
+      stamp_ = 0;
     }
     scratch_ = geom::CollideScratch{};
     return Ok{};
   }
 
-  QueryStats query(const geom::Pose& pose, std::vector<FacePair>& out, std::size_t max_pairs) override {
+  /// Blocks left out: roots_ becomes the largest subtrees holding none of them (the skipped
+  /// blocks' roots and their ancestors are cut out; every other node below the root is covered
+  /// once), so the descent keeps the top levels' culling. False when no held block is skipped.
+  bool cover_without(std::span<const std::uint32_t> skip) {
+    if (++stamp_ == 0) {
+      std::fill(cut_.begin(), cut_.end(), 0);
+      stamp_ = 1;
+    }
+    cut_.resize(object_tree_.num_nodes(), 0);
+    bool any = false;
+    for (std::uint32_t id : skip) {
+      const auto it = std::lower_bound(set_.blocks.begin(), set_.blocks.end(), id);
+      if (it == set_.blocks.end() || *it != id) continue;
+      for (std::uint32_t r : block_roots_[std::size_t(it - set_.blocks.begin())]) {
+        cut_[r] = stamp_;  // the block itself
+        any = true;
+        for (std::uint32_t a = object_tree_.cold[r].parent; a != geom::kNoNode && cut_[a] != stamp_ + 0u;
+             a = object_tree_.cold[a].parent)
+          cut_[a] = stamp_;  // ancestors: split into their children
+      }
+    }
+    if (!any) return false;
+    roots_.clear();
+    stack_.assign(1, 0);
+    while (!stack_.empty()) {
+      const std::uint32_t i = stack_.back();
+      stack_.pop_back();
+      if (cut_[i] != stamp_) {
+        roots_.push_back(i);
+      } else if (!object_tree_.nodes[i].leaf && !is_block_root(i)) {
+        const geom::SphereNode& n = object_tree_.nodes[i];
+        for (std::uint32_t c = n.first + n.count; c-- > n.first;) stack_.push_back(c);
+      }
+    }
+    return true;
+  }
+
+  QueryStats query(const geom::Pose& pose, std::span<const std::uint32_t> skip, std::vector<FacePair>& out,
+                   std::size_t max_pairs) override {
     QueryStats st;
     if (empty_) return st;
     const auto t0 = std::chrono::steady_clock::now();
@@ -42,6 +89,10 @@ class TreeBackend final : public CollisionBackend {
     // computes the same transformed doubles as a single-process query.
     geom::CollideConfig opt = geom::DefaultCollideConfig();
     opt.max_pairs = max_pairs;
+    if (!skip.empty() && !block_roots_.empty() && cover_without(skip)) {
+      opt.restrict_object = true;
+      opt.object_roots = roots_;
+    }
     geom::collide(set_.probe, probe_tree_, set_.object, object_tree_, pose, opt, scratch_, result_);
     out.reserve(out.size() + result_.pairs.size());
     for (const geom::FacePair& p : result_.pairs) out.push_back({p.probe, set_.object_face_ids[p.object]});
@@ -57,6 +108,12 @@ class TreeBackend final : public CollisionBackend {
   geom::SphereTree probe_tree_, object_tree_;
   geom::CollideScratch scratch_;
   geom::CollideResult result_;
+  std::vector<std::vector<std::uint32_t>> block_roots_;  // per held block: the share tree's nodes covering exactly it
+  std::vector<std::uint32_t> roots_;                     // scratch: the roots of the blocks queried
+  std::vector<std::uint8_t> is_root_;                    // per node: it is a held block's root
+  std::vector<std::uint32_t> cut_, stack_;               // per node: stamp of the query that cut it; scratch
+  std::uint32_t stamp_ = 0;
+  bool is_block_root(std::uint32_t i) const { return i < is_root_.size() && is_root_[i]; }
   bool empty_ = true;
   bool per_block_ = true;
 };

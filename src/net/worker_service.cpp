@@ -456,7 +456,7 @@ void WorkerService::on_query(const zmq::message_t& peer, const std::string& owne
   pairs_.clear();
   // The backend stops past max_pairs: a block set of faces piled on each other cannot make the
   // worker compute (and hold) N² pairs before refusing.
-  const QueryStats st = it->backend->query(q.pose, pairs_, cfg_.limits.max_pairs);
+  const QueryStats st = it->backend->query(q.pose, q.skip, pairs_, cfg_.limits.max_pairs);
   if (pairs_.size() > cfg_.limits.max_pairs) {
     ++counters_.too_many_pairs;
     send_error(peer, ErrorCode::TooLarge, q.seq,

@@ -56,8 +56,9 @@ void wire_seeds(const fs::path& dir) {
   write_frame(dir, "hello", HelloMsg{7, 0x1234567890abcdefull, 42, {{0xdeadbeefull, 1000}, {0x1ull, 0}}});
   write_frame(dir, "hello_empty", HelloMsg{0, 1, 0, {}});
   write_frame(dir, "loadblocks_chunk", LoadBlocksMsg{0xfeedull, 10, 4, {1, 2, 3, 4, 5, 6}});
-  write_frame(dir, "query", QueryMsg{99, 0xabcull, some_pose()});
-  write_frame(dir, "query_identity", QueryMsg{1, 2, geom::Pose::Identity()});
+  write_frame(dir, "query", QueryMsg{99, 0xabcull, some_pose(), {}});
+  write_frame(dir, "query_identity", QueryMsg{1, 2, geom::Pose::Identity(), {}});
+  write_frame(dir, "query_skip", QueryMsg{3, 0xabcull, some_pose(), {0, 2, 9}});
   write_frame(dir, "result", ResultMsg{99, 3, 0xabcull, {10, 20, 30}, {{1, 2}, {3, 4}, {0xffffffffu, 0}}});
   write_frame(dir, "result_empty", ResultMsg{1, 0, 0, {}, {}});
   write_frame(dir, "heartbeat", HeartbeatMsg{0x55aa});
@@ -168,8 +169,8 @@ void worker_seeds(const fs::path& dir) {
   // One client loads in two chunks and queries; another queries the same set and is refused.
   add_record(seq, 0, encode(first));
   add_record(seq, 0, encode(second));
-  add_record(seq, 0, encode(QueryMsg{1, h, touching}));
-  add_record(seq, 1, encode(QueryMsg{2, h, touching}));
+  add_record(seq, 0, encode(QueryMsg{1, h, touching, {}}));
+  add_record(seq, 1, encode(QueryMsg{2, h, touching, {}}));
   add_record(seq, 1, encode(HeartbeatMsg{3}));
   write(dir / "seed_load_query.bin", seq.data(), seq.size());
   // Interleaved uploads, one restarted, a third client refused, then the same bytes shared.
@@ -180,7 +181,7 @@ void worker_seeds(const fs::path& dir) {
   add_record(seq, 1, encode(first));
   add_record(seq, 0, encode(second));
   add_record(seq, 1, encode(second));
-  add_record(seq, 1, encode(QueryMsg{4, h, touching}));
+  add_record(seq, 1, encode(QueryMsg{4, h, touching, {}}));
   add_record(seq, 3, encode(second));
   write(dir / "seed_interleaved.bin", seq.data(), seq.size());
 }

@@ -25,7 +25,8 @@ std::vector<Message> samples() {
   v.push_back(HelloMsg{0, 1, 0, {}});
   LoadBlocksMsg lb{0xfeedull, 10, 4, {1, 2, 3, 4, 5, 6}};
   v.push_back(lb);
-  v.push_back(QueryMsg{99, 0xabcull, some_pose()});
+  v.push_back(QueryMsg{99, 0xabcull, some_pose(), {}});
+  v.push_back(QueryMsg{100, 0xabcull, some_pose(), {0, 7, 0xfffffu}});
   ResultMsg r{99, 3, 0xabcull, {10, 20, 30}, {{1, 2}, {3, 4}, {0xffffffffu, 0}}};
   v.push_back(r);
   v.push_back(ResultMsg{1, 0, 0, {}, {}});
@@ -57,7 +58,7 @@ TEST_CASE("every message survives encode/decode unchanged") {
 TEST_CASE("header layout is pinned: magic, version, type, flags, body length, little-endian") {
   const auto b = encode(HeartbeatMsg{0x0102030405060708ull});
   REQUIRE(b.size() == kHeaderBytes + 8);
-  const std::vector<std::uint8_t> want{'S', 'T', 'N', 'P', 1, 0, 5, 0, 8, 0, 0, 0, 8, 7, 6, 5, 4, 3, 2, 1};
+  const std::vector<std::uint8_t> want{'S', 'T', 'N', 'P', 2, 0, 5, 0, 8, 0, 0, 0, 8, 7, 6, 5, 4, 3, 2, 1};
   CHECK(b == want);
 }
 
@@ -101,8 +102,8 @@ TEST_CASE("wrong magic, version, type and flags are rejected, naming the field")
     std::uint8_t v;
     const char* word;
   };
-  for (Case c : {Case{0, 'X', "magic"}, Case{4, 2, "version"}, Case{5, 1, "version"}, Case{6, 0, "type"},
-                 Case{6, 7, "type"}, Case{7, 1, "flags"}}) {
+  for (Case c : {Case{0, 'X', "magic"}, Case{4, 1, "version"}, Case{4, 3, "version"}, Case{5, 1, "version"},
+                 Case{6, 0, "type"}, Case{6, 7, "type"}, Case{7, 1, "flags"}}) {
     auto b = good;
     b[c.at] = c.v;
     auto d = decode(b, DefaultLimits());
@@ -165,7 +166,7 @@ TEST_CASE("oversized counts are refused before allocating") {
 }
 
 TEST_CASE("non-finite and non-rigid poses are refused") {
-  auto b = encode(QueryMsg{1, 2, some_pose()});
+  auto b = encode(QueryMsg{1, 2, some_pose(), {}});
   const std::size_t pose_at = kHeaderBytes + 16;
   SUBCASE("NaN") {
     const double nan = std::numeric_limits<double>::quiet_NaN();
@@ -184,8 +185,32 @@ TEST_CASE("non-finite and non-rigid poses are refused") {
   SUBCASE("reflection") {
     geom::Pose p = geom::Pose::Identity();
     p.matrix()(0, 0) = -1;
-    CHECK_FALSE(decode(encode(QueryMsg{1, 2, p}), DefaultLimits()).ok());
+    CHECK_FALSE(decode(encode(QueryMsg{1, 2, p, {}}), DefaultLimits()).ok());
   }
+}
+
+TEST_CASE("a Query's skip list must be ascending, below max_blocks and within max_skip; the error says where") {
+  const Limits L = DefaultLimits();
+  const std::size_t list_at = kHeaderBytes + 16 + 96 + 4;  // seq, hash, pose, count
+  auto refused = [&](std::vector<std::uint32_t> skip, const char* what, const Limits& lim) {
+    const auto d = decode(encode(QueryMsg{1, 2, some_pose(), std::move(skip)}), lim);
+    REQUIRE_FALSE(d.ok());
+    CHECK(d.error().find(what) != std::string::npos);
+    return d.error();
+  };
+  const std::string e = refused({3, 3}, "ascending", L);
+  CHECK(e.find("byte " + std::to_string(list_at + 4)) != std::string::npos);
+  refused({5, 2}, "ascending", L);
+  refused({L.max_blocks}, "max_blocks", L);
+  Limits small = L;
+  small.max_skip = 2;
+  refused({1, 2, 3}, "skip count", small);
+  CHECK(decode(encode(QueryMsg{1, 2, some_pose(), {1, 2}}), small).ok());
+  // A count larger than the bytes that follow is refused before anything is allocated.
+  auto b = encode(QueryMsg{1, 2, some_pose(), {4}});
+  const std::uint32_t huge = 200;
+  std::memcpy(b.data() + list_at - 4, &huge, 4);
+  CHECK_FALSE(decode(b, L).ok());
 }
 
 TEST_CASE("unknown error codes are refused") {

@@ -5,6 +5,8 @@
 // worker compute N² pairs (refused at max_pairs, collide() stops its traversal there).
 #include <doctest/doctest.h>
 
+#include <algorithm>
+#include <numeric>
 #include <thread>
 
 #include "geom/collide.hpp"
@@ -239,7 +241,7 @@ TEST_CASE("a worker answers hostile messages with an Error or drops them, and ke
     return e->text;
   };
   CHECK(expect_error({1, 2, 3}, ErrorCode::BadMessage).find("header") != std::string::npos);
-  auto q = encode(QueryMsg{1, 2, geom::Pose::Identity()});
+  auto q = encode(QueryMsg{1, 2, geom::Pose::Identity(), {}});
   auto bad_version = q;
   bad_version[4] = 9;
   CHECK(expect_error(bad_version, ErrorCode::BadMessage).find("version") != std::string::npos);
@@ -441,7 +443,7 @@ TEST_CASE("a block set of faces piled on each other: the worker refuses the quer
     REQUIRE(std::holds_alternative<HelloMsg>(loaded));
     geom::Pose shifted = geom::Pose::Identity();
     shifted.translation() = geom::Vec3(1, 1, 0);  // coplanar and overlapping: every pair collides
-    Message refused = reply(encode(QueryMsg{5, hash, shifted}));
+    Message refused = reply(encode(QueryMsg{5, hash, shifted, {}}));
     auto* e = std::get_if<ErrorMsg>(&refused);
     REQUIRE(e);
     CHECK(e->code == ErrorCode::TooLarge);
@@ -450,7 +452,7 @@ TEST_CASE("a block set of faces piled on each other: the worker refuses the quer
     // It keeps answering (how far the traversal got is checked on collide() itself, below).
     geom::Pose apart = geom::Pose::Identity();
     apart.translation() = geom::Vec3(0, 0, 50);
-    Message answered = reply(encode(QueryMsg{6, hash, apart}));
+    Message answered = reply(encode(QueryMsg{6, hash, apart, {}}));
     auto* res = std::get_if<ResultMsg>(&answered);
     REQUIRE(res);
     CHECK(res->pairs.empty());
@@ -486,4 +488,106 @@ TEST_CASE("workers bound to tcp://localhost and tcp://[::1] serve a client (READ
     if (!w.ok()) FAIL(w.error());
     check_one_exact_round(ctx, *w.value(), s);
   }
+}
+
+TEST_CASE("a backend leaves out the blocks a Query skips, and only those (tree and reference backends)") {
+  test::NetScene s = test::small_scene(16, 24);
+  const geom::SphereTree tree = geom::SphereTree::build(s.object).value();
+  auto blocks = tree_blocks(tree, 3, 1);
+  REQUIRE(blocks.ok());
+  std::vector<std::uint32_t> all(blocks.value().size());
+  std::iota(all.begin(), all.end(), 0u);
+  auto set = make_block_set(s.probe, s.object, blocks.value(), all, 24);
+  REQUIRE(set.ok());
+  std::vector<std::uint32_t> block_of(s.object.faces.size());
+  for (std::uint32_t b = 0; b < blocks.value().size(); ++b)
+    for (std::uint32_t f : blocks.value()[b]) block_of[f] = b;
+  for (bool use_tree : {true, false}) {
+    CAPTURE(use_tree);
+    auto be = use_tree ? tree_backend_factory()() : reference_backend_factory()();
+    REQUIRE(be->load(set.value()).ok());
+    int checked = 0;
+    for (const geom::Pose& pose : test::contact_poses(s, 6)) {
+      std::vector<FacePair> full;
+      be->query(pose, {}, full, SIZE_MAX);
+      std::sort(full.begin(), full.end());
+      REQUIRE(full == reference_collide(s.probe, s.object, pose));
+      // Skip every block that has pairs but one, plus a block id no set holds.
+      std::vector<std::uint32_t> skip;
+      for (const FacePair& p : full) skip.push_back(block_of[p.object]);
+      std::sort(skip.begin(), skip.end());
+      skip.erase(std::unique(skip.begin(), skip.end()), skip.end());
+      if (skip.size() < 2) continue;
+      skip.erase(skip.begin());
+      skip.push_back(std::uint32_t(blocks.value().size()) + 5);
+      std::vector<FacePair> part;
+      const QueryStats st = be->query(pose, skip, part, SIZE_MAX);
+      std::sort(part.begin(), part.end());
+      std::vector<FacePair> expect;
+      for (const FacePair& p : full)
+        if (!std::binary_search(skip.begin(), skip.end(), block_of[p.object])) expect.push_back(p);
+      CHECK(part == expect);
+      CHECK_FALSE(expect.empty());
+      CHECK(st.tri_tests > 0);
+      ++checked;
+    }
+    CHECK(checked >= 2);  // the poses touch several blocks
+  }
+}
+
+TEST_CASE("choose_assist takes the busiest worker's heaviest blocks while each move shortens the round") {
+  // Worker 0 carries 8 (blocks 10: 5, 11: 3), worker 1 carries 1: the client takes block 10;
+  // then worker 0 (3) is lighter than the client (5) and nothing more helps.
+  const std::vector<BlockWork> w = {{10, 0, 5}, {11, 0, 3}, {20, 1, 1}};
+  CHECK(choose_assist(w, 2, 8) == std::vector<std::uint32_t>{10});
+  CHECK(choose_assist(w, 2, 0).empty());
+  // One block alone on the busiest worker: moving it only moves the critical path.
+  const std::vector<BlockWork> one = {{3, 1, 7}, {4, 0, 2}};
+  CHECK(choose_assist(one, 2, 8).empty());
+  // Many equal blocks on one worker: the client takes half of its load, never more.
+  std::vector<BlockWork> many;
+  for (std::uint32_t b = 0; b < 10; ++b) many.push_back({b, 2, 1.0});
+  const auto taken = choose_assist(many, 3, 16);
+  CHECK(taken.size() == 5);  // 10 -> 5 on the worker, 5 on the client; a sixth would make it 4 / 6: no shorter
+  CHECK(std::is_sorted(taken.begin(), taken.end()));
+  CHECK(choose_assist(many, 3, 2).size() == 2);  // capped
+}
+
+TEST_CASE("client assist: the client answers some blocks itself, every round stays exact and complete") {
+  zmq::context_t ctx;
+  test::NetScene s = test::small_scene(16, 24);
+  const geom::SphereTree tree = geom::SphereTree::build(s.object).value();
+  auto blocks = tree_blocks(tree, 3, 1);
+  REQUIRE(blocks.ok());
+  const std::string t = tag();
+  auto w = LocalWorkers::start(ctx, 4, tree_backend_factory(), [&](int i) { return inproc_endpoint(i, t); });
+  REQUIRE_MESSAGE(w.ok(), w.error());
+  ScatterConfig cfg;
+  cfg.endpoints = w.value()->endpoints();
+  cfg.assist_blocks = 4;
+  auto c = ScatterGather::create(ctx, cfg, s.probe, s.object, blocks.value());
+  REQUIRE_MESSAGE(c.ok(), c.error());
+  REQUIRE(c.value()->wait_ready(Clock::now() + 10s));
+  std::uint64_t seq = 0;
+  std::uint32_t assisted_rounds = 0;
+  for (const geom::Pose& pose : test::contact_poses(s, 8)) {
+    for (int k = 0; k < 3; ++k) {  // the same pose again: the round before's pairs say where the work is
+      RoundResult r = c.value()->round(++seq, pose, Clock::now() + 5s);
+      CHECK(r.complete);
+      CHECK(r.blocks_covered == r.blocks_total);
+      CHECK(r.workers_replied == 4);
+      CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+      CHECK(r.blocks_assisted <= cfg.assist_blocks);
+      if (seq == 1) CHECK(r.blocks_assisted == 0);  // nothing known yet
+      if (r.blocks_assisted > 0) {
+        ++assisted_rounds;
+        if (k > 0) CHECK(r.assist.tri_tests > 0);  // at the pose they were picked at (a new pose may miss them)
+        CHECK(r.stats.tri_tests >= r.assist.tri_tests);
+      }
+    }
+  }
+  CHECK(assisted_rounds > 0);
+  // More than the skip list may carry is refused up front.
+  cfg.assist_blocks = cfg.limits.max_skip + 1;
+  CHECK_FALSE(ScatterGather::create(ctx, cfg, s.probe, s.object, blocks.value()).ok());
 }

@@ -121,8 +121,9 @@ class GatedBackend final : public CollisionBackend {
     gate_->cv.wait(lk, [&] { return gate_->open; });
     return inner_->load(set);
   }
-  QueryStats query(const geom::Pose& pose, std::vector<FacePair>& out, std::size_t max_pairs) override {
-    return inner_->query(pose, out, max_pairs);
+  QueryStats query(const geom::Pose& pose, std::span<const std::uint32_t> skip, std::vector<FacePair>& out,
+                   std::size_t max_pairs) override {
+    return inner_->query(pose, skip, out, max_pairs);
   }
 
  private:
@@ -169,20 +170,20 @@ TEST_CASE("two clients: each sees and queries only the sets it sent; neither can
   const HelloMsg hb = hello_of(b.ask(encode(HeartbeatMsg{42})));
   CHECK(hb.echo == 42);
   CHECK(hb.held.empty());
-  const ErrorMsg e = error_of(b.ask(encode(QueryMsg{9, set.hash, geom::Pose::Identity()})));
+  const ErrorMsg e = error_of(b.ask(encode(QueryMsg{9, set.hash, geom::Pose::Identity(), {}})));
   CHECK(e.code == ErrorCode::NotLoaded);
   CHECK(e.ref == 9);
   CHECK(hello_of(b.recv()).held.empty());  // the Hello after NotLoaded: still nothing of a's
 
   // a queries its set.
-  const Message r = a.ask(encode(QueryMsg{10, set.hash, geom::Pose::Identity()}));
+  const Message r = a.ask(encode(QueryMsg{10, set.hash, geom::Pose::Identity(), {}}));
   REQUIRE(std::holds_alternative<ResultMsg>(r));
   CHECK(std::get<ResultMsg>(r).seq == 10);
 
   // b sends the same bytes: now it may query them too (one backend serves both).
   b.upload(set.bytes, set.hash, chunk);
   CHECK(holds(hello_of(b.recv()), set.hash));
-  const Message rb = b.ask(encode(QueryMsg{11, set.hash, geom::Pose::Identity()}));
+  const Message rb = b.ask(encode(QueryMsg{11, set.hash, geom::Pose::Identity(), {}}));
   REQUIRE(std::holds_alternative<ResultMsg>(rb));
   CHECK(std::get<ResultMsg>(rb).pairs == std::get<ResultMsg>(r).pairs);
 }
@@ -215,7 +216,7 @@ TEST_CASE("a worker answers heartbeats and other clients' queries while it build
   CHECK(during.echo == 7);
   CHECK_FALSE(holds(during, big.hash));
   for (std::uint64_t seq = 1; seq <= 3; ++seq) {
-    const Message r = a.ask(encode(QueryMsg{seq, small.hash, geom::Pose::Identity()}));
+    const Message r = a.ask(encode(QueryMsg{seq, small.hash, geom::Pose::Identity(), {}}));
     REQUIRE(std::holds_alternative<ResultMsg>(r));
   }
   gate->release();
