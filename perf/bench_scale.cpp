@@ -69,6 +69,7 @@ struct ScaleArgs {
   std::uint32_t partition_leaf_faces = 0;  // 0: the object tree's own leaves
   double ship_motion_mm = 0.1;             // the probe's motion between two rounds, for the shipping model
   std::uint32_t ship_blocks = 8;           // blocks the shipping model may move per round
+  std::uint32_t assist_blocks = 8;         // blocks the client assist may answer per round (net::choose_assist)
   std::uint32_t max_workers = 64;
   int runs = 15;
   int gather_rounds = 400;
@@ -294,6 +295,15 @@ struct Row {
   const std::vector<std::uint32_t>* block_faces = nullptr;  // faces per block
   double block_imbalance = 0, shipped_imbalance = 0;
   std::uint32_t shipped_blocks = 0, shipped_faces = 0;
+  // Client assist (built: ScatterConfig::assist_blocks): the client answers the blocks
+  // net::choose_assist() picks from the pairs each block gave at the pose of the round before,
+  // their owners skip them. On this pose's work of each block alone: the workers' max / mean
+  // after it (assisted), the round's slowest part (a worker or the client) against the whole
+  // work dealt evenly over the W workers (assist_critical; `block_imbalance` without assist), and
+  // the client's load against the slowest worker's (assist_client: <= 1, the worker stays last).
+  const std::vector<std::uint32_t>* block_pairs_before = nullptr;
+  double assisted_imbalance = 0, assist_critical = 0, assist_client = 0;
+  std::uint32_t assisted_blocks = 0;
   double imbalance() const { return mean_us > 0 ? max_us / mean_us : 0; }
   double redundancy() const { return single_us > 0 ? sum_us / single_us : 0; }
   double sphere_ratio() const { return single_spheres ? double(sum_spheres) / double(single_spheres) : 0; }
@@ -509,8 +519,9 @@ void run_scale(const ScaleArgs& a) {
   }
   using Tests = std::vector<std::array<std::uint64_t, 2>>;  // per block: sphere tests, triangle tests
   struct BlockTests {
-    std::vector<Tests> now, before;                 // per pose
-    std::vector<std::uint32_t> faces;               // per block
+    std::vector<Tests> now, before;                        // per pose
+    std::vector<std::vector<std::uint32_t>> pairs_before;  // per pose, per block: pairs found at the pose before
+    std::vector<std::uint32_t> faces;                      // per block
     std::deque<std::vector<std::uint32_t>> owners;  // block -> worker, one per (W, mapping) dealt (a deque: rows point in)
   };
   std::map<std::pair<std::uint32_t, std::uint32_t>, BlockTests> block_tests;
@@ -534,6 +545,10 @@ void run_scale(const ScaleArgs& a) {
           c.object_roots = part.value().block(b);
           geom::collide(probe, pt, object, part_tree, (*list)[i], c, scratch, result);
           (*out)[i].push_back({result.stats.node_pairs, result.stats.tri_pairs});
+          if (out == &bt.before) {
+            bt.pairs_before.resize(poses.size());
+            bt.pairs_before[i].push_back(std::uint32_t(result.pairs.size()));
+          }
         }
     }
     return bt;
@@ -574,6 +589,7 @@ void run_scale(const ScaleArgs& a) {
         prow[i].single_tris = single_tris[i];
         prow[i].block_tests = &per_block_tests.now[i];
         prow[i].block_tests_before = &per_block_tests.before[i];
+        prow[i].block_pairs_before = &per_block_tests.pairs_before[i];
         prow[i].owners = &owners;
         prow[i].block_faces = &per_block_tests.faces;
       }
@@ -686,7 +702,87 @@ void run_scale(const ScaleArgs& a) {
       r.shipped_imbalance = deal_imbalance(work, shipped_owner, r.workers);
       r.shipped_blocks = std::uint32_t(moved.size());
       for (std::uint32_t k : moved) r.shipped_faces += r.block_faces->at(k);
+      std::vector<net::BlockWork> worked;
+      for (std::uint32_t k = 0; k < r.block_pairs_before->size(); ++k)
+        if ((*r.block_pairs_before)[k] > 0) worked.push_back({k, (*r.owners)[k], double((*r.block_pairs_before)[k])});
+      const std::vector<std::uint32_t> taken = net::choose_assist(worked, r.workers, a.assist_blocks);
+      std::vector<double> load(r.workers, 0.0);
+      double client = 0, total = 0;
+      for (std::uint32_t k = 0; k < work.size(); ++k) {
+        (std::binary_search(taken.begin(), taken.end(), k) ? client : load[(*r.owners)[k]]) += work[k];
+        total += work[k];
+      }
+      const double max_load = *std::max_element(load.begin(), load.end()), rest = total - client;
+      r.assisted_imbalance = rest > 0 ? max_load * r.workers / rest : 1.0;
+      r.assist_critical = total > 0 ? std::max(max_load, client) * r.workers / total : 1.0;
+      r.assist_client = max_load > 0 ? client / max_load : 0.0;
+      r.assisted_blocks = std::uint32_t(taken.size());
       r.oracle_imbalance = oracle_imbalance(std::move(work), r.workers);
+    }
+  }
+
+  // Client assist in real rounds: W in-process workers (block-cyclic, the automatic split) and two
+  // clients, one with assist and one without; at each pose a round at the pose of the round before
+  // (--ship-motion-mm away), then the one measured. Each worker's counted tests come from its own
+  // Result (its share tree as it is), the client's from its own queries; weighted by the measured
+  // cost per test. Deterministic: counts, not times (the 8 workers share this VM's two cores).
+  struct AssistRound {
+    std::size_t pose = 0;
+    std::uint32_t contacts = 0, blocks = 0;
+    double imbalance = 0;  // without assist: max / mean of the workers' counted work
+    double assisted = 0;   // with assist: the same over the workers
+    double critical = 0;   // with assist: max(slowest worker, client) / (all of it / W)
+    double client = 0;     // with assist: the client's work / the slowest worker's
+  };
+  std::vector<AssistRound> assist_rounds;
+  const std::uint32_t assist_w = std::min<std::uint32_t>(8, a.max_workers);
+  if (a.assist_blocks > 0 && assist_w >= 2) {
+    zmq::context_t actx(1);
+    const Split sp = split_for(assist_w, geom::Mapping::block_cyclic);
+    auto blocks = net::tree_blocks(part_tree, sp.layer, sp.block_size);
+    if (!blocks) die(blocks.error());
+    const std::string tag = "assist-" + std::to_string(::getpid());
+    auto lw = net::LocalWorkers::start(actx, int(assist_w), net::tree_backend_factory(per_block),
+                                       [&](int i) { return net::inproc_endpoint(i, tag); });
+    if (!lw) die(lw.error());
+    std::unique_ptr<net::ScatterGather> sg[2];
+    for (int k = 0; k < 2; ++k) {
+      net::ScatterConfig cfg;
+      cfg.endpoints = lw.value()->endpoints();
+      cfg.assist_blocks = k ? a.assist_blocks : 0;
+      auto c = net::ScatterGather::create(actx, cfg, probe, object, blocks.value());
+      if (!c) die(c.error());
+      sg[k] = std::move(c).value();
+      if (!sg[k]->wait_ready(Clock::now() + std::chrono::seconds(120))) die("in-process workers not ready");
+    }
+    const auto work = [&](const net::QueryStats& q) {
+      return cost_sphere_us * double(q.sphere_tests) + cost_tri_us * double(q.tri_tests);
+    };
+    std::uint64_t seq = 0;
+    net::RoundResult r[2];
+    for (std::size_t i = 0; i < poses.size(); ++i) {
+      for (int k = 0; k < 2; ++k) {
+        sg[k]->round(++seq, poses_before[i], Clock::now() + std::chrono::seconds(60), r[k]);
+        sg[k]->round(++seq, poses[i], Clock::now() + std::chrono::seconds(60), r[k]);
+        if (!r[k].complete) die("client assist check: an incomplete round");
+      }
+      if (r[0].pairs != r[1].pairs) die("client assist check: the pairs differ with and without assist");
+      AssistRound ar;
+      ar.pose = i + 1;
+      ar.contacts = std::uint32_t(r[0].contacts());
+      ar.blocks = r[1].blocks_assisted;
+      double load[2] = {0, 0}, sum[2] = {0, 0};
+      for (int k = 0; k < 2; ++k)
+        for (const net::QueryStats& q : r[k].worker_stats) {
+          load[k] = std::max(load[k], work(q));
+          sum[k] += work(q);
+        }
+      const double client = work(r[1].assist);
+      ar.imbalance = sum[0] > 0 ? load[0] * assist_w / sum[0] : 1.0;
+      ar.assisted = sum[1] > 0 ? load[1] * assist_w / sum[1] : 1.0;
+      ar.critical = sum[1] + client > 0 ? std::max(load[1], client) * assist_w / (sum[1] + client) : 1.0;
+      ar.client = load[1] > 0 ? client / load[1] : 0.0;
+      assist_rounds.push_back(ar);
     }
   }
 
@@ -699,12 +795,12 @@ void run_scale(const ScaleArgs& a) {
     std::uint32_t workers = 0;
     geom::Mapping mapping = geom::Mapping::block_cyclic;
     std::size_t poses = 0;
-    Spread imbalance_counted, imbalance, redundancy_counted, redundancy, oracle, block, shipped;
+    Spread imbalance_counted, imbalance, redundancy_counted, redundancy, oracle, block, shipped, assisted, critical;
   };
   std::vector<Summary> summaries;
   for (std::uint32_t W : ws)
     for (geom::Mapping m : mappings) {
-      std::vector<double> v[7];
+      std::vector<double> v[9];
       for (const Row& r : rows)
         if (r.workers == W && r.mapping == m) {
           v[0].push_back(r.work_imbalance());
@@ -714,6 +810,8 @@ void run_scale(const ScaleArgs& a) {
           v[4].push_back(r.oracle_imbalance);
           v[5].push_back(r.block_imbalance);
           v[6].push_back(r.shipped_imbalance);
+          v[7].push_back(r.assisted_imbalance);
+          v[8].push_back(r.assist_critical);
         }
       if (v[0].empty()) continue;
       const auto spread = [](const std::vector<double>& x) {
@@ -723,7 +821,7 @@ void run_scale(const ScaleArgs& a) {
         return sp;
       };
       summaries.push_back({W, m, v[0].size(), spread(v[0]), spread(v[1]), spread(v[2]), spread(v[3]), spread(v[4]),
-                           spread(v[5]), spread(v[6])});
+                           spread(v[5]), spread(v[6]), spread(v[7]), spread(v[8])});
     }
 
   // 4. The gather on this machine: raw inproc fan-out floor for small W, with a reply of the
@@ -896,16 +994,28 @@ void run_scale(const ScaleArgs& a) {
           "\"redundancy\": %.3f, \"client_us\": %.2f, \"compute_round_us\": %.2f, \"max_reply_bytes\": %zu, "
           "\"compute_speedup\": %.3f, \"sphere_tests_ratio\": %.3f, \"tri_tests_ratio\": %.3f, "
           "\"imbalance_counted\": %.3f, \"redundancy_counted\": %.3f, \"oracle_imbalance\": %.3f, "
-          "\"block_imbalance\": %.3f, \"shipped_imbalance\": %.3f, \"shipped_blocks\": %u, \"shipped_faces\": %u",
+          "\"block_imbalance\": %.3f, \"shipped_imbalance\": %.3f, \"shipped_blocks\": %u, \"shipped_faces\": %u, "
+          "\"assisted_imbalance\": %.3f, \"assist_critical\": %.3f, \"assist_client\": %.3f, \"assisted_blocks\": %u",
           k ? "," : "", r.pose, r.contacts, r.workers, geom::to_string(r.mapping), r.split.layer, r.split.block_size,
           r.split.blocks, r.split.automatic ? "true" : "false", r.busy, r.single_us, r.max_us, r.mean_us, r.sum_us,
           r.imbalance(), r.redundancy(), r.client_us, r.compute_round_us, r.max_reply_bytes,
           r.single_us / r.compute_round_us, r.sphere_ratio(), r.tri_ratio(), r.work_imbalance(), r.work_redundancy(),
-          r.oracle_imbalance, r.block_imbalance, r.shipped_imbalance, r.shipped_blocks, r.shipped_faces);
+          r.oracle_imbalance, r.block_imbalance, r.shipped_imbalance, r.shipped_blocks, r.shipped_faces,
+          r.assisted_imbalance, r.assist_critical, r.assist_client, r.assisted_blocks);
       for (const Network& n : kNetworks)
         std::printf(", \"round_%s_us\": %.2f, \"speedup_%s\": %.3f", n.name, predicted(r, n), n.name,
                     r.single_us / predicted(r, n));
       std::printf("}");
+    }
+    std::printf("\n],\n \"assist_rounds\": [");
+    for (std::size_t k = 0; k < assist_rounds.size(); ++k) {
+      const AssistRound& x = assist_rounds[k];
+      std::printf(
+          "%s\n  {\"pose\": %zu, \"contacts\": %u, \"workers\": %u, \"assist_blocks\": %u, \"blocks_assisted\": %u, "
+          "\"imbalance_counted\": %.3f, \"assisted_imbalance\": %.3f, \"assist_critical\": %.3f, \"assist_client\": "
+          "%.3f}",
+          k ? "," : "", x.pose, x.contacts, assist_w, a.assist_blocks, x.blocks, x.imbalance, x.assisted, x.critical,
+          x.client);
     }
     std::printf("\n],\n \"summary\": [");
     for (std::size_t k = 0; k < summaries.size(); ++k) {
@@ -915,7 +1025,8 @@ void run_scale(const ScaleArgs& a) {
       for (auto [name, sp] : {std::pair{"imbalance_counted", &u.imbalance_counted}, std::pair{"imbalance", &u.imbalance},
                               std::pair{"redundancy_counted", &u.redundancy_counted},
                               std::pair{"redundancy", &u.redundancy}, std::pair{"oracle_imbalance", &u.oracle},
-                              std::pair{"block_imbalance", &u.block}, std::pair{"shipped_imbalance", &u.shipped}})
+                              std::pair{"block_imbalance", &u.block}, std::pair{"shipped_imbalance", &u.shipped},
+                              std::pair{"assisted_imbalance", &u.assisted}, std::pair{"assist_critical", &u.critical}})
         std::printf(", \"%s\": {\"mean\": %.3f, \"median\": %.3f, \"max\": %.3f}", name, sp->mean, sp->median, sp->max);
       std::printf("}");
     }
@@ -959,14 +1070,17 @@ void run_scale(const ScaleArgs& a) {
       "\nover the %zu poses (mean / median / max): imbal#, imbal, redun#, redun as above; from the counted work of "
       "each block alone: blocks = the mapping's deal, oracle = the same blocks dealt knowing the pose (largest "
       "first to the least loaded worker: what no static mapping beats), shipped = the deal after the work shipping "
-      "model moved up to %u blocks judged by the round before (the probe %.3g mm away; a model, not built)\n",
-      poses.size(), a.ship_blocks, a.ship_motion_mm);
-  std::printf("%3s %-12s %20s %20s %20s %20s %20s %20s %20s\n", "W", "mapping", "imbal#", "imbal", "redun#", "redun",
-              "blocks", "oracle", "shipped");
+      "model moved up to %u blocks judged by the round before (the probe %.3g mm away; a model, not built); "
+      "assisted = the workers' max / mean when the client answers up to %u blocks itself (client assist, built: "
+      "net::choose_assist on the pairs per block of the round before), critical = the slowest of them and the "
+      "client against all the work dealt evenly over W (blocks' own denominator)\n",
+      poses.size(), a.ship_blocks, a.ship_motion_mm, a.assist_blocks);
+  std::printf("%3s %-12s %20s %20s %20s %20s %20s %20s %20s %20s %20s\n", "W", "mapping", "imbal#", "imbal", "redun#",
+              "redun", "blocks", "oracle", "shipped", "assisted", "critical");
   for (const Summary& u : summaries) {
     std::printf("%3u %-12s", u.workers, geom::to_string(u.mapping));
-    for (const Spread* sp :
-         {&u.imbalance_counted, &u.imbalance, &u.redundancy_counted, &u.redundancy, &u.block, &u.oracle, &u.shipped})
+    for (const Spread* sp : {&u.imbalance_counted, &u.imbalance, &u.redundancy_counted, &u.redundancy, &u.block,
+                             &u.oracle, &u.shipped, &u.assisted, &u.critical})
       std::printf("   %5.2f / %5.2f / %5.2f", sp->mean, sp->median, sp->max);
     std::printf("\n");
   }
@@ -981,6 +1095,23 @@ void run_scale(const ScaleArgs& a) {
         c.pose, c.workers, c.predicted_us, c.gather_us, c.floor_us, c.measured_us,
         100.0 * (c.predicted_us - c.measured_us) / c.measured_us, c.compute_alone_us, c.compute_in_round_us,
         c.compute_corun_us, c.predicted_corun_us, 100.0 * (c.predicted_corun_us - c.measured_us) / c.measured_us);
+  if (!assist_rounds.empty()) {
+    std::printf(
+        "client assist in real rounds (W = %u in-process workers, block-cyclic; up to %u blocks; after a round at the "
+        "pose %.3g mm away; counted work from each worker's Result): imbalance = workers' max / mean without assist, "
+        "assisted = with it, critical = max(slowest worker, client) / (all work / W), client = client / slowest "
+        "worker\n",
+        assist_w, a.assist_blocks, a.ship_motion_mm);
+    double m[4] = {0, 0, 0, 0}, x[4] = {0, 0, 0, 0};
+    for (const AssistRound& r : assist_rounds) {
+      std::printf("  pose %zu, %u contacts: imbalance %.2f, assisted %.2f, critical %.2f, client %.2f (%u blocks)\n",
+                  r.pose, r.contacts, r.imbalance, r.assisted, r.critical, r.client, r.blocks);
+      const double v[4] = {r.imbalance, r.assisted, r.critical, r.client};
+      for (int k = 0; k < 4; ++k) m[k] += v[k] / double(assist_rounds.size()), x[k] = std::max(x[k], v[k]);
+    }
+    std::printf("  mean / max: imbalance %.2f / %.2f, assisted %.2f / %.2f, critical %.2f / %.2f, client %.2f / %.2f\n",
+                m[0], x[0], m[1], x[1], m[2], x[2], m[3], x[3]);
+  }
   std::printf("memory: largest share / whole object (tree + mesh):");
   for (const Memory& m : memory)
     if (m.mapping == geom::Mapping::block_cyclic)
@@ -1029,6 +1160,11 @@ void add_scale(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--ship-blocks", a->ship_blocks, "work shipping model: blocks moved per round at most")
       ->check(CLI::Range(0u, 100000u))
+      ->capture_default_str();
+  cmd->add_option("--assist-blocks", a->assist_blocks,
+                  "client assist: blocks the client answers itself per round at most (net::choose_assist, the same "
+                  "rule as [workers] assist_blocks), judged by the pairs per block at the pose --ship-motion-mm away")
+      ->check(CLI::Range(0u, 256u))
       ->capture_default_str();
   cmd->add_flag("--json", a->json, "print one JSON object instead of the table");
   cmd->callback([a] { run_scale(*a); });

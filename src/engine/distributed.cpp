@@ -162,6 +162,8 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
     cfg.endpoints = fleet->local->endpoints();
     fleet->description = std::to_string(spec.workers) + " in-process worker" + (spec.workers == 1 ? "" : "s");
   }
+  if (spec.assist_blocks > 0)
+    fleet->description += " + client assist (" + std::to_string(spec.assist_blocks) + " blocks)";
   if (fleet->blocks < cfg.endpoints.size())
     return fail("distribution: layer ", layer, " gives ", fleet->blocks, " blocks for ", cfg.endpoints.size(),
                 " workers (choose a deeper layer or a smaller block size)");

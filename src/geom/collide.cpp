@@ -150,6 +150,47 @@ void CollideScratch::prepare(const Mesh& probe, const SphereTree& probe_tree, co
   auto fit = [](auto& v, std::size_t n) {
     if (v.size() != n) v.assign(n, {});
   };
+  // The probe's part is derived again only for another probe: a client answering several object
+  // blocks (net::ScatterConfig::assist_blocks) switches object trees every query, and the probe's
+  // leaves take far longer to derive than a block's spheres.
+  const bool same_probe = pkey_ == probe_tree.nodes.data() && phash_ == probe_tree.mesh_hash &&
+                          lidx_.size() == probe_tree.face_order.size() && cstamp_.size() == probe_tree.nodes.size() &&
+                          pmark_.size() == probe.faces.size();
+  if (!same_probe) prepare_probe(probe, probe_tree);
+  // Object spheres as float SoA, so the children of a node (contiguous) load as whole vectors.
+  nstride_o_ = object_tree.nodes.size() + kMaxChildren;
+  osph_.assign(4 * nstride_o_, 0.0f);
+  for (std::size_t i = 0; i < object_tree.nodes.size(); ++i) {
+    const SphereNode& h = object_tree.nodes[i];
+    for (int k = 0; k < 3; ++k) osph_[k * nstride_o_ + i] = h.centre[k];
+    osph_[3 * nstride_o_ + i] = h.radius;
+  }
+  obox_.assign(object_tree.nodes.size(), {});
+  for (std::size_t i = 0; i < object_tree.nodes.size(); ++i) {
+    const SphereNode& h = object_tree.nodes[i];
+    if (!h.leaf) continue;
+    const float inf = std::numeric_limits<float>::infinity();
+    std::array<float, 8> b = {inf, inf, inf, -inf, -inf, -inf, 0, 0};
+    for (std::uint32_t slot = h.first; slot < h.first + h.count; ++slot)
+      for (int k = 0; k < 3; ++k) {
+        b[k] = std::min(b[k], object_tree.face_boxes[slot].lo[k]);
+        b[3 + k] = std::max(b[3 + k], object_tree.face_boxes[slot].hi[k]);
+      }
+    obox_[i] = b;
+  }
+  osph_key_ = object_tree.nodes.data();
+  osph_hash_ = object_tree.mesh_hash;
+  if (omark_.size() != object.faces.size()) omark_.assign(object.faces.size(), 0);
+  // DFS with "replace one entry by at most 8": depth of the stack <= 1 + 7 (Dp + Do).
+  const std::uint32_t cap = 8 * (probe_tree.num_depths + object_tree.num_depths) + 8;
+  if (stack_.size() < cap) stack_.resize(cap);
+  stack_cap_ = static_cast<std::uint32_t>(stack_.size());
+}
+
+void CollideScratch::prepare_probe(const Mesh& probe, const SphereTree& probe_tree) {
+  auto fit = [](auto& v, std::size_t n) {
+    if (v.size() != n) v.assign(n, {});
+  };
   // Probe leaves as little meshes (distinct vertices per leaf, faces as indices into them).
   lvrange_.assign(probe_tree.nodes.size(), {0, 0});
   lverts_.clear();
@@ -182,39 +223,11 @@ void CollideScratch::prepare(const Mesh& probe, const SphereTree& probe_tree, co
   fit(cstamp_, probe_tree.nodes.size());
   nstride_p_ = probe_tree.nodes.size() + kMaxChildren;
   psph_.assign(4 * nstride_p_, 0.0f);
-  // Object spheres as float SoA, so the children of a node (contiguous) load as whole vectors.
-  nstride_o_ = object_tree.nodes.size() + kMaxChildren;
-  osph_.assign(4 * nstride_o_, 0.0f);
-  for (std::size_t i = 0; i < object_tree.nodes.size(); ++i) {
-    const SphereNode& h = object_tree.nodes[i];
-    for (int k = 0; k < 3; ++k) osph_[k * nstride_o_ + i] = h.centre[k];
-    osph_[3 * nstride_o_ + i] = h.radius;
-  }
-  obox_.assign(object_tree.nodes.size(), {});
-  for (std::size_t i = 0; i < object_tree.nodes.size(); ++i) {
-    const SphereNode& h = object_tree.nodes[i];
-    if (!h.leaf) continue;
-    const float inf = std::numeric_limits<float>::infinity();
-    std::array<float, 8> b = {inf, inf, inf, -inf, -inf, -inf, 0, 0};
-    for (std::uint32_t slot = h.first; slot < h.first + h.count; ++slot)
-      for (int k = 0; k < 3; ++k) {
-        b[k] = std::min(b[k], object_tree.face_boxes[slot].lo[k]);
-        b[3 + k] = std::max(b[3 + k], object_tree.face_boxes[slot].hi[k]);
-      }
-    obox_[i] = b;
-  }
-  osph_key_ = object_tree.nodes.data();
-  osph_hash_ = object_tree.mesh_hash;
   fit(lstamp_, probe_tree.nodes.size());
   lbox_.resize(probe_tree.nodes.size());
   pstride_ = probe_tree.face_order.size() + kMaxLeafFaces;  // whole-vector loads past a leaf's end stay inside
   pbox_.assign(6 * pstride_, 0.0f);
   fit(pmark_, probe.faces.size());
-  fit(omark_, object.faces.size());
-  // DFS with "replace one entry by at most 8": depth of the stack <= 1 + 7 (Dp + Do).
-  const std::uint32_t cap = 8 * (probe_tree.num_depths + object_tree.num_depths) + 8;
-  if (stack_.size() < cap) stack_.resize(cap);
-  stack_cap_ = static_cast<std::uint32_t>(stack_.size());
 }
 
 std::size_t CollideScratch::bytes() const {

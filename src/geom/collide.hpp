@@ -110,6 +110,7 @@ class CollideScratch {
   std::size_t bytes() const;
 
  private:
+  void prepare_probe(const Mesh& probe, const SphereTree& probe_tree);  // prepare()'s probe part
   friend struct CollideQuery;
   friend void collide(const Mesh&, const SphereTree&, const Mesh&, const SphereTree&, const Pose&, const CollideConfig&,
                       CollideScratch&, CollideResult&);

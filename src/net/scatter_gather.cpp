@@ -443,6 +443,7 @@ struct ScatterGather::Impl {
     out->pairs.insert(out->pairs.end(), r.pairs.begin(), r.pairs.end());
     for (std::uint32_t b : p.asked->blocks)
       if (!std::binary_search(p.skip.begin(), p.skip.end(), b)) covered[b] = 1;
+    out->worker_stats[std::size_t(&p - peers.data())] = r.stats;
     out->stats.sphere_tests += r.stats.sphere_tests;
     out->stats.tri_tests += r.stats.tri_tests;
     out->stats.compute_ns = std::max(out->stats.compute_ns, r.stats.compute_ns);
@@ -827,6 +828,7 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   out.stats = {};
   out.blocks_assisted = 0;
   out.assist = {};
+  out.worker_stats.assign(m.peers.size(), QueryStats{});
   m.out = &out;
   m.in_round = false;
   m.service_now();  // old replies are dropped here, Hellos applied

@@ -129,6 +129,7 @@ struct RoundResult {
   std::uint32_t stale_dropped = 0;          ///< replies of older rounds dropped
   std::uint32_t bad_messages = 0;           ///< undecodable or unexpected replies dropped
   QueryStats stats;                         ///< summed counters; compute_ns is the slowest worker's
+  std::vector<QueryStats> worker_stats;     ///< per worker (endpoint order): its Result's counters, zero if none
   std::uint32_t blocks_assisted = 0;        ///< blocks the client answered itself (ScatterConfig::assist_blocks)
   QueryStats assist;                        ///< the client's own work on them (also in `stats`)
   /// "Contacts" (paper §3.5): distinct colliding probe faces + distinct colliding object faces.

@@ -133,6 +133,63 @@ TEST_CASE("a grouped object tree (a worker's share of apart blocks) gives exactl
   object.tree = SphereTree::build(share, {8}, runs).value();
   const Body probe(make_capsule(6, 25, 10));
   compare_at(probe, object, poses_for(probe.mesh, object.mesh, 12, 91));
+
+  // Each run has one root whose faces are exactly the run's; colliding from the roots of every
+  // other run gives exactly the pairs outside the left-out runs (a worker's Query skip list).
+  const auto roots = group_roots(object.tree, share.faces.size(), runs);
+  REQUIRE(roots.size() == runs.size());
+  std::vector<std::uint32_t> run_of;
+  for (std::uint32_t g = 0; g < runs.size(); ++g) run_of.insert(run_of.end(), runs[g], g);
+  for (std::uint32_t g = 0; g < runs.size(); ++g) {
+    REQUIRE(roots[g].size() == 1);
+    const std::uint32_t r = roots[g][0];
+    std::vector<std::uint32_t> faces(object.tree.faces_begin(r), object.tree.faces_end(r));
+    std::sort(faces.begin(), faces.end());
+    REQUIRE(faces.size() == runs[g]);
+    CHECK(faces.front() == std::uint32_t(std::find(run_of.begin(), run_of.end(), g) - run_of.begin()));
+    CHECK(std::all_of(faces.begin(), faces.end(), [&](std::uint32_t f) { return run_of[f] == g; }));
+  }
+  int compared = 0;
+  for (const auto& [label, pose] : poses_for(probe.mesh, object.mesh, 12, 93)) {
+    CAPTURE(label);
+    const std::vector<FacePair> all = brute_force(probe.mesh, object.mesh, pose);
+    std::vector<std::uint32_t> kept;
+    for (std::uint32_t g = 0; g < runs.size(); ++g)
+      if (g % 3 != 1) kept.push_back(roots[g][0]);
+    CollideConfig opt;
+    opt.restrict_object = true;
+    opt.object_roots = kept;
+    std::vector<FacePair> expect;
+    for (const FacePair& fp : all)
+      if (run_of[fp.object] % 3 != 1) expect.push_back(fp);
+    CHECK(run(probe, object, pose, opt) == expect);
+    compared += !expect.empty() && expect.size() < all.size();
+  }
+  CHECK(compared > 0);
+  // A tree built without the runs mixes them in its leaves: no roots to collide them apart.
+  const Body ungrouped(share, {8});
+  CHECK(group_roots(ungrouped.tree, share.faces.size(), runs).empty());
+  // Runs that do not add up to the faces: refused.
+  CHECK(group_roots(object.tree, share.faces.size() + 1, runs).empty());
+}
+
+TEST_CASE("one scratch alternating between object trees gives each query the result of a fresh scratch") {
+  const Body probe(make_capsule(6, 25, 10));
+  const Body a(make_icosphere(30, 6)), b(make_icosphere(22, 9));
+  const auto pa = poses_for(probe.mesh, a.mesh, 6, 5), pb = poses_for(probe.mesh, b.mesh, 6, 6);
+  CollideScratch shared;
+  for (std::size_t i = 0; i < pa.size(); ++i)
+    for (int k = 0; k < 2; ++k) {
+      const Body& o = k ? b : a;
+      const Pose& pose = k ? pb[i].second : pa[i].second;
+      CollideScratch fresh;
+      CollideResult r1, r2;
+      collide(probe.mesh, probe.tree, o.mesh, o.tree, pose, {}, shared, r1);
+      collide(probe.mesh, probe.tree, o.mesh, o.tree, pose, {}, fresh, r2);
+      CHECK(r1.pairs == r2.pairs);
+      CHECK(r1.stats.node_pairs == r2.stats.node_pairs);
+      CHECK(r1.stats.tri_pairs == r2.stats.tri_pairs);
+    }
 }
 
 TEST_CASE("transform_to_object: t is accurate with origins at 1e6 mm") {
