@@ -157,7 +157,10 @@ Status RunEngine::State::prepare() {
     spec.contact_radius = 0.25 * double(ptree.tree.nodes[0].radius);
     spec.leaf_faces = s.tree.leaf_faces;
     spec.miss_limit = std::uint32_t(s.down_after);
-    spec.assist_blocks = std::uint32_t(s.assist_blocks);
+    // "auto": daemons run on other machines, whose collision thread waits idle for their replies;
+    // in-process workers share this machine's cores with it.
+    spec.assist_blocks =
+        s.assist_blocks >= 0 ? std::uint32_t(s.assist_blocks) : (spec.endpoints.empty() ? 0u : kAutoAssistBlocks);
     spec.curve = opt.curve;
     spec.note = opt.note;
     note("starting workers and loading their blocks ...");

@@ -21,6 +21,10 @@
 
 namespace st::engine {
 
+/// [workers] assist_blocks = "auto" with worker daemons: at ~1,000 contacts the client assist
+/// takes 5-8 blocks a round (spheretouch-bench scale, perf/RESULTS.md "Client assist").
+inline constexpr std::uint32_t kAutoAssistBlocks = 8;
+
 /// One body: a mesh file, the model set ("model:NAME") or a generated shape.
 struct BodySpec {
   std::string mesh;                                     ///< resolved file path; empty for a generated body
@@ -59,11 +63,13 @@ struct Scene {
   geom::Mapping mapping = geom::Mapping::block_cyclic;  ///< how blocks are dealt to workers
   int workers = 2;                                      ///< in-process workers (0 = collide in the collision thread)
   std::vector<std::string> endpoints;                   ///< worker daemons (overrides `workers`)
-  std::string server_key;           ///< CURVE: the workers' public key file (resolved path; "" = plain)
-  std::string client_key;           ///< CURVE: this client's key pair PREFIX (PREFIX.key, PREFIX.pub)
-  double deadline_ms = 50;          ///< scatter-gather round deadline, ms
-  int down_after = 3;               ///< missed deadlines before a worker is marked down
-  int assist_blocks = 0;            ///< blocks the collision thread answers itself each round (0 = off)
+  std::string server_key;   ///< CURVE: the workers' public key file (resolved path; "" = plain)
+  std::string client_key;   ///< CURVE: this client's key pair PREFIX (PREFIX.key, PREFIX.pub)
+  double deadline_ms = 50;  ///< scatter-gather round deadline, ms
+  int down_after = 3;       ///< missed deadlines before a worker is marked down
+  /// Blocks the collision thread answers itself each round (net::ScatterConfig::assist_blocks);
+  /// -1 = "auto": kAutoAssistBlocks with worker daemons, 0 (off) with in-process workers.
+  int assist_blocks = -1;
   double collision_rate_hz = 0;     ///< cap on collision rounds per second (0 = as fast as possible)
   int approx_layer = geom::kExact;  ///< kExact, or a sphere layer for the approximate mode
   rt::HapticLoopConfig haptic = rt::DefaultHapticLoopConfig();  ///< servo loop
