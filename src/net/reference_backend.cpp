@@ -74,6 +74,7 @@ class GridBackend final : public CollisionBackend {
     for (std::size_t b = 0, f = 0; b < s.block_faces.size(); ++b)
       for (std::uint32_t k = 0; k < s.block_faces[b] && f < nf; ++k) face_block_[f++] = static_cast<std::uint32_t>(b);
     skipped_.assign(blocks_.size(), 0);
+    skipped_list_.clear();
     return Ok{};
   }
 
@@ -82,11 +83,14 @@ class GridBackend final : public CollisionBackend {
     const std::size_t start = out.size();
     const auto t0 = std::chrono::steady_clock::now();
     QueryStats st;
-    std::fill(skipped_.begin(), skipped_.end(), 0);
-    bool any_skipped = false;
+    for (std::size_t i : skipped_list_) skipped_[i] = 0;  // last query's marks
+    skipped_list_.clear();
     for (std::uint32_t b : skip)
-      if (auto it = std::lower_bound(blocks_.begin(), blocks_.end(), b); it != blocks_.end() && *it == b)
-        skipped_[std::size_t(it - blocks_.begin())] = 1, any_skipped = true;
+      if (auto it = std::lower_bound(blocks_.begin(), blocks_.end(), b); it != blocks_.end() && *it == b) {
+        skipped_[std::size_t(it - blocks_.begin())] = 1;
+        skipped_list_.push_back(std::size_t(it - blocks_.begin()));
+      }
+    const bool any_skipped = !skipped_list_.empty();
     // Relative transform probe-local → object-local, composed once in double (large
     // offsets live only in poses and origins; never transform through the far-away file frame per vertex).
     const geom::Pose rel = Eigen::Translation3d(-object_.origin) * pose * Eigen::Translation3d(probe_.origin);
@@ -154,6 +158,7 @@ class GridBackend final : public CollisionBackend {
   std::vector<std::uint32_t> blocks_;      // global ids of the held blocks, ascending
   std::vector<std::uint32_t> face_block_;  // share face -> index into blocks_
   std::vector<std::uint8_t> skipped_;      // per held block: left out of this query
+  std::vector<std::size_t> skipped_list_;  // the blocks marked in skipped_
   std::vector<Vec3> moved_;
 };
 

@@ -59,7 +59,7 @@ class TreeBackend final : public CollisionBackend {
       for (std::uint32_t r : block_roots_[std::size_t(it - set_.blocks.begin())]) {
         cut_[r] = stamp_;  // the block itself
         any = true;
-        for (std::uint32_t a = object_tree_.cold[r].parent; a != geom::kNoNode && cut_[a] != stamp_ + 0u;
+        for (std::uint32_t a = object_tree_.cold[r].parent; a != geom::kNoNode && cut_[a] != stamp_;
              a = object_tree_.cold[a].parent)
           cut_[a] = stamp_;  // ancestors: split into their children
       }

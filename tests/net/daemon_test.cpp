@@ -107,6 +107,34 @@ TEST_CASE("daemons: pair sets identical to the single-process query for W = 1, 2
   }
 }
 
+TEST_CASE("daemons with client assist: the skip list crosses tcp, every round stays exact (hand vs bunny, W = 4)") {
+  const test::NetScene s = test::model_scene("hand.off", "bunny.off", 64);
+  const auto poses = test::contact_poses(s, 6);
+  zmq::context_t ctx;
+  Fleet f(4);
+  ScatterConfig cfg;
+  cfg.endpoints = f.endpoints();
+  cfg.heartbeat_period = 50ms;
+  cfg.assist_blocks = 8;
+  auto c = ScatterGather::create(ctx, cfg, s.probe, s.object, s.blocks);
+  REQUIRE_MESSAGE(c.ok(), c.error());
+  REQUIRE(c.value()->wait_ready(Clock::now() + 30s));
+  std::uint64_t seq = 0;
+  std::uint32_t assisted = 0;
+  for (const auto& p : poses) {
+    const std::vector<FacePair> want = reference_collide(s.probe, s.object, p);
+    for (int k = 0; k < 2; ++k) {  // the second round knows where the first found its pairs
+      RoundResult r = c.value()->round(++seq, p, Clock::now() + 10s);
+      CHECK(r.complete);
+      CHECK(r.workers_replied == 4);
+      CHECK(r.pairs == want);
+      assisted += r.blocks_assisted;
+    }
+  }
+  CHECK(assisted > 0);
+  for (int i = 0; i < 4; ++i) CHECK(f.procs[std::size_t(i)]->wait(0ms) == -1);  // none crashed
+}
+
 TEST_CASE(
     "daemons: kill -9 while queries stream; rounds return, are incomplete until reassigned, exact again; restart "
     "reloads") {
