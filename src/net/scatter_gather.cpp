@@ -684,6 +684,8 @@ struct ScatterGather::Impl {
   /// Answers the taken blocks while the Queries are out: the same collide() a worker runs on its
   /// block's subtree, so the pairs are the ones the worker would have found.
   void answer_taken(const geom::Pose& pose) {
+    if (taken.empty()) return;
+    const auto t0 = Clock::now();
     for (std::uint32_t b : taken) {
       LocalBlock* lb = local_block(b);
       if (!lb) continue;  // not covered: the round says it is incomplete
@@ -699,6 +701,8 @@ struct ScatterGather::Impl {
     }
     out->stats.sphere_tests += out->assist.sphere_tests;
     out->stats.tri_tests += out->assist.tri_tests;
+    out->assist.compute_ns =
+        std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t0).count());
   }
 
   /// Each block's pairs in this round's result: what choose_assisted() weighs next round.

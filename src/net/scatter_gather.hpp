@@ -131,7 +131,7 @@ struct RoundResult {
   QueryStats stats;                         ///< summed counters; compute_ns is the slowest worker's
   std::vector<QueryStats> worker_stats;     ///< per worker (endpoint order): its Result's counters, zero if none
   std::uint32_t blocks_assisted = 0;        ///< blocks the client answered itself (ScatterConfig::assist_blocks)
-  QueryStats assist;                        ///< the client's own work on them (also in `stats`)
+  QueryStats assist;  ///< the client's own work on them (tests also in `stats`; its time here only)
   /// "Contacts" (paper §3.5): distinct colliding probe faces + distinct colliding object faces.
   std::size_t contacts() const { return probe_faces.size() + object_faces.size(); }
 };
