@@ -67,6 +67,11 @@ Status wait_for_fleet(Fleet& fleet, const FleetSpec& spec, const net::ScatterCon
   // First wait briefly: a daemon that has not said Hello by then is probed, and a refused key or
   // a security mismatch ends the start now instead of after ready_timeout.
   if (fleet.client->wait_ready(std::min(until, start + spec.hello_timeout))) return Ok{};
+  // A daemon whose messages this client cannot read (another protocol version): waiting cannot help.
+  for (const net::WorkerStatus& w : fleet.client->workers())
+    if (w.epoch == 0 && !w.unreadable.empty())
+      return fail("worker ", w.endpoint, " answers with messages this client cannot read (", w.unreadable,
+                  "): a spheretouch-worker of another version? Upgrade the daemons and the clients together");
   std::map<std::string, net::ProbeResult> probed;
   auto probe_silent = [&] {
     for (const net::WorkerStatus& w : fleet.client->workers())

@@ -176,6 +176,7 @@ struct ScatterGather::Impl {
     Clock::time_point silent_since{};  // last message received from it, or its socket opened if later
     Clock::time_point asked_at{};      // last Query or Heartbeat that wants an answer
     std::uint64_t nonce = 0;
+    std::string unreadable;           // why its last undecodable message was refused
     SetPtr asked;                     // the block set this round's Query named; null if no Query was queued
     std::vector<std::uint32_t> skip;  // blocks of `asked` the client answers this round (assist)
     // Totals.
@@ -485,6 +486,7 @@ struct ScatterGather::Impl {
       Result<Message> m = decode({static_cast<const std::uint8_t*>(msg.data()), msg.size()}, cfg.limits);
       if (!m) {
         if (out) ++out->bad_messages;
+        p.unreadable = m.error();
         continue;
       }
       p.silent_since = std::max(p.silent_since, now);
@@ -900,7 +902,7 @@ std::vector<WorkerStatus> ScatterGather::workers() const {
   std::vector<WorkerStatus> v;
   for (const Impl::Peer& p : impl_->peers)
     v.push_back({p.endpoint, p.link != Link::Down, p.worker_id, p.epoch, p.misses, p.target, p.holds(p.target_hash),
-                 p.bytes_sent, p.loads_sent, p.held.size()});
+                 p.bytes_sent, p.loads_sent, p.held.size(), p.unreadable});
   return v;
 }
 

@@ -148,6 +148,9 @@ struct WorkerStatus {
   std::uint64_t bytes_sent = 0;              ///< LoadBlocks bytes sent to it so far
   std::uint32_t loads_sent = 0;              ///< block sets sent to it so far
   std::size_t sets_held = 0;                 ///< block sets it holds, from its last Hello
+  /// Why the last message from it this client could not read was refused (empty: none), e.g.
+  /// "header at byte 4: version: 1 not supported (this build speaks 2)": a daemon of another version.
+  std::string unreadable;
 };
 
 /// The collision thread's client to the worker fleet.
