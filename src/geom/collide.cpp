@@ -147,9 +147,6 @@ std::uint32_t CollideScratch::next_generation() {
 
 void CollideScratch::prepare(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object,
                              const SphereTree& object_tree) {
-  auto fit = [](auto& v, std::size_t n) {
-    if (v.size() != n) v.assign(n, {});
-  };
   // The probe's part is derived again only for another probe: a client answering several object
   // blocks (net::ScatterConfig::assist_blocks) switches object trees every query, and the probe's
   // leaves take far longer to derive than a block's spheres.
