@@ -3,18 +3,15 @@
 // processes: a spheretouch-worker daemon with a CURVE config on a free tcp loopback port.
 #include <sys/stat.h>
 
-#include <atomic>
 #include <chrono>
 #include <filesystem>
-#include <thread>
-#include <zmq.hpp>
 
 #include "geom/mesh_io.hpp"
 #include "geom/primitives.hpp"
 #include "app/query_meshes.hpp"
 #include "net/curve_keys.hpp"
 #include "net/process_util.hpp"
-#include "net/protocol.hpp"
+#include "net/old_worker.hpp"
 #include "test_util.hpp"
 
 using namespace st;
@@ -253,31 +250,9 @@ TEST_CASE(
 TEST_CASE("query --connect to a worker of another protocol version: the error says it cannot read it, and why") {
   Meshes m;
   zmq::context_t ctx;
-  zmq::socket_t old(ctx, zmq::socket_type::router);  // answers everything with a version-1 Hello
-  old.set(zmq::sockopt::linger, 0);
-  old.bind("tcp://127.0.0.1:*");
-  const std::string ep = old.get(zmq::sockopt::last_endpoint);
-  std::atomic<bool> stop{false};
-  std::thread t([&] {
-    while (!stop) {
-      zmq::pollitem_t it{old.handle(), 0, ZMQ_POLLIN, 0};
-      zmq::poll(&it, 1, std::chrono::milliseconds(10));
-      if (!(it.revents & ZMQ_POLLIN)) continue;
-      zmq::message_t id, frame;
-      (void)old.recv(id);
-      while (true) {  // the whole multipart message
-        (void)old.recv(frame);
-        if (!frame.more()) break;
-      }
-      std::vector<std::uint8_t> hello = net::encode(net::HelloMsg{0, 5, 0, {}});
-      hello[4] = 1;
-      old.send(id, zmq::send_flags::sndmore);
-      old.send(zmq::buffer(hello), zmq::send_flags::none);
-    }
-  });
+  test::OldVersionWorker old(ctx);
+  const std::string ep = old.endpoint();
   const auto r = run_command(m.query("--connect " + ep));
-  stop = true;
-  t.join();
   INFO(r.output);
   CHECK(r.exit_code == 2);
   CHECK(contains(r.output, "worker " + ep + " answers with messages this client cannot read"));

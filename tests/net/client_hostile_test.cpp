@@ -8,6 +8,7 @@
 
 #include "net/scatter_gather.hpp"
 #include "net_test_util.hpp"
+#include "old_worker.hpp"
 
 using namespace st;
 using namespace st::net;
@@ -146,26 +147,8 @@ TEST_CASE("the client drops truncated, oversized, wrong-version, garbage, stale 
 
 TEST_CASE("a worker of another protocol version: the client says why it cannot read it") {
   zmq::context_t ctx;
-  // An old worker: answers every Heartbeat with a Hello whose header says version 1.
-  zmq::socket_t old(ctx, zmq::socket_type::router);
-  old.set(zmq::sockopt::linger, 0);
-  old.bind("tcp://127.0.0.1:*");
-  const std::string ep = old.get(zmq::sockopt::last_endpoint);
-  std::atomic<bool> stop{false};
-  std::thread t([&] {
-    while (!stop) {
-      zmq::pollitem_t it{old.handle(), 0, ZMQ_POLLIN, 0};
-      zmq::poll(&it, 1, 10ms);
-      if (!(it.revents & ZMQ_POLLIN)) continue;
-      zmq::message_t id, frame;
-      (void)old.recv(id);
-      (void)old.recv(frame);
-      std::vector<std::uint8_t> hello = encode(HelloMsg{0, 5, 0, {}});
-      hello[4] = 1;  // the version before the Query's skip list
-      old.send(id, zmq::send_flags::sndmore);
-      old.send(zmq::buffer(hello), zmq::send_flags::none);
-    }
-  });
+  test::OldVersionWorker old(ctx);
+  const std::string ep = old.endpoint();
   const test::NetScene s = test::small_scene(4, 16);
   ScatterConfig cfg;
   cfg.endpoints = {ep};
@@ -177,6 +160,4 @@ TEST_CASE("a worker of another protocol version: the client says why it cannot r
   CHECK(w[0].epoch == 0);  // never heard
   CHECK_MESSAGE(w[0].unreadable.find("version: 1 not supported (this build speaks 2)") != std::string::npos,
                 w[0].unreadable);
-  stop = true;
-  t.join();
 }
