@@ -51,7 +51,6 @@ class TreeBackend final : public CollisionBackend {
       std::fill(cut_.begin(), cut_.end(), 0);
       stamp_ = 1;
     }
-    cut_.resize(object_tree_.num_nodes(), 0);
     bool any = false;
     for (std::uint32_t id : skip) {
       const auto it = std::lower_bound(set_.blocks.begin(), set_.blocks.end(), id);
