@@ -145,12 +145,15 @@ inline double max_of(double a, double b) { return a < b ? b : a; }
 /// The intersection segments of rows [0, n) of a batch: per row, the segment of object face a
 /// and probe face b (unit normals) along L = n_a × n_b, the direction the boundary of the object
 /// surface inside the probe runs (the inside on its left seen from outside), as its vector area
-/// ½ (s0 − o) × (s1 − o) and its end points s0, s1 relative to o; OK = 0 when there is none
-/// (parallel planes, no crossing, or the intervals meet in a point). With t = x·L on the line,
-/// s1 − s0 = (hi − lo) L / |L|², and (s0 − o) × L = c_b n_a − c_a n_b for any point of the line
-/// (c = n·(v0 − o); the component along L drops out). The line's point nearest o is
-/// x0 = (c_a (n_b × L) + c_b (L × n_a)) / |L|² (x0·L = 0), so s = x0 + (t − o·L) L / |L|²; the
-/// heights t are measured from o (the vertices are relative to it) so o·L = 0.
+/// ½ (s0 − o) × (s1 − o) and its length (kEnds false: what FD needs, every round), or its end
+/// points s0, s1 relative to o (kEnds true: the held contact's footprint, once per hold); OK = 0
+/// when there is none (parallel planes, no crossing, or the intervals meet in a point), and then
+/// the vector area and its length are 0. With t = x·L on the line, s1 − s0 = (hi − lo) L / |L|²,
+/// and (s0 − o) × L = c_b n_a − c_a n_b for any point of the line (c = n·(v0 − o); the component
+/// along L drops out). The line's point nearest o is x0 = (c_a (n_b × L) + c_b (L × n_a)) / |L|²
+/// (x0·L = 0), so s = x0 + (t − o·L) L / |L|²; the heights t are measured from o (the vertices
+/// are relative to it) so o·L = 0.
+template <bool kEnds>
 void segment_kernel(SegmentBatch& bt, int n) {
   using B = SegmentBatch;
   for (int i = 0; i < n; ++i) {
@@ -178,25 +181,42 @@ void segment_kernel(SegmentBatch& bt, int n) {
     const double lo = max_of(alo, blo), hi = min_of(ahi, bhi);
     const bool ok = (l2 > 1e-24) & aok & bok & (hi > lo);  // parallel planes: touching or coplanar, no curve
     const double inv = 1 / l2;
-    const double scale = ok ? 0.5 * (hi - lo) * inv : 0.0;
     const double ac = bt.in[B::AC][i], bc = bt.in[B::BC][i];
-    const double vx = bc * anx - ac * bnx, vy = bc * any - ac * bny, vz = bc * anz - ac * bnz;
-    bt.out[B::PX][i] = scale * vx;
-    bt.out[B::PY][i] = scale * vy;
-    bt.out[B::PZ][i] = scale * vz;
-    bt.out[B::PABS2][i] = scale * scale * (vx * vx + vy * vy + vz * vz);  // sqrt outside: errno blocks vectorising
-    const double x0 = (ac * (bny * lz - bnz * ly) + bc * (ly * anz - lz * any)) * inv;
-    const double y0 = (ac * (bnz * lx - bnx * lz) + bc * (lz * anx - lx * anz)) * inv;
-    const double z0 = (ac * (bnx * ly - bny * lx) + bc * (lx * any - ly * anx)) * inv;
-    bt.out[B::S0X][i] = x0 + lo * inv * lx;
-    bt.out[B::S0Y][i] = y0 + lo * inv * ly;
-    bt.out[B::S0Z][i] = z0 + lo * inv * lz;
-    bt.out[B::S1X][i] = x0 + hi * inv * lx;
-    bt.out[B::S1Y][i] = y0 + hi * inv * ly;
-    bt.out[B::S1Z][i] = z0 + hi * inv * lz;
     bt.out[B::OK][i] = ok ? 1.0 : 0.0;
+    if constexpr (kEnds) {
+      const double x0 = (ac * (bny * lz - bnz * ly) + bc * (ly * anz - lz * any)) * inv;
+      const double y0 = (ac * (bnz * lx - bnx * lz) + bc * (lz * anx - lx * anz)) * inv;
+      const double z0 = (ac * (bnx * ly - bny * lx) + bc * (lx * any - ly * anx)) * inv;
+      bt.out[B::S0X][i] = x0 + lo * inv * lx;
+      bt.out[B::S0Y][i] = y0 + lo * inv * ly;
+      bt.out[B::S0Z][i] = z0 + lo * inv * lz;
+      bt.out[B::S1X][i] = x0 + hi * inv * lx;
+      bt.out[B::S1Y][i] = y0 + hi * inv * ly;
+      bt.out[B::S1Z][i] = z0 + hi * inv * lz;
+    } else {
+      // Selects, not a zero scale: a row without a segment adds exactly nothing to the sums, even
+      // where its products overflow.
+      const double scale = 0.5 * (hi - lo) * inv;
+      const double vx = bc * anx - ac * bnx, vy = bc * any - ac * bny, vz = bc * anz - ac * bnz;
+      const double px = scale * vx, py = scale * vy, pz = scale * vz;
+      bt.out[B::PX][i] = ok ? px : 0.0;
+      bt.out[B::PY][i] = ok ? py : 0.0;
+      bt.out[B::PZ][i] = ok ? pz : 0.0;
+      bt.out[B::PABS][i] = ok ? std::sqrt(scale * scale * (vx * vx + vy * vy + vz * vz)) : 0.0;
+    }
   }
 }
+
+/// Faces grouped afresh (not from the last grouping) when more than 1 in this many are new since
+/// then: joining a new face looks at the ~18 faces around its corners, a fresh grouping at the
+/// 3 corners of every face.
+constexpr std::uint32_t kFreshGrouping = 6;
+constexpr std::uint32_t kNoGroup = UINT32_MAX;
+
+/// BodyState::use: what a colliding face's record gives the segments.
+constexpr std::uint8_t kNoDirection = 0;  ///< degenerate or bad vertex indices: no segment
+constexpr std::uint8_t kUsable = 1;       ///< a unit normal
+constexpr std::uint8_t kFront = 2;        ///< and (object faces) not turned away from the previous FD
 
 /// Vector area below this fraction of the colliding object faces' area is noise, not a direction.
 constexpr double kTinyArea = 1e-9;
@@ -268,6 +288,7 @@ void ContactBuilder::Patch::BodyState::reset(const Mesh& m) {
   fixed.clear();
   prev_fixed.clear();
   fixed_epoch = 0;
+  n_groups = 0;
 }
 
 void ContactBuilder::Patch::BodyState::compute_face_normals() {
@@ -287,6 +308,7 @@ const ContactBuilder::Patch::BodyState::Fixed& ContactBuilder::Patch::BodyState:
   if (from_prev[i] != UINT32_MAX) return fx = prev_fixed[from_prev[i]];
   const Tri& t = mesh->faces[faces[i]];
   fx.vid = t;
+  fx.group = UINT32_MAX;
   fx.bad_index = !(t[0] < nv && t[1] < nv && t[2] < nv);
   fx.n.setZero();
   if (fx.bad_index) return fx;
@@ -307,10 +329,11 @@ void ContactBuilder::Patch::BodyState::clear_stamps() {
 std::size_t ContactBuilder::Patch::BodyState::bytes() const {
   return vf.bytes() +
          (visit_stamp.capacity() + path_stamp.capacity() + exit_face.capacity() + 2 * face_mark.capacity() +
-          faces.capacity() + group_parent.capacity() + 2 * group_table.capacity()) *
+          faces.capacity() + group_parent.capacity() + 2 * group_table.capacity() + group_label.capacity() +
+          group_remap.capacity() + group_first.capacity()) *
              4 +
          (depth.capacity() + group_box.capacity()) * sizeof(double) + group_open.capacity() +
-         recs.capacity() * sizeof(FaceRec) + (fixed.capacity() + prev_fixed.capacity()) * sizeof(Fixed) +
+         recs.capacity() * sizeof(FaceRec) + use.capacity() + (fixed.capacity() + prev_fixed.capacity()) * sizeof(Fixed) +
          from_prev.capacity() * 4 + face_normals.capacity() * sizeof(Vec3);
 }
 
@@ -337,8 +360,8 @@ void ContactBuilder::Patch::reset() {
 }
 
 std::size_t ContactBuilder::Patch::bytes() const {
-  return probe_s.bytes() + object_s.bytes() +
-         (probe_world.capacity() + curve.capacity() + held_curve.capacity()) * sizeof(Vec3) +
+  return probe_s.bytes() + object_s.bytes() + probe_world.capacity() * sizeof(Vec3) +
+         (held_object_recs.capacity() + held_probe_recs.capacity()) * sizeof(FaceRec) + held_slots.capacity() * 8 +
          (batch ? sizeof(SegmentBatch) : 0) +
          (probe_xform_stamp.capacity() + climb.capacity() + seed_pairs.capacity()) * 4 +
          valid.capacity() * sizeof(ContactPair) + valid_slots.capacity() * 8;
@@ -350,6 +373,131 @@ const Vec3& ContactBuilder::Patch::probe_point(std::uint32_t v, const Mesh& prob
     probe_world[v] = rot * probe.local[v] + shift;
   }
   return probe_world[v];
+}
+
+std::uint32_t ContactBuilder::Patch::group_faces(BodyState& T) {
+  const auto n_slots = static_cast<std::uint32_t>(T.faces.size());
+  std::vector<std::uint32_t>& label = T.group_label;
+  std::vector<std::uint32_t>& parent = T.group_parent;  // union-find over labels
+  std::vector<std::uint32_t>& remap = T.group_remap;
+  label.assign(n_slots, kNoGroup);
+  parent.clear();
+  auto root = [&](std::uint32_t i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  auto unite = [&](std::uint32_t a, std::uint32_t b) {
+    a = root(a), b = root(b);
+    if (a != b) parent[std::max(a, b)] = std::min(a, b);
+  };
+  auto fresh = [&] {
+    parent.push_back(static_cast<std::uint32_t>(parent.size()));
+    return parent.back();
+  };
+  // The faces that were grouped last time keep their groups (renumbered from 0).
+  remap.assign(T.n_groups, kNoGroup);
+  std::uint32_t n_new = 0;
+  for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
+    const std::uint32_t g = T.fixed[slot].group;
+    if (g >= T.n_groups) {
+      ++n_new;
+      continue;
+    }
+    if (remap[g] == kNoGroup) remap[g] = fresh();
+    label[slot] = remap[g];
+  }
+  if (std::uint64_t(n_new) * kFreshGrouping > n_slots) {
+    // Group every face afresh: union-find over the slots, each vertex remembering the first slot
+    // it was seen in, in a small hash table (scratch, stays in cache; a per-vertex array would be
+    // read at random over the whole mesh).
+    parent.resize(n_slots);
+    for (std::uint32_t i = 0; i < n_slots; ++i) parent[i] = label[i] = i;
+    std::vector<std::uint64_t>& table = T.group_table;  // (vertex + 1) << 32 | slot; 0 = empty
+    std::size_t size = 64;
+    while (size < 6 * std::size_t(n_slots)) size *= 2;  // at most half full
+    table.assign(size, 0);
+    for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
+      if (T.fixed[slot].bad_index) continue;
+      for (std::uint32_t v : T.fixed[slot].vid) {
+        const std::uint64_t key = std::uint64_t(v) + 1;
+        for (std::size_t h = (v * 0x9E3779B97F4A7C15ull) >> 40 & (size - 1);; h = (h + 1) & (size - 1)) {
+          if (table[h] == 0) {
+            table[h] = key << 32 | slot;
+            break;
+          }
+          if (table[h] >> 32 == key) {
+            unite(std::uint32_t(table[h]), slot);
+            break;
+          }
+        }
+      }
+    }
+  } else {
+    // A face new since then joins the colliding faces around its vertices (found through the
+    // mesh's vertex-face lists and this round's face marks); alone, it starts a group.
+    for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
+      if (label[slot] != kNoGroup) continue;
+      if (!T.fixed[slot].bad_index)
+        for (std::uint32_t v : T.fixed[slot].vid)
+          for (std::uint32_t k = T.vf.first[v]; k < T.vf.first[v + 1]; ++k) {
+            const BodyState::Mark& mk = T.face_mark[T.vf.faces[k]];
+            if (mk.stamp != epoch || mk.slot == slot || label[mk.slot] == kNoGroup) continue;
+            if (label[slot] == kNoGroup)
+              label[slot] = label[mk.slot];
+            else
+              unite(label[slot], label[mk.slot]);
+          }
+      if (label[slot] == kNoGroup) label[slot] = fresh();
+    }
+  }
+  // Dense labels, kept with the faces for the next grouping.
+  remap.assign(parent.size(), kNoGroup);
+  std::uint32_t n = 0;
+  for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
+    const std::uint32_t r = root(label[slot]);
+    if (remap[r] == kNoGroup) remap[r] = n++;
+    T.fixed[slot].group = label[slot] = remap[r];
+  }
+  T.n_groups = n;
+  return n;
+}
+
+double ContactBuilder::Patch::held_footprint() {
+  // The held round's intersection curve (its segments' end points, recomputed from its records),
+  // or, when it had none (touching or coplanar faces only), its colliding object faces' corners.
+  double radius2 = 0;
+  bool any = false;
+  auto reach = [&](const Vec3& c) {  // c relative to the held round's origin
+    const Vec3 rel = held_origin + c - held_point;
+    radius2 = std::max(radius2, (rel - rel.dot(held_n) * held_n).squaredNorm());
+  };
+  if (!batch) batch = std::make_unique<SegmentBatch>();
+  SegmentBatch& bt = *batch;
+  using B = SegmentBatch;
+  int rows = 0;
+  auto flush = [&] {
+    segment_kernel<true>(bt, rows);
+    for (int r = 0; r < rows; ++r) {
+      if (bt.out[B::OK][r] == 0) continue;
+      any = true;
+      reach(Vec3(bt.out[B::S0X][r], bt.out[B::S0Y][r], bt.out[B::S0Z][r]));
+      reach(Vec3(bt.out[B::S1X][r], bt.out[B::S1Y][r], bt.out[B::S1Z][r]));
+    }
+    rows = 0;
+  };
+  for (const auto& [slot_a, slot_b] : held_slots) {
+    const FaceRec& ra = held_object_recs[slot_a];
+    const FaceRec& rb = held_probe_recs[slot_b];
+    if (ra.n.squaredNorm() == 0 || rb.n.squaredNorm() == 0) continue;
+    bt.set(rows, ra, rb);
+    if (++rows == SegmentBatch::kRows) flush();
+  }
+  flush();
+  if (!any)
+    for (const FaceRec& ra : held_object_recs)
+      if (ra.n.squaredNorm() != 0)
+        for (const Vec3& v : ra.v) reach(v);
+  return std::sqrt(radius2);
 }
 
 ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, const Vec3& d, const Mesh& probe,
@@ -518,57 +666,33 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   if (discover && full) {
     for (std::uint32_t i = 0; i < valid.size(); ++i) open.push_back(i);
   } else if (discover) {
-    // Union-find over the slots: faces sharing a vertex join. Each vertex remembers the first
-    // slot it was seen in, in a small hash table (scratch, stays in cache; a per-vertex array
-    // would be read at random over the whole mesh).
-    std::vector<std::uint32_t>& parent = T.group_parent;
+    const std::uint32_t n_groups = group_faces(T);
+    const std::vector<std::uint32_t>& label = T.group_label;
     const auto n_slots = static_cast<std::uint32_t>(T.faces.size());
-    parent.resize(n_slots);
-    for (std::uint32_t i = 0; i < n_slots; ++i) parent[i] = i;
-    auto root = [&](std::uint32_t i) {
-      while (parent[i] != i) i = parent[i] = parent[parent[i]];
-      return i;
-    };
-    std::vector<std::uint64_t>& table = T.group_table;  // (vertex + 1) << 32 | slot; 0 = empty
-    std::size_t size = 64;
-    while (size < 6 * std::size_t(n_slots)) size *= 2;  // at most half full
-    table.assign(size, 0);
-    for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
-      if (T.fixed[slot].bad_index) continue;
-      for (std::uint32_t v : T.fixed[slot].vid) {
-        const std::uint64_t key = std::uint64_t(v) + 1;
-        for (std::size_t h = (v * 0x9E3779B97F4A7C15ull) >> 40 & (size - 1);; h = (h + 1) & (size - 1)) {
-          if (table[h] == 0) {
-            table[h] = key << 32 | slot;
-            break;
-          }
-          if (table[h] >> 32 == key) {
-            const std::uint32_t a = root(std::uint32_t(table[h])), b = root(slot);
-            if (a != b) parent[std::max(a, b)] = std::min(a, b);
-            break;
-          }
-        }
-      }
-    }
     // Each group's extent across d (from the records: vertices relative to the round's origin),
     // and whether one of this round's maxima lies in it.
-    std::vector<double>& box = T.group_box;  // per root: lo_u, hi_u, lo_w, hi_w
-    box.assign(4 * std::size_t(n_slots), 0);
+    std::vector<double>& box = T.group_box;  // per group: lo_u, hi_u, lo_w, hi_w
+    box.resize(4 * std::size_t(n_groups));
+    for (std::uint32_t g = 0; g < n_groups; ++g) {
+      double* bx = &box[4 * std::size_t(g)];
+      bx[0] = bx[2] = std::numeric_limits<double>::infinity(), bx[1] = bx[3] = -bx[0];
+    }
+    std::vector<std::uint32_t>& first = T.group_first;  // per group: a face of it (its first slot)
+    first.assign(n_groups, UINT32_MAX);
     for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
-      const std::uint32_t r = root(slot);
-      double* bx = &box[4 * std::size_t(r)];
-      if (r == slot) bx[0] = bx[2] = std::numeric_limits<double>::infinity(), bx[1] = bx[3] = -bx[0];
+      const std::uint32_t g = label[slot];
+      if (first[g] == UINT32_MAX) first[g] = slot;
       if (T.fixed[slot].bad_index) continue;
+      double* bx = &box[4 * std::size_t(g)];
       for (const Vec3& x : T.recs[slot].v) {
         const double xu = x.dot(walk.u), xw = x.dot(walk.w);
         bx[0] = std::min(bx[0], xu), bx[1] = std::max(bx[1], xu), bx[2] = std::min(bx[2], xw), bx[3] = std::max(bx[3], xw);
       }
     }
-    std::vector<std::uint8_t>& group_open = T.group_open;  // per root: no maximum in its extent
-    group_open.assign(n_slots, 0);
-    for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
-      if (root(slot) != slot) continue;
-      const double* bx = &box[4 * std::size_t(slot)];
+    std::vector<std::uint8_t>& group_open = T.group_open;  // per group: no maximum in its extent
+    group_open.assign(n_groups, 0);
+    for (std::uint32_t g = 0; g < n_groups; ++g) {
+      const double* bx = &box[4 * std::size_t(g)];
       bool followed = false;
       auto inside = [&](std::uint32_t v) {
         const Vec3 x = test_pos(v) - rec_origin;
@@ -578,11 +702,11 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
       for (int i = 0; i < n_maxima && !followed; ++i) followed = inside(maxima[i]);
       for (int i = 0; i < Memory::kKnown && !followed; ++i)
         followed = memory.known[i] < test_nv && inside(memory.known[i]);
-      group_open[slot] = followed ? 0 : 1;
-      if (!followed && !T.fixed[slot].bad_index) drop(T.fixed[slot].vid[0]);
+      group_open[g] = followed ? 0 : 1;
+      if (!followed && !T.fixed[first[g]].bad_index) drop(T.fixed[first[g]].vid[0]);
     }
     for (std::uint32_t i = 0; i < valid.size(); ++i)
-      if (group_open[root(valid_slots[i][probe_side ? 1 : 0])]) open.push_back(i);
+      if (group_open[label[valid_slots[i][probe_side ? 1 : 0]]]) open.push_back(i);
   }
   std::uint32_t low_v[kLowSeeds], low_f[kLowSeeds];
   double low_key[kLowSeeds];
@@ -761,13 +885,23 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   valid.clear();
   valid_slots.clear();
   // A face that collided in the last round (when its records were made) keeps its fixed part.
-  auto first_sight = [&](BodyState& b, std::uint32_t f) {
+  // Returns the face's slot. The face of the pair before is answered without reading its mark:
+  // the collision core lists a leaf pair's pairs together, so about half the pairs repeat the
+  // object face of the pair before them (the marks, over the whole mesh, are read at random).
+  struct Last {
+    std::uint32_t face = UINT32_MAX, slot = 0;
+  } last_probe, last_object;
+  auto first_sight = [&](BodyState& b, Last& last, std::uint32_t f) {
+    if (f == last.face) return last.slot;
     BodyState::Mark& mark = b.face_mark[f];
-    if (mark.stamp == epoch) return;
-    const bool again = b.fixed_epoch != 0 && b.fixed_epoch == epoch - 1 && mark.stamp == epoch - 1;
-    b.from_prev.push_back(again ? mark.slot : UINT32_MAX);
-    mark = {epoch, std::uint32_t(b.faces.size())};
-    b.faces.push_back(f);
+    if (mark.stamp != epoch) {
+      const bool again = b.fixed_epoch != 0 && b.fixed_epoch == epoch - 1 && mark.stamp == epoch - 1;
+      b.from_prev.push_back(again ? mark.slot : UINT32_MAX);
+      mark = {epoch, std::uint32_t(b.faces.size())};
+      b.faces.push_back(f);
+    }
+    last = {f, mark.slot};
+    return mark.slot;
   };
   for (BodyState* b : {&probe_s, &object_s}) {
     b->faces.clear();
@@ -780,9 +914,8 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
       continue;
     }
     valid.push_back(p);
-    first_sight(probe_s, p.probe);
-    first_sight(object_s, p.object);
-    valid_slots.push_back({object_s.face_mark[p.object].slot, probe_s.face_mark[p.probe].slot});
+    const std::uint32_t probe_slot = first_sight(probe_s, last_probe, p.probe);
+    valid_slots.push_back({first_sight(object_s, last_object, p.object), probe_slot});
   }
   if (m.skipped_pairs) m.flags |= kBadInput;
   m.probe_faces = static_cast<std::uint32_t>(probe_s.faces.size());
@@ -812,11 +945,13 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   double n_faces_abs = 0;       // Σ of their lengths
   object_s.fixed.resize(object_s.faces.size());
   object_s.recs.resize(object_s.faces.size());
+  object_s.use.resize(object_s.faces.size());
   for (std::size_t i = 0; i < object_s.faces.size(); ++i) {
     const BodyState::Fixed& fx = object_s.fixed_part(i);
     FaceRec& r = object_s.recs[i];
     r.n.setZero();
     r.c = 0;
+    object_s.use[i] = kNoDirection;
     if (fx.bad_index || fx.n.squaredNorm() == 0) {
       ++m.degenerate_faces;
       continue;
@@ -824,6 +959,7 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     for (int k = 0; k < 3; ++k) r.v[k] = fx.v[k] - origin;
     r.n = fx.n;
     r.c = r.n.dot(r.v[0]);
+    object_s.use[i] = have_prev && r.n.dot(prev_n) > kBackCos ? kFront : kUsable;
     n_faces += fx.cr;
     n_faces_abs += fx.len;
   }
@@ -831,56 +967,53 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   if (m.degenerate_faces) m.flags |= kDegenerateSkipped;
   probe_s.fixed.resize(probe_s.faces.size());
   probe_s.recs.resize(probe_s.faces.size());
+  probe_s.use.resize(probe_s.faces.size());
   const Vec3 to_rec = shift - origin;  // probe-local → record frame: R·x + to_rec
   for (std::size_t i = 0; i < probe_s.faces.size(); ++i) {
     const BodyState::Fixed& fx = probe_s.fixed_part(i);
     FaceRec& r = probe_s.recs[i];
     r.n.setZero();
     r.c = 0;
+    probe_s.use[i] = kNoDirection;
     if (fx.bad_index) continue;
     for (int k = 0; k < 3; ++k) r.v[k] = R * fx.v[k] + to_rec;
     r.n = R * fx.n;  // zero stays zero (degenerate)
     r.c = r.n.dot(r.v[0]);
+    probe_s.use[i] = fx.n.squaredNorm() == 0 ? kNoDirection : kUsable;
   }
   probe_s.fixed_epoch = epoch;
 
   // The vector area of the object surface inside the probe, from the intersection curve:
   // A = ½ Σ (s0 − o) × (s1 − o) over the pairs' segments, in batches through the vectorised
   // kernel. Split into the part on faces not turned away from the previous FD (front) and all.
-  Vec3 a_all = Vec3::Zero(), a_front = Vec3::Zero();
+  double a_all[3] = {0, 0, 0}, a_front[3] = {0, 0, 0};
   double abs_all = 0, abs_front = 0;
   bool any_front_face = false;
-  curve.clear();
   if (!batch) batch = std::make_unique<SegmentBatch>();
   SegmentBatch& bt = *batch;
   int rows = 0;
   auto flush = [&] {
-    segment_kernel(bt, rows);
+    using B = SegmentBatch;
+    segment_kernel<false>(bt, rows);
+    // Rows without a segment add zeros (the kernel's selects), so the sums need no branch.
     for (int r = 0; r < rows; ++r) {
-      if (bt.out[SegmentBatch::OK][r] == 0) continue;
-      const Vec3 piece(bt.out[SegmentBatch::PX][r], bt.out[SegmentBatch::PY][r], bt.out[SegmentBatch::PZ][r]);
-      const double piece_abs = std::sqrt(bt.out[SegmentBatch::PABS2][r]);
-      a_all += piece;
-      abs_all += piece_abs;
-      if (bt.front[r]) {
-        a_front += piece;
-        abs_front += piece_abs;
+      const double f = bt.front[r] ? 1.0 : 0.0, piece_abs = bt.out[B::PABS][r];
+      for (int c = 0; c < 3; ++c) {
+        a_all[c] += bt.out[B::PX + c][r];
+        a_front[c] += f * bt.out[B::PX + c][r];
       }
-      curve.push_back(origin +
-                      Vec3(bt.out[SegmentBatch::S0X][r], bt.out[SegmentBatch::S0Y][r], bt.out[SegmentBatch::S0Z][r]));
-      curve.push_back(origin +
-                      Vec3(bt.out[SegmentBatch::S1X][r], bt.out[SegmentBatch::S1Y][r], bt.out[SegmentBatch::S1Z][r]));
+      abs_all += piece_abs;
+      abs_front += f * piece_abs;
     }
     rows = 0;
   };
   for (const auto& [slot_a, slot_b] : valid_slots) {
-    const FaceRec& ra = object_s.recs[slot_a];
-    const FaceRec& rb = probe_s.recs[slot_b];
-    if (ra.n.squaredNorm() == 0 || rb.n.squaredNorm() == 0) continue;  // degenerate: no direction
-    const bool front = have_prev && ra.n.dot(prev_n) > kBackCos;
+    const std::uint8_t use_a = object_s.use[slot_a];
+    if (use_a == kNoDirection || probe_s.use[slot_b] == kNoDirection) continue;  // degenerate: no direction
+    const bool front = use_a == kFront;
     any_front_face |= front;
     bt.front[rows] = front;
-    bt.set(rows, ra, rb);
+    bt.set(rows, object_s.recs[slot_a], probe_s.recs[slot_b]);
     if (++rows == SegmentBatch::kRows) flush();
   }
   flush();
@@ -891,7 +1024,7 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   bool in_contact = !valid.empty() && m.degenerate_faces < m.object_faces;
   if (in_contact && have_prev && !any_front_face) in_contact = false;  // only back faces: past a thin feature
   if (in_contact) {
-    const Vec3& a = have_prev ? a_front : a_all;
+    const Vec3 a = have_prev ? Vec3(a_front[0], a_front[1], a_front[2]) : Vec3(a_all[0], a_all[1], a_all[2]);
     const double abs_sum = have_prev ? abs_front : abs_all;
     const double a_norm = a.norm();
     // A curve of (nearly) no area is rounding noise (faces touching at a vertex or an edge): its
@@ -917,14 +1050,7 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     // feature's far side): keep the last plane while the tracked point is below it and over
     // the patch's footprint.
     if (held_valid) {
-      if (held_radius < 0) {  // the footprint: how far the held round's curve reaches from its plane point
-        double radius2 = 0;
-        for (const Vec3& c : held_curve) {
-          const Vec3 rel = c - held_point;
-          radius2 = std::max(radius2, (rel - rel.dot(held_n) * held_n).squaredNorm());
-        }
-        held_radius = std::sqrt(radius2);
-      }
+      if (held_radius < 0) held_radius = held_footprint();
       const Vec3 x = R * held_tracked + shift;
       const Vec3 rel = x - held_point;
       const double depth = -rel.dot(held_n);
@@ -944,12 +1070,6 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     reset();
     return m;
   }
-  if (curve.empty()) {  // touching or coplanar only: the footprint is the colliding faces
-    for (std::uint32_t f : object_s.faces)
-      if (tri_ok(object.faces[f], object_s.nv))
-        for (std::uint32_t v : object.faces[f]) curve.push_back(object.local[v]);
-  }
-
   // PD: directional penetration depth along n, both ways: probe points inside the object leave
   // along +n through the object's faces that face +n; object points inside the probe leave along
   // −n through the probe's faces that face −n.
@@ -999,8 +1119,12 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   m.plane_point = to_pod(plane_pt + object.origin);
   m.contact_point = m.plane_point;
 
-  // The curve is kept for the held contact's footprint, measured only if it is held.
-  std::swap(curve, held_curve);
+  // This round's pairs and records are kept for the held contact's footprint, measured only if
+  // it is held (buffers swapped, not copied).
+  std::swap(valid_slots, held_slots);
+  std::swap(object_s.recs, held_object_recs);
+  std::swap(probe_s.recs, held_probe_recs);
+  held_origin = origin;
   held_radius = -1;
   have_prev = true;
   prev_n = n;

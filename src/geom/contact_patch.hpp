@@ -25,7 +25,7 @@ struct FaceRec {
 
 /// Up to kRows (object face, probe face) pairs laid out by columns, so that the compiler
 /// vectorises the intersection segment kernel over rows (contact_patch.cpp): the two faces'
-/// records in, the segment's vector area and end points out. Fixed size, so that every column
+/// records in, the segment's vector area or its end points out. Fixed size, so that every column
 /// is a known distinct array (no aliasing for the vectoriser to rule out). 19 KB.
 struct SegmentBatch {
   static constexpr int kRows = 64;
@@ -58,10 +58,11 @@ struct SegmentBatch {
     BC,
     kIn
   };
-  enum Out { PX, PY, PZ, PABS2, S0X, S0Y, S0Z, S1X, S1Y, S1Z, OK, kOut };
-  alignas(64) double in[kIn][kRows];    ///< records of face a (object) and b (probe), rows = pairs
-  alignas(64) double out[kOut][kRows];  ///< vector area, its squared length, end points − o, 1 if a segment
-  bool front[kRows];                    ///< the object face is not turned away from the previous FD
+  enum Out { PX, PY, PZ, PABS, S0X, S0Y, S0Z, S1X, S1Y, S1Z, OK, kOut };
+  alignas(64) double in[kIn][kRows];  ///< records of face a (object) and b (probe), rows = pairs
+  /// Per row: 1 if a segment; its vector area and that area's length (0 if none), or its end points − o.
+  alignas(64) double out[kOut][kRows];
+  bool front[kRows];  ///< the object face is not turned away from the previous FD
   /// Writes the two records into row r.
   void set(int r, const FaceRec& a, const FaceRec& b);
 };
@@ -142,6 +143,7 @@ struct ContactBuilder::Patch {
     std::vector<Mark> face_mark;       ///< per face: the round it was counted as colliding, its index in `faces` then
     std::vector<std::uint32_t> faces;  ///< distinct colliding faces this round (slot = index)
     std::vector<FaceRec> recs;         ///< their records, per slot
+    std::vector<std::uint8_t> use;     ///< per slot: what its record gives the segments (kNoDirection, kUsable, kFront)
     /// What a colliding face's record is made from that does not change with the pose: vertices
     /// in the body's local frame, unit normal (zero: degenerate or bad indices), (b−a)×(c−a) and
     /// its length. Kept from one round to the next (most faces collide again), so that the mesh,
@@ -151,8 +153,9 @@ struct ContactBuilder::Patch {
       Vec3 n;
       Vec3 cr;
       double len = 0;
-      Tri vid{};               ///< its vertex indices
-      bool bad_index = false;  ///< a vertex index out of range: no record
+      Tri vid{};                         ///< its vertex indices
+      bool bad_index = false;            ///< a vertex index out of range: no record
+      std::uint32_t group = UINT32_MAX;  ///< its group at the last grouping (group_faces), UINT32_MAX: none
     };
     std::vector<Fixed> fixed, prev_fixed;  ///< per slot, this round and the last
     /// Fills and returns fixed[i] (sized): last round's when face faces[i] collided then, else read
@@ -162,11 +165,15 @@ struct ContactBuilder::Patch {
     /// The round whose records were filled last (in `fixed` until the next round swaps them
     /// into `prev_fixed`); 0 = none.
     std::uint32_t fixed_epoch = 0;
-    // Scratch for grouping the colliding faces into regions (a search for new regions).
-    std::vector<std::uint64_t> group_table;   ///< vertex → the first slot it was seen in (hash table)
-    std::vector<std::uint32_t> group_parent;  ///< union-find over the slots
-    std::vector<double> group_box;            ///< per group root: its extent across d (u, w)
-    std::vector<std::uint8_t> group_open;     ///< per group root: no remembered maximum in it
+    // Grouping the colliding faces into regions (a search for new regions): group_faces.
+    std::uint32_t n_groups = 0;               ///< groups at the last grouping (Fixed::group below it)
+    std::vector<std::uint32_t> group_label;   ///< per slot: its group
+    std::vector<std::uint64_t> group_table;   ///< scratch: vertex → the first slot it was seen in (hash table)
+    std::vector<std::uint32_t> group_parent;  ///< scratch: union-find over the groups
+    std::vector<std::uint32_t> group_remap;   ///< scratch: old or root label → new label
+    std::vector<std::uint32_t> group_first;   ///< scratch: per group, its first slot
+    std::vector<double> group_box;            ///< scratch: per group, its extent across d (u, w)
+    std::vector<std::uint8_t> group_open;     ///< scratch: per group, no remembered maximum in it
     std::vector<Vec3> face_normals;  ///< every face's unit normal, local frame (zero: degenerate); the probe's only
     Memory memory;                   ///< last round's deepest vertices
     bool sized_for(const Mesh& m) const { return mesh == &m && nv == m.local.size() && nf == m.faces.size(); }
@@ -185,13 +192,24 @@ struct ContactBuilder::Patch {
   Vec3 held_n{Vec3::Zero()};        ///< its normal
   Vec3 held_point{Vec3::Zero()};    ///< a point of it, object-local, mm
   Vec3 held_tracked{Vec3::Zero()};  ///< the probe point held against it, probe-local, mm
-  std::vector<Vec3> held_curve;     ///< the intersection curve of the round it was set in, object-local
-  double held_radius = -1;          ///< the footprint around held_point (from held_curve), mm; < 0 not yet measured
+  /// The round it was set in: its pairs' record slots, its records and their origin (the curve
+  /// the footprint is measured from is recomputed from them, only once the contact is held).
+  std::vector<std::array<std::uint32_t, 2>> held_slots;
+  std::vector<FaceRec> held_object_recs, held_probe_recs;
+  Vec3 held_origin{Vec3::Zero()};
+  double held_radius = -1;  ///< the footprint around held_point, mm; < 0 not yet measured
+  /// How far the held round's intersection curve reaches from held_point across held_n.
+  double held_footprint();
+  /// Groups T's colliding faces of this round (faces sharing a vertex join) into
+  /// T.group_label[slot], labels 0 .. n − 1; returns n. A face keeps the group it was given at the
+  /// last grouping (carried with its fixed part, so a group is followed from round to round);
+  /// only faces new since then are joined, through the colliding faces around their corners;
+  /// with many new faces, every face is grouped afresh. (Groups that have split since stay one.)
+  std::uint32_t group_faces(BodyState& T);
   // Scratch.
   std::vector<ContactPair> valid;
   std::vector<std::array<std::uint32_t, 2>> valid_slots;        ///< per valid pair: its object and probe record slots
   std::vector<Vec3> probe_world;                                ///< probe vertices, object-local (valid where stamped)
-  std::vector<Vec3> curve;                                      ///< intersection segment end points, object-local
   std::unique_ptr<SegmentBatch> batch;                          ///< scratch of the segment kernel
   std::vector<std::uint32_t> probe_xform_stamp;                 ///< round in which probe_world[v] was computed
   std::uint32_t climb_serial = 0;                               ///< climbs so far (path stamps)
