@@ -237,6 +237,9 @@ constexpr int kRidgeSteps = 8;
 constexpr double kRidgeGainMm = 1e-4;
 /// Rounds between searches for new contact regions while the remembered ones still hold.
 constexpr std::uint32_t kDiscoverEvery = 4;
+/// A remembered maximum less than this share as deep as the deepest point found so far is not
+/// climbed in every round (see Patch::side).
+constexpr double kShallowShare = 0.5;
 /// Every this many searches for new regions, one starts from the whole patch; the others only
 /// from the regions no remembered maximum follows (where the remembered ones are climbed every
 /// round, a climb from the patch's rim mostly retraces one: a search over the whole patch costs
@@ -578,6 +581,21 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
     climb_serial = 0;
   }
   const std::uint32_t round_first = climb_serial + 1;
+  // Remembers a local maximum (deepest first). Full: the shallowest gives way, or v is not kept.
+  // (Only a slot already filled is compared: the old test read the last slot on the way to
+  // filling it, uninitialised.)
+  auto remember = [&](std::uint32_t v) {
+    if (n_maxima == Memory::kSize && maxima_depth[Memory::kSize - 1] >= depth[v]) {
+      drop(v);
+      return;
+    }
+    if (n_maxima == Memory::kSize) drop(maxima[Memory::kSize - 1]);
+    int i = n_maxima < Memory::kSize ? n_maxima++ : Memory::kSize - 1;
+    maxima[i] = v;
+    maxima_depth[i] = depth[v];
+    for (; i > 0 && maxima_depth[i] > maxima_depth[i - 1]; --i)
+      std::swap(maxima[i], maxima[i - 1]), std::swap(maxima_depth[i], maxima_depth[i - 1]);
+  };
   auto climb_from = [&](std::uint32_t v) {
     if (path[v] >= round_first) return;
     const std::uint32_t serial = ++climb_serial;
@@ -618,19 +636,8 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
               break;
             }
       }
-      if (next == UINT32_MAX) {  // a local maximum: remember it (deepest first)
-        // Full: the shallowest gives way, or v is not kept. (Only a slot already filled is
-        // compared: the old test read the last slot on the way to filling it, uninitialised.)
-        if (n_maxima == Memory::kSize && maxima_depth[Memory::kSize - 1] >= depth[v]) {
-          drop(v);
-          return;
-        }
-        if (n_maxima == Memory::kSize) drop(maxima[Memory::kSize - 1]);
-        int i = n_maxima < Memory::kSize ? n_maxima++ : Memory::kSize - 1;
-        maxima[i] = v;
-        maxima_depth[i] = depth[v];
-        for (; i > 0 && maxima_depth[i] > maxima_depth[i - 1]; --i)
-          std::swap(maxima[i], maxima[i - 1]), std::swap(maxima_depth[i], maxima_depth[i - 1]);
+      if (next == UINT32_MAX) {  // a local maximum
+        remember(v);
         return;
       }
       // Next to an earlier climb's path: that climb has been up this slope already.
@@ -642,12 +649,21 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   // vertices lowest along d (over a flat surface the deepest; from the pair's face on the other
   // side); and a sample of the pairs whose offset turns every round, so a separate contact region
   // that neither found is found within a few rounds.
+  //
+  // A remembered maximum other than the deepest is climbed every round only while it is at least
+  // kShallowShare as deep as the deepest point found so far (it could set PD); a shallower one
+  // is kept as it is and climbed in the rounds that look for new regions (every
+  // kDiscoverEvery-th), which is often enough for it to follow its region.
   climb.clear();
   bool remembered = false;
+  const bool discover_round = epoch % kDiscoverEvery == 0;
   for (int i = 0; i < Memory::kSize; ++i) {
     const std::uint32_t v = memory.vertex[i];
     if (v < test_nv && memory.face[i] < surface.faces.size() && eval(v, memory.face[i]) > 0) {
-      climb_from(v);
+      if (i == 0 || discover_round || depth[v] >= kShallowShare * best.depth)
+        climb_from(v);
+      else if (path[v] < round_first)  // not on a path of this round (a climb's maximum is remembered there)
+        remember(v);
       remembered = true;
     }
   }
@@ -659,7 +675,7 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   // where no remembered maximum lies: this body's colliding faces fall into groups connected
   // through shared vertices (a ring around each region the other body entered), and a group
   // whose extent across d holds none of this round's maxima is a region not followed yet.
-  const bool discover = !remembered || epoch % kDiscoverEvery == 0;
+  const bool discover = !remembered || discover_round;
   const bool full = !remembered || (epoch / kDiscoverEvery) % kFullDiscoverEvery == 0;
   std::vector<std::uint32_t>& open = seed_pairs;  // indices into valid
   open.clear();
