@@ -16,7 +16,15 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
+#if defined(__AVX__)
+#include <immintrin.h>
+#endif
+
+// The segment computation's 4-lane vectors (D4 below) are passed between always-inlined helpers
+// of this file only: no ABI is crossed, so GCC's note that passing them changes without AVX is moot.
+#pragma GCC diagnostic ignored "-Wpsabi"
 
 namespace st::geom {
 
@@ -113,99 +121,167 @@ bool SurfaceWalk::exit(const Vec3& x, std::uint32_t& face, double& dist, int max
 
 namespace {
 
-// Plain selects on values (std::min and std::max return references, which keeps the kernel below
-// from being vectorised).
-inline double min_of(double a, double b) { return b < a ? b : a; }
-inline double max_of(double a, double b) { return a < b ? b : a; }
+// Four rows of the segment computation at once, one per lane, in GCC/Clang vector extensions:
+// lane-wise operators, so the formulas read as scalar ones, and the compiler picks AVX, SSE or
+// plain instructions. A row is an (object face, probe face) pair; the two faces' records are read
+// straight from their FaceRec (four rows' worth of 4 fields turned into 4 columns in registers),
+// so nothing is copied into a batch first.
+typedef double D4 __attribute__((vector_size(32)));
+using M4 = decltype(D4{} < D4{});  ///< per-lane flags (all bits set or none), from comparisons
+
+inline D4 splat(double x) { return D4{x, x, x, x}; }
+/// m ? a : b per lane.
+[[gnu::always_inline]] inline D4 pick(const M4& m, const D4& a, const D4& b) {
+  return (D4)(((M4)a & m) | ((M4)b & ~m));
+}
+/// b < a ? b : a and a < b ? b : a per lane (NaN as in those scalar selects).
+[[gnu::always_inline]] inline D4 min4(const D4& a, const D4& b) { return pick(b < a, b, a); }
+[[gnu::always_inline]] inline D4 max4(const D4& a, const D4& b) { return pick(a < b, b, a); }
+[[gnu::always_inline]] inline D4 sqrt4(const D4& x) {
+#if defined(__AVX__)
+  return _mm256_sqrt_pd(x);
+#else
+  return D4{std::sqrt(x[0]), std::sqrt(x[1]), std::sqrt(x[2]), std::sqrt(x[3])};
+#endif
+}
+
+static_assert(sizeof(FaceRec) == 13 * sizeof(double), "FaceRec is read as 13 doubles");
+
+/// Four records as columns: vertices, unit normal and plane offset, lane l = row l.
+struct Rec4 {
+  D4 x[3], y[3], z[3], nx, ny, nz, c;
+};
+
+/// Fields [f, f + 4) of four records r[0..3] as four columns (a 4 × 4 transpose).
+[[gnu::always_inline]] inline void columns4(const double* const r[4], int f, D4& c0, D4& c1, D4& c2, D4& c3) {
+  D4 x0, x1, x2, x3;
+  std::memcpy(&x0, r[0] + f, sizeof(D4));
+  std::memcpy(&x1, r[1] + f, sizeof(D4));
+  std::memcpy(&x2, r[2] + f, sizeof(D4));
+  std::memcpy(&x3, r[3] + f, sizeof(D4));
+  const D4 t0 = __builtin_shufflevector(x0, x1, 0, 4, 2, 6), t1 = __builtin_shufflevector(x0, x1, 1, 5, 3, 7);
+  const D4 t2 = __builtin_shufflevector(x2, x3, 0, 4, 2, 6), t3 = __builtin_shufflevector(x2, x3, 1, 5, 3, 7);
+  c0 = __builtin_shufflevector(t0, t2, 0, 1, 4, 5);
+  c1 = __builtin_shufflevector(t1, t3, 0, 1, 4, 5);
+  c2 = __builtin_shufflevector(t0, t2, 2, 3, 6, 7);
+  c3 = __builtin_shufflevector(t1, t3, 2, 3, 6, 7);
+}
+
+/// The records p[0..3] as columns (FaceRec: v0, v1, v2, n, c = 13 doubles).
+[[gnu::always_inline]] inline Rec4 load4(const FaceRec* const p[4]) {
+  const double* const r[4] = {p[0]->v[0].data(), p[1]->v[0].data(), p[2]->v[0].data(), p[3]->v[0].data()};
+  Rec4 q;
+  columns4(r, 0, q.x[0], q.y[0], q.z[0], q.x[1]);
+  columns4(r, 4, q.y[1], q.z[1], q.x[2], q.y[2]);
+  columns4(r, 8, q.z[2], q.nx, q.ny, q.nz);
+  q.c = D4{r[0][12], r[1][12], r[2][12], r[3][12]};
+  return q;
+}
 
 /// Where a triangle with signed distances d0..d2 to the other triangle's plane and heights
 /// t0..t2 = x·L along the line direction L crosses that plane: the interval [lo, hi] of x·L, ok
-/// when it crosses (not all distances of one strict sign). Branch-free (the kernel below is
-/// vectorised): an edge crossing the plane at d_i / (d_i − d_j) along it counts when its ends'
-/// signs differ, the quotient of the others is discarded.
+/// when it crosses (not all distances of one strict sign). Branch-free: an edge crossing the
+/// plane at d_i / (d_i − d_j) along it counts when its ends' signs differ, the quotient of the
+/// others is discarded (0/0 on an edge that does not cross is never selected).
 ///
 /// A vertex exactly on the plane (d = 0) counts as on its positive side (a symbolic perturbation,
 /// as in Edelsbrunner & Mücke's simulation of simplicity): the decision depends on the vertex and
 /// the plane only, so two faces sharing an edge that lies in the plane agree, and the curve is
 /// counted once instead of twice or not at all.
-[[gnu::always_inline]] inline void crossing(double d0, double d1, double d2, double t0, double t1, double t2,
-                                            double& lo, double& hi, bool& ok) {
-  constexpr double inf = std::numeric_limits<double>::infinity();
-  const bool n0 = d0 < 0, n1 = d1 < 0, n2 = d2 < 0;
-  const bool c01 = n0 != n1, c12 = n1 != n2, c20 = n2 != n0;
-  // Unconditional divisions (a select around them would make them conditional, and a division
-  // that may trap is never if-converted): 0/0 on an edge that does not cross is never selected.
-  const double s01 = d0 / (d0 - d1), s12 = d1 / (d1 - d2), s20 = d2 / (d2 - d0);  // d_j = 0 gives vertex j
-  const double e01 = t0 + s01 * (t1 - t0), e12 = t1 + s12 * (t2 - t1), e20 = t2 + s20 * (t0 - t2);
-  lo = min_of(min_of(c01 ? e01 : inf, c12 ? e12 : inf), c20 ? e20 : inf);
-  hi = max_of(max_of(c01 ? e01 : -inf, c12 ? e12 : -inf), c20 ? e20 : -inf);
+[[gnu::always_inline]] inline void crossing(const D4& d0, const D4& d1, const D4& d2, const D4& t0, const D4& t1,
+                                            const D4& t2, D4& lo, D4& hi, M4& ok) {
+  const D4 inf = splat(std::numeric_limits<double>::infinity()), zero = splat(0);
+  const M4 n0 = d0 < zero, n1 = d1 < zero, n2 = d2 < zero;
+  const M4 c01 = n0 ^ n1, c12 = n1 ^ n2, c20 = n2 ^ n0;
+  const D4 s01 = d0 / (d0 - d1), s12 = d1 / (d1 - d2), s20 = d2 / (d2 - d0);  // d_j = 0 gives vertex j
+  const D4 e01 = t0 + s01 * (t1 - t0), e12 = t1 + s12 * (t2 - t1), e20 = t2 + s20 * (t0 - t2);
+  lo = min4(min4(pick(c01, e01, inf), pick(c12, e12, inf)), pick(c20, e20, inf));
+  hi = max4(max4(pick(c01, e01, -inf), pick(c12, e12, -inf)), pick(c20, e20, -inf));
   ok = c01 | c12 | c20;
 }
 
-/// The intersection segments of rows [0, n) of a batch: per row, the segment of object face a
-/// and probe face b (unit normals) along L = n_a × n_b, the direction the boundary of the object
-/// surface inside the probe runs (the inside on its left seen from outside), as its vector area
-/// ½ (s0 − o) × (s1 − o) and its length (kEnds false: what FD needs, every round), or its end
-/// points s0, s1 relative to o (kEnds true: the held contact's footprint, once per hold); OK = 0
-/// when there is none (parallel planes, no crossing, or the intervals meet in a point), and then
-/// the vector area and its length are 0. With t = x·L on the line, s1 − s0 = (hi − lo) L / |L|²,
-/// and (s0 − o) × L = c_b n_a − c_a n_b for any point of the line (c = n·(v0 − o); the component
-/// along L drops out). The line's point nearest o is x0 = (c_a (n_b × L) + c_b (L × n_a)) / |L|²
-/// (x0·L = 0), so s = x0 + (t − o·L) L / |L|²; the heights t are measured from o (the vertices
-/// are relative to it) so o·L = 0.
-template <bool kEnds>
-void segment_kernel(SegmentBatch& bt, int n) {
-  using B = SegmentBatch;
-  for (int i = 0; i < n; ++i) {
-    const double anx = bt.in[B::ANX][i], any = bt.in[B::ANY][i], anz = bt.in[B::ANZ][i];
-    const double bnx = bt.in[B::BNX][i], bny = bt.in[B::BNY][i], bnz = bt.in[B::BNZ][i];
-    const double lx = any * bnz - anz * bny, ly = anz * bnx - anx * bnz, lz = anx * bny - any * bnx;
-    const double l2 = lx * lx + ly * ly + lz * lz;  // unit normals: |L| = sin of the angle between the planes
-    const double ax[3] = {bt.in[B::AX0][i], bt.in[B::AX1][i], bt.in[B::AX2][i]};
-    const double ay[3] = {bt.in[B::AY0][i], bt.in[B::AY1][i], bt.in[B::AY2][i]};
-    const double az[3] = {bt.in[B::AZ0][i], bt.in[B::AZ1][i], bt.in[B::AZ2][i]};
-    const double bx[3] = {bt.in[B::BX0][i], bt.in[B::BX1][i], bt.in[B::BX2][i]};
-    const double by[3] = {bt.in[B::BY0][i], bt.in[B::BY1][i], bt.in[B::BY2][i]};
-    const double bz[3] = {bt.in[B::BZ0][i], bt.in[B::BZ1][i], bt.in[B::BZ2][i]};
-    double da[3], db[3], ta[3], tb[3];
-    for (int k = 0; k < 3; ++k) {
-      da[k] = bnx * (ax[k] - bx[0]) + bny * (ay[k] - by[0]) + bnz * (az[k] - bz[0]);  // a's vertices vs b's plane
-      db[k] = anx * (bx[k] - ax[0]) + any * (by[k] - ay[0]) + anz * (bz[k] - az[0]);  // b's vertices vs a's plane
-      ta[k] = ax[k] * lx + ay[k] * ly + az[k] * lz;
-      tb[k] = bx[k] * lx + by[k] * ly + bz[k] * lz;
+/// The intersection segments of four rows: per row, the segment of object face a and probe
+/// face b (unit normals) along L = n_a × n_b, the direction the boundary of the object surface
+/// inside the probe runs (the inside on its left seen from outside): its vector area
+/// ½ (s0 − o) × (s1 − o) and that area's length (both 0 where there is no segment: parallel
+/// planes, no crossing, or the intervals meet in a point), and its end points s0, s1 relative to
+/// o. With t = x·L on the line, s1 − s0 = (hi − lo) L / |L|², and (s0 − o) × L = c_b n_a − c_a n_b
+/// for any point of the line (c = n·(v0 − o); the component along L drops out). The line's point
+/// nearest o is x0 = (c_a (n_b × L) + c_b (L × n_a)) / |L|² (x0·L = 0), so
+/// s = x0 + (t − o·L) L / |L|²; the heights t are measured from o (the vertices are relative to it)
+/// so o·L = 0. Inlined, a caller's unused outputs cost nothing.
+struct Seg4 {
+  M4 ok;                            ///< a segment
+  D4 px, py, pz, pabs;              ///< vector area and its length (0 where none)
+  D4 s0x, s0y, s0z, s1x, s1y, s1z;  ///< end points − o (where ok)
+};
+[[gnu::always_inline]] inline Seg4 segments4(const Rec4& a, const Rec4& b) {
+  const D4 lx = a.ny * b.nz - a.nz * b.ny, ly = a.nz * b.nx - a.nx * b.nz, lz = a.nx * b.ny - a.ny * b.nx;
+  const D4 l2 = lx * lx + ly * ly + lz * lz;  // unit normals: |L| = sin of the angle between the planes
+  D4 da[3], db[3], ta[3], tb[3];
+  for (int k = 0; k < 3; ++k) {
+    da[k] = b.nx * (a.x[k] - b.x[0]) + b.ny * (a.y[k] - b.y[0]) + b.nz * (a.z[k] - b.z[0]);  // a's vertices vs b's plane
+    db[k] = a.nx * (b.x[k] - a.x[0]) + a.ny * (b.y[k] - a.y[0]) + a.nz * (b.z[k] - a.z[0]);  // b's vertices vs a's plane
+    ta[k] = a.x[k] * lx + a.y[k] * ly + a.z[k] * lz;
+    tb[k] = b.x[k] * lx + b.y[k] * ly + b.z[k] * lz;
+  }
+  D4 alo, ahi, blo, bhi;
+  M4 aok, bok;
+  crossing(da[0], da[1], da[2], ta[0], ta[1], ta[2], alo, ahi, aok);
+  crossing(db[0], db[1], db[2], tb[0], tb[1], tb[2], blo, bhi, bok);
+  const D4 lo = max4(alo, blo), hi = min4(ahi, bhi);
+  Seg4 s;
+  s.ok = (l2 > splat(1e-24)) & aok & bok & (hi > lo);  // parallel planes: touching or coplanar, no curve
+  const D4 inv = splat(1) / l2, zero = splat(0);
+  // Selects, not a zero scale: a row without a segment adds exactly nothing to the sums, even
+  // where its products overflow.
+  const D4 scale = splat(0.5) * (hi - lo) * inv;
+  const D4 vx = b.c * a.nx - a.c * b.nx, vy = b.c * a.ny - a.c * b.ny, vz = b.c * a.nz - a.c * b.nz;
+  s.px = pick(s.ok, scale * vx, zero);
+  s.py = pick(s.ok, scale * vy, zero);
+  s.pz = pick(s.ok, scale * vz, zero);
+  s.pabs = pick(s.ok, sqrt4(scale * scale * (vx * vx + vy * vy + vz * vz)), zero);
+  const D4 x0 = (a.c * (b.ny * lz - b.nz * ly) + b.c * (ly * a.nz - lz * a.ny)) * inv;
+  const D4 y0 = (a.c * (b.nz * lx - b.nx * lz) + b.c * (lz * a.nx - lx * a.nz)) * inv;
+  const D4 z0 = (a.c * (b.nx * ly - b.ny * lx) + b.c * (lx * a.ny - ly * a.nx)) * inv;
+  s.s0x = x0 + lo * inv * lx;
+  s.s0y = y0 + lo * inv * ly;
+  s.s0z = z0 + lo * inv * lz;
+  s.s1x = x0 + hi * inv * lx;
+  s.s1y = y0 + hi * inv * ly;
+  s.s1z = z0 + hi * inv * lz;
+  return s;
+}
+
+/// A record with no normal: padding rows (no segment, nothing added).
+const FaceRec& no_record() {
+  static const FaceRec r = [] {
+    FaceRec z;
+    z.v[0] = z.v[1] = z.v[2] = z.n = Vec3::Zero();
+    z.c = 0;
+    return z;
+  }();
+  return r;
+}
+
+/// Calls f(Seg4, first row) for the rows [0, n) of (a, b) four at a time, the last group padded
+/// with records that give no segment.
+template <class F>
+void for_segments(const std::vector<const FaceRec*>& a, const std::vector<const FaceRec*>& b, F&& f) {
+  const std::size_t n = a.size();
+  for (std::size_t i = 0; i < n; i += 4) {
+    const FaceRec* pa[4];
+    const FaceRec* pb[4];
+    for (std::size_t k = 0; k < 4; ++k) {
+      pa[k] = i + k < n ? a[i + k] : &no_record();
+      pb[k] = i + k < n ? b[i + k] : &no_record();
     }
-    double alo, ahi, blo, bhi;
-    bool aok, bok;
-    crossing(da[0], da[1], da[2], ta[0], ta[1], ta[2], alo, ahi, aok);
-    crossing(db[0], db[1], db[2], tb[0], tb[1], tb[2], blo, bhi, bok);
-    const double lo = max_of(alo, blo), hi = min_of(ahi, bhi);
-    const bool ok = (l2 > 1e-24) & aok & bok & (hi > lo);  // parallel planes: touching or coplanar, no curve
-    const double inv = 1 / l2;
-    const double ac = bt.in[B::AC][i], bc = bt.in[B::BC][i];
-    bt.out[B::OK][i] = ok ? 1.0 : 0.0;
-    if constexpr (kEnds) {
-      const double x0 = (ac * (bny * lz - bnz * ly) + bc * (ly * anz - lz * any)) * inv;
-      const double y0 = (ac * (bnz * lx - bnx * lz) + bc * (lz * anx - lx * anz)) * inv;
-      const double z0 = (ac * (bnx * ly - bny * lx) + bc * (lx * any - ly * anx)) * inv;
-      bt.out[B::S0X][i] = x0 + lo * inv * lx;
-      bt.out[B::S0Y][i] = y0 + lo * inv * ly;
-      bt.out[B::S0Z][i] = z0 + lo * inv * lz;
-      bt.out[B::S1X][i] = x0 + hi * inv * lx;
-      bt.out[B::S1Y][i] = y0 + hi * inv * ly;
-      bt.out[B::S1Z][i] = z0 + hi * inv * lz;
-    } else {
-      // Selects, not a zero scale: a row without a segment adds exactly nothing to the sums, even
-      // where its products overflow.
-      const double scale = 0.5 * (hi - lo) * inv;
-      const double vx = bc * anx - ac * bnx, vy = bc * any - ac * bny, vz = bc * anz - ac * bnz;
-      const double px = scale * vx, py = scale * vy, pz = scale * vz;
-      bt.out[B::PX][i] = ok ? px : 0.0;
-      bt.out[B::PY][i] = ok ? py : 0.0;
-      bt.out[B::PZ][i] = ok ? pz : 0.0;
-      bt.out[B::PABS][i] = ok ? std::sqrt(scale * scale * (vx * vx + vy * vy + vz * vz)) : 0.0;
-    }
+    f(segments4(load4(pa), load4(pb)), i);
   }
 }
+
+/// Sum of a vector's lanes.
+inline double lanes_sum(const D4& x) { return (x[0] + x[1]) + (x[2] + x[3]); }
 
 /// Faces grouped afresh (not from the last grouping) when more than 1 in this many are new since
 /// then: joining a new face looks at the ~18 faces around its corners, a fresh grouping at the
@@ -261,20 +337,6 @@ bool unit_normal(const Vec3& a, const Vec3& b, const Vec3& c, Vec3& n, Vec3& cr,
 }
 
 }  // namespace
-
-void SegmentBatch::set(int r, const FaceRec& a, const FaceRec& b) {
-  for (int k = 0; k < 3; ++k)
-    for (int c = 0; c < 3; ++c) {
-      in[AX0 + 3 * k + c][r] = a.v[k][c];
-      in[BX0 + 3 * k + c][r] = b.v[k][c];
-    }
-  for (int c = 0; c < 3; ++c) {
-    in[ANX + c][r] = a.n[c];
-    in[BNX + c][r] = b.n[c];
-  }
-  in[AC][r] = a.c;
-  in[BC][r] = b.c;
-}
 
 void ContactBuilder::Patch::BodyState::reset(const Mesh& m) {
   vf = VertexFaces::build(m);
@@ -365,7 +427,7 @@ void ContactBuilder::Patch::reset() {
 std::size_t ContactBuilder::Patch::bytes() const {
   return probe_s.bytes() + object_s.bytes() + probe_world.capacity() * sizeof(Vec3) +
          (held_object_recs.capacity() + held_probe_recs.capacity()) * sizeof(FaceRec) + held_slots.capacity() * 8 +
-         (batch ? sizeof(SegmentBatch) : 0) +
+         (seg_a.capacity() + seg_b.capacity() + seg_front.capacity()) * 8 +
          (probe_xform_stamp.capacity() + climb.capacity() + seed_pairs.capacity()) * 4 +
          valid.capacity() * sizeof(ContactPair) + valid_slots.capacity() * 8;
 }
@@ -474,28 +536,23 @@ double ContactBuilder::Patch::held_footprint() {
     const Vec3 rel = held_origin + c - held_point;
     radius2 = std::max(radius2, (rel - rel.dot(held_n) * held_n).squaredNorm());
   };
-  if (!batch) batch = std::make_unique<SegmentBatch>();
-  SegmentBatch& bt = *batch;
-  using B = SegmentBatch;
-  int rows = 0;
-  auto flush = [&] {
-    segment_kernel<true>(bt, rows);
-    for (int r = 0; r < rows; ++r) {
-      if (bt.out[B::OK][r] == 0) continue;
-      any = true;
-      reach(Vec3(bt.out[B::S0X][r], bt.out[B::S0Y][r], bt.out[B::S0Z][r]));
-      reach(Vec3(bt.out[B::S1X][r], bt.out[B::S1Y][r], bt.out[B::S1Z][r]));
-    }
-    rows = 0;
-  };
+  seg_a.clear();
+  seg_b.clear();
   for (const auto& [slot_a, slot_b] : held_slots) {
     const FaceRec& ra = held_object_recs[slot_a];
     const FaceRec& rb = held_probe_recs[slot_b];
     if (ra.n.squaredNorm() == 0 || rb.n.squaredNorm() == 0) continue;
-    bt.set(rows, ra, rb);
-    if (++rows == SegmentBatch::kRows) flush();
+    seg_a.push_back(&ra);
+    seg_b.push_back(&rb);
   }
-  flush();
+  for_segments(seg_a, seg_b, [&](const Seg4& g, std::size_t) {
+    for (int k = 0; k < 4; ++k) {
+      if (!g.ok[k]) continue;
+      any = true;
+      reach(Vec3(g.s0x[k], g.s0y[k], g.s0z[k]));
+      reach(Vec3(g.s1x[k], g.s1y[k], g.s1z[k]));
+    }
+  });
   if (!any)
     for (const FaceRec& ra : held_object_recs)
       if (ra.n.squaredNorm() != 0)
@@ -1000,39 +1057,32 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   probe_s.fixed_epoch = epoch;
 
   // The vector area of the object surface inside the probe, from the intersection curve:
-  // A = ½ Σ (s0 − o) × (s1 − o) over the pairs' segments, in batches through the vectorised
-  // kernel. Split into the part on faces not turned away from the previous FD (front) and all.
-  double a_all[3] = {0, 0, 0}, a_front[3] = {0, 0, 0};
-  double abs_all = 0, abs_front = 0;
+  // A = ½ Σ (s0 − o) × (s1 − o) over the pairs' segments, four pairs at a time (segments4).
+  // Split into the part on faces not turned away from the previous FD (front) and all.
   bool any_front_face = false;
-  if (!batch) batch = std::make_unique<SegmentBatch>();
-  SegmentBatch& bt = *batch;
-  int rows = 0;
-  auto flush = [&] {
-    using B = SegmentBatch;
-    segment_kernel<false>(bt, rows);
-    // Rows without a segment add zeros (the kernel's selects), so the sums need no branch.
-    for (int r = 0; r < rows; ++r) {
-      const double f = bt.front[r] ? 1.0 : 0.0, piece_abs = bt.out[B::PABS][r];
-      for (int c = 0; c < 3; ++c) {
-        a_all[c] += bt.out[B::PX + c][r];
-        a_front[c] += f * bt.out[B::PX + c][r];
-      }
-      abs_all += piece_abs;
-      abs_front += f * piece_abs;
-    }
-    rows = 0;
-  };
+  seg_a.clear();
+  seg_b.clear();
+  seg_front.clear();
   for (const auto& [slot_a, slot_b] : valid_slots) {
     const std::uint8_t use_a = object_s.use[slot_a];
     if (use_a == kNoDirection || probe_s.use[slot_b] == kNoDirection) continue;  // degenerate: no direction
     const bool front = use_a == kFront;
     any_front_face |= front;
-    bt.front[rows] = front;
-    bt.set(rows, object_s.recs[slot_a], probe_s.recs[slot_b]);
-    if (++rows == SegmentBatch::kRows) flush();
+    seg_a.push_back(&object_s.recs[slot_a]);
+    seg_b.push_back(&probe_s.recs[slot_b]);
+    seg_front.push_back(front ? 1.0 : 0.0);
   }
-  flush();
+  seg_front.resize((seg_front.size() + 3) / 4 * 4, 0.0);  // padding rows are not front
+  D4 sx = splat(0), sy = sx, sz = sx, sabs = sx, fx = sx, fy = sx, fz = sx, fabs = sx;
+  for_segments(seg_a, seg_b, [&](const Seg4& g, std::size_t i) {
+    D4 f;
+    std::memcpy(&f, &seg_front[i], sizeof(D4));
+    sx += g.px, sy += g.py, sz += g.pz, sabs += g.pabs;
+    fx += f * g.px, fy += f * g.py, fz += f * g.pz, fabs += f * g.pabs;
+  });
+  const double a_all[3] = {lanes_sum(sx), lanes_sum(sy), lanes_sum(sz)};
+  const double a_front[3] = {lanes_sum(fx), lanes_sum(fy), lanes_sum(fz)};
+  const double abs_all = lanes_sum(sabs), abs_front = lanes_sum(fabs);
 
   // FD: the front part of the curve while contact continues (thin plates, wedges), all of it at
   // first contact; then the fallbacks.

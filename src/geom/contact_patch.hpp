@@ -3,7 +3,6 @@
 #pragma once
 #include <array>
 #include <cstdint>
-#include <memory>
 #include <span>
 #include <vector>
 
@@ -21,50 +20,6 @@ struct FaceRec {
   Vec3 v[3];
   Vec3 n;
   double c;
-};
-
-/// Up to kRows (object face, probe face) pairs laid out by columns, so that the compiler
-/// vectorises the intersection segment kernel over rows (contact_patch.cpp): the two faces'
-/// records in, the segment's vector area or its end points out. Fixed size, so that every column
-/// is a known distinct array (no aliasing for the vectoriser to rule out). 19 KB.
-struct SegmentBatch {
-  static constexpr int kRows = 64;
-  enum In {
-    AX0,
-    AY0,
-    AZ0,
-    AX1,
-    AY1,
-    AZ1,
-    AX2,
-    AY2,
-    AZ2,
-    ANX,
-    ANY,
-    ANZ,
-    AC,
-    BX0,
-    BY0,
-    BZ0,
-    BX1,
-    BY1,
-    BZ1,
-    BX2,
-    BY2,
-    BZ2,
-    BNX,
-    BNY,
-    BNZ,
-    BC,
-    kIn
-  };
-  enum Out { PX, PY, PZ, PABS, S0X, S0Y, S0Z, S1X, S1Y, S1Z, OK, kOut };
-  alignas(64) double in[kIn][kRows];  ///< records of face a (object) and b (probe), rows = pairs
-  /// Per row: 1 if a segment; its vector area and that area's length (0 if none), or its end points − o.
-  alignas(64) double out[kOut][kRows];
-  bool front[kRows];  ///< the object face is not turned away from the previous FD
-  /// Writes the two records into row r.
-  void set(int r, const FaceRec& a, const FaceRec& b);
 };
 
 /// Point location on one body's surface seen along a direction d: walks from a start face across
@@ -208,9 +163,12 @@ struct ContactBuilder::Patch {
   std::uint32_t group_faces(BodyState& T);
   // Scratch.
   std::vector<ContactPair> valid;
-  std::vector<std::array<std::uint32_t, 2>> valid_slots;        ///< per valid pair: its object and probe record slots
-  std::vector<Vec3> probe_world;                                ///< probe vertices, object-local (valid where stamped)
-  std::unique_ptr<SegmentBatch> batch;                          ///< scratch of the segment kernel
+  std::vector<std::array<std::uint32_t, 2>> valid_slots;  ///< per valid pair: its object and probe record slots
+  std::vector<Vec3> probe_world;                          ///< probe vertices, object-local (valid where stamped)
+  /// Scratch of the segment computation: per usable pair, its object and probe face records and
+  /// 1 if the object face is not turned away from the previous FD (padded to whole groups of 4).
+  std::vector<const FaceRec*> seg_a, seg_b;
+  std::vector<double> seg_front;
   std::vector<std::uint32_t> probe_xform_stamp;                 ///< round in which probe_world[v] was computed
   std::uint32_t climb_serial = 0;                               ///< climbs so far (path stamps)
   Eigen::Matrix3d rot{Eigen::Matrix3d::Identity()};             ///< this round's pose rotation
