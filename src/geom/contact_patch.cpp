@@ -755,7 +755,7 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
     for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
       const std::uint32_t g = label[slot];
       if (first[g] == UINT32_MAX) first[g] = slot;
-      if (T.fixed[slot].bad_index) continue;
+      if (T.use[slot] == kNoDirection) continue;  // no record (an object face's is not filled when degenerate)
       double* bx = &box[4 * std::size_t(g)];
       for (const Vec3& x : T.recs[slot].v) {
         const double xu = x.dot(walk.u), xw = x.dot(walk.w);

@@ -140,6 +140,65 @@ TEST_CASE("contact patch: a second contact region is found when it appears, and 
   }
 }
 
+TEST_CASE("contact patch: a small region appearing next to a large one is found (grouped apart from it)") {
+  // A finely meshed 20 mm ball A slides along y, 1 mm deep in a flat block's top face (z = 20;
+  // ~110 colliding faces, the same ones all along: the probe only translates), while a coarse
+  // 5 mm ball B (80 faces, at most ~15 colliding) slides up a ramp beside it (a block tilted 0.1
+  // rad about x) until it is the deeper. Each search for new regions then sees only B's few new
+  // faces, and groups just those: they touch none of A's and must make a group of their own, or B
+  // is taken for part of A's region and not climbed before the next search over the whole patch
+  // (32 rounds on). PD must be, within the 4 rounds between searches after B touches, the
+  // largest distance a probe vertex travels along FD to leave the block or the ramp.
+  Mesh probe;
+  auto add = [](Mesh& m, const Mesh& part, const Pose& at) {
+    const auto base = std::uint32_t(m.local.size());
+    for (const Vec3& v : part.local) m.local.push_back(at * (part.origin + v));
+    for (const Tri& t : part.faces) m.faces.push_back({t[0] + base, t[1] + base, t[2] + base});
+  };
+  add(probe, make_icosphere(20, 32), pose_at({-25, 0, 0}));  // A
+  add(probe, make_icosphere(5, 2), pose_at({25, 0, -14}));   // B: its centre 14 mm below A's
+  const std::size_t a_vertices = probe.local.size() - 42;    // B (frequency 2) has 42 vertices
+  constexpr double kRamp = 0.1;                              // rad
+  const Vec3 ramp_n(0, -std::sin(kRamp), std::cos(kRamp));   // the ramp's top face normal
+  double b_low = 1e9;  // B's lowest vertex, probe frame (its coarse mesh has none at the pole)
+  for (std::size_t v = a_vertices; v < probe.local.size(); ++v)
+    b_low = std::min(b_low, (probe.origin + probe.local[v]).z());
+  const Vec3 ramp_at(25, 0, 39 + b_low - 0.5);  // a point of that face: 0.5 mm under B's path at y = 0
+  Mesh object;
+  add(object, make_box({60, 400, 40}), pose_at({-25, 0, 0}));  // top face z = 20
+  Pose ramp = Pose::Identity();
+  ramp.linear() = Eigen::AngleAxisd(kRamp, Vec3::UnitX()).toRotationMatrix();
+  ramp.translation() = ramp_at - ramp.linear() * Vec3(0, 0, 20);  // the tilted box's top face through ramp_at
+  add(object, make_box({20, 400, 40}), ramp);
+  ContactBuilder b;
+  int touched = -1;  // the round B touched the ramp in
+  bool b_deeper = false;
+  for (int k = 0; k <= 28; ++k) {
+    const Pose p = pose_at({0, 0.7 * k, 39});  // A's centre 19 mm above the block: 1 mm deep
+    const ContactModel m = model_at(b, probe, object, p);
+    REQUIRE(m.in_contact());
+    const Vec3 d = fd(m);
+    double depth_a = -1e9, depth_b = -1e9, pd = 0;  // deepest vertex of each ball, and along d
+    for (std::size_t v = 0; v < probe.local.size(); ++v) {
+      const Vec3 x = p * (probe.origin + probe.local[v]);
+      if (v < a_vertices) {
+        depth_a = std::max(depth_a, 20 - x.z());
+        pd = std::max(pd, (20 - x.z()) / d.z());
+      } else {
+        depth_b = std::max(depth_b, ramp_n.dot(ramp_at - x));
+        pd = std::max(pd, ramp_n.dot(ramp_at - x) / ramp_n.dot(d));
+      }
+    }
+    if (depth_b > 0 && touched < 0) touched = k;
+    b_deeper |= depth_b > depth_a + 0.1;
+    CAPTURE(k);
+    CHECK(angle_deg(d, Vec3::UnitZ()) < 6);  // between the block's and the ramp's normals
+    if (touched >= 0 && k >= touched + 4) CHECK(m.penetration_mm == doctest::Approx(pd).epsilon(1e-6));
+  }
+  CHECK(touched > 0);
+  CHECK(b_deeper);  // the test reached the rounds where only finding B gives the right depth
+}
+
 TEST_CASE("contact patch: box edge and corner: FD on the bisector, PD = depth") {
   const Vec3 edge_dir = Vec3(1, 0, 1).normalized(), corner_dir = Vec3(1, 1, 1).normalized();
   for (double d : {0.5, 2.0, 5.0}) {
