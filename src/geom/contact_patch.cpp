@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <utility>
 #include <limits>
 #if defined(__AVX__)
 #include <immintrin.h>
@@ -264,21 +265,33 @@ const FaceRec& no_record() {
   return r;
 }
 
-/// Calls f(Seg4, first row) for the rows [0, n) of (a, b) four at a time, the last group padded
-/// with records that give no segment.
+/// Rows (an object and a probe face record, and a weight) gathered four at a time for
+/// segments4: f(Seg4, weights) runs on each full group; finish() pads the last one with records
+/// that give no segment (weight 0).
 template <class F>
-void for_segments(const std::vector<const FaceRec*>& a, const std::vector<const FaceRec*>& b, F&& f) {
-  const std::size_t n = a.size();
-  for (std::size_t i = 0; i < n; i += 4) {
-    const FaceRec* pa[4];
-    const FaceRec* pb[4];
-    for (std::size_t k = 0; k < 4; ++k) {
-      pa[k] = i + k < n ? a[i + k] : &no_record();
-      pb[k] = i + k < n ? b[i + k] : &no_record();
-    }
-    f(segments4(load4(pa), load4(pb)), i);
+struct Quads {
+  explicit Quads(F fn) : f(std::move(fn)) {}
+  void add(const FaceRec* ra, const FaceRec* rb, double weight) {
+    a[n] = ra, b[n] = rb, w[n] = weight;
+    if (++n == 4) run();
   }
-}
+  void finish() {
+    if (n == 0) return;
+    for (int k = n; k < 4; ++k) a[k] = b[k] = &no_record(), w[k] = 0;
+    run();
+  }
+
+ private:
+  void run() {
+    f(segments4(load4(a), load4(b)), D4{w[0], w[1], w[2], w[3]});
+    n = 0;
+  }
+  F f;
+  const FaceRec* a[4];
+  const FaceRec* b[4];
+  double w[4];
+  int n = 0;
+};
 
 /// Sum of a vector's lanes.
 inline double lanes_sum(const D4& x) { return (x[0] + x[1]) + (x[2] + x[3]); }
@@ -427,7 +440,6 @@ void ContactBuilder::Patch::reset() {
 std::size_t ContactBuilder::Patch::bytes() const {
   return probe_s.bytes() + object_s.bytes() + probe_world.capacity() * sizeof(Vec3) +
          (held_object_recs.capacity() + held_probe_recs.capacity()) * sizeof(FaceRec) + held_slots.capacity() * 8 +
-         (seg_a.capacity() + seg_b.capacity() + seg_front.capacity()) * 8 +
          (probe_xform_stamp.capacity() + climb.capacity() + seed_pairs.capacity()) * 4 +
          valid.capacity() * sizeof(ContactPair) + valid_slots.capacity() * 8;
 }
@@ -536,16 +548,7 @@ double ContactBuilder::Patch::held_footprint() {
     const Vec3 rel = held_origin + c - held_point;
     radius2 = std::max(radius2, (rel - rel.dot(held_n) * held_n).squaredNorm());
   };
-  seg_a.clear();
-  seg_b.clear();
-  for (const auto& [slot_a, slot_b] : held_slots) {
-    const FaceRec& ra = held_object_recs[slot_a];
-    const FaceRec& rb = held_probe_recs[slot_b];
-    if (ra.n.squaredNorm() == 0 || rb.n.squaredNorm() == 0) continue;
-    seg_a.push_back(&ra);
-    seg_b.push_back(&rb);
-  }
-  for_segments(seg_a, seg_b, [&](const Seg4& g, std::size_t) {
+  Quads quads([&](const Seg4& g, const D4&) {
     for (int k = 0; k < 4; ++k) {
       if (!g.ok[k]) continue;
       any = true;
@@ -553,6 +556,13 @@ double ContactBuilder::Patch::held_footprint() {
       reach(Vec3(g.s1x[k], g.s1y[k], g.s1z[k]));
     }
   });
+  for (const auto& [slot_a, slot_b] : held_slots) {
+    const FaceRec& ra = held_object_recs[slot_a];
+    const FaceRec& rb = held_probe_recs[slot_b];
+    if (ra.n.squaredNorm() == 0 || rb.n.squaredNorm() == 0) continue;
+    quads.add(&ra, &rb, 0);
+  }
+  quads.finish();
   if (!any)
     for (const FaceRec& ra : held_object_recs)
       if (ra.n.squaredNorm() != 0)
@@ -710,7 +720,8 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   // A remembered maximum other than the deepest is climbed every round only while it is at least
   // kShallowShare as deep as the deepest point found so far (it could set PD); a shallower one
   // is kept as it is and climbed in the rounds that look for new regions (every
-  // kDiscoverEvery-th), which is often enough for it to follow its region.
+  // kDiscoverEvery-th; in one round with them, the extra work raises fewer rounds' cost), which is
+  // often enough for it to follow its region.
   climb.clear();
   bool remembered = false;
   const bool discover_round = epoch % kDiscoverEvery == 0;
@@ -764,6 +775,7 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
     }
     std::vector<std::uint8_t>& group_open = T.group_open;  // per group: no maximum in its extent
     group_open.assign(n_groups, 0);
+    bool any_open = false;
     for (std::uint32_t g = 0; g < n_groups; ++g) {
       const double* bx = &box[4 * std::size_t(g)];
       bool followed = false;
@@ -776,9 +788,10 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
       for (int i = 0; i < Memory::kKnown && !followed; ++i)
         followed = memory.known[i] < test_nv && inside(memory.known[i]);
       group_open[g] = followed ? 0 : 1;
+      any_open |= !followed;
       if (!followed && !T.fixed[first[g]].bad_index) drop(T.fixed[first[g]].vid[0]);
     }
-    for (std::uint32_t i = 0; i < valid.size(); ++i)
+    for (std::uint32_t i = 0; i < valid.size() && any_open; ++i)
       if (group_open[label[valid_slots[i][probe_side ? 1 : 0]]]) open.push_back(i);
   }
   std::uint32_t low_v[kLowSeeds], low_f[kLowSeeds];
@@ -1060,26 +1073,19 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   // A = ½ Σ (s0 − o) × (s1 − o) over the pairs' segments, four pairs at a time (segments4).
   // Split into the part on faces not turned away from the previous FD (front) and all.
   bool any_front_face = false;
-  seg_a.clear();
-  seg_b.clear();
-  seg_front.clear();
+  D4 sx = splat(0), sy = sx, sz = sx, sabs = sx, fx = sx, fy = sx, fz = sx, fabs = sx;
+  Quads quads([&](const Seg4& g, const D4& f) {  // f: 1 on the front rows
+    sx += g.px, sy += g.py, sz += g.pz, sabs += g.pabs;
+    fx += f * g.px, fy += f * g.py, fz += f * g.pz, fabs += f * g.pabs;
+  });
   for (const auto& [slot_a, slot_b] : valid_slots) {
     const std::uint8_t use_a = object_s.use[slot_a];
     if (use_a == kNoDirection || probe_s.use[slot_b] == kNoDirection) continue;  // degenerate: no direction
     const bool front = use_a == kFront;
     any_front_face |= front;
-    seg_a.push_back(&object_s.recs[slot_a]);
-    seg_b.push_back(&probe_s.recs[slot_b]);
-    seg_front.push_back(front ? 1.0 : 0.0);
+    quads.add(&object_s.recs[slot_a], &probe_s.recs[slot_b], front ? 1.0 : 0.0);
   }
-  seg_front.resize((seg_front.size() + 3) / 4 * 4, 0.0);  // padding rows are not front
-  D4 sx = splat(0), sy = sx, sz = sx, sabs = sx, fx = sx, fy = sx, fz = sx, fabs = sx;
-  for_segments(seg_a, seg_b, [&](const Seg4& g, std::size_t i) {
-    D4 f;
-    std::memcpy(&f, &seg_front[i], sizeof(D4));
-    sx += g.px, sy += g.py, sz += g.pz, sabs += g.pabs;
-    fx += f * g.px, fy += f * g.py, fz += f * g.pz, fabs += f * g.pabs;
-  });
+  quads.finish();
   const double a_all[3] = {lanes_sum(sx), lanes_sum(sy), lanes_sum(sz)};
   const double a_front[3] = {lanes_sum(fx), lanes_sum(fy), lanes_sum(fz)};
   const double abs_all = lanes_sum(sabs), abs_front = lanes_sum(fabs);

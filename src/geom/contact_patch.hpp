@@ -163,12 +163,8 @@ struct ContactBuilder::Patch {
   std::uint32_t group_faces(BodyState& T);
   // Scratch.
   std::vector<ContactPair> valid;
-  std::vector<std::array<std::uint32_t, 2>> valid_slots;  ///< per valid pair: its object and probe record slots
-  std::vector<Vec3> probe_world;                          ///< probe vertices, object-local (valid where stamped)
-  /// Scratch of the segment computation: per usable pair, its object and probe face records and
-  /// 1 if the object face is not turned away from the previous FD (padded to whole groups of 4).
-  std::vector<const FaceRec*> seg_a, seg_b;
-  std::vector<double> seg_front;
+  std::vector<std::array<std::uint32_t, 2>> valid_slots;        ///< per valid pair: its object and probe record slots
+  std::vector<Vec3> probe_world;                                ///< probe vertices, object-local (valid where stamped)
   std::vector<std::uint32_t> probe_xform_stamp;                 ///< round in which probe_world[v] was computed
   std::uint32_t climb_serial = 0;                               ///< climbs so far (path stamps)
   Eigen::Matrix3d rot{Eigen::Matrix3d::Identity()};             ///< this round's pose rotation
