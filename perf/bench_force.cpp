@@ -402,7 +402,9 @@ void write_trace(const std::string& path, const Replay& rp, const ForceScene& s)
 }
 
 /// Contact model cost at the perf poses: cold (a fresh builder) and warm (after 100 rounds
-/// sliding 0.01 mm per round into the pose), against collide() in the same loop.
+/// sliding 0.01 mm per round into the pose), against collide() in the same loop. The warm rounds
+/// repeat the pose, or with slide_mm > 0 move the probe that far along x each round, through it
+/// (centred on it).
 struct Cost {
   std::uint32_t contacts = 0;
   std::string model;
@@ -413,7 +415,7 @@ struct Cost {
 };
 
 std::vector<Cost> contact_cost(const Body& probe, const Body& object, const std::vector<TaggedPose>& poses,
-                               const std::vector<Model>& models, int runs) {
+                               const std::vector<Model>& models, int runs, double slide_mm) {
   std::vector<Cost> out;
   geom::CollideScratch sc;
   geom::CollideResult r;
@@ -441,9 +443,10 @@ std::vector<Cost> contact_cost(const Body& probe, const Body& object, const std:
       // (collide() right after a fresh builder's set-up runs on evicted caches and looks slower).
       geom::ContactBuilder b(m.contact);
       b.prepare(probe.mesh, object.mesh);
+      const double start = -0.5 * runs * slide_mm;  // the timed rounds' first offset
       for (int k = 0; k < 100 + runs; ++k) {
         geom::Pose p = tp.pose;
-        p.translation().x() += double(std::min(k, 100) - 100) * 0.01;
+        p.translation().x() += start + double(k - 100) * (k < 100 ? 0.01 : slide_mm);
         const auto t0 = clock::now();
         geom::collide(probe.mesh, probe.tree, object.mesh, object.tree, p, {}, sc, r);
         const auto t1 = clock::now();
@@ -470,6 +473,7 @@ void add_force(CLI::App& app) {
   struct Args {
     std::string scenes = "box,sphere,plate,hand_elephant,hand_armadillo", models = "paper,patch", trace_dir, poses;
     int collision_ticks = 2, cost_runs = 30;
+    double cost_slide_mm = 0;
     bool json = false, quick = false;
   };
   auto a = std::make_shared<Args>();
@@ -489,6 +493,11 @@ void add_force(CLI::App& app) {
                   "pose file for the contact-cost figure (default perf/poses/hand_elephant.txt when present)");
   cmd->add_option("--cost-runs", a->cost_runs, "timed rounds per pose and model for the contact-cost figure")
       ->check(CLI::Range(1, 100000))
+      ->capture_default_str();
+  cmd->add_option("--cost-slide", a->cost_slide_mm,
+                  "for the contact-cost figure, move the probe this many mm along x each timed round, through "
+                  "each pose (0: the timed rounds repeat the pose)")
+      ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   cmd->add_flag("--quick", a->quick, "shorter scripts, fewer cost runs (CI smoke run)");
   cmd->add_flag("--json", a->json, "print one JSON object");
@@ -551,7 +560,8 @@ void add_force(CLI::App& app) {
         std::filesystem::exists(dir + "/elephant.off")) {
       std::fprintf(stderr, "force: contact-model cost at the poses of %s\n", pose_file.c_str());
       const Body hand = load_body(dir + "/hand_L2.off"), elephant = load_body(dir + "/elephant.off");
-      costs = contact_cost(hand, elephant, read_tagged_poses(pose_file), models, a->quick ? 5 : a->cost_runs);
+      costs = contact_cost(hand, elephant, read_tagged_poses(pose_file), models, a->quick ? 5 : a->cost_runs,
+                           a->cost_slide_mm);
     }
     auto num = [](double v) {
       char b[64];
@@ -578,7 +588,7 @@ void add_force(CLI::App& app) {
             num(f.collide_us_p50).c_str(), num(f.contact_us_p50).c_str(), num(f.contacts_p50).c_str(), f.ticks,
             f.contact_ticks);
       }
-      std::printf("\n], \"contact_cost\": [");
+      std::printf("\n], \"contact_cost_slide_mm\": %s, \"contact_cost\": [", num(a->cost_slide_mm).c_str());
       for (std::size_t i = 0; i < costs.size(); ++i) {
         const Cost& c = costs[i];
         std::printf(
@@ -606,8 +616,9 @@ void add_force(CLI::App& app) {
     if (!costs.empty()) {
       std::printf(
           "\ncontact model cost at the perf poses (median µs, warm mean beside; share = contact / collide() of the "
-          "warm "
-          "rounds)\n");
+          "warm rounds, which %s)\n",
+          a->cost_slide_mm > 0 ? ("slide " + num(a->cost_slide_mm) + " mm a round through the pose").c_str()
+                               : "repeat the pose");
       std::printf("%8s %-6s %10s %10s %10s %10s %8s %8s %8s\n", "contacts", "model", "collide", "cold", "warm",
                   "warm mean", "cold %", "warm %", "mean %");
       for (const Cost& c : costs)

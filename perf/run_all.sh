@@ -138,7 +138,6 @@ log "speed/accuracy trade (offline, simulated time)"
   > "$out/trade.txt"
 
 log "force rendering quality: paper vs patch contact model, open and closed loop (simulated time)"
-# Per-tick traces (perf/results/force/, not committed: 8 MB) feed force_slide.png.
 # Per-tick traces go to $out/force/ (8 MB, not committed); force_slide.png is drawn from them.
 force_args=(--json --trace-dir "$out/force" --poses "$out/poses/hand_elephant.txt")
 [ $quick = 1 ] && force_args+=(--quick --scenes box,plate,hand_elephant)

@@ -17,8 +17,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
-#include <utility>
 #include <limits>
+#include <utility>
 #if defined(__AVX__)
 #include <immintrin.h>
 #endif
@@ -720,8 +720,8 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   // A remembered maximum other than the deepest is climbed every round only while it is at least
   // kShallowShare as deep as the deepest point found so far (it could set PD); a shallower one
   // is kept as it is and climbed in the rounds that look for new regions (every
-  // kDiscoverEvery-th; in one round with them, the extra work raises fewer rounds' cost), which is
-  // often enough for it to follow its region.
+  // kDiscoverEvery-th: the extra work then falls in rounds that have some anyway, and the
+  // typical round's cost stays down), which is often enough for it to follow its region.
   climb.clear();
   bool remembered = false;
   const bool discover_round = epoch % kDiscoverEvery == 0;

@@ -159,7 +159,8 @@ struct ContactBuilder::Patch {
   /// T.group_label[slot], labels 0 .. n − 1; returns n. A face keeps the group it was given at the
   /// last grouping (carried with its fixed part, so a group is followed from round to round);
   /// only faces new since then are joined, through the colliding faces around their corners;
-  /// with many new faces, every face is grouped afresh. (Groups that have split since stay one.)
+  /// with many new faces, every face is grouped afresh. A group that has split since stays one:
+  /// a region that separated from a followed one is found by the next search over the whole patch.
   std::uint32_t group_faces(BodyState& T);
   // Scratch.
   std::vector<ContactPair> valid;
