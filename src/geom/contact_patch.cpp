@@ -329,11 +329,16 @@ constexpr std::uint32_t kDiscoverEvery = 4;
 /// A remembered maximum less than this share as deep as the deepest point found so far is not
 /// climbed in every round (see Patch::side).
 constexpr double kShallowShare = 0.5;
-/// Every this many searches for new regions, one starts from the whole patch; the others only
-/// from the regions no remembered maximum follows (where the remembered ones are climbed every
-/// round, a climb from the patch's rim mostly retraces one: a search over the whole patch costs
-/// ~4x a round at ~1,000 contacts).
-constexpr std::uint32_t kFullDiscoverEvery = 8;
+/// The patrol (Patch::side): one climb at a time from a pair of the whole patch, at most this
+/// many steps per search for new regions, continued in the next search from where it stopped.
+/// A climb from a region's rim to its peak takes ~50 steps at a 21 mm deep press of hand_L2 on
+/// the elephant, ~1.5 µs each (vertices no recent round touched, the caches swept by the
+/// collision round): 4 per side keep a search's cost to ~12 µs and finish such a climb within
+/// ~13 searches (~50 rounds).
+constexpr int kPatrolSteps = 4;
+/// Golden-ratio step of the pairs the patrol starts from: the k-th climb starts from pair
+/// ⌊frac(k·φ)·n⌋ of n, so successive ones spread evenly over the patch whatever n is.
+constexpr double kPatrolStep = 0.6180339887498949;
 /// Steps a walk may take from its start face: neighbouring vertices land within a face or two of
 /// each other; a longer walk means the point is not over the patch.
 constexpr int kMaxWalkSteps = 16;
@@ -663,10 +668,13 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
     for (; i > 0 && maxima_depth[i] > maxima_depth[i - 1]; --i)
       std::swap(maxima[i], maxima[i - 1]), std::swap(maxima_depth[i], maxima_depth[i - 1]);
   };
-  auto climb_from = [&](std::uint32_t v) {
-    if (path[v] >= round_first) return;
+  // Returns where it stopped when it took max_steps steps without reaching a maximum or an
+  // earlier path (UINT32_MAX: it ended).
+  auto climb_from = [&](std::uint32_t v, int max_steps = std::numeric_limits<int>::max()) -> std::uint32_t {
+    if (path[v] >= round_first) return UINT32_MAX;
     const std::uint32_t serial = ++climb_serial;
-    for (;;) {
+    for (int step = 0;; ++step) {
+      if (step == max_steps) return v;
       path[v] = serial;
       std::uint32_t cand[32];
       double key[32];
@@ -689,7 +697,7 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
         joined |= path[cand[i]] >= round_first && path[cand[i]] != serial;
         if (eval(cand[i], exitf[v]) > depth[v]) next = cand[i];
       }
-      if (best.capped) return;
+      if (best.capped) return UINT32_MAX;
       // A vertex higher than all its neighbours may still sit below a ridge or plateau between
       // vertices: look one ring further before calling it the deepest (other maxima are only
       // kept for next round's starts, they need not be exact).
@@ -705,10 +713,10 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
       }
       if (next == UINT32_MAX) {  // a local maximum
         remember(v);
-        return;
+        return UINT32_MAX;
       }
       // Next to an earlier climb's path: that climb has been up this slope already.
-      if (joined) return;
+      if (joined) return UINT32_MAX;
       v = next;
     }
   };
@@ -738,13 +746,17 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   // While the remembered maxima hold, new regions are looked for every kDiscoverEvery rounds
   // (a region starts at depth 0, so one found a few rounds late has not grown much): climbs
   // start from the colliding pairs' vertices lowest along d (over a flat surface the deepest)
-  // and from a sample of the pairs whose offset turns every round. Every kFullDiscoverEvery-th
-  // time (and with nothing remembered) from the whole patch; otherwise only from the regions
-  // where no remembered maximum lies: this body's colliding faces fall into groups connected
-  // through shared vertices (a ring around each region the other body entered), and a group
-  // whose extent across d holds none of this round's maxima is a region not followed yet.
+  // and from a sample of the pairs whose offset turns every round. With nothing remembered from
+  // the whole patch; otherwise only from the regions where no remembered maximum lies: this
+  // body's colliding faces fall into groups connected through shared vertices (a ring around
+  // each region the other body entered), and a group whose extent across d holds none of this
+  // round's maxima is a region not followed yet. What that misses (a region that split from a
+  // followed group, or a second peak inside one) is found by the patrol: one climb at a time
+  // from a pair of the whole patch, a different pair each time (kPatrolStep), kPatrolSteps steps
+  // per search and continued in the next. (A search over the whole patch at once cost ~10x a
+  // round at ~1,000 contacts, its climbs from the rim mostly retracing the remembered ones.)
   const bool discover = !remembered || discover_round;
-  const bool full = !remembered || (epoch / kDiscoverEvery) % kFullDiscoverEvery == 0;
+  const bool full = !remembered;
   std::vector<std::uint32_t>& open = seed_pairs;  // indices into valid
   open.clear();
   if (discover && full) {
@@ -822,8 +834,30 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
     for (std::uint32_t v : test.faces[tf])
       if (v < test_nv && visit[v] != epoch && eval(v, sf) > 0) climb.push_back(v);
   }
+  const bool searched = !climb.empty();  // climbs from regions not followed (their groups now known)
   std::sort(climb.begin(), climb.end(), [&](std::uint32_t a, std::uint32_t b) { return depth[a] > depth[b]; });
   for (std::uint32_t v : climb) climb_from(v);
+  // The patrol: its climb goes on from where it stopped while that vertex is still inside, else
+  // a new one starts from the deepest inside vertex of the next pair.
+  std::uint32_t patrol = UINT32_MAX, patrol_face = UINT32_MAX, patrol_k = memory.patrol_k;
+  if (discover && !full && !valid.empty()) {
+    std::uint32_t v = memory.patrol;
+    if (!(v < test_nv && memory.patrol_face < surface.faces.size() && eval(v, memory.patrol_face) > 0)) {
+      const double k = patrol_k++;
+      const std::size_t i =
+          std::min(valid.size() - 1, std::size_t((k * kPatrolStep - std::floor(k * kPatrolStep)) * double(valid.size())));
+      const std::uint32_t tf = probe_side ? valid[i].probe : valid[i].object;
+      const std::uint32_t sf = probe_side ? valid[i].object : valid[i].probe;
+      v = UINT32_MAX;
+      for (std::uint32_t u : test.faces[tf])
+        if (u < test_nv && eval(u, sf) > 0 && (v == UINT32_MAX || depth[u] > depth[v])) v = u;
+    }
+    if (v != UINT32_MAX) patrol = climb_from(v, kPatrolSteps);
+    if (patrol != UINT32_MAX) patrol_face = exitf[patrol];
+  } else {  // kept through the rounds between searches
+    patrol = memory.patrol;
+    patrol_face = memory.patrol_face;
+  }
   const std::uint32_t deepest_vertex = best.vertex;
   const Memory last = memory;
   memory = Memory{};
@@ -831,8 +865,11 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
     memory.vertex[i] = maxima[i];
     memory.face[i] = exitf[maxima[i]];
   }
-  // What the last search that climbed knew.
-  if (climb.empty())
+  memory.patrol = patrol;
+  memory.patrol_face = patrol_face;
+  memory.patrol_k = patrol_k;
+  // What the last search that climbed from regions not followed knew.
+  if (!searched)
     std::copy(std::begin(last.known), std::end(last.known), std::begin(memory.known));
   else
     std::copy(known, known + n_known, std::begin(memory.known));

@@ -78,6 +78,9 @@ struct ContactBuilder::Patch {
     /// with more than kSize peaks, or a rim around a hole, would be searched every time).
     std::uint32_t known[kKnown] = {UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX,
                                    UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX};
+    /// The patrol's climb (see Patch::side): the vertex it stopped at (UINT32_MAX: none under
+    /// way), the face that vertex left through, and how many climbs it has started.
+    std::uint32_t patrol = UINT32_MAX, patrol_face = UINT32_MAX, patrol_k = 0;
   };
 
   /// What the model keeps per body: the faces around each vertex, and per-vertex and per-face
@@ -160,7 +163,7 @@ struct ContactBuilder::Patch {
   /// last grouping (carried with its fixed part, so a group is followed from round to round);
   /// only faces new since then are joined, through the colliding faces around their corners;
   /// with many new faces, every face is grouped afresh. A group that has split since stays one:
-  /// a region that separated from a followed one is found by the next search over the whole patch.
+  /// a region that separated from a followed one is found by the patrol (see Patch::side).
   std::uint32_t group_faces(BodyState& T);
   // Scratch.
   std::vector<ContactPair> valid;

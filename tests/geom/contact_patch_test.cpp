@@ -146,8 +146,8 @@ TEST_CASE("contact patch: a small region appearing next to a large one is found 
   // 5 mm ball B (80 faces, at most ~15 colliding) slides up a ramp beside it (a block tilted 0.1
   // rad about x) until it is the deeper. Each search for new regions then sees only B's few new
   // faces, and groups just those: they touch none of A's and must make a group of their own, or B
-  // is taken for part of A's region and not climbed before the next search over the whole patch
-  // (32 rounds on). PD must be, within the 4 rounds between searches after B touches, the
+  // is taken for part of A's region and found only when the patrol's climb comes by (tens of
+  // rounds on). PD must be, within the 4 rounds between searches after B touches, the
   // largest distance a probe vertex travels along FD to leave the block or the ramp.
   Mesh probe;
   auto add = [](Mesh& m, const Mesh& part, const Pose& at) {
@@ -197,6 +197,49 @@ TEST_CASE("contact patch: a small region appearing next to a large one is found 
   }
   CHECK(touched > 0);
   CHECK(b_deeper);  // the test reached the rounds where only finding B gives the right depth
+}
+
+TEST_CASE("contact patch: a second peak rising inside a followed region is found (the patrol)") {
+  // A peanut (an ellipsoid 40 x 20 x 20 mm with a waist: lobes A and B) lies on a block's top face
+  // (z = 20), its deepest vertex held 4 mm deep, and rocks from A down (B up, out of contact) to B
+  // slightly down. The pressed region spreads from A through the waist to B as one region, so no
+  // group of colliding faces is ever new: B's lobe rises inside a followed region, as a second
+  // local maximum of depth that only a climb from elsewhere on the patch reaches. Once B is the
+  // deeper, PD must be found at B (the probe's deepest vertex, FD = +z: all faces of the patch
+  // lie on the block's top face).
+  Mesh peanut = make_icosphere(10, 16);
+  for (Vec3& v : peanut.local) {
+    const Vec3 x = peanut.origin + v;
+    const double waist = 1 - 0.2 * std::exp(-x.x() * x.x() / 18);
+    v = Vec3(2 * x.x(), waist * x.y(), waist * x.z()) - peanut.origin;
+  }
+  const Mesh block = make_box({200, 200, 40});  // top face z = 20
+  ContactBuilder b;
+  constexpr int kRounds = 400;
+  int wrong_late = 0, late = 0;
+  double worst_late = 0;
+  for (int k = 0; k <= kRounds; ++k) {
+    const double theta = 0.25 - 0.33 * k / kRounds;  // about y: B (x > 0) goes up for theta > 0
+    Pose p = Pose::Identity();
+    p.linear() = Eigen::AngleAxisd(theta, Vec3::UnitY()).toRotationMatrix();
+    double low = 1e9;
+    for (const Vec3& v : peanut.local) low = std::min(low, (p.linear() * (peanut.origin + v)).z());
+    p.translation() = Vec3(0, 0, 16 - low);  // the deepest vertex 4 mm below z = 20
+    const ContactModel m = model_at(b, peanut, block, p);
+    CAPTURE(k);
+    REQUIRE(m.in_contact());
+    CHECK(angle_deg(fd(m), Vec3::UnitZ()) < 1e-6);
+    CHECK(m.penetration_mm <= 4 + 1e-9);
+    if (theta < -0.02) {  // B's lobe the deeper by ~0.4 mm or more
+      ++late;
+      worst_late = std::max(worst_late, 4 - m.penetration_mm);
+      wrong_late += std::abs(m.penetration_mm - 4) > kDepthTol ? 1 : 0;
+    }
+  }
+  INFO("rounds with B the deeper: " << late << ", of them PD wrong in " << wrong_late << " (worst " << worst_late
+                                    << " mm short)");
+  CHECK(late > 50);
+  CHECK(wrong_late <= 10);
 }
 
 TEST_CASE("contact patch: box edge and corner: FD on the bisector, PD = depth") {
