@@ -207,16 +207,17 @@ struct Rec4 {
 /// ½ (s0 − o) × (s1 − o) and that area's length (both 0 where there is no segment: parallel
 /// planes, no crossing, or the intervals meet in a point), and its end points s0, s1 relative to
 /// o. With t = x·L on the line, s1 − s0 = (hi − lo) L / |L|², and (s0 − o) × L = c_b n_a − c_a n_b
-/// for any point of the line (c = n·(v0 − o); the component along L drops out). The line's point
-/// nearest o is x0 = (c_a (n_b × L) + c_b (L × n_a)) / |L|² (x0·L = 0), so
-/// s = x0 + (t − o·L) L / |L|²; the heights t are measured from o (the vertices are relative to it)
-/// so o·L = 0. Inlined, a caller's unused outputs cost nothing.
+/// for any point of the line (c = n·(v0 − o): the records' offsets c = n·v0 less n·o; the
+/// component along L drops out). The line's point nearest o is x0 = (c_a (n_b × L) + c_b (L × n_a))
+/// / |L|² relative to o, so s − o = x0 + (t − o·L) L / |L|². (Each row's area is measured from a
+/// point o near the patch: the sum does not depend on o, but the sum of the rows' lengths does,
+/// and FD's cancellation test compares the two.) Inlined, a caller's unused outputs cost nothing.
 struct Seg4 {
   M4 ok;                            ///< a segment
   D4 px, py, pz, pabs;              ///< vector area and its length (0 where none)
   D4 s0x, s0y, s0z, s1x, s1y, s1z;  ///< end points − o (where ok)
 };
-[[gnu::always_inline]] inline Seg4 segments4(const Rec4& a, const Rec4& b) {
+[[gnu::always_inline]] inline Seg4 segments4(const Rec4& a, const Rec4& b, const D4& ox, const D4& oy, const D4& oz) {
   const D4 lx = a.ny * b.nz - a.nz * b.ny, ly = a.nz * b.nx - a.nx * b.nz, lz = a.nx * b.ny - a.ny * b.nx;
   const D4 l2 = lx * lx + ly * ly + lz * lz;  // unit normals: |L| = sin of the angle between the planes
   D4 da[3], db[3], ta[3], tb[3];
@@ -237,20 +238,22 @@ struct Seg4 {
   // Selects, not a zero scale: a row without a segment adds exactly nothing to the sums, even
   // where its products overflow.
   const D4 scale = splat(0.5) * (hi - lo) * inv;
-  const D4 vx = b.c * a.nx - a.c * b.nx, vy = b.c * a.ny - a.c * b.ny, vz = b.c * a.nz - a.c * b.nz;
+  const D4 ca = a.c - (a.nx * ox + a.ny * oy + a.nz * oz), cb = b.c - (b.nx * ox + b.ny * oy + b.nz * oz);
+  const D4 vx = cb * a.nx - ca * b.nx, vy = cb * a.ny - ca * b.ny, vz = cb * a.nz - ca * b.nz;
   s.px = pick(s.ok, scale * vx, zero);
   s.py = pick(s.ok, scale * vy, zero);
   s.pz = pick(s.ok, scale * vz, zero);
   s.pabs = pick(s.ok, sqrt4(scale * scale * (vx * vx + vy * vy + vz * vz)), zero);
-  const D4 x0 = (a.c * (b.ny * lz - b.nz * ly) + b.c * (ly * a.nz - lz * a.ny)) * inv;
-  const D4 y0 = (a.c * (b.nz * lx - b.nx * lz) + b.c * (lz * a.nx - lx * a.nz)) * inv;
-  const D4 z0 = (a.c * (b.nx * ly - b.ny * lx) + b.c * (lx * a.ny - ly * a.nx)) * inv;
-  s.s0x = x0 + lo * inv * lx;
-  s.s0y = y0 + lo * inv * ly;
-  s.s0z = z0 + lo * inv * lz;
-  s.s1x = x0 + hi * inv * lx;
-  s.s1y = y0 + hi * inv * ly;
-  s.s1z = z0 + hi * inv * lz;
+  const D4 x0 = (ca * (b.ny * lz - b.nz * ly) + cb * (ly * a.nz - lz * a.ny)) * inv;
+  const D4 y0 = (ca * (b.nz * lx - b.nx * lz) + cb * (lz * a.nx - lx * a.nz)) * inv;
+  const D4 z0 = (ca * (b.nx * ly - b.ny * lx) + cb * (lx * a.ny - ly * a.nx)) * inv;
+  const D4 ol = ox * lx + oy * ly + oz * lz, s0 = (lo - ol) * inv, s1 = (hi - ol) * inv;
+  s.s0x = x0 + s0 * lx;
+  s.s0y = y0 + s0 * ly;
+  s.s0z = z0 + s0 * lz;
+  s.s1x = x0 + s1 * lx;
+  s.s1y = y0 + s1 * ly;
+  s.s1z = z0 + s1 * lz;
   return s;
 }
 
@@ -266,11 +269,11 @@ const FaceRec& no_record() {
 }
 
 /// Rows (an object and a probe face record, and a weight) gathered four at a time for
-/// segments4: f(Seg4, weights) runs on each full group; finish() pads the last one with records
-/// that give no segment (weight 0).
+/// segments4, areas measured from o: f(Seg4, weights) runs on each full group; finish() pads the
+/// last one with records that give no segment (weight 0).
 template <class F>
 struct Quads {
-  explicit Quads(F fn) : f(std::move(fn)) {}
+  Quads(F fn, const Vec3& o) : f(std::move(fn)), ox(splat(o.x())), oy(splat(o.y())), oz(splat(o.z())) {}
   void add(const FaceRec* ra, const FaceRec* rb, double weight) {
     a[n] = ra, b[n] = rb, w[n] = weight;
     if (++n == 4) run();
@@ -283,10 +286,11 @@ struct Quads {
 
  private:
   void run() {
-    f(segments4(load4(a), load4(b)), D4{w[0], w[1], w[2], w[3]});
+    f(segments4(load4(a), load4(b), ox, oy, oz), D4{w[0], w[1], w[2], w[3]});
     n = 0;
   }
   F f;
+  D4 ox, oy, oz;
   const FaceRec* a[4];
   const FaceRec* b[4];
   double w[4];
@@ -389,18 +393,30 @@ void ContactBuilder::Patch::BodyState::compute_face_normals() {
 const ContactBuilder::Patch::BodyState::Fixed& ContactBuilder::Patch::BodyState::fixed_part(std::size_t i) {
   Fixed& fx = fixed[i];
   if (from_prev[i] != UINT32_MAX) return fx = prev_fixed[from_prev[i]];
-  const Tri& t = mesh->faces[faces[i]];
+  make_fixed(fx, faces[i]);
+  return fx;
+}
+
+void ContactBuilder::Patch::BodyState::make_fixed(Fixed& fx, std::uint32_t f) const {
+  const Tri& t = mesh->faces[f];
+  FaceRec& r = fx.rec;
   fx.vid = t;
   fx.group = UINT32_MAX;
   fx.bad_index = !(t[0] < nv && t[1] < nv && t[2] < nv);
-  fx.n.setZero();
-  if (fx.bad_index) return fx;
-  for (int k = 0; k < 3; ++k) fx.v[k] = mesh->local[t[k]];
+  fx.len = 0;
+  r.n.setZero();
+  r.c = 0;
+  if (fx.bad_index) {
+    r.v[0] = r.v[1] = r.v[2] = Vec3::Zero();
+    return;
+  }
+  for (int k = 0; k < 3; ++k) r.v[k] = mesh->local[t[k]];
+  Vec3 cr;
   if (!face_normals.empty())
-    fx.n = face_normals[faces[i]];  // computed once per mesh (the probe's; zero: degenerate)
-  else if (!unit_normal(fx.v[0], fx.v[1], fx.v[2], fx.n, fx.cr, fx.len))
-    fx.n.setZero();
-  return fx;
+    r.n = face_normals[f];  // computed once per mesh (the probe's; zero: degenerate)
+  else if (!unit_normal(r.v[0], r.v[1], r.v[2], r.n, cr, fx.len))
+    r.n.setZero(), fx.len = 0;
+  r.c = r.n.dot(r.v[0]);
 }
 
 void ContactBuilder::Patch::BodyState::clear_stamps() {
@@ -445,6 +461,7 @@ void ContactBuilder::Patch::reset() {
 std::size_t ContactBuilder::Patch::bytes() const {
   return probe_s.bytes() + object_s.bytes() + probe_world.capacity() * sizeof(Vec3) +
          (held_object_recs.capacity() + held_probe_recs.capacity()) * sizeof(FaceRec) + held_slots.capacity() * 8 +
+         (held_object_faces.capacity() + held_probe_faces.capacity()) * 4 +
          (probe_xform_stamp.capacity() + climb.capacity() + seed_pairs.capacity()) * 4 +
          valid.capacity() * sizeof(ContactPair) + valid_slots.capacity() * 8;
 }
@@ -545,22 +562,41 @@ std::uint32_t ContactBuilder::Patch::group_faces(BodyState& T) {
 }
 
 double ContactBuilder::Patch::held_footprint() {
-  // The held round's intersection curve (its segments' end points, recomputed from its records),
-  // or, when it had none (touching or coplanar faces only), its colliding object faces' corners.
+  // The held round's intersection curve (its segments' end points, recomputed from its faces'
+  // records rebuilt from the meshes at its pose, object frame, relative to held_point), or, when
+  // it had none (touching or coplanar faces only), its colliding object faces' corners.
+  BodyState::Fixed fx;
+  held_object_recs.resize(held_object_faces.size());
+  for (std::size_t i = 0; i < held_object_faces.size(); ++i) {
+    object_s.make_fixed(fx, held_object_faces[i]);
+    FaceRec& r = held_object_recs[i];
+    for (int k = 0; k < 3; ++k) r.v[k] = fx.rec.v[k] - held_point;
+    r.n = fx.rec.n;
+    r.c = r.n.dot(r.v[0]);
+  }
+  held_probe_recs.resize(held_probe_faces.size());
+  for (std::size_t i = 0; i < held_probe_faces.size(); ++i) {
+    probe_s.make_fixed(fx, held_probe_faces[i]);
+    FaceRec& r = held_probe_recs[i];
+    for (int k = 0; k < 3; ++k) r.v[k] = held_rot * fx.rec.v[k] + held_shift - held_point;
+    r.n = held_rot * fx.rec.n;
+    r.c = r.n.dot(r.v[0]);
+  }
   double radius2 = 0;
   bool any = false;
-  auto reach = [&](const Vec3& c) {  // c relative to the held round's origin
-    const Vec3 rel = held_origin + c - held_point;
+  auto reach = [&](const Vec3& rel) {  // rel: a point relative to held_point
     radius2 = std::max(radius2, (rel - rel.dot(held_n) * held_n).squaredNorm());
   };
-  Quads quads([&](const Seg4& g, const D4&) {
-    for (int k = 0; k < 4; ++k) {
-      if (!g.ok[k]) continue;
-      any = true;
-      reach(Vec3(g.s0x[k], g.s0y[k], g.s0z[k]));
-      reach(Vec3(g.s1x[k], g.s1y[k], g.s1z[k]));
-    }
-  });
+  Quads quads(
+      [&](const Seg4& g, const D4&) {
+        for (int k = 0; k < 4; ++k) {
+          if (!g.ok[k]) continue;
+          any = true;
+          reach(Vec3(g.s0x[k], g.s0y[k], g.s0z[k]));
+          reach(Vec3(g.s1x[k], g.s1y[k], g.s1z[k]));
+        }
+      },
+      Vec3::Zero());
   for (const auto& [slot_a, slot_b] : held_slots) {
     const FaceRec& ra = held_object_recs[slot_a];
     const FaceRec& rb = held_probe_recs[slot_b];
@@ -765,8 +801,9 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
     const std::uint32_t n_groups = group_faces(T);
     const std::vector<std::uint32_t>& label = T.group_label;
     const auto n_slots = static_cast<std::uint32_t>(T.faces.size());
-    // Each group's extent across d (from the records: vertices relative to the round's origin),
-    // and whether one of this round's maxima lies in it.
+    // Each group's extent across d (from the records, in the common frame), and whether one of
+    // this round's maxima lies in it.
+    const Vec3 uc = dir_to_common(walk.u), wc = dir_to_common(walk.w);
     std::vector<double>& box = T.group_box;  // per group: lo_u, hi_u, lo_w, hi_w
     box.resize(4 * std::size_t(n_groups));
     for (std::uint32_t g = 0; g < n_groups; ++g) {
@@ -778,10 +815,10 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
     for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
       const std::uint32_t g = label[slot];
       if (first[g] == UINT32_MAX) first[g] = slot;
-      if (T.use[slot] == kNoDirection) continue;  // no record (an object face's is not filled when degenerate)
+      if (T.use[slot] == kNoDirection) continue;  // no record (a moved one is not filled when degenerate)
       double* bx = &box[4 * std::size_t(g)];
-      for (const Vec3& x : T.recs[slot].v) {
-        const double xu = x.dot(walk.u), xw = x.dot(walk.w);
+      for (const Vec3& x : common_rec(T, slot).v) {
+        const double xu = x.dot(uc), xw = x.dot(wc);
         bx[0] = std::min(bx[0], xu), bx[1] = std::max(bx[1], xu), bx[2] = std::min(bx[2], xw), bx[3] = std::max(bx[3], xw);
       }
     }
@@ -792,8 +829,8 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
       const double* bx = &box[4 * std::size_t(g)];
       bool followed = false;
       auto inside = [&](std::uint32_t v) {
-        const Vec3 x = test_pos(v) - rec_origin;
-        const double xu = x.dot(walk.u), xw = x.dot(walk.w);
+        const Vec3 x = to_common(test_pos(v));
+        const double xu = x.dot(uc), xw = x.dot(wc);
         return xu >= bx[0] && xu <= bx[1] && xw >= bx[2] && xw <= bx[3];
       };
       for (int i = 0; i < n_maxima && !followed; ++i) followed = inside(maxima[i]);
@@ -1056,75 +1093,80 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   const Eigen::Matrix3d& R = rot;
   auto tri_ok = [](const Tri& t, std::size_t nv) { return t[0] < nv && t[1] < nv && t[2] < nv; };
 
-  // One record per colliding face: vertices in the object frame (the probe's transformed once
-  // per round), unit normal (zero: degenerate, no direction; the probe's are rotated) and plane
-  // offset from an origin o near the patch (for rounding). Degenerate object faces count as
-  // contacts but give no direction.
-  Vec3 origin = Vec3::Zero();
+  // One record per colliding face: vertices, unit normal (zero: degenerate, no direction) and
+  // plane offset, in a common frame: the local frame of the body with more colliding faces, whose
+  // records are then their fixed parts as they are (kept from round to round); the other body's
+  // are moved into it. Degenerate object faces count as contacts but give no direction.
+  probe_frame = probe_s.faces.size() > object_s.faces.size();
+  Vec3 origin = Vec3::Zero();  // object-local: a point of the patch, the areas' origin (rounding)
   if (!valid.empty() && tri_ok(object.faces[valid.front().object], object_s.nv))
     origin = object.local[object.faces[valid.front().object][0]];
-  rec_origin = origin;
+  // A record moved: x' = M·x + t (object-local → probe-local, or probe-local → object-local).
+  const Eigen::Matrix3d M = probe_frame ? Eigen::Matrix3d(R.transpose()) : R;
+  const Vec3 t = probe_frame ? Vec3(-(R.transpose() * shift)) : shift;
+  auto move = [&](const FaceRec& from, FaceRec& r) {
+    for (int k = 0; k < 3; ++k) r.v[k] = M * from.v[k] + t;
+    r.n = M * from.n;  // zero stays zero (degenerate)
+    r.c = r.n.dot(r.v[0]);
+  };
   Vec3 n_faces = Vec3::Zero();  // Σ unnormalised normals: 2 × the area-weighted mean normal (fallback)
   double n_faces_abs = 0;       // Σ of their lengths
   object_s.fixed.resize(object_s.faces.size());
-  object_s.recs.resize(object_s.faces.size());
   object_s.use.resize(object_s.faces.size());
+  if (probe_frame) object_s.recs.resize(object_s.faces.size());
   for (std::size_t i = 0; i < object_s.faces.size(); ++i) {
     const BodyState::Fixed& fx = object_s.fixed_part(i);
-    FaceRec& r = object_s.recs[i];
-    r.n.setZero();
-    r.c = 0;
     object_s.use[i] = kNoDirection;
-    if (fx.bad_index || fx.n.squaredNorm() == 0) {
+    if (fx.bad_index || fx.rec.n.squaredNorm() == 0) {
       ++m.degenerate_faces;
       continue;
     }
-    for (int k = 0; k < 3; ++k) r.v[k] = fx.v[k] - origin;
-    r.n = fx.n;
-    r.c = r.n.dot(r.v[0]);
-    object_s.use[i] = have_prev && r.n.dot(prev_n) > kBackCos ? kFront : kUsable;
-    n_faces += fx.cr;
+    if (probe_frame) move(fx.rec, object_s.recs[i]);
+    object_s.use[i] = have_prev && fx.rec.n.dot(prev_n) > kBackCos ? kFront : kUsable;
+    n_faces += fx.len * fx.rec.n;
     n_faces_abs += fx.len;
   }
   object_s.fixed_epoch = epoch;
   if (m.degenerate_faces) m.flags |= kDegenerateSkipped;
   probe_s.fixed.resize(probe_s.faces.size());
-  probe_s.recs.resize(probe_s.faces.size());
   probe_s.use.resize(probe_s.faces.size());
-  const Vec3 to_rec = shift - origin;  // probe-local → record frame: R·x + to_rec
+  if (!probe_frame) probe_s.recs.resize(probe_s.faces.size());
   for (std::size_t i = 0; i < probe_s.faces.size(); ++i) {
     const BodyState::Fixed& fx = probe_s.fixed_part(i);
-    FaceRec& r = probe_s.recs[i];
-    r.n.setZero();
-    r.c = 0;
     probe_s.use[i] = kNoDirection;
     if (fx.bad_index) continue;
-    for (int k = 0; k < 3; ++k) r.v[k] = R * fx.v[k] + to_rec;
-    r.n = R * fx.n;  // zero stays zero (degenerate)
-    r.c = r.n.dot(r.v[0]);
-    probe_s.use[i] = fx.n.squaredNorm() == 0 ? kNoDirection : kUsable;
+    if (!probe_frame) move(fx.rec, probe_s.recs[i]);
+    probe_s.use[i] = fx.rec.n.squaredNorm() == 0 ? kNoDirection : kUsable;
   }
   probe_s.fixed_epoch = epoch;
 
   // The vector area of the object surface inside the probe, from the intersection curve:
-  // A = ½ Σ (s0 − o) × (s1 − o) over the pairs' segments, four pairs at a time (segments4).
-  // Split into the part on faces not turned away from the previous FD (front) and all.
+  // A = ½ Σ (s0 − o) × (s1 − o) over the pairs' segments, four pairs at a time (segments4), in
+  // the common frame (turned into the object's after). Split into the part on faces not turned
+  // away from the previous FD (front) and all.
   bool any_front_face = false;
   D4 sx = splat(0), sy = sx, sz = sx, sabs = sx, fx = sx, fy = sx, fz = sx, fabs = sx;
-  Quads quads([&](const Seg4& g, const D4& f) {  // f: 1 on the front rows
-    sx += g.px, sy += g.py, sz += g.pz, sabs += g.pabs;
-    fx += f * g.px, fy += f * g.py, fz += f * g.pz, fabs += f * g.pabs;
-  });
+  Quads quads(
+      [&](const Seg4& g, const D4& f) {  // f: 1 on the front rows
+        sx += g.px, sy += g.py, sz += g.pz, sabs += g.pabs;
+        fx += f * g.px, fy += f * g.py, fz += f * g.pz, fabs += f * g.pabs;
+      },
+      to_common(origin));
+  const BodyState::Fixed* object_fixed = object_s.fixed.data();
+  const BodyState::Fixed* probe_fixed = probe_s.fixed.data();
+  const FaceRec* object_recs = object_s.recs.data();
+  const FaceRec* probe_recs = probe_s.recs.data();
   for (const auto& [slot_a, slot_b] : valid_slots) {
     const std::uint8_t use_a = object_s.use[slot_a];
     if (use_a == kNoDirection || probe_s.use[slot_b] == kNoDirection) continue;  // degenerate: no direction
     const bool front = use_a == kFront;
     any_front_face |= front;
-    quads.add(&object_s.recs[slot_a], &probe_s.recs[slot_b], front ? 1.0 : 0.0);
+    quads.add(probe_frame ? &object_recs[slot_a] : &object_fixed[slot_a].rec,
+              probe_frame ? &probe_fixed[slot_b].rec : &probe_recs[slot_b], front ? 1.0 : 0.0);
   }
   quads.finish();
-  const double a_all[3] = {lanes_sum(sx), lanes_sum(sy), lanes_sum(sz)};
-  const double a_front[3] = {lanes_sum(fx), lanes_sum(fy), lanes_sum(fz)};
+  Vec3 a_all(lanes_sum(sx), lanes_sum(sy), lanes_sum(sz)), a_front(lanes_sum(fx), lanes_sum(fy), lanes_sum(fz));
+  if (probe_frame) a_all = R * a_all, a_front = R * a_front;
   const double abs_all = lanes_sum(sabs), abs_front = lanes_sum(fabs);
 
   // FD: the front part of the curve while contact continues (thin plates, wedges), all of it at
@@ -1133,7 +1175,7 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   bool in_contact = !valid.empty() && m.degenerate_faces < m.object_faces;
   if (in_contact && have_prev && !any_front_face) in_contact = false;  // only back faces: past a thin feature
   if (in_contact) {
-    const Vec3 a = have_prev ? Vec3(a_front[0], a_front[1], a_front[2]) : Vec3(a_all[0], a_all[1], a_all[2]);
+    const Vec3 a = have_prev ? a_front : a_all;
     const double abs_sum = have_prev ? abs_front : abs_all;
     const double a_norm = a.norm();
     // A curve of (nearly) no area is rounding noise (faces touching at a vertex or an edge): its
@@ -1228,12 +1270,13 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   m.plane_point = to_pod(plane_pt + object.origin);
   m.contact_point = m.plane_point;
 
-  // This round's pairs and records are kept for the held contact's footprint, measured only if
-  // it is held (buffers swapped, not copied).
+  // This round's pairs, colliding faces and pose are kept for the held contact's footprint,
+  // measured only if it is held (buffers swapped, not copied).
   std::swap(valid_slots, held_slots);
-  std::swap(object_s.recs, held_object_recs);
-  std::swap(probe_s.recs, held_probe_recs);
-  held_origin = origin;
+  std::swap(object_s.faces, held_object_faces);
+  std::swap(probe_s.faces, held_probe_faces);
+  held_rot = rot;
+  held_shift = shift;
   held_radius = -1;
   have_prev = true;
   prev_n = n;

@@ -13,9 +13,9 @@ namespace st::geom {
 /// Unit normal and centroid of face f of m, m's local frame; false when degenerate or non-finite.
 bool face_frame(const Mesh& m, std::uint32_t f, Vec3& centroid, Vec3& normal);
 
-/// A colliding face as the patch model's segment computation reads it: its vertices in the common
-/// (object-local) frame relative to the round's origin o (a point near the patch, for rounding),
-/// its unit normal (zero: degenerate, no direction) and its plane's offset c = n·v0.
+/// A colliding face as the patch model's segment computation reads it: its vertices in the
+/// round's common frame (the local frame of the body with more colliding faces), its unit normal
+/// (zero: degenerate, no direction) and its plane's offset c = n·v0.
 struct FaceRec {
   Vec3 v[3];
   Vec3 n;
@@ -100,16 +100,15 @@ struct ContactBuilder::Patch {
     };
     std::vector<Mark> face_mark;       ///< per face: the round it was counted as colliding, its index in `faces` then
     std::vector<std::uint32_t> faces;  ///< distinct colliding faces this round (slot = index)
-    std::vector<FaceRec> recs;         ///< their records, per slot
-    std::vector<std::uint8_t> use;     ///< per slot: what its record gives the segments (kNoDirection, kUsable, kFront)
-    /// What a colliding face's record is made from that does not change with the pose: vertices
-    /// in the body's local frame, unit normal (zero: degenerate or bad indices), (b−a)×(c−a) and
-    /// its length. Kept from one round to the next (most faces collide again), so that the mesh,
-    /// scattered and just swept out of the caches by the collision round, is read for new faces only.
+    std::vector<FaceRec> recs;      ///< per slot, the record moved into the common frame (when it is the other body's)
+    std::vector<std::uint8_t> use;  ///< per slot: what its record gives the segments (kNoDirection, kUsable, kFront)
+    /// What does not change with the pose: the face's record in its body's local frame (unit
+    /// normal zero: degenerate or bad indices) and |(b−a)×(c−a)| (object faces). Kept from one
+    /// round to the next (most faces collide again), so that the mesh, scattered and just swept
+    /// out of the caches by the collision round, is read for new faces only; the body whose
+    /// frame is the common one uses it as it is.
     struct Fixed {
-      Vec3 v[3];
-      Vec3 n;
-      Vec3 cr;
+      FaceRec rec;
       double len = 0;
       Tri vid{};                         ///< its vertex indices
       bool bad_index = false;            ///< a vertex index out of range: no record
@@ -119,6 +118,8 @@ struct ContactBuilder::Patch {
     /// Fills and returns fixed[i] (sized): last round's when face faces[i] collided then, else read
     /// from the mesh (the unit normal from face_normals when those are kept, else computed).
     const Fixed& fixed_part(std::size_t i);
+    /// Fills fx for face f from the mesh.
+    void make_fixed(Fixed& fx, std::uint32_t f) const;
     std::vector<std::uint32_t> from_prev;  ///< per slot: its slot in the last round, UINT32_MAX if new
     /// The round whose records were filled last (in `fixed` until the next round swaps them
     /// into `prev_fixed`); 0 = none.
@@ -150,11 +151,13 @@ struct ContactBuilder::Patch {
   Vec3 held_n{Vec3::Zero()};        ///< its normal
   Vec3 held_point{Vec3::Zero()};    ///< a point of it, object-local, mm
   Vec3 held_tracked{Vec3::Zero()};  ///< the probe point held against it, probe-local, mm
-  /// The round it was set in: its pairs' record slots, its records and their origin (the curve
+  /// The round it was set in: its pairs' record slots, its colliding faces and pose (the curve
   /// the footprint is measured from is recomputed from them, only once the contact is held).
   std::vector<std::array<std::uint32_t, 2>> held_slots;
-  std::vector<FaceRec> held_object_recs, held_probe_recs;
-  Vec3 held_origin{Vec3::Zero()};
+  std::vector<std::uint32_t> held_object_faces, held_probe_faces;
+  Eigen::Matrix3d held_rot{Eigen::Matrix3d::Identity()};
+  Vec3 held_shift{Vec3::Zero()};
+  std::vector<FaceRec> held_object_recs, held_probe_recs;  ///< scratch: their records, rebuilt
   double held_radius = -1;  ///< the footprint around held_point, mm; < 0 not yet measured
   /// How far the held round's intersection curve reaches from held_point across held_n.
   double held_footprint();
@@ -167,13 +170,20 @@ struct ContactBuilder::Patch {
   std::uint32_t group_faces(BodyState& T);
   // Scratch.
   std::vector<ContactPair> valid;
-  std::vector<std::array<std::uint32_t, 2>> valid_slots;        ///< per valid pair: its object and probe record slots
-  std::vector<Vec3> probe_world;                                ///< probe vertices, object-local (valid where stamped)
-  std::vector<std::uint32_t> probe_xform_stamp;                 ///< round in which probe_world[v] was computed
-  std::uint32_t climb_serial = 0;                               ///< climbs so far (path stamps)
-  Eigen::Matrix3d rot{Eigen::Matrix3d::Identity()};             ///< this round's pose rotation
-  Vec3 shift{Vec3::Zero()};                                     ///< and translation, probe-local → object-local
-  Vec3 rec_origin{Vec3::Zero()};                                ///< this round's FaceRec origin o, object-local
+  std::vector<std::array<std::uint32_t, 2>> valid_slots;  ///< per valid pair: its object and probe record slots
+  std::vector<Vec3> probe_world;                          ///< probe vertices, object-local (valid where stamped)
+  std::vector<std::uint32_t> probe_xform_stamp;           ///< round in which probe_world[v] was computed
+  std::uint32_t climb_serial = 0;                         ///< climbs so far (path stamps)
+  Eigen::Matrix3d rot{Eigen::Matrix3d::Identity()};       ///< this round's pose rotation
+  Vec3 shift{Vec3::Zero()};                               ///< and translation, probe-local → object-local
+  bool probe_frame = false;  ///< this round's common frame is the probe's local frame (else the object's)
+  /// The common frame's record of a colliding face of body b.
+  const FaceRec& common_rec(const BodyState& b, std::uint32_t slot) const {
+    return (&b == &probe_s) == probe_frame ? b.fixed[slot].rec : b.recs[slot];
+  }
+  /// A point or a direction of the object's local frame in the common frame.
+  Vec3 to_common(const Vec3& x) const { return probe_frame ? Vec3(rot.transpose() * (x - shift)) : x; }
+  Vec3 dir_to_common(const Vec3& d) const { return probe_frame ? Vec3(rot.transpose() * d) : d; }
   const Vec3& probe_point(std::uint32_t v, const Mesh& probe);  ///< probe vertex v, object-local
   std::uint32_t epoch = 0;
   std::vector<std::uint32_t> climb;       ///< scratch: vertices to climb from
