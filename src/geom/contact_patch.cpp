@@ -372,8 +372,12 @@ void ContactBuilder::Patch::BodyState::reset(const Mesh& m) {
   face_mark.assign(nf, {});
   memory = {};
   face_normals.clear();
-  fixed.clear();
-  prev_fixed.clear();
+  store.clear();
+  store_seen.clear();
+  store_free.clear();
+  entry.clear();
+  prev_entry.clear();
+  to_fill.clear();
   fixed_epoch = 0;
   n_groups = 0;
 }
@@ -390,11 +394,39 @@ void ContactBuilder::Patch::BodyState::compute_face_normals() {
   }
 }
 
-const ContactBuilder::Patch::BodyState::Fixed& ContactBuilder::Patch::BodyState::fixed_part(std::size_t i) {
-  Fixed& fx = fixed[i];
-  if (from_prev[i] != UINT32_MAX) return fx = prev_fixed[from_prev[i]];
-  make_fixed(fx, faces[i]);
-  return fx;
+// Inlined into the pairs' loop (its only caller), run for every colliding face: as little as
+// possible besides the mark (read at random, a cache miss), so that many are in flight at once.
+[[gnu::always_inline]] inline std::uint32_t ContactBuilder::Patch::BodyState::see(std::uint32_t f, std::uint32_t epoch) {
+  Mark& mark = face_mark[f];
+  if (mark.stamp != epoch) {
+    const bool again = fixed_epoch != 0 && fixed_epoch == epoch - 1 && mark.stamp == epoch - 1;
+    entry.push_back(again ? mark.slot : UINT32_MAX);  // last round's slot for now (settle)
+    mark = {epoch, static_cast<std::uint32_t>(faces.size())};
+    faces.push_back(f);
+  }
+  return mark.slot;
+}
+
+void ContactBuilder::Patch::BodyState::settle(std::uint32_t epoch) {
+  for (std::uint32_t slot = 0; slot < entry.size(); ++slot) {
+    std::uint32_t& e = entry[slot];
+    if (e != UINT32_MAX) {
+      e = prev_entry[e];  // collided last round: its entry stays
+    } else {              // new: a fresh entry, filled from the mesh with the records
+      if (store_free.empty()) {
+        e = static_cast<std::uint32_t>(store.size());
+        store.emplace_back();
+        store_seen.push_back(0);
+      } else {
+        e = store_free.back();
+        store_free.pop_back();
+      }
+      to_fill.push_back(slot);
+    }
+    store_seen[e] = epoch;
+  }
+  for (std::uint32_t e : prev_entry)  // last round's faces that collide no more
+    if (store_seen[e] != epoch) store_free.push_back(e);
 }
 
 void ContactBuilder::Patch::BodyState::make_fixed(Fixed& fx, std::uint32_t f) const {
@@ -423,6 +455,12 @@ void ContactBuilder::Patch::BodyState::clear_stamps() {
   std::fill(visit_stamp.begin(), visit_stamp.end(), 0);
   std::fill(face_mark.begin(), face_mark.end(), Mark{});
   fixed_epoch = 0;
+  store.clear();
+  store_seen.clear();
+  store_free.clear();
+  entry.clear();
+  prev_entry.clear();
+  to_fill.clear();
 }
 
 std::size_t ContactBuilder::Patch::BodyState::bytes() const {
@@ -432,8 +470,9 @@ std::size_t ContactBuilder::Patch::BodyState::bytes() const {
           group_remap.capacity() + group_first.capacity()) *
              4 +
          (depth.capacity() + group_box.capacity()) * sizeof(double) + group_open.capacity() +
-         recs.capacity() * sizeof(FaceRec) + use.capacity() + (fixed.capacity() + prev_fixed.capacity()) * sizeof(Fixed) +
-         from_prev.capacity() * 4 + face_normals.capacity() * sizeof(Vec3);
+         recs.capacity() * sizeof(FaceRec) + use.capacity() + store.capacity() * sizeof(Fixed) +
+         (store_seen.capacity() + store_free.capacity() + entry.capacity() + prev_entry.capacity() + to_fill.capacity()) * 4 +
+         face_normals.capacity() * sizeof(Vec3);
 }
 
 void ContactBuilder::Patch::prepare(const Mesh& probe, const Mesh& object) {
@@ -497,7 +536,7 @@ std::uint32_t ContactBuilder::Patch::group_faces(BodyState& T) {
   remap.assign(T.n_groups, kNoGroup);
   std::uint32_t n_new = 0;
   for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
-    const std::uint32_t g = T.fixed[slot].group;
+    const std::uint32_t g = T.fixed(slot).group;
     if (g >= T.n_groups) {
       ++n_new;
       continue;
@@ -516,8 +555,8 @@ std::uint32_t ContactBuilder::Patch::group_faces(BodyState& T) {
     while (size < 6 * std::size_t(n_slots)) size *= 2;  // at most half full
     table.assign(size, 0);
     for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
-      if (T.fixed[slot].bad_index) continue;
-      for (std::uint32_t v : T.fixed[slot].vid) {
+      if (T.fixed(slot).bad_index) continue;
+      for (std::uint32_t v : T.fixed(slot).vid) {
         const std::uint64_t key = std::uint64_t(v) + 1;
         for (std::size_t h = (v * 0x9E3779B97F4A7C15ull) >> 40 & (size - 1);; h = (h + 1) & (size - 1)) {
           if (table[h] == 0) {
@@ -536,8 +575,8 @@ std::uint32_t ContactBuilder::Patch::group_faces(BodyState& T) {
     // mesh's vertex-face lists and this round's face marks); alone, it starts a group.
     for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
       if (label[slot] != kNoGroup) continue;
-      if (!T.fixed[slot].bad_index)
-        for (std::uint32_t v : T.fixed[slot].vid)
+      if (!T.fixed(slot).bad_index)
+        for (std::uint32_t v : T.fixed(slot).vid)
           for (std::uint32_t k = T.vf.first[v]; k < T.vf.first[v + 1]; ++k) {
             const BodyState::Mark& mk = T.face_mark[T.vf.faces[k]];
             if (mk.stamp != epoch || mk.slot == slot || label[mk.slot] == kNoGroup) continue;
@@ -555,7 +594,7 @@ std::uint32_t ContactBuilder::Patch::group_faces(BodyState& T) {
   for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
     const std::uint32_t r = root(label[slot]);
     if (remap[r] == kNoGroup) remap[r] = n++;
-    T.fixed[slot].group = label[slot] = remap[r];
+    T.fixed(slot).group = label[slot] = remap[r];
   }
   T.n_groups = n;
   return n;
@@ -838,7 +877,7 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
         followed = memory.known[i] < test_nv && inside(memory.known[i]);
       group_open[g] = followed ? 0 : 1;
       any_open |= !followed;
-      if (!followed && !T.fixed[first[g]].bad_index) drop(T.fixed[first[g]].vid[0]);
+      if (!followed && !T.fixed(first[g]).bad_index) drop(T.fixed(first[g]).vid[0]);
     }
     for (std::uint32_t i = 0; i < valid.size() && any_open; ++i)
       if (group_open[label[valid_slots[i][probe_side ? 1 : 0]]]) open.push_back(i);
@@ -1044,29 +1083,22 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
 
   valid.clear();
   valid_slots.clear();
-  // A face that collided in the last round (when its records were made) keeps its fixed part.
-  // Returns the face's slot. The face of the pair before is answered without reading its mark:
+  // A face that collided in the last round (when its entries were filled) keeps its fixed part
+  // where it is (BodyState::see). Returns the face's slot. The face of the pair before is answered without reading its mark:
   // the collision core lists a leaf pair's pairs together, so about half the pairs repeat the
   // object face of the pair before them (the marks, over the whole mesh, are read at random).
   struct Last {
     std::uint32_t face = UINT32_MAX, slot = 0;
   } last_probe, last_object;
-  auto first_sight = [&](BodyState& b, Last& last, std::uint32_t f) {
-    if (f == last.face) return last.slot;
-    BodyState::Mark& mark = b.face_mark[f];
-    if (mark.stamp != epoch) {
-      const bool again = b.fixed_epoch != 0 && b.fixed_epoch == epoch - 1 && mark.stamp == epoch - 1;
-      b.from_prev.push_back(again ? mark.slot : UINT32_MAX);
-      mark = {epoch, std::uint32_t(b.faces.size())};
-      b.faces.push_back(f);
-    }
-    last = {f, mark.slot};
-    return mark.slot;
+  auto first_sight = [&](BodyState & b, Last & last, std::uint32_t f) __attribute__((always_inline)) {
+    if (f != last.face) last = {f, b.see(f, epoch)};
+    return last.slot;
   };
   for (BodyState* b : {&probe_s, &object_s}) {
     b->faces.clear();
-    b->from_prev.clear();
-    std::swap(b->fixed, b->prev_fixed);
+    b->to_fill.clear();
+    std::swap(b->entry, b->prev_entry);
+    b->entry.clear();
   }
   for (const ContactPair& p : pairs) {
     if (p.probe >= probe.faces.size() || p.object >= object.faces.size()) {
@@ -1077,6 +1109,8 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     const std::uint32_t probe_slot = first_sight(probe_s, last_probe, p.probe);
     valid_slots.push_back({first_sight(object_s, last_object, p.object), probe_slot});
   }
+  probe_s.settle(epoch);
+  object_s.settle(epoch);
   if (m.skipped_pairs) m.flags |= kBadInput;
   m.probe_faces = static_cast<std::uint32_t>(probe_s.faces.size());
   m.object_faces = static_cast<std::uint32_t>(object_s.faces.size());
@@ -1111,11 +1145,12 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   };
   Vec3 n_faces = Vec3::Zero();  // Σ unnormalised normals: 2 × the area-weighted mean normal (fallback)
   double n_faces_abs = 0;       // Σ of their lengths
-  object_s.fixed.resize(object_s.faces.size());
+  for (BodyState* b : {&probe_s, &object_s})
+    for (std::uint32_t slot : b->to_fill) b->make_fixed(b->fixed(slot), b->faces[slot]);
   object_s.use.resize(object_s.faces.size());
   if (probe_frame) object_s.recs.resize(object_s.faces.size());
-  for (std::size_t i = 0; i < object_s.faces.size(); ++i) {
-    const BodyState::Fixed& fx = object_s.fixed_part(i);
+  for (std::uint32_t i = 0; i < object_s.faces.size(); ++i) {
+    const BodyState::Fixed& fx = object_s.fixed(i);
     object_s.use[i] = kNoDirection;
     if (fx.bad_index || fx.rec.n.squaredNorm() == 0) {
       ++m.degenerate_faces;
@@ -1128,11 +1163,10 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   }
   object_s.fixed_epoch = epoch;
   if (m.degenerate_faces) m.flags |= kDegenerateSkipped;
-  probe_s.fixed.resize(probe_s.faces.size());
   probe_s.use.resize(probe_s.faces.size());
   if (!probe_frame) probe_s.recs.resize(probe_s.faces.size());
-  for (std::size_t i = 0; i < probe_s.faces.size(); ++i) {
-    const BodyState::Fixed& fx = probe_s.fixed_part(i);
+  for (std::uint32_t i = 0; i < probe_s.faces.size(); ++i) {
+    const BodyState::Fixed& fx = probe_s.fixed(i);
     probe_s.use[i] = kNoDirection;
     if (fx.bad_index) continue;
     if (!probe_frame) move(fx.rec, probe_s.recs[i]);
@@ -1152,8 +1186,10 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
         fx += f * g.px, fy += f * g.py, fz += f * g.pz, fabs += f * g.pabs;
       },
       to_common(origin));
-  const BodyState::Fixed* object_fixed = object_s.fixed.data();
-  const BodyState::Fixed* probe_fixed = probe_s.fixed.data();
+  const BodyState::Fixed* object_store = object_s.store.data();
+  const BodyState::Fixed* probe_store = probe_s.store.data();
+  const std::uint32_t* object_entry = object_s.entry.data();
+  const std::uint32_t* probe_entry = probe_s.entry.data();
   const FaceRec* object_recs = object_s.recs.data();
   const FaceRec* probe_recs = probe_s.recs.data();
   for (const auto& [slot_a, slot_b] : valid_slots) {
@@ -1161,8 +1197,8 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     if (use_a == kNoDirection || probe_s.use[slot_b] == kNoDirection) continue;  // degenerate: no direction
     const bool front = use_a == kFront;
     any_front_face |= front;
-    quads.add(probe_frame ? &object_recs[slot_a] : &object_fixed[slot_a].rec,
-              probe_frame ? &probe_fixed[slot_b].rec : &probe_recs[slot_b], front ? 1.0 : 0.0);
+    quads.add(probe_frame ? &object_recs[slot_a] : &object_store[object_entry[slot_a]].rec,
+              probe_frame ? &probe_store[probe_entry[slot_b]].rec : &probe_recs[slot_b], front ? 1.0 : 0.0);
   }
   quads.finish();
   Vec3 a_all(lanes_sum(sx), lanes_sum(sy), lanes_sum(sz)), a_front(lanes_sum(fx), lanes_sum(fy), lanes_sum(fz));

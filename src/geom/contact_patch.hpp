@@ -114,15 +114,27 @@ struct ContactBuilder::Patch {
       bool bad_index = false;            ///< a vertex index out of range: no record
       std::uint32_t group = UINT32_MAX;  ///< its group at the last grouping (group_faces), UINT32_MAX: none
     };
-    std::vector<Fixed> fixed, prev_fixed;  ///< per slot, this round and the last
-    /// Fills and returns fixed[i] (sized): last round's when face faces[i] collided then, else read
-    /// from the mesh (the unit normal from face_normals when those are kept, else computed).
-    const Fixed& fixed_part(std::size_t i);
-    /// Fills fx for face f from the mesh.
+    /// The fixed parts of the faces that collide this round or did the last, each in place while
+    /// its face collides round after round (an entry is neither moved nor copied): entries of
+    /// faces that stopped colliding are reused from the round after.
+    std::vector<Fixed> store;
+    std::vector<std::uint32_t> store_seen;         ///< per entry: the round its face was last counted colliding
+    std::vector<std::uint32_t> store_free;         ///< entries free for new faces
+    std::vector<std::uint32_t> entry, prev_entry;  ///< per slot: its entry, this round and the last
+    std::vector<std::uint32_t> to_fill;            ///< slots whose entries are new this round (read from the mesh)
+    /// The fixed part of this round's slot.
+    Fixed& fixed(std::uint32_t slot) { return store[entry[slot]]; }
+    const Fixed& fixed(std::uint32_t slot) const { return store[entry[slot]]; }
+    /// Counts face f as colliding this round; returns its slot.
+    std::uint32_t see(std::uint32_t f, std::uint32_t epoch);
+    /// After the pairs: gives each slot its entry (last round's, or a new one, listed in to_fill)
+    /// and frees the entries of last round's faces that do not collide this round.
+    void settle(std::uint32_t epoch);
+    /// Fills fx for face f from the mesh (the unit normal from face_normals when those are kept,
+    /// else computed).
     void make_fixed(Fixed& fx, std::uint32_t f) const;
-    std::vector<std::uint32_t> from_prev;  ///< per slot: its slot in the last round, UINT32_MAX if new
-    /// The round whose records were filled last (in `fixed` until the next round swaps them
-    /// into `prev_fixed`); 0 = none.
+    /// The round whose new entries were filled last (to_fill); 0 = none: an entry is taken over
+    /// from the round before only when that round filled its entries.
     std::uint32_t fixed_epoch = 0;
     // Grouping the colliding faces into regions (a search for new regions): group_faces.
     std::uint32_t n_groups = 0;               ///< groups at the last grouping (Fixed::group below it)
@@ -179,7 +191,7 @@ struct ContactBuilder::Patch {
   bool probe_frame = false;  ///< this round's common frame is the probe's local frame (else the object's)
   /// The common frame's record of a colliding face of body b.
   const FaceRec& common_rec(const BodyState& b, std::uint32_t slot) const {
-    return (&b == &probe_s) == probe_frame ? b.fixed[slot].rec : b.recs[slot];
+    return (&b == &probe_s) == probe_frame ? b.fixed(slot).rec : b.recs[slot];
   }
   /// A point or a direction of the object's local frame in the common frame.
   Vec3 to_common(const Vec3& x) const { return probe_frame ? Vec3(rot.transpose() * (x - shift)) : x; }

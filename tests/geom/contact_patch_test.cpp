@@ -427,6 +427,21 @@ TEST_CASE("contact patch: bad input gives a finite model and a flag") {
   CHECK((nan.flags & kBadInput) != 0);
   CHECK(finite_model(nan));
   CHECK_FALSE(b.has_first_face());
+  // A non-finite pose with pairs never seen before, then those pairs at a good pose: the faces
+  // first counted in the bad round are read afresh (nothing left unfilled by it is reused), and
+  // the following rounds give what a fresh builder gives.
+  for (int k = 0; k < 4; ++k) {
+    CAPTURE(k);
+    const Pose p = pose_at({2.0 + 0.5 * k, 1.0, 27});
+    const std::vector<FacePair> pk = st::test::brute_force(ball10(), box40(), p);
+    if (k == 0) (void)b.build(ball10(), box40(), pose_at({0, std::nan(""), 27}), pk);
+    const ContactModel after = b.build(ball10(), box40(), p, pk);
+    ContactBuilder fresh;
+    const ContactModel ref = fresh.build(ball10(), box40(), p, pk);
+    REQUIRE(after.in_contact());
+    CHECK(after.penetration_mm == doctest::Approx(ref.penetration_mm).epsilon(1e-12));
+    CHECK((fd(after) - fd(ref)).norm() < 1e-12);
+  }
   // Out-of-range indices are skipped and flagged; the rest still renders.
   std::vector<FacePair> bad = pairs;
   bad.push_back({999999, 0});
