@@ -337,9 +337,9 @@ constexpr double kShallowShare = 0.5;
 /// many steps per search for new regions, continued in the next search from where it stopped.
 /// A climb from a region's rim to its peak takes ~50 steps at a 21 mm deep press of hand_L2 on
 /// the elephant, ~1.5 µs each (vertices no recent round touched, the caches swept by the
-/// collision round): 4 per side keep a search's cost to ~12 µs and finish such a climb within
-/// ~13 searches (~50 rounds).
-constexpr int kPatrolSteps = 4;
+/// collision round): 2 per side keep a search's cost to ~6 µs and finish such a climb within
+/// ~25 searches (~100 rounds).
+constexpr int kPatrolSteps = 2;
 /// Golden-ratio step of the pairs the patrol starts from: the k-th climb starts from pair
 /// ⌊frac(k·φ)·n⌋ of n, so successive ones spread evenly over the patch whatever n is.
 constexpr double kPatrolStep = 0.6180339887498949;
@@ -802,16 +802,17 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   //
   // A remembered maximum other than the deepest is climbed every round only while it is at least
   // kShallowShare as deep as the deepest point found so far (it could set PD); a shallower one
-  // is kept as it is and climbed in the rounds that look for new regions (every
-  // kDiscoverEvery-th: the extra work then falls in rounds that have some anyway, and the
-  // typical round's cost stays down), which is often enough for it to follow its region.
+  // is kept as it is (its depth there still read every round) and climbed in a round that looks
+  // for new regions (every kDiscoverEvery-th: the extra work then falls in rounds that have some
+  // anyway, and the typical round's cost stays down), one of them in each such round in turn.
   climb.clear();
   bool remembered = false;
   const bool discover_round = epoch % kDiscoverEvery == 0;
+  const int shallow_turn = 1 + int(epoch / kDiscoverEvery % (Memory::kSize - 1));
   for (int i = 0; i < Memory::kSize; ++i) {
     const std::uint32_t v = memory.vertex[i];
     if (v < test_nv && memory.face[i] < surface.faces.size() && eval(v, memory.face[i]) > 0) {
-      if (i == 0 || discover_round || depth[v] >= kShallowShare * best.depth)
+      if (i == 0 || (discover_round && i == shallow_turn) || depth[v] >= kShallowShare * best.depth)
         climb_from(v);
       else if (path[v] < round_first)  // not on a path of this round (a climb's maximum is remembered there)
         remember(v);
