@@ -434,6 +434,7 @@ void ContactBuilder::Patch::BodyState::make_fixed(Fixed& fx, std::uint32_t f) co
   FaceRec& r = fx.rec;
   fx.vid = t;
   fx.group = UINT32_MAX;
+  fx.covered = false;
   fx.bad_index = !(t[0] < nv && t[1] < nv && t[2] < nv);
   fx.len = 0;
   r.n.setZero();
@@ -809,6 +810,7 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   bool remembered = false;
   const bool discover_round = epoch % kDiscoverEvery == 0;
   const int shallow_turn = 1 + int(epoch / kDiscoverEvery % (Memory::kSize - 1));
+  bool lost = memory.lost;
   for (int i = 0; i < Memory::kSize; ++i) {
     const std::uint32_t v = memory.vertex[i];
     if (v < test_nv && memory.face[i] < surface.faces.size() && eval(v, memory.face[i]) > 0) {
@@ -817,17 +819,23 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
       else if (path[v] < round_first)  // not on a path of this round (a climb's maximum is remembered there)
         remember(v);
       remembered = true;
+    } else if (v != UINT32_MAX) {
+      lost = true;
     }
   }
   // While the remembered maxima hold, new regions are looked for every kDiscoverEvery rounds
   // (a region starts at depth 0, so one found a few rounds late has not grown much): climbs
   // start from the colliding pairs' vertices lowest along d (over a flat surface the deepest)
   // and from a sample of the pairs whose offset turns every round. With nothing remembered from
-  // the whole patch; otherwise only from the regions where no remembered maximum lies: this
-  // body's colliding faces fall into groups connected through shared vertices (a ring around
-  // each region the other body entered), and a group whose extent across d holds none of this
-  // round's maxima is a region not followed yet. What that misses (a region that split from a
-  // followed group, or a second peak inside one) is found by the patrol: one climb at a time
+  // the whole patch; otherwise only from the regions not followed yet. This body's colliding
+  // faces fall into groups connected through shared vertices (a ring around each region the
+  // other body entered). A new region brings faces that began colliding since the last search
+  // (not `covered`): a group with none that a search has seen is a new region. Only once a
+  // remembered maximum has been lost (its region may be followed no more) is each group's
+  // extent across d checked for one of this round's maxima (or a vertex known from the last
+  // searches) instead. With no new face and nothing lost there is nothing to group. What this
+  // misses (a region that split from a followed group, or a second peak inside one) is found by
+  // the patrol: one climb at a time
   // from a pair of the whole patch, a different pair each time (kPatrolStep), kPatrolSteps steps
   // per search and continued in the next. (A search over the whole patch at once cost ~10x a
   // round at ~1,000 contacts, its climbs from the rim mostly retracing the remembered ones.)
@@ -838,50 +846,66 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   if (discover && full) {
     for (std::uint32_t i = 0; i < valid.size(); ++i) open.push_back(i);
   } else if (discover) {
-    const std::uint32_t n_groups = group_faces(T);
-    const std::vector<std::uint32_t>& label = T.group_label;
     const auto n_slots = static_cast<std::uint32_t>(T.faces.size());
-    // Each group's extent across d (from the records, in the common frame), and whether one of
-    // this round's maxima lies in it.
-    const Vec3 uc = dir_to_common(walk.u), wc = dir_to_common(walk.w);
-    std::vector<double>& box = T.group_box;  // per group: lo_u, hi_u, lo_w, hi_w
-    box.resize(4 * std::size_t(n_groups));
-    for (std::uint32_t g = 0; g < n_groups; ++g) {
-      double* bx = &box[4 * std::size_t(g)];
-      bx[0] = bx[2] = std::numeric_limits<double>::infinity(), bx[1] = bx[3] = -bx[0];
-    }
-    std::vector<std::uint32_t>& first = T.group_first;  // per group: a face of it (its first slot)
-    first.assign(n_groups, UINT32_MAX);
-    for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
-      const std::uint32_t g = label[slot];
-      if (first[g] == UINT32_MAX) first[g] = slot;
-      if (T.use[slot] == kNoDirection) continue;  // no record (a moved one is not filled when degenerate)
-      double* bx = &box[4 * std::size_t(g)];
-      for (const Vec3& x : common_rec(T, slot).v) {
-        const double xu = x.dot(uc), xw = x.dot(wc);
-        bx[0] = std::min(bx[0], xu), bx[1] = std::max(bx[1], xu), bx[2] = std::min(bx[2], xw), bx[3] = std::max(bx[3], xw);
+    bool any_new = false;
+    for (std::uint32_t slot = 0; slot < n_slots && !any_new; ++slot) any_new = !T.fixed(slot).covered;
+    if (any_new || lost) {
+      const std::uint32_t n_groups = group_faces(T);
+      const std::vector<std::uint32_t>& label = T.group_label;
+      std::vector<std::uint32_t>& first = T.group_first;  // per group: a face of it (its first slot)
+      first.assign(n_groups, UINT32_MAX);
+      std::vector<std::uint8_t>& group_open = T.group_open;  // per group: a region not followed
+      group_open.assign(n_groups, 1);
+      if (!lost) {  // open: no face of it covered
+        for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
+          const std::uint32_t g = label[slot];
+          if (first[g] == UINT32_MAX) first[g] = slot;
+          if (T.fixed(slot).covered) group_open[g] = 0;
+        }
+      } else {
+        // Each group's extent across d (from the records, in the common frame); open: none of
+        // this round's maxima, nor a vertex known from the last searches, lies in it.
+        const Vec3 uc = dir_to_common(walk.u), wc = dir_to_common(walk.w);
+        std::vector<double>& box = T.group_box;  // per group: lo_u, hi_u, lo_w, hi_w
+        box.resize(4 * std::size_t(n_groups));
+        for (std::uint32_t g = 0; g < n_groups; ++g) {
+          double* bx = &box[4 * std::size_t(g)];
+          bx[0] = bx[2] = std::numeric_limits<double>::infinity(), bx[1] = bx[3] = -bx[0];
+        }
+        for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
+          const std::uint32_t g = label[slot];
+          if (first[g] == UINT32_MAX) first[g] = slot;
+          if (T.use[slot] == kNoDirection) continue;  // no record (a moved one is not filled when degenerate)
+          double* bx = &box[4 * std::size_t(g)];
+          for (const Vec3& x : common_rec(T, slot).v) {
+            const double xu = x.dot(uc), xw = x.dot(wc);
+            bx[0] = std::min(bx[0], xu), bx[1] = std::max(bx[1], xu), bx[2] = std::min(bx[2], xw),
+            bx[3] = std::max(bx[3], xw);
+          }
+        }
+        for (std::uint32_t g = 0; g < n_groups; ++g) {
+          const double* bx = &box[4 * std::size_t(g)];
+          auto inside = [&](std::uint32_t v) {
+            const Vec3 x = to_common(test_pos(v));
+            const double xu = x.dot(uc), xw = x.dot(wc);
+            return xu >= bx[0] && xu <= bx[1] && xw >= bx[2] && xw <= bx[3];
+          };
+          bool followed = false;
+          for (int i = 0; i < n_maxima && !followed; ++i) followed = inside(maxima[i]);
+          for (int i = 0; i < Memory::kKnown && !followed; ++i)
+            followed = memory.known[i] < test_nv && inside(memory.known[i]);
+          group_open[g] = followed ? 0 : 1;
+        }
       }
+      bool any_open = false;
+      for (std::uint32_t g = 0; g < n_groups; ++g) {
+        if (!group_open[g]) continue;
+        any_open = true;
+        if (!T.fixed(first[g]).bad_index) drop(T.fixed(first[g]).vid[0]);
+      }
+      for (std::uint32_t i = 0; i < valid.size() && any_open; ++i)
+        if (group_open[label[valid_slots[i][probe_side ? 1 : 0]]]) open.push_back(i);
     }
-    std::vector<std::uint8_t>& group_open = T.group_open;  // per group: no maximum in its extent
-    group_open.assign(n_groups, 0);
-    bool any_open = false;
-    for (std::uint32_t g = 0; g < n_groups; ++g) {
-      const double* bx = &box[4 * std::size_t(g)];
-      bool followed = false;
-      auto inside = [&](std::uint32_t v) {
-        const Vec3 x = to_common(test_pos(v));
-        const double xu = x.dot(uc), xw = x.dot(wc);
-        return xu >= bx[0] && xu <= bx[1] && xw >= bx[2] && xw <= bx[3];
-      };
-      for (int i = 0; i < n_maxima && !followed; ++i) followed = inside(maxima[i]);
-      for (int i = 0; i < Memory::kKnown && !followed; ++i)
-        followed = memory.known[i] < test_nv && inside(memory.known[i]);
-      group_open[g] = followed ? 0 : 1;
-      any_open |= !followed;
-      if (!followed && !T.fixed(first[g]).bad_index) drop(T.fixed(first[g]).vid[0]);
-    }
-    for (std::uint32_t i = 0; i < valid.size() && any_open; ++i)
-      if (group_open[label[valid_slots[i][probe_side ? 1 : 0]]]) open.push_back(i);
   }
   std::uint32_t low_v[kLowSeeds], low_f[kLowSeeds];
   double low_key[kLowSeeds];
@@ -945,6 +969,11 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   memory.patrol = patrol;
   memory.patrol_face = patrol_face;
   memory.patrol_k = patrol_k;
+  if (discover) {  // every colliding face has now been seen by a search; what was lost, looked for
+    for (std::uint32_t slot = 0; slot < T.faces.size(); ++slot) T.fixed(slot).covered = true;
+    lost = false;
+  }
+  memory.lost = lost;
   // What the last search that climbed from regions not followed knew.
   if (!searched)
     std::copy(std::begin(last.known), std::end(last.known), std::begin(memory.known));

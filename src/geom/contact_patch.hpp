@@ -81,6 +81,9 @@ struct ContactBuilder::Patch {
     /// The patrol's climb (see Patch::side): the vertex it stopped at (UINT32_MAX: none under
     /// way), the face that vertex left through, and how many climbs it has started.
     std::uint32_t patrol = UINT32_MAX, patrol_face = UINT32_MAX, patrol_k = 0;
+    /// A remembered maximum was lost (no longer inside) since the last search for new regions:
+    /// its region may have no maximum followed any more.
+    bool lost = false;
   };
 
   /// What the model keeps per body: the faces around each vertex, and per-vertex and per-face
@@ -113,6 +116,7 @@ struct ContactBuilder::Patch {
       Tri vid{};                         ///< its vertex indices
       bool bad_index = false;            ///< a vertex index out of range: no record
       std::uint32_t group = UINT32_MAX;  ///< its group at the last grouping (group_faces), UINT32_MAX: none
+      bool covered = false;              ///< a search for new regions has run since it began colliding
     };
     /// The fixed parts of the faces that collide this round or did the last, each in place while
     /// its face collides round after round (an entry is neither moved nor copied): entries of
