@@ -242,6 +242,47 @@ TEST_CASE("contact patch: a second peak rising inside a followed region is found
   CHECK(wrong_late <= 10);
 }
 
+TEST_CASE("contact patch: a region whose remembered maximum was lost is looked for again") {
+  // A dumbbell (two 10 mm balls 30 mm apart on its x axis) spins about that axis, 3 degrees a
+  // round, on a box's top face: ball A held 2 mm deep, ball B 0.7 mm (under half A's depth, so
+  // its maximum is climbed only now and then). The spin turns B's deepest vertex away within a
+  // few rounds: B's remembered maximum is lost while its region stays, with no new region to
+  // look for. Then the dumbbell rocks B down to 3 mm: PD must follow B once it is the deeper,
+  // which only a search after the loss (or the much slower patrol) can give.
+  Mesh dumbbell;
+  for (double x : {-15.0, 15.0}) {
+    const Mesh ball = make_icosphere(10, 16);
+    const auto base = std::uint32_t(dumbbell.local.size());
+    for (const Vec3& v : ball.local) dumbbell.local.push_back(ball.origin + v + Vec3(x, 0, 0));
+    for (const Tri& t : ball.faces) dumbbell.faces.push_back({t[0] + base, t[1] + base, t[2] + base});
+  }
+  const Mesh box = make_box({100, 100, 40});  // top face z = 20
+  ContactBuilder b;
+  int late = 0, wrong = 0;
+  for (int k = 0; k <= 90; ++k) {
+    const double s = k < 40 ? -0.0433 : std::min(0.0333, -0.0433 + 0.0019 * (k - 40));  // sin of the rock
+    const double theta = std::asin(s), phi = 3.0 * kPi / 180 * k;
+    Pose p = Pose::Identity();
+    p.linear() = (Eigen::AngleAxisd(theta, Vec3::UnitY()) * Eigen::AngleAxisd(phi, Vec3::UnitX())).toRotationMatrix();
+    const Vec3 a_centre = p.linear() * Vec3(-15, 0, 0);
+    p.translation() = Vec3(0, 0, 28) - Vec3(0, 0, a_centre.z());  // A's centre at z = 28: 2 mm deep
+    double depth = 0;                                             // the deepest vertex below the top face
+    for (const Vec3& v : dumbbell.local) depth = std::max(depth, 20 - (p * (dumbbell.origin + v)).z());
+    const double depth_b = 2 + 30 * s;
+    CAPTURE(k);
+    const ContactModel m = model_at(b, dumbbell, box, p);
+    REQUIRE(m.in_contact());
+    CHECK(m.penetration_mm <= depth + 1e-9);
+    if (depth_b > 2.2) {
+      ++late;
+      wrong += std::abs(m.penetration_mm - depth) > kDepthTol ? 1 : 0;
+    }
+  }
+  INFO("rounds with B the deeper by 0.2 mm or more: " << late << ", PD wrong in " << wrong);
+  CHECK(late >= 10);
+  CHECK(wrong == 0);
+}
+
 TEST_CASE("contact patch: box edge and corner: FD on the bisector, PD = depth") {
   const Vec3 edge_dir = Vec3(1, 0, 1).normalized(), corner_dir = Vec3(1, 1, 1).normalized();
   for (double d : {0.5, 2.0, 5.0}) {
