@@ -366,6 +366,9 @@ void ContactBuilder::Patch::BodyState::reset(const Mesh& m) {
   nv = m.local.size();
   nf = m.faces.size();
   visit_stamp.assign(nv, 0);
+  vertex_mark.assign(nv, 0);
+  vertex_stamp = 0;
+  cover_count.assign(nv, 0);
   path_stamp.assign(nv, 0);
   depth.assign(nv, 0);
   exit_face.assign(nv, UINT32_MAX);
@@ -421,12 +424,28 @@ void ContactBuilder::Patch::BodyState::settle(std::uint32_t epoch) {
         e = store_free.back();
         store_free.pop_back();
       }
+      store[e].covered = false;  // (filled later: a round may end before)
       to_fill.push_back(slot);
     }
     store_seen[e] = epoch;
   }
-  for (std::uint32_t e : prev_entry)  // last round's faces that collide no more
-    if (store_seen[e] != epoch) store_free.push_back(e);
+  for (std::uint32_t e : prev_entry) {  // last round's faces that collide no more
+    if (store_seen[e] == epoch) continue;
+    store_free.push_back(e);
+    const Fixed& fx = store[e];
+    if (fx.covered && !fx.bad_index)
+      for (std::uint32_t v : fx.vid) --cover_count[v];
+  }
+}
+
+void ContactBuilder::Patch::BodyState::cover_all() {
+  for (std::uint32_t slot = 0; slot < faces.size(); ++slot) {
+    Fixed& fx = fixed(slot);
+    if (fx.covered) continue;
+    fx.covered = true;
+    if (!fx.bad_index)
+      for (std::uint32_t v : fx.vid) ++cover_count[v];
+  }
 }
 
 void ContactBuilder::Patch::BodyState::make_fixed(Fixed& fx, std::uint32_t f) const {
@@ -454,6 +473,7 @@ void ContactBuilder::Patch::BodyState::make_fixed(Fixed& fx, std::uint32_t f) co
 
 void ContactBuilder::Patch::BodyState::clear_stamps() {
   std::fill(visit_stamp.begin(), visit_stamp.end(), 0);
+  std::fill(cover_count.begin(), cover_count.end(), 0);  // the store is emptied below
   std::fill(face_mark.begin(), face_mark.end(), Mark{});
   fixed_epoch = 0;
   store.clear();
@@ -466,12 +486,12 @@ void ContactBuilder::Patch::BodyState::clear_stamps() {
 
 std::size_t ContactBuilder::Patch::BodyState::bytes() const {
   return vf.bytes() +
-         (visit_stamp.capacity() + path_stamp.capacity() + exit_face.capacity() + 2 * face_mark.capacity() +
-          faces.capacity() + group_parent.capacity() + 2 * group_table.capacity() + group_label.capacity() +
-          group_remap.capacity() + group_first.capacity()) *
+         (visit_stamp.capacity() + path_stamp.capacity() + exit_face.capacity() + cover_count.capacity() +
+          2 * face_mark.capacity() + faces.capacity() + group_parent.capacity() + 2 * group_table.capacity() +
+          group_label.capacity() + group_remap.capacity() + group_first.capacity()) *
              4 +
-         (depth.capacity() + group_box.capacity()) * sizeof(double) + group_open.capacity() +
-         recs.capacity() * sizeof(FaceRec) + use.capacity() + store.capacity() * sizeof(Fixed) +
+         (depth.capacity() + group_box.capacity() + vertex_mark.capacity()) * sizeof(double) + group_open.capacity() +
+         group_attached.capacity() + recs.capacity() * sizeof(FaceRec) + use.capacity() + store.capacity() * sizeof(Fixed) +
          (store_seen.capacity() + store_free.capacity() + entry.capacity() + prev_entry.capacity() + to_fill.capacity()) * 4 +
          face_normals.capacity() * sizeof(Vec3);
 }
@@ -598,6 +618,61 @@ std::uint32_t ContactBuilder::Patch::group_faces(BodyState& T) {
     T.fixed(slot).group = label[slot] = remap[r];
   }
   T.n_groups = n;
+  return n;
+}
+
+std::uint32_t ContactBuilder::Patch::new_groups(BodyState& T) {
+  const auto n_slots = static_cast<std::uint32_t>(T.faces.size());
+  std::vector<std::uint32_t>& label = T.group_label;
+  std::vector<std::uint32_t>& parent = T.group_parent;     // union-find over the new faces' slots
+  std::vector<std::uint8_t>& attached = T.group_attached;  // per slot: its set shares a vertex with a covered face
+  label.assign(n_slots, 0);
+  parent.resize(n_slots);
+  attached.assign(n_slots, 0);
+  auto root = [&](std::uint32_t i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  // A new face touches a covered one where its vertex has a covered colliding face around it
+  // (T.cover_count); new faces sharing a vertex join (per vertex, this call's stamp and the
+  // first new face's slot).
+  std::vector<std::uint64_t>& mark = T.vertex_mark;
+  if (++T.vertex_stamp == 0) {
+    std::fill(mark.begin(), mark.end(), 0);
+    T.vertex_stamp = 1;
+  }
+  const std::uint64_t stamp = std::uint64_t(T.vertex_stamp) << 32;
+  for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
+    const BodyState::Fixed& fx = T.fixed(slot);
+    parent[slot] = slot;
+    if (fx.covered || fx.bad_index) continue;
+    for (std::uint32_t v : fx.vid) {
+      if (T.cover_count[v] > 0) attached[slot] = 1;
+      const std::uint64_t m = mark[v];
+      if ((m >> 32) != T.vertex_stamp) {
+        mark[v] = stamp | slot;
+      } else {
+        const std::uint32_t a = root(slot), b = root(std::uint32_t(m));
+        if (a != b) parent[std::max(a, b)] = std::min(a, b);
+      }
+    }
+  }
+  // Labels: 0 the covered faces (and those with bad indices), 1 + n for the n-th set of new faces.
+  std::vector<std::uint32_t>& remap = T.group_remap;
+  remap.assign(n_slots, kNoGroup);
+  std::uint32_t n = 1;
+  for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
+    const BodyState::Fixed& fx = T.fixed(slot);
+    if (fx.covered || fx.bad_index) continue;
+    const std::uint32_t r = root(slot);
+    if (remap[r] == kNoGroup) remap[r] = n++;
+    label[slot] = remap[r];
+    if (attached[slot]) attached[r] = 1;
+  }
+  std::vector<std::uint8_t>& open = T.group_open;
+  open.assign(n, 0);
+  for (std::uint32_t slot = 0; slot < n_slots; ++slot)
+    if (label[slot] != 0) open[label[slot]] = attached[root(slot)] ? 0 : 1;
   return n;
 }
 
@@ -850,19 +925,16 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
     bool any_new = false;
     for (std::uint32_t slot = 0; slot < n_slots && !any_new; ++slot) any_new = !T.fixed(slot).covered;
     if (any_new || lost) {
-      const std::uint32_t n_groups = group_faces(T);
+      const std::uint32_t n_groups = lost ? group_faces(T) : new_groups(T);
       const std::vector<std::uint32_t>& label = T.group_label;
       std::vector<std::uint32_t>& first = T.group_first;  // per group: a face of it (its first slot)
       first.assign(n_groups, UINT32_MAX);
       std::vector<std::uint8_t>& group_open = T.group_open;  // per group: a region not followed
-      group_open.assign(n_groups, 1);
-      if (!lost) {  // open: no face of it covered
-        for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
-          const std::uint32_t g = label[slot];
-          if (first[g] == UINT32_MAX) first[g] = slot;
-          if (T.fixed(slot).covered) group_open[g] = 0;
-        }
+      if (!lost) {                                           // new_groups said which are open
+        for (std::uint32_t slot = 0; slot < n_slots; ++slot)
+          if (first[label[slot]] == UINT32_MAX) first[label[slot]] = slot;
       } else {
+        group_open.assign(n_groups, 1);
         // Each group's extent across d (from the records, in the common frame); open: none of
         // this round's maxima, nor a vertex known from the last searches, lies in it.
         const Vec3 uc = dir_to_common(walk.u), wc = dir_to_common(walk.w);
@@ -970,7 +1042,7 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   memory.patrol_face = patrol_face;
   memory.patrol_k = patrol_k;
   if (discover) {  // every colliding face has now been seen by a search; what was lost, looked for
-    for (std::uint32_t slot = 0; slot < T.faces.size(); ++slot) T.fixed(slot).covered = true;
+    T.cover_all();
     lost = false;
   }
   memory.lost = lost;

@@ -141,14 +141,22 @@ struct ContactBuilder::Patch {
     /// from the round before only when that round filled its entries.
     std::uint32_t fixed_epoch = 0;
     // Grouping the colliding faces into regions (a search for new regions): group_faces.
-    std::uint32_t n_groups = 0;               ///< groups at the last grouping (Fixed::group below it)
-    std::vector<std::uint32_t> group_label;   ///< per slot: its group
-    std::vector<std::uint64_t> group_table;   ///< scratch: vertex → the first slot it was seen in (hash table)
-    std::vector<std::uint32_t> group_parent;  ///< scratch: union-find over the groups
-    std::vector<std::uint32_t> group_remap;   ///< scratch: old or root label → new label
-    std::vector<std::uint32_t> group_first;   ///< scratch: per group, its first slot
-    std::vector<double> group_box;            ///< scratch: per group, its extent across d (u, w)
-    std::vector<std::uint8_t> group_open;     ///< scratch: per group, no remembered maximum in it
+    std::uint32_t n_groups = 0;                ///< groups at the last grouping (Fixed::group below it)
+    std::vector<std::uint32_t> group_label;    ///< per slot: its group
+    std::vector<std::uint64_t> group_table;    ///< scratch: vertex → the first slot it was seen in (hash table)
+    std::vector<std::uint32_t> group_parent;   ///< scratch: union-find over the groups
+    std::vector<std::uint32_t> group_remap;    ///< scratch: old or root label → new label
+    std::vector<std::uint32_t> group_first;    ///< scratch: per group, its first slot
+    std::vector<double> group_box;             ///< scratch: per group, its extent across d (u, w)
+    std::vector<std::uint8_t> group_open;      ///< scratch: per group, a region not followed
+    std::vector<std::uint8_t> group_attached;  ///< scratch (new_groups): per slot, its set touches a covered face
+    std::vector<std::uint64_t> vertex_mark;  ///< scratch (new_groups): per vertex, a stamp and the face that marked it
+    std::uint32_t vertex_stamp = 0;          ///< new_groups' calls so far (its stamp)
+    /// Per vertex: the colliding faces around it that are covered (kept as faces are covered,
+    /// cover_all, and stop colliding, settle).
+    std::vector<std::uint32_t> cover_count;
+    /// Marks every colliding face covered (after a search for new regions).
+    void cover_all();
     std::vector<Vec3> face_normals;  ///< every face's unit normal, local frame (zero: degenerate); the probe's only
     Memory memory;                   ///< last round's deepest vertices
     bool sized_for(const Mesh& m) const { return mesh == &m && nv == m.local.size() && nf == m.faces.size(); }
@@ -184,6 +192,11 @@ struct ContactBuilder::Patch {
   /// with many new faces, every face is grouped afresh. A group that has split since stays one:
   /// a region that separated from a followed one is found by the patrol (see Patch::side).
   std::uint32_t group_faces(BodyState& T);
+  /// The groups a search for new regions opens when no maximum was lost: T's faces that began
+  /// colliding since the last search (not covered), joined through shared vertices; a set of
+  /// them sharing no vertex with a covered face is a new region. Labels in T.group_label (0: the
+  /// covered faces), which are open in T.group_open; returns the label count.
+  std::uint32_t new_groups(BodyState& T);
   // Scratch.
   std::vector<ContactPair> valid;
   std::vector<std::array<std::uint32_t, 2>> valid_slots;  ///< per valid pair: its object and probe record slots

@@ -140,6 +140,44 @@ TEST_CASE("contact patch: a second contact region is found when it appears, and 
   }
 }
 
+TEST_CASE("contact patch: a region that lifts off and comes back is found again") {
+  // The dumbbell of the test above rocks B down into contact (A held 1 mm deep), up out of it,
+  // and down again until B is the deeper: B's faces collide again after they stopped, and must
+  // count as new again (not as faces a search has seen), or B is not looked for.
+  Mesh dumbbell;
+  for (double x : {-15.0, 15.0}) {
+    const Mesh ball = make_icosphere(10, 16);
+    const auto base = std::uint32_t(dumbbell.local.size());
+    for (const Vec3& v : ball.local) dumbbell.local.push_back(ball.origin + v + Vec3(x, 0, 0));
+    for (const Tri& t : ball.faces) dumbbell.faces.push_back({t[0] + base, t[1] + base, t[2] + base});
+  }
+  const Mesh box = make_box({100, 100, 40});  // top face z = 20
+  ContactBuilder b;
+  int late = 0, wrong = 0;
+  bool was_in = false, left = false;
+  for (int k = 0; k <= 90; ++k) {
+    // B's depth 1 + 30 sin θ: to 0.5 mm (k 20), out to -1 mm (k 35), then down to 2 mm (k 90).
+    const double depth_b = k <= 20 ? -1 + 0.075 * k : (k <= 35 ? 0.5 - 0.1 * (k - 20) : -1 + 3.0 * (k - 35) / 55);
+    const double theta = std::asin((depth_b - 1) / 30);
+    Pose p = Pose::Identity();
+    p.linear() = Eigen::AngleAxisd(theta, Vec3::UnitY()).toRotationMatrix();
+    p.translation() = Vec3(0, 0, 29 - 15 * std::sin(theta));  // A's depth stays 1 mm
+    CAPTURE(k);
+    const ContactModel m = model_at(b, dumbbell, box, p);
+    REQUIRE(m.in_contact());
+    CHECK(angle_deg(fd(m), Vec3::UnitZ()) < 1e-6);
+    was_in |= depth_b > 0.3;
+    left |= was_in && depth_b < -0.5;
+    if (left && depth_b > 1.1) {
+      ++late;
+      wrong += std::abs(m.penetration_mm - depth_b) > kDepthTol ? 1 : 0;
+    }
+  }
+  INFO("rounds with B back and the deeper: " << late << ", PD wrong in " << wrong);
+  CHECK(late >= 15);
+  CHECK(wrong == 0);
+}
+
 TEST_CASE("contact patch: a small region appearing next to a large one is found (grouped apart from it)") {
   // A finely meshed 20 mm ball A slides along y, 1 mm deep in a flat block's top face (z = 20;
   // ~110 colliding faces, the same ones all along: the probe only translates), while a coarse
