@@ -268,32 +268,31 @@ const FaceRec& no_record() {
   return r;
 }
 
-/// Rows (an object and a probe face record, and a weight) gathered four at a time for
-/// segments4, areas measured from o: f(Seg4, weights) runs on each full group; finish() pads the
-/// last one with records that give no segment (weight 0).
+/// Rows (an object and a probe face record) gathered four at a time for segments4, areas
+/// measured from o: f(Seg4) runs on each full group; finish() pads the last one with records
+/// that give no segment.
 template <class F>
 struct Quads {
   Quads(F fn, const Vec3& o) : f(std::move(fn)), ox(splat(o.x())), oy(splat(o.y())), oz(splat(o.z())) {}
-  void add(const FaceRec* ra, const FaceRec* rb, double weight) {
-    a[n] = ra, b[n] = rb, w[n] = weight;
+  void add(const FaceRec* ra, const FaceRec* rb) {
+    a[n] = ra, b[n] = rb;
     if (++n == 4) run();
   }
   void finish() {
     if (n == 0) return;
-    for (int k = n; k < 4; ++k) a[k] = b[k] = &no_record(), w[k] = 0;
+    for (int k = n; k < 4; ++k) a[k] = b[k] = &no_record();
     run();
   }
 
  private:
   void run() {
-    f(segments4(load4(a), load4(b), ox, oy, oz), D4{w[0], w[1], w[2], w[3]});
+    f(segments4(load4(a), load4(b), ox, oy, oz));
     n = 0;
   }
   F f;
   D4 ox, oy, oz;
   const FaceRec* a[4];
   const FaceRec* b[4];
-  double w[4];
   int n = 0;
 };
 
@@ -703,7 +702,7 @@ double ContactBuilder::Patch::held_footprint() {
     radius2 = std::max(radius2, (rel - rel.dot(held_n) * held_n).squaredNorm());
   };
   Quads quads(
-      [&](const Seg4& g, const D4&) {
+      [&](const Seg4& g) {
         for (int k = 0; k < 4; ++k) {
           if (!g.ok[k]) continue;
           any = true;
@@ -716,7 +715,7 @@ double ContactBuilder::Patch::held_footprint() {
     const FaceRec& ra = held_object_recs[slot_a];
     const FaceRec& rb = held_probe_recs[slot_b];
     if (ra.n.squaredNorm() == 0 || rb.n.squaredNorm() == 0) continue;
-    quads.add(&ra, &rb, 0);
+    quads.add(&ra, &rb);
   }
   quads.finish();
   if (!any)
@@ -1278,16 +1277,11 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
 
   // The vector area of the object surface inside the probe, from the intersection curve:
   // A = ½ Σ (s0 − o) × (s1 − o) over the pairs' segments, four pairs at a time (segments4), in
-  // the common frame (turned into the object's after). Split into the part on faces not turned
-  // away from the previous FD (front) and all.
+  // the common frame (turned into the object's after): while contact continues, only the part on
+  // faces not turned away from the previous FD (front); at first contact all of it.
   bool any_front_face = false;
-  D4 sx = splat(0), sy = sx, sz = sx, sabs = sx, fx = sx, fy = sx, fz = sx, fabs = sx;
-  Quads quads(
-      [&](const Seg4& g, const D4& f) {  // f: 1 on the front rows
-        sx += g.px, sy += g.py, sz += g.pz, sabs += g.pabs;
-        fx += f * g.px, fy += f * g.py, fz += f * g.pz, fabs += f * g.pabs;
-      },
-      to_common(origin));
+  D4 sx = splat(0), sy = sx, sz = sx, sabs = sx;
+  Quads quads([&](const Seg4& g) { sx += g.px, sy += g.py, sz += g.pz, sabs += g.pabs; }, to_common(origin));
   const BodyState::Fixed* object_store = object_s.store.data();
   const BodyState::Fixed* probe_store = probe_s.store.data();
   const std::uint32_t* object_entry = object_s.entry.data();
@@ -1299,13 +1293,14 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     if (use_a == kNoDirection || probe_s.use[slot_b] == kNoDirection) continue;  // degenerate: no direction
     const bool front = use_a == kFront;
     any_front_face |= front;
+    if (have_prev && !front) continue;  // with history only the front part is used
     quads.add(probe_frame ? &object_recs[slot_a] : &object_store[object_entry[slot_a]].rec,
-              probe_frame ? &probe_store[probe_entry[slot_b]].rec : &probe_recs[slot_b], front ? 1.0 : 0.0);
+              probe_frame ? &probe_store[probe_entry[slot_b]].rec : &probe_recs[slot_b]);
   }
   quads.finish();
-  Vec3 a_all(lanes_sum(sx), lanes_sum(sy), lanes_sum(sz)), a_front(lanes_sum(fx), lanes_sum(fy), lanes_sum(fz));
-  if (probe_frame) a_all = R * a_all, a_front = R * a_front;
-  const double abs_all = lanes_sum(sabs), abs_front = lanes_sum(fabs);
+  Vec3 area(lanes_sum(sx), lanes_sum(sy), lanes_sum(sz));  // the front part's with history, else all of it
+  if (probe_frame) area = R * area;
+  const double abs_sum = lanes_sum(sabs);
 
   // FD: the front part of the curve while contact continues (thin plates, wedges), all of it at
   // first contact; then the fallbacks.
@@ -1313,8 +1308,7 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   bool in_contact = !valid.empty() && m.degenerate_faces < m.object_faces;
   if (in_contact && have_prev && !any_front_face) in_contact = false;  // only back faces: past a thin feature
   if (in_contact) {
-    const Vec3 a = have_prev ? a_front : a_all;
-    const double abs_sum = have_prev ? abs_front : abs_all;
+    const Vec3& a = area;
     const double a_norm = a.norm();
     // A curve of (nearly) no area is rounding noise (faces touching at a vertex or an edge): its
     // direction is arbitrary. kTinyArea of the colliding faces' area is far below any real
