@@ -374,6 +374,11 @@ void ContactBuilder::Patch::BodyState::reset(const Mesh& m) {
   face_mark.assign(nf, {});
   memory = {};
   face_normals.clear();
+  clear_store();
+  n_groups = 0;
+}
+
+void ContactBuilder::Patch::BodyState::clear_store() {
   store.clear();
   store_seen.clear();
   store_free.clear();
@@ -381,7 +386,6 @@ void ContactBuilder::Patch::BodyState::reset(const Mesh& m) {
   prev_entry.clear();
   to_fill.clear();
   fixed_epoch = 0;
-  n_groups = 0;
 }
 
 void ContactBuilder::Patch::BodyState::compute_face_normals() {
@@ -474,13 +478,7 @@ void ContactBuilder::Patch::BodyState::clear_stamps() {
   std::fill(visit_stamp.begin(), visit_stamp.end(), 0);
   std::fill(cover_count.begin(), cover_count.end(), 0);  // the store is emptied below
   std::fill(face_mark.begin(), face_mark.end(), Mark{});
-  fixed_epoch = 0;
-  store.clear();
-  store_seen.clear();
-  store_free.clear();
-  entry.clear();
-  prev_entry.clear();
-  to_fill.clear();
+  clear_store();
 }
 
 std::size_t ContactBuilder::Patch::BodyState::bytes() const {
@@ -904,12 +902,12 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   // the whole patch; otherwise only from the regions not followed yet. This body's colliding
   // faces fall into groups connected through shared vertices (a ring around each region the
   // other body entered). A new region brings faces that began colliding since the last search
-  // (not `covered`): a group with none that a search has seen is a new region. Only once a
-  // remembered maximum has been lost (its region may be followed no more) is each group's
-  // extent across d checked for one of this round's maxima (or a vertex known from the last
-  // searches) instead. With no new face and nothing lost there is nothing to group. What this
-  // misses (a region that split from a followed group, or a second peak inside one) is found by
-  // the patrol: one climb at a time
+  // (not `covered`): a group with none that a search has seen is a new region (new_groups).
+  // Only once a remembered maximum has been lost (its region may be followed no more) are all
+  // faces grouped (group_faces) and each group's extent across d checked for one of this
+  // round's maxima (or a vertex known from the last searches) instead. With no new face and
+  // nothing lost there is nothing to group. What this misses (a region that split from a
+  // followed group, or a second peak inside one) is found by the patrol: one climb at a time
   // from a pair of the whole patch, a different pair each time (kPatrolStep), kPatrolSteps steps
   // per search and continued in the next. (A search over the whole patch at once cost ~10x a
   // round at ~1,000 contacts, its climbs from the rim mostly retracing the remembered ones.)

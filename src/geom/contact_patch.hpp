@@ -72,10 +72,11 @@ struct ContactBuilder::Patch {
     static constexpr int kKnown = 8;  ///< vertices known to lie in followed regions (see `known`)
     std::uint32_t vertex[kSize] = {UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX};
     std::uint32_t face[kSize] = {UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX};
-    /// Vertices whose regions count as followed when new regions are looked for, from the last
-    /// search that climbed: local maxima it found beyond the kSize deepest (not climbed each
-    /// round), and a vertex of each group it climbed from (a region is new once: else a patch
-    /// with more than kSize peaks, or a rim around a hole, would be searched every time).
+    /// Vertices whose regions count as followed when groups' extents are checked (a search after
+    /// a remembered maximum was lost), from the last search that climbed from new regions: local
+    /// maxima it found beyond the kSize deepest (not climbed each round), and a vertex of each
+    /// group it climbed from (a region is new once: else a patch with more than kSize peaks, or a
+    /// rim around a hole, would be searched every time).
     std::uint32_t known[kKnown] = {UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX,
                                    UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX};
     /// The patrol's climb (see Patch::side): the vertex it stopped at (UINT32_MAX: none under
@@ -134,13 +135,16 @@ struct ContactBuilder::Patch {
     /// After the pairs: gives each slot its entry (last round's, or a new one, listed in to_fill)
     /// and frees the entries of last round's faces that do not collide this round.
     void settle(std::uint32_t epoch);
+    /// Empties the store (no face's fixed part kept).
+    void clear_store();
     /// Fills fx for face f from the mesh (the unit normal from face_normals when those are kept,
     /// else computed).
     void make_fixed(Fixed& fx, std::uint32_t f) const;
     /// The round whose new entries were filled last (to_fill); 0 = none: an entry is taken over
     /// from the round before only when that round filled its entries.
     std::uint32_t fixed_epoch = 0;
-    // Grouping the colliding faces into regions (a search for new regions): group_faces.
+    // Grouping the colliding faces into regions (a search for new regions): group_faces after a
+    // remembered maximum was lost, else new_groups.
     std::uint32_t n_groups = 0;                ///< groups at the last grouping (Fixed::group below it)
     std::vector<std::uint32_t> group_label;    ///< per slot: its group
     std::vector<std::uint64_t> group_table;    ///< scratch: vertex → the first slot it was seen in (hash table)

@@ -49,6 +49,17 @@ const Mesh& ball10() {
   static const Mesh m = make_icosphere(10, 16);
   return m;
 }
+// Two 10 mm balls (ball10's mesh) 30 mm apart along x, centred on the origin.
+Mesh make_dumbbell() {
+  Mesh dumbbell;
+  for (double x : {-15.0, 15.0}) {
+    const Mesh& ball = ball10();
+    const auto base = std::uint32_t(dumbbell.local.size());
+    for (const Vec3& v : ball.local) dumbbell.local.push_back(ball.origin + v + Vec3(x, 0, 0));
+    for (const Tri& t : ball.faces) dumbbell.faces.push_back({t[0] + base, t[1] + base, t[2] + base});
+  }
+  return dumbbell;
+}
 constexpr double kDepthTol = 0.05;  // mm: the depth target for analytic shapes (README, force rendering)
 }  // namespace
 
@@ -115,13 +126,7 @@ TEST_CASE("contact patch: a second contact region is found when it appears, and 
   // ball B coming down from 2 mm above until it is the deeper (depth 1 + 30 sin θ). Both
   // patches lie on the top face, so FD = +z exactly; PD must reach B's depth within the rounds
   // that look for new regions (B appears outside the footprint A's patch had).
-  Mesh dumbbell;
-  for (double x : {-15.0, 15.0}) {
-    const Mesh ball = make_icosphere(10, 16);
-    const auto base = std::uint32_t(dumbbell.local.size());
-    for (const Vec3& v : ball.local) dumbbell.local.push_back(ball.origin + v + Vec3(x, 0, 0));
-    for (const Tri& t : ball.faces) dumbbell.faces.push_back({t[0] + base, t[1] + base, t[2] + base});
-  }
+  const Mesh dumbbell = make_dumbbell();
   const Mesh box = make_box({100, 100, 40});  // top face z = 20, the balls well inside its edges
   ContactBuilder b;
   for (int k = 0; k <= 40; ++k) {
@@ -144,13 +149,7 @@ TEST_CASE("contact patch: a region that lifts off and comes back is found again"
   // The dumbbell of the test above rocks B down into contact (A held 1 mm deep), up out of it,
   // and down again until B is the deeper: B's faces collide again after they stopped, and must
   // count as new again (not as faces a search has seen), or B is not looked for.
-  Mesh dumbbell;
-  for (double x : {-15.0, 15.0}) {
-    const Mesh ball = make_icosphere(10, 16);
-    const auto base = std::uint32_t(dumbbell.local.size());
-    for (const Vec3& v : ball.local) dumbbell.local.push_back(ball.origin + v + Vec3(x, 0, 0));
-    for (const Tri& t : ball.faces) dumbbell.faces.push_back({t[0] + base, t[1] + base, t[2] + base});
-  }
+  const Mesh dumbbell = make_dumbbell();
   const Mesh box = make_box({100, 100, 40});  // top face z = 20
   ContactBuilder b;
   int late = 0, wrong = 0;
@@ -287,13 +286,7 @@ TEST_CASE("contact patch: a region whose remembered maximum was lost is looked f
   // few rounds: B's remembered maximum is lost while its region stays, with no new region to
   // look for. Then the dumbbell rocks B down to 3 mm: PD must follow B once it is the deeper,
   // which only a search after the loss (or the much slower patrol) can give.
-  Mesh dumbbell;
-  for (double x : {-15.0, 15.0}) {
-    const Mesh ball = make_icosphere(10, 16);
-    const auto base = std::uint32_t(dumbbell.local.size());
-    for (const Vec3& v : ball.local) dumbbell.local.push_back(ball.origin + v + Vec3(x, 0, 0));
-    for (const Tri& t : ball.faces) dumbbell.faces.push_back({t[0] + base, t[1] + base, t[2] + base});
-  }
+  const Mesh dumbbell = make_dumbbell();
   const Mesh box = make_box({100, 100, 40});  // top face z = 20
   ContactBuilder b;
   int late = 0, wrong = 0;
