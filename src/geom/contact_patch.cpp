@@ -1183,9 +1183,10 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   valid.clear();
   valid_slots.clear();
   // A face that collided in the last round (when its entries were filled) keeps its fixed part
-  // where it is (BodyState::see). Returns the face's slot. The face of the pair before is answered without reading its mark:
-  // the collision core lists a leaf pair's pairs together, so about half the pairs repeat the
-  // object face of the pair before them (the marks, over the whole mesh, are read at random).
+  // where it is (BodyState::see, settle). Returns the face's slot. The face of the pair before
+  // is answered without reading its mark: the collision core lists a leaf pair's pairs
+  // together, so about half the pairs repeat the object face of the pair before them (the
+  // marks, over the whole mesh, are read at random).
   struct Last {
     std::uint32_t face = UINT32_MAX, slot = 0;
   } last_probe, last_object;
