@@ -28,6 +28,8 @@
 #include "engine/scene.hpp"
 #include "bench.hpp"
 #include "bench_tables_common.hpp"
+#include "engine/distributed.hpp"
+#include "force_scenes.hpp"
 #include "geom/collide.hpp"
 #include "geom/contact.hpp"
 #include "geom/primitives.hpp"
@@ -45,7 +47,14 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr std::int64_t kTickNs = 1'000'000;  // 1 kHz servo
 constexpr double kDirMinN = 0.05;            // directions are compared only above this force, N
-constexpr double kPopDepthMm = 0.5;          // a force vanishing deeper than this is a pop-through, mm
+constexpr double kPopDepthMm = 0.5;
+/// collide() as the run engine calls it without workers: exact, pairs sorted (the order the
+/// workers' merge gives, so that the contact model does not depend on the worker count).
+const geom::CollideConfig kEngineCollide = [] {
+  geom::CollideConfig c;
+  c.sort_pairs = true;
+  return c;
+}();          // a force vanishing deeper than this is a pop-through, mm
 
 /// A scene: bodies, a script of probe poses and the windows the metrics look at.
 struct ForceScene {
@@ -56,6 +65,12 @@ struct ForceScene {
   double still_t0 = 0, still_t1 = 0;                   // holding still, s (empty: no still figure)
   std::function<double(const geom::Vec3&)> depth_ref;  // analytic depth of the probe at a position (null: unknown)
   bool plate = false;                                  // pop-through: device below the plate's top while over it
+  // Generated scenes (a ball probe, force_scenes.hpp): the truth table's rows.
+  TruthFn truth;                  // the ball's smallest clearing translation at a centre (null: not a generated scene)
+  double ball_mm = 0;             // the ball's radius
+  std::string twin;               // the same scene on the other tessellation (coarse ↔ subdivided), for the direction check
+  bool crease = false;            // a concave scene: no force above law(true depth) + 0.05 N
+  double keep_t0 = 0, keep_t1 = 0;  // plate: slid under the plate; the force's share of its value at keep_t0
 };
 
 Body generated(const std::string& label, geom::Mesh mesh) {
@@ -181,6 +196,254 @@ ForceScene hand_scene(const std::string& name, const std::string& probe_path, co
   return s;
 }
 
+// ---- Generated scenes: CAD-like solids and a ball probe, against the analytic truth ----
+
+constexpr double kBallMm = 10;  // the generated scenes' ball radius (pocket: kPocketBallMm)
+constexpr int kBallFrequency = 16;
+
+/// Moves to p at `speed` mm/s.
+void go(Keys& k, const geom::Vec3& p, double speed) { k.to(p, std::max((p - k.last()).norm() / speed, 1e-3)); }
+
+/// A ball probe on a generated solid.
+ForceScene ball_scene(const std::string& name, geom::Mesh solid, double r) {
+  ForceScene s;
+  s.name = name;
+  s.object = generated(solid.name, std::move(solid));
+  s.probe = generated("ball", geom::make_icosphere(r, kBallFrequency));
+  s.ball_mm = r;
+  return s;
+}
+
+/// A box of 100 mm, faces split × split (1: the 12-face box), placed by `place`.
+geom::Mesh box100(int split, const Eigen::Isometry3d& place = Eigen::Isometry3d::Identity()) {
+  CellSolid c = CellSolid::empty({-50, 50}, {-50, 50}, {-50, 50});
+  c.set(0, 0, 0, true);
+  return cell_mesh(c, split, place, split == 1 ? "box12" : "box_split");
+}
+
+/// The path around a box edge at a constant depth: on the top face toward the edge at (50, ·, 50),
+/// around it, down the side face (box frame, y = 0).
+void around_edge(Keys& k, double depth, double speed, const Eigen::Isometry3d& place) {
+  const double h = kBallMm - depth;
+  go(k, place * geom::Vec3(30, 0, 50 + h), speed);
+  go(k, place * geom::Vec3(50, 0, 50 + h), speed);
+  for (int deg = 3; deg <= 90; deg += 3) {
+    const double a = deg * kPi / 180;
+    go(k, place * geom::Vec3(50 + h * std::sin(a), 0, 50 + h * std::cos(a)), speed);
+  }
+  go(k, place * geom::Vec3(50 + h, 0, 30), speed);
+}
+
+/// Box edge: the ball 2 mm deep slides over an edge of the 12-face box (split 1) or the same box
+/// subdivided 16× (split 16), from the top face to the side at 10 mm/s.
+ForceScene box_edge_scene(int split) {
+  const std::string tag = split == 1 ? "box12" : "box16x";
+  ForceScene s = ball_scene(tag + "_edge", box100(split), kBallMm);
+  s.twin = (split == 1 ? "box16x" : "box12") + std::string("_edge");
+  Keys k;
+  k.at({30, 0, 50 + kBallMm + 5});
+  k.to({30, 0, 50 + kBallMm - 2}, 0.3);
+  k.hold(0.2);
+  s.slide_t0 = k.t;
+  around_edge(k, 2, 10, Eigen::Isometry3d::Identity());
+  s.slide_t1 = k.t;
+  go(k, {50 + kBallMm + 5, 0, 30}, 50);
+  k.hold(0.1);
+  s.script = k.tr;
+  s.truth = [](const geom::Vec3& c) { return box_truth({-50, -50, -50}, {50, 50, 50}, Eigen::Isometry3d::Identity(), kBallMm, c); };
+  return s;
+}
+
+/// Box corner: the ball pressed 3 mm onto a corner along the diagonal, held 1 s, released.
+ForceScene box_corner_scene(int split) {
+  const std::string tag = split == 1 ? "box12" : "box16x";
+  ForceScene s = ball_scene(tag + "_corner", box100(split), kBallMm);
+  s.twin = (split == 1 ? "box16x" : "box12") + std::string("_corner");
+  const geom::Vec3 corner(50, 50, 50), diag = geom::Vec3(1, 1, 1).normalized();
+  Keys k;
+  k.at(corner + (kBallMm + 5) * diag);
+  k.to(corner + (kBallMm - 3) * diag, 0.5);
+  k.hold(1.0);
+  s.still_t0 = k.t - 0.8;
+  s.still_t1 = k.t;
+  k.to(corner + (kBallMm + 5) * diag, 0.5);
+  k.hold(0.1);
+  s.script = k.tr;
+  s.truth = [](const geom::Vec3& c) { return box_truth({-50, -50, -50}, {50, 50, 50}, Eigen::Isometry3d::Identity(), kBallMm, c); };
+  return s;
+}
+
+/// A 90° ridge: the box turned 45° about y so an edge is a roof's crest at z = 0; the ball, 2 mm
+/// deep, slides up one face, over the crest and down the other at `speed` mm/s.
+ForceScene ridge_scene(int split, double speed) {
+  Eigen::Isometry3d place = Eigen::Isometry3d::Identity();
+  place.translate(geom::Vec3(0, 0, -50 * std::sqrt(2.0)));
+  place.rotate(Eigen::AngleAxisd(-kPi / 4, geom::Vec3::UnitY()));
+  char name[64];
+  std::snprintf(name, sizeof name, "ridge%s_%g", split == 1 ? "12" : "16x", speed);
+  ForceScene s = ball_scene(name, box100(split, place), kBallMm);
+  std::snprintf(name, sizeof name, "ridge%s_%g", split == 1 ? "16x" : "12", speed);
+  s.twin = name;
+  Keys k;
+  const double h = kBallMm - 2;
+  // Start on the face before the crest (box frame: the top face, 40 mm from the edge).
+  const geom::Vec3 start = place * geom::Vec3(10, 0, 50 + h);
+  k.at(start + 5 * (place.linear() * geom::Vec3::UnitZ()));
+  k.to(start, 0.3);
+  k.hold(0.2);
+  s.slide_t0 = k.t;
+  go(k, place * geom::Vec3(30, 0, 50 + h), speed);
+  around_edge(k, 2, speed, place);
+  s.slide_t1 = k.t;
+  go(k, place * geom::Vec3(50 + h + 5, 0, 30), 50);
+  k.hold(0.1);
+  s.script = k.tr;
+  s.truth = [place](const geom::Vec3& c) { return box_truth({-50, -50, -50}, {50, 50, 50}, place, kBallMm, c); };
+  return s;
+}
+
+/// A 90° crease (an L: floor z <= 0, wall x <= 0, coarse faces): the ball 2 mm into the floor
+/// slides into the wall to 3 mm, holds, slides 30 mm along the crease, leaves.
+ForceScene crease_scene(int split) {
+  CellSolid c = CellSolid::empty({-50, 0, 50}, {-50, 50}, {-50, 0, 50});
+  c.set(0, 0, 0, true);
+  c.set(1, 0, 0, true);
+  c.set(0, 0, 1, true);
+  ForceScene s = ball_scene(split == 1 ? "crease" : "crease16x", cell_mesh(c, split, Eigen::Isometry3d::Identity(), "crease"), kBallMm);
+  s.crease = true;
+  Keys k;
+  k.at({25, -20, kBallMm + 5});
+  k.to({25, -20, kBallMm - 2}, 0.3);
+  k.hold(0.2);
+  s.slide_t0 = k.t;
+  go(k, {kBallMm - 3, -20, kBallMm - 2}, 10);  // into the wall
+  k.hold(0.3);
+  go(k, {kBallMm - 3, 10, kBallMm - 2}, 10);  // along the crease
+  s.slide_t1 = k.t;
+  go(k, {25, 10, kBallMm + 5}, 50);
+  k.hold(0.1);
+  s.script = k.tr;
+  const std::vector<Wall> walls{{geom::Vec3::UnitZ(), 0}, {geom::Vec3::UnitX(), 0}};
+  s.truth = [walls](const geom::Vec3& x) { return cavity_truth(walls, kBallMm, x); };
+  return s;
+}
+
+/// An inner corner (a cube of 100 mm with one octant taken out: three faces of 50 mm meet at the
+/// origin): the ball pressed 2 mm into each, held 1.5 s, released.
+ForceScene inner_corner_scene() {
+  CellSolid c = CellSolid::empty({-50, 0, 50}, {-50, 0, 50}, {-50, 0, 50});
+  for (int i = 0; i < 2; ++i)
+    for (int j = 0; j < 2; ++j)
+      for (int l = 0; l < 2; ++l) c.set(i, j, l, !(i == 1 && j == 1 && l == 1));
+  ForceScene s = ball_scene("inner_corner", cell_mesh(c, 1, Eigen::Isometry3d::Identity(), "inner_corner"), kBallMm);
+  s.crease = true;
+  Keys k;
+  const double out = kBallMm + 5, in = kBallMm - 2;
+  k.at({out, out, out});
+  k.to({in, in, in}, 0.5);
+  k.hold(1.5);
+  s.still_t0 = k.t - 1.0;
+  s.still_t1 = k.t;
+  k.to({out, out, out}, 0.5);
+  k.hold(0.1);
+  s.script = k.tr;
+  const std::vector<Wall> walls{{geom::Vec3::UnitX(), 0}, {geom::Vec3::UnitY(), 0}, {geom::Vec3::UnitZ(), 0}};
+  s.truth = [walls](const geom::Vec3& x) { return cavity_truth(walls, kBallMm, x); };
+  return s;
+}
+
+constexpr double kPocketBallMm = 6;
+/// A pocket (30 × 30 mm, 15 mm deep, in a 100 mm slab, coarse faces): a 6 mm ball pressed
+/// 1.5 mm into a corner (floor and two walls), held 1.5 s, released; twice.
+ForceScene pocket_scene() {
+  CellSolid c = CellSolid::empty({-50, -15, 15, 50}, {-50, -15, 15, 50}, {-50, 0, 15});
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      c.set(i, j, 0, true);
+      c.set(i, j, 1, !(i == 1 && j == 1));
+    }
+  ForceScene s = ball_scene("pocket", cell_mesh(c, 1, Eigen::Isometry3d::Identity(), "pocket"), kPocketBallMm);
+  s.crease = true;
+  const double r = kPocketBallMm;
+  auto at = [r](double gap) { return geom::Vec3(-15 + r + gap, -15 + r + gap, r + gap); };
+  Keys k;
+  k.at(at(3));
+  for (int rep = 0; rep < 2; ++rep) {
+    k.to(at(-1.5), 0.5);
+    k.hold(1.5);
+    if (rep == 0) s.still_t0 = k.t - 1.0, s.still_t1 = k.t;
+    k.to(at(3), 0.5);
+  }
+  k.hold(0.1);
+  s.script = k.tr;
+  const std::vector<Wall> walls{{geom::Vec3::UnitX(), -15}, {geom::Vec3::UnitY(), -15}, {geom::Vec3::UnitZ(), 0},
+                                {-geom::Vec3::UnitX(), -15}, {-geom::Vec3::UnitY(), -15}};
+  s.truth = [walls](const geom::Vec3& x) { return cavity_truth(walls, kPocketBallMm, x); };
+  return s;
+}
+
+/// A 1 mm plate (100 mm square, 12 faces, top at z = 0.5): a 5 mm ball pushed through at 50 mm/s,
+/// slid 6 mm sideways under it at 10 mm/s, brought back up. The truth is a proxy's: the depth
+/// below the top it entered, pointing up, until it is clear above.
+ForceScene plate_through_scene() {
+  CellSolid c = CellSolid::empty({-50, 50}, {-50, 50}, {-0.5, 0.5});
+  c.set(0, 0, 0, true);
+  ForceScene s = ball_scene("plate_through", cell_mesh(c, 1, Eigen::Isometry3d::Identity(), "plate1"), 5);
+  Keys k;
+  k.at({0.3, -0.2, 10});
+  go(k, {0.3, -0.2, -8}, 50);  // through: the ball's top 2.5 mm under the plate
+  k.hold(0.2);
+  s.keep_t0 = k.t;
+  go(k, {6.3, -0.2, -8}, 10);  // 6 mm sideways under the plate
+  s.keep_t1 = k.t;
+  k.hold(0.2);
+  go(k, {6.3, -0.2, 10}, 50);  // back up, out above it
+  k.hold(0.3);
+  s.script = k.tr;
+  s.plate = true;
+  s.truth = [](const geom::Vec3& x) {
+    Truth t;
+    const double below = 0.5 - (x.z() - 5);  // the ball's lowest point under the top
+    if (below > 0)
+      t.depth_mm = below, t.normal = geom::Vec3::UnitZ();
+    else
+      t.clearance_mm = -below;
+    return t;
+  };
+  return s;
+}
+
+/// A fast release: the ball pressed 3 mm into the subdivided box's top face, held, pulled straight
+/// out at 300 mm/s.
+ForceScene release_scene() {
+  ForceScene s = ball_scene("release300", box100(16), kBallMm);
+  Keys k;
+  k.at({0, 0, 50 + kBallMm + 5});
+  k.to({0, 0, 50 + kBallMm - 3}, 0.4);
+  k.hold(0.5);
+  go(k, {0, 0, 50 + kBallMm + 10}, 300);
+  k.hold(0.2);
+  s.script = k.tr;
+  s.truth = [](const geom::Vec3& c) { return box_truth({-50, -50, -50}, {50, 50, 50}, Eigen::Isometry3d::Identity(), kBallMm, c); };
+  return s;
+}
+
+/// The generated scenes a name stands for ("meshes" = all of them).
+std::vector<ForceScene> generated_scenes(const std::string& n) {
+  std::vector<ForceScene> out;
+  const bool all = n == "meshes";
+  if (all || n == "box_edge") out.push_back(box_edge_scene(1)), out.push_back(box_edge_scene(16));
+  if (all || n == "box_corner") out.push_back(box_corner_scene(1)), out.push_back(box_corner_scene(16));
+  if (all || n == "ridge")
+    for (double v : {10.0, 300.0}) out.push_back(ridge_scene(1, v)), out.push_back(ridge_scene(16, v));
+  if (all || n == "crease") out.push_back(crease_scene(1));
+  if (all || n == "inner_corner") out.push_back(inner_corner_scene());
+  if (all || n == "pocket") out.push_back(pocket_scene());
+  if (all || n == "plate_through") out.push_back(plate_through_scene());
+  if (all || n == "release") out.push_back(release_scene());
+  return out;
+}
+
 struct Model {
   std::string name;
   geom::ContactConfig contact;
@@ -192,13 +455,29 @@ struct Tick {
   double pd = 0;
 };
 
+/// One collision round's model, where it was computed.
+struct Round {
+  double t_s = 0;
+  Eigen::Vector3d centre{Eigen::Vector3d::Zero()};  // the probe's origin (the ball's centre), object frame
+  Eigen::Vector3d fd{Eigen::Vector3d::Zero()};
+  double pd = 0;
+  bool contact = false;
+};
+
 /// One replay; returns per-tick records and the per-round costs.
 struct Replay {
   std::vector<Tick> ticks;
+  std::vector<Round> rounds;
   std::vector<double> collide_us, contact_us, contacts;  // in-contact rounds
+  /// Pair-order check: a second builder fed every round's pairs permuted (reversed, rotated by a
+  /// third); the largest differences of FD (norm) and PD (mm) from the first.
+  double order_fd_max = 0, order_pd_max = 0;
 };
 
-Replay replay(const ForceScene& s, const Model& model, bool closed, int C) {
+/// The replay's collision rounds: collide() in this thread (fleet null) or a scatter-gather round
+/// over a fleet's workers.
+Replay replay(const ForceScene& s, const Model& model, bool closed, int C, engine::Fleet* fleet = nullptr,
+              bool order_check = false) {
   rt::VirtualUser user;
   user.enabled = closed;
   const int n = int(std::ceil(s.script.duration_s() * 1000.0)) + 1;
@@ -207,8 +486,10 @@ Replay replay(const ForceScene& s, const Model& model, bool closed, int C) {
   auto models = std::make_unique<rt::TripleBuffer<geom::ContactModel>>();
   rt::HapticServo servo(dev, *poses, *models, rt::ForceLaw{}, rt::DefaultInterpolatorConfig(),
                         rt::DefaultSaturationConfig(), nullptr, model.passivity, 1e-3);
-  geom::ContactBuilder builder(model.contact);
+  geom::ContactBuilder builder(model.contact), permuted(model.contact);
   builder.prepare(s.probe.mesh, s.object.mesh);
+  std::vector<geom::ContactPair> perm;
+  net::RoundResult round;
   geom::CollideScratch sc;
   geom::CollideResult r;
   Replay out;
@@ -234,10 +515,26 @@ Replay replay(const ForceScene& s, const Model& model, bool closed, int C) {
       const rt::PoseSample ps = poses->output();
       const geom::Pose pose = geom::to_eigen(ps.pose);
       const auto t0 = std::chrono::steady_clock::now();
-      geom::collide(s.probe.mesh, s.probe.tree, s.object.mesh, s.object.tree, pose, {}, sc, r);
+      if (fleet) {
+        fleet->client->round(seq + 1, pose, net::Clock::now() + std::chrono::seconds(10), round);
+        if (!round.complete) die(s.name + ": a scatter-gather round came back incomplete");
+        r.pairs.assign(round.pairs.begin(), round.pairs.end());
+      } else {
+        geom::collide(s.probe.mesh, s.probe.tree, s.object.mesh, s.object.tree, pose, kEngineCollide, sc, r);
+      }
       const auto t1 = std::chrono::steady_clock::now();
       pending = builder.build(s.probe.mesh, s.object.mesh, pose, r.pairs);
       const auto t2 = std::chrono::steady_clock::now();
+      if (order_check) {
+        perm.assign(r.pairs.rbegin(), r.pairs.rend());
+        std::rotate(perm.begin(), perm.begin() + std::ptrdiff_t(perm.size() / 3), perm.end());
+        const geom::ContactModel q = permuted.build(s.probe.mesh, s.object.mesh, pose, perm);
+        out.order_fd_max = std::max(out.order_fd_max, (geom::to_eigen(q.force_dir) - geom::to_eigen(pending.force_dir)).norm());
+        out.order_pd_max = std::max(out.order_pd_max, std::abs(q.penetration_mm - pending.penetration_mm));
+        if (q.in_contact() != pending.in_contact()) out.order_fd_max = std::max(out.order_fd_max, 1.0);
+      }
+      out.rounds.push_back({double(k) * 1e-3, pose.translation(), geom::to_eigen(pending.force_dir),
+                            pending.penetration_mm, pending.in_contact()});
       pending.seq = ++seq;
       pending.pose_seq = ps.seq;
       pending.pose_sampled_ns = ps.sampled_ns;
@@ -389,6 +686,107 @@ Figures measure(const ForceScene& s, const Replay& rp) {
   return fg;
 }
 
+/// A generated scene's figures against the analytic truth (force_scenes.hpp): force error, depth
+/// overestimate, direction, steps, force while clear, what a thin plate keeps.
+struct TruthFigures {
+  double f_err_rms = 0, f_err_max = 0;  // |F − law(true depth)·n| over ticks in contact (either), N
+  double over_law_max = 0;              // max |F| − law(true depth), N
+  double pd_over_max = 0;               // max PD − true depth at the rounds' poses, mm
+  double round_dir_p99 = 0, round_dir_max = 0;  // FD's change between in-contact rounds (slide window), deg
+  double dir_err_p50 = 0, dir_err_p90 = 0, dir_err_max = 0;  // angle(F, true normal), deg
+  double step_max = 0;                                      // largest per-tick |ΔF|, N
+  double clear01_max = 0, clear03_max = 0;                  // max |F| while clear by >= 0.1 / 0.3 mm, N
+  double keep_min = -1;                                     // plate: min |F| / |F(keep_t0)| slid under it
+  double twin_dir_p99 = -1, twin_dir_max = -1;              // direction against the other tessellation's, deg
+  double order_fd = 0, order_pd = 0;                        // pair-order check (Replay)
+  int workers_identical = -1;                               // 1: the traces at every worker count equal 0 workers'
+  std::string workers_checked;                              // the worker counts compared
+};
+
+TruthFigures measure_truth(const ForceScene& s, const Replay& rp) {
+  TruthFigures tf;
+  const rt::ForceLaw law;
+  const auto& T = rp.ticks;
+  double sq = 0;
+  std::size_t n = 0;
+  std::vector<double> dir_err;
+  for (std::size_t i = 0; i < T.size(); ++i) {
+    const Truth tr = s.truth(T[i].x);
+    const double fl = law.magnitude_N(tr.depth_mm);
+    const double f = T[i].f.norm();
+    if (i > 0) tf.step_max = std::max(tf.step_max, (T[i].f - T[i - 1].f).norm());
+    if (tr.clearance_mm >= 0.1) tf.clear01_max = std::max(tf.clear01_max, f);
+    if (tr.clearance_mm >= 0.3) tf.clear03_max = std::max(tf.clear03_max, f);
+    if (!(tr.depth_mm > 0 || f > 0)) continue;
+    const double e = (T[i].f - fl * tr.normal).norm();
+    sq += e * e, ++n;
+    tf.f_err_max = std::max(tf.f_err_max, e);
+    tf.over_law_max = std::max(tf.over_law_max, f - fl);
+    if (f > kDirMinN && tr.depth_mm > 0.05) dir_err.push_back(angle_deg(T[i].f, tr.normal));
+  }
+  tf.f_err_rms = n ? std::sqrt(sq / double(n)) : 0;
+  tf.dir_err_p50 = quantile(dir_err, 0.5);
+  tf.dir_err_p90 = quantile(dir_err, 0.9);
+  tf.dir_err_max = dir_err.empty() ? 0 : *std::max_element(dir_err.begin(), dir_err.end());
+  const bool window = s.slide_t1 > s.slide_t0;
+  std::vector<double> turn;
+  for (std::size_t i = 0; i < rp.rounds.size(); ++i) {
+    const Round& r = rp.rounds[i];
+    if (!r.contact) continue;
+    tf.pd_over_max = std::max(tf.pd_over_max, r.pd - s.truth(r.centre).depth_mm);
+    if (i == 0 || !rp.rounds[i - 1].contact || (window && (r.t_s < s.slide_t0 || r.t_s > s.slide_t1))) continue;
+    turn.push_back(angle_deg(r.fd, rp.rounds[i - 1].fd));
+  }
+  tf.round_dir_p99 = quantile(turn, 0.99);
+  tf.round_dir_max = turn.empty() ? 0 : *std::max_element(turn.begin(), turn.end());
+  if (s.keep_t1 > s.keep_t0) {
+    const std::size_t i0 = std::size_t(s.keep_t0 * 1000), i1 = std::min(T.size(), std::size_t(s.keep_t1 * 1000));
+    const double f0 = i0 < T.size() ? T[i0].f.norm() : 0;
+    tf.keep_min = f0 > 0 ? 1e9 : 0;
+    for (std::size_t i = i0; i < i1 && f0 > 0; ++i) tf.keep_min = std::min(tf.keep_min, T[i].f.norm() / f0);
+  }
+  tf.order_fd = rp.order_fd_max;
+  tf.order_pd = rp.order_pd_max;
+  return tf;
+}
+
+/// Direction of a scene's force against its twin's (the other tessellation), tick by tick over the
+/// slide window where both push harder than kDirMinN.
+void compare_twin(const ForceScene& s, const Replay& a, const Replay& b, TruthFigures& tf) {
+  std::vector<double> d;
+  const bool window = s.slide_t1 > s.slide_t0;
+  for (std::size_t i = 0; i < std::min(a.ticks.size(), b.ticks.size()); ++i) {
+    const double t = double(i) * 1e-3;
+    if (window && (t < s.slide_t0 || t > s.slide_t1)) continue;
+    if (a.ticks[i].f.norm() > kDirMinN && b.ticks[i].f.norm() > kDirMinN) d.push_back(angle_deg(a.ticks[i].f, b.ticks[i].f));
+  }
+  tf.twin_dir_p99 = quantile(d, 0.99);
+  tf.twin_dir_max = d.empty() ? 0 : *std::max_element(d.begin(), d.end());
+}
+
+/// The same replay at each worker count (in-process workers, scatter-gather): 1 when every trace
+/// equals `base` (0 workers) exactly, tick by tick. Counts the object's tree cannot give every
+/// worker a block (a 12-face box is one leaf) are left out; `checked` lists the others.
+int same_at_worker_counts(const ForceScene& s, const Model& m, int C, const Replay& base, const std::vector<int>& counts,
+                          std::string& checked) {
+  for (int w : counts) {
+    engine::FleetSpec spec;
+    spec.workers = w;
+    auto f = engine::start_fleet(spec, s.probe.mesh, s.object.mesh, s.object.tree);
+    if (!f && f.error().find("gives " + std::to_string(w) + " workers a block each") != std::string::npos) continue;
+    if (!f) die(s.name + ": " + f.error());
+    checked += (checked.empty() ? "" : ",") + std::to_string(w);
+    const Replay rp = replay(s, m, false, C, f.value().get());
+    if (rp.ticks.size() != base.ticks.size()) return 0;
+    for (std::size_t i = 0; i < rp.ticks.size(); ++i)
+      if (rp.ticks[i].f != base.ticks[i].f || rp.ticks[i].x != base.ticks[i].x || rp.ticks[i].pd != base.ticks[i].pd) {
+        std::fprintf(stderr, "force: %s with %d workers differs from 0 workers at tick %zu\n", s.name.c_str(), w, i);
+        return 0;
+      }
+  }
+  return 1;
+}
+
 void write_trace(const std::string& path, const Replay& rp, const ForceScene& s) {
   std::FILE* f = std::fopen(path.c_str(), "w");
   if (!f) die(path + ": cannot create");
@@ -396,7 +794,8 @@ void write_trace(const std::string& path, const Replay& rp, const ForceScene& s)
   for (std::size_t i = 0; i < rp.ticks.size(); ++i) {
     const Tick& t = rp.ticks[i];
     std::fprintf(f, "%.3f,%.5f,%.5f,%.5f,%.6f,%.6f,%.6f,%.6f,%.5f,%.5f\n", double(i) * 1e-3, t.x.x(), t.x.y(), t.x.z(),
-                 t.f.x(), t.f.y(), t.f.z(), t.f.norm(), t.pd, s.depth_ref ? s.depth_ref(t.x) : std::nan(""));
+                 t.f.x(), t.f.y(), t.f.z(), t.f.norm(), t.pd,
+                 s.depth_ref ? s.depth_ref(t.x) : s.truth ? s.truth(t.x).depth_mm : std::nan(""));
   }
   if (std::fclose(f) != 0) die(path + ": write failed");
 }
@@ -431,7 +830,7 @@ std::vector<Cost> contact_cost(const Body& probe, const Body& object, const std:
       for (int k = 0; k < runs; ++k) {
         geom::ContactBuilder fresh(m.contact);
         fresh.prepare(probe.mesh, object.mesh);
-        geom::collide(probe.mesh, probe.tree, object.mesh, object.tree, tp.pose, {}, sc, r);
+        geom::collide(probe.mesh, probe.tree, object.mesh, object.tree, tp.pose, kEngineCollide, sc, r);
         const auto t1 = clock::now();
         const geom::ContactModel cm = fresh.build(probe.mesh, object.mesh, tp.pose, r.pairs);
         const auto t2 = clock::now();
@@ -448,7 +847,7 @@ std::vector<Cost> contact_cost(const Body& probe, const Body& object, const std:
         geom::Pose p = tp.pose;
         p.translation().x() += start + double(k - 100) * (k < 100 ? 0.01 : slide_mm);
         const auto t0 = clock::now();
-        geom::collide(probe.mesh, probe.tree, object.mesh, object.tree, p, {}, sc, r);
+        geom::collide(probe.mesh, probe.tree, object.mesh, object.tree, p, kEngineCollide, sc, r);
         const auto t1 = clock::now();
         (void)b.build(probe.mesh, object.mesh, p, r.pairs);
         const auto t2 = clock::now();
@@ -471,7 +870,8 @@ std::vector<Cost> contact_cost(const Body& probe, const Body& object, const std:
 
 void add_force(CLI::App& app) {
   struct Args {
-    std::string scenes = "box,sphere,plate,hand_elephant,hand_armadillo", models = "paper,patch", trace_dir, poses;
+    std::string scenes = "box,sphere,plate,hand_elephant,hand_armadillo,meshes", models = "paper,patch", trace_dir, poses;
+    std::string workers_check = "1,2,4";
     int collision_ticks = 2, cost_runs = 30;
     double cost_slide_mm = 0;
     bool json = false, quick = false;
@@ -482,7 +882,15 @@ void add_force(CLI::App& app) {
       "Force rendering quality in simulated time: per scene, contact model (paper, patch) and loop (open, "
       "closed with the simulated hand): force steps, direction changes and flips, energy per contact "
       "cycle, oscillation while holding still, depth error, pop-through, cost per round");
-  cmd->add_option("--scenes", a->scenes, "box, sphere, plate, hand_elephant, hand_armadillo (model set)")->capture_default_str();
+  cmd->add_option("--scenes", a->scenes,
+                  "box, sphere, plate, hand_elephant, hand_armadillo (model set); generated CAD-like solids with a "
+                  "ball against the analytic truth: box_edge, box_corner, ridge, crease, inner_corner, pocket, "
+                  "plate_through, release, or meshes (all of them)")
+      ->capture_default_str();
+  cmd->add_option("--workers-check", a->workers_check,
+                  "worker counts (in-process, scatter-gather) whose traces must equal 0 workers' on the generated "
+                  "scenes (patch model, open loop); 'none' skips the check")
+      ->capture_default_str();
   cmd->add_option("--models", a->models, "contact models: paper (no passivity guard), patch (the default, guarded)")
       ->capture_default_str();
   cmd->add_option("--collision-ticks", a->collision_ticks, "a collision round every C ticks, delivered C ticks later")
@@ -531,26 +939,61 @@ void add_force(CLI::App& app) {
           continue;
         }
         scenes.push_back(hand_scene(n, dir + "/hand_L2.off", dir + "/" + obj));
+      } else if (auto g = generated_scenes(n); !g.empty()) {
+        for (ForceScene& x : g) scenes.push_back(std::move(x));
       } else {
-        die("--scenes: unknown scene '" + n + "' (box, sphere, plate, hand_elephant, hand_armadillo)");
+        die("--scenes: unknown scene '" + n +
+            "' (box, sphere, plate, hand_elephant, hand_armadillo, box_edge, box_corner, ridge, crease, "
+            "inner_corner, pocket, plate_through, release, meshes)");
       }
+    }
+    std::vector<int> worker_counts;
+    if (a->workers_check != "none") {
+      for (int w : parse_int_list(a->workers_check))
+        if (w < 1 || w > 64) die("--workers-check: worker counts in 1..64, got " + std::to_string(w));
+        else worker_counts.push_back(w);
     }
     if (!a->trace_dir.empty()) std::filesystem::create_directories(a->trace_dir);
     std::vector<Figures> all;
+    struct TruthRow {
+      std::size_t fig;  // its Figures in `all`
+      TruthFigures tf;
+      std::shared_ptr<Replay> rp;
+    };
+    std::vector<TruthRow> truth_rows;
     for (const ForceScene& s : scenes)
       for (const Model& m : models)
         for (bool closed : {false, true}) {
           std::fprintf(stderr, "force: %s × %s, %s loop (%.1f s simulated)\n", s.name.c_str(), m.name.c_str(),
                        closed ? "closed" : "open", s.script.duration_s());
-          const Replay rp = replay(s, m, closed, a->collision_ticks);
-          Figures fg = measure(s, rp);
+          auto rp = std::make_shared<Replay>(replay(s, m, closed, a->collision_ticks, nullptr, bool(s.truth)));
+          Figures fg = measure(s, *rp);
           fg.scene = s.name;
           fg.model = m.name;
           fg.loop = closed ? "closed" : "open";
           all.push_back(fg);
           if (!a->trace_dir.empty())
-            write_trace(a->trace_dir + "/force_" + s.name + "_" + m.name + "_" + fg.loop + ".csv", rp, s);
+            write_trace(a->trace_dir + "/force_" + s.name + "_" + m.name + "_" + fg.loop + ".csv", *rp, s);
+          if (!s.truth) continue;
+          TruthRow row{all.size() - 1, measure_truth(s, *rp), rp};
+          if (!closed && m.contact.model == geom::ContactModelKind::patch && !worker_counts.empty()) {
+            std::fprintf(stderr, "force: %s × %s at %s workers\n", s.name.c_str(), m.name.c_str(), a->workers_check.c_str());
+            row.tf.workers_identical =
+                same_at_worker_counts(s, m, a->collision_ticks, *rp, worker_counts, row.tf.workers_checked);
+          }
+          truth_rows.push_back(std::move(row));
         }
+    // Each generated scene against its twin on the other tessellation (same model and loop).
+    for (TruthRow& row : truth_rows) {
+      const Figures& f = all[row.fig];
+      const ForceScene* sc = nullptr;
+      for (const ForceScene& s : scenes)
+        if (s.name == f.scene) sc = &s;
+      if (!sc || sc->twin.empty()) continue;
+      for (const TruthRow& other : truth_rows)
+        if (all[other.fig].scene == sc->twin && all[other.fig].model == f.model && all[other.fig].loop == f.loop)
+          compare_twin(*sc, *row.rp, *other.rp, row.tf);
+    }
     // Contact-model cost at the perf poses.
     std::vector<Cost> costs;
     std::string pose_file = a->poses;
@@ -588,6 +1031,27 @@ void add_force(CLI::App& app) {
             num(f.collide_us_p50).c_str(), num(f.contact_us_p50).c_str(), num(f.contacts_p50).c_str(), f.ticks,
             f.contact_ticks);
       }
+      std::printf("\n], \"truth\": [");
+      for (std::size_t i = 0; i < truth_rows.size(); ++i) {
+        const TruthFigures& t = truth_rows[i].tf;
+        const Figures& f = all[truth_rows[i].fig];
+        std::printf(
+            "%s\n  {\"scene\": \"%s\", \"model\": \"%s\", \"loop\": \"%s\", \"f_err_rms_N\": %s, \"f_err_max_N\": %s, "
+            "\"over_law_max_N\": %s, \"pd_over_max_mm\": %s, \"round_dir_p99_deg\": %s, \"round_dir_max_deg\": %s, "
+            "\"dir_err_p50_deg\": %s, \"dir_err_p90_deg\": %s, \"dir_err_max_deg\": %s, \"step_max_N\": %s, "
+            "\"clear01_max_N\": %s, \"clear03_max_N\": %s, \"keep_min\": %s, \"twin_dir_p99_deg\": %s, "
+            "\"twin_dir_max_deg\": %s, \"order_fd\": %s, \"order_pd_mm\": %s, \"workers_identical\": %s, "
+            "\"workers_checked\": \"%s\", \"energy_per_cycle_mJ\": %s, \"still_rms_30hz_N\": %s}",
+            i ? "," : "", f.scene.c_str(), f.model.c_str(), f.loop.c_str(), num(t.f_err_rms).c_str(),
+            num(t.f_err_max).c_str(), num(t.over_law_max).c_str(), num(t.pd_over_max).c_str(),
+            num(t.round_dir_p99).c_str(), num(t.round_dir_max).c_str(), num(t.dir_err_p50).c_str(),
+            num(t.dir_err_p90).c_str(), num(t.dir_err_max).c_str(), num(t.step_max).c_str(),
+            num(t.clear01_max).c_str(), num(t.clear03_max).c_str(), t.keep_min < 0 ? "null" : num(t.keep_min).c_str(),
+            t.twin_dir_p99 < 0 ? "null" : num(t.twin_dir_p99).c_str(),
+            t.twin_dir_max < 0 ? "null" : num(t.twin_dir_max).c_str(), num(t.order_fd).c_str(), num(t.order_pd).c_str(),
+            t.workers_identical < 0 ? "null" : (t.workers_identical ? "true" : "false"), t.workers_checked.c_str(),
+            num(f.energy_per_cycle).c_str(), f.still_rms < 0 ? "null" : num(f.still_rms).c_str());
+      }
       std::printf("\n], \"contact_cost_slide_mm\": %s, \"contact_cost\": [", num(a->cost_slide_mm).c_str());
       for (std::size_t i = 0; i < costs.size(); ++i) {
         const Cost& c = costs[i];
@@ -613,6 +1077,24 @@ void add_force(CLI::App& app) {
                   f.energy_cycle_max, f.still_rms < 0 ? "-" : num(f.still_rms).c_str(),
                   f.depth_err < 0 ? "-" : num(f.depth_err).c_str(),
                   f.popthrough < 0 ? "-" : std::to_string(f.popthrough).c_str(), f.round_us_p50, f.contact_us_p50);
+    if (!truth_rows.empty()) {
+      std::printf(
+          "\ngenerated scenes against the analytic truth (ball probe: the smallest clearing translation); N, mm, deg\n"
+          "%-16s %-6s %-6s %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s %7s %7s\n",
+          "scene", "model", "loop", "Ferr_rms", "Ferr_max", "over_law", "PD_over", "turn_p99", "dir_p90", "step_max",
+          "clear.1", "clear.3", "keep", "twin_p99", "E/cycle", "buzz", "order", "workers");
+      for (const TruthRow& row : truth_rows) {
+        const TruthFigures& t = row.tf;
+        const Figures& f = all[row.fig];
+        std::printf("%-16s %-6s %-6s %8.4f %8.4f %8.4f %8.3f %8.3f %8.2f %8.4f %8.4f %8.4f %8s %8s %8.4f %8s %7s %7s\n",
+                    f.scene.c_str(), f.model.c_str(), f.loop.c_str(), t.f_err_rms, t.f_err_max, t.over_law_max,
+                    t.pd_over_max, t.round_dir_p99, t.dir_err_p90, t.step_max, t.clear01_max, t.clear03_max,
+                    t.keep_min < 0 ? "-" : num(t.keep_min).c_str(), t.twin_dir_p99 < 0 ? "-" : num(t.twin_dir_p99).c_str(),
+                    f.energy_per_cycle, f.still_rms < 0 ? "-" : num(f.still_rms).c_str(),
+                    t.order_fd == 0 && t.order_pd == 0 ? "same" : num(std::max(t.order_fd, t.order_pd)).c_str(),
+                    t.workers_identical < 0 ? "-" : !t.workers_identical ? "DIFF" : ("=" + t.workers_checked).c_str());
+      }
+    }
     if (!costs.empty()) {
       std::printf(
           "\ncontact model cost at the perf poses (median µs, warm mean beside; share = contact / collide() of the "

@@ -139,6 +139,9 @@ Status RunEngine::State::prepare() {
 
   // Collision backend. Workers and daemons plug in here (scatter-gather); 0 = this thread.
   copt.stop_layer = s.approx_layer;
+  // Pairs in (probe, object) order, as the workers' merge gives them: the contact model is then
+  // the same at every worker count, and the builder need not sort them.
+  copt.sort_pairs = true;
   collide_fn = [this](std::uint64_t, const geom::Pose& pose, RoundOutput& out) {
     geom::collide(probe, ptree.tree, object, otree.tree, pose, copt, scratch, result);
     out.pairs.assign(result.pairs.begin(), result.pairs.end());

@@ -230,7 +230,7 @@ void CollideScratch::prepare_probe(const Mesh& probe, const SphereTree& probe_tr
 std::size_t CollideScratch::bytes() const {
   auto b = [](const auto& v) { return v.capacity() * sizeof(v[0]); };
   return b(lvrange_) + b(lverts_) + b(lidx_) + b(ptx_) + b(cstamp_) + b(psph_) + b(osph_) + b(obox_) + b(lstamp_) +
-         b(lbox_) + b(pbox_) + b(pmark_) + b(omark_) + b(stack_);
+         b(lbox_) + b(pbox_) + b(pmark_) + b(omark_) + b(stack_) + b(sort_keys_);
 }
 
 struct CollideQuery {
@@ -451,6 +451,37 @@ struct CollideQuery {
   }
 };
 
+void sort_face_pairs(std::span<FacePair> pairs, std::vector<std::uint64_t>& scratch) {
+  const std::size_t n = pairs.size();
+  if (n < 64) {  // a handful: the comparison sort is quicker than clearing the counts
+    std::sort(pairs.begin(), pairs.end());
+    return;
+  }
+  std::uint32_t max_probe = 0, max_object = 0;
+  for (const FacePair& p : pairs) max_probe = std::max(max_probe, p.probe), max_object = std::max(max_object, p.object);
+  const int object_bits = std::bit_width(max_object), bits = std::bit_width(max_probe) + object_bits;
+  constexpr int kDigit = 11;
+  constexpr std::size_t kBuckets = std::size_t(1) << kDigit;
+  scratch.resize(2 * n);
+  std::uint64_t* a = scratch.data();
+  std::uint64_t* b = a + n;
+  for (std::size_t i = 0; i < n; ++i) a[i] = (std::uint64_t(pairs[i].probe) << object_bits) | pairs[i].object;
+  // One stable counting pass per digit, lowest first: the order of the keys is (probe, object).
+  std::uint32_t count[kBuckets];
+  for (int shift = 0; shift < bits; shift += kDigit) {
+    std::fill(count, count + kBuckets, 0u);
+    for (std::size_t i = 0; i < n; ++i) ++count[(a[i] >> shift) & (kBuckets - 1)];
+    if (count[(a[0] >> shift) & (kBuckets - 1)] == n) continue;  // one digit value: nothing moves
+    std::uint32_t sum = 0;
+    for (std::uint32_t& c : count) sum += std::exchange(c, sum);
+    for (std::size_t i = 0; i < n; ++i) b[count[(a[i] >> shift) & (kBuckets - 1)]++] = a[i];
+    std::swap(a, b);
+  }
+  const std::uint64_t object_mask = (std::uint64_t(1) << object_bits) - 1;
+  for (std::size_t i = 0; i < n; ++i)
+    pairs[i] = {std::uint32_t(a[i] >> object_bits), std::uint32_t(a[i] & object_mask)};
+}
+
 FaceCounts count_faces(std::span<const FacePair> pairs, std::vector<std::uint32_t>& scratch) {
   const auto distinct = [&](auto field) {
     scratch.clear();
@@ -497,7 +528,7 @@ void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object
     for (const std::uint32_t r : options.object_roots)
       if (r < object_tree.num_nodes() && !result.stats.pair_limit_hit) q.descend(0, r);
   }
-  if (options.sort_pairs) std::sort(result.pairs.begin(), result.pairs.end());
+  if (options.sort_pairs) sort_face_pairs(result.pairs, scratch.sort_keys_);
 }
 
 }  // namespace st::geom

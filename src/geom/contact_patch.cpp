@@ -15,6 +15,7 @@
 #include "geom/contact_patch.hpp"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -520,7 +521,7 @@ std::size_t ContactBuilder::Patch::bytes() const {
          (held_object_recs.capacity() + held_probe_recs.capacity()) * sizeof(FaceRec) + held_slots.capacity() * 8 +
          (held_object_faces.capacity() + held_probe_faces.capacity()) * 4 +
          (probe_xform_stamp.capacity() + climb.capacity() + seed_pairs.capacity()) * 4 +
-         valid.capacity() * sizeof(ContactPair) + valid_slots.capacity() * 8;
+         (valid.capacity() + canonical.capacity()) * sizeof(ContactPair) + valid_slots.capacity() * 8;
 }
 
 const Vec3& ContactBuilder::Patch::probe_point(std::uint32_t v, const Mesh& probe) {
@@ -1165,9 +1166,48 @@ ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, cons
   return best;
 }
 
+Vec3 ContactBuilder::Patch::curve_point() const {
+  // The pairs are in canonical order, so the point is a function of the pair set. Measured from
+  // the common frame's origin (a body's centre): the rounding of one segment's end points is
+  // ~1e-16 of the body's size.
+  Vec3 point = Vec3::Zero();
+  bool found = false;
+  Quads quads(
+      [&](const Seg4& g) {
+        for (int l = 0; l < 4 && !found; ++l)
+          if (g.ok[l]) {
+            point = 0.5 * Vec3(g.s0x[l] + g.s1x[l], g.s0y[l] + g.s1y[l], g.s0z[l] + g.s1z[l]);
+            found = true;
+          }
+      },
+      Vec3::Zero());
+  for (const auto& [slot_a, slot_b] : valid_slots) {
+    if (found) break;
+    const std::uint8_t use_a = object_s.use[slot_a];
+    if (use_a == kNoDirection || probe_s.use[slot_b] == kNoDirection) continue;
+    if (have_prev && use_a != kFront) continue;
+    quads.add(&common_rec(object_s, slot_a), &common_rec(probe_s, slot_b));
+  }
+  if (!found) quads.finish();
+  assert(point.allFinite());
+  return point;
+}
+
 ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object, const Pose& pose,
                                           std::span<const ContactPair> pairs) {
   prepare(probe, object);
+  // The model is a function of the set of pairs, not of their order (the collision core's order
+  // differs from the scatter-gather merge's, and with it the worker count): pairs are taken in
+  // (probe, object) order, each once. The collision paths deliver them so (a linear check);
+  // others are sorted here, into scratch.
+  const std::size_t given = pairs.size();
+  const auto not_increasing = [](const ContactPair& a, const ContactPair& b) { return !(a < b); };
+  if (std::adjacent_find(pairs.begin(), pairs.end(), not_increasing) != pairs.end()) {
+    canonical.assign(pairs.begin(), pairs.end());
+    std::sort(canonical.begin(), canonical.end());
+    canonical.erase(std::unique(canonical.begin(), canonical.end()), canonical.end());
+    pairs = canonical;
+  }
   if (++epoch == 0) {  // stamps wrapped: clear them once every 2^32 rounds
     std::fill(probe_xform_stamp.begin(), probe_xform_stamp.end(), 0);
     probe_s.clear_stamps();
@@ -1176,7 +1216,7 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   }
   ContactModel m;
   m.pose = to_pod(pose);
-  m.pairs = static_cast<std::uint32_t>(std::min<std::size_t>(pairs.size(), UINT32_MAX));
+  m.pairs = static_cast<std::uint32_t>(std::min<std::size_t>(given, UINT32_MAX));
   const bool pose_ok = pose.matrix().allFinite();
   if (!pose_ok) m.flags |= kBadInput;
 
@@ -1225,16 +1265,12 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   rot = pose.linear();
   shift = rot * probe.origin + pose.translation() - object.origin;
   const Eigen::Matrix3d& R = rot;
-  auto tri_ok = [](const Tri& t, std::size_t nv) { return t[0] < nv && t[1] < nv && t[2] < nv; };
 
   // One record per colliding face: vertices, unit normal (zero: degenerate, no direction) and
   // plane offset, in a common frame: the local frame of the body with more colliding faces, whose
   // records are then their fixed parts as they are (kept from round to round); the other body's
   // are moved into it. Degenerate object faces count as contacts but give no direction.
   probe_frame = probe_s.faces.size() > object_s.faces.size();
-  Vec3 origin = Vec3::Zero();  // object-local: a point of the patch, the areas' origin (rounding)
-  if (!valid.empty() && tri_ok(object.faces[valid.front().object], object_s.nv))
-    origin = object.local[object.faces[valid.front().object][0]];
   // A record moved: x' = M·x + t (object-local → probe-local, or probe-local → object-local).
   const Eigen::Matrix3d M = probe_frame ? Eigen::Matrix3d(R.transpose()) : R;
   const Vec3 t = probe_frame ? Vec3(-(R.transpose() * shift)) : shift;
@@ -1280,7 +1316,7 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   // faces not turned away from the previous FD (front); at first contact all of it.
   bool any_front_face = false;
   D4 sx = splat(0), sy = sx, sz = sx, sabs = sx;
-  Quads quads([&](const Seg4& g) { sx += g.px, sy += g.py, sz += g.pz, sabs += g.pabs; }, to_common(origin));
+  Quads quads([&](const Seg4& g) { sx += g.px, sy += g.py, sz += g.pz, sabs += g.pabs; }, curve_point());
   const BodyState::Fixed* object_store = object_s.store.data();
   const BodyState::Fixed* probe_store = probe_s.store.data();
   const std::uint32_t* object_entry = object_s.entry.data();

@@ -54,6 +54,11 @@ struct ContactBuilder::Patch {
   bool has_history() const { return have_prev; }
   std::size_t bytes() const;
 
+  /// The areas' origin, a point of this round's intersection curve in the common frame: the
+  /// midpoint of the first segment of the pairs whose areas are summed (zero: none). Measured
+  /// from a point on the patch, Σ|a| compares with |Σa| whatever the faces' size (FD's
+  /// cancellation test); from a far vertex of a large face, Σ|a| is inflated and FD falls back.
+  Vec3 curve_point() const;
   /// Result of one side's depth search.
   struct Deepest {
     double depth = 0;                   ///< largest exit distance found, mm (0: none inside)
@@ -202,6 +207,7 @@ struct ContactBuilder::Patch {
   /// covered faces), which are open in T.group_open; returns the label count.
   std::uint32_t new_groups(BodyState& T);
   // Scratch.
+  std::vector<ContactPair> canonical;  ///< the pairs sorted and distinct, when not given so
   std::vector<ContactPair> valid;
   std::vector<std::array<std::uint32_t, 2>> valid_slots;  ///< per valid pair: its object and probe record slots
   std::vector<Vec3> probe_world;                          ///< probe vertices, object-local (valid where stamped)

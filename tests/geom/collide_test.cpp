@@ -328,3 +328,22 @@ TEST_CASE("scratch reuse: no reallocation once warm; non-finite pose gives nothi
   collide(c.mesh, c.tree, s.mesh, s.tree, p, {}, scratch, res);
   CHECK(res.pairs.empty());
 }
+
+TEST_CASE("sort_face_pairs orders pairs as std::sort does, at every size and index range") {
+  std::mt19937_64 rng(11);
+  std::vector<std::uint64_t> scratch;
+  for (std::uint32_t range : {1u, 7u, 2048u, 70000u, 1u << 24, 0xffffffffu})
+    for (std::size_t n : {0, 1, 63, 64, 65, 1000, 20000}) {
+      std::vector<FacePair> pairs(n);
+      for (FacePair& p : pairs) {
+        p.probe = std::uint32_t(rng() % (std::uint64_t(range) + 1));
+        p.object = std::uint32_t(rng() % (std::uint64_t(range) + 1));
+      }
+      std::vector<FacePair> expect = pairs;
+      std::sort(expect.begin(), expect.end());
+      st::geom::sort_face_pairs(pairs, scratch);
+      CAPTURE(range);
+      CAPTURE(n);
+      CHECK(pairs == expect);
+    }
+}

@@ -4,7 +4,9 @@
 // 1 mm plate (no pop-through); bad input. Pairs come from the exact brute-force reference.
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <random>
 #include <limits>
 #include <vector>
 
@@ -577,4 +579,66 @@ TEST_CASE("contact patch: a hand on the elephant: finite, PD and FD consistent w
     prev = m;
   }
   CHECK(b.bytes() > 0);
+}
+
+namespace {
+// Follows `poses` with two builders, one given each round's pairs as found, the other the same
+// pairs shuffled (and one repeated): the models must be the same, bit for bit.
+void check_order_free(const Mesh& probe, const Mesh& object, const std::vector<Pose>& poses, int& contact_rounds) {
+  ContactBuilder a, b;
+  std::mt19937 rng(7);
+  for (const Pose& p : poses) {
+    const std::vector<FacePair> pairs = st::test::brute_force(probe, object, p);
+    std::vector<FacePair> shuffled = pairs;
+    std::shuffle(shuffled.begin(), shuffled.end(), rng);
+    if (!shuffled.empty()) shuffled.push_back(shuffled.front());
+    const ContactModel ma = a.build(probe, object, p, pairs), mb = b.build(probe, object, p, shuffled);
+    REQUIRE(ma.in_contact() == mb.in_contact());
+    contact_rounds += ma.in_contact();
+    CHECK(fd(ma) == fd(mb));
+    CHECK(ma.penetration_mm == mb.penetration_mm);
+    CHECK(to_eigen(ma.plane_point) == to_eigen(mb.plane_point));
+    CHECK(to_eigen(ma.probe_point) == to_eigen(mb.probe_point));
+    CHECK(ma.flags == (mb.flags & ~std::uint32_t(kBadInput)));
+  }
+}
+}  // namespace
+
+TEST_CASE("contact patch: the model is a function of the pair set, not of the pairs' order") {
+  // A ball around the edge of a 12-face 200 mm box (faces far larger than the patch: a far vertex
+  // of the first pair's face as the areas' origin inflated Σ|a| and froze FD), and the hand
+  // sliding on the elephant (real rounds).
+  const Mesh box = make_box({200, 200, 200});
+  std::vector<Pose> around;
+  for (double a = 0; a <= 90.0; a += 3) {
+    const Vec3 dir(std::sin(a * kPi / 180), 0, std::cos(a * kPi / 180));
+    around.push_back(pose_at(Vec3(100, 0, 100) + 8.0 * dir));
+  }
+  int rounds = 0;
+  check_order_free(ball10(), box, around, rounds);
+  CHECK(rounds == int(around.size()));
+  // On the big faces FD turns without freezing and without a fallback.
+  ContactBuilder b;
+  ContactModel prev{};
+  for (const Pose& p : around) {
+    const ContactModel m = model_at(b, ball10(), box, p);
+    REQUIRE(m.in_contact());
+    CHECK((m.flags & (kNormalFallback | kNormalsDisagree)) == 0);
+    if (prev.in_contact()) CHECK(angle_deg(fd(m), fd(prev)) < 4.0);  // 3° a step around the edge
+    prev = m;
+  }
+
+  const Mesh& hand = *st::test::model_mesh("hand_L2.off");
+  const Mesh& elephant = *st::test::model_mesh("elephant.off");
+  double hand_low = std::numeric_limits<double>::infinity(), top = -hand_low;
+  Vec3 top_v = Vec3::Zero(), hand_tip = Vec3::Zero();
+  for (std::uint32_t i = 0; i < hand.local.size(); ++i)
+    if (hand.vertex(i).z() < hand_low) hand_low = hand.vertex(i).z(), hand_tip = hand.vertex(i);
+  for (std::uint32_t i = 0; i < elephant.local.size(); ++i)
+    if (elephant.vertex(i).z() > top) top = elephant.vertex(i).z(), top_v = elephant.vertex(i);
+  std::vector<Pose> slide;
+  for (double s = 0; s <= 3.0; s += 0.25) slide.push_back(pose_at(top_v - hand_tip + Vec3(s, 0.3 * s, -3.0)));
+  rounds = 0;
+  check_order_free(hand, elephant, slide, rounds);
+  CHECK(rounds == int(slide.size()));
 }
