@@ -76,7 +76,7 @@ std::uint32_t SurfaceWalk::across(std::uint32_t f, std::uint32_t a, std::uint32_
   return UINT32_MAX;
 }
 
-bool SurfaceWalk::exit(const Vec3& x, std::uint32_t& face, double& dist, int max_steps) {
+bool SurfaceWalk::exit(const Vec3& x, std::uint32_t& face, double& dist, int max_steps, std::uint32_t* last) {
   const std::size_t nv = mesh->local.size();
   const double qu = x.dot(u), qw = x.dot(w), qh = x.dot(d);
   std::uint32_t f = face, prev = UINT32_MAX;
@@ -90,6 +90,7 @@ bool SurfaceWalk::exit(const Vec3& x, std::uint32_t& face, double& dist, int max
     // turned less than acos(kFrontCos) from d are walked (never a silhouette or a back face).
     const double det = e1u * e2w - e2u * e1w;
     if (!facing(det, a, b, c)) return false;
+    if (last) *last = f;
     const double pu = qu - au, pw = qw - aw;
     const double inv = 1 / det;
     const double b1 = (pu * e2w - e2u * pw) * inv, b2 = (e1u * pw - pu * e1w) * inv, b0 = 1 - b1 - b2;
@@ -116,6 +117,34 @@ bool SurfaceWalk::exit(const Vec3& x, std::uint32_t& face, double& dist, int max
     f = next;
   }
   return false;
+}
+
+bool SurfaceWalk::near_face(const Vec3& x, std::uint32_t f, double margin, double& dist) {
+  const Tri& t = mesh->faces[f];
+  const std::size_t nv = mesh->local.size();
+  if (t[0] >= nv || t[1] >= nv || t[2] >= nv) return false;
+  const Vec3 p[3] = {at(t[0]), at(t[1]), at(t[2])};
+  const Eigen::Vector2d q(x.dot(u), x.dot(w));
+  Eigen::Vector2d c[3];
+  for (int k = 0; k < 3; ++k) c[k] = {p[k].dot(u), p[k].dot(w)};
+  const Eigen::Vector2d e1 = c[1] - c[0], e2 = c[2] - c[0], r = q - c[0];
+  const double det = e1.x() * e2.y() - e2.x() * e1.y();
+  if (!facing(det, p[0], p[1], p[2])) return false;
+  const double b1 = (r.x() * e2.y() - e2.x() * r.y()) / det, b2 = (e1.x() * r.y() - r.x() * e1.y()) / det;
+  const double b0 = 1 - b1 - b2;
+  // Distance from q to the triangle in the plane ⊥ d: 0 inside, else to the nearest edge.
+  double gap2 = 0;
+  if (b0 < 0 || b1 < 0 || b2 < 0) {
+    gap2 = std::numeric_limits<double>::infinity();
+    for (int k = 0; k < 3; ++k) {
+      const Eigen::Vector2d a = c[k], e = c[(k + 1) % 3] - a;
+      const double s = std::clamp((q - a).dot(e) / e.squaredNorm(), 0.0, 1.0);
+      gap2 = std::min(gap2, (q - a - s * e).squaredNorm());
+    }
+  }
+  if (!(gap2 <= margin * margin)) return false;
+  dist = b0 * p[0].dot(d) + b1 * p[1].dot(d) + b2 * p[2].dot(d) - x.dot(d);  // the plane's height over x
+  return std::isfinite(dist);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -343,6 +372,9 @@ constexpr int kPatrolSteps = 2;
 /// Golden-ratio step of the pairs the patrol starts from: the k-th climb starts from pair
 /// ⌊frac(k·φ)·n⌋ of n, so successive ones spread evenly over the patch whatever n is.
 constexpr double kPatrolStep = 0.6180339887498949;
+/// Steps the held contact's walk may take from last round's face: a slide of a few face widths a
+/// round (fast motion over a fine mesh).
+constexpr int kMaxHoldSteps = 256;
 /// Steps a walk may take from its start face: neighbouring vertices land within a face or two of
 /// each other; a longer walk means the point is not over the patch.
 constexpr int kMaxWalkSteps = 16;
@@ -518,8 +550,6 @@ void ContactBuilder::Patch::reset() {
 
 std::size_t ContactBuilder::Patch::bytes() const {
   return probe_s.bytes() + object_s.bytes() + probe_world.capacity() * sizeof(Vec3) +
-         (held_object_recs.capacity() + held_probe_recs.capacity()) * sizeof(FaceRec) + held_slots.capacity() * 8 +
-         (held_object_faces.capacity() + held_probe_faces.capacity()) * 4 +
          (probe_xform_stamp.capacity() + climb.capacity() + seed_pairs.capacity()) * 4 +
          (valid.capacity() + canonical.capacity()) * sizeof(ContactPair) + valid_slots.capacity() * 8;
 }
@@ -674,54 +704,37 @@ std::uint32_t ContactBuilder::Patch::new_groups(BodyState& T) {
   return n;
 }
 
-double ContactBuilder::Patch::held_footprint() {
-  // The held round's intersection curve (its segments' end points, recomputed from its faces'
-  // records rebuilt from the meshes at its pose, object frame, relative to held_point), or, when
-  // it had none (touching or coplanar faces only), its colliding object faces' corners.
-  BodyState::Fixed fx;
-  held_object_recs.resize(held_object_faces.size());
-  for (std::size_t i = 0; i < held_object_faces.size(); ++i) {
-    object_s.make_fixed(fx, held_object_faces[i]);
-    FaceRec& r = held_object_recs[i];
-    for (int k = 0; k < 3; ++k) r.v[k] = fx.rec.v[k] - held_point;
-    r.n = fx.rec.n;
-    r.c = r.n.dot(r.v[0]);
+bool ContactBuilder::Patch::hold(const Mesh& probe, const Mesh& object, ContactModel& m) {
+  if (!held_valid || held_face >= object.faces.size()) return false;
+  // The tracked probe point (the deepest one when the contact was last rendered), object-local,
+  // located under the entered surface by a walk over its faces that face held_n, from the face
+  // found last round (a slide moves it a face or a few).
+  const Vec3 x = rot * held_tracked + shift;
+  SurfaceWalk walk;
+  walk.mesh = &object;
+  walk.vf = &object_s.vf;
+  walk.set_direction(held_n);
+  std::uint32_t face = held_face, last = held_face;
+  double depth = 0;
+  if (!walk.exit(x, face, depth, kMaxHoldSteps, &last)) {
+    // Past the surface's edge (or a turn of more than ~85°): held within hold_margin_mm of the
+    // last face walked, its plane extended.
+    if (last == UINT32_MAX || !walk.near_face(x, last, config.hold_margin_mm, depth)) return false;
+    face = last;
   }
-  held_probe_recs.resize(held_probe_faces.size());
-  for (std::size_t i = 0; i < held_probe_faces.size(); ++i) {
-    probe_s.make_fixed(fx, held_probe_faces[i]);
-    FaceRec& r = held_probe_recs[i];
-    for (int k = 0; k < 3; ++k) r.v[k] = held_rot * fx.rec.v[k] + held_shift - held_point;
-    r.n = held_rot * fx.rec.n;
-    r.c = r.n.dot(r.v[0]);
-  }
-  double radius2 = 0;
-  bool any = false;
-  auto reach = [&](const Vec3& rel) {  // rel: a point relative to held_point
-    radius2 = std::max(radius2, (rel - rel.dot(held_n) * held_n).squaredNorm());
-  };
-  Quads quads(
-      [&](const Seg4& g) {
-        for (int k = 0; k < 4; ++k) {
-          if (!g.ok[k]) continue;
-          any = true;
-          reach(Vec3(g.s0x[k], g.s0y[k], g.s0z[k]));
-          reach(Vec3(g.s1x[k], g.s1y[k], g.s1z[k]));
-        }
-      },
-      Vec3::Zero());
-  for (const auto& [slot_a, slot_b] : held_slots) {
-    const FaceRec& ra = held_object_recs[slot_a];
-    const FaceRec& rb = held_probe_recs[slot_b];
-    if (ra.n.squaredNorm() == 0 || rb.n.squaredNorm() == 0) continue;
-    quads.add(&ra, &rb);
-  }
-  quads.finish();
-  if (!any)
-    for (const FaceRec& ra : held_object_recs)
-      if (ra.n.squaredNorm() != 0)
-        for (const Vec3& v : ra.v) reach(v);
-  return std::sqrt(radius2);
+  if (!(depth > 0)) return false;  // clear on the entry side
+  held_face = face;
+  const Vec3 on_surface = x + depth * held_n;
+  m.flags |= kInContact | kHeld | kNormalFallback;
+  m.force_dir = to_pod(held_n);
+  m.penetration_mm = depth;
+  m.nearest_object_face = face;
+  m.probe_point = to_pod(held_tracked + probe.origin);
+  m.plane_point = to_pod(on_surface + object.origin);
+  m.contact_point = m.plane_point;
+  have_prev = true;
+  prev_n = held_n;
+  return true;
 }
 
 ContactBuilder::Patch::Deepest ContactBuilder::Patch::side(bool probe_side, const Vec3& d, const Mesh& probe,
@@ -1365,26 +1378,9 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
 
   if (!in_contact) {
     // Held contact: the probe has passed through a feature it entered (or only touches the
-    // feature's far side): keep the last plane while the tracked point is below it and over
-    // the patch's footprint.
-    if (held_valid) {
-      if (held_radius < 0) held_radius = held_footprint();
-      const Vec3 x = R * held_tracked + shift;
-      const Vec3 rel = x - held_point;
-      const double depth = -rel.dot(held_n);
-      const double lateral = (rel + depth * held_n).norm();
-      if (depth > 0 && lateral <= held_radius + config.hold_margin_mm) {
-        m.flags |= kInContact | kHeld | kNormalFallback;
-        m.force_dir = to_pod(held_n);
-        m.penetration_mm = depth;
-        m.probe_point = to_pod(held_tracked + probe.origin);
-        m.plane_point = to_pod(held_point + object.origin);
-        m.contact_point = to_pod(x + depth * held_n + object.origin);
-        have_prev = true;
-        prev_n = held_n;
-        return m;
-      }
-    }
+    // feature's far side): the force keeps pushing back out of the surface it entered while the
+    // tracked point is under it (a surface-constrained proxy).
+    if (hold(probe, object, m)) return m;
     reset();
     return m;
   }
@@ -1437,19 +1433,15 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   m.plane_point = to_pod(plane_pt + object.origin);
   m.contact_point = m.plane_point;
 
-  // This round's pairs, colliding faces and pose are kept for the held contact's footprint,
-  // measured only if it is held (buffers swapped, not copied).
-  std::swap(valid_slots, held_slots);
-  std::swap(object_s.faces, held_object_faces);
-  std::swap(probe_s.faces, held_probe_faces);
-  held_rot = rot;
-  held_shift = shift;
-  held_radius = -1;
+  // The surface a held contact is measured against: the face the deepest point leaves through,
+  // or a colliding object face that faces n.
+  held_face = dp.depth > 0 && dp.depth >= dobj.depth ? dp.face : UINT32_MAX;
+  for (std::uint32_t i = 0; held_face == UINT32_MAX && i < object_s.faces.size(); ++i)
+    if (object_s.use[i] != kNoDirection && object_s.fixed(i).rec.n.dot(n) > kFrontCos) held_face = object_s.faces[i];
   have_prev = true;
   prev_n = n;
   held_valid = true;
   held_n = n;
-  held_point = plane_pt;
   held_tracked = tracked_local;
   return m;
 }

@@ -40,7 +40,11 @@ struct SurfaceWalk {
   /// Walks from `face` to the face above (or below) x seen along d; on success `face` is that
   /// face and `dist` how far x must travel along d to reach it (<= 0: x is outside, above it).
   /// False when the walk would leave the faces that face d, or takes more than max_steps.
-  bool exit(const Vec3& x, std::uint32_t& face, double& dist, int max_steps = 48);
+  /// `last`, when given, is the last face walked (that faces d), also when the walk fails.
+  bool exit(const Vec3& x, std::uint32_t& face, double& dist, int max_steps = 48, std::uint32_t* last = nullptr);
+  /// Whether x, seen along d, lies within `margin` of face f; if so `dist` is how far x must
+  /// travel along d to reach f's plane.
+  bool near_face(const Vec3& x, std::uint32_t f, double margin, double& dist);
   /// The face across edge (a, b) of face f, or UINT32_MAX.
   std::uint32_t across(std::uint32_t f, std::uint32_t a, std::uint32_t b) const;
 };
@@ -182,18 +186,13 @@ struct ContactBuilder::Patch {
   Vec3 prev_n{Vec3::Zero()};
   bool held_valid = false;          ///< a contact plane to hold
   Vec3 held_n{Vec3::Zero()};        ///< its normal
-  Vec3 held_point{Vec3::Zero()};    ///< a point of it, object-local, mm
   Vec3 held_tracked{Vec3::Zero()};  ///< the probe point held against it, probe-local, mm
-  /// The round it was set in: its pairs' record slots, its colliding faces and pose (the curve
-  /// the footprint is measured from is recomputed from them, only once the contact is held).
-  std::vector<std::array<std::uint32_t, 2>> held_slots;
-  std::vector<std::uint32_t> held_object_faces, held_probe_faces;
-  Eigen::Matrix3d held_rot{Eigen::Matrix3d::Identity()};
-  Vec3 held_shift{Vec3::Zero()};
-  std::vector<FaceRec> held_object_recs, held_probe_recs;  ///< scratch: their records, rebuilt
-  double held_radius = -1;  ///< the footprint around held_point, mm; < 0 not yet measured
-  /// How far the held round's intersection curve reaches from held_point across held_n.
-  double held_footprint();
+  std::uint32_t held_face = UINT32_MAX;  ///< the entered surface's face over the tracked point, last found
+  /// The held contact, when the model gives no direction (the probe is past a feature it entered,
+  /// or touches only its far side): while the tracked point is under the entered surface (a walk
+  /// over its faces that face held_n, or within hold_margin_mm past its edge, the last face's
+  /// plane extended), fills m with FD = held_n and PD = the depth under it; false: clear of it.
+  bool hold(const Mesh& probe, const Mesh& object, ContactModel& m);
   /// Groups T's colliding faces of this round (faces sharing a vertex join) into
   /// T.group_label[slot], labels 0 .. n − 1; returns n. A face keeps the group it was given at the
   /// last grouping (carried with its fixed part, so a group is followed from round to round);
