@@ -58,9 +58,17 @@ bool model_ok(const geom::ContactModel& m) {
 }
 }  // namespace
 
+double Interpolator::crossfade_span() const noexcept {
+  const double span = static_cast<double>(c_.crossfade_ns);
+  return interval_ns_ > 0 ? std::min(span, kCrossfadeRounds * interval_ns_) : span;
+}
+
 void Interpolator::on_model(const geom::ContactModel& model, std::int64_t now_ns) noexcept {
-  // The model in use until now, for the cross-fade (evaluated at the pose of the next tick).
-  if (!pending_offset_) {
+  const bool ok = model_ok(model), was_contact = contact_;
+  const bool new_contact = ok && model.in_contact();
+  // The model in use until now, for the cross-fade (evaluated at the pose of the next tick). A
+  // release in progress keeps the model it releases while further no-contact models arrive.
+  if (!pending_offset_ && !(releasing_ && !new_contact)) {
     prev_contact_ = contact_;
     prev_fd_ = fd_;
     prev_probe_point_ = probe_point_;
@@ -68,12 +76,15 @@ void Interpolator::on_model(const geom::ContactModel& model, std::int64_t now_ns
     prev_offset_ = offset_;
     prev_fade_ = state_.fade;
     const double faded = static_cast<double>(std::max<std::int64_t>(now_ns - received_ns_, 0));
-    prev_weight_ = (have_model_ && c_.crossfade_ns > 0 && faded < static_cast<double>(c_.crossfade_ns))
-                       ? 1.0 - faded / static_cast<double>(c_.crossfade_ns)
-                       : 0.0;
+    const double span = crossfade_span();
+    prev_weight_ = (have_model_ && span > 0 && faded < span) ? 1.0 - faded / span : 0.0;
+  }
+  if (have_model_ && now_ns > received_ns_) {
+    const double gap = static_cast<double>(now_ns - received_ns_);
+    interval_ns_ = interval_ns_ > 0 ? 0.8 * interval_ns_ + 0.2 * gap : gap;
   }
   model_ = model;
-  if (!model_ok(model)) {
+  if (!ok) {
     ++rejected_;
     model_.flags &= ~geom::kInContact;  // garbage from the collision side renders as no contact
   }
@@ -81,6 +92,12 @@ void Interpolator::on_model(const geom::ContactModel& model, std::int64_t now_ns
   received_ns_ = now_ns;
   contact_ = model_.in_contact();
   pending_offset_ = true;
+  if (contact_) {
+    releasing_ = false;
+  } else if (was_contact && c_.mode == InterpMode::plane) {
+    releasing_ = true;
+    release_ns_ = now_ns;
+  }
   if (!contact_) {
     fd_.setZero();
     force_a_.setZero();
@@ -138,8 +155,23 @@ Eigen::Vector3d Interpolator::force(const Eigen::Isometry3d& pose, std::int64_t 
         break;
     }
   }
-  if (c_.mode == InterpMode::plane) {
-    // Cross-fade: the jump a new model would cause decays linearly over crossfade_ns.
+  if (c_.mode == InterpMode::plane && releasing_) {
+    // The contact ended: the old model at this pose, fading out over kReleaseFadeNs, never rising.
+    const double w = 1.0 - static_cast<double>(std::max<std::int64_t>(now_ns - release_ns_, 0)) / kReleaseFadeNs;
+    if (w > 0 && prev_contact_) {
+      p = pose * prev_probe_point_;
+      pd = (prev_plane_point_ - p).dot(prev_fd_);
+      f = (w * prev_fade_ * law_.magnitude_N(pd)) * prev_fd_;
+      const double cap = last_out_.norm(), fn = f.norm();
+      if (fn > cap) f *= cap / fn;
+    } else {
+      releasing_ = false;
+    }
+    pending_offset_ = false;
+    offset_.setZero();
+  } else if (c_.mode == InterpMode::plane) {
+    // Cross-fade: the jump a new model would cause decays linearly over crossfade_ns (or
+    // kCrossfadeTravelMm of travel).
     if (pending_offset_) {
       // The old model at THIS pose (plus what was still left of its own cross-fade) minus the new
       // one at this pose: only the models' disagreement is faded, never the probe's motion.
@@ -157,8 +189,8 @@ Eigen::Vector3d Interpolator::force(const Eigen::Isometry3d& pose, std::int64_t 
     // the force freezes at its old value while updates stream in (found in `spheretouch run`).
     // With arrivals every tick this is exponential smoothing with time constant ~crossfade_ns.
     const double faded = static_cast<double>(std::max<std::int64_t>(idle, 0)) + dt_s * 1e9;
-    if (c_.crossfade_ns > 0 && faded < static_cast<double>(c_.crossfade_ns))
-      f += offset_ * (1.0 - faded / static_cast<double>(c_.crossfade_ns));
+    const double span = crossfade_span();
+    if (span > 0 && faded < span) f += offset_ * (1.0 - faded / span);
   } else {
     pending_offset_ = false;
   }

@@ -8,8 +8,11 @@
 //  * plane: PD recomputed every tick against the newest local contact plane,
 //           PD(t) = (plane_point - pose(t)·probe_point)·FD, F = law(PD(t))·FD; a new model is
 //           cross-faded in: at its arrival the old and the new model are evaluated at the SAME
-//           pose (the current one), and their difference decays linearly over crossfade_ns, so
-//           the cross-fade hides only what the models disagree on, never the probe's motion.
+//           pose (the current one), and their difference decays linearly over crossfade_ns, or
+//           kCrossfadeRounds recent intervals between models if that is shorter, so the
+//           cross-fade hides only what the models disagree on, never the probe's motion, and a
+//           fast crossing follows the geometry. A "no contact" model after one in contact ends the contact: the old
+//           model, still evaluated at each tick's pose, fades out over kReleaseFadeNs, never rising.
 // In every mode: a model older than stale_timeout_ns (no update received) fades the force
 // linearly to zero over fade_ns; optional damping -c·(v·FD)·FD never makes the force pull;
 // every input is checked for finiteness and a bad one yields zero force, counted.
@@ -80,6 +83,8 @@ class Interpolator {
 
  private:
   Eigen::Vector3d contact_force(const Eigen::Isometry3d& pose, double& pd_mm) const noexcept;
+  /// The cross-fade's length now, ns: crossfade_ns, or kCrossfadeRounds recent model intervals.
+  double crossfade_span() const noexcept;
   ForceLaw law_;
   InterpolatorConfig c_;
   geom::ContactModel model_{};  ///< newest accepted model
@@ -101,6 +106,9 @@ class Interpolator {
   Eigen::Vector3d last_out_{Eigen::Vector3d::Zero()};     ///< last force() output (after fade)
   Eigen::Vector3d last_point_{Eigen::Vector3d::Zero()};   ///< probe point, previous tick (damping)
   bool pending_offset_ = false;                           ///< plane: offset_ to be taken at the next force()
+  double interval_ns_ = 0;  ///< plane: recent interval between models (exponential average), ns; 0 = none yet
+  bool releasing_ = false;        ///< plane: a no-contact model followed one in contact; the old one fades out
+  std::int64_t release_ns_ = 0;   ///< when that no-contact model arrived
   bool have_last_point_ = false;                          ///< last_point_ is valid (damping)
   double velocity_fd_ = 0;                                ///< filtered probe speed along FD, mm/s
   std::int64_t last_ns_ = 0;                              ///< previous force() time

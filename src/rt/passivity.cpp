@@ -11,6 +11,14 @@ namespace {
 /// reaches zero, mJ: a few percent of a light press's stored energy (a 1 mm press on the default
 /// law holds ~0.3 mJ), so the controller is fully on by the time it is needed.
 constexpr double kRampMJ = 0.02;
+/// The controller spreads an excess over this many ticks (it asks for excess / kSpreadTicks a
+/// tick): taking it all in one tick drops the force, the observer then sees no excess, the force
+/// comes back, and a fast release chatters (1.30, 0.31, 1.00, 0.54 N on successive ticks).
+constexpr double kSpreadTicks = 4;
+/// Per tick, the damper keeps at least this share of last tick's value while it is needed: it
+/// lets go over ~10 ticks instead of switching off, so the force it takes away comes back
+/// without a step (and never with a sign reversal of the force's change).
+constexpr double kDamperHold = 0.8;
 }  // namespace
 
 PassivityConfig DefaultPassivityConfig() { return PassivityConfig{}; }
@@ -34,6 +42,7 @@ void PassivityGuard::reset() noexcept {
   last_x_.setZero();
   last_f_.setZero();
   vn_ = 0;
+  alpha_ = 0;
   energy_ = 0;
   have_x_ = false;
   contact_ = false;
@@ -62,6 +71,7 @@ Eigen::Vector3d PassivityGuard::apply(const Eigen::Vector3d& f, const Eigen::Vec
     // A cycle ends or begins: the surface keeps no credit for what it absorbed, only a debt.
     energy_ = std::max(energy_, 0.0);
     vn_ = 0;
+    alpha_ = 0;
     contact_ = contact;
   }
   state_.energy_mJ = energy_;
@@ -86,12 +96,21 @@ Eigen::Vector3d PassivityGuard::apply(const Eigen::Vector3d& f, const Eigen::Vec
   // Only while leaving the surface: a zero-order hold gives energy back on the way out. On the
   // way in the prediction runs a tick ahead of the observer (it already counts the new force's
   // stored energy), and damping there would only stiffen a fast press.
-  if (excess > 0 && vn_ > 1e-9) {
-    const double ramp = std::min(excess / kRampMJ, 1.0);
-    const double alpha = std::min(c_.max_damping_N_s_per_mm * ramp, excess / (dt * vn_ * vn_));
+  // The damper asks for the excess over kSpreadTicks ticks and lets go gradually (kDamperHold):
+  // it may dissipate a little more than the excess (passive), never switches off in one tick.
+  double alpha = 0;
+  if (vn_ > 1e-9) {
+    if (excess > 0) {
+      const double ramp = std::min(excess / kRampMJ, 1.0);
+      alpha = std::min(c_.max_damping_N_s_per_mm * ramp, excess / (kSpreadTicks * dt * vn_ * vn_));
+    }
+    alpha = std::min(std::max(alpha, kDamperHold * alpha_), c_.max_damping_N_s_per_mm);
+  }
+  alpha_ = alpha;
+  if (alpha > 0) {
     add -= alpha * vn_;
-    state_.active = alpha > 0;
-    if (state_.active) ++active_ticks_;
+    state_.active = true;
+    ++active_ticks_;
   }
   Eigen::Vector3d out = f + add * n;
   const double along = out.dot(n);

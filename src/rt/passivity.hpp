@@ -10,8 +10,10 @@
 //     into the device, E = Σ F_k·(x_{k+1} − x_k) (exactly what a zero-order-hold force does on
 //     the moving end effector). Ours acts on the energy the cycle would end with, E + F_n²/(2k)
 //     (the surface still holds at least F_n²/(2k) to give back): when it is > 0 a damper
-//     α = (E + F_n²/2k) / (T·v_n²), capped at max_damping, dissipates the excess over the next
-//     tick, while there is still force to take it from. When contact ends, E keeps only a
+//     α = (E + F_n²/2k) / (4·T·v_n²), capped at max_damping, dissipates the excess over the next
+//     four ticks, while there is still force to take it from; α lets go by at most 20 % a tick,
+//     so the force it took comes back without a step (one-tick removal chattered on a fast
+//     release). When contact ends, E keeps only a
 //     positive debt (it restarts at 0 otherwise), so every contact cycle starts with no credit.
 // The guard never makes the force pull the probe into the object (the normal component stays
 // >= 0) and never raises it above the saturator's ceiling (it runs before the Saturator, and the
@@ -72,6 +74,7 @@ class PassivityGuard {
   Eigen::Vector3d last_f_{Eigen::Vector3d::Zero()};  ///< previous commanded force, N
   double vn_ = 0;                                    ///< filtered normal velocity, mm/s (+ = leaving the surface)
   double energy_ = 0;                                ///< observer, mJ
+  double alpha_ = 0;                                 ///< the controller's damper last tick, N·s/mm
   bool have_x_ = false;
   bool contact_ = false;  ///< previous tick was in contact
   std::uint64_t active_ticks_ = 0;

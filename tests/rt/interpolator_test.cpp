@@ -292,3 +292,63 @@ TEST_CASE("interpolator: plane follows models that arrive every tick (no freeze)
   }
   CHECK(in.force(at_z(5.0), t).norm() < 0.01 * law.magnitude_N(2.0));
 }
+
+TEST_CASE("interpolator: a no-contact model ends the contact: the old plane followed out, fading, never rising") {
+  const ForceLaw law;
+  Interpolator in(law, cfg(InterpMode::plane));
+  for (int t = 0; t <= 100; ++t) {  // the onset's fade-in has died out by 100 ms
+    if (t % 2 == 0) in.on_model(wall_model(std::uint64_t(t + 1), -2.0), t * kMs);
+    (void)in.force(at_z(-2.0), t * kMs);
+  }
+  const double held = in.force(at_z(-1.0), 101 * kMs).z();
+  CHECK(held == doctest::Approx(law.magnitude_N(1.0)).epsilon(1e-4));
+  // The collision side says "no contact" (its pose was clear); the probe is still 1 mm under the
+  // old plane: the force falls to zero over kReleaseFadeNs, every tick below the one before,
+  // also when a second no-contact model arrives on the way.
+  ContactModel clear = wall_model(100, 0.5);
+  in.on_model(clear, 102 * kMs);
+  double last = held;
+  for (int t = 102; t <= 102 + int(kReleaseFadeNs / kMs); ++t) {
+    if (t == 104) in.on_model(wall_model(101, 0.5), t * kMs);
+    const double f = in.force(at_z(-1.0), t * kMs).z();
+    CAPTURE(t);
+    CHECK(f <= last);
+    CHECK(f >= 0.0);
+    if (t < 102 + int(kReleaseFadeNs / kMs)) CHECK(f > 0.0);
+    last = f;
+  }
+  CHECK(last == 0.0);
+  CHECK(in.force(at_z(-1.0), 120 * kMs).z() == 0.0);
+  // Following the probe out: once it is above the old plane the force is zero at once.
+  Interpolator out(law, cfg(InterpMode::plane));
+  for (int t = 0; t <= 20; ++t) {
+    if (t % 2 == 0) out.on_model(wall_model(std::uint64_t(t + 1), -2.0), t * kMs);
+    (void)out.force(at_z(-2.0), t * kMs);
+  }
+  (void)out.force(at_z(-0.2), 21 * kMs);
+  out.on_model(wall_model(50, 0.5), 22 * kMs);
+  CHECK(out.force(at_z(0.1), 22 * kMs).z() == 0.0);
+}
+
+TEST_CASE("interpolator: the cross-fade lasts kCrossfadeRounds model intervals when models come faster") {
+  const ForceLaw law;
+  Interpolator in(law, cfg(InterpMode::plane));  // crossfade_ns 10 ms
+  for (int t = 0; t <= 100; ++t) {
+    if (t % 2 == 0) in.on_model(wall_model(std::uint64_t(t + 1), -2.0), t * kMs);
+    (void)in.force(at_z(-2.0), t * kMs);
+  }
+  CHECK(in.force(at_z(-2.0), 101 * kMs).z() == doctest::Approx(law.magnitude_N(2.0)).epsilon(1e-4));
+  ContactModel m = wall_model(99, -2.0);  // the wall 1 mm lower: PD 1 at the same pose
+  m.plane_point = {0, 0, -1};
+  m.penetration_mm = 1.0;
+  in.on_model(m, 102 * kMs);
+  const int span_ms = int(kCrossfadeRounds * 2);  // models every 2 ms
+  double mid = 0, done = 0;
+  for (int t = 102; t <= 102 + span_ms; ++t) {
+    const double f = in.force(at_z(-2.0), t * kMs).z();
+    if (t == 102 + span_ms - 2) mid = f;
+    done = f;
+  }
+  CHECK(mid > law.magnitude_N(1.0) + 1e-3);                              // still fading
+  CHECK(done == doctest::Approx(law.magnitude_N(1.0)).epsilon(1e-4));  // done within the span, not 10 ms
+}
