@@ -328,8 +328,21 @@ ForceScene crease_scene(int split) {
   return s;
 }
 
+/// Circles the last key's position in the plane ⊥ (1, 1, 1), radius r_mm, once in `seconds`:
+/// in a three-face corner each wall's depth swings by ±0.82·r_mm (asymmetric contacts).
+void circle_corner(Keys& k, double r_mm, double seconds) {
+  const geom::Vec3 c = k.last(), u = geom::Vec3(1, -1, 0).normalized(), v = geom::Vec3(1, 1, -2).normalized();
+  go(k, c + r_mm * u, 10);
+  for (int deg = 5; deg <= 360; deg += 5) {
+    const double a = deg * kPi / 180;
+    k.to(c + r_mm * (std::cos(a) * u + std::sin(a) * v), seconds / 72);
+  }
+  go(k, c, 10);
+}
+
 /// An inner corner (a cube of 100 mm with one octant taken out: three faces of 50 mm meet at the
-/// origin): the ball pressed 2 mm into each, held 1.5 s, released.
+/// origin): the ball pressed 2 mm into each, held 1.5 s, circled (each wall 0.4 to 3.6 mm deep),
+/// released.
 ForceScene inner_corner_scene() {
   CellSolid c = CellSolid::empty({-50, 0, 50}, {-50, 0, 50}, {-50, 0, 50});
   for (int i = 0; i < 2; ++i)
@@ -344,6 +357,7 @@ ForceScene inner_corner_scene() {
   k.hold(1.5);
   s.still_t0 = k.t - 1.0;
   s.still_t1 = k.t;
+  circle_corner(k, 2.0, 2.0);
   k.to({out, out, out}, 0.5);
   k.hold(0.1);
   s.script = k.tr;
@@ -354,7 +368,8 @@ ForceScene inner_corner_scene() {
 
 constexpr double kPocketBallMm = 6;
 /// A pocket (30 × 30 mm, 15 mm deep, in a 100 mm slab, coarse faces): a 6 mm ball pressed
-/// 1.5 mm into a corner (floor and two walls), held 1.5 s, released; twice.
+/// 1.5 mm into a corner (floor and two walls), held 1.5 s, released; twice, circled in the
+/// corner the second time (each face 0.5 to 2.5 mm deep).
 ForceScene pocket_scene() {
   CellSolid c = CellSolid::empty({-50, -15, 15, 50}, {-50, -15, 15, 50}, {-50, 0, 15});
   for (int i = 0; i < 3; ++i)
@@ -372,6 +387,7 @@ ForceScene pocket_scene() {
     k.to(at(-1.5), 0.5);
     k.hold(1.5);
     if (rep == 0) s.still_t0 = k.t - 1.0, s.still_t1 = k.t;
+    if (rep == 1) circle_corner(k, 1.2, 2.0);
     k.to(at(3), 0.5);
   }
   k.hold(0.1);
