@@ -204,11 +204,21 @@ constexpr int kBallFrequency = 16;
 /// Moves to p at `speed` mm/s.
 void go(Keys& k, const geom::Vec3& p, double speed) { k.to(p, std::max((p - k.last()).norm() / speed, 1e-3)); }
 
+/// Leaf size of the generated solids' trees (and the workers' in the worker-count check): small,
+/// so that even the 12-face box has leaves enough to deal to 4 workers.
+constexpr std::uint32_t kSolidLeafFaces = 2;
+
 /// A ball probe on a generated solid.
 ForceScene ball_scene(const std::string& name, geom::Mesh solid, double r) {
   ForceScene s;
   s.name = name;
-  s.object = generated(solid.name, std::move(solid));
+  s.object.label = solid.name;
+  s.object.mesh = std::move(solid);
+  geom::TreeConfig tc = geom::DefaultTreeConfig();
+  tc.leaf_faces = kSolidLeafFaces;
+  auto tree = geom::SphereTree::build(s.object.mesh, tc);
+  if (!tree) die(name + ": " + tree.error());
+  s.object.tree = std::move(tree).value();
   s.probe = generated("ball", geom::make_icosphere(r, kBallFrequency));
   s.ball_mm = r;
   return s;
@@ -807,6 +817,7 @@ int same_at_worker_counts(const ForceScene& s, const Model& m, int C, const Repl
   for (int w : counts) {
     engine::FleetSpec spec;
     spec.workers = w;
+    spec.leaf_faces = kSolidLeafFaces;
     auto f = engine::start_fleet(spec, s.probe.mesh, s.object.mesh, s.object.tree);
     if (!f && f.error().find("gives " + std::to_string(w) + " workers a block each") != std::string::npos) continue;
     if (!f) die(s.name + ": " + f.error());
