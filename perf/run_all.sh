@@ -140,7 +140,7 @@ log "speed/accuracy trade (offline, simulated time)"
 log "force rendering quality: paper vs patch contact model, open and closed loop (simulated time)"
 # Per-tick traces go to $out/force/ (8 MB, not committed); force_slide.png is drawn from them.
 force_args=(--json --trace-dir "$out/force" --poses "$out/poses/hand_elephant.txt")
-[ $quick = 1 ] && force_args+=(--quick --scenes box,plate,hand_elephant)
+[ $quick = 1 ] && force_args+=(--quick --scenes box,plate,hand_elephant,box_edge,crease,plate_through,release --workers-check 2)
 "$bench" force "${force_args[@]}" > "$out/force.json"
 
 log "hostile clients: the security reproducers against a live worker daemon, an honest client querying"

@@ -37,10 +37,17 @@
 //    way out along FD: the force stays conservative and continuous rather than turning to the
 //    nearest feature.
 //  * Held contact (a surface-constrained proxy): when the probe has passed through a thin
-//    feature, so that no front face collides any more, the last contact plane is kept while the
-//    probe's deepest vertex stays below it and within the patch's footprint (plus hold_margin_mm):
-//    FD and the plane stay, PD grows with the depth below it (flag kHeld). The proxy shown to a
-//    user is the probe moved out by PD along FD (ContactModel::proxy_offset()).
+//    feature, so that no front face collides any more, FD is kept while the tracked probe point
+//    (the deepest one when contact was last rendered) is under the surface it entered: a walk
+//    over that surface's faces that face FD, from the face found last round, finds the face over
+//    the point (or, within hold_margin_mm past the surface's edge, the last face's plane
+//    extended); PD is the depth under it (flag kHeld). It ends once the point is clear on the
+//    entry side. The proxy shown to a user is the probe moved out by PD along FD
+//    (ContactModel::proxy_offset()).
+//  * Order: the model is a function of the set of pairs. They are taken in (probe, object)
+//    order, each once (sorted in scratch when not given so), and the segments' areas are
+//    measured from a point of the intersection curve, so neither the worker count nor the
+//    faces' size changes FD, PD or the force.
 //  * Fallbacks: when the pairs give no usable curve (touching or coplanar faces only), FD = the
 //    area-weighted mean normal of the colliding object faces (flag kNormalFallback); when that is
 //    zero too, the previous FD; a patch whose faces cancel (|A| < kCancelRatio · Σ|a|) keeps the
@@ -164,7 +171,7 @@ static_assert(sizeof(ContactModel) == 288, "ContactModel layout is pinned (share
 struct ContactConfig {
   ContactModelKind model = ContactModelKind::patch;  ///< which model
   double replane_angle_deg = 60.0;  ///< paper: re-record the first contact face when FD turns further than this
-  double hold_margin_mm = 1.0;  ///< patch: a held contact lasts while the probe is this close to the patch's footprint
+  double hold_margin_mm = 1.0;  ///< patch: a held contact lasts this far past the edge of the surface it entered
   /// patch: vertices the depth search may visit per body and round (kInsideCapped past it)
   std::uint32_t max_inside_vertices = 1u << 18;
 };
