@@ -118,6 +118,7 @@ enum ContactFlag : std::uint32_t {
   kHeld = 1u << 5,               ///< patch: held contact, the probe is past a feature it entered (proxy)
   kNormalFallback = 1u << 6,     ///< patch: FD from face normals or history, not from the intersection curve
   kInsideCapped = 1u << 7,       ///< patch: the depth search hit ContactConfig::max_inside_vertices
+  kPlanes = 1u << 8,             ///< patch: FD and PD clear several planes at once (a concave contact)
 };
 
 /// Which contact model a builder computes.

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "geom/contact.hpp"
+#include "geom/contact_planes.hpp"
 
 namespace st::geom {
 
@@ -63,6 +64,16 @@ struct ContactBuilder::Patch {
   /// from a point on the patch, Σ|a| compares with |Σa| whatever the faces' size (FD's
   /// cancellation test); from a far vertex of a large face, Σ|a| is inflated and FD falls back.
   Vec3 curve_point() const;
+  /// The probe's deepest point under the plane x·normal = offset (object-local): the largest
+  /// offset − normal·x over its vertices, by a steepest ascent from the colliding probe faces'
+  /// vertices; `vertex` is where (UINT32_MAX: none).
+  double probe_support(const Mesh& probe, const Vec3& normal, double offset, std::uint32_t& vertex);
+  /// A concave contact: when this round's direction-giving object faces form 2-4 planar clusters
+  /// that face each other, n and pd become the smallest translation clearing the probe from every
+  /// cluster's plane (contact_planes.hpp), with the probe point and plane point for it; false
+  /// (nothing written) otherwise.
+  bool clear_planes(const Mesh& probe, Vec3& n, double& pd, Vec3& tracked_local, Vec3& plane_pt);
+  PlaneClusters planes;  ///< scratch (clear_planes)
   /// Result of one side's depth search.
   struct Deepest {
     double depth = 0;                   ///< largest exit distance found, mm (0: none inside)

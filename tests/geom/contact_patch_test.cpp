@@ -676,3 +676,53 @@ TEST_CASE("contact patch: held under a thin plate while under the surface it ent
   const ContactModel off = at(51.5, -8);
   CHECK_FALSE(off.in_contact());
 }
+
+namespace {
+// An L-shaped prism of 6 big faces a side: floor z = 10 (x in [10, 40]) and wall x = 10 (z in
+// [10, 40]) meet in a concave crease along y (y in [-20, 20]).
+Mesh make_crease() {
+  const double xz[6][2] = {{0, 0}, {40, 0}, {40, 10}, {10, 10}, {10, 40}, {0, 40}};
+  Mesh m;
+  for (double y : {-20.0, 20.0}) {
+    for (const auto& p : xz) m.local.push_back({p[0], y, p[1]});
+    m.local.push_back({5, y, 5});  // the cap's centre (the L is star-shaped from it)
+  }
+  const std::uint32_t c0 = 6, c1 = 13;
+  for (std::uint32_t i = 0; i < 6; ++i) {
+    const std::uint32_t j = (i + 1) % 6;
+    m.faces.push_back({c0, i, j});          // cap at y = -20 (normal -y)
+    m.faces.push_back({c1, 7 + j, 7 + i});  // cap at y = +20
+    m.faces.push_back({i, 7 + j, j});       // side quad, outward
+    m.faces.push_back({i, 7 + i, 7 + j});
+  }
+  // Outward: the signed volume (Σ a·(b×c)/6) is positive.
+  double volume = 0;
+  for (const Tri& t : m.faces) volume += m.local[t[0]].dot(m.local[t[1]].cross(m.local[t[2]])) / 6;
+  REQUIRE(volume == doctest::Approx(40 * 10 * 40 + 10 * 30 * 40));
+  return m;
+}
+}  // namespace
+
+TEST_CASE("contact patch: a concave crease: PD and FD are the smallest way out of both walls") {
+  const Mesh crease = make_crease();
+  REQUIRE(crease.validate());
+  // The ball a mm into the wall and b mm into the floor: the way out is (a, 0, b).
+  for (const auto& [a, b] : std::vector<std::pair<double, double>>{{3, 2}, {3.5, 0.5}, {0.5, 3.5}, {2, 2}}) {
+    CAPTURE(a);
+    CAPTURE(b);
+    ContactBuilder builder;
+    const ContactModel m = model_at(builder, ball10(), crease, pose_at({10 + 10 - a, 0, 10 + 10 - b}));
+    REQUIRE(m.in_contact());
+    CHECK((m.flags & kPlanes) != 0);
+    CHECK(std::abs(m.penetration_mm - std::hypot(a, b)) < 0.02);
+    CHECK(angle_deg(fd(m), Vec3(a, 0, b)) < 0.5);
+    CHECK(depth_below_plane(m, pose_at({10 + 10 - a, 0, 10 + 10 - b})) == doctest::Approx(m.penetration_mm));
+  }
+  // On the floor alone (clear of the wall): one plane, the summed normal as before.
+  ContactBuilder builder;
+  const ContactModel f = model_at(builder, ball10(), crease, pose_at({30, 0, 18}));
+  REQUIRE(f.in_contact());
+  CHECK((f.flags & kPlanes) == 0);
+  CHECK(std::abs(f.penetration_mm - 2.0) < 0.02);
+  CHECK(angle_deg(fd(f), Vec3::UnitZ()) < 1e-6);
+}
