@@ -185,7 +185,7 @@ struct VertexFaces {
   std::size_t bytes() const { return (first.size() + faces.size()) * sizeof(std::uint32_t); }  ///< memory held
 };
 
-struct SurfaceWalk;  // contact_patch.hpp
+struct SurfaceWalk;  // surface_walk.hpp
 
 /// Builds ContactModels from face pairs, remembering the model's history between calls (paper:
 /// the first contact face; patch: the previous FD and the held plane). Not thread-safe; owned by
