@@ -7,20 +7,12 @@
 #include <vector>
 
 #include "geom/contact.hpp"
+#include "geom/contact_segments.hpp"
 
 namespace st::geom {
 
 /// Unit normal and centroid of face f of m, m's local frame; false when degenerate or non-finite.
 bool face_frame(const Mesh& m, std::uint32_t f, Vec3& centroid, Vec3& normal);
-
-/// A colliding face as the patch model's segment computation reads it: its vertices in the
-/// round's common frame (the local frame of the body with more colliding faces), its unit normal
-/// (zero: degenerate, no direction) and its plane's offset c = n·v0.
-struct FaceRec {
-  Vec3 v[3];
-  Vec3 n;
-  double c;
-};
 
 /// ContactBuilder's patch model (see contact.hpp for what it computes).
 struct ContactBuilder::Patch {
