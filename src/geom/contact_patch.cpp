@@ -15,11 +15,11 @@
 #include "geom/contact_patch.hpp"
 
 #include <algorithm>
-#include <cassert>
 #include <cmath>
 #include <limits>
 #include <utility>
 
+#include "geom/check.hpp"
 #include "geom/contact_segments.hpp"
 #include "geom/surface_walk.hpp"
 
@@ -153,7 +153,7 @@ void ContactBuilder::Patch::BodyState::compute_face_normals() {
   }
 }
 
-// Inlined into the pairs' loop (its only caller), run for every colliding face: as little as
+// Inlined into the pairs' loop (Patch::take_pairs, its only caller), run for every colliding face: as little as
 // possible besides the mark (read at random, a cache miss), so that many are in flight at once.
 [[gnu::always_inline]] inline std::uint32_t ContactBuilder::Patch::BodyState::see(std::uint32_t f, std::uint32_t epoch) {
   Mark& mark = face_mark[f];
@@ -166,10 +166,19 @@ void ContactBuilder::Patch::BodyState::compute_face_normals() {
   return mark.slot;
 }
 
+void ContactBuilder::Patch::BodyState::begin_round() {
+  faces.clear();
+  to_fill.clear();
+  std::swap(entry, prev_entry);
+  entry.clear();
+}
+
 void ContactBuilder::Patch::BodyState::settle(std::uint32_t epoch) {
+  ST_ASSERT(entry.size() == faces.size(), "an entry per slot");
   for (std::uint32_t slot = 0; slot < entry.size(); ++slot) {
     std::uint32_t& e = entry[slot];
     if (e != UINT32_MAX) {
+      ST_ASSERT(e < prev_entry.size(), "a face seen again has last round's slot");
       e = prev_entry[e];  // collided last round: its entry stays
     } else {              // new: a fresh entry, filled from the mesh with the records
       if (store_free.empty()) {
@@ -190,8 +199,15 @@ void ContactBuilder::Patch::BodyState::settle(std::uint32_t epoch) {
     store_free.push_back(e);
     const Fixed& fx = store[e];
     if (fx.covered && !fx.bad_index)
-      for (std::uint32_t v : fx.vid) --cover_count[v];
+      for (std::uint32_t v : fx.vid) {
+        ST_ASSERT(cover_count[v] > 0, "a covered face was counted at its vertices");
+        --cover_count[v];
+      }
   }
+}
+
+void ContactBuilder::Patch::BodyState::fill_new() {
+  for (std::uint32_t slot : to_fill) make_fixed(fixed(slot), faces[slot]);
 }
 
 void ContactBuilder::Patch::BodyState::cover_all() {
@@ -224,6 +240,7 @@ void ContactBuilder::Patch::BodyState::make_fixed(Fixed& fx, std::uint32_t f) co
     r.n = face_normals[f];  // computed once per mesh (the probe's; zero: degenerate)
   else if (!unit_normal(r.v[0], r.v[1], r.v[2], r.n, cr, fx.len))
     r.n.setZero(), fx.len = 0;
+  ST_ASSERT(r.n.squaredNorm() == 0 || std::abs(r.n.squaredNorm() - 1) < 1e-9, "a unit normal, or zero (degenerate)");
   r.c = r.n.dot(r.v[0]);
 }
 
@@ -275,6 +292,7 @@ std::size_t ContactBuilder::Patch::bytes() const {
 }
 
 const Vec3& ContactBuilder::Patch::probe_point(std::uint32_t v, const Mesh& probe) {
+  ST_ASSERT(v < probe_world.size() && v < probe.local.size(), "a vertex of the probe");
   if (probe_xform_stamp[v] != epoch) {
     probe_xform_stamp[v] = epoch;
     probe_world[v] = rot * probe.local[v] + shift;
@@ -443,6 +461,7 @@ bool ContactBuilder::Patch::hold(const Mesh& probe, const Mesh& object, ContactM
     face = last;
   }
   if (!(depth > 0)) return false;  // clear on the entry side
+  ST_ASSERT(face < object.faces.size(), "the held face is an object face");
   held_face = face;
   const Vec3 on_surface = x + depth * held_n;
   m.flags |= kInContact | kHeld | kNormalFallback;
@@ -911,37 +930,68 @@ Vec3 ContactBuilder::Patch::curve_point() const {
     first.add(&common_rec(object_s, slot_a), &common_rec(probe_s, slot_b));
   }
   first.finish();
-  assert(first.midpoint().allFinite());
+  ST_ASSERT(first.midpoint().allFinite(), "the curve point is finite (segments of unit normals)");
   return first.midpoint();
 }
 
 ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object, const Pose& pose,
                                           std::span<const ContactPair> pairs) {
   prepare(probe, object);
+  const std::size_t given = pairs.size();
+  pairs = in_order(pairs);
+  next_epoch();
+  ContactModel m;
+  m.pose = to_pod(pose);
+  m.pairs = static_cast<std::uint32_t>(std::min<std::size_t>(given, UINT32_MAX));
+  const bool pose_ok = pose.matrix().allFinite();
+  if (!pose_ok) m.flags |= kBadInput;
+  take_pairs(probe, object, pairs, m);
+  if (!pose_ok) {
+    reset();
+    return m;
+  }
+  set_pose(probe, object, pose);
+  const FaceNormals faces = make_records(m);
+  const CurveArea curve = vector_area();
+  Vec3 n = Vec3::Zero();
+  if (!force_direction(m, curve, faces, n)) {
+    // Held contact: the probe has passed through a feature it entered (or only touches the
+    // feature's far side): the force keeps pushing back out of the surface it entered while the
+    // tracked point is under it (a surface-constrained proxy).
+    if (hold(probe, object, m)) return m;
+    reset();
+    return m;
+  }
+  Vec3 tracked_local;  // the probe point PD is measured at, probe-local
+  std::uint32_t face = UINT32_MAX;
+  if (penetration(probe, object, n, m, tracked_local, face)) keep_contact(n, tracked_local, face);
+  return m;
+}
+
+std::span<const ContactPair> ContactBuilder::Patch::in_order(std::span<const ContactPair> pairs) {
   // The model is a function of the set of pairs, not of their order (the collision core's order
   // differs from the scatter-gather merge's, and with it the worker count): pairs are taken in
   // (probe, object) order, each once. The collision paths deliver them so (a linear check);
   // others are sorted here, into scratch.
-  const std::size_t given = pairs.size();
   const auto not_increasing = [](const ContactPair& a, const ContactPair& b) { return !(a < b); };
-  if (std::adjacent_find(pairs.begin(), pairs.end(), not_increasing) != pairs.end()) {
-    canonical.assign(pairs.begin(), pairs.end());
-    std::sort(canonical.begin(), canonical.end());
-    canonical.erase(std::unique(canonical.begin(), canonical.end()), canonical.end());
-    pairs = canonical;
-  }
+  if (std::adjacent_find(pairs.begin(), pairs.end(), not_increasing) == pairs.end()) return pairs;
+  canonical.assign(pairs.begin(), pairs.end());
+  std::sort(canonical.begin(), canonical.end());
+  canonical.erase(std::unique(canonical.begin(), canonical.end()), canonical.end());
+  return canonical;
+}
+
+void ContactBuilder::Patch::next_epoch() {
   if (++epoch == 0) {  // stamps wrapped: clear them once every 2^32 rounds
     std::fill(probe_xform_stamp.begin(), probe_xform_stamp.end(), 0);
     probe_s.clear_stamps();
     object_s.clear_stamps();
     epoch = 1;
   }
-  ContactModel m;
-  m.pose = to_pod(pose);
-  m.pairs = static_cast<std::uint32_t>(std::min<std::size_t>(given, UINT32_MAX));
-  const bool pose_ok = pose.matrix().allFinite();
-  if (!pose_ok) m.flags |= kBadInput;
+}
 
+void ContactBuilder::Patch::take_pairs(const Mesh& probe, const Mesh& object, std::span<const ContactPair> pairs,
+                                       ContactModel& m) {
   valid.clear();
   valid_slots.clear();
   // A face that collided in the last round (when its entries were filled) keeps its fixed part
@@ -956,12 +1006,8 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     if (f != last.face) last = {f, b.see(f, epoch)};
     return last.slot;
   };
-  for (BodyState* b : {&probe_s, &object_s}) {
-    b->faces.clear();
-    b->to_fill.clear();
-    std::swap(b->entry, b->prev_entry);
-    b->entry.clear();
-  }
+  probe_s.begin_round();
+  object_s.begin_round();
   for (const ContactPair& p : pairs) {
     if (p.probe >= probe.faces.size() || p.object >= object.faces.size()) {
       ++m.skipped_pairs;
@@ -977,21 +1023,21 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   m.probe_faces = static_cast<std::uint32_t>(probe_s.faces.size());
   m.object_faces = static_cast<std::uint32_t>(object_s.faces.size());
   m.contacts = m.probe_faces + m.object_faces;
-  if (!pose_ok) {
-    reset();
-    return m;
-  }
+}
 
+void ContactBuilder::Patch::set_pose(const Mesh& probe, const Mesh& object, const Pose& pose) {
   // Probe vertices in object-local coordinates, each transformed once per round:
   // x = R·local + (R·probe.origin + t - object.origin) (no large offsets in the sum).
   rot = pose.linear();
   shift = rot * probe.origin + pose.translation() - object.origin;
-  const Eigen::Matrix3d& R = rot;
+}
 
+ContactBuilder::Patch::FaceNormals ContactBuilder::Patch::make_records(ContactModel& m) {
   // One record per colliding face: vertices, unit normal (zero: degenerate, no direction) and
   // plane offset, in a common frame: the local frame of the body with more colliding faces, whose
   // records are then their fixed parts as they are (kept from round to round); the other body's
   // are moved into it. Degenerate object faces count as contacts but give no direction.
+  const Eigen::Matrix3d& R = rot;
   probe_frame = probe_s.faces.size() > object_s.faces.size();
   // A record moved: x' = M·x + t (object-local → probe-local, or probe-local → object-local).
   const Eigen::Matrix3d M = probe_frame ? Eigen::Matrix3d(R.transpose()) : R;
@@ -1001,10 +1047,9 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     r.n = M * from.n;  // zero stays zero (degenerate)
     r.c = r.n.dot(r.v[0]);
   };
-  Vec3 n_faces = Vec3::Zero();  // Σ unnormalised normals: 2 × the area-weighted mean normal (fallback)
-  double n_faces_abs = 0;       // Σ of their lengths
-  for (BodyState* b : {&probe_s, &object_s})
-    for (std::uint32_t slot : b->to_fill) b->make_fixed(b->fixed(slot), b->faces[slot]);
+  FaceNormals faces;  // Σ unnormalised normals: 2 × the area-weighted mean normal (fallback), Σ lengths
+  probe_s.fill_new();
+  object_s.fill_new();
   object_s.use.resize(object_s.faces.size());
   if (probe_frame) object_s.recs.resize(object_s.faces.size());
   for (std::uint32_t i = 0; i < object_s.faces.size(); ++i) {
@@ -1016,8 +1061,8 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     }
     if (probe_frame) move(fx.rec, object_s.recs[i]);
     object_s.use[i] = have_prev && fx.rec.n.dot(prev_n) > kBackCos ? kFront : kUsable;
-    n_faces += fx.len * fx.rec.n;
-    n_faces_abs += fx.len;
+    faces.sum += fx.len * fx.rec.n;
+    faces.abs_sum += fx.len;
   }
   object_s.fixed_epoch = epoch;
   if (m.degenerate_faces) m.flags |= kDegenerateSkipped;
@@ -1031,12 +1076,15 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     probe_s.use[i] = fx.rec.n.squaredNorm() == 0 ? kNoDirection : kUsable;
   }
   probe_s.fixed_epoch = epoch;
+  return faces;
+}
 
+ContactBuilder::Patch::CurveArea ContactBuilder::Patch::vector_area() {
   // The vector area of the object surface inside the probe, from the intersection curve:
   // A = ½ Σ (s0 − o) × (s1 − o) over the pairs' segments, four pairs at a time (segments4), in
   // the common frame (turned into the object's after): while contact continues, only the part on
   // faces not turned away from the previous FD (front); at first contact all of it.
-  bool any_front_face = false;
+  CurveArea out;
   SegmentAreaSum sums(curve_point());
   const BodyState::Fixed* object_store = object_s.store.data();
   const BodyState::Fixed* probe_store = probe_s.store.data();
@@ -1048,50 +1096,49 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
     const std::uint8_t use_a = object_s.use[slot_a];
     if (use_a == kNoDirection || probe_s.use[slot_b] == kNoDirection) continue;  // degenerate: no direction
     const bool front = use_a == kFront;
-    any_front_face |= front;
+    out.any_front_face |= front;
     if (have_prev && !front) continue;  // with history only the front part is used
     sums.add(probe_frame ? &object_recs[slot_a] : &object_store[object_entry[slot_a]].rec,
              probe_frame ? &probe_store[probe_entry[slot_b]].rec : &probe_recs[slot_b]);
   }
   sums.finish();
-  Vec3 area = sums.area();  // the front part's with history, else all of it
-  if (probe_frame) area = R * area;
-  const double abs_sum = sums.abs_sum();
+  out.area = sums.area();  // the front part's with history, else all of it
+  if (probe_frame) out.area = rot * out.area;
+  out.abs_sum = sums.abs_sum();
+  return out;
+}
 
+bool ContactBuilder::Patch::force_direction(ContactModel& m, const CurveArea& curve, const FaceNormals& faces, Vec3& n) {
   // FD: the front part of the curve while contact continues (thin plates, wedges), all of it at
   // first contact; then the fallbacks.
-  Vec3 n = Vec3::Zero();
   bool in_contact = !valid.empty() && m.degenerate_faces < m.object_faces;
-  if (in_contact && have_prev && !any_front_face) in_contact = false;  // only back faces: past a thin feature
+  if (in_contact && have_prev && !curve.any_front_face) in_contact = false;  // only back faces: past a thin feature
   if (in_contact) {
-    const Vec3& a = area;
+    const Vec3& a = curve.area;
     const double a_norm = a.norm();
     // A curve of (nearly) no area is rounding noise (faces touching at a vertex or an edge): its
     // direction is arbitrary. kTinyArea of the colliding faces' area is far below any real
     // penetration (a ball pressed 1e-6 of its radius already has ~1e-5 of its face area inside).
-    const bool tiny = !(a_norm > kTinyArea * 0.5 * n_faces_abs);
-    if (abs_sum > 0 && a_norm > kCancelRatio * abs_sum && std::isfinite(a_norm) && !tiny) {
+    const bool tiny = !(a_norm > kTinyArea * 0.5 * faces.abs_sum);
+    if (curve.abs_sum > 0 && a_norm > kCancelRatio * curve.abs_sum && std::isfinite(a_norm) && !tiny) {
       n = a / a_norm;
     } else {
       m.flags |= kNormalFallback;
-      if (abs_sum > 0 && !tiny) m.flags |= kNormalsDisagree;
+      if (curve.abs_sum > 0 && !tiny) m.flags |= kNormalsDisagree;
       if (have_prev)
         n = prev_n;
-      else if (n_faces.norm() > kCancelRatio * n_faces_abs)
-        n = n_faces.normalized();
+      else if (faces.sum.norm() > kCancelRatio * faces.abs_sum)
+        n = faces.sum.normalized();
       else
         in_contact = false;
     }
   }
+  ST_ASSERT(!in_contact || std::abs(n.squaredNorm() - 1) < 1e-9, "FD is a unit vector");
+  return in_contact;
+}
 
-  if (!in_contact) {
-    // Held contact: the probe has passed through a feature it entered (or only touches the
-    // feature's far side): the force keeps pushing back out of the surface it entered while the
-    // tracked point is under it (a surface-constrained proxy).
-    if (hold(probe, object, m)) return m;
-    reset();
-    return m;
-  }
+bool ContactBuilder::Patch::penetration(const Mesh& probe, const Mesh& object, const Vec3& n, ContactModel& m,
+                                        Vec3& tracked_local, std::uint32_t& face) {
   // PD: directional penetration depth along n, both ways: probe points inside the object leave
   // along +n through the object's faces that face +n; object points inside the probe leave along
   // −n through the probe's faces that face −n.
@@ -1104,19 +1151,19 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   m.force_dir = to_pod(n);
 
   // The point PD is measured at, fixed on the probe, and the plane through the surface there.
-  Vec3 tracked_local, plane_pt;  // probe-local point, object-local plane point
+  Vec3 plane_pt;  // object-local plane point
   if (dp.depth > 0 && dp.depth >= dobj.depth) {
     m.penetration_mm = dp.depth;
     m.deepest_probe_vertex = dp.vertex;
     m.nearest_object_face = dp.face;
-    tracked_local = R.transpose() * (dp.point - shift);
+    tracked_local = rot.transpose() * (dp.point - shift);
     plane_pt = dp.point + dp.depth * n;
   } else if (dobj.depth > 0) {
     // An object point is deepest: the probe point is where it leaves the probe (along −n), a
     // point fixed on the probe; the plane passes through the object point.
     m.penetration_mm = dobj.depth;
     const Vec3 e = dobj.point - dobj.depth * n;
-    tracked_local = R.transpose() * (e - shift);
+    tracked_local = rot.transpose() * (e - shift);
     plane_pt = dobj.point;
   } else {
     // Touching, or edges crossing with every vertex outside: PD = 0, the plane through the
@@ -1131,27 +1178,32 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
       reset();
       m.flags &= ~kInContact;
       m.force_dir = {};
-      return m;
+      return false;
     }
     m.deepest_probe_vertex = lv;
     tracked_local = probe.local[lv];
     plane_pt = probe_point(lv, probe);
   }
+  ST_ASSERT(m.penetration_mm >= 0, "PD >= 0");
   m.probe_point = to_pod(tracked_local + probe.origin);
   m.plane_point = to_pod(plane_pt + object.origin);
   m.contact_point = m.plane_point;
+  face = dp.depth > 0 && dp.depth >= dobj.depth ? dp.face : UINT32_MAX;
+  return true;
+}
 
+void ContactBuilder::Patch::keep_contact(const Vec3& n, const Vec3& tracked_local, std::uint32_t face) {
   // The surface a held contact is measured against: the face the deepest point leaves through,
   // or a colliding object face that faces n.
-  held_face = dp.depth > 0 && dp.depth >= dobj.depth ? dp.face : UINT32_MAX;
+  held_face = face;
   for (std::uint32_t i = 0; held_face == UINT32_MAX && i < object_s.faces.size(); ++i)
     if (object_s.use[i] != kNoDirection && object_s.fixed(i).rec.n.dot(n) > kFrontCos) held_face = object_s.faces[i];
+  ST_ASSERT(held_face == UINT32_MAX || held_face < object_s.nf, "the held face is an object face");
   have_prev = true;
   prev_n = n;
   held_valid = true;
   held_n = n;
   held_tracked = tracked_local;
-  return m;
 }
 
 }  // namespace st::geom

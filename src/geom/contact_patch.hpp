@@ -6,6 +6,7 @@
 #include <span>
 #include <vector>
 
+#include "geom/check.hpp"
 #include "geom/contact.hpp"
 #include "geom/contact_segments.hpp"
 
@@ -17,11 +18,55 @@ bool face_frame(const Mesh& m, std::uint32_t f, Vec3& centroid, Vec3& normal);
 /// ContactBuilder's patch model (see contact.hpp for what it computes).
 struct ContactBuilder::Patch {
   explicit Patch(const ContactConfig& c) : config(c) {}
+  /// Sizes the per-body state for these meshes (kept while they stay the same).
   void prepare(const Mesh& probe, const Mesh& object);
+  /// The model for `pairs` at `pose` (ContactBuilder::build()).
   ContactModel build(const Mesh& probe, const Mesh& object, const Pose& pose, std::span<const ContactPair> pairs);
+  /// Forgets the history (as if contact had ended).
   void reset();
+  /// Whether a previous FD is kept.
   bool has_history() const { return have_prev; }
+  /// Memory held.
   std::size_t bytes() const;
+
+  // build()'s steps, in order.
+  /// The pairs in (probe, object) order, each once: as given when they are so, else sorted into
+  /// `canonical`.
+  std::span<const ContactPair> in_order(std::span<const ContactPair> pairs);
+  /// Starts a round: the next epoch (every stamp cleared when it wraps).
+  void next_epoch();
+  /// Takes the pairs with indices in range (valid) and their faces' slots (valid_slots); fills
+  /// m's face counts, and skipped_pairs with kBadInput.
+  void take_pairs(const Mesh& probe, const Mesh& object, std::span<const ContactPair> pairs, ContactModel& m);
+  /// This round's pose: rot and shift (probe-local → object-local, no large offsets in the sum).
+  void set_pose(const Mesh& probe, const Mesh& object, const Pose& pose);
+  /// The colliding object faces' normals, the fallback direction: Σ of the unnormalised normals
+  /// (2 × the area-weighted mean normal) and Σ of their lengths.
+  struct FaceNormals {
+    Vec3 sum{Vec3::Zero()};  ///< Σ (b−a)×(c−a)
+    double abs_sum = 0;      ///< Σ |(b−a)×(c−a)|
+  };
+  /// The records in the common frame and what each gives the segments (use); counts the
+  /// degenerate object faces in m.
+  FaceNormals make_records(ContactModel& m);
+  /// The vector area of the intersection curve (object frame) and what it is made of.
+  struct CurveArea {
+    Vec3 area{Vec3::Zero()};      ///< Σa: the front part's with history, else all of it
+    double abs_sum = 0;           ///< Σ|a| over the same rows
+    bool any_front_face = false;  ///< a usable pair's object face faces the previous FD
+  };
+  /// The vector area from the pairs' segments (contact_segments.hpp), measured from curve_point().
+  CurveArea vector_area();
+  /// FD into n (unit) from the curve, else the fallbacks; false: no contact direction.
+  bool force_direction(ContactModel& m, const CurveArea& curve, const FaceNormals& faces, Vec3& n);
+  /// PD along n, both ways (side()), the probe point (tracked_local, probe-local) and the
+  /// contact plane; `face`: the object face the deepest probe point leaves through (UINT32_MAX:
+  /// none). False when there is nothing to render (m then says so, and the history is reset).
+  bool penetration(const Mesh& probe, const Mesh& object, const Vec3& n, ContactModel& m, Vec3& tracked_local,
+                   std::uint32_t& face);
+  /// The history the next round starts from: FD n and the held contact (probe point
+  /// tracked_local, probe-local, against the face `face` leaves through, or UINT32_MAX).
+  void keep_contact(const Vec3& n, const Vec3& tracked_local, std::uint32_t face);
 
   /// The areas' origin, a point of this round's intersection curve in the common frame: the
   /// midpoint of the first segment of the pairs whose areas are summed (zero: none). Measured
@@ -102,13 +147,24 @@ struct ContactBuilder::Patch {
     std::vector<std::uint32_t> entry, prev_entry;  ///< per slot: its entry, this round and the last
     std::vector<std::uint32_t> to_fill;            ///< slots whose entries are new this round (read from the mesh)
     /// The fixed part of this round's slot.
-    Fixed& fixed(std::uint32_t slot) { return store[entry[slot]]; }
-    const Fixed& fixed(std::uint32_t slot) const { return store[entry[slot]]; }
+    Fixed& fixed(std::uint32_t slot) {
+      ST_ASSERT(slot < entry.size() && entry[slot] < store.size(), "a slot of this round, settled");
+      return store[entry[slot]];
+    }
+    /// The fixed part of this round's slot.
+    const Fixed& fixed(std::uint32_t slot) const {
+      ST_ASSERT(slot < entry.size() && entry[slot] < store.size(), "a slot of this round, settled");
+      return store[entry[slot]];
+    }
+    /// Starts a round: no face counted yet (this round's entries become the last round's).
+    void begin_round();
     /// Counts face f as colliding this round; returns its slot.
     std::uint32_t see(std::uint32_t f, std::uint32_t epoch);
     /// After the pairs: gives each slot its entry (last round's, or a new one, listed in to_fill)
     /// and frees the entries of last round's faces that do not collide this round.
     void settle(std::uint32_t epoch);
+    /// Fills the entries new this round (to_fill) from the mesh.
+    void fill_new();
     /// Empties the store (no face's fixed part kept).
     void clear_store();
     /// Fills fx for face f from the mesh (the unit normal from face_normals when those are kept,
