@@ -10,6 +10,7 @@
 
 #include "geom/check.hpp"
 #include "geom/contact_patch.hpp"
+#include "geom/contact_regions.hpp"
 
 namespace st::geom {
 
@@ -299,7 +300,7 @@ void DepthSearch::open_pairs(bool discover, bool full) {
 // and which are open (T.group_open: a region not followed); returns the group count.
 std::uint32_t DepthSearch::group_regions() {
   const auto n_slots = static_cast<std::uint32_t>(T_.faces.size());
-  const std::uint32_t n_groups = lost_ ? patch_.group_faces(T_) : patch_.new_groups(T_);
+  const std::uint32_t n_groups = lost_ ? group_faces(T_, epoch_) : new_groups(T_);
   const std::vector<std::uint32_t>& label = T_.group_label;
   std::vector<std::uint32_t>& first = T_.group_first;  // per group: a face of it (its first slot)
   first.assign(n_groups, UINT32_MAX);

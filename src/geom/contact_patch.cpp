@@ -4,9 +4,9 @@
 // body's vertices from the colliding pairs, exit distances found by walking over the other
 // body's facing faces, edge crossings near the top), history for thin features, and a held
 // plane when the probe has passed through a feature it entered. This file is the round
-// (Patch::build() and its steps), the per-body state and the grouping of colliding faces into
-// regions; the segment kernel is in contact_segments.cpp, the surface walk in surface_walk.cpp
-// and the depth search in contact_depth.cpp.
+// (Patch::build() and its steps) and the per-body state; the segment kernel is in
+// contact_segments.cpp, the surface walk in surface_walk.cpp, the contact regions in
+// contact_regions.cpp and the depth search in contact_depth.cpp.
 //
 // References: the vector area of a surface patch is ½∮x×dx over its boundary (Stokes); the
 // gradient of the intersection volume of two bodies with respect to a translation is the vector
@@ -52,12 +52,6 @@ VertexFaces VertexFaces::build(const Mesh& mesh) {
 // The model.
 
 namespace {
-
-/// Faces grouped afresh (not from the last grouping) when more than 1 in this many are new since
-/// then: joining a new face looks at the ~18 faces around its corners, a fresh grouping at the
-/// 3 corners of every face.
-constexpr std::uint32_t kFreshGrouping = 6;
-constexpr std::uint32_t kNoGroup = UINT32_MAX;
 
 /// Vector area below this fraction of the colliding object faces' area is noise, not a direction.
 constexpr double kTinyArea = 1e-9;
@@ -208,7 +202,7 @@ void PatchBody::clear_stamps() {
 std::size_t PatchBody::bytes() const {
   return vf.bytes() +
          (visit_stamp.capacity() + path_stamp.capacity() + exit_face.capacity() + cover_count.capacity() +
-          2 * face_mark.capacity() + faces.capacity() + group_parent.capacity() + 2 * group_table.capacity() +
+          2 * face_mark.capacity() + faces.capacity() + group_sets.capacity() + 2 * group_table.capacity() +
           group_label.capacity() + group_remap.capacity() + group_first.capacity()) *
              4 +
          (depth.capacity() + group_box.capacity() + vertex_mark.capacity()) * sizeof(double) + group_open.capacity() +
@@ -252,148 +246,6 @@ const Vec3& ContactBuilder::Patch::probe_point(std::uint32_t v, const Mesh& prob
     probe_world[v] = rot * probe.local[v] + shift;
   }
   return probe_world[v];
-}
-
-std::uint32_t ContactBuilder::Patch::group_faces(PatchBody& T) {
-  const auto n_slots = static_cast<std::uint32_t>(T.faces.size());
-  std::vector<std::uint32_t>& label = T.group_label;
-  std::vector<std::uint32_t>& parent = T.group_parent;  // union-find over labels
-  std::vector<std::uint32_t>& remap = T.group_remap;
-  label.assign(n_slots, kNoGroup);
-  parent.clear();
-  auto root = [&](std::uint32_t i) {
-    while (parent[i] != i) i = parent[i] = parent[parent[i]];
-    return i;
-  };
-  auto unite = [&](std::uint32_t a, std::uint32_t b) {
-    a = root(a), b = root(b);
-    if (a != b) parent[std::max(a, b)] = std::min(a, b);
-  };
-  auto fresh = [&] {
-    parent.push_back(static_cast<std::uint32_t>(parent.size()));
-    return parent.back();
-  };
-  // The faces that were grouped last time keep their groups (renumbered from 0).
-  remap.assign(T.n_groups, kNoGroup);
-  std::uint32_t n_new = 0;
-  for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
-    const std::uint32_t g = T.fixed(slot).group;
-    if (g >= T.n_groups) {
-      ++n_new;
-      continue;
-    }
-    if (remap[g] == kNoGroup) remap[g] = fresh();
-    label[slot] = remap[g];
-  }
-  if (std::uint64_t(n_new) * kFreshGrouping > n_slots) {
-    // Group every face afresh: union-find over the slots, each vertex remembering the first slot
-    // it was seen in, in a small hash table (scratch, stays in cache; a per-vertex array would be
-    // read at random over the whole mesh).
-    parent.resize(n_slots);
-    for (std::uint32_t i = 0; i < n_slots; ++i) parent[i] = label[i] = i;
-    std::vector<std::uint64_t>& table = T.group_table;  // (vertex + 1) << 32 | slot; 0 = empty
-    std::size_t size = 64;
-    while (size < 6 * std::size_t(n_slots)) size *= 2;  // at most half full
-    table.assign(size, 0);
-    for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
-      if (T.fixed(slot).bad_index) continue;
-      for (std::uint32_t v : T.fixed(slot).vid) {
-        const std::uint64_t key = std::uint64_t(v) + 1;
-        for (std::size_t h = (v * 0x9E3779B97F4A7C15ull) >> 40 & (size - 1);; h = (h + 1) & (size - 1)) {
-          if (table[h] == 0) {
-            table[h] = key << 32 | slot;
-            break;
-          }
-          if (table[h] >> 32 == key) {
-            unite(std::uint32_t(table[h]), slot);
-            break;
-          }
-        }
-      }
-    }
-  } else {
-    // A face new since then joins the colliding faces around its vertices (found through the
-    // mesh's vertex-face lists and this round's face marks); alone, it starts a group.
-    for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
-      if (label[slot] != kNoGroup) continue;
-      if (!T.fixed(slot).bad_index)
-        for (std::uint32_t v : T.fixed(slot).vid)
-          for (std::uint32_t k = T.vf.first[v]; k < T.vf.first[v + 1]; ++k) {
-            const PatchBody::Mark& mk = T.face_mark[T.vf.faces[k]];
-            if (mk.stamp != epoch || mk.slot == slot || label[mk.slot] == kNoGroup) continue;
-            if (label[slot] == kNoGroup)
-              label[slot] = label[mk.slot];
-            else
-              unite(label[slot], label[mk.slot]);
-          }
-      if (label[slot] == kNoGroup) label[slot] = fresh();
-    }
-  }
-  // Dense labels, kept with the faces for the next grouping.
-  remap.assign(parent.size(), kNoGroup);
-  std::uint32_t n = 0;
-  for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
-    const std::uint32_t r = root(label[slot]);
-    if (remap[r] == kNoGroup) remap[r] = n++;
-    T.fixed(slot).group = label[slot] = remap[r];
-  }
-  T.n_groups = n;
-  return n;
-}
-
-std::uint32_t ContactBuilder::Patch::new_groups(PatchBody& T) {
-  const auto n_slots = static_cast<std::uint32_t>(T.faces.size());
-  std::vector<std::uint32_t>& label = T.group_label;
-  std::vector<std::uint32_t>& parent = T.group_parent;     // union-find over the new faces' slots
-  std::vector<std::uint8_t>& attached = T.group_attached;  // per slot: its set shares a vertex with a covered face
-  label.assign(n_slots, 0);
-  parent.resize(n_slots);
-  attached.assign(n_slots, 0);
-  auto root = [&](std::uint32_t i) {
-    while (parent[i] != i) i = parent[i] = parent[parent[i]];
-    return i;
-  };
-  // A new face touches a covered one where its vertex has a covered colliding face around it
-  // (T.cover_count); new faces sharing a vertex join (per vertex, this call's stamp and the
-  // first new face's slot).
-  std::vector<std::uint64_t>& mark = T.vertex_mark;
-  if (++T.vertex_stamp == 0) {
-    std::fill(mark.begin(), mark.end(), 0);
-    T.vertex_stamp = 1;
-  }
-  const std::uint64_t stamp = std::uint64_t(T.vertex_stamp) << 32;
-  for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
-    const PatchBody::Fixed& fx = T.fixed(slot);
-    parent[slot] = slot;
-    if (fx.covered || fx.bad_index) continue;
-    for (std::uint32_t v : fx.vid) {
-      if (T.cover_count[v] > 0) attached[slot] = 1;
-      const std::uint64_t m = mark[v];
-      if ((m >> 32) != T.vertex_stamp) {
-        mark[v] = stamp | slot;
-      } else {
-        const std::uint32_t a = root(slot), b = root(std::uint32_t(m));
-        if (a != b) parent[std::max(a, b)] = std::min(a, b);
-      }
-    }
-  }
-  // Labels: 0 the covered faces (and those with bad indices), 1 + n for the n-th set of new faces.
-  std::vector<std::uint32_t>& remap = T.group_remap;
-  remap.assign(n_slots, kNoGroup);
-  std::uint32_t n = 1;
-  for (std::uint32_t slot = 0; slot < n_slots; ++slot) {
-    const PatchBody::Fixed& fx = T.fixed(slot);
-    if (fx.covered || fx.bad_index) continue;
-    const std::uint32_t r = root(slot);
-    if (remap[r] == kNoGroup) remap[r] = n++;
-    label[slot] = remap[r];
-    if (attached[slot]) attached[r] = 1;
-  }
-  std::vector<std::uint8_t>& open = T.group_open;
-  open.assign(n, 0);
-  for (std::uint32_t slot = 0; slot < n_slots; ++slot)
-    if (label[slot] != 0) open[label[slot]] = attached[root(slot)] ? 0 : 1;
-  return n;
 }
 
 bool ContactBuilder::Patch::hold(const Mesh& probe, const Mesh& object, ContactModel& m) {

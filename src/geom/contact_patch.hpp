@@ -1,7 +1,7 @@
 // The patch contact model's state and scratch (ContactBuilder::Patch) and its per-body state
 // (PatchBody); the model is defined in contact.hpp. Internal to src/geom: contact.cpp owns one
 // per builder. Its parts: the segment kernel (contact_segments.hpp), the surface walk
-// (surface_walk.hpp), the depth search (contact_depth.hpp).
+// (surface_walk.hpp), the contact regions (contact_regions.hpp), the depth search (contact_depth.hpp).
 #pragma once
 #include <array>
 #include <cstdint>
@@ -11,6 +11,7 @@
 #include "geom/check.hpp"
 #include "geom/contact.hpp"
 #include "geom/contact_depth.hpp"
+#include "geom/contact_regions.hpp"
 #include "geom/contact_segments.hpp"
 
 namespace st::geom {
@@ -90,12 +91,12 @@ struct PatchBody {
   /// The round whose new entries were filled last (to_fill); 0 = none: an entry is taken over
   /// from the round before only when that round filled its entries.
   std::uint32_t fixed_epoch = 0;
-  // Grouping the colliding faces into regions (a search for new regions):
+  // Grouping the colliding faces into regions (a search for new regions; contact_regions.hpp):
   // group_faces after a remembered maximum was lost, else new_groups.
   std::uint32_t n_groups = 0;                ///< groups at the last grouping (Fixed::group below it)
   std::vector<std::uint32_t> group_label;    ///< per slot: its group
   std::vector<std::uint64_t> group_table;    ///< scratch: vertex → the first slot it was seen in (hash table)
-  std::vector<std::uint32_t> group_parent;   ///< scratch: union-find over the groups
+  UnionFind group_sets;                      ///< scratch: union-find over the groups
   std::vector<std::uint32_t> group_remap;    ///< scratch: old or root label → new label
   std::vector<std::uint32_t> group_first;    ///< scratch: per group, its first slot
   std::vector<double> group_box;             ///< scratch: per group, its extent across d (u, w)
@@ -205,18 +206,6 @@ struct ContactBuilder::Patch {
   /// over its faces that face held_n, or within hold_margin_mm past its edge, the last face's
   /// plane extended), fills m with FD = held_n and PD = the depth under it; false: clear of it.
   bool hold(const Mesh& probe, const Mesh& object, ContactModel& m);
-  /// Groups T's colliding faces of this round (faces sharing a vertex join) into
-  /// T.group_label[slot], labels 0 .. n − 1; returns n. A face keeps the group it was given at the
-  /// last grouping (carried with its fixed part, so a group is followed from round to round);
-  /// only faces new since then are joined, through the colliding faces around their corners;
-  /// with many new faces, every face is grouped afresh. A group that has split since stays one:
-  /// a region that separated from a followed one is found by the patrol (see DepthSearch).
-  std::uint32_t group_faces(PatchBody& T);
-  /// The groups a search for new regions opens when no maximum was lost: T's faces that began
-  /// colliding since the last search (not covered), joined through shared vertices; a set of
-  /// them sharing no vertex with a covered face is a new region. Labels in T.group_label (0: the
-  /// covered faces), which are open in T.group_open; returns the label count.
-  std::uint32_t new_groups(PatchBody& T);
   // Scratch.
   std::vector<ContactPair> canonical;                     ///< the pairs sorted and distinct, when not given so
   std::vector<ContactPair> valid;                         ///< the pairs with indices in range
