@@ -193,7 +193,8 @@ struct VertexFaces {
   std::size_t bytes() const { return (first.size() + faces.size()) * sizeof(std::uint32_t); }  ///< memory held
 };
 
-struct SurfaceWalk;  // contact_patch.hpp
+struct SurfaceWalk;  // surface_walk.hpp
+class DepthSearch;   // contact_depth.hpp
 
 /// Builds ContactModels from face pairs, remembering the model's history between calls (paper:
 /// the first contact face; patch: the previous FD and the held plane). Not thread-safe; owned by
@@ -225,8 +226,10 @@ class ContactBuilder {
   Vec3 first_normal_{Vec3::Zero()};        ///< paper: its unit normal
   std::vector<std::uint32_t> probe_faces_, object_faces_, probe_vertices_;  ///< scratch
   std::vector<Vec3> probe_points_;  ///< scratch: probe vertices in the object's local frame
-  struct Patch;                     ///< the patch model's state and scratch (contact_patch.cpp)
-  friend struct SurfaceWalk;
+  struct Patch;                     ///< the patch model's state and scratch (contact_patch.hpp)
+  friend struct SurfaceWalk;        // the patch model's parts that name Patch
+  friend class DepthSearch;
+  friend struct PatchTestAccess;  // tests/geom: the patch model's parts, tested one at a time
   std::unique_ptr<Patch> patch_;
 };
 
