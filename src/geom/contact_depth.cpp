@@ -465,7 +465,7 @@ void DepthSearch::refine_edge(std::uint32_t ia, std::uint32_t ib, const Seen* se
       const double sa = (qu * sw - qw * su) * inv, r = (qu * rw - qw * ru) * inv;
       if (sa < 0 || sa > 1 || r < 0 || r > 1) continue;
       const double dist = (sn.ph[e] + r * (sn.ph[j] - sn.ph[e])) - (ah + sa * rh);
-      if (dist > best_.depth) {
+      if (dist > best_.depth && inside_below_edge(sn, e)) {
         best_.depth = dist;
         best_.point = a + sa * (b - a);
         best_.face = sn.face;
@@ -474,6 +474,25 @@ void DepthSearch::refine_edge(std::uint32_t ia, std::uint32_t ib, const Seen* se
       }
     }
   }
+}
+
+bool DepthSearch::inside_below_edge(const Seen& sn, int e) {
+  // Locally at the edge the solid is the intersection of the two faces' half-spaces (a convex
+  // edge) or their union (a concave one). A point x straight below the edge along d is under the
+  // seen face's plane (it faces d); it is under the other face's plane too when that face faces
+  // d. Otherwise only a concave edge keeps x inside.
+  const Tri& t = surface_.faces[sn.face];
+  const std::uint32_t a = t[e], b = t[e == 2 ? 0 : e + 1], c = t[e == 0 ? 2 : e - 1];
+  const std::uint32_t g = walk_.across(sn.face, a, b);
+  if (g == UINT32_MAX) return true;  // an open boundary: nothing to tell by
+  const Tri& tg = surface_.faces[g];
+  const std::uint32_t opposite = tg[0] != a && tg[0] != b ? tg[0] : (tg[1] != a && tg[1] != b ? tg[1] : tg[2]);
+  const Vec3 pa = walk_.at(a), pb = walk_.at(b), pc = walk_.at(c), po = walk_.at(opposite);
+  // g runs the shared edge b → a, so its outward normal is (a − b) × (o − b) = −(b − a) × (o − a).
+  const Vec3 ng = -(pb - pa).cross(po - pa);
+  const Vec3 nf = (pb - pa).cross(pc - pa);  // the seen face's outward normal (unnormalised)
+  if (ng.dot(walk_.d) > 0) return true;      // g faces d: x is under both planes
+  return (po - pa).dot(nf) > 0;              // a concave edge: g's far vertex above the seen face's plane
 }
 
 // Every edge of the faces around vertex c (once) against the faces its neighbourhood leaves

@@ -89,6 +89,10 @@ class DepthSearch {
   inline bool see(std::uint32_t f, Seen& sn);             ///< surface face f seen along d
   /// Where test edge (ia, ib) crosses the edges of the seen faces along d.
   inline void refine_edge(std::uint32_t ia, std::uint32_t ib, const Seen* seen, int n_seen);
+  /// Whether a point below edge (e, e+1) of a seen face, along d, lies inside S there: the face
+  /// across that edge faces d too, or the edge is concave (a point under a convex silhouette edge
+  /// is outside S, however deep the crossing looks).
+  bool inside_below_edge(const Seen& sn, int e);
   inline void refine_around(std::uint32_t c);              ///< edge crossings around vertex c
   inline void follow_ridge(std::uint32_t deepest_vertex);  ///< crossings from fan to fan along a ridge
   inline void refine_pairs();                              ///< crossings over every colliding pair

@@ -726,3 +726,36 @@ TEST_CASE("contact patch: a concave crease: PD and FD are the smallest way out o
   CHECK(std::abs(f.penetration_mm - 2.0) < 0.02);
   CHECK(angle_deg(fd(f), Vec3::UnitZ()) < 1e-6);
 }
+
+TEST_CASE("contact patch: PD never exceeds the exact directional depth along FD (coarse convex bodies)") {
+  // A coarse ball (an icosahedron: big facets, sharp silhouette edges) pressed at random into the
+  // edges and corners of a box: PD along FD must not exceed the exact directional depth, the
+  // smallest t that separates the bodies moved by t·FD (bisection on the exact pairs). An edge
+  // crossing below a silhouette edge of the other body lies outside it and must not count.
+  const Mesh ico = make_icosphere(10, 1);
+  const Mesh& box = box40();
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  int checked = 0;
+  for (int k = 0; k < 400; ++k) {
+    Pose p = Pose::Identity();
+    p.linear() = Eigen::AngleAxisd(kPi * u(rng), Vec3(u(rng), u(rng), u(rng)).normalized()).toRotationMatrix();
+    p.translation() = Vec3(20 + 6 * u(rng), 20 + 6 * u(rng), 20 + 6 * u(rng));  // around the corner (20, 20, 20)
+    ContactBuilder b;
+    const ContactModel m = model_at(b, ico, box, p);
+    if (!m.in_contact() || m.penetration_mm <= 0) continue;
+    const Vec3 d = fd(m);
+    auto apart = [&](double t) {
+      Pose q = p;
+      q.translation() += t * d;
+      return st::test::brute_force(ico, box, q).empty();
+    };
+    double lo = 0, hi = 60;
+    if (!apart(hi)) continue;  // not separable along FD within 60 mm (contained): no reference
+    for (int it = 0; it < 50; ++it) (apart(0.5 * (lo + hi)) ? hi : lo) = 0.5 * (lo + hi);
+    CAPTURE(k);
+    CHECK(m.penetration_mm <= hi + 1e-6);
+    ++checked;
+  }
+  CHECK(checked > 100);
+}
