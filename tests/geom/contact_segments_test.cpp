@@ -20,7 +20,7 @@ using namespace st::geom;
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+constexpr double kPiSegments = 3.14159265358979323846;
 
 FaceRec rec(const Vec3& a, const Vec3& b, const Vec3& c) {
   FaceRec r;
@@ -175,8 +175,8 @@ TEST_CASE("contact segments: a ball pressed into a box's face has the disc's vec
     s.finish();
     const double rho2 = 100 - (10 - d) * (10 - d);  // the disc's radius², ball radius 10
     const Vec3 a = s.area();
-    CHECK(a.z() == doctest::Approx(kPi * rho2).epsilon(0.02));  // the facets cut a polygon inside the circle
-    CHECK(a.z() <= kPi * rho2);
+    CHECK(a.z() == doctest::Approx(kPiSegments * rho2).epsilon(0.02));  // the facets cut a polygon inside the circle
+    CHECK(a.z() <= kPiSegments * rho2);
     CHECK(std::hypot(a.x(), a.y()) < 1e-9 * a.z());
     CHECK(s.abs_sum() == doctest::Approx(a.norm()).epsilon(1e-9));
     // Over a closed curve Σa does not depend on the origin (up to rounding); Σ|a| does.
