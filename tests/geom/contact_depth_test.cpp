@@ -36,11 +36,7 @@ const Mesh& ball10() {  // vertex spacing ~0.7 mm: within ~0.01 mm of the sphere
   return m;
 }
 
-Pose pose_at(const Vec3& t) {
-  Pose p = Pose::Identity();
-  p.translation() = t;
-  return p;
-}
+using st::test::pose_at;
 
 /// A round of the patch model up to its depth search (Patch::build()'s steps before PD).
 void set_up_round(Patch& patch, const Mesh& probe, const Mesh& object, const Pose& pose) {

@@ -19,11 +19,7 @@ using namespace st::geom;
 namespace {
 constexpr double kPi = 3.14159265358979323846;
 
-Pose pose_at(const Vec3& t) {
-  Pose p = Pose::Identity();
-  p.translation() = t;
-  return p;
-}
+using st::test::pose_at;
 ContactModel model_at(ContactBuilder& b, const Mesh& probe, const Mesh& object, const Pose& p) {
   const std::vector<FacePair> pairs = st::test::brute_force(probe, object, p);
   return b.build(probe, object, p, pairs);

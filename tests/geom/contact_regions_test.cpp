@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "geom/contact_patch.hpp"
+#include "test_models.hpp"
 
 using namespace st::geom;
 
@@ -38,19 +39,7 @@ std::vector<std::uint32_t> components(std::uint32_t n, const std::vector<std::pa
   return comp;
 }
 
-/// An n × n grid of unit squares, two faces each: square (i, j) is faces 2(j·n + i) and + 1.
-Mesh grid(int n) {
-  Mesh m;
-  for (int j = 0; j <= n; ++j)
-    for (int i = 0; i <= n; ++i) m.local.emplace_back(i, j, 0);
-  auto at = [n](int i, int j) { return std::uint32_t(j * (n + 1) + i); };
-  for (int j = 0; j < n; ++j)
-    for (int i = 0; i < n; ++i) {
-      m.faces.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
-      m.faces.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
-    }
-  return m;
-}
+using st::test::grid;
 
 constexpr int kGrid = 12;
 

@@ -11,25 +11,13 @@
 #include <vector>
 
 #include "geom/primitives.hpp"
+#include "test_models.hpp"
 
 using namespace st::geom;
 
 namespace {
 
-/// An n × n grid of unit squares in the plane z = height, two faces each (counter-clockwise seen
-/// from +z: normal +z); square (i, j) spans [i, i + 1] × [j, j + 1], faces 2(j·n + i) and + 1.
-Mesh grid(int n, double height = 0) {
-  Mesh m;
-  for (int j = 0; j <= n; ++j)
-    for (int i = 0; i <= n; ++i) m.local.emplace_back(i, j, height);
-  auto at = [n](int i, int j) { return std::uint32_t(j * (n + 1) + i); };
-  for (int j = 0; j < n; ++j)
-    for (int i = 0; i < n; ++i) {
-      m.faces.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
-      m.faces.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
-    }
-  return m;
-}
+using st::test::grid;
 
 /// A walk over m along d (m's own vertices: no patch).
 SurfaceWalk walk_over(const Mesh& m, const VertexFaces& vf, const Vec3& d) {

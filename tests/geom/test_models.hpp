@@ -19,6 +19,28 @@
 
 namespace st::test {
 
+/// The identity rotation moved by t (a probe placed by translation only).
+inline geom::Pose pose_at(const geom::Vec3& t) {
+  geom::Pose p = geom::Pose::Identity();
+  p.translation() = t;
+  return p;
+}
+
+/// An n × n grid of unit squares at z = height, two faces each (counter-clockwise seen from +z:
+/// normal +z); square (i, j) spans [i, i + 1] × [j, j + 1], faces 2(j·n + i) and + 1.
+inline geom::Mesh grid(int n, double height = 0) {
+  geom::Mesh m;
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) m.local.emplace_back(i, j, height);
+  auto at = [n](int i, int j) { return std::uint32_t(j * (n + 1) + i); };
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      m.faces.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
+      m.faces.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
+    }
+  return m;
+}
+
 /// A model of the set, loaded once per process. A missing model set fails the test (never skips):
 /// run scripts/models.sh.
 inline const geom::Mesh* model_mesh(const std::string& name) {
