@@ -171,7 +171,7 @@ Eigen::Vector3d Interpolator::force(const Eigen::Isometry3d& pose, std::int64_t 
     offset_.setZero();
   } else if (c_.mode == InterpMode::plane) {
     // Cross-fade: the jump a new model would cause decays linearly over crossfade_ns (or
-    // kCrossfadeTravelMm of travel).
+    // kCrossfadeRounds model intervals, if shorter).
     if (pending_offset_) {
       // The old model at THIS pose (plus what was still left of its own cross-fade) minus the new
       // one at this pose: only the models' disagreement is faded, never the probe's motion.
