@@ -358,7 +358,8 @@ bool ContactBuilder::Patch::clear_planes(const Mesh& probe, Vec3& n, double& pd,
   if (!ok || !(len > 0) || !std::isfinite(len)) return false;
   n = t / len;
   pd = len;
-  // The tracked point: the support vertex of the plane that binds most along the way out.
+  // The tracked point: the support vertex of the deepest plane that t holds tight (its depth
+  // reached, to rounding); the plane model's depth there is PD at this pose.
   int k = 0;
   for (int i = 1; i < pc.n; ++i)
     if (depth[i] - normal[i].dot(t) > depth[k] - normal[k].dot(t) - 1e-12 && depth[i] > depth[k]) k = i;

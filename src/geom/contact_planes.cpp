@@ -38,7 +38,6 @@ void PlaneClusters::add(const Vec3& normal, const Vec3& centroid) {
   p.centroid = centroid;
   p.offset = normal.dot(centroid);
   p.faces = 1;
-  p.depth = 0;
 }
 
 bool PlaneClusters::concave(double slack_mm) const {

@@ -19,7 +19,6 @@ struct PlaneCluster {
   Vec3 centroid{Vec3::Zero()};   ///< mean of its faces' centroids
   double offset = 0;             ///< normal · centroid
   std::uint32_t faces = 0;       ///< faces in it
-  double depth = 0;              ///< how far the probe reaches under its plane, mm (filled by the caller)
 };
 
 /// Up to kMaxPlanes clusters of a contact's faces.
