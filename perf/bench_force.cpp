@@ -54,7 +54,7 @@ const geom::CollideConfig kEngineCollide = [] {
   geom::CollideConfig c;
   c.sort_pairs = true;
   return c;
-}();          // a force vanishing deeper than this is a pop-through, mm
+}();  // a force vanishing deeper than this is a pop-through, mm
 
 /// A scene: bodies, a script of probe poses and the windows the metrics look at.
 struct ForceScene {
@@ -66,10 +66,10 @@ struct ForceScene {
   std::function<double(const geom::Vec3&)> depth_ref;  // analytic depth of the probe at a position (null: unknown)
   bool plate = false;                                  // pop-through: device below the plate's top while over it
   // Generated scenes (a ball probe, force_scenes.hpp): the truth table's rows.
-  TruthFn truth;                  // the ball's smallest clearing translation at a centre (null: not a generated scene)
-  double ball_mm = 0;             // the ball's radius
-  std::string twin;               // the same scene on the other tessellation (coarse ↔ subdivided), for the direction check
-  bool crease = false;            // a concave scene: no force above law(true depth) + 0.05 N
+  TruthFn truth;        // the ball's smallest clearing translation at a centre (null: not a generated scene)
+  double ball_mm = 0;   // the ball's radius
+  std::string twin;     // the same scene on the other tessellation (coarse ↔ subdivided), for the direction check
+  bool crease = false;  // a concave scene: no force above law(true depth) + 0.05 N
   double keep_t0 = 0, keep_t1 = 0;  // plate: slid under the plate; the force's share of its value at keep_t0
 };
 
@@ -260,7 +260,9 @@ ForceScene box_edge_scene(int split) {
   go(k, {50 + kBallMm + 5, 0, 30}, 50);
   k.hold(0.1);
   s.script = k.tr;
-  s.truth = [](const geom::Vec3& c) { return box_truth({-50, -50, -50}, {50, 50, 50}, Eigen::Isometry3d::Identity(), kBallMm, c); };
+  s.truth = [](const geom::Vec3& c) {
+    return box_truth({-50, -50, -50}, {50, 50, 50}, Eigen::Isometry3d::Identity(), kBallMm, c);
+  };
   return s;
 }
 
@@ -279,7 +281,9 @@ ForceScene box_corner_scene(int split) {
   k.to(corner + (kBallMm + 5) * diag, 0.5);
   k.hold(0.1);
   s.script = k.tr;
-  s.truth = [](const geom::Vec3& c) { return box_truth({-50, -50, -50}, {50, 50, 50}, Eigen::Isometry3d::Identity(), kBallMm, c); };
+  s.truth = [](const geom::Vec3& c) {
+    return box_truth({-50, -50, -50}, {50, 50, 50}, Eigen::Isometry3d::Identity(), kBallMm, c);
+  };
   return s;
 }
 
@@ -319,7 +323,8 @@ ForceScene crease_scene(int split) {
   c.set(0, 0, 0, true);
   c.set(1, 0, 0, true);
   c.set(0, 0, 1, true);
-  ForceScene s = ball_scene(split == 1 ? "crease" : "crease16x", cell_mesh(c, split, Eigen::Isometry3d::Identity(), "crease"), kBallMm);
+  ForceScene s = ball_scene(split == 1 ? "crease" : "crease16x",
+                            cell_mesh(c, split, Eigen::Isometry3d::Identity(), "crease"), kBallMm);
   s.crease = true;
   Keys k;
   k.at({25, -20, kBallMm + 5});
@@ -402,8 +407,11 @@ ForceScene pocket_scene() {
   }
   k.hold(0.1);
   s.script = k.tr;
-  const std::vector<Wall> walls{{geom::Vec3::UnitX(), -15}, {geom::Vec3::UnitY(), -15}, {geom::Vec3::UnitZ(), 0},
-                                {-geom::Vec3::UnitX(), -15}, {-geom::Vec3::UnitY(), -15}};
+  const std::vector<Wall> walls{{geom::Vec3::UnitX(), -15},
+                                {geom::Vec3::UnitY(), -15},
+                                {geom::Vec3::UnitZ(), 0},
+                                {-geom::Vec3::UnitX(), -15},
+                                {-geom::Vec3::UnitY(), -15}};
   s.truth = [walls](const geom::Vec3& x) { return cavity_truth(walls, kPocketBallMm, x); };
   return s;
 }
@@ -450,7 +458,9 @@ ForceScene release_scene() {
   go(k, {0, 0, 50 + kBallMm + 10}, 300);
   k.hold(0.2);
   s.script = k.tr;
-  s.truth = [](const geom::Vec3& c) { return box_truth({-50, -50, -50}, {50, 50, 50}, Eigen::Isometry3d::Identity(), kBallMm, c); };
+  s.truth = [](const geom::Vec3& c) {
+    return box_truth({-50, -50, -50}, {50, 50, 50}, Eigen::Isometry3d::Identity(), kBallMm, c);
+  };
   return s;
 }
 
@@ -570,7 +580,8 @@ Replay replay(const ForceScene& s, const Model& model, bool closed, int C, engin
         perm.assign(r.pairs.rbegin(), r.pairs.rend());
         std::rotate(perm.begin(), perm.begin() + std::ptrdiff_t(perm.size() / 3), perm.end());
         const geom::ContactModel q = permuted.build(s.probe.mesh, s.object.mesh, pose, perm);
-        out.order_fd_max = std::max(out.order_fd_max, (geom::to_eigen(q.force_dir) - geom::to_eigen(pending.force_dir)).norm());
+        out.order_fd_max =
+            std::max(out.order_fd_max, (geom::to_eigen(q.force_dir) - geom::to_eigen(pending.force_dir)).norm());
         out.order_pd_max = std::max(out.order_pd_max, std::abs(q.penetration_mm - pending.penetration_mm));
         if (q.in_contact() != pending.in_contact()) out.order_fd_max = std::max(out.order_fd_max, 1.0);
       }
@@ -730,19 +741,19 @@ Figures measure(const ForceScene& s, const Replay& rp) {
 /// A generated scene's figures against the analytic truth (force_scenes.hpp): force error, depth
 /// overestimate, direction, steps, force while clear, what a thin plate keeps.
 struct TruthFigures {
-  double f_err_rms = 0, f_err_max = 0;  // |F − law(true depth)·n| over ticks in contact (either), N
-  double over_law_max = 0;              // max |F| − law(true depth), N
-  double pd_over_max = 0;               // max PD − true depth at the rounds' poses, mm
+  double f_err_rms = 0, f_err_max = 0;          // |F − law(true depth)·n| over ticks in contact (either), N
+  double over_law_max = 0;                      // max |F| − law(true depth), N
+  double pd_over_max = 0;                       // max PD − true depth at the rounds' poses, mm
   double round_dir_p99 = 0, round_dir_max = 0;  // FD's change between in-contact rounds (slide window), deg
   double dir_err_p50 = 0, dir_err_p90 = 0, dir_err_max = 0;  // angle(F, true normal), deg
   double lag_p50 = 0, lag_p90 = 0;  // angle(F, FD of a model built at the tick's own pose): latency and interpolation, deg
-  double step_max = 0;                                      // largest per-tick |ΔF|, N
-  double clear01_max = 0, clear03_max = 0;                  // max |F| while clear by >= 0.1 / 0.3 mm, N
-  double keep_min = -1;                                     // plate: min |F| / |F(keep_t0)| slid under it
-  double twin_dir_p99 = -1, twin_dir_max = -1;              // direction against the other tessellation's, deg
-  double order_fd = 0, order_pd = 0;                        // pair-order check (Replay)
-  int workers_identical = -1;                               // 1: the traces at every worker count equal 0 workers'
-  std::string workers_checked;                              // the worker counts compared
+  double step_max = 0;              // largest per-tick |ΔF|, N
+  double clear01_max = 0, clear03_max = 0;      // max |F| while clear by >= 0.1 / 0.3 mm, N
+  double keep_min = -1;                         // plate: min |F| / |F(keep_t0)| slid under it
+  double twin_dir_p99 = -1, twin_dir_max = -1;  // direction against the other tessellation's, deg
+  double order_fd = 0, order_pd = 0;            // pair-order check (Replay)
+  int workers_identical = -1;                   // 1: the traces at every worker count equal 0 workers'
+  std::string workers_checked;                  // the worker counts compared
 };
 
 TruthFigures measure_truth(const ForceScene& s, const Replay& rp) {
@@ -803,7 +814,8 @@ void compare_twin(const ForceScene& s, const Replay& a, const Replay& b, TruthFi
   for (std::size_t i = 0; i < std::min(a.ticks.size(), b.ticks.size()); ++i) {
     const double t = double(i) * 1e-3;
     if (window && (t < s.slide_t0 || t > s.slide_t1)) continue;
-    if (a.ticks[i].f.norm() > kDirMinN && b.ticks[i].f.norm() > kDirMinN) d.push_back(angle_deg(a.ticks[i].f, b.ticks[i].f));
+    if (a.ticks[i].f.norm() > kDirMinN && b.ticks[i].f.norm() > kDirMinN)
+      d.push_back(angle_deg(a.ticks[i].f, b.ticks[i].f));
   }
   tf.twin_dir_p99 = quantile(d, 0.99);
   tf.twin_dir_max = d.empty() ? 0 : *std::max_element(d.begin(), d.end());
@@ -812,8 +824,8 @@ void compare_twin(const ForceScene& s, const Replay& a, const Replay& b, TruthFi
 /// The same replay at each worker count (in-process workers, scatter-gather): 1 when every trace
 /// equals `base` (0 workers) exactly, tick by tick. Counts the object's tree cannot give every
 /// worker a block (a 12-face box is one leaf) are left out; `checked` lists the others.
-int same_at_worker_counts(const ForceScene& s, const Model& m, int C, const Replay& base, const std::vector<int>& counts,
-                          std::string& checked) {
+int same_at_worker_counts(const ForceScene& s, const Model& m, int C, const Replay& base,
+                          const std::vector<int>& counts, std::string& checked) {
   for (int w : counts) {
     engine::FleetSpec spec;
     spec.workers = w;
@@ -841,7 +853,9 @@ void write_trace(const std::string& path, const Replay& rp, const ForceScene& s)
     const Tick& t = rp.ticks[i];
     std::fprintf(f, "%.3f,%.5f,%.5f,%.5f,%.6f,%.6f,%.6f,%.6f,%.5f,%.5f\n", double(i) * 1e-3, t.x.x(), t.x.y(), t.x.z(),
                  t.f.x(), t.f.y(), t.f.z(), t.f.norm(), t.pd,
-                 s.depth_ref ? s.depth_ref(t.x) : s.truth ? s.truth(t.x).depth_mm : std::nan(""));
+                 s.depth_ref ? s.depth_ref(t.x)
+                 : s.truth   ? s.truth(t.x).depth_mm
+                             : std::nan(""));
   }
   if (std::fclose(f) != 0) die(path + ": write failed");
 }
@@ -996,8 +1010,10 @@ void add_force(CLI::App& app) {
     std::vector<int> worker_counts;
     if (a->workers_check != "none") {
       for (int w : parse_int_list(a->workers_check))
-        if (w < 1 || w > 64) die("--workers-check: worker counts in 1..64, got " + std::to_string(w));
-        else worker_counts.push_back(w);
+        if (w < 1 || w > 64)
+          die("--workers-check: worker counts in 1..64, got " + std::to_string(w));
+        else
+          worker_counts.push_back(w);
     }
     if (!a->trace_dir.empty()) std::filesystem::create_directories(a->trace_dir);
     std::vector<Figures> all;
@@ -1023,7 +1039,8 @@ void add_force(CLI::App& app) {
           if (!s.truth) continue;
           TruthRow row{all.size() - 1, measure_truth(s, *rp), rp};
           if (!closed && m.contact.model == geom::ContactModelKind::patch && !worker_counts.empty()) {
-            std::fprintf(stderr, "force: %s × %s at %s workers\n", s.name.c_str(), m.name.c_str(), a->workers_check.c_str());
+            std::fprintf(stderr, "force: %s × %s at %s workers\n", s.name.c_str(), m.name.c_str(),
+                         a->workers_check.c_str());
             row.tf.workers_identical =
                 same_at_worker_counts(s, m, a->collision_ticks, *rp, worker_counts, row.tf.workers_checked);
           }
@@ -1093,9 +1110,8 @@ void add_force(CLI::App& app) {
             num(t.f_err_max).c_str(), num(t.over_law_max).c_str(), num(t.pd_over_max).c_str(),
             num(t.round_dir_p99).c_str(), num(t.round_dir_max).c_str(), num(t.dir_err_p50).c_str(),
             num(t.dir_err_p90).c_str(), num(t.dir_err_max).c_str(), num(t.lag_p50).c_str(), num(t.lag_p90).c_str(),
-            num(t.step_max).c_str(),
-            num(t.clear01_max).c_str(), num(t.clear03_max).c_str(), t.keep_min < 0 ? "null" : num(t.keep_min).c_str(),
-            t.twin_dir_p99 < 0 ? "null" : num(t.twin_dir_p99).c_str(),
+            num(t.step_max).c_str(), num(t.clear01_max).c_str(), num(t.clear03_max).c_str(),
+            t.keep_min < 0 ? "null" : num(t.keep_min).c_str(), t.twin_dir_p99 < 0 ? "null" : num(t.twin_dir_p99).c_str(),
             t.twin_dir_max < 0 ? "null" : num(t.twin_dir_max).c_str(), num(t.order_fd).c_str(), num(t.order_pd).c_str(),
             t.workers_identical < 0 ? "null" : (t.workers_identical ? "true" : "false"), t.workers_checked.c_str(),
             num(f.energy_per_cycle).c_str(), f.still_rms < 0 ? "null" : num(f.still_rms).c_str());
@@ -1129,18 +1145,21 @@ void add_force(CLI::App& app) {
       std::printf(
           "\ngenerated scenes against the analytic truth (ball probe: the smallest clearing translation); N, mm, deg\n"
           "%-16s %-6s %-6s %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s %8s %7s %7s\n",
-          "scene", "model", "loop", "Ferr_rms", "Ferr_max", "over_law", "PD_over", "turn_p99", "dir_p90", "lag_p90", "step_max",
-          "clear.1", "clear.3", "keep", "twin_p99", "E/cycle", "buzz", "order", "workers");
+          "scene", "model", "loop", "Ferr_rms", "Ferr_max", "over_law", "PD_over", "turn_p99", "dir_p90", "lag_p90",
+          "step_max", "clear.1", "clear.3", "keep", "twin_p99", "E/cycle", "buzz", "order", "workers");
       for (const TruthRow& row : truth_rows) {
         const TruthFigures& t = row.tf;
         const Figures& f = all[row.fig];
-        std::printf("%-16s %-6s %-6s %8.4f %8.4f %8.4f %8.3f %8.3f %8.2f %8.2f %8.4f %8.4f %8.4f %8s %8s %8.4f %8s %7s %7s\n",
-                    f.scene.c_str(), f.model.c_str(), f.loop.c_str(), t.f_err_rms, t.f_err_max, t.over_law_max,
-                    t.pd_over_max, t.round_dir_p99, t.dir_err_p90, t.lag_p90, t.step_max, t.clear01_max, t.clear03_max,
-                    t.keep_min < 0 ? "-" : num(t.keep_min).c_str(), t.twin_dir_p99 < 0 ? "-" : num(t.twin_dir_p99).c_str(),
-                    f.energy_per_cycle, f.still_rms < 0 ? "-" : num(f.still_rms).c_str(),
-                    t.order_fd == 0 && t.order_pd == 0 ? "same" : num(std::max(t.order_fd, t.order_pd)).c_str(),
-                    t.workers_identical < 0 ? "-" : !t.workers_identical ? "DIFF" : ("=" + t.workers_checked).c_str());
+        std::printf(
+            "%-16s %-6s %-6s %8.4f %8.4f %8.4f %8.3f %8.3f %8.2f %8.2f %8.4f %8.4f %8.4f %8s %8s %8.4f %8s %7s %7s\n",
+            f.scene.c_str(), f.model.c_str(), f.loop.c_str(), t.f_err_rms, t.f_err_max, t.over_law_max, t.pd_over_max,
+            t.round_dir_p99, t.dir_err_p90, t.lag_p90, t.step_max, t.clear01_max, t.clear03_max,
+            t.keep_min < 0 ? "-" : num(t.keep_min).c_str(), t.twin_dir_p99 < 0 ? "-" : num(t.twin_dir_p99).c_str(),
+            f.energy_per_cycle, f.still_rms < 0 ? "-" : num(f.still_rms).c_str(),
+            t.order_fd == 0 && t.order_pd == 0 ? "same" : num(std::max(t.order_fd, t.order_pd)).c_str(),
+            t.workers_identical < 0 ? "-"
+            : !t.workers_identical  ? "DIFF"
+                                    : ("=" + t.workers_checked).c_str());
       }
     }
     if (!costs.empty()) {

@@ -15,9 +15,9 @@ namespace st::bench {
 
 /// What a ball centred at c penetrates, and how far it is from the solid when clear.
 struct Truth {
-  double depth_mm = 0;                                ///< |t| of the smallest clearing translation t, 0 when clear
-  Eigen::Vector3d normal{Eigen::Vector3d::Zero()};    ///< t / |t| (zero when clear)
-  double clearance_mm = 0;                            ///< the gap between ball and solid, mm (0 while touching or in)
+  double depth_mm = 0;                              ///< |t| of the smallest clearing translation t, 0 when clear
+  Eigen::Vector3d normal{Eigen::Vector3d::Zero()};  ///< t / |t| (zero when clear)
+  double clearance_mm = 0;                          ///< the gap between ball and solid, mm (0 while touching or in)
 };
 /// The truth at a ball centre (object frame, mm).
 using TruthFn = std::function<Truth(const Eigen::Vector3d& centre)>;
@@ -30,8 +30,8 @@ struct CellSolid {
   /// A grid of the given lines with every cell empty.
   static CellSolid empty(std::vector<double> xs, std::vector<double> ys, std::vector<double> zs);
   int cells(int axis) const { return int(lines[axis].size()) - 1; }  ///< cells along an axis
-  bool at(int i, int j, int k) const;                                 ///< solid (false outside the grid)
-  void set(int i, int j, int k, bool v);                              ///< marks a cell
+  bool at(int i, int j, int k) const;                                ///< solid (false outside the grid)
+  void set(int i, int j, int k, bool v);                             ///< marks a cell
 };
 
 /// The solid's boundary as a closed triangle mesh: every cell face between a solid and an empty

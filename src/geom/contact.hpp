@@ -172,7 +172,7 @@ static_assert(sizeof(ContactModel) == 288, "ContactModel layout is pinned (share
 struct ContactConfig {
   ContactModelKind model = ContactModelKind::patch;  ///< which model
   double replane_angle_deg = 60.0;  ///< paper: re-record the first contact face when FD turns further than this
-  double hold_margin_mm = 1.0;  ///< patch: a held contact lasts this far past the edge of the surface it entered
+  double hold_margin_mm = 1.0;      ///< patch: a held contact lasts this far past the edge of the surface it entered
   /// patch: vertices the depth search may visit per body and round (kInsideCapped past it)
   std::uint32_t max_inside_vertices = 1u << 18;
 };

@@ -15,10 +15,10 @@ namespace st::geom {
 
 /// A set of colliding faces that lie in one plane (to within kPlanarCos).
 struct PlaneCluster {
-  Vec3 normal{Vec3::Zero()};     ///< unit normal (of its first face)
-  Vec3 centroid{Vec3::Zero()};   ///< mean of its faces' centroids
-  double offset = 0;             ///< normal · centroid
-  std::uint32_t faces = 0;       ///< faces in it
+  Vec3 normal{Vec3::Zero()};    ///< unit normal (of its first face)
+  Vec3 centroid{Vec3::Zero()};  ///< mean of its faces' centroids
+  double offset = 0;            ///< normal · centroid
+  std::uint32_t faces = 0;      ///< faces in it
 };
 
 /// Up to kMaxPlanes clusters of a contact's faces.

@@ -106,13 +106,13 @@ class Interpolator {
   Eigen::Vector3d last_out_{Eigen::Vector3d::Zero()};     ///< last force() output (after fade)
   Eigen::Vector3d last_point_{Eigen::Vector3d::Zero()};   ///< probe point, previous tick (damping)
   bool pending_offset_ = false;                           ///< plane: offset_ to be taken at the next force()
-  double interval_ns_ = 0;  ///< plane: recent interval between models (exponential average), ns; 0 = none yet
+  double interval_ns_ = 0;        ///< plane: recent interval between models (exponential average), ns; 0 = none yet
   bool releasing_ = false;        ///< plane: a no-contact model followed one in contact; the old one fades out
   std::int64_t release_ns_ = 0;   ///< when that no-contact model arrived
-  bool have_last_point_ = false;                          ///< last_point_ is valid (damping)
-  double velocity_fd_ = 0;                                ///< filtered probe speed along FD, mm/s
-  std::int64_t last_ns_ = 0;                              ///< previous force() time
-  std::int64_t received_ns_ = 0;                          ///< newest model's arrival
+  bool have_last_point_ = false;  ///< last_point_ is valid (damping)
+  double velocity_fd_ = 0;        ///< filtered probe speed along FD, mm/s
+  std::int64_t last_ns_ = 0;      ///< previous force() time
+  std::int64_t received_ns_ = 0;  ///< newest model's arrival
   std::uint64_t rejected_ = 0, bad_poses_ = 0;
   InterpState state_;
 };

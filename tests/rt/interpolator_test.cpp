@@ -349,6 +349,6 @@ TEST_CASE("interpolator: the cross-fade lasts kCrossfadeRounds model intervals w
     if (t == 102 + span_ms - 2) mid = f;
     done = f;
   }
-  CHECK(mid > law.magnitude_N(1.0) + 1e-3);                              // still fading
+  CHECK(mid > law.magnitude_N(1.0) + 1e-3);                            // still fading
   CHECK(done == doctest::Approx(law.magnitude_N(1.0)).epsilon(1e-4));  // done within the span, not 10 ms
 }

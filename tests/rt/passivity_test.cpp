@@ -172,7 +172,7 @@ TEST_CASE("passivity: a fast release with an energy excess: the force falls with
   std::vector<double> depth;
   for (int i = 0; i <= 300; ++i) depth.push_back(3.0 * i / 300.0);  // slow press, 300 ms
   for (int i = 0; i < 100; ++i) depth.push_back(3.0);               // hold
-  for (double d = 3.0; d > 0; d -= 0.3) depth.push_back(d);          // 300 mm/s out
+  for (double d = 3.0; d > 0; d -= 0.3) depth.push_back(d);         // 300 mm/s out
   depth.push_back(0);
   double energy = 0, f_prev_n = 0, step_prev = 0;
   Vector3d f_prev = Vector3d::Zero();
