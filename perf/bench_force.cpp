@@ -73,11 +73,12 @@ struct ForceScene {
   double keep_t0 = 0, keep_t1 = 0;  // plate: slid under the plate; the force's share of its value at keep_t0
 };
 
-Body generated(const std::string& label, geom::Mesh mesh) {
+/// A body of a generated mesh, its tree built with `tree` (default: the project's).
+Body generated(const std::string& label, geom::Mesh mesh, const geom::TreeConfig& tree = geom::DefaultTreeConfig()) {
   Body b;
   b.label = label;
   b.mesh = std::move(mesh);
-  auto t = geom::SphereTree::build(b.mesh);
+  auto t = geom::SphereTree::build(b.mesh, tree);
   if (!t) die(label + ": " + t.error());
   b.tree = std::move(t).value();
   return b;
@@ -212,13 +213,10 @@ constexpr std::uint32_t kSolidLeafFaces = 2;
 ForceScene ball_scene(const std::string& name, geom::Mesh solid, double r) {
   ForceScene s;
   s.name = name;
-  s.object.label = solid.name;
-  s.object.mesh = std::move(solid);
   geom::TreeConfig tc = geom::DefaultTreeConfig();
   tc.leaf_faces = kSolidLeafFaces;
-  auto tree = geom::SphereTree::build(s.object.mesh, tc);
-  if (!tree) die(name + ": " + tree.error());
-  s.object.tree = std::move(tree).value();
+  const std::string label = solid.name;
+  s.object = generated(label, std::move(solid), tc);
   s.probe = generated("ball", geom::make_icosphere(r, kBallFrequency));
   s.ball_mm = r;
   return s;
