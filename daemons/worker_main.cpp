@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch-worker: one worker of the distributed collision (paper §3.4) as a daemon. Binds a
 // ZeroMQ endpoint, holds the block sets it is sent in memory and answers queries (WorkerService).
 // Logs to stderr (with <N> syslog prefixes when journald reads it); under systemd it sends
@@ -17,9 +18,9 @@
 #include <systemd/sd-daemon.h>
 #endif
 
-#include "net/tree_backend.hpp"
-#include "net/worker_config.hpp"
-#include "net/worker_service.hpp"
+#include <spheretouch/net/tree_backend.hpp>
+#include <spheretouch/net/worker_config.hpp>
+#include <spheretouch/net/worker_service.hpp>
 
 namespace {
 

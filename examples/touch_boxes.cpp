@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // A program that uses the installed collision core, nothing else of spheretouch:
 //   c++ -std=c++20 touch_boxes.cpp $(pkg-config --cflags --libs spheretouch) -o touch_boxes
 // Two boxes are slid into each other; each step prints whether they touch, how many face pairs

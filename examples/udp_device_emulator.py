@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: BSD-3-Clause
 """A haptic device's driver program for spheretouch's UDP bridge, with the device emulated.
 
 A real driver has the same loop around a vendor SDK (OpenHaptics hdScheduleAsynchronous, Force
@@ -9,7 +10,7 @@ the program measures what a driver would see: poses sent, forces received (every
 sequence gaps, and the pose-to-force time (from sending a pose to receiving the first force that
 used it, on this program's clock, echoed by the servo).
 
-Wire format (version 1, little-endian; src/rt/udp_device.hpp and README):
+Wire format (version 1, little-endian; src/spheretouch/rt/udp_device.hpp and README):
   pose  (80 bytes): "STHP" u16 version u16 buttons u64 seq i64 device_ns f64 x y z f64 qw qx qy qz
   force (64 bytes): "STHF" u16 version u16 flags u64 seq u64 pose_seq i64 pose_device_ns
                     f64 fx fy fz i64 servo_ns

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch-bench subcommands. Each benchmark lives in its own bench_*.cpp and registers
 // itself here; every one prints a table, or one JSON object with --json.
 #pragma once

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch-bench collide: exact collide() query time (median of --runs, warm scratch, single
 // thread) of a probe against an object at the poses of a pose file, with contacts and counters;
 // --find-poses writes such a file with poses near given contact counts (fingertip pushed into the
@@ -17,10 +18,10 @@
 #ifdef ST_HAVE_FCL
 #include "fcl_peer.hpp"
 #endif
-#include "geom/collide.hpp"
-#include "geom/mesh_io.hpp"
-#include "geom/pose_io.hpp"
-#include "geom/sphere_tree.hpp"
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/mesh_io.hpp>
+#include <spheretouch/geom/pose_io.hpp>
+#include <spheretouch/geom/sphere_tree.hpp>
 
 namespace st::bench {
 namespace {

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch-bench force: force rendering quality, replayed in simulated time (deterministic: no
 // sleeping, no wall clock except the cost fields). For each scene, contact model and loop:
 //  * the servo's own code (rt::HapticServo: interpolator, passivity guard, saturator) ticks at
@@ -25,16 +26,16 @@
 #include <memory>
 #include <sstream>
 
-#include "engine/scene.hpp"
+#include <spheretouch/engine/scene.hpp>
 #include "bench.hpp"
 #include "bench_tables_common.hpp"
-#include "engine/distributed.hpp"
+#include <spheretouch/engine/distributed.hpp>
 #include "force_scenes.hpp"
-#include "geom/collide.hpp"
-#include "geom/contact.hpp"
-#include "geom/primitives.hpp"
-#include "rt/haptic_servo.hpp"
-#include "rt/simulated_device.hpp"
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/contact.hpp>
+#include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/rt/haptic_servo.hpp>
+#include <spheretouch/rt/simulated_device.hpp>
 
 namespace st::bench {
 namespace {

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch-bench hostile: the reproducers of the security review, replayed against a live
 // worker daemon on loopback while an honest client keeps querying it. Per case: what the worker
 // did with the attack (outcome: refused, answered, crashed, stalled), its resident memory at the
@@ -18,11 +19,11 @@
 #include <zmq.hpp>
 
 #include "bench.hpp"
-#include "geom/primitives.hpp"
-#include "net/block_set.hpp"
-#include "net/protocol.hpp"
-#include "net/scatter_gather.hpp"
-#include "rt/shm_segment.hpp"
+#include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/net/block_set.hpp>
+#include <spheretouch/net/protocol.hpp>
+#include <spheretouch/net/scatter_gather.hpp>
+#include <spheretouch/rt/shm_segment.hpp>
 
 namespace st::bench {
 namespace {

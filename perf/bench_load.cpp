@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch-bench load MESH: time to load a mesh (median of N runs), e.g. the 832,000-face
 // armadillo, loaded in under 2 s.
 #include <algorithm>
@@ -7,7 +8,7 @@
 #include <vector>
 
 #include "bench.hpp"
-#include "geom/mesh_io.hpp"
+#include <spheretouch/geom/mesh_io.hpp>
 
 namespace st::bench {
 

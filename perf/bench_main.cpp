@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch-bench: the benchmark programs behind perf/RESULTS.md.
 #include "bench.hpp"
 

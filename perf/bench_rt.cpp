@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch-bench exchange | haptic: the real-time core's two speed claims.
 //  exchange: the haptic side's cost of taking the newest ContactModel (update + copy out) from a
 //            TripleBuffer vs a std::mutex-guarded copy, the reader at 1 kHz, the writer
@@ -21,14 +22,14 @@
 #include <vector>
 
 #include "bench.hpp"
-#include "geom/contact.hpp"
-#include "rt/clock.hpp"
-#include "rt/haptic_loop.hpp"
-#include "rt/haptic_servo.hpp"
-#include "rt/histogram.hpp"
-#include "rt/simulated_device.hpp"
-#include "rt/telemetry.hpp"
-#include "rt/triple_buffer.hpp"
+#include <spheretouch/geom/contact.hpp>
+#include <spheretouch/rt/clock.hpp>
+#include <spheretouch/rt/haptic_loop.hpp>
+#include <spheretouch/rt/haptic_servo.hpp>
+#include <spheretouch/rt/histogram.hpp>
+#include <spheretouch/rt/simulated_device.hpp>
+#include <spheretouch/rt/telemetry.hpp>
+#include <spheretouch/rt/triple_buffer.hpp>
 
 namespace st::bench {
 

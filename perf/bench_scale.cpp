@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch-bench scale: the scale-out model, measured (issue 17).
 //
 // For W = 1, 2, 4, ... workers and each mapping of the object's blocks (block-cyclic, contiguous,
@@ -46,16 +47,16 @@
 
 #include "bench.hpp"
 #include "fanout_floor.hpp"
-#include "geom/collide.hpp"
-#include "geom/mesh_io.hpp"
-#include "geom/partition.hpp"
-#include "geom/pose_io.hpp"
-#include "geom/sphere_tree.hpp"
-#include "net/block_set.hpp"
-#include "net/local_workers.hpp"
-#include "net/protocol.hpp"
-#include "net/scatter_gather.hpp"
-#include "net/tree_backend.hpp"
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/mesh_io.hpp>
+#include <spheretouch/geom/partition.hpp>
+#include <spheretouch/geom/pose_io.hpp>
+#include <spheretouch/geom/sphere_tree.hpp>
+#include <spheretouch/net/block_set.hpp>
+#include <spheretouch/net/local_workers.hpp>
+#include <spheretouch/net/protocol.hpp>
+#include <spheretouch/net/scatter_gather.hpp>
+#include <spheretouch/net/tree_backend.hpp>
 
 namespace st::bench {
 namespace {

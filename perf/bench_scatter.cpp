@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch-bench scatter: round trip of an empty query through N workers (scatter-gather
 // overhead), over inproc, ipc or tcp loopback. Rounds are spaced like the collision loop spaces
 // them (--gap-us between the end of one round and the start of the next): ZeroMQ latency rises
@@ -25,10 +26,10 @@
 
 #include "bench.hpp"
 #include "fanout_floor.hpp"
-#include "geom/primitives.hpp"
-#include "net/local_workers.hpp"
-#include "net/reference_backend.hpp"
-#include "net/scatter_gather.hpp"
+#include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/net/local_workers.hpp>
+#include <spheretouch/net/reference_backend.hpp>
+#include <spheretouch/net/scatter_gather.hpp>
 
 namespace st::bench {
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch-bench table1 | table3 | table2 | peers | icosphere: the paper's tables.
 //  table1/table3: time of one collision round (median, p95, mean, rounds/s) at the poses of a
 //                 pose file, with 0 workers (collide() in the calling thread, as the collision
@@ -27,21 +28,21 @@
 #include <sstream>
 #include <thread>
 
-#include "engine/collision_loop.hpp"
-#include "engine/distributed.hpp"
-#include "engine/scene.hpp"
+#include <spheretouch/engine/collision_loop.hpp>
+#include <spheretouch/engine/distributed.hpp>
+#include <spheretouch/engine/scene.hpp>
 #include "bench.hpp"
 #include "bench_tables_common.hpp"
-#include "geom/pose_io.hpp"
-#include "geom/collide.hpp"
-#include "geom/contact.hpp"
-#include "geom/mesh_io.hpp"
-#include "geom/primitives.hpp"
-#include "rt/clock.hpp"
-#include "rt/haptic_loop.hpp"
-#include "rt/haptic_servo.hpp"
-#include "rt/interpolator.hpp"
-#include "rt/saturation.hpp"
+#include <spheretouch/geom/pose_io.hpp>
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/contact.hpp>
+#include <spheretouch/geom/mesh_io.hpp>
+#include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/rt/clock.hpp>
+#include <spheretouch/rt/haptic_loop.hpp>
+#include <spheretouch/rt/haptic_servo.hpp>
+#include <spheretouch/rt/interpolator.hpp>
+#include <spheretouch/rt/saturation.hpp>
 #ifdef ST_HAVE_FCL
 #include "fcl_peer.hpp"
 #endif

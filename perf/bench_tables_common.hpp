@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Shared pieces of the harness benchmarks (bench_tables.cpp, bench_trade.cpp): body
 // loading (files or the built-in ~960-face icosphere), pose files with their "# contacts N
 // (target T)" comments, the hand's built-in press/slide script, worker daemons over tcp
@@ -9,9 +10,9 @@
 #include <string>
 #include <vector>
 
-#include "geom/mesh.hpp"
-#include "geom/sphere_tree.hpp"
-#include "rt/simulated_device.hpp"
+#include <spheretouch/geom/mesh.hpp>
+#include <spheretouch/geom/sphere_tree.hpp>
+#include <spheretouch/rt/simulated_device.hpp>
 
 namespace st::bench {
 

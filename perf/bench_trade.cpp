@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch-bench trade: the speed/accuracy trade, as a deterministic offline
 // simulation in simulated time (no sleeping, no wall clock in the error axis).
 //
@@ -26,10 +27,10 @@
 
 #include "bench.hpp"
 #include "bench_tables_common.hpp"
-#include "geom/collide.hpp"
-#include "geom/contact.hpp"
-#include "rt/interpolator.hpp"
-#include "rt/saturation.hpp"
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/contact.hpp>
+#include <spheretouch/rt/interpolator.hpp>
+#include <spheretouch/rt/saturation.hpp>
 
 namespace st::bench {
 namespace {

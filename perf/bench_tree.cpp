@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch-bench tree MESH...: SphereTree build time (median of N runs), nodes, leaves, layers
 // and bytes per face, against the "832,000 faces in at most 1 s" target.
 #include <algorithm>
@@ -7,8 +8,8 @@
 #include <vector>
 
 #include "bench.hpp"
-#include "geom/mesh_io.hpp"
-#include "geom/sphere_tree.hpp"
+#include <spheretouch/geom/mesh_io.hpp>
+#include <spheretouch/geom/sphere_tree.hpp>
 
 namespace st::bench {
 

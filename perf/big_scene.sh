@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # perf/big_scene.sh [BUILD_DIR]: the million-face scenes of issue 17, measured.
 #   1. load and sphere-tree build times of armadillo_L3 (3.3 M faces) and armadillo_L4 (13.3 M);
 #   2. configs/big_armadillo.toml (the hand touching armadillo_L4 at 1 kHz) run with 4 in-process

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # Before/after check of two build directories of this project, for a change that must not alter
 # behaviour: `spheretouch query` output byte-identical on every perf pose file, then
 # `spheretouch-bench collide` (hand_L2 x elephant, perf/poses/hand_elephant.txt, 1000 runs) for

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The raw ZeroMQ fan-out and gather, with nothing of ours in it: N ROUTER echo threads and N
 // DEALERs in the caller. What a scatter-gather round over N workers costs on this machine before
 // any of our code (spheretouch-bench scatter's floor; spheretouch-bench scale's gather term).
@@ -14,7 +15,7 @@
 #include <vector>
 #include <zmq.hpp>
 
-#include "net/local_workers.hpp"
+#include <spheretouch/net/local_workers.hpp>
 
 namespace st::bench {
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // FCL peer: fcl::BVHModel<OBBRSSd> with fcl::collide and an unlimited contact count.
 #include "fcl_peer.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // FCL 0.7 as the peer in benchmarks: BVHModel<OBBRSS>, all contacts (num_max_contacts
 // unlimited), same meshes and poses as ours in the same run. Compiled only with libfcl-dev.
 #pragma once
@@ -6,7 +7,7 @@
 #include <utility>
 #include <vector>
 
-#include "geom/mesh.hpp"
+#include <spheretouch/geom/mesh.hpp>
 
 namespace st::bench {
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Generated scenes for spheretouch-bench force (see force_scenes.hpp).
 #include "force_scenes.hpp"
 

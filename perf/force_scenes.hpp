@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Generated scenes for `spheretouch-bench force`: the meshes people bring (CAD-like solids with
 // large flat faces, creases, pockets and thin plates), written by the bench (no download), and
 // the analytic truth for a ball: the smallest translation that clears it (its depth and
@@ -9,7 +10,7 @@
 #include <functional>
 #include <vector>
 
-#include "geom/mesh.hpp"
+#include <spheretouch/geom/mesh.hpp>
 
 namespace st::bench {
 

@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: BSD-3-Clause
 """Report of perf/run_all.sh: reads the CSV/JSON in a results directory, writes summary.json,
 peers_rt.csv, gnuplot scripts and PNGs (--plots), harness.md, and (--results-md FILE) replaces the
 harness section of perf/RESULTS.md between its markers. Standard library only."""

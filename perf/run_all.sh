@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # The perf harness: regenerates the paper's Tables 1-3, the peers, the speed/accuracy
 # trade, the force rendering quality (paper vs patch contact model), their CSVs, PNG plots, a JSON
 # summary and the harness sections of perf/RESULTS.md.

@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: BSD-3-Clause
 """Plots spheretouch-bench scale --json output: predicted speed-up against one thread vs the
 number of workers W, one line per mapping, on the 10 GbE model (solid) and compute only (no
 network, dashed), for the pose closest to --contacts contacts. OUT.svg is written directly (no

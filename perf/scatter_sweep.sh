@@ -1,4 +1,5 @@
 #!/bin/sh
+# SPDX-License-Identifier: BSD-3-Clause
 # Scatter-gather overhead sweep behind perf/RESULTS.md: an empty query through 1, 2, 4, 8 workers
 # over inproc, ipc and tcp loopback, rounds spaced like the collision loop (--gap-us).
 # Usage: perf/scatter_sweep.sh [BUILD_DIR] [CSV] [extra spheretouch-bench scatter options...]

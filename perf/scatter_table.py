@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: BSD-3-Clause
 """Markdown table of perf/scatter.csv (spheretouch-bench scatter --csv): p50/p99 round trip by
 transport and worker count, the same run's single request-reply baseline, and the ratio to the
 same run's raw ZeroMQ fan-out floor."""

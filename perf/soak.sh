@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # Soak: `spheretouch run` for MINUTES with 4 worker daemons over tcp loopback; every minute one
 # worker (in turn) is killed with SIGKILL and restarted on its port 5 s later. Records the run's
 # summary (ticks, misses, incomplete rounds, telemetry drops) and the resident memory of every

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # The live view's and the UDP bridge's costs, measured (README "Live view", "A bridge for real
 # devices"; perf/RESULTS.md):
 #   1. haptic misses of the same run (configs/demo.toml: hand_L2 x elephant) without a viewer and

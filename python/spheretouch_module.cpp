@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The `spheretouch` Python module (pybind11, numpy): meshes from arrays or files, sphere trees,
 // exact collision queries for one pose or a batch, the contact models and the force law.
 // Conventions: arrays are numpy; poses are 4x4 float64 rigid transforms (probe frame -> object
@@ -13,11 +14,11 @@
 #include <string>
 #include <vector>
 
-#include "geom/contact.hpp"
-#include "geom/mesh_io.hpp"
-#include "geom/pose_io.hpp"
-#include "rt/force_law.hpp"
-#include "spheretouch/collide.hpp"
+#include <spheretouch/geom/contact.hpp>
+#include <spheretouch/geom/mesh_io.hpp>
+#include <spheretouch/geom/pose_io.hpp>
+#include <spheretouch/rt/force_law.hpp>
+#include <spheretouch/collide.hpp>
 
 namespace py = pybind11;
 using namespace st;

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # Builds the paper-sized model set from Debian's libcgal-demo meshes (no root needed):
 #   apt-get download libcgal-demo; dpkg -x; take four meshes from its data.tar.gz; scale to mm and
 #   Loop-subdivide with `spheretouch export`. Output in $ST_MODEL_DIR (default .cache/models).

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # Runs every doctest suite: the release build, then (unless ST_SANITIZERS=0) the whole suite
 # under ASan+UBSan and the concurrent suites (rt, net) under TSan, then each libFuzzer target for
 # ST_FUZZ seconds (default 30, 0 skips). Closes with one line "tests: N passed, N failed"
@@ -43,6 +44,8 @@ configure() {  # build-dir meson-args...
 
 say "scripts/format.sh --check"
 scripts/format.sh --check || { status=1; failed=$((failed + 1)); failed_steps+=" format"; }
+say "scripts/check_spdx.sh"
+scripts/check_spdx.sh || { status=1; failed=$((failed + 1)); failed_steps+=" spdx"; }
 
 say "release build"
 ninja -C build -j"$jobs" || exit 1
@@ -80,6 +83,9 @@ if [ "$sanitizers" != 0 ]; then
       build_targets build-tsan daemons/spheretouch-worker tests/net/zmq_ping tests/test_rt tests/test_net
     } >"$bg/tsan.log" 2>&1
     finished tsan $?
+    # The core-only build with nothing but eigen3 visible to pkg-config (tests/install).
+    ST_JOBS="$jobs" tests/install/check_core_only.sh build-core >"$bg/core.log" 2>&1
+    finished core $?
     if [ "$fuzz_secs" != 0 ]; then ST_JOBS="$jobs" tests/fuzz/run_fuzz.sh 0 >"$bg/fuzz.log" 2>&1; finished fuzz $?; fi
   ) &
   bg_pid=$!
@@ -110,6 +116,7 @@ if [ "$sanitizers" != 0 ]; then
   if built tsan; then
     TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1:suppressions=$PWD/tests/tsan.supp run_suites build-tsan rt net
   fi
+  built core || true  # built() prints the log and marks the run failed
   # libFuzzer targets (clang, ASan+UBSan, LeakSanitizer): each runs ST_FUZZ seconds (default 30;
   # 0 skips) from a copy of its committed corpus, four at a time; any crash, leak, UBSan report,
   # timeout or violated property fails the run (tests/fuzz/run_fuzz.sh).

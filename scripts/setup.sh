@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # One entry point for a fresh Debian 12 machine: installs the missing Debian packages, configures
 # and builds, then does what was asked.
 #   scripts/setup.sh demo    set up, build the model set, run the main job (configs/demo.toml) for a few seconds
@@ -16,6 +17,7 @@ packages=(g++ meson ninja-build pkg-config
           doctest-dev libtomlplusplus-dev libcli11-dev libsystemd-dev libfcl-dev systemd
           clang libclang-rt-14-dev   # clang + libFuzzer runtime: tests/fuzz/run_fuzz.sh
           clang-format               # scripts/format.sh --check
+          cmake                      # tests/install: a CMake consumer of the installed package
           pybind11-dev python3-dev python3-numpy   # the Python module (python/)
           libcivetweb-dev libjs-three              # the live view (spheretouch run --view)
           chromium)                                # the live view's browser tests (headless)

@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: BSD-3-Clause
 """Prints, for each meson build directory given, one line per test (result, duration, its
 'test cases' line) and, for every test that did not pass, the lines of its log that say why
 (doctest ERROR/FATAL blocks, sanitizer reports, the last lines before it ended). CI shows only

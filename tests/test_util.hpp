@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Helpers shared by the doctest suites: temporary directories, files, and where the model set is.
 #pragma once
 #include <doctest/doctest.h>

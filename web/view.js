@@ -1,4 +1,5 @@
-// spheretouch live view: draws what the run's /ws stream says (src/view/view_server.hpp has the
+// SPDX-License-Identifier: BSD-3-Clause
+// spheretouch live view: draws what the run's /ws stream says (src/spheretouch/view/view_server.hpp has the
 // message layouts). three.js r111 (Debian's libjs-three) as the global THREE.
 (function () {
   'use strict';

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: BSD-3-Clause
 """Tests of the spheretouch Python module (run by `meson test --suite python`).
 
 The module is checked against the project's own command line (`spheretouch query`, the exact

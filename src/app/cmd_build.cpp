@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch build MESH [-o FILE]: build a mesh's sphere tree and write it to a versioned file
 // that later runs read instead of rebuilding (default: the tree cache).
 #include <chrono>
@@ -6,8 +7,8 @@
 
 #include "app/commands.hpp"
 #include "app/mesh_options.hpp"
-#include "engine/tree_cache.hpp"
-#include "geom/tree_io.hpp"
+#include <spheretouch/engine/tree_cache.hpp>
+#include <spheretouch/geom/tree_io.hpp>
 
 namespace st::app {
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch export IN -o OUT.off: convert, rescale and Loop-subdivide a mesh (the model set
 // is built with it: scripts/models.sh).
 #include <cmath>
@@ -5,7 +6,7 @@
 
 #include "app/commands.hpp"
 #include "app/mesh_options.hpp"
-#include "geom/subdivide.hpp"
+#include <spheretouch/geom/subdivide.hpp>
 
 namespace st::app {
 namespace {

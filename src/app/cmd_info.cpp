@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch info MESH...: what a mesh file holds and how it was read.
 #include <cstdio>
 

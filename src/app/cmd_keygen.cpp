@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch keygen --out PREFIX [--force]: a CURVE key pair for a worker fleet or a client:
 // PREFIX.key (the Z85 secret key, one line, mode 0600) and PREFIX.pub (the Z85 public key, one
 // line). The workers' .key goes in their [curve] secret_key_file, their .pub to every client
@@ -5,7 +6,7 @@
 #include <cstdio>
 
 #include "app/commands.hpp"
-#include "net/curve_keys.hpp"
+#include <spheretouch/net/curve_keys.hpp>
 
 namespace st::app {
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch monitor: watch a live run through its shared-memory segment, read-only. It maps
 // the segment PROT_READ and reads only the status area (SeqLocks any number of readers may
 // share), never the triple buffers, whose single reader is the servo or the collision thread.
@@ -18,10 +19,10 @@
 #include <vector>
 
 #include "app/commands.hpp"
-#include "engine/scene.hpp"
-#include "rt/clock.hpp"
-#include "rt/shm_segment.hpp"
-#include "view/view_server.hpp"
+#include <spheretouch/engine/scene.hpp>
+#include <spheretouch/rt/clock.hpp>
+#include <spheretouch/rt/shm_segment.hpp>
+#include <spheretouch/view/view_server.hpp>
 
 namespace st::app {
 namespace {

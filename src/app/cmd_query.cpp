@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch query PROBE OBJECT --poses FILE: every colliding (probe face, object face) pair per
 // pose, exactly. Output, per pose:
 //   pose <i> pairs <n> contacts <c>
@@ -7,12 +8,12 @@
 #include <cstdio>
 
 #include "app/commands.hpp"
-#include "engine/distributed.hpp"
+#include <spheretouch/engine/distributed.hpp>
 #include "app/mesh_options.hpp"
-#include "engine/tree_cache.hpp"
-#include "geom/collide.hpp"
-#include "geom/partition.hpp"
-#include "geom/pose_io.hpp"
+#include <spheretouch/engine/tree_cache.hpp>
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/partition.hpp>
+#include <spheretouch/geom/pose_io.hpp>
 
 namespace st::app {
 

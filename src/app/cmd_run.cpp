@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch run SCENE: the main job (engine/run_engine.hpp runs it). This file is what is about
 // the terminal: arguments and their overrides of the scene, CURVE key flags, signals, the status
 // line, and the summary on stdout.
@@ -10,9 +11,9 @@
 #include <thread>
 
 #include "app/commands.hpp"
-#include "view/view_server.hpp"
-#include "engine/run_engine.hpp"
-#include "rt/clock.hpp"
+#include <spheretouch/view/view_server.hpp>
+#include <spheretouch/engine/run_engine.hpp>
+#include <spheretouch/rt/clock.hpp>
 
 namespace st::app {
 namespace {

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch servo (hidden): the haptic servo process of `run --split` (engine/servo_process.hpp
 // says what it does and why it is a process of its own).
 #include <unistd.h>
@@ -9,13 +10,13 @@
 #include <thread>
 
 #include "app/commands.hpp"
-#include "engine/scene.hpp"
-#include "engine/servo_process.hpp"
-#include "rt/clock.hpp"
-#include "rt/haptic_loop.hpp"
-#include "rt/haptic_servo.hpp"
-#include "rt/shm_segment.hpp"
-#include "rt/telemetry.hpp"
+#include <spheretouch/engine/scene.hpp>
+#include <spheretouch/engine/servo_process.hpp>
+#include <spheretouch/rt/clock.hpp>
+#include <spheretouch/rt/haptic_loop.hpp>
+#include <spheretouch/rt/haptic_servo.hpp>
+#include <spheretouch/rt/shm_segment.hpp>
+#include <spheretouch/rt/telemetry.hpp>
 
 namespace st::app {
 

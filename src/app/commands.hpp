@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The `spheretouch` subcommands. Each lives in its own cmd_*.cpp and registers itself on the
 // root CLI11 app; a failing command throws CLI::RuntimeError(exit_code) after printing why.
 #pragma once
@@ -6,7 +7,7 @@
 #include <cstdio>
 #include <string>
 
-#include "engine/text.hpp"
+#include <spheretouch/engine/text.hpp>
 
 namespace st::app {
 

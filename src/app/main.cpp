@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // spheretouch: the command line. Subcommands are registered from commands.hpp.
 #include <malloc.h>
 

@@ -1,8 +1,9 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Command-line options shared by every subcommand that loads a mesh (--units, --scale).
 #pragma once
 #include <CLI/CLI.hpp>
 
-#include "geom/mesh_io.hpp"
+#include <spheretouch/geom/mesh_io.hpp>
 
 namespace st::app {
 

@@ -1,10 +1,12 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The public collision API over geom::collide() (see collide.hpp).
-#include "spheretouch/collide.hpp"
+#include <spheretouch/collide.hpp>
 
 #include <algorithm>
 #include <utility>
 
 namespace st {
+inline namespace SPHERETOUCH_ABI {
 
 Result<Body> Body::make(Mesh mesh, const TreeConfig& params, const Pose& frame) {
   if (Status s = mesh.validate(); !s.ok()) return fail(mesh.name, ": ", s.error());
@@ -106,4 +108,5 @@ void collide(const Body& probe, const Body& object, const CollisionRequest& requ
   run(probe, object, relative_pose(probe, object), request, scratch, inner, result);
 }
 
+}  // namespace SPHERETOUCH_ABI
 }  // namespace st

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // <spheretouch/collide.hpp>: the collision core's public API (depends on Eigen only; link the
 // `spheretouch` pkg-config package). In the spirit of Coal's collide(o1, o2, request, result)
 // and ComputeCollision: a Body pairs a mesh with its sphere tree and its frame, a request says
@@ -15,18 +16,20 @@
 // faces named by their index in the input file, the same set geom::collide() returns (that is the
 // inner function; this API adds nothing to its arithmetic). In approximate mode it is a superset.
 #pragma once
+#include <spheretouch/abi.hpp>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
 
-#include "geom/collide.hpp"
-#include "geom/mesh.hpp"
-#include "geom/result.hpp"
-#include "geom/sphere_tree.hpp"
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/mesh.hpp>
+#include <spheretouch/geom/result.hpp>
+#include <spheretouch/geom/sphere_tree.hpp>
 
 namespace st {
+inline namespace SPHERETOUCH_ABI {
 
 using geom::CollideStats;
 using geom::FacePair;
@@ -130,4 +133,5 @@ Pose relative_pose(const Body& probe, const Body& object);
 /// The same for two frames given directly.
 Pose relative_pose(const Pose& probe_frame, const Pose& object_frame);
 
+}  // namespace SPHERETOUCH_ABI
 }  // namespace st

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Tests for src/app: the command line as a user runs it (the real binary, through a shell).
 #include "test_util.hpp"
 

@@ -1,4 +1,5 @@
-// Tests src/engine/run_engine.*: the main job driven as a library, without the command line —
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/engine/run_engine.*: the main job driven as a library, without the command line —
 // what a program or a benchmark does with it.
 #include <doctest/doctest.h>
 
@@ -8,9 +9,9 @@
 #include <sstream>
 #include <thread>
 
-#include "engine/run_engine.hpp"
-#include "geom/primitives.hpp"
-#include "rt/view_frame.hpp"
+#include <spheretouch/engine/run_engine.hpp>
+#include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/rt/view_frame.hpp>
 #include "test_util.hpp"
 
 namespace {

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Fault injection into `spheretouch run` with four worker daemons over tcp loopback:
 // a worker killed with SIGKILL and restarted, a worker frozen with SIGSTOP and thawed, and all
 // traffic to a worker held by a relay (the link is down) and released. The same run without

@@ -1,15 +1,16 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Tests `spheretouch keygen` (src/app/cmd_keygen.cpp) and the client side of CURVE in the app
-// (src/engine/distributed.*, query/run --server-key/--client-key, scene [workers] keys) with real
+// (src/spheretouch/engine/distributed.*, query/run --server-key/--client-key, scene [workers] keys) with real
 // processes: a spheretouch-worker daemon with a CURVE config on a free tcp loopback port.
 #include <sys/stat.h>
 
 #include <chrono>
 #include <filesystem>
 
-#include "geom/mesh_io.hpp"
-#include "geom/primitives.hpp"
+#include <spheretouch/geom/mesh_io.hpp>
+#include <spheretouch/geom/primitives.hpp>
 #include "app/query_meshes.hpp"
-#include "net/curve_keys.hpp"
+#include <spheretouch/net/curve_keys.hpp>
 #include "net/process_util.hpp"
 #include "net/old_worker.hpp"
 #include "test_util.hpp"

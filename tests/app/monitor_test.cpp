@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Tests src/app/cmd_monitor.cpp: its refusals (a segment with a bad magic or another layout
 // version gets a clear error, never a crash; a live session is watched in servo_process_test.cpp)
 // and --view: the live view attached to a running run (meshes, frames with the contacts), a bad
@@ -18,9 +19,9 @@
 #include <thread>
 
 #include "app/view_client.hpp"
-#include "engine/scene.hpp"
+#include <spheretouch/engine/scene.hpp>
 #include "process_util.hpp"
-#include "rt/shm_segment.hpp"
+#include <spheretouch/rt/shm_segment.hpp>
 #include "test_util.hpp"
 
 using namespace st::test;

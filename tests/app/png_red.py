@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: BSD-3-Clause
 """Counts the red pixels (r > 200, g < 90, b < 90) of an 8-bit RGB or RGBA PNG: png_red.py FILE."""
 import struct
 import sys

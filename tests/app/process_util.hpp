@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Helpers for the app suites that drive `spheretouch run --split` as a real process: start it
 // with fork+exec (output to a file), wait for its segment's servo to tick, reap with a timeout.
 #pragma once
@@ -14,7 +15,7 @@
 #include <thread>
 #include <vector>
 
-#include "rt/shm_segment.hpp"
+#include <spheretouch/rt/shm_segment.hpp>
 #include "test_util.hpp"
 
 namespace st::test {

@@ -1,8 +1,9 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The small bodies the query and keygen suites query: a capsule (probe) and an icosphere
 // (object) written as OFF files, and three poses: far apart, pressed in, rotated.
 #pragma once
-#include "geom/mesh_io.hpp"
-#include "geom/primitives.hpp"
+#include <spheretouch/geom/mesh_io.hpp>
+#include <spheretouch/geom/primitives.hpp>
 #include "test_util.hpp"
 
 namespace st::test {

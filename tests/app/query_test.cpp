@@ -1,12 +1,13 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Tests for `spheretouch query` and `spheretouch build` through the real binary: output format,
 // the exact pair set against the library, --blocks equality, pose-file errors, the tree cache.
 #include <filesystem>
 #include <sstream>
 
-#include "geom/collide.hpp"
-#include "geom/mesh_io.hpp"
-#include "geom/pose_io.hpp"
-#include "geom/primitives.hpp"
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/mesh_io.hpp>
+#include <spheretouch/geom/pose_io.hpp>
+#include <spheretouch/geom/primitives.hpp>
 #include "app/query_meshes.hpp"
 #include "net/process_util.hpp"
 #include "test_util.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Tests for `spheretouch run` and scene files: a short run of a generated scene asserting counts
 // (never timing precision), the force profile of the built-in script, the outputs' formats, and
 // an error naming the field for each kind of bad scene file.
@@ -8,7 +9,7 @@
 #include <sstream>
 
 #include "app/commands.hpp"
-#include "engine/scene.hpp"
+#include <spheretouch/engine/scene.hpp>
 #include "app/process_util.hpp"
 #include "test_util.hpp"
 

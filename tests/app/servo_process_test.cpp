@@ -1,4 +1,5 @@
-// Tests src/engine/servo_process.* and src/app/cmd_servo.cpp through `spheretouch run --split`: the servo as its own process
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/engine/servo_process.* and src/app/cmd_servo.cpp through `spheretouch run --split`: the servo as its own process
 // produces the outputs of a normal run; with the collision process SIGKILLed mid-press it ticks
 // on to its duration, its force fades to exactly zero, and it says the collision side died.
 // Counts and states only, never wall-clock precision.
@@ -8,7 +9,7 @@
 #include <cerrno>
 #include <cmath>
 
-#include "engine/servo_process.hpp"
+#include <spheretouch/engine/servo_process.hpp>
 #include "process_util.hpp"
 
 using namespace st::test;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The UDP device bridge end to end: `spheretouch run` with [device] kind = "udp" (in-process servo
 // and --split) driven by examples/udp_device_emulator.py at 1 kHz for two seconds: no pose lost,
 // a force back every servo tick, contact felt, nothing refused.

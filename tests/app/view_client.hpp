@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // A WebSocket client of the live view for the app suites (civetweb's client API): collects the
 // binary messages ("STVM" meshes, "STVF" frames) a view sends, and reads their fields.
 #pragma once

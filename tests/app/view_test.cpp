@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The live view (spheretouch run --view): the page and its scripts are served, the WebSocket
 // stream carries the meshes and frames whose colliding faces match the run's contacts, a page's
 // bad messages are refused without harm, and a real browser (Debian's headless Chromium) draws

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Shared by the libFuzzer targets (tests/fuzz/fuzz_*.cpp): a property check that survives
 // NDEBUG (the replay builds are release builds) and aborts, so libFuzzer saves the input.
 #pragma once

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // libFuzzer target: the mesh importer (geom/mesh_io.hpp) on whole files in memory, through
 // parse_mesh, the same dispatch load_mesh uses. The first input byte picks the format (low two
 // bits: 0 OFF, 1 OBJ, 2 PLY: ASCII by our reader, binary by assimp, chosen by content as for a
@@ -10,7 +11,7 @@
 #include <string_view>
 
 #include "fuzz_check.hpp"
-#include "geom/mesh_io.hpp"
+#include <spheretouch/geom/mesh_io.hpp>
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size == 0) return 0;

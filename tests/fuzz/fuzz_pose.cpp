@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // libFuzzer target: the pose-file parser (geom/pose_io.hpp). Every accepted pose is a rigid
 // transform within the documented tolerance, and format_pose / parse_poses round-trip it bit
 // for bit (the writer promises shortest round-trip output).
@@ -8,7 +9,7 @@
 #include <string_view>
 
 #include "fuzz_check.hpp"
-#include "geom/pose_io.hpp"
+#include <spheretouch/geom/pose_io.hpp>
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string_view text(reinterpret_cast<const char*>(data), size);

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // libFuzzer target: the scene-file parser (app/scene.hpp, TOML via toml++). parse_scene loads no
 // mesh: for a named mesh or trajectory file it only asks whether the file exists (a stat), so
 // the target touches nothing on disk. Relative paths and "model:NAME" resolve in
@@ -8,7 +9,7 @@
 #include <cstdlib>
 #include <string>
 
-#include "engine/scene.hpp"
+#include <spheretouch/engine/scene.hpp>
 #include "fuzz_check.hpp"
 
 #ifndef ST_FUZZ_SCENE_DIR

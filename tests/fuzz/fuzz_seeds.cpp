@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Writes the generated part of the fuzz seed corpus: wire frames made by our own encoder (every
 // message type, empty and non-empty lists, a LoadBlocks carrying a whole small block set) for
 // fuzz_wire, tiny meshes in every format fuzz_mesh reads (its first byte selects the format),
@@ -18,11 +19,11 @@
 #include <sys/mman.h>
 #include <unistd.h>
 
-#include "geom/primitives.hpp"
-#include "geom/tree_io.hpp"
-#include "net/block_set.hpp"
-#include "net/protocol.hpp"
-#include "rt/shm_segment.hpp"
+#include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/geom/tree_io.hpp>
+#include <spheretouch/net/block_set.hpp>
+#include <spheretouch/net/protocol.hpp>
+#include <spheretouch/rt/shm_segment.hpp>
 
 namespace {
 

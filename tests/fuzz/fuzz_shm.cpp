@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // libFuzzer target: the shared-memory segment as its readers see it (rt/shm_segment.hpp). The
 // input becomes the contents of a real POSIX shared-memory segment, any size; its creator pid
 // and start time are set to this process (a live creator, as an attacker writing into a live
@@ -22,9 +23,9 @@
 #include <vector>
 
 #include "fuzz_check.hpp"
-#include "rt/haptic_servo.hpp"
-#include "rt/shm_segment.hpp"
-#include "rt/simulated_device.hpp"
+#include <spheretouch/rt/haptic_servo.hpp>
+#include <spheretouch/rt/shm_segment.hpp>
+#include <spheretouch/rt/simulated_device.hpp>
 
 namespace {
 

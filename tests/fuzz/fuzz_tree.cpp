@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // libFuzzer target: the sphere-tree cache reader (geom/tree_io.hpp). An attacker who can write
 // the cache file can make its checksum and mesh hash match (neither is cryptographic), so the
 // harness does that for every input (seal_tree_bytes) and the structure check is what stands.
@@ -11,10 +12,10 @@
 #include <vector>
 
 #include "fuzz_check.hpp"
-#include "geom/collide.hpp"
-#include "geom/primitives.hpp"
-#include "geom/tree_io.hpp"
-#include "net/reference_backend.hpp"
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/geom/tree_io.hpp>
+#include <spheretouch/net/reference_backend.hpp>
 
 namespace {
 

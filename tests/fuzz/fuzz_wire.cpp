@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // libFuzzer target: the wire decoder (net/protocol.hpp), i.e. every frame a worker or the client
 // accepts from the network, and the block-set decoder (net/block_set.hpp) behind LoadBlocks.
 // Properties, beyond "no crash, leak, UB or unbounded allocation":
@@ -16,8 +17,8 @@
 #include <vector>
 
 #include "fuzz_check.hpp"
-#include "net/block_set.hpp"
-#include "net/protocol.hpp"
+#include <spheretouch/net/block_set.hpp>
+#include <spheretouch/net/protocol.hpp>
 
 namespace {
 

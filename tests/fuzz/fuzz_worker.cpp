@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // libFuzzer target: the worker's message handler as a whole (net/worker_service.hpp), fed
 // sequences of messages from four clients: uploads interleaved, restarted and abandoned,
 // queries for held and foreign sets, heartbeats, garbage. Input: records of
@@ -14,8 +15,8 @@
 #include <vector>
 
 #include "fuzz_check.hpp"
-#include "net/reference_backend.hpp"
-#include "net/worker_service.hpp"
+#include <spheretouch/net/reference_backend.hpp>
+#include <spheretouch/net/worker_service.hpp>
 
 namespace {
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // main() for replaying fuzz inputs without libFuzzer (any compiler): runs every file named on the
 // command line, or every file in a named directory, through LLVMFuzzerTestOneInput once. The
 // default build registers one such test per target over its committed corpus (tests/fuzz/corpus/),

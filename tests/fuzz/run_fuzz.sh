@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: BSD-3-Clause
 # Runs the libFuzzer targets (tests/fuzz/fuzz_*.cpp) for SECONDS each, two at a time (2 cores),
 # each from a copy of its committed corpus (tests/fuzz/corpus/TARGET; the repo is never written),
 # with ASan + UBSan (halting on the first report) and LeakSanitizer. Configures and builds

@@ -1,4 +1,5 @@
-// Tests src/geom/collide.*: the exact pair set equals a brute-force reference on real and
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/geom/collide.*: the exact pair set equals a brute-force reference on real and
 // generated meshes (far, near, deep, barely touching, far from the origin), approximate mode is a
 // superset, scratch reuse does not allocate, bad poses are harmless.
 #include <doctest/doctest.h>
@@ -6,9 +7,10 @@
 #include <random>
 #include <set>
 
-#include "geom/collide.hpp"
-#include "geom/primitives.hpp"
-#include "geom/sphere_tree.hpp"
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/geom/simd.hpp>
+#include <spheretouch/geom/sphere_tree.hpp>
 #include "test_models.hpp"
 #include "test_util.hpp"
 
@@ -281,6 +283,58 @@ TEST_CASE("collide equals brute force: hand and hand_L2 x elephant at >= 20 pose
         far_poses.end());
     compare_at(fprobe, fobject, far_poses);
   }
+}
+
+TEST_CASE("every SIMD instruction set gives the same pairs and counters (run-time dispatch)") {
+  using simd::Isa;
+  const Isa best = simd::best_isa(), before = simd::active_isa();
+  // The names round-trip, and an ISA above what the CPU and build have is refused, changing nothing.
+  for (const Isa isa : {Isa::scalar, Isa::sse2, Isa::avx2}) {
+    Isa back = Isa::scalar;
+    CHECK(simd::parse_isa(simd::isa_name(isa), back));
+    CHECK(back == isa);
+  }
+  Isa unused = Isa::scalar;
+  CHECK_FALSE(simd::parse_isa("avx9", unused));
+  if (best < Isa::avx2) {
+    CHECK_FALSE(simd::set_isa(Isa::avx2));
+    CHECK(simd::active_isa() == before);
+  }
+  MESSAGE("best ISA on this machine: " << std::string(simd::isa_name(best)));
+
+  const Mesh* hand = st::test::model_mesh("hand_L2.off");
+  const Mesh* ele = st::test::model_mesh("elephant.off");
+  Body probe(*hand), object(*ele);
+  const auto poses = poses_for(*hand, *ele, st::test::kSanitizerBuild ? 4 : 10, 7);
+  CollideScratch scratch;
+  std::size_t touching = 0;
+  for (const auto& [name, pose] : poses) {
+    CAPTURE(name);
+    CollideResult ref;
+    std::vector<Isa> isas;
+    for (int i = 0; i <= static_cast<int>(best); ++i) isas.push_back(static_cast<Isa>(i));
+    for (const Isa isa : isas) {
+      const std::string isa_name = simd::isa_name(isa);
+      CAPTURE(isa_name);
+      REQUIRE(simd::set_isa(isa));
+      CHECK(simd::active_isa() == isa);
+      CollideResult res;
+      CollideConfig opt;
+      opt.sort_pairs = true;
+      collide(probe.mesh, probe.tree, object.mesh, object.tree, pose, opt, scratch, res);
+      if (isa == Isa::scalar) {
+        ref = res;
+        touching += !res.pairs.empty();
+        continue;
+      }
+      CHECK(res.pairs == ref.pairs);
+      CHECK(res.stats.node_pairs == ref.stats.node_pairs);
+      CHECK(res.stats.leaf_pairs == ref.stats.leaf_pairs);
+      CHECK(res.stats.tri_pairs == ref.stats.tri_pairs);
+    }
+  }
+  CHECK(touching >= poses.size() / 2);  // the poses exercise the leaf stage, not only far misses
+  REQUIRE(simd::set_isa(before));
 }
 
 TEST_CASE("approximate mode is a superset of exact") {

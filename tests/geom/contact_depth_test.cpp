@@ -1,16 +1,17 @@
-// Tests src/geom/contact_depth.*: one side's depth search on a round of the patch model set up
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/geom/contact_depth.*: one side's depth search on a round of the patch model set up
 // step by step (pairs, pose, records): a ball pressed into a box's face (the ball's depth along +z
 // is the press depth, the box has no vertex inside), into its corner (the corner's depth along −n
 // is the press depth), a search from the last round's memory, and the max_inside_vertices cap.
-#include "geom/contact_depth.hpp"
+#include <spheretouch/geom/contact_depth.hpp>
 
 #include <doctest/doctest.h>
 
 #include <cmath>
 #include <vector>
 
-#include "geom/contact_patch.hpp"
-#include "geom/primitives.hpp"
+#include <spheretouch/geom/contact_patch.hpp>
+#include <spheretouch/geom/primitives.hpp>
 #include "test_models.hpp"
 
 namespace st::geom {

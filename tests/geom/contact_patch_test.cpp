@@ -1,4 +1,5 @@
-// Tests the patch contact model of src/geom/contact.* (contact_patch.cpp) against analytic
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests the patch contact model of src/spheretouch/geom/contact.* (contact_patch.cpp) against analytic
 // shapes with known depth and normal: a sphere pressed into a box's face, edge and corner, into a
 // sphere and into a concave crease; pulled out; slid over and around an edge; pushed through a
 // 1 mm plate (no pop-through); bad input. Pairs come from the exact brute-force reference.
@@ -10,8 +11,8 @@
 #include <limits>
 #include <vector>
 
-#include "geom/contact.hpp"
-#include "geom/primitives.hpp"
+#include <spheretouch/geom/contact.hpp>
+#include <spheretouch/geom/primitives.hpp>
 #include "test_models.hpp"
 
 using namespace st::geom;

@@ -1,13 +1,14 @@
-// Tests src/geom/contact_planes.*: planar clusters of a contact's faces (a crease and an inner
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/geom/contact_planes.*: planar clusters of a contact's faces (a crease and an inner
 // corner are concave, a box edge is not, a split face is one plane, a sphere's facets are not a
 // few planes) and the smallest translation that clears several planes, against hand solutions.
-#include "geom/contact_planes.hpp"
+#include <spheretouch/geom/contact_planes.hpp>
 
 #include <doctest/doctest.h>
 
 #include <cmath>
 
-#include "geom/primitives.hpp"
+#include <spheretouch/geom/primitives.hpp>
 
 using namespace st::geom;
 

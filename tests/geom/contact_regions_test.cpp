@@ -1,9 +1,10 @@
-// Tests src/geom/contact_regions.*: the union-find (against connected components found by a
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/geom/contact_regions.*: the union-find (against connected components found by a
 // search, roots the smallest members whatever the order of the unions), and the grouping of a
 // body's colliding faces over rounds on a generated grid: group_faces (afresh, faces joined to
 // the groups they carry, a bridge joining two groups, a split group staying one) and new_groups
 // (covered faces, new faces attached to them, a new region).
-#include "geom/contact_regions.hpp"
+#include <spheretouch/geom/contact_regions.hpp>
 
 #include <doctest/doctest.h>
 
@@ -12,7 +13,7 @@
 #include <utility>
 #include <vector>
 
-#include "geom/contact_patch.hpp"
+#include <spheretouch/geom/contact_patch.hpp>
 #include "test_models.hpp"
 
 using namespace st::geom;

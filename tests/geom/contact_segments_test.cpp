@@ -1,9 +1,10 @@
-// Tests src/geom/contact_segments.*: the segment of two crossing triangles and its vector area
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/geom/contact_segments.*: the segment of two crossing triangles and its vector area
 // against a hand computation; rows without a segment add nothing; the first segment's midpoint;
 // the sums' order (lane by lane in the order added, across batches: bit for bit the same as the
 // rows' areas summed so); and a ball pressed into a box's face, whose vector area is the disc's
 // π ρ² n.
-#include "geom/contact_segments.hpp"
+#include <spheretouch/geom/contact_segments.hpp>
 
 #include <doctest/doctest.h>
 
@@ -12,8 +13,8 @@
 #include <random>
 #include <vector>
 
-#include "geom/contact.hpp"
-#include "geom/primitives.hpp"
+#include <spheretouch/geom/contact.hpp>
+#include <spheretouch/geom/primitives.hpp>
 #include "test_models.hpp"
 
 using namespace st::geom;

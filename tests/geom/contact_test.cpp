@@ -1,7 +1,8 @@
-// Tests src/geom/contact.* for the paper's model (§3.6, [contact] model = "paper"): FD/PD/plane on
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/geom/contact.* for the paper's model (§3.6, [contact] model = "paper"): FD/PD/plane on
 // a flat wall, first-contact recording and re-recording, zero contacts, degenerate faces,
 // disagreeing normals, bad pairs, far-from-origin bodies. The patch model: contact_patch_test.cpp.
-#include "geom/contact.hpp"
+#include <spheretouch/geom/contact.hpp>
 
 #include <doctest/doctest.h>
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Test-only exact reference for the predicates and the triangle test, independent of the code
 // under test: integers of fixed capacity, every double converted exactly (x = M·2^e, M odd) to
 // an integer at a common power-of-two scale, and overlap decided as "origin in the convex hull

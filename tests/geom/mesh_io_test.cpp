@@ -1,6 +1,7 @@
-// Tests for src/geom/mesh_io.*: every format from a small generated file, face order, every bad
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests for src/spheretouch/geom/mesh_io.*: every format from a small generated file, face order, every bad
 // input's message, precision far from the origin, units and scale, degenerate-face policy.
-#include "geom/mesh_io.hpp"
+#include <spheretouch/geom/mesh_io.hpp>
 
 #include <cmath>
 #include <cstring>

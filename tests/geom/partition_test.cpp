@@ -1,4 +1,5 @@
-// Tests src/geom/partition.*: blocks cover every face once; the union over workers of collide
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/geom/partition.*: blocks cover every face once; the union over workers of collide
 // restricted to each worker's roots equals the unrestricted result, for W = 1..16 and every
 // mapping (block-cyclic, contiguous, random); the automatic split never yields an empty or
 // out-of-range block and gives every worker a block, for any worker count it accepts.
@@ -6,9 +7,9 @@
 
 #include <algorithm>
 
-#include "geom/collide.hpp"
-#include "geom/partition.hpp"
-#include "geom/primitives.hpp"
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/partition.hpp>
+#include <spheretouch/geom/primitives.hpp>
 #include "test_models.hpp"
 
 using namespace st::geom;

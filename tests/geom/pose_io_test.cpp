@@ -1,6 +1,7 @@
-// Tests src/geom/pose_io.*: the accepted syntax (comments, blank lines, CRLF, signs), every
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/geom/pose_io.*: the accepted syntax (comments, blank lines, CRLF, signs), every
 // error message (file:line, what is wrong), and exact round trips through format_pose.
-#include "geom/pose_io.hpp"
+#include <spheretouch/geom/pose_io.hpp>
 
 #include <doctest/doctest.h>
 

@@ -1,7 +1,8 @@
-// Tests src/geom/predicates.*: every sign against an exact big-integer determinant
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/geom/predicates.*: every sign against an exact big-integer determinant
 // (exact_ref.hpp), on inputs built to be degenerate or within a few ulps of it, at scales from
 // 2^-280 to 2^280, so that both the filter and the exact stage decide many calls.
-#include "geom/predicates.hpp"
+#include <spheretouch/geom/predicates.hpp>
 
 #include <doctest/doctest.h>
 

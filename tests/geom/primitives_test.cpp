@@ -1,5 +1,6 @@
-// Tests for src/geom/primitives.*: generated meshes are closed, manifold and outward-oriented.
-#include "geom/primitives.hpp"
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests for src/spheretouch/geom/primitives.*: generated meshes are closed, manifold and outward-oriented.
+#include <spheretouch/geom/primitives.hpp>
 
 #include "test_util.hpp"
 

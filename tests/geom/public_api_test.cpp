@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Tests src/spheretouch/collide.*: the public API gives exactly geom::collide()'s pairs (and the
 // brute-force reference's), frames compose as documented, the first-pair and capped requests
 // return pairs of the full set with consistent counters, and bad bodies and requests are refused
@@ -9,9 +10,9 @@
 #include <limits>
 #include <random>
 
-#include "geom/pose_io.hpp"
-#include "geom/primitives.hpp"
-#include "spheretouch/collide.hpp"
+#include <spheretouch/geom/pose_io.hpp>
+#include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/collide.hpp>
 #include "test_models.hpp"
 #include "test_util.hpp"
 

@@ -1,4 +1,5 @@
-// Tests src/geom/sphere_tree.* and src/geom/tree_io.*: structure, enclosure (exact, with the
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/geom/sphere_tree.* and src/spheretouch/geom/tree_io.*: structure, enclosure (exact, with the
 // float padding), balanced leaves, layers, tightness, persistence errors.
 #include <doctest/doctest.h>
 
@@ -7,9 +8,9 @@
 #include <fstream>
 #include <random>
 
-#include "geom/primitives.hpp"
-#include "geom/sphere_tree.hpp"
-#include "geom/tree_io.hpp"
+#include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/geom/sphere_tree.hpp>
+#include <spheretouch/geom/tree_io.hpp>
 #include "test_models.hpp"
 
 using namespace st::geom;

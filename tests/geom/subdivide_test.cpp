@@ -1,10 +1,11 @@
-// Tests for src/geom/subdivide.*: face counts, closedness kept, order rule, determinism, errors.
-#include "geom/subdivide.hpp"
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests for src/spheretouch/geom/subdivide.*: face counts, closedness kept, order rule, determinism, errors.
+#include <spheretouch/geom/subdivide.hpp>
 
 #include <cstring>
 
-#include "geom/mesh_io.hpp"
-#include "geom/primitives.hpp"
+#include <spheretouch/geom/mesh_io.hpp>
+#include <spheretouch/geom/primitives.hpp>
 #include "test_util.hpp"
 
 using namespace st;

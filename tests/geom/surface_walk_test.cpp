@@ -1,8 +1,9 @@
-// Tests src/geom/surface_walk.*: the plane basis, the facing test, the face across an edge, the
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/geom/surface_walk.*: the plane basis, the facing test, the face across an edge, the
 // walk to the face over a point (a flat grid and a ball, against the plane's and the sphere's
 // exit distance) and where it stops (faces that do not face d, too many steps), and near_face's
 // margin past a face's edge.
-#include "geom/surface_walk.hpp"
+#include <spheretouch/geom/surface_walk.hpp>
 
 #include <doctest/doctest.h>
 
@@ -10,7 +11,7 @@
 #include <limits>
 #include <vector>
 
-#include "geom/primitives.hpp"
+#include <spheretouch/geom/primitives.hpp>
 #include "test_models.hpp"
 
 using namespace st::geom;

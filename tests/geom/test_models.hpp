@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Helpers shared by the geom suites: the model set under $ST_SOURCE_ROOT/.cache/models, a
 // brute-force collision reference and pose builders.
 #pragma once
@@ -12,9 +13,9 @@
 #include <string>
 #include <vector>
 
-#include "geom/collide.hpp"
-#include "geom/mesh_io.hpp"
-#include "geom/tri_tri.hpp"
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/mesh_io.hpp>
+#include <spheretouch/geom/tri_tri.hpp>
 #include "test_util.hpp"
 
 namespace st::test {
@@ -48,7 +49,7 @@ inline const geom::Mesh* model_mesh(const std::string& name) {
   auto it = cache.find(name);
   if (it == cache.end()) {
     auto r = geom::load_mesh(st::test::model(name));
-    REQUIRE_MESSAGE(r.ok(), r.error());
+    REQUIRE_MESSAGE(r.ok(), (r.ok() ? std::string() : r.error()));  // the message is built on success too (-s)
     it = cache.emplace(name, std::move(r.value().mesh)).first;
   }
   return &it->second;

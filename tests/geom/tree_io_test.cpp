@@ -1,11 +1,12 @@
-// Tests src/geom/tree_io.* against forged tree files: the checksum and the mesh hash are not
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/geom/tree_io.* against forged tree files: the checksum and the mesh hash are not
 // cryptographic, so an attacker who can write the cache can make them pass (here: edit the tree,
 // then write_tree() computes a fresh checksum and keeps the mesh hash). Each forgery that once
 // crashed collide() (stack sized from num_depths) or made it run forever (shared children), or
 // that would hide collisions (spheres that do not hold their faces), must be refused with a
 // message naming what is wrong. And collide() itself never overflows its stack on a tree that
 // lies about its depth. (The round trip and stale/corrupt headers: sphere_tree_test.cpp.)
-#include "geom/tree_io.hpp"
+#include <spheretouch/geom/tree_io.hpp>
 
 #include <doctest/doctest.h>
 
@@ -14,8 +15,8 @@
 #include <functional>
 #include <string>
 
-#include "geom/collide.hpp"
-#include "geom/primitives.hpp"
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/primitives.hpp>
 #include "test_util.hpp"
 
 using namespace st::geom;

@@ -1,9 +1,10 @@
-// Tests src/geom/tri_tri.*: hand cases for every contact type (general, coplanar, touching,
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/geom/tri_tri.*: hand cases for every contact type (general, coplanar, touching,
 // degenerate), each in all 6×6 vertex orders × both argument orders and under exact and inexact
 // scalings/translations; one-ulp perturbations that flip the answer; random integer-grid pairs.
 // Expected values come from the case table, and always also from an independent exact reference
 // (origin in the hull of the vertex differences, big integers: exact_ref.hpp).
-#include "geom/tri_tri.hpp"
+#include <spheretouch/geom/tri_tri.hpp>
 
 #include <doctest/doctest.h>
 

@@ -1,11 +1,12 @@
-// Tests src/net/block_set.*: building shares, canonical encoding and content hash, checked decode.
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/net/block_set.*: building shares, canonical encoding and content hash, checked decode.
 #include <doctest/doctest.h>
 
 #include <algorithm>
 #include <random>
 
-#include "geom/primitives.hpp"
-#include "net/block_set.hpp"
+#include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/net/block_set.hpp>
 
 using namespace st;
 using namespace st::net;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Tests that the scatter-gather client survives a hostile or broken worker: truncated, oversized,
 // wrong-version, garbage, multi-frame, stale, wrong-hash and out-of-range replies are dropped and
 // counted; every round returns; valid replies still make complete rounds.
@@ -6,7 +7,7 @@
 #include <atomic>
 #include <thread>
 
-#include "net/scatter_gather.hpp"
+#include <spheretouch/net/scatter_gather.hpp>
 #include "net_test_util.hpp"
 #include "old_worker.hpp"
 

@@ -1,4 +1,5 @@
-// Tests src/net/curve_keys.*: key pair files (modes whatever the umask, no overwrite without
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/net/curve_keys.*: key pair files (modes whatever the umask, no overwrite without
 // force, force ends 0600), and the readers (permissions, non-regular files, size, pairs that do
 // not match, a secret key offered as a public one).
 #include <doctest/doctest.h>
@@ -12,7 +13,7 @@
 #include <fstream>
 #include <sstream>
 
-#include "net/curve_keys.hpp"
+#include <spheretouch/net/curve_keys.hpp>
 #include "test_util.hpp"
 
 using namespace st;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // End-to-end tests with real spheretouch-worker processes on 127.0.0.1: exact results for
 // W = 1, 2, 4, 8 on real meshes, kill -9 while queries stream and restart, hostile messages,
 // SIGTERM, the bind policy, config errors, and `systemd-analyze verify` of the units.
@@ -8,9 +9,9 @@
 #include <regex>
 #include <sys/stat.h>
 
-#include "geom/primitives.hpp"
-#include "net/reference_backend.hpp"
-#include "net/scatter_gather.hpp"
+#include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/net/reference_backend.hpp>
+#include <spheretouch/net/scatter_gather.hpp>
 #include "net_test_util.hpp"
 #include "process_util.hpp"
 

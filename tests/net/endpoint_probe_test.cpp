@@ -1,4 +1,5 @@
-// Tests src/net/endpoint_probe.*: against a WorkerService with CURVE on tcp loopback (its own
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/net/endpoint_probe.*: against a WorkerService with CURVE on tcp loopback (its own
 // context and thread) the probe tells an admitted client, a refused key, a client without keys
 // and a wrong server key apart; a plain worker and a closed port are told apart too.
 #include <doctest/doctest.h>
@@ -7,10 +8,10 @@
 #include <mutex>
 #include <thread>
 
-#include "net/curve_keys.hpp"
-#include "net/endpoint_probe.hpp"
-#include "net/tree_backend.hpp"
-#include "net/worker_service.hpp"
+#include <spheretouch/net/curve_keys.hpp>
+#include <spheretouch/net/endpoint_probe.hpp>
+#include <spheretouch/net/tree_backend.hpp>
+#include <spheretouch/net/worker_service.hpp>
 #include "process_util.hpp"
 
 using namespace st;

@@ -1,11 +1,12 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Shared by the net suites: small generated scenes, real-mesh scenes, and contact poses.
 #pragma once
 #include <random>
 #include <vector>
 
-#include "geom/mesh_io.hpp"
-#include "geom/primitives.hpp"
-#include "net/block_set.hpp"
+#include <spheretouch/geom/mesh_io.hpp>
+#include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/net/block_set.hpp>
 #include "test_util.hpp"
 
 namespace st::test {

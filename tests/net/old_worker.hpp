@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // A worker of the protocol version before this one (tests only): a ROUTER on a free loopback
 // port that answers every message with a Hello whose header says version 1, so a client can be
 // checked for what it says about a daemon it cannot read.
@@ -10,7 +11,7 @@
 #include <vector>
 #include <zmq.hpp>
 
-#include "net/protocol.hpp"
+#include <spheretouch/net/protocol.hpp>
 
 namespace st::test {
 

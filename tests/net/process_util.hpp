@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Starting, signalling and reaping real processes (the worker daemon) from tests, and free ports.
 #pragma once
 #include <arpa/inet.h>

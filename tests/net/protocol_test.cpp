@@ -1,11 +1,12 @@
-// Tests src/net/protocol.*: round trips of every message, and hostile decoding (truncation at
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/net/protocol.*: round trips of every message, and hostile decoding (truncation at
 // every byte offset, oversized counts, wrong version, bit flips, random garbage).
 #include <doctest/doctest.h>
 
 #include <random>
 
-#include "net/protocol.hpp"
-#include "net/wire.hpp"
+#include <spheretouch/net/protocol.hpp>
+#include <spheretouch/net/wire.hpp>
 
 using namespace st;
 using namespace st::net;

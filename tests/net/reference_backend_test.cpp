@@ -1,8 +1,9 @@
-// Tests src/net/reference_backend.*: the SAT triangle test on the cases that matter (closed
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/net/reference_backend.*: the SAT triangle test on the cases that matter (closed
 // sets: touching collides), and the grid backend against all-pairs brute force.
 #include <doctest/doctest.h>
 
-#include "net/reference_backend.hpp"
+#include <spheretouch/net/reference_backend.hpp>
 #include "net_test_util.hpp"
 
 using namespace st;

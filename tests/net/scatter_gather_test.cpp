@@ -1,4 +1,5 @@
-// Tests src/net/scatter_gather.* and src/net/worker_service.* in one process over inproc://:
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/net/scatter_gather.* and src/spheretouch/net/worker_service.* in one process over inproc://:
 // exact merged results for 1..8 workers, content-addressed loading, a worker stopped while
 // rounds stream (rounds return, are marked incomplete, blocks are reassigned, results are exact
 // again) and restarted (reloaded), hostile messages to a worker, and a block set built to make a
@@ -9,12 +10,12 @@
 #include <numeric>
 #include <thread>
 
-#include "geom/collide.hpp"
-#include "geom/sphere_tree.hpp"
-#include "net/local_workers.hpp"
-#include "net/reference_backend.hpp"
-#include "net/tree_backend.hpp"
-#include "net/scatter_gather.hpp"
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/sphere_tree.hpp>
+#include <spheretouch/net/local_workers.hpp>
+#include <spheretouch/net/reference_backend.hpp>
+#include <spheretouch/net/tree_backend.hpp>
+#include <spheretouch/net/scatter_gather.hpp>
 #include "net_test_util.hpp"
 
 using namespace st;

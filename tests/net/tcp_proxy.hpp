@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // TcpProxy: a loopback TCP relay placed between a client and one worker, for fault injection.
 // set_forwarding(false) stops moving bytes in both directions and stops accepting: the
 // connections stay open but nothing crosses them, as when the link to a host goes down

@@ -1,9 +1,10 @@
-// Tests src/net/worker_config.*: TOML parsing (unknown keys named), and the safe-by-default bind policy.
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/net/worker_config.*: TOML parsing (unknown keys named), and the safe-by-default bind policy.
 #include <doctest/doctest.h>
 
 #include <filesystem>
 
-#include "net/worker_config.hpp"
+#include <spheretouch/net/worker_config.hpp>
 #include "test_util.hpp"
 
 using namespace st::net;

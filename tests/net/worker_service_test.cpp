@@ -1,4 +1,5 @@
-// Tests src/net/worker_service.* as clients see it over inproc://: clients kept apart (uploads,
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/net/worker_service.* as clients see it over inproc://: clients kept apart (uploads,
 // visible sets), loads built off the socket thread (heartbeats answered during a build), and the
 // bounds on buffered upload bytes, concurrent uploads and abandoned uploads.
 #include <doctest/doctest.h>
@@ -11,9 +12,9 @@
 #include <mutex>
 #include <thread>
 
-#include "net/curve_keys.hpp"
-#include "net/local_workers.hpp"
-#include "net/reference_backend.hpp"
+#include <spheretouch/net/curve_keys.hpp>
+#include <spheretouch/net/local_workers.hpp>
+#include <spheretouch/net/reference_backend.hpp>
 #include "net_test_util.hpp"
 
 using namespace st;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Test helper for worker_service_test (ipc uid filter): sends one Heartbeat to ENDPOINT and exits
 // 0 if a reply arrives within TIMEOUT_MS, 1 if none does, 2 on bad arguments. A program of its
 // own so that a test can fork, switch user and exec it (threads must not start in a forked child
@@ -6,7 +7,7 @@
 #include <string>
 #include <zmq.hpp>
 
-#include "net/protocol.hpp"
+#include <spheretouch/net/protocol.hpp>
 
 int main(int argc, char** argv) {
   if (argc != 3) return 2;

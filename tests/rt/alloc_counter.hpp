@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Test helper: counts heap allocations made while armed. Replaces the global operator new
 // family (and, outside sanitizer builds, malloc/calloc/realloc via glibc's __libc_* entry
 // points) for the whole test binary; disarmed it only forwards.

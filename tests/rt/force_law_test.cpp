@@ -1,6 +1,7 @@
-// Tests src/rt/force_law.*: defaults, continuity, monotonicity, validation, and the property
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/rt/force_law.*: defaults, continuity, monotonicity, validation, and the property
 // that any PD (0, denormals, 1e-300..1e300, -1, NaN, ±Inf) gives a finite force in [0, F_max].
-#include "rt/force_law.hpp"
+#include <spheretouch/rt/force_law.hpp>
 
 #include <doctest/doctest.h>
 
@@ -8,7 +9,7 @@
 #include <limits>
 #include <vector>
 
-#include "rt/constants.hpp"
+#include <spheretouch/rt/constants.hpp>
 
 using namespace st::rt;
 

@@ -1,7 +1,8 @@
-// Tests src/rt/haptic_loop.*: deadline accounting with synthetic time (exact), a 2 s real run
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/rt/haptic_loop.*: deadline accounting with synthetic time (exact), a 2 s real run
 // with tick and miss accounting (counts only, never wall-clock assertions), injected overruns,
 // real-time refusals reported, and no heap allocation on the tick path.
-#include "rt/haptic_loop.hpp"
+#include <spheretouch/rt/haptic_loop.hpp>
 
 #include <doctest/doctest.h>
 
@@ -11,7 +12,7 @@
 #include <thread>
 
 #include "alloc_counter.hpp"
-#include "rt/clock.hpp"
+#include <spheretouch/rt/clock.hpp>
 
 using namespace st::rt;
 

@@ -1,8 +1,9 @@
-// Tests src/rt/haptic_servo.*: the whole haptic side at 1 kHz against a simulated device and a
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/rt/haptic_servo.*: the whole haptic side at 1 kHz against a simulated device and a
 // stand-in collision thread (probe tip vs a wall, via geom::ContactBuilder at ~100 Hz): the
 // force is rendered, always finite and saturated, telemetry accounts for every tick, the tick
 // path allocates nothing, and a collision side that stops makes the force fade to zero.
-#include "rt/haptic_servo.hpp"
+#include <spheretouch/rt/haptic_servo.hpp>
 
 #include <doctest/doctest.h>
 
@@ -11,9 +12,9 @@
 #include <thread>
 
 #include "alloc_counter.hpp"
-#include "geom/contact.hpp"
-#include "rt/clock.hpp"
-#include "rt/simulated_device.hpp"
+#include <spheretouch/geom/contact.hpp>
+#include <spheretouch/rt/clock.hpp>
+#include <spheretouch/rt/simulated_device.hpp>
 #include "rt_test_util.hpp"
 
 using namespace st::rt;

@@ -1,5 +1,6 @@
-// Tests src/rt/histogram.hpp: bin edges, percentile precision, extremes.
-#include "rt/histogram.hpp"
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/rt/histogram.hpp: bin edges, percentile precision, extremes.
+#include <spheretouch/rt/histogram.hpp>
 
 #include <doctest/doctest.h>
 

@@ -1,7 +1,8 @@
-// Tests src/rt/interpolator.* and src/rt/saturation.*: each interpolation method on synthetic
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/rt/interpolator.* and src/spheretouch/rt/saturation.*: each interpolation method on synthetic
 // contact sequences against a flat wall (z < 0 is inside, FD = +z), updates stopping, bad input,
 // and a randomized property: every output finite and within the saturation ceiling.
-#include "rt/interpolator.hpp"
+#include <spheretouch/rt/interpolator.hpp>
 
 #include <doctest/doctest.h>
 
@@ -9,8 +10,8 @@
 #include <limits>
 #include <random>
 
-#include "rt/constants.hpp"
-#include "rt/saturation.hpp"
+#include <spheretouch/rt/constants.hpp>
+#include <spheretouch/rt/saturation.hpp>
 
 using namespace st::rt;
 using st::geom::ContactModel;

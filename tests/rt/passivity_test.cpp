@@ -1,20 +1,21 @@
-// Tests src/rt/passivity.*: a sampled spring pressed and released injects energy (Colgate), the
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/rt/passivity.*: a sampled spring pressed and released injects energy (Colgate), the
 // guard takes it back; the guard never pulls and passes forces through when disabled; and in
 // closed loop (the virtual user's hand, the servo, the patch contact model on a box, a slow
 // collision side), every contact cycle returns no more energy than it took.
-#include "rt/passivity.hpp"
+#include <spheretouch/rt/passivity.hpp>
 
 #include <doctest/doctest.h>
 
 #include <cmath>
 #include <vector>
 
-#include "geom/collide.hpp"
-#include "geom/contact.hpp"
-#include "geom/primitives.hpp"
-#include "geom/sphere_tree.hpp"
-#include "rt/haptic_servo.hpp"
-#include "rt/simulated_device.hpp"
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/contact.hpp>
+#include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/geom/sphere_tree.hpp>
+#include <spheretouch/rt/haptic_servo.hpp>
+#include <spheretouch/rt/simulated_device.hpp>
 
 using namespace st::rt;
 using Eigen::Vector3d;

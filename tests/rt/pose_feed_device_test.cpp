@@ -1,9 +1,10 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // PoseFeedDevice (the browser device): poses pushed at a page's rate come out at the servo's rate
 // without steps, one source period behind; bad poses are refused before the servo sees them.
 #include <cmath>
 
 #include "doctest/doctest.h"
-#include "rt/pose_feed_device.hpp"
+#include <spheretouch/rt/pose_feed_device.hpp>
 
 TEST_CASE("pose feed device: home before the first pose, then upsampled without steps; bad poses refused") {
   Eigen::Isometry3d grip = Eigen::Isometry3d::Identity();

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // Test helpers shared by the rt suites.
 #pragma once
 #include <string>

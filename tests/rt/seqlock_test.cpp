@@ -1,7 +1,8 @@
-// Tests src/rt/seqlock.hpp: nothing before the first store, the newest value after, and a
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/rt/seqlock.hpp: nothing before the first store, the newest value after, and a
 // two-thread hammer (one writer, two readers): no torn copy, versions never go back; the same
 // for a payload large enough to be read in place (no stack copy), written in prefixes.
-#include "rt/seqlock.hpp"
+#include <spheretouch/rt/seqlock.hpp>
 
 #include <doctest/doctest.h>
 

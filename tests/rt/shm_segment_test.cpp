@@ -1,6 +1,7 @@
-// Tests src/rt/shm_segment.*: two processes (fork) exchanging through a segment, header checks,
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/rt/shm_segment.*: two processes (fork) exchanging through a segment, header checks,
 // and a segment left by a dead process being detected (attach refuses) and replaced (create).
-#include "rt/shm_segment.hpp"
+#include <spheretouch/rt/shm_segment.hpp>
 
 #include <doctest/doctest.h>
 
@@ -13,7 +14,7 @@
 #include <cstring>
 #include <string>
 
-#include "rt/clock.hpp"
+#include <spheretouch/rt/clock.hpp>
 
 using namespace st::rt;
 

@@ -1,6 +1,7 @@
-// Tests src/rt/simulated_device.*: trajectory interpolation and file validation, the built-in
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/rt/simulated_device.*: trajectory interpolation and file validation, the built-in
 // script, the virtual user reacting to force, and force recording with counted overflow.
-#include "rt/simulated_device.hpp"
+#include <spheretouch/rt/simulated_device.hpp>
 
 #include <doctest/doctest.h>
 

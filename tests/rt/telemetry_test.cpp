@@ -1,6 +1,7 @@
-// Tests src/rt/spsc_queue.hpp and src/rt/telemetry.*: FIFO order across two threads, drops
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/rt/spsc_queue.hpp and src/spheretouch/rt/telemetry.*: FIFO order across two threads, drops
 // counted when full, the writer draining everything to a file that states the drop count.
-#include "rt/telemetry.hpp"
+#include <spheretouch/rt/telemetry.hpp>
 
 #include <doctest/doctest.h>
 
@@ -9,7 +10,7 @@
 #include <thread>
 #include <unistd.h>
 
-#include "rt/spsc_queue.hpp"
+#include <spheretouch/rt/spsc_queue.hpp>
 #include "rt_test_util.hpp"
 
 using namespace st::rt;

@@ -1,6 +1,7 @@
-// Tests src/rt/triple_buffer.hpp: single-thread semantics and a two-thread hammer
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/rt/triple_buffer.hpp: single-thread semantics and a two-thread hammer
 // (>= 10^7 exchanges, no torn payload, sequence never goes back). TSan-clean by construction.
-#include "rt/triple_buffer.hpp"
+#include <spheretouch/rt/triple_buffer.hpp>
 
 #include <doctest/doctest.h>
 

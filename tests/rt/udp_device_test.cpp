@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: BSD-3-Clause
 // The UDP device bridge: the wire format (every refusal), and a live UdpDevice on loopback fed by
 // a driver socket: poses taken, forces echoed, the peer latched, stale/malformed/foreign datagrams
 // counted and dropped, silence faded out and back in without a step, floods survived.
@@ -14,8 +15,8 @@
 #include <vector>
 
 #include "doctest/doctest.h"
-#include "rt/clock.hpp"
-#include "rt/udp_device.hpp"
+#include <spheretouch/rt/clock.hpp>
+#include <spheretouch/rt/udp_device.hpp>
 
 namespace {
 

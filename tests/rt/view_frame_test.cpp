@@ -1,7 +1,8 @@
-// Tests src/rt/view_frame.*: a frame's used prefix, and the checks a frame read from shared
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/rt/view_frame.*: a frame's used prefix, and the checks a frame read from shared
 // memory gets before a view sends it (counts, face ids, non-finite numbers, flags); a frame
 // published through a SeqLock prefix store reads back whole.
-#include "rt/view_frame.hpp"
+#include <spheretouch/rt/view_frame.hpp>
 
 #include <doctest/doctest.h>
 
@@ -9,7 +10,7 @@
 #include <limits>
 #include <memory>
 
-#include "rt/seqlock.hpp"
+#include <spheretouch/rt/seqlock.hpp>
 
 using namespace st::rt;
 

@@ -1,0 +1,39 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// <spheretouch/abi.hpp>: the ABI namespace. Every header of the library includes this first, so
+// every name is declared in st::SPHERETOUCH_ABI (an inline namespace: users write st::geom::Mesh).
+//
+// Why. Eigen lays out its fixed-size vectorisable types (Isometry3d, Quaterniond, Vector4d) by
+// EIGEN_MAX_STATIC_ALIGN_BYTES, which follows the compiler's -m flags (16 with SSE, 32 with AVX, 64
+// with AVX-512). A program compiled with other flags than the library would pass a Pose with
+// another layout across the boundary and crash. The library is therefore built with a fixed
+// alignment (-DEIGEN_MAX_ALIGN_BYTES=16 -DEIGEN_MAX_STATIC_ALIGN_BYTES=16, in the pkg-config Cflags
+// and the CMake targets, so a consumer built through them matches whatever its -march), and the
+// namespace names the alignment a translation unit sees: a consumer that bypasses those flags
+// references st::v0_a32::... (or _a64) and fails to link instead of crashing.
+#pragma once
+#include <Eigen/Core>
+
+#include <spheretouch/version.hpp>
+
+#define SPHERETOUCH_ABI_CAT2(a, b) a##b
+#define SPHERETOUCH_ABI_CAT(a, b) SPHERETOUCH_ABI_CAT2(a, b)
+/// The inline namespace of this ABI: v<major>_a<Eigen static alignment in bytes>, e.g. v0_a16.
+#define SPHERETOUCH_ABI                                                                           \
+  SPHERETOUCH_ABI_CAT(SPHERETOUCH_ABI_CAT(SPHERETOUCH_ABI_CAT(v, SPHERETOUCH_VERSION_MAJOR), _a), \
+                      EIGEN_MAX_STATIC_ALIGN_BYTES)
+
+// The library's namespaces, declared once inside the ABI namespace: a later `namespace st::geom {`
+// extends st::SPHERETOUCH_ABI::geom (a namespace of the inline set is reopened by its plain name).
+// A header that opened one of these before including this one would make the name ambiguous: a
+// compile error, never a silent second namespace.
+namespace st {
+inline namespace SPHERETOUCH_ABI {
+namespace detail {}
+namespace geom {}
+namespace rt {}
+namespace net {}
+namespace engine {}
+namespace view {}
+namespace config {}
+}  // namespace SPHERETOUCH_ABI
+}  // namespace st

@@ -1,0 +1,189 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Fleet start-up: see distributed.hpp.
+#include <spheretouch/engine/distributed.hpp>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <map>
+
+#include <spheretouch/net/endpoint_probe.hpp>
+#include <spheretouch/net/tree_backend.hpp>
+#include <spheretouch/net/worker_config.hpp>
+
+namespace st::engine {
+
+int Fleet::up() const {
+  int n = 0;
+  for (const net::WorkerStatus& w : client->workers()) n += w.up;
+  return n;
+}
+
+namespace {
+
+/// Seconds as the user reads them ("2 s", "0.5 s").
+std::string seconds(std::chrono::milliseconds ms) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%g s", double(ms.count()) / 1000.0);
+  return b;
+}
+
+/// What to do about a probe's finding, for the error message.
+std::string advice(const net::ProbeResult& p, const FleetSpec& spec) {
+  switch (p.outcome) {
+    case net::ProbeOutcome::auth_refused:
+      return "; this client's public key " + spec.curve.client.public_z85 +
+             " is not in the worker's [curve] allowed_clients (or allowed_clients_files): add it there, or use a "
+             "client key that is (the worker logs the refusal)";
+    case net::ProbeOutcome::security_mismatch:
+      return spec.curve.enabled() ? "; remove the client keys, or configure the worker's [curve]"
+                                  : "; give the workers' public key and a client key pair (--server-key FILE "
+                                    "--client-key PREFIX, or [workers] server_key / client_key)";
+    default:
+      return "";
+  }
+}
+
+}  // namespace
+
+Result<ClientCurve> load_client_curve(const std::string& server_key_file, const std::string& client_prefix,
+                                      const std::string& server_what, const std::string& client_what) {
+  ClientCurve c;
+  if (server_key_file.empty() && client_prefix.empty()) return c;
+  if (server_key_file.empty()) return fail(client_what, " is given but ", server_what, " is not: CURVE needs both");
+  if (client_prefix.empty()) return fail(server_what, " is given but ", client_what, " is not: CURVE needs both");
+  Result<std::string> server = net::read_public_key(server_key_file);
+  if (!server) return fail(server_what, ": ", server.error());
+  Result<net::CurveKeyPair> client = net::read_key_pair(client_prefix);
+  if (!client) return fail(client_what, ": ", client.error());
+  c.server_public = std::move(server).value();
+  c.client = std::move(client).value();
+  return c;
+}
+
+Status wait_for_fleet(Fleet& fleet, const FleetSpec& spec, const net::ScatterConfig& cfg) {
+  const auto start = net::Clock::now();
+  const auto until = start + spec.ready_timeout;
+  // First wait briefly: a daemon that has not said Hello by then is probed, and a refused key or
+  // a security mismatch ends the start now instead of after ready_timeout.
+  if (fleet.client->wait_ready(std::min(until, start + spec.hello_timeout))) return Ok{};
+  // A daemon whose messages this client cannot read (another protocol version): waiting cannot help.
+  for (const net::WorkerStatus& w : fleet.client->workers())
+    if (w.epoch == 0 && !w.unreadable.empty())
+      return fail("worker ", w.endpoint, " answers with messages this client cannot read (", w.unreadable,
+                  "): a spheretouch-worker of another version? Upgrade the daemons and the clients together");
+  std::map<std::string, net::ProbeResult> probed;
+  auto probe_silent = [&] {
+    for (const net::WorkerStatus& w : fleet.client->workers())
+      if (w.epoch == 0 && !fleet.local)
+        probed[w.endpoint] = net::probe_endpoint(fleet.ctx, w.endpoint, cfg.curve_server_public, cfg.curve_public,
+                                                 cfg.curve_secret, std::chrono::milliseconds(2000));
+  };
+  probe_silent();
+  for (const auto& [ep, p] : probed)
+    if (p.definitive())
+      return fail("worker ", ep, " did not answer Hello within ", seconds(spec.hello_timeout), ": ", p.detail,
+                  advice(p, spec));
+  if (spec.note)
+    for (const auto& [ep, p] : probed)
+      spec.note("worker " + ep + " has not answered Hello after " + seconds(spec.hello_timeout) + " (" + p.detail +
+                "); waiting up to " + seconds(spec.ready_timeout));
+  if (fleet.client->wait_ready(until)) return Ok{};
+  probed.clear();
+  probe_silent();
+  std::string who;
+  for (const net::WorkerStatus& w : fleet.client->workers()) {
+    if (w.holds_target) continue;
+    who += (who.empty() ? "" : "; ") + w.endpoint;
+    if (auto it = probed.find(w.endpoint); it != probed.end())
+      who += " never answered Hello: " + it->second.detail + advice(it->second, spec);
+    else
+      who += " answered but did not acknowledge its block set";
+  }
+  return fail("workers did not load their blocks within ", seconds(spec.ready_timeout), ": ", who);
+}
+
+Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Mesh& probe, const geom::Mesh& object,
+                                           const geom::SphereTree& object_tree) {
+  auto fleet = std::make_unique<Fleet>();
+  const std::size_t nworkers = spec.endpoints.empty() ? std::size_t(std::max(spec.workers, 0)) : spec.endpoints.size();
+  std::uint32_t layer = spec.layer, block_size = spec.block_size;
+  if (nworkers > 0 && (layer == geom::kFree || block_size == 0)) {
+    // The automatic split: the model's pick for this object and worker count (either knob may be
+    // pinned by the scene; the other is chosen).
+    geom::SplitModelConfig model;
+    model.contact_radius = spec.contact_radius;
+    Result<geom::SplitChoice> pick =
+        geom::choose_split(object_tree, std::uint32_t(nworkers), spec.mapping, model, layer, block_size);
+    if (!pick) return fail("distribution: ", pick.error());
+    layer = pick.value().layer;
+    block_size = pick.value().block_size;
+    fleet->split = pick.value().why + " (automatic; set [tree] layer and block_size to override)";
+  }
+  if (layer == geom::kFree) layer = 2;  // no workers: nothing is dealt
+  if (block_size == 0) block_size = 1;
+  Result<net::Blocks> blocks = net::tree_blocks(object_tree, layer, block_size);
+  if (!blocks) return fail("distribution: ", blocks.error());
+  fleet->blocks = static_cast<std::uint32_t>(blocks.value().size());
+  if (fleet->split.empty())
+    fleet->split = "layer " + std::to_string(layer) + ", block size " + std::to_string(block_size) + ": " +
+                   std::to_string(fleet->blocks) + " blocks, " + geom::to_string(spec.mapping) + " over " +
+                   std::to_string(nworkers) + " workers (set in the scene)";
+  net::ScatterConfig cfg;
+  cfg.mapping = spec.mapping;
+  cfg.miss_limit = spec.miss_limit;
+  cfg.assist_blocks = spec.assist_blocks;
+  cfg.leaf_faces = spec.leaf_faces;
+  if (spec.curve.enabled() && spec.endpoints.empty())
+    return fail(
+        "CURVE keys (server key, client key) are for worker daemons; in-process workers need none "
+        "(give the daemons' endpoints with --connect or [workers] endpoints)");
+  if (!spec.endpoints.empty()) {
+    cfg.endpoints = spec.endpoints;
+    if (spec.curve.enabled()) {
+      cfg.curve_server_public = spec.curve.server_public;
+      cfg.curve_public = spec.curve.client.public_z85;
+      cfg.curve_secret = spec.curve.client.secret_z85;
+    }
+    fleet->description = std::to_string(spec.endpoints.size()) + " worker daemon" + (spec.endpoints.size() == 1 ? "" : "s");
+    // Plaintext to another host: say so (the daemons refuse it unless started --insecure).
+    if (!spec.curve.enabled())
+      for (const std::string& ep : spec.endpoints)
+        if (!net::is_local_endpoint(ep))
+          std::fprintf(stderr,
+                       "warning: %s is not a loopback or ipc:// endpoint and no CURVE keys are set: poses, block "
+                       "sets and results cross the network in plaintext, unauthenticated (set server_key and "
+                       "client_key, README \"Securing a fleet\")\n",
+                       ep.c_str());
+  } else {
+    if (spec.workers < 1) return fail("distribution: no workers (use --workers N or --connect EP,...)");
+    // A tag unique to this fleet keeps inproc names apart when several fleets share a process.
+    static std::atomic<int> fleets{0};
+    const std::string tag = std::to_string(::getpid()) + "-" + std::to_string(fleets++);
+    Result<std::unique_ptr<net::LocalWorkers>> lw = net::LocalWorkers::start(
+        fleet->ctx, spec.workers, net::tree_backend_factory(), [&](int i) { return net::inproc_endpoint(i, tag); });
+    if (!lw) return fail("in-process workers: ", lw.error());
+    fleet->local = std::move(lw).value();
+    cfg.endpoints = fleet->local->endpoints();
+    fleet->description = std::to_string(spec.workers) + " in-process worker" + (spec.workers == 1 ? "" : "s");
+  }
+  if (spec.assist_blocks > 0)
+    fleet->description += " + client assist (" + std::to_string(spec.assist_blocks) + " blocks)";
+  if (fleet->blocks < cfg.endpoints.size())
+    return fail("distribution: layer ", layer, " gives ", fleet->blocks, " blocks for ", cfg.endpoints.size(),
+                " workers (choose a deeper layer or a smaller block size)");
+  Result<std::unique_ptr<net::ScatterGather>> sg =
+      net::ScatterGather::create(fleet->ctx, cfg, probe, object, std::move(blocks).value());
+  if (!sg) {
+    net::wipe_secret(cfg.curve_secret);
+    return fail("scatter-gather: ", sg.error());
+  }
+  fleet->client = std::move(sg).value();
+  const Status ready = wait_for_fleet(*fleet, spec, cfg);  // probes silent workers with the key
+  net::wipe_secret(cfg.curve_secret);                      // the client keeps its own copy
+  if (!ready) return Error{ready.error()};
+  return fleet;
+}
+
+}  // namespace st::engine

@@ -1,0 +1,80 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// The app's side of distribution: start N in-process workers (inproc://, the embedded default)
+// or connect to worker daemons, deal the object's layer-n sphere blocks over them and wait until
+// every worker holds its share; with CURVE keys for daemons that require them, and a clear error
+// (endpoint, reason, what to fix) when a daemon refuses this client. Used by `query
+// --workers/--connect` and by `run`.
+#pragma once
+#include <spheretouch/abi.hpp>
+#include <chrono>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+#include <zmq.hpp>
+
+#include <spheretouch/geom/partition.hpp>
+#include <spheretouch/geom/sphere_tree.hpp>
+#include <spheretouch/net/curve_keys.hpp>
+#include <spheretouch/net/local_workers.hpp>
+#include <spheretouch/net/scatter_gather.hpp>
+
+namespace st::engine {
+
+/// A client's CURVE settings: the workers' public key and this client's key pair, Z85.
+struct ClientCurve {
+  std::string server_public;  ///< the workers' (fleet's) public key; empty: no CURVE
+  net::CurveKeyPair client;   ///< this client's pair; its public key is in the workers' allow-list
+  bool enabled() const { return !server_public.empty(); }  ///< keys were given
+};
+
+/// Reads a client's CURVE settings from the workers' public key file and this client's PREFIX
+/// (PREFIX.key, mode 0600, and PREFIX.pub if present). Both or neither: two empty paths give
+/// plain settings. Errors name the file and `server_what` / `client_what` (the flag or field).
+Result<ClientCurve> load_client_curve(const std::string& server_key_file, const std::string& client_prefix,
+                                      const std::string& server_what, const std::string& client_what);
+
+/// How to reach the workers.
+struct FleetSpec {
+  int workers = 0;                     ///< in-process workers (ignored when endpoints are given)
+  std::vector<std::string> endpoints;  ///< worker daemons
+  /// Distribution: sphere layer and layer spheres per block; geom::kFree / 0 = automatic
+  /// (geom::choose_split for this object and worker count, contact regions of contact_radius).
+  std::uint32_t layer = geom::kFree, block_size = 0;
+  geom::Mapping mapping = geom::Mapping::block_cyclic;              ///< how blocks are dealt
+  double contact_radius = 10;                                       ///< mm, for the automatic split
+  std::uint32_t leaf_faces = geom::DefaultTreeConfig().leaf_faces;  ///< tree knob sent to workers
+  std::uint32_t miss_limit = 3;                                     ///< missed deadlines before a worker is marked down
+  std::uint32_t assist_blocks = 0;  ///< blocks the client answers itself each round (net::ScatterConfig::assist_blocks)
+  std::chrono::milliseconds ready_timeout{30000};  ///< time allowed for the first upload
+  /// A daemon silent this long is probed: a refused CURVE key or a security mismatch fails the
+  /// start at once (waiting cannot help); anything else waits out ready_timeout.
+  std::chrono::milliseconds hello_timeout{2000};
+  ClientCurve curve;  ///< CURVE keys for worker daemons (empty: plain)
+  /// Progress notes while the start waits (a daemon still silent after hello_timeout); may be empty.
+  std::function<void(const std::string&)> note;
+};
+
+/// A running fleet: its context, the in-process workers (if any) and the client.
+struct Fleet {
+  zmq::context_t ctx{1};
+  std::unique_ptr<net::LocalWorkers> local;
+  std::unique_ptr<net::ScatterGather> client;
+  std::uint32_t blocks = 0;  ///< blocks dealt
+  std::string description;   ///< "2 in-process workers" / "3 daemons"
+  std::string split;         ///< how the object was split and why ("layer 3, block size 1: ...")
+  /// Workers currently up (not marked down).
+  int up() const;
+};
+
+/// Waits until every worker of a started fleet holds its blocks. A daemon silent after
+/// hello_timeout is probed (net::probe_endpoint); a refused CURVE key or a security mismatch
+/// fails at once, naming the endpoint and what to fix; otherwise it waits out ready_timeout and
+/// says, per worker, what went wrong.
+Status wait_for_fleet(Fleet& fleet, const FleetSpec& spec, const net::ScatterConfig& cfg);
+
+/// Starts the fleet and waits until every worker holds its blocks; errors say which step failed.
+Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Mesh& probe, const geom::Mesh& object,
+                                           const geom::SphereTree& object_tree);
+
+}  // namespace st::engine

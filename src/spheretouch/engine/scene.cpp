@@ -1,0 +1,426 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Scene file parsing: one TomlReader per section, defaults from the libraries' Default…().
+#include <spheretouch/engine/scene.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <fstream>
+#include <sstream>
+#include <unistd.h>
+
+#include <spheretouch/config/toml_reader.hpp>
+#include <spheretouch/geom/mesh_io.hpp>
+#include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/net/curve_keys.hpp>
+
+namespace st::engine {
+
+using config::TomlReader;
+
+namespace {
+
+constexpr double kMs = 1e6;  // ns per ms
+
+/// Empty when `path` exists, else why not. Only asks (a stat): parsing loads no file. A path the
+/// system refuses to look up (a name too long, no permission) is an error here, never an exception.
+std::string lookup(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec)) return {};
+  if (ec) return "cannot look up " + path + ": " + ec.message();
+  return "file " + path + " does not exist";
+}
+
+void read_body(TomlReader& r, BodySpec& b, const std::string& dir, const std::string& field) {
+  std::string mesh;
+  r.string("mesh", mesh);
+  r.string("builtin", b.builtin, {"icosphere", "box", "capsule"});
+  r.number("radius_mm", b.radius_mm, 1e-6, 1e9);
+  r.number("length_mm", b.length_mm, 0, 1e9);
+  r.number("size_mm", b.size_mm, 1e-6, 1e9);
+  r.integer("frequency", b.frequency, 1, 200);
+  r.integer("segments", b.segments, 3, 1000);
+  r.string("units", b.units, {"um", "mm", "cm", "m", "in"});
+  r.number("scale", b.scale, 1e-12, 1e12);
+  if (!mesh.empty() && !b.builtin.empty()) r.error("mesh", "give either mesh or builtin, not both");
+  if (mesh.empty() && b.builtin.empty()) r.error("mesh", "expected a mesh path (or \"model:NAME\") or a builtin shape");
+  if (mesh.rfind("model:", 0) == 0)
+    b.mesh = model_dir() + "/" + mesh.substr(6);
+  else if (!mesh.empty())
+    b.mesh = std::filesystem::path(mesh).is_absolute() ? mesh : dir + "/" + mesh;
+  if (!b.mesh.empty())
+    if (std::string why = lookup(b.mesh); !why.empty())
+      r.error("mesh", why + (mesh.rfind("model:", 0) == 0 ? " (run scripts/models.sh to build the model set)" : ""));
+  (void)field;
+}
+
+geom::Vec3 vec3(const std::vector<double>& v) { return geom::Vec3(v[0], v[1], v[2]); }
+
+}  // namespace
+
+std::string model_dir() {
+  if (const char* d = std::getenv("ST_MODEL_DIR"); d && *d) return d;
+  // The executable lives in <source>/build*/: look for <source>/.cache/models beside it.
+  char buf[4096];
+  const ssize_t n = ::readlink("/proc/self/exe", buf, sizeof buf - 1);
+  if (n > 0) {
+    std::filesystem::path p(std::string(buf, std::size_t(n)));
+    for (int up = 0; up < 3 && p.has_parent_path(); ++up) {
+      p = p.parent_path();
+      std::error_code ec;
+      if (std::filesystem::exists(p / ".cache" / "models", ec)) return (p / ".cache" / "models").string();
+    }
+  }
+  return ".cache/models";
+}
+
+Scene DefaultScene() {
+  Scene s;
+  s.probe.builtin = "capsule";
+  s.probe.radius_mm = 8;
+  s.probe.length_mm = 40;
+  s.object.builtin = "icosphere";
+  s.object.radius_mm = 50;
+  s.object.frequency = 40;
+  return s;
+}
+
+Result<Scene> parse_scene(const std::string& text, const std::string& name, const std::string& dir) {
+  Result<toml::table> parsed = config::parse_toml(text, name);
+  if (!parsed) return Error{parsed.error()};
+  const toml::table& root = parsed.value();
+  Scene s = DefaultScene();
+  s.file = name;
+  TomlReader top(&root, "", name);
+  for (const char* sec : {"probe", "object", "tree", "workers", "collision", "haptic", "force", "interpolation",
+                          "contact", "passivity", "device", "output", "run"})
+    top.known(sec);
+  if (Status st = top.finish(); !st) return Error{st.error()};
+  for (const char* sec : {"probe", "object"})
+    if (!root.contains(sec))
+      return fail(name, ": missing section [", sec, "] (every scene names its probe and object)");
+
+  auto section = [&](const char* key) { return root.get_as<toml::table>(key); };
+  auto check_table = [&](const char* key) -> Status {
+    if (root.contains(key) && !root.get_as<toml::table>(key))
+      return fail(name, ": ", key, ": expected a [", key, "] table");
+    return Ok{};
+  };
+  for (const char* sec : {"probe", "object", "tree", "workers", "collision", "haptic", "force", "interpolation",
+                          "contact", "passivity", "device", "output", "run"})
+    if (Status st = check_table(sec); !st) return Error{st.error()};
+
+  {
+    s.probe = {};
+    TomlReader r(section("probe"), "probe", name);
+    read_body(r, s.probe, dir, "probe");
+    std::vector<double> tip, rot;
+    r.numbers("tip", tip, 3);
+    r.numbers("rotation_deg", rot, 3);
+    if (!tip.empty()) {
+      s.probe_tip_auto = false;
+      s.probe_tip = vec3(tip);
+    }
+    if (!rot.empty()) s.probe_rotation_deg = vec3(rot);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    s.object = {};
+    TomlReader r(section("object"), "object", name);
+    read_body(r, s.object, dir, "object");
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("tree"), "tree", name);
+    r.integer("leaf_faces", s.tree.leaf_faces, 1, geom::kMaxLeafFaces);
+    r.integer_or_auto("layer", s.layer, 0, 20, geom::kFree);
+    r.integer_or_auto("block_size", s.block_size, 1, 1 << 20, 0u);
+    std::string mapping = geom::to_string(s.mapping);
+    r.string("mapping", mapping, {"block-cyclic", "contiguous", "random"});
+    geom::parse_mapping(mapping, s.mapping);
+    r.boolean("cache", s.tree_cache);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("workers"), "workers", name);
+    r.integer("count", s.workers, 0, 64);
+    r.strings("endpoints", s.endpoints);
+    r.number("deadline_ms", s.deadline_ms, 0.1, 10000);
+    r.integer("down_after", s.down_after, 1, 1000);
+    r.integer_or_auto("assist_blocks", s.assist_blocks, 0, 256, -1);
+    for (const std::string& ep : s.endpoints)
+      if (ep.rfind("tcp://", 0) != 0 && ep.rfind("ipc://", 0) != 0)
+        r.error("endpoints", "expected tcp://HOST:PORT or ipc://PATH endpoints (found '" + ep + "')");
+    // CURVE keys: paths relative to the scene; read (and the secret's mode checked) when the run
+    // connects, so the servo process that re-reads the scene never touches them.
+    auto resolve = [&](const std::string& p) {
+      return p.empty() || std::filesystem::path(p).is_absolute() ? p : dir + "/" + p;
+    };
+    r.string("server_key", s.server_key);
+    r.string("client_key", s.client_key);
+    s.server_key = resolve(s.server_key);
+    s.client_key = resolve(s.client_key);
+    if (!s.server_key.empty() && s.client_key.empty())
+      r.error("client_key", "server_key is set but client_key is not: CURVE needs this client's key pair too");
+    else if (s.server_key.empty() && !s.client_key.empty())
+      r.error("server_key", "client_key is set but server_key is not: CURVE needs the workers' public key too");
+    if (!s.server_key.empty() && !std::filesystem::exists(s.server_key))
+      r.error("server_key",
+              "file " + s.server_key + " does not exist (the workers' PREFIX.pub from `spheretouch keygen`)");
+    if (!s.client_key.empty() && !std::filesystem::exists(net::key_files(s.client_key).secret_file))
+      r.error("client_key", "file " + net::key_files(s.client_key).secret_file +
+                                " does not exist (make the pair with `spheretouch keygen --out PREFIX`)");
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("collision"), "collision", name);
+    r.number("rate_hz", s.collision_rate_hz, 0, 100000);
+    std::string mode = "exact";
+    r.string("mode", mode, {"exact", "approximate"});
+    int layer = geom::kLeafSpheres;
+    r.integer("approx_layer", layer, -1, 64);
+    if (mode == "approximate")
+      s.approx_layer = layer;
+    else if (r.has("approx_layer"))
+      r.error("approx_layer", "only meaningful with mode = \"approximate\"");
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("haptic"), "haptic", name);
+    r.number("rate_hz", s.haptic.rate_hz, rt::kMinRateHz, rt::kMaxRateHz);
+    r.integer("fifo_priority", s.haptic.fifo_priority, 0, 99);
+    r.integer("cpu", s.haptic.cpu, -1, 4095);
+    r.boolean("lock_memory", s.haptic.lock_memory);
+    std::size_t prefault_kb = s.haptic.prefault_stack_bytes / 1024;
+    r.integer("prefault_stack_kb", prefault_kb, 0, 65536);
+    s.haptic.prefault_stack_bytes = prefault_kb * 1024;
+    std::size_t stack_kb = s.thread_stack_bytes / 1024;
+    r.integer("thread_stack_kb", stack_kb, 0, 1 << 20);
+    if (stack_kb != 0 && stack_kb < 64) r.error("thread_stack_kb", "expected 0 (glibc's default) or at least 64");
+    s.thread_stack_bytes = stack_kb * 1024;
+    const std::size_t margin_kb = rt::kPrefaultStackMargin / 1024;
+    if (stack_kb != 0 && prefault_kb > 0 && prefault_kb + margin_kb > stack_kb)
+      r.error("prefault_stack_kb",
+              std::to_string(prefault_kb) + " KiB does not fit the haptic thread's stack (thread_stack_kb = " +
+                  std::to_string(stack_kb) + ", of which " + std::to_string(margin_kb) + " KiB stay free)");
+    r.boolean("strict", s.haptic.strict);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("force"), "force", name);
+    std::string law = s.law.kind == rt::LawKind::log ? "log" : "linear";
+    r.string("law", law, {"log", "linear"});
+    s.law.kind = law == "log" ? rt::LawKind::log : rt::LawKind::linear;
+    r.number("a", s.law.a, -1e6, 1e6);
+    r.number("b_n", s.law.b_N, 1e-9, 1e6);
+    r.number("log_base", s.law.log_base, 1.000001, 1e6);
+    r.number("pd_unit_mm", s.law.pd_unit_mm, 1e-9, 1e9);
+    r.number("spring_n_per_mm", s.law.spring_N_per_mm, 1e-9, 1e6);
+    r.number("peak_n", s.saturation.peak_N, 1e-9, 1e4);
+    s.law.max_force_N = s.saturation.peak_N;
+    r.boolean("sustained_limit", s.saturation.sustained);
+    r.number("continuous_n", s.saturation.continuous_N, 1e-9, 1e4);
+    r.number("sustained_tau_s", s.saturation.tau_s, 1e-3, 1e5);
+    r.number("damping_n_s_per_mm", s.interp.damping_N_s_per_mm, 0, 1e3);
+    if (s.saturation.continuous_N > s.saturation.peak_N) r.error("continuous_n", "must not exceed peak_n");
+    if (Status st = r.finish(); !st) return Error{st.error()};
+    if (Result<rt::ForceLaw> l = rt::ForceLaw::make(s.law); !l) return fail(name, ": [force] ", l.error());
+    if (std::string e = rt::Saturator::check(s.saturation); !e.empty()) return fail(name, ": [force] ", e);
+  }
+  {
+    TomlReader r(section("interpolation"), "interpolation", name);
+    std::string method = "plane";
+    r.string("method", method, {"hold", "paper", "plane"});
+    s.interp.mode = rt::parse_interp_mode(method).value();
+    double crossfade_ms = double(s.interp.crossfade_ns) / kMs, timeout_ms = double(s.interp.stale_timeout_ns) / kMs,
+           fade_ms = double(s.interp.fade_ns) / kMs;
+    r.number("crossfade_ms", crossfade_ms, 0, 10000);
+    r.number("timeout_ms", timeout_ms, 1, 100000);
+    r.number("fade_ms", fade_ms, 0, 100000);
+    r.number("paper_gain_n_per_mm", s.interp.paper_gain_N_per_mm, 0, 1e3);
+    r.number("paper_max_move_mm", s.interp.paper_max_move_mm, 0, 1e3);
+    s.interp.crossfade_ns = std::int64_t(crossfade_ms * kMs);
+    s.interp.stale_timeout_ns = std::int64_t(timeout_ms * kMs);
+    s.interp.fade_ns = std::int64_t(fade_ms * kMs);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("contact"), "contact", name);
+    std::string model = geom::to_string(s.contact.model);
+    r.string("model", model, {"patch", "paper"});
+    s.contact.model = geom::parse_contact_model(model).value();
+    r.number("hold_margin_mm", s.contact.hold_margin_mm, 0, 1e4);
+    r.number("replane_angle_deg", s.contact.replane_angle_deg, 0, 180);
+    r.integer("max_inside_vertices", s.contact.max_inside_vertices, 1, 1 << 26);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+    if (std::string e = geom::check(s.contact); !e.empty()) return fail(name, ": [contact] ", e);
+  }
+  {
+    TomlReader r(section("passivity"), "passivity", name);
+    r.boolean("enabled", s.passivity.enabled);
+    r.number("colgate_margin", s.passivity.colgate_margin, 0, 100);
+    r.number("max_damping_n_s_per_mm", s.passivity.max_damping_N_s_per_mm, 0, 10);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+    if (std::string e = rt::PassivityGuard::check(s.passivity); !e.empty()) return fail(name, ": [passivity] ", e);
+  }
+  {
+    TomlReader r(section("device"), "device", name);
+    r.string("kind", s.device.kind, {"simulated", "udp", "browser"});
+    rt::UdpDeviceConfig& u = s.device.udp;
+    r.string("bind", u.bind);
+    r.string("peer", u.peer);
+    r.number("silence_ms", u.silence_ms, 1, 10000);
+    r.number("fade_ms", u.fade_ms, 1, 10000);
+    r.number("scale", u.scale, 1e-6, 1e6);
+    std::vector<double> offset;
+    r.numbers("offset_mm", offset, 3);
+    if (!offset.empty()) u.offset_mm = {offset[0], offset[1], offset[2]};
+    r.string("script", s.device.script);
+    if (s.device.script != "builtin" && !std::filesystem::path(s.device.script).is_absolute())
+      s.device.script = dir + "/" + s.device.script;
+    if (s.device.script != "builtin")
+      if (std::string why = lookup(s.device.script); !why.empty())
+        r.error("script", "trajectory " + why + " (or use \"builtin\")");
+    std::vector<double> target, normal;
+    if (root["device"]["target"].is_string()) {
+      std::string t;
+      r.string("target", t, {"top"});
+    } else {
+      r.numbers("target", target, 3);
+      if (!target.empty()) {
+        s.device.target_top = false;
+        s.device.target = vec3(target);
+      }
+    }
+    r.numbers("normal", normal, 3);
+    if (!normal.empty()) {
+      if (vec3(normal).norm() < 1e-9)
+        r.error("normal", "must not be the zero vector");
+      else
+        s.device.normal = vec3(normal).normalized();
+    }
+    r.number("press_mm", s.device.press_mm, 0, 1000);
+    r.number("slide_mm", s.device.slide_mm, 0, 10000);
+    r.boolean("virtual_user", s.device.user.enabled);
+    r.number("user_stiffness_n_per_mm", s.device.user.stiffness_N_per_mm, 1e-6, 100);
+    r.boolean("repeat", s.device.repeat);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("output"), "output", name);
+    r.string("dir", s.out_dir);
+    r.boolean("trace", s.write_trace);
+    r.boolean("perfetto", s.write_perfetto);
+    r.boolean("ply", s.write_ply);
+    r.string("status", s.status, {"auto", "tty", "plain", "off"});
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  {
+    TomlReader r(section("run"), "run", name);
+    r.number("duration_s", s.duration_s, 0.01, 1e6);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+  }
+  if (std::string e = rt::HapticLoop::check(s.haptic); !e.empty()) return fail(name, ": [haptic] ", e);
+  return s;
+}
+
+Result<Scene> load_scene(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return fail(path, ": cannot open scene file");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string dir = std::filesystem::path(path).parent_path().string();
+  return parse_scene(ss.str(), path, dir.empty() ? "." : dir);
+}
+
+rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, const geom::Mesh& object) {
+  const geom::Vec3 n = s.device.normal;
+  geom::Vec3 target = s.device.target;
+  if (s.device.target_top) {  // the object's extreme vertex along the normal
+    double best = -std::numeric_limits<double>::infinity();
+    for (std::uint32_t i = 0; i < object.num_vertices(); ++i)
+      if (const double d = object.vertex(i).dot(n); d > best) {
+        best = d;
+        target = object.vertex(i);
+      }
+  }
+  const geom::Pose grip = probe_grip(s, probe);
+  rt::Trajectory t = rt::builtin_press_slide(target, n, s.device.press_mm, s.device.slide_mm);
+  for (rt::TimedPose& k : t.keys) {
+    geom::Pose p = geom::Pose::Identity();
+    p.translate(k.pose.translation());
+    k.pose = p * grip;
+  }
+  return t;
+}
+
+geom::Pose probe_grip(const Scene& s, const geom::Mesh& probe) {
+  const geom::Vec3 n = s.device.normal;
+  const geom::Vec3 r = s.probe_rotation_deg * (M_PI / 180.0);
+  const Eigen::Matrix3d R = (Eigen::AngleAxisd(r.x(), geom::Vec3::UnitX()) *
+                             Eigen::AngleAxisd(r.y(), geom::Vec3::UnitY()) * Eigen::AngleAxisd(r.z(), geom::Vec3::UnitZ()))
+                                .toRotationMatrix();
+  geom::Vec3 tip = s.probe_tip;
+  if (s.probe_tip_auto) {  // the probe's lowest vertex along the approach direction
+    double best = std::numeric_limits<double>::infinity();
+    for (std::uint32_t i = 0; i < probe.num_vertices(); ++i)
+      if (const double d = (R * probe.vertex(i)).dot(n); d < best) {
+        best = d;
+        tip = probe.vertex(i);
+      }
+  }
+  geom::Pose g = geom::Pose::Identity();
+  g.rotate(R);
+  g.translate(-tip);
+  return g;
+}
+
+Result<geom::Mesh> load_body(const BodySpec& b, const std::string& field) {
+  if (!b.builtin.empty()) {
+    if (b.builtin == "icosphere") return geom::make_icosphere(b.radius_mm, b.frequency);
+    if (b.builtin == "box") return geom::make_box(geom::Vec3::Constant(b.size_mm));
+    return geom::make_capsule(b.radius_mm, b.length_mm, b.segments);
+  }
+  geom::LoadConfig o;
+  o.units = b.units;
+  o.scale = b.scale;
+  Result<geom::LoadedMesh> r = geom::load_mesh(b.mesh, o);
+  if (!r) return fail("[", field, "] ", r.error());
+  return std::move(r.value().mesh);
+}
+
+rt::SceneRef scene_ref(const std::string& scene_path, const geom::Mesh& probe, const geom::Mesh& object) {
+  rt::SceneRef r;
+  if (scene_path.size() < rt::SceneRef::kMaxPath) std::memcpy(r.scene_path, scene_path.c_str(), scene_path.size() + 1);
+  r.probe_hash = geom::mesh_hash(probe);
+  r.object_hash = geom::mesh_hash(object);
+  r.probe_vertices = std::uint32_t(probe.num_vertices());
+  r.probe_faces = std::uint32_t(probe.num_faces());
+  r.object_vertices = std::uint32_t(object.num_vertices());
+  r.object_faces = std::uint32_t(object.num_faces());
+  return r;
+}
+
+std::string compare_scene_ref(const rt::SceneRef& ref, const geom::Mesh& probe, const geom::Mesh& object) {
+  std::string out;
+  auto body = [&out](const char* what, const geom::Mesh& m, std::uint32_t nv, std::uint32_t nf, std::uint64_t hash) {
+    if (!out.empty()) return;
+    char line[256];
+    if (m.num_vertices() != nv || m.num_faces() != nf)
+      std::snprintf(line, sizeof line, "the %s has %zu vertices and %zu faces, the run's had %u and %u", what,
+                    m.num_vertices(), m.num_faces(), nv, nf);
+    else if (geom::mesh_hash(m) != hash)
+      std::snprintf(line, sizeof line, "the %s has the run's %zu vertices and %zu faces but other coordinates or faces",
+                    what, m.num_vertices(), m.num_faces());
+    else
+      return;
+    out = line;
+  };
+  body("probe", probe, ref.probe_vertices, ref.probe_faces, ref.probe_hash);
+  body("object", object, ref.object_vertices, ref.object_faces, ref.object_hash);
+  return out;
+}
+
+}  // namespace st::engine

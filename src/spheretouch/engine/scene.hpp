@@ -1,0 +1,124 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Scene files (configs/*.toml): what `spheretouch run` touches and with which knobs. Every field
+// is checked where it is read, unknown keys are rejected, and only the bodies named are loaded.
+// configs/demo.toml documents every field.
+#pragma once
+#include <spheretouch/abi.hpp>
+#include <string>
+#include <vector>
+
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/contact.hpp>
+#include <spheretouch/geom/mesh.hpp>
+#include <spheretouch/geom/partition.hpp>
+#include <spheretouch/geom/sphere_tree.hpp>
+#include <spheretouch/rt/force_law.hpp>
+#include <spheretouch/rt/haptic_loop.hpp>
+#include <spheretouch/rt/interpolator.hpp>
+#include <spheretouch/rt/passivity.hpp>
+#include <spheretouch/rt/saturation.hpp>
+#include <spheretouch/rt/shm_status.hpp>
+#include <spheretouch/rt/simulated_device.hpp>
+#include <spheretouch/rt/udp_device.hpp>
+
+namespace st::engine {
+
+/// [workers] assist_blocks = "auto" with worker daemons: at ~1,000 contacts the client assist
+/// takes 5-8 blocks a round (spheretouch-bench scale, perf/RESULTS.md "Client assist").
+inline constexpr std::uint32_t kAutoAssistBlocks = 8;
+
+/// One body: a mesh file, the model set ("model:NAME") or a generated shape.
+struct BodySpec {
+  std::string mesh;                                     ///< resolved file path; empty for a generated body
+  std::string builtin;                                  ///< "icosphere", "box", "capsule" when generated
+  double radius_mm = 10, length_mm = 30, size_mm = 40;  ///< generated shape dimensions
+  int frequency = 7, segments = 24;                     ///< generated shape resolution
+  std::string units = "mm";                             ///< unit of the file's coordinates
+  double scale = 1;                                     ///< extra factor
+};
+
+/// The device: a simulated one (a script) or a real one behind the UDP bridge.
+struct DeviceSpec {
+  std::string kind = "simulated";                          ///< "simulated" or "udp"
+  rt::UdpDeviceConfig udp = rt::DefaultUdpDeviceConfig();  ///< kind = "udp"
+  std::string script = "builtin";                          ///< "builtin" or a trajectory file (t + 16 numbers a line)
+  bool target_top = true;                                  ///< builtin: touch the object's highest point along +z
+  geom::Vec3 target{geom::Vec3::Zero()};   ///< builtin: surface point, object frame, mm (target_top false)
+  geom::Vec3 normal{geom::Vec3::UnitZ()};  ///< builtin: approach against this outward normal
+  double press_mm = 3, slide_mm = 20;      ///< builtin: press depth and slide length, mm
+  rt::VirtualUser user;                    ///< spring-damper hand reacting to the force
+  bool repeat = false;                     ///< replay the script from its start each time it ends
+};
+
+/// Everything a run needs, with defaults from the libraries' Default…() functions.
+struct Scene {
+  std::string file;                                   ///< the scene file (for messages)
+  BodySpec probe, object;                             ///< the hand and the touched object
+  bool probe_tip_auto = true;                         ///< fingertip = probe's lowest vertex along the approach
+  geom::Vec3 probe_tip{geom::Vec3::Zero()};           ///< fingertip, probe file coordinates, mm
+  geom::Vec3 probe_rotation_deg{geom::Vec3::Zero()};  ///< probe orientation (XYZ Euler, about the tip)
+  geom::TreeConfig tree = geom::DefaultTreeConfig();  ///< leaf size
+  bool tree_cache = true;                             ///< read/write trees in the tree cache
+  /// Distribution: sphere layer whose spheres are dealt in blocks, and layer spheres per block;
+  /// geom::kFree / 0 = chosen by geom::choose_split() for the scene and worker count ("auto").
+  std::uint32_t layer = geom::kFree, block_size = 0;
+  geom::Mapping mapping = geom::Mapping::block_cyclic;  ///< how blocks are dealt to workers
+  int workers = 2;                                      ///< in-process workers (0 = collide in the collision thread)
+  std::vector<std::string> endpoints;                   ///< worker daemons (overrides `workers`)
+  std::string server_key;   ///< CURVE: the workers' public key file (resolved path; "" = plain)
+  std::string client_key;   ///< CURVE: this client's key pair PREFIX (PREFIX.key, PREFIX.pub)
+  double deadline_ms = 50;  ///< scatter-gather round deadline, ms
+  int down_after = 3;       ///< missed deadlines before a worker is marked down
+  /// Blocks the collision thread answers itself each round (net::ScatterConfig::assist_blocks);
+  /// -1 = "auto": kAutoAssistBlocks with worker daemons, 0 (off) with in-process workers.
+  int assist_blocks = -1;
+  double collision_rate_hz = 0;     ///< cap on collision rounds per second (0 = as fast as possible)
+  int approx_layer = geom::kExact;  ///< kExact, or a sphere layer for the approximate mode
+  rt::HapticLoopConfig haptic = rt::DefaultHapticLoopConfig();  ///< servo loop
+  /// stack of every thread run starts ([haptic] thread_stack_kb); 0 = glibc's default
+  std::size_t thread_stack_bytes = 1 << 20;
+  rt::ForceLawConfig law = rt::DefaultForceLawConfig();              ///< eq. (1) or spring
+  rt::SaturationConfig saturation = rt::DefaultSaturationConfig();   ///< device limits
+  rt::InterpolatorConfig interp = rt::DefaultInterpolatorConfig();   ///< between contact updates
+  geom::ContactConfig contact = geom::DefaultContactConfig();        ///< contact model (patch or paper)
+  rt::PassivityConfig passivity = rt::DefaultPassivityConfig();      ///< energy guard in the servo
+  DeviceSpec device;                                                 ///< simulated device
+  double duration_s = 6;                                             ///< run length (the built-in script takes 5 s)
+  std::string out_dir;                                               ///< run directory ("" = runs/<timestamp>)
+  bool write_trace = true, write_perfetto = true, write_ply = true;  ///< outputs
+  std::string status = "auto";                                       ///< status line: auto, tty, plain, off
+};
+
+/// The defaults (a capsule fingertip against an icosphere: needs no download).
+Scene DefaultScene();
+
+/// Reads and checks a scene file; errors name the file, line and field.
+Result<Scene> load_scene(const std::string& path);
+
+/// Parses scene text; `name` is used in messages and `dir` resolves relative mesh paths.
+Result<Scene> parse_scene(const std::string& text, const std::string& name, const std::string& dir);
+
+/// Directory of the model set: $ST_MODEL_DIR, else .cache/models next to the executable's
+/// source tree, else ./.cache/models.
+std::string model_dir();
+
+/// The built-in script: the probe's fingertip (scene tip, or its lowest vertex along the approach)
+/// approaches the object's surface point (scene target, or its extreme vertex along the normal)
+/// against the normal, presses, slides and releases (rt::builtin_press_slide moves the fingertip).
+rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, const geom::Mesh& object);
+/// The probe as the device holds it: probe file coordinates to the tool frame (the fingertip at
+/// the origin, the scene's probe rotation). A device pose is Trans(tip position) · Rot · grip.
+geom::Pose probe_grip(const Scene& s, const geom::Mesh& probe);
+
+/// Loads (or generates) a body; errors name the scene field.
+Result<geom::Mesh> load_body(const BodySpec& spec, const std::string& field);
+
+/// What a run records in its segment about its scene and meshes (rt::SceneRef): `scene_path`
+/// (absolute; "" = none, and a path longer than SceneRef::kMaxPath - 1 is recorded as none) and
+/// the meshes' counts and geom::mesh_hash.
+rt::SceneRef scene_ref(const std::string& scene_path, const geom::Mesh& probe, const geom::Mesh& object);
+/// "" when `probe` and `object` are the meshes `ref` describes, else what differs (counts, or the
+/// same counts and other coordinates or faces).
+std::string compare_scene_ref(const rt::SceneRef& ref, const geom::Mesh& probe, const geom::Mesh& object);
+
+}  // namespace st::engine

@@ -1,0 +1,28 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Text helpers of the run's summary and the command line.
+#pragma once
+#include <spheretouch/abi.hpp>
+#include <cstdarg>
+#include <cstdio>
+#include <string>
+
+namespace st::engine {
+
+/// Appends printf-style text to `out`, whatever its length; the compiler checks the format
+/// against the arguments.
+[[gnu::format(printf, 2, 3)]] inline void appendf(std::string& out, const char* fmt, ...) {
+  va_list ap, again;
+  va_start(ap, fmt);
+  va_copy(again, ap);
+  const int n = std::vsnprintf(nullptr, 0, fmt, ap);
+  va_end(ap);
+  if (n > 0) {
+    const std::size_t at = out.size();
+    out.resize(at + std::size_t(n) + 1);
+    std::vsnprintf(out.data() + at, std::size_t(n) + 1, fmt, again);
+    out.resize(at + std::size_t(n));
+  }
+  va_end(again);
+}
+
+}  // namespace st::engine

@@ -1,0 +1,304 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Simultaneous descent of two SphereTrees (paper §3.3; traversal after Coal/FCL: relative
+// transform, larger node first, explicit stack), then a leaf-pair stage of box masks.
+//
+// Why no pair is ever missed. Let x be a point common to probe triangle P' (the fl-transformed
+// vertices apply(rt, v)) and object triangle O. Every filter tests a convex set that contains x:
+//  * object node sphere (c_o, r_o): contains O's vertices exactly (sphere_tree.cpp), hence O, hence x;
+//  * probe node sphere: each apply(rt, v) lies within s·r_p of R c_p + t, where s >= ||R||_2
+//    (Gershgorin bound on R^T R, so slightly non-orthonormal poses are covered) — hence within
+//    s·r_p + (rounding of apply and of the centre) of the computed centre;
+//  * probe face box: min/max of the very doubles tri_tri_overlap sees, widened to float (exact
+//    containment, float_below/float_above); a probe leaf box is the union of its face boxes;
+//  * object face box: float rounded outward from the doubles (exact containment); an object leaf
+//    box is the union of its face boxes.
+// Box against box is pure comparison (no arithmetic), so it rejects only disjoint boxes.
+// Sphere-sphere (sphere_mask) and leaf box-sphere tests run in float. Let M bound every centre,
+// radius and coordinate involved (M = |t| + s(|c_p root| + r_p root) + |c_o root| + r_o root:
+// every node's centre lies in the hull of its vertices, hence in the root sphere). The float
+// probe centre is within 2^-24·M·√3 + 1e-14·M of the exact R c_p + t; radii are rounded once;
+// the differences, squares and sums lose at most a few 2^-24 relative. Together that is below
+// 4e-7·M in distance, and the probe radius (or, box-sphere, the object radius) is widened by
+// slack = 1e-5·M, 25x that. So a filter rejects only when the true sets are disjoint, and the final
+// set equals {(p, o) : tri_tri_overlap(same doubles)}. Each face is in exactly one leaf and each
+// leaf pair is reached at most once, so no pair is reported twice.
+#include <spheretouch/geom/collide.hpp>
+
+#include <algorithm>
+#include <bit>
+#include <limits>
+
+#include <spheretouch/geom/check.hpp>
+#include <spheretouch/geom/simd.hpp>
+#include <spheretouch/geom/tri_tri.hpp>
+
+namespace st::geom {
+namespace {
+
+// Error-free transformations (Dekker/Knuth; Ogita, Rump, Oishi 2005 "Accurate sum and dot product").
+inline void two_sum(double a, double b, double& s, double& e) {
+  s = a + b;
+  const double z = s - a;
+  e = (a - (s - z)) + (b - z);
+}
+
+// sum of terms, accurate to ~1 ulp of the result (Sum2 of Ogita-Rump-Oishi, products split exactly).
+double accurate_sum(const double* prod_a, const double* prod_b, int np, const double* add, int na) {
+  double s = 0, comp = 0;
+  for (int i = 0; i < np; ++i) {
+    const double p = prod_a[i] * prod_b[i];
+    const double pe = std::fma(prod_a[i], prod_b[i], -p);
+    double e;
+    two_sum(s, p, s, e);
+    comp += e + pe;
+  }
+  for (int i = 0; i < na; ++i) {
+    double e;
+    two_sum(s, add[i], s, e);
+    comp += e;
+  }
+  return s + comp;
+}
+
+inline Vec3 centre_of(const SphereNode& n) { return Vec3(n.centre[0], n.centre[1], n.centre[2]); }
+
+}  // namespace
+
+RelTransform transform_to_object(const Pose& pose, const Mesh& probe, const Mesh& object) {
+  RelTransform rt;
+  rt.R = pose.linear();
+  for (int i = 0; i < 3; ++i) {
+    const double a[3] = {rt.R(i, 0), rt.R(i, 1), rt.R(i, 2)};
+    const double b[3] = {probe.origin.x(), probe.origin.y(), probe.origin.z()};
+    const double add[2] = {pose.translation()[i], -object.origin[i]};
+    rt.t[i] = accurate_sum(a, b, 3, add, 2);
+  }
+  return rt;
+}
+
+std::uint32_t CollideScratch::next_generation() {
+  if (++gen_ == 0) {
+    std::fill(cstamp_.begin(), cstamp_.end(), 0u);
+    std::fill(lstamp_.begin(), lstamp_.end(), 0u);
+    std::fill(pmark_.begin(), pmark_.end(), 0u);
+    std::fill(omark_.begin(), omark_.end(), 0u);
+    gen_ = 1;
+  }
+  return gen_;
+}
+
+void CollideScratch::prepare(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object,
+                             const SphereTree& object_tree) {
+  // The probe's part is derived again only for another probe: a client answering several object
+  // blocks (net::ScatterConfig::assist_blocks) switches object trees every query, and the probe's
+  // leaves take far longer to derive than a block's spheres.
+  const bool same_probe = pkey_ == probe_tree.nodes.data() && phash_ == probe_tree.mesh_hash &&
+                          lidx_.size() == probe_tree.face_order.size() && cstamp_.size() == probe_tree.nodes.size() &&
+                          pmark_.size() == probe.faces.size();
+  if (!same_probe) prepare_probe(probe, probe_tree);
+  // Object spheres as float SoA, so the children of a node (contiguous) load as whole vectors.
+  nstride_o_ = object_tree.nodes.size() + kMaxChildren;
+  osph_.assign(4 * nstride_o_, 0.0f);
+  for (std::size_t i = 0; i < object_tree.nodes.size(); ++i) {
+    const SphereNode& h = object_tree.nodes[i];
+    for (int k = 0; k < 3; ++k) osph_[k * nstride_o_ + i] = h.centre[k];
+    osph_[3 * nstride_o_ + i] = h.radius;
+  }
+  obox_.assign(object_tree.nodes.size(), {});
+  for (std::size_t i = 0; i < object_tree.nodes.size(); ++i) {
+    const SphereNode& h = object_tree.nodes[i];
+    if (!h.leaf) continue;
+    const float inf = std::numeric_limits<float>::infinity();
+    std::array<float, 8> b = {inf, inf, inf, -inf, -inf, -inf, 0, 0};
+    for (std::uint32_t slot = h.first; slot < h.first + h.count; ++slot)
+      for (int k = 0; k < 3; ++k) {
+        b[k] = std::min(b[k], object_tree.face_boxes[slot].lo[k]);
+        b[3 + k] = std::max(b[3 + k], object_tree.face_boxes[slot].hi[k]);
+      }
+    obox_[i] = b;
+  }
+  osph_key_ = object_tree.nodes.data();
+  osph_hash_ = object_tree.mesh_hash;
+  if (omark_.size() != object.faces.size()) omark_.assign(object.faces.size(), 0);
+  // DFS with "replace one entry by at most 8": depth of the stack <= 1 + 7 (Dp + Do).
+  const std::uint32_t cap = 8 * (probe_tree.num_depths + object_tree.num_depths) + 8;
+  if (stack_.size() < cap) stack_.resize(cap);
+  stack_cap_ = static_cast<std::uint32_t>(stack_.size());
+}
+
+void CollideScratch::prepare_probe(const Mesh& probe, const SphereTree& probe_tree) {
+  auto fit = [](auto& v, std::size_t n) {
+    if (v.size() != n) v.assign(n, {});
+  };
+  // Probe leaves as little meshes (distinct vertices per leaf, faces as indices into them).
+  lvrange_.assign(probe_tree.nodes.size(), {0, 0});
+  lverts_.clear();
+  lidx_.assign(probe_tree.face_order.size(), {0, 0, 0});
+  {
+    std::vector<std::uint32_t> at(probe.local.size(), kNoNode), stamp(probe.local.size(), kNoNode);
+    for (std::uint32_t i = 0; i < probe_tree.num_nodes(); ++i) {
+      const SphereNode& h = probe_tree.nodes[i];
+      if (!h.leaf) continue;
+      const auto begin = static_cast<std::uint32_t>(lverts_.size());
+      for (std::uint32_t slot = h.first; slot < h.first + h.count; ++slot) {
+        const Tri& t = probe.faces[probe_tree.face_order[slot]];
+        for (int k = 0; k < 3; ++k) {
+          const std::uint32_t v = t[k];
+          if (stamp[v] != i) {
+            stamp[v] = i;
+            at[v] = static_cast<std::uint32_t>(lverts_.size());
+            lverts_.push_back(probe.local[v]);
+          }
+          lidx_[slot][k] = at[v];
+        }
+      }
+      lvrange_[i] = {begin, static_cast<std::uint32_t>(lverts_.size())};
+    }
+  }
+  lverts_.shrink_to_fit();
+  ptx_.resize(lverts_.size());
+  pkey_ = probe_tree.nodes.data();
+  phash_ = probe_tree.mesh_hash;
+  fit(cstamp_, probe_tree.nodes.size());
+  nstride_p_ = probe_tree.nodes.size() + kMaxChildren;
+  psph_.assign(4 * nstride_p_, 0.0f);
+  fit(lstamp_, probe_tree.nodes.size());
+  lbox_.resize(probe_tree.nodes.size());
+  pstride_ = probe_tree.face_order.size() + kMaxLeafFaces;  // whole-vector loads past a leaf's end stay inside
+  pbox_.assign(6 * pstride_, 0.0f);
+  fit(pmark_, probe.faces.size());
+}
+
+std::size_t CollideScratch::bytes() const {
+  auto b = [](const auto& v) { return v.capacity() * sizeof(v[0]); };
+  return b(lvrange_) + b(lverts_) + b(lidx_) + b(ptx_) + b(cstamp_) + b(psph_) + b(osph_) + b(obox_) + b(lstamp_) +
+         b(lbox_) + b(pbox_) + b(pmark_) + b(omark_) + b(stack_) + b(sort_keys_);
+}
+
+// One query, traversal and leaf stage, per instruction set (collide_traversal.inl; the primary
+// template is never defined). Every ISA gives the same masks, so the same pairs and counters.
+template <class Lanes>
+struct CollideQuery;
+
+#define ST_COLLIDE_SIMD simd::scalar
+#include "collide_traversal.inl"
+#undef ST_COLLIDE_SIMD
+#if defined(ST_SIMD_X86)
+#define ST_COLLIDE_SIMD simd::sse2
+#include "collide_traversal.inl"
+#undef ST_COLLIDE_SIMD
+ST_TARGET_AVX2_BEGIN
+#define ST_COLLIDE_SIMD simd::avx2
+#include "collide_traversal.inl"
+#undef ST_COLLIDE_SIMD
+ST_TARGET_END
+#endif
+
+namespace {
+
+// The query on one ISA's kernels: everything but the set-up, which is the same for all.
+template <class Lanes>
+void run_query(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree,
+               const CollideConfig& options, CollideScratch& scratch, CollideResult& result, const RelTransform& rt,
+               double s, float slack, std::uint32_t gen) {
+  CollideQuery<Lanes> q{probe, probe_tree, object, object_tree, options, scratch, result, rt};
+  q.gen = gen;
+  q.exact = options.stop_layer == kExact;
+  q.stop = options.stop_layer >= 0 ? static_cast<std::uint32_t>(options.stop_layer) : 0xffffffffu;
+  q.s = s;
+  q.slack = slack;
+  if (!options.restrict_object) {
+    q.descend(0, 0);
+  } else {
+    for (const std::uint32_t r : options.object_roots)
+      if (r < object_tree.num_nodes() && !result.stats.pair_limit_hit) q.descend(0, r);
+  }
+}
+
+}  // namespace
+
+void sort_face_pairs(std::span<FacePair> pairs, std::vector<std::uint64_t>& scratch) {
+  const std::size_t n = pairs.size();
+  if (n < 64) {  // a handful: the comparison sort is quicker than clearing the counts
+    std::sort(pairs.begin(), pairs.end());
+    return;
+  }
+  std::uint32_t max_probe = 0, max_object = 0;
+  for (const FacePair& p : pairs) max_probe = std::max(max_probe, p.probe), max_object = std::max(max_object, p.object);
+  const int object_bits = std::bit_width(max_object), bits = std::bit_width(max_probe) + object_bits;
+  constexpr int kDigit = 11;
+  constexpr std::size_t kBuckets = std::size_t(1) << kDigit;
+  scratch.resize(2 * n);
+  std::uint64_t* a = scratch.data();
+  std::uint64_t* b = a + n;
+  for (std::size_t i = 0; i < n; ++i) a[i] = (std::uint64_t(pairs[i].probe) << object_bits) | pairs[i].object;
+  // One stable counting pass per digit, lowest first: the order of the keys is (probe, object).
+  std::uint32_t count[kBuckets];
+  for (int shift = 0; shift < bits; shift += kDigit) {
+    std::fill(count, count + kBuckets, 0u);
+    for (std::size_t i = 0; i < n; ++i) ++count[(a[i] >> shift) & (kBuckets - 1)];
+    if (count[(a[0] >> shift) & (kBuckets - 1)] == n) continue;  // one digit value: nothing moves
+    std::uint32_t sum = 0;
+    for (std::uint32_t& c : count) sum += std::exchange(c, sum);
+    for (std::size_t i = 0; i < n; ++i) b[count[(a[i] >> shift) & (kBuckets - 1)]++] = a[i];
+    std::swap(a, b);
+  }
+  const std::uint64_t object_mask = (std::uint64_t(1) << object_bits) - 1;
+  for (std::size_t i = 0; i < n; ++i)
+    pairs[i] = {std::uint32_t(a[i] >> object_bits), std::uint32_t(a[i] & object_mask)};
+}
+
+FaceCounts count_faces(std::span<const FacePair> pairs, std::vector<std::uint32_t>& scratch) {
+  const auto distinct = [&](auto field) {
+    scratch.clear();
+    for (const FacePair& p : pairs) scratch.push_back(p.*field);
+    std::sort(scratch.begin(), scratch.end());
+    return static_cast<std::uint32_t>(std::unique(scratch.begin(), scratch.end()) - scratch.begin());
+  };
+  return {distinct(&FacePair::probe), distinct(&FacePair::object)};
+}
+
+void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree,
+             const Pose& pose, const CollideConfig& options, CollideScratch& scratch, CollideResult& result) {
+  result.clear();
+  if (probe_tree.nodes.empty() || object_tree.nodes.empty()) return;
+  if (!pose.matrix().allFinite()) return;  // boundaries validate poses; never crash here
+  if (probe_tree.num_depths > kMaxTreeDepth || object_tree.num_depths > kMaxTreeDepth) {
+    result.stats.truncated = 1;  // the stack is sized from num_depths: never from an unchecked value
+    return;
+  }
+  if (scratch.pkey_ != probe_tree.nodes.data() || scratch.phash_ != probe_tree.mesh_hash ||
+      scratch.lidx_.size() != probe_tree.face_order.size() || scratch.omark_.size() != object.faces.size() ||
+      scratch.cstamp_.size() != probe_tree.nodes.size() || scratch.osph_key_ != object_tree.nodes.data() ||
+      scratch.osph_hash_ != object_tree.mesh_hash || scratch.nstride_o_ != object_tree.nodes.size() + kMaxChildren ||
+      scratch.stack_cap_ < 8 * (probe_tree.num_depths + object_tree.num_depths) + 8)
+    scratch.prepare(probe, probe_tree, object, object_tree);
+
+  const RelTransform rt = transform_to_object(pose, probe, object);
+  // s >= ||R||_2: sqrt of the largest row sum of |R^T R| (Gershgorin), widened for its rounding.
+  const Eigen::Matrix3d G = rt.R.transpose() * rt.R;
+  const double g = G.cwiseAbs().rowwise().sum().maxCoeff();
+  const double s = std::sqrt(g) * (1 + 1e-12);
+  const SphereNode& rp = probe_tree.nodes[0];
+  const SphereNode& ro = object_tree.nodes[0];
+  const double mag = rt.t.norm() + s * (centre_of(rp).norm() + rp.radius) + centre_of(ro).norm() + ro.radius;
+  const float slack = static_cast<float>(1e-5 * mag) + 1e-30f;
+  const std::uint32_t gen = scratch.next_generation();
+
+  switch (simd::active_isa()) {
+#if defined(ST_SIMD_X86)
+    case simd::Isa::avx2:
+      run_query<simd::avx2::Lanes>(probe, probe_tree, object, object_tree, options, scratch, result, rt, s, slack, gen);
+      break;
+    case simd::Isa::sse2:
+      run_query<simd::sse2::Lanes>(probe, probe_tree, object, object_tree, options, scratch, result, rt, s, slack, gen);
+      break;
+#endif
+    default:
+      run_query<simd::scalar::Lanes>(probe, probe_tree, object, object_tree, options, scratch, result, rt, s, slack, gen);
+      break;
+  }
+  if (options.sort_pairs) sort_face_pairs(result.pairs, scratch.sort_keys_);
+}
+
+}  // namespace st::geom

@@ -1,0 +1,160 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// collide(): exact face-level collision of a probe (the hand) against an object by simultaneous
+// descent of their SphereTrees with the relative transform (paper §3.3, Coal/FCL traversal).
+// Nothing is transformed wholesale: sphere centres and probe vertices are mapped as visited.
+#pragma once
+#include <spheretouch/abi.hpp>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include <spheretouch/geom/mesh.hpp>
+#include <spheretouch/geom/sphere_tree.hpp>
+
+namespace st::geom {
+
+/// Probe local frame -> object local frame (mesh.hpp): p_obj_local = R p_probe_local + t. The ONE arithmetic every
+/// caller (collide, references in tests, tools) uses, so "the same transformed doubles" is literal.
+struct RelTransform {
+  Eigen::Matrix3d R;  ///< pose.linear()
+  Vec3 t;             ///< R probe.origin + pose.translation() - object.origin, rounded once
+};
+
+/// R and t for `pose` (probe frame -> object frame). t is computed with error-free
+/// transformations (fma TwoProduct + TwoSum) and rounded once, so origins at 1e6 mm lose nothing.
+RelTransform transform_to_object(const Pose& pose, const Mesh& probe, const Mesh& object);
+
+/// p mapped by rt: each coordinate fma(R_i0, x, fma(R_i1, y, fma(R_i2, z, t_i))), identical on every
+/// compiler setting (no contraction freedom).
+inline Vec3 apply(const RelTransform& rt, const Vec3& p) {
+  Vec3 out;
+  for (int i = 0; i < 3; ++i)
+    out[i] = std::fma(rt.R(i, 0), p.x(), std::fma(rt.R(i, 1), p.y(), std::fma(rt.R(i, 2), p.z(), rt.t[i])));
+  return out;
+}
+
+/// A colliding face pair, named by input-file face indices.
+struct FacePair {
+  std::uint32_t probe;   ///< probe face index
+  std::uint32_t object;  ///< object face index
+  friend bool operator==(const FacePair&, const FacePair&) = default;
+  friend auto operator<=>(const FacePair&, const FacePair&) = default;
+};
+
+/// Distinct probe faces and distinct object faces of a pair list: paper §3.5's "number of
+/// contacts" is their sum. The one definition every counter uses.
+struct FaceCounts {
+  std::uint32_t probe_faces = 0;                                         ///< distinct probe faces
+  std::uint32_t object_faces = 0;                                        ///< distinct object faces
+  std::uint32_t contacts() const { return probe_faces + object_faces; }  ///< paper §3.5
+};
+/// Counts the pairs' distinct faces (any order; `scratch` is reused, no allocation once warm).
+FaceCounts count_faces(std::span<const FacePair> pairs, std::vector<std::uint32_t>& scratch);
+
+/// Sorts pairs by (probe, object), as std::sort would, in a few linear passes (an LSD radix
+/// sort of 11-bit digits over the key's used bits: 3 passes for two meshes of ~60,000 faces).
+/// `scratch` is reused (no allocation once warm).
+void sort_face_pairs(std::span<FacePair> pairs, std::vector<std::uint64_t>& scratch);
+
+/// Approximate-mode stop layers (CollideConfig::stop_layer).
+inline constexpr int kExact = -2;        ///< full exact descent (default)
+inline constexpr int kLeafSpheres = -1;  ///< stop at leaf spheres, no triangle tests
+
+/// What a query does.
+struct CollideConfig {
+  /// kExact: triangle tests. kLeafSpheres or a layer K >= 0: stop where both nodes are at layer K
+  /// (or leaves) and report every face pair of the overlapping sphere pair (a superset of exact).
+  int stop_layer = kExact;
+  bool sort_pairs = false;  ///< sort `pairs` by (probe, object)
+  /// With restrict_object: only these object subtree roots (a worker's blocks, partition.hpp; may
+  /// be empty = nothing). Must be disjoint subtrees (e.g. nodes of one layer).
+  std::span<const std::uint32_t> object_roots{};
+  bool restrict_object = false;   ///< use object_roots instead of the whole object
+  bool approx_face_pairs = true;  ///< approximate mode: also expand sphere pairs into face pairs
+  /// Stop the traversal once more than this many pairs are found (stats.pair_limit_hit); the result
+  /// then holds at most max_pairs plus one leaf pair's worth (64 × 64). A worker answering a
+  /// hostile block set (every face on top of every other) must not compute N² pairs first.
+  std::size_t max_pairs = SIZE_MAX;
+};
+inline CollideConfig DefaultCollideConfig() { return {}; }  ///< exact, unsorted, whole object
+
+/// Counters of one query (Box2D-style, for tests and benchmarks).
+struct CollideStats {
+  std::uint64_t node_pairs = 0;    ///< sphere pairs tested
+  std::uint64_t leaf_pairs = 0;    ///< leaf-leaf pairs reached (exact mode)
+  std::uint64_t tri_pairs = 0;     ///< exact tri_tri_overlap calls
+  std::uint64_t sphere_pairs = 0;  ///< approximate mode: overlapping sphere pairs reported
+  /// traversals stopped: a tree deeper than its num_depths (or > kMaxTreeDepth); 0 for valid trees
+  std::uint64_t truncated = 0;
+  bool pair_limit_hit = false;  ///< the traversal stopped at CollideConfig::max_pairs
+};
+
+/// Output of a query; caller-owned, reused across queries (clear() keeps capacity).
+struct CollideResult {
+  std::vector<FacePair> pairs;  ///< colliding (or, approximate mode, candidate) face pairs
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> sphere_pairs;  ///< approximate mode: (probe node, object node)
+  std::uint32_t probe_faces = 0;                                      ///< distinct probe faces in `pairs`
+  std::uint32_t object_faces = 0;                                     ///< distinct object faces in `pairs`
+  CollideStats stats;                                                 ///< counters
+  std::uint32_t contacts() const { return probe_faces + object_faces; }  ///< paper §3.5 "number of contacts"
+  void clear() {
+    pairs.clear();
+    sphere_pairs.clear();
+    probe_faces = object_faces = 0;
+    stats = {};
+  }
+};
+
+/// Per-caller scratch: per-query caches of transformed probe vertices, centres and leaf face boxes
+/// (generation stamps), contact stamps, explicit stack. Sized on first use for a (probe, object) pair; later queries allocate nothing.
+class CollideScratch {
+ public:
+  /// Sizes everything for these meshes/trees (also done lazily by collide()).
+  void prepare(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree);
+  /// Heap bytes held (the per-query caches and what is derived from the two trees).
+  std::size_t bytes() const;
+
+ private:
+  void prepare_probe(const Mesh& probe, const SphereTree& probe_tree);  // prepare()'s probe part
+  template <class Lanes>
+  friend struct CollideQuery;  // collide.cpp: one per instruction set
+  friend void collide(const Mesh&, const SphereTree&, const Mesh&, const SphereTree&, const Pose&, const CollideConfig&,
+                      CollideScratch&, CollideResult&);
+  std::uint32_t gen_ = 0;
+  std::vector<std::uint64_t> sort_keys_;  // sort_face_pairs' scratch (CollideConfig::sort_pairs)
+  // Probe leaves as little meshes, so a query transforms a leaf's vertices in one sequential pass
+  // (derived from the probe tree once, keyed by pkey_/phash_):
+  std::vector<std::array<std::uint32_t, 2>> lvrange_;  // probe leaf node -> its vertices [begin, end) in lverts_
+  std::vector<Vec3> lverts_;  // distinct vertices of each leaf, leaves one after another, probe-local
+  std::vector<std::array<std::uint32_t, 3>> lidx_;  // probe slot -> its face's vertices as indices into lverts_
+  std::vector<Vec3> ptx_;              // lverts_ transformed into object-local (valid for leaves stamped this query)
+  const void* pkey_ = nullptr;         // probe tree the above was derived from (nodes.data()) ...
+  std::uint64_t phash_ = 0;            // ... and its mesh_hash
+  std::vector<std::uint32_t> cstamp_;  // probe node -> generation its CHILDREN's spheres were transformed
+  std::vector<float> psph_;  // probe node spheres in object-local, SoA (x, y, z, s·r + slack) by node, stride nstride_p_
+  std::size_t nstride_p_ = 0;               // probe nodes + padding for 8-wide loads
+  std::vector<float> osph_;                 // object node spheres, SoA (x, y, z, r) by node, stride nstride_o_
+  std::size_t nstride_o_ = 0;               // object nodes + padding for 8-wide loads
+  std::vector<std::array<float, 8>> obox_;  // object leaf: union of its face boxes (lo xyz, hi xyz, pad)
+  const void* osph_key_ = nullptr;          // object tree osph_ was filled from (nodes.data()) ...
+  std::uint64_t osph_hash_ = 0;             // ... and its mesh_hash
+  std::vector<std::uint32_t> lstamp_;       // probe leaf node -> generation of its cached face boxes
+  std::vector<std::array<float, 8>> lbox_;  // probe leaf: union of its face boxes (lo xyz, hi xyz, pad)
+  std::vector<float> pbox_;                 // probe face boxes by slot, SoA: component k at k * pstride_
+  std::size_t pstride_ = 0;                 // slots + padding for whole-vector loads
+  std::vector<std::uint32_t> pmark_;        // probe face -> generation it was counted as a contact
+  std::vector<std::uint32_t> omark_;        // object face -> generation it was counted
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> stack_;
+  std::uint32_t stack_cap_ = 0;
+  std::uint32_t next_generation();
+};
+
+/// Collides probe (posed by `pose`: probe frame -> object frame) with object. The pair
+/// set is exactly {(p, o) : tri_tri_overlap(apply(rt, probe p's vertices), object o's vertices)}
+/// (restricted to object_roots if given). Never throws; allocates only while warming up.
+void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree,
+             const Pose& pose, const CollideConfig& options, CollideScratch& scratch, CollideResult& result);
+
+}  // namespace st::geom

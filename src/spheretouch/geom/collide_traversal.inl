@@ -1,0 +1,284 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// The collision query's traversal and leaf stage (collide.cpp), compiled once per instruction set:
+// collide.cpp includes this file inside each ISA's target region (simd.hpp) with ST_COLLIDE_SIMD
+// naming that ISA's namespace (simd::sse2, ...), so each ISA gets its own CollideQuery
+// specialisation, kernels included, and collide() runs the one simd::active_isa() names.
+// No #include here: everything is defined inside the region, for its ISA.
+
+template <>
+struct CollideQuery<ST_COLLIDE_SIMD::Lanes> {
+  using Lanes = ST_COLLIDE_SIMD::Lanes;
+  using Mask = ST_COLLIDE_SIMD::Mask;
+
+  // The three filters are written once over Lanes (this ISA's), a step of Lanes::width lanes at a
+  // time; every ISA gives the same masks.
+
+  // Bit k (k < n <= 8) set when sphere k of a float SoA block (x at c[0], y at c[st], z at c[2 st],
+  // radius at c[3 st]) meets the sphere (qx, qy, qz; qr): |c_k - q|^2 <= (r_k + qr)^2 in float.
+  // Conservative by the slack in the probe radii (see the top of this file). Reads whole steps past
+  // n: the SoA arrays are padded by kMaxChildren.
+  static std::uint32_t sphere_mask(const float* c, std::size_t st, std::uint32_t n, float qx, float qy, float qz, float qr) {
+    const Lanes x = Lanes::broadcast(qx), y = Lanes::broadcast(qy), z = Lanes::broadcast(qz), r = Lanes::broadcast(qr);
+    std::uint32_t m = 0;
+    for (std::uint32_t k = 0; k < n; k += Lanes::width) {
+      const Lanes dx = Lanes::load(c + k) - x;
+      const Lanes dy = Lanes::load(c + st + k) - y;
+      const Lanes dz = Lanes::load(c + 2 * st + k) - z;
+      const Lanes rr = Lanes::load(c + 3 * st + k) + r;
+      m |= (dx * dx + dy * dy + dz * dz <= rr * rr).bits() << k;
+    }
+    return m & ((1u << n) - 1u);
+  }
+
+  // Bit i (i < n <= 64) set when box i of a float SoA block (lo x at c[i], lo y at c[st + i], ...,
+  // hi z at c[5 st + i]) meets box b (lo xyz, hi xyz). Pure comparisons, exact. Reads whole steps
+  // past n: the SoA arrays are padded by kMaxLeafFaces.
+  static std::uint64_t soa_box_mask(const float* c, std::size_t st, std::uint32_t n, const float* b) {
+    const Lanes blx = Lanes::broadcast(b[0]), bly = Lanes::broadcast(b[1]), blz = Lanes::broadcast(b[2]);
+    const Lanes bhx = Lanes::broadcast(b[3]), bhy = Lanes::broadcast(b[4]), bhz = Lanes::broadcast(b[5]);
+    std::uint64_t m = 0;
+    for (std::uint32_t i = 0; i < n; i += Lanes::width) {
+      const Mask h = (Lanes::load(c + i) <= bhx) & (Lanes::load(c + st + i) <= bhy) &
+                     (Lanes::load(c + 2 * st + i) <= bhz) & (Lanes::load(c + 3 * st + i) >= blx) &
+                     (Lanes::load(c + 4 * st + i) >= bly) & (Lanes::load(c + 5 * st + i) >= blz);
+      m |= std::uint64_t{h.bits()} << i;
+    }
+    return n >= 64 ? m : m & ((std::uint64_t{1} << n) - 1);
+  }
+
+  // Bit j (j < n <= 64) set when face box fb[j] meets box b (lo xyz, hi xyz). Exact. A step's boxes
+  // are gathered from the 24-byte AoS, reading nothing past fb[n - 1] (face_boxes is not padded).
+  static std::uint64_t face_box_mask(const FaceBox* fb, std::uint32_t n, const float* b) {
+    static_assert(sizeof(FaceBox) == 6 * sizeof(float), "face boxes are read as 6 packed floats");
+    const Lanes blx = Lanes::broadcast(b[0]), bly = Lanes::broadcast(b[1]), blz = Lanes::broadcast(b[2]);
+    const Lanes bhx = Lanes::broadcast(b[3]), bhy = Lanes::broadcast(b[4]), bhz = Lanes::broadcast(b[5]);
+    const float* f = reinterpret_cast<const float*>(fb);
+    std::uint64_t m = 0;
+    for (std::uint32_t j = 0; j < n; j += Lanes::width) {
+      const std::uint32_t live = n - j;
+      const float* p = f + 6 * j;
+      // Lanes past the last box are gathered as 0 and may compare true: the live mask clears them.
+      const Mask h = Mask::first(live) & (Lanes::gather<6>(p, live) <= bhx) & (Lanes::gather<6>(p + 1, live) <= bhy) &
+                     (Lanes::gather<6>(p + 2, live) <= bhz) & (Lanes::gather<6>(p + 3, live) >= blx) &
+                     (Lanes::gather<6>(p + 4, live) >= bly) & (Lanes::gather<6>(p + 5, live) >= blz);
+      m |= std::uint64_t{h.bits()} << j;
+    }
+    return m;
+  }
+
+  const Mesh& P;
+  const SphereTree& PT;
+  const Mesh& O;
+  const SphereTree& OT;
+  const CollideConfig& opt;
+  CollideScratch& sc;
+  CollideResult& res;
+  RelTransform rt;
+  double s = 1;     // >= ||R||_2
+  float slack = 0;  // absolute slack of the float sphere tests, mm (see sphere_mask)
+  std::uint32_t gen = 0;
+  bool exact = true;
+  std::uint32_t stop = 0;  // approximate mode: layer at which nodes become terminal
+
+  // Probe node i's sphere in object-local into the float SoA: centre apply(rt, c) rounded to
+  // float, radius s·r + slack.
+  void put_probe_sphere(std::uint32_t i) {
+    const SphereNode& h = PT.nodes[i];
+    const Vec3 c = apply(rt, centre_of(h));
+    float* ps = sc.psph_.data();
+    const std::size_t st = sc.nstride_p_;
+    for (int k = 0; k < 3; ++k) ps[k * st + i] = static_cast<float>(c[k]);
+    ps[3 * st + i] = static_cast<float>(s * h.radius + slack);
+  }
+  // The children of probe node p, transformed once per query.
+  void probe_children(std::uint32_t p) {
+    if (sc.cstamp_[p] == gen) return;
+    sc.cstamp_[p] = gen;
+    const SphereNode& h = PT.nodes[p];
+    for (std::uint32_t k = 0; k < h.count; ++k) put_probe_sphere(h.first + k);
+  }
+
+  bool terminal_p(const SphereNode& n) const { return n.leaf || (!exact && n.depth >= stop); }
+  bool terminal_o(const SphereNode& n) const { return n.leaf || (!exact && n.depth >= stop); }
+
+  // Float bounds of a double, branch-free: x ∓ |x|·2^-22 ∓ 1e-30 is at least 2^-22·|x| away from x
+  // on the wide side, and float conversion moves it by at most 2^-24 of itself, so the result is
+  // still on the wide side (x = 0 included: ±1e-30 is a normal float).
+  static float float_below(double x) { return static_cast<float>(x - std::abs(x) * 0x1p-22 - 1e-30); }
+  static float float_above(double x) { return static_cast<float>(x + std::abs(x) * 0x1p-22 + 1e-30); }
+
+  // Probe leaf p's face boxes (float, enclosing the transformed doubles) in SoA by slot, and their
+  // union, computed once per query.
+  const std::array<float, 8>& probe_leaf(std::uint32_t p) {
+    std::array<float, 8>& u = sc.lbox_[p];
+    if (sc.lstamp_[p] == gen) return u;
+    sc.lstamp_[p] = gen;
+    const SphereNode& hp = PT.nodes[p];
+    const float inf = std::numeric_limits<float>::infinity();
+    u = {inf, inf, inf, -inf, -inf, -inf, 0, 0};
+    float* pb = sc.pbox_.data();
+    const std::size_t st = sc.pstride_;
+    // The very doubles tri_tri_overlap will see: apply(rt, v) of the same local vertices.
+    const auto [v0, v1] = sc.lvrange_[p];
+    for (std::uint32_t v = v0; v < v1; ++v) sc.ptx_[v] = apply(rt, sc.lverts_[v]);
+    for (std::uint32_t slot = hp.first, e = hp.first + hp.count; slot < e; ++slot) {
+      const auto& ix = sc.lidx_[slot];
+      const Vec3& a = sc.ptx_[ix[0]];
+      const Vec3& b = sc.ptx_[ix[1]];
+      const Vec3& c = sc.ptx_[ix[2]];
+      for (int k = 0; k < 3; ++k) {
+        const float lo = float_below(std::min(a[k], std::min(b[k], c[k])));
+        const float hi = float_above(std::max(a[k], std::max(b[k], c[k])));
+        pb[k * st + slot] = lo;
+        pb[(3 + k) * st + slot] = hi;
+        u[k] = std::min(u[k], lo);
+        u[3 + k] = std::max(u[3 + k], hi);
+      }
+    }
+    return u;
+  }
+
+  void emit(std::uint32_t pf, std::uint32_t of) {
+    res.pairs.push_back({pf, of});
+    if (res.pairs.size() > opt.max_pairs) [[unlikely]]
+      res.stats.pair_limit_hit = true;
+    if (sc.pmark_[pf] != gen) {
+      sc.pmark_[pf] = gen;
+      ++res.probe_faces;
+    }
+    if (sc.omark_[of] != gen) {
+      sc.omark_[of] = gen;
+      ++res.object_faces;
+    }
+  }
+
+  // Bit i set when probe face box at slot first + i (i < n) meets box b (lo xyz, hi xyz).
+  std::uint64_t probe_mask(std::uint32_t first, std::uint32_t n, const float* b) const {
+    return soa_box_mask(sc.pbox_.data() + first, sc.pstride_, n, b);
+  }
+
+  // Leaf pair: object faces against the probe leaf's box, probe faces against the survivors'
+  // union box, then face box against face box, then the exact triangle test. Boxes are compared
+  // without arithmetic, so every rejection is exact (see the top of this file).
+  void leaf_leaf(std::uint32_t p, std::uint32_t o) {
+    const SphereNode& hp = PT.nodes[p];
+    const SphereNode& ho = OT.nodes[o];
+    ++res.stats.leaf_pairs;
+    const std::array<float, 8>& u = probe_leaf(p);
+    // Probe leaf box against the object leaf sphere (float, radius widened by the slack) before
+    // the object's face boxes are touched: most leaf pairs end here.
+    {
+      const float* os = sc.osph_.data();
+      const std::size_t so = sc.nstride_o_;
+      float d2 = 0;
+      for (int k = 0; k < 3; ++k) {
+        const float c = os[k * so + o];
+        const float d = std::max(0.0f, std::max(u[k] - c, c - u[3 + k]));
+        d2 += d * d;
+      }
+      const float r = os[3 * so + o] + slack;
+      if (d2 > r * r) return;
+    }
+    // Probe leaf box against the object leaf box (union of its face boxes).
+    {
+      const std::array<float, 8>& v = sc.obox_[o];
+      // Branch-free on purpose: int-valued | of all six comparisons, one branch at the end.
+      if (int(v[0] > u[3]) | int(v[1] > u[4]) | int(v[2] > u[5]) | int(v[3] < u[0]) | int(v[4] < u[1]) | int(v[5] < u[2]))
+        return;
+    }
+    const FaceBox* ob = OT.face_boxes.data() + ho.first;
+    const std::uint64_t mo = face_box_mask(ob, ho.count, u.data());
+    if (mo == 0) return;
+    const float inf = std::numeric_limits<float>::infinity();
+    float ou[6] = {inf, inf, inf, -inf, -inf, -inf};
+    for (std::uint64_t m = mo; m != 0; m &= m - 1) {
+      const FaceBox& fb = ob[std::countr_zero(m)];
+      for (int k = 0; k < 3; ++k) {
+        ou[k] = std::min(ou[k], fb.lo[k]);
+        ou[3 + k] = std::max(ou[3 + k], fb.hi[k]);
+      }
+    }
+    const std::uint64_t mp = probe_mask(hp.first, hp.count, ou);
+    if (mp == 0) return;
+    for (std::uint64_t m = mo; m != 0; m &= m - 1) {
+      const unsigned j = static_cast<unsigned>(std::countr_zero(m));
+      const FaceBox& fb = ob[j];
+      const float b[6] = {fb.lo[0], fb.lo[1], fb.lo[2], fb.hi[0], fb.hi[1], fb.hi[2]};
+      std::uint64_t mf = std::popcount(mp) == 1 ? mp : (probe_mask(hp.first, hp.count, b) & mp);
+      if (mf == 0) continue;
+      const std::uint32_t of = OT.face_order[ho.first + j];
+      const Tri& ot = O.faces[of];
+      const Vec3& o0 = O.local[ot[0]];
+      const Vec3& o1 = O.local[ot[1]];
+      const Vec3& o2 = O.local[ot[2]];
+      for (; mf != 0; mf &= mf - 1) {
+        const std::uint32_t slot = hp.first + static_cast<unsigned>(std::countr_zero(mf));
+        ++res.stats.tri_pairs;
+        const auto& ix = sc.lidx_[slot];
+        if (tri_tri_overlap(sc.ptx_[ix[0]], sc.ptx_[ix[1]], sc.ptx_[ix[2]], o0, o1, o2)) emit(PT.face_order[slot], of);
+      }
+    }
+  }
+
+  void approx_pair(std::uint32_t p, std::uint32_t o) {
+    ++res.stats.sphere_pairs;
+    res.sphere_pairs.emplace_back(p, o);
+    if (!opt.approx_face_pairs) return;
+    for (const std::uint32_t* pf = PT.faces_begin(p); pf != PT.faces_end(p) && !res.stats.pair_limit_hit; ++pf)
+      for (const std::uint32_t* of = OT.faces_begin(o); of != OT.faces_end(o); ++of) emit(*pf, *of);
+  }
+
+  void push_children(std::uint32_t mask, std::uint32_t first, std::uint32_t other, bool probe_side,
+                     std::pair<std::uint32_t, std::uint32_t>* stack, std::uint32_t& n) const {
+    // Highest child first, so the first child is popped first (depth-first in child order).
+    for (; mask != 0; mask &= ~(1u << (31 - std::countl_zero(mask)))) {
+      const std::uint32_t c = first + static_cast<std::uint32_t>(31 - std::countl_zero(mask));
+      stack[n++] = probe_side ? std::pair{c, other} : std::pair{other, c};
+    }
+    ST_ASSERT(n <= sc.stack_cap_, "descend() leaves room for kMaxChildren before each push");
+  }
+
+  void descend(std::uint32_t proot, std::uint32_t oroot) {
+    auto* stack = sc.stack_.data();
+    const float* ps = sc.psph_.data();
+    const float* os = sc.osph_.data();
+    const std::size_t sp = sc.nstride_p_, so = sc.nstride_o_;
+    std::uint32_t n = 0;
+    put_probe_sphere(proot);
+    res.stats.node_pairs += 1;
+    if (sphere_mask(os + oroot, so, 1, ps[proot], ps[sp + proot], ps[2 * sp + proot], ps[3 * sp + proot]) == 0) return;
+    stack[n++] = {proot, oroot};
+    while (n > 0 && !res.stats.pair_limit_hit) {
+      const auto [p, o] = stack[--n];
+      const SphereNode& hp = PT.nodes[p];
+      const SphereNode& ho = OT.nodes[o];
+      const bool tp = terminal_p(hp), to = terminal_o(ho);
+      if (tp && to) {
+        if (exact)
+          leaf_leaf(p, o);
+        else
+          approx_pair(p, o);
+        continue;
+      }
+      // A tree deeper than its num_depths claims (never one built or read by tree_io, which
+      // checks; a hand-made one could) would overflow the stack: stop, and say so.
+      if (n + kMaxChildren > sc.stack_cap_) [[unlikely]] {
+        ++res.stats.truncated;
+        return;
+      }
+      // Descend the larger sphere; test all its children against the other sphere at once.
+      if (!to && (tp || ho.radius >= s * hp.radius)) {
+        res.stats.node_pairs += ho.count;
+        const std::uint32_t m =
+            sphere_mask(os + ho.first, so, ho.count, ps[p], ps[sp + p], ps[2 * sp + p], ps[3 * sp + p]);
+        push_children(m, ho.first, p, false, stack, n);
+      } else {
+        probe_children(p);
+        res.stats.node_pairs += hp.count;
+        const std::uint32_t m =
+            sphere_mask(ps + hp.first, sp, hp.count, os[o], os[so + o], os[2 * so + o], os[3 * so + o]);
+        push_children(m, hp.first, o, true, stack, n);
+      }
+    }
+  }
+};

@@ -1,0 +1,217 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Contact models from colliding face pairs: the builder, the configuration and the paper's model
+// (§3.6); the patch model is in contact_patch.cpp. Definitions in contact.hpp.
+#include <spheretouch/geom/contact.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include <spheretouch/geom/check.hpp>
+#include <spheretouch/geom/contact_patch.hpp>
+
+namespace st::geom {
+
+Result<ContactModelKind> parse_contact_model(std::string_view name) {
+  if (name == "paper") return ContactModelKind::paper;
+  if (name == "patch") return ContactModelKind::patch;
+  return fail("contact model '", std::string(name), "': expected patch or paper");
+}
+
+const char* to_string(ContactModelKind kind) {
+  switch (kind) {
+    case ContactModelKind::paper:
+      return "paper";
+    case ContactModelKind::patch:
+      return "patch";
+  }
+  return "?";
+}
+
+ContactConfig DefaultContactConfig() { return ContactConfig{}; }
+
+std::string check(const ContactConfig& c) {
+  std::ostringstream os;
+  if (c.model != ContactModelKind::paper && c.model != ContactModelKind::patch)
+    os << "contact: model = " << static_cast<unsigned>(c.model) << ", expected patch or paper";
+  else if (!(std::isfinite(c.replane_angle_deg) && c.replane_angle_deg >= 0 && c.replane_angle_deg <= 180))
+    os << "contact: replane_angle_deg = " << c.replane_angle_deg << ", expected a value in [0, 180]";
+  else if (!(std::isfinite(c.hold_margin_mm) && c.hold_margin_mm >= 0))
+    os << "contact: hold_margin_mm = " << c.hold_margin_mm << ", expected a finite value >= 0";
+  else if (c.max_inside_vertices < 1)
+    os << "contact: max_inside_vertices = 0, expected >= 1";
+  return os.str();
+}
+
+ContactBuilder::ContactBuilder(ContactConfig config) : config_(config), patch_(std::make_unique<Patch>(config)) {}
+ContactBuilder::~ContactBuilder() = default;
+ContactBuilder::ContactBuilder(ContactBuilder&&) noexcept = default;
+ContactBuilder& ContactBuilder::operator=(ContactBuilder&&) noexcept = default;
+
+void ContactBuilder::reset() {
+  first_face_ = UINT32_MAX;
+  first_point_.setZero();
+  first_normal_.setZero();
+  patch_->reset();
+}
+
+bool ContactBuilder::has_first_face() const {
+  return config_.model == ContactModelKind::paper ? first_face_ != UINT32_MAX : patch_->has_history();
+}
+
+void ContactBuilder::prepare(const Mesh& probe, const Mesh& object) {
+  if (config_.model == ContactModelKind::patch) patch_->prepare(probe, object);
+}
+
+std::size_t ContactBuilder::bytes() const {
+  return patch_->bytes() + (probe_faces_.capacity() + object_faces_.capacity() + probe_vertices_.capacity()) * 4 +
+         probe_points_.capacity() * sizeof(Vec3);
+}
+
+ContactModel ContactBuilder::build(const Mesh& probe, const Mesh& object, const Pose& pose,
+                                   std::span<const ContactPair> pairs) {
+  ContactModel m = config_.model == ContactModelKind::paper ? build_paper(probe, object, pose, pairs)
+                                                            : patch_->build(probe, object, pose, pairs);
+  m.kind = static_cast<std::uint32_t>(config_.model);
+  ST_ASSERT(!m.in_contact() || std::abs(to_eigen(m.force_dir).norm() - 1.0) < 1e-9, "FD is a unit vector in contact");
+  ST_ASSERT(std::isfinite(m.penetration_mm) && m.penetration_mm >= 0, "PD is finite and >= 0");
+  ST_ASSERT(m.contacts == m.object_faces + m.probe_faces, "contacts = object faces + probe faces");
+  return m;
+}
+
+namespace {
+void sort_unique(std::vector<std::uint32_t>& v) {
+  std::sort(v.begin(), v.end());
+  v.erase(std::unique(v.begin(), v.end()), v.end());
+}
+}  // namespace
+
+// Unit normal and centroid of face f, object-local; false when degenerate or non-finite.
+bool face_frame(const Mesh& m, std::uint32_t f, Vec3& centroid, Vec3& normal) {
+  const Tri& t = m.faces[f];
+  const Vec3& a = m.local[t[0]];
+  const Vec3& b = m.local[t[1]];
+  const Vec3& c = m.local[t[2]];
+  centroid = (a + b + c) / 3.0;
+  const Vec3 n = (b - a).cross(c - a);
+  const double longest2 = std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
+  const double len = n.norm();
+  if (!std::isfinite(len) || !(len > kDegenerateRel * longest2)) return false;
+  normal = n / len;
+  return true;
+}
+
+ContactModel ContactBuilder::build_paper(const Mesh& probe, const Mesh& object, const Pose& pose,
+                                         std::span<const ContactPair> pairs) {
+  ContactModel m;
+  m.pose = to_pod(pose);
+  m.pairs = static_cast<std::uint32_t>(std::min<std::size_t>(pairs.size(), UINT32_MAX));
+  const bool pose_ok = pose.matrix().allFinite();
+  if (!pose_ok) m.flags |= kBadInput;
+
+  probe_faces_.clear();
+  object_faces_.clear();
+  for (const ContactPair& p : pairs) {
+    const bool bad = p.probe >= probe.faces.size() || p.object >= object.faces.size();
+    if (bad) {
+      ++m.skipped_pairs;
+      continue;
+    }
+    probe_faces_.push_back(p.probe);
+    object_faces_.push_back(p.object);
+  }
+  if (m.skipped_pairs) m.flags |= kBadInput;
+  sort_unique(probe_faces_);
+  sort_unique(object_faces_);
+  m.probe_faces = static_cast<std::uint32_t>(probe_faces_.size());
+  m.object_faces = static_cast<std::uint32_t>(object_faces_.size());
+  m.contacts = m.probe_faces + m.object_faces;
+
+  // Distinct probe contact-face vertices, moved into object-local coordinates:
+  // x_obj_local = R·local + (R·probe.origin + t - object.origin) (no large offsets in the sum).
+  probe_vertices_.clear();
+  for (std::uint32_t f : probe_faces_)
+    for (std::uint32_t v : probe.faces[f])
+      if (v < probe.local.size()) probe_vertices_.push_back(v);
+  sort_unique(probe_vertices_);
+  const Eigen::Matrix3d R = pose.linear();
+  const Vec3 shift = R * probe.origin + pose.translation() - object.origin;
+  probe_points_.clear();
+  for (std::uint32_t v : probe_vertices_) probe_points_.push_back(R * probe.local[v] + shift);
+
+  // Nearest (probe vertex, object face centroid) pair over non-degenerate object faces.
+  double best = std::numeric_limits<double>::infinity();
+  std::uint32_t best_face = UINT32_MAX;
+  std::size_t best_vertex = 0;
+  Vec3 best_centroid = Vec3::Zero(), best_normal = Vec3::Zero();
+  Vec3 c, n;
+  if (pose_ok) {
+    for (std::uint32_t f : object_faces_) {
+      if (!face_frame(object, f, c, n)) {
+        ++m.degenerate_faces;
+        continue;
+      }
+      for (std::size_t i = 0; i < probe_points_.size(); ++i) {
+        const double d2 = (probe_points_[i] - c).squaredNorm();
+        if (d2 < best) {  // strict: ties keep the lower face (outer loop ascending), then lower vertex
+          best = d2;
+          best_face = f;
+          best_vertex = i;
+          best_centroid = c;
+          best_normal = n;
+        }
+      }
+    }
+  }
+  if (m.degenerate_faces) m.flags |= kDegenerateSkipped;
+  if (best_face == UINT32_MAX) {
+    reset();  // zero usable contacts: the paper's "first contact" ends here
+    return m;
+  }
+
+  m.flags |= kInContact;
+  m.nearest_object_face = best_face;
+  m.nearest_probe_vertex = probe_vertices_[best_vertex];
+  m.force_dir = to_pod(best_normal);
+  const Vec3& pv = probe_points_[best_vertex];
+  m.contact_point = to_pod(pv - (pv - best_centroid).dot(best_normal) * best_normal + object.origin);
+
+  // First contact face: record at contact start; re-record when FD has turned too far from it.
+  const double cos_limit = std::cos(config_.replane_angle_deg * 3.14159265358979323846 / 180.0);
+  if (first_face_ == UINT32_MAX || first_normal_.dot(best_normal) < cos_limit) {
+    first_face_ = best_face;
+    first_point_ = best_centroid;
+    first_normal_ = best_normal;
+    m.flags |= kReplaned;
+  }
+  m.first_contact_face = first_face_;
+
+  // PD: deepest probe contact vertex below the recorded plane.
+  double pd = 0;
+  std::size_t deepest = best_vertex;
+  double deepest_depth = -std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < probe_points_.size(); ++i) {
+    const double depth = (first_point_ - probe_points_[i]).dot(first_normal_);
+    if (depth > deepest_depth) {
+      deepest_depth = depth;
+      deepest = i;
+    }
+  }
+  pd = std::max(0.0, deepest_depth);
+  m.penetration_mm = pd;
+  m.deepest_probe_vertex = probe_vertices_[deepest];
+  m.probe_point = to_pod(probe.origin + probe.local[probe_vertices_[deepest]]);
+  // Local contact plane, normal FD, placed so the deepest vertex is PD below it at this pose.
+  m.plane_point = to_pod(probe_points_[deepest] + pd * best_normal + object.origin);
+
+  for (std::uint32_t f : object_faces_) {
+    if (face_frame(object, f, c, n) && n.dot(best_normal) < 0) {
+      m.flags |= kNormalsDisagree;
+      break;
+    }
+  }
+  return m;
+}
+
+}  // namespace st::geom

@@ -1,0 +1,180 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// The SIMD vocabulary of the collision core: float lanes per instruction set, so each kernel is
+// written once, and the choice of instruction set at RUN time, so one binary runs on any x86-64
+// (no -march in any build flag; README, "Portable binaries").
+//
+// * Lanes/Mask come in one namespace per ISA: scalar (1 float), sse2 (4: the x86-64 baseline) and
+//   avx2 (8; with FMA). Each operation is one IEEE float operation per
+//   lane, so a kernel gives the same bits on all of them (the project compiles with
+//   -ffp-contract=off: no multiply-add is fused behind the kernel's back).
+// * Code for an ISA above the baseline lives between ST_TARGET_AVX2_BEGIN and ST_TARGET_END: GCC's `#pragma GCC target` (Clang: `#pragma clang attribute`) compiles the
+//   functions DEFINED there for that ISA. Templates and inline functions defined elsewhere (the
+//   standard library, Eigen) keep the baseline, so no AVX instruction can leak into code that runs
+//   on a CPU without it through a shared inline copy. Nothing may be #included inside a region.
+// * active_isa() is what the dispatching code (collide.cpp) runs: the best the CPU has, lowered by
+//   the environment variable ST_SIMD (scalar, sse2, avx2) or set_isa(); with -Dsimd=false
+//   (ST_NO_SIMD) or off x86-64 only the scalar path exists.
+#pragma once
+#include <spheretouch/abi.hpp>
+#include <cstdint>
+#include <string_view>
+
+#if !defined(ST_NO_SIMD) && defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define ST_SIMD_X86 1
+#include <immintrin.h>
+#endif
+
+#if defined(ST_SIMD_X86) && defined(__clang__)
+#define ST_TARGET_AVX2_BEGIN _Pragma("clang attribute push(__attribute__((target(\"avx2,fma\"))), apply_to = function)")
+#define ST_TARGET_END _Pragma("clang attribute pop")
+#elif defined(ST_SIMD_X86)
+#define ST_TARGET_AVX2_BEGIN _Pragma("GCC push_options") _Pragma("GCC target(\"avx2,fma\")")
+#define ST_TARGET_END _Pragma("GCC pop_options")
+#endif
+
+namespace st::geom::simd {
+
+/// An instruction set a kernel can run on, in increasing order of width.
+enum class Isa : std::uint8_t {
+  scalar = 0,  ///< one float at a time (any CPU; the only path with -Dsimd=false)
+  sse2 = 1,    ///< 4 floats (every x86-64)
+  avx2 = 2,    ///< 8 floats, with FMA (Haswell and later)
+};
+
+/// The widest ISA this CPU and this build support (ignores ST_SIMD and set_isa()).
+Isa best_isa();
+/// The ISA the kernels run now: best_isa(), or lower if ST_SIMD or set_isa() asked for it.
+Isa active_isa();
+/// Runs the kernels on `isa` from now on (all threads); false, changing nothing, when this CPU or
+/// build lacks it. For tests and benchmarks that compare the paths.
+bool set_isa(Isa isa);
+/// "scalar", "sse2" or "avx2".
+const char* isa_name(Isa isa);
+/// The ISA named `name` (as isa_name() spells it); false when the name is none of them.
+bool parse_isa(std::string_view name, Isa& isa);
+
+namespace scalar {
+
+/// One flag.
+struct Mask {
+  bool v;  ///< the flag
+
+  static Mask first(std::uint32_t live) { return {live > 0}; }                      ///< set when live > 0
+  std::uint32_t bits() const { return v; }                                          ///< bit 0 = the flag
+  friend Mask operator&(Mask a, Mask b) { return {static_cast<bool>(a.v & b.v)}; }  ///< and, no branch
+};
+
+/// One float.
+struct Lanes {
+  static constexpr int width = 1;  ///< floats per step
+  float v;                         ///< the float
+
+  static Lanes load(const float* p) { return {*p}; }  ///< p[0]
+  static Lanes broadcast(float x) { return {x}; }     ///< x
+  /// p[0] when live > 0, else 0 without reading p.
+  template <int Stride>
+  static Lanes gather(const float* p, std::uint32_t live) {
+    return {live > 0 ? *p : 0.0f};
+  }
+  friend Lanes operator+(Lanes a, Lanes b) { return {a.v + b.v}; }   ///< a + b
+  friend Lanes operator-(Lanes a, Lanes b) { return {a.v - b.v}; }   ///< a - b
+  friend Lanes operator*(Lanes a, Lanes b) { return {a.v * b.v}; }   ///< a · b
+  friend Mask operator<=(Lanes a, Lanes b) { return {a.v <= b.v}; }  ///< a <= b (false for NaN)
+  friend Mask operator>=(Lanes a, Lanes b) { return {a.v >= b.v}; }  ///< a >= b (false for NaN)
+};
+
+}  // namespace scalar
+
+#if defined(ST_SIMD_X86)
+
+namespace sse2 {
+
+/// One flag per lane, held as the all-ones/all-zeros lanes that SSE comparisons produce.
+struct Mask {
+  __m128 v;  ///< the flags
+
+  /// Lanes l < live are set (live may exceed the width).
+  static Mask first(std::uint32_t live) {
+    const __m128i lane = _mm_setr_epi32(0, 1, 2, 3);
+    const __m128i n = _mm_set1_epi32(static_cast<int>(live < 4 ? live : 4));
+    return {_mm_castsi128_ps(_mm_cmpgt_epi32(n, lane))};
+  }
+  std::uint32_t bits() const { return static_cast<std::uint32_t>(_mm_movemask_ps(v)); }  ///< bit l = lane l
+  friend Mask operator&(Mask a, Mask b) { return {_mm_and_ps(a.v, b.v)}; }               ///< lane-wise and
+};
+
+/// 4 floats.
+struct Lanes {
+  static constexpr int width = 4;  ///< floats per step
+  __m128 v;                        ///< the floats
+
+  static Lanes load(const float* p) { return {_mm_loadu_ps(p)}; }  ///< p[0, 4), unaligned
+  static Lanes broadcast(float x) { return {_mm_set1_ps(x)}; }     ///< x in every lane
+  /// Lane l = p[l·Stride] for l < live, 0 for the others, whose addresses are never read.
+  template <int Stride>
+  static Lanes gather(const float* p, std::uint32_t live) {
+    if (live >= 4) [[likely]]
+      return {_mm_setr_ps(p[0], p[Stride], p[2 * Stride], p[3 * Stride])};
+    return {_mm_setr_ps(live > 0 ? p[0] : 0.0f, live > 1 ? p[Stride] : 0.0f, live > 2 ? p[2 * Stride] : 0.0f, 0.0f)};
+  }
+  friend Lanes operator+(Lanes a, Lanes b) { return {_mm_add_ps(a.v, b.v)}; }  ///< lane-wise a + b
+  friend Lanes operator-(Lanes a, Lanes b) { return {_mm_sub_ps(a.v, b.v)}; }  ///< lane-wise a - b
+  friend Lanes operator*(Lanes a, Lanes b) { return {_mm_mul_ps(a.v, b.v)}; }  ///< lane-wise a · b
+  /// a <= b per lane; false where either is NaN, as in scalar float.
+  friend Mask operator<=(Lanes a, Lanes b) { return {_mm_cmple_ps(a.v, b.v)}; }
+  /// a >= b per lane; false where either is NaN, as in scalar float.
+  friend Mask operator>=(Lanes a, Lanes b) { return {_mm_cmpge_ps(a.v, b.v)}; }
+};
+
+}  // namespace sse2
+
+ST_TARGET_AVX2_BEGIN
+namespace avx2 {
+
+/// One flag per lane, held as the all-ones/all-zeros lanes that AVX comparisons produce.
+struct Mask {
+  __m256 v;  ///< the flags
+
+  /// Lanes l < live are set (live may exceed the width).
+  static Mask first(std::uint32_t live) {
+    const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    const __m256i n = _mm256_set1_epi32(static_cast<int>(live < 8 ? live : 8));
+    return {_mm256_castsi256_ps(_mm256_cmpgt_epi32(n, lane))};
+  }
+  std::uint32_t bits() const { return static_cast<std::uint32_t>(_mm256_movemask_ps(v)); }  ///< bit l = lane l
+};
+
+/// 8 floats.
+struct Lanes {
+  static constexpr int width = 8;  ///< floats per step
+  __m256 v;                        ///< the floats
+
+  static Lanes load(const float* p) { return {_mm256_loadu_ps(p)}; }  ///< p[0, 8), unaligned
+  static Lanes broadcast(float x) { return {_mm256_set1_ps(x)}; }     ///< x in every lane
+  /// Lane l = p[l·Stride] for l < live, 0 for the others, whose addresses are never read (the
+  /// gather is masked, so the last record of an array can be gathered without padding).
+  template <int Stride>
+  static Lanes gather(const float* p, std::uint32_t live) {
+    const __m256i idx =
+        _mm256_setr_epi32(0, Stride, 2 * Stride, 3 * Stride, 4 * Stride, 5 * Stride, 6 * Stride, 7 * Stride);
+    return {_mm256_mask_i32gather_ps(_mm256_setzero_ps(), p, idx, Mask::first(live).v, 4)};
+  }
+};
+
+// Free functions, not in-class friends: GCC does not apply the region's target to friends
+// defined in a class.
+inline Mask operator&(Mask a, Mask b) { return {_mm256_and_ps(a.v, b.v)}; }     ///< lane-wise and
+inline Lanes operator+(Lanes a, Lanes b) { return {_mm256_add_ps(a.v, b.v)}; }  ///< lane-wise a + b
+inline Lanes operator-(Lanes a, Lanes b) { return {_mm256_sub_ps(a.v, b.v)}; }  ///< lane-wise a - b
+inline Lanes operator*(Lanes a, Lanes b) { return {_mm256_mul_ps(a.v, b.v)}; }  ///< lane-wise a · b
+/// a <= b per lane; false where either is NaN, as in scalar float.
+inline Mask operator<=(Lanes a, Lanes b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_LE_OQ)}; }
+/// a >= b per lane; false where either is NaN, as in scalar float.
+inline Mask operator>=(Lanes a, Lanes b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_GE_OQ)}; }
+
+}  // namespace avx2
+ST_TARGET_END
+
+#endif  // ST_SIMD_X86
+
+}  // namespace st::geom::simd

@@ -1,0 +1,37 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// CollisionBackend: the narrow interface a worker answers queries through. The collision core
+// (SphereTree + collide() restricted to the worker's blocks) plugs in behind it; until it lands,
+// reference_backend.hpp provides an exact-by-construction stand-in. A backend is built once per
+// block set (cold: may allocate, may take a while) and then queried many times (hot).
+#pragma once
+#include <spheretouch/abi.hpp>
+#include <functional>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include <spheretouch/net/block_set.hpp>
+#include <spheretouch/net/protocol.hpp>
+
+namespace st::net {
+
+/// Collides the probe against one worker's share of the object.
+class CollisionBackend {
+ public:
+  virtual ~CollisionBackend() = default;
+  /// Builds the backend's structures (e.g. its own sphere tree with set.leaf_faces) for `set`.
+  virtual Status load(const BlockSet& set) = 0;
+  /// Appends every colliding (probe face, GLOBAL object face) pair at `pose` (probe file coords →
+  /// object file coords) to `out`, in any order, each pair once, leaving out the faces of the
+  /// blocks in `skip` (global block ids, ascending; ids not held are ignored); returns the work
+  /// counters. Stops as soon as more than `max_pairs` pairs were appended (then out holds more
+  /// than max_pairs, at most a few thousand more): the caller answers "too many pairs" without
+  /// computing them all.
+  virtual QueryStats query(const geom::Pose& pose, std::span<const std::uint32_t> skip, std::vector<FacePair>& out,
+                           std::size_t max_pairs) = 0;
+};
+
+/// Makes an empty backend; a worker calls it once per block set it loads.
+using BackendFactory = std::function<std::unique_ptr<CollisionBackend>()>;
+
+}  // namespace st::net

@@ -1,0 +1,251 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Encoding and checked decoding of the wire protocol (protocol.hpp).
+#include <spheretouch/net/protocol.hpp>
+
+#include <cmath>
+
+#include <spheretouch/geom/pose_io.hpp>
+#include <spheretouch/net/wire.hpp>
+
+namespace st::net {
+
+namespace {
+
+void put_pose(Writer& w, const geom::Pose& p) {
+  const auto& m = p.matrix();
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c) w.f64(m(r, c));  // rows of [R | t], row-major
+}
+
+geom::Pose get_pose(Reader& r) {
+  const std::size_t at = r.offset();
+  Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
+  for (int i = 0; i < 3; ++i)
+    for (int c = 0; c < 4; ++c) m(i, c) = r.f64("pose");
+  if (r.ok()) {
+    if (const std::string why = geom::check_rigid(m); !why.empty())
+      r.fail_at(at, "pose", ": not a rigid transform (", why, ")");
+  }
+  geom::Pose p = geom::Pose::Identity();
+  p.matrix() = m;
+  return p;
+}
+
+struct BodyEncoder {
+  Writer& w;
+  void operator()(const HelloMsg& m) {
+    w.u32(m.worker_id);
+    w.u64(m.epoch);
+    w.u64(m.echo);
+    w.u32(static_cast<std::uint32_t>(m.held.size()));
+    for (const Held& h : m.held) {
+      w.u64(h.hash);
+      w.u32(h.faces);
+    }
+  }
+  void operator()(const LoadBlocksMsg& m) {
+    w.u64(m.hash);
+    w.u64(m.total_bytes);
+    w.u64(m.offset);
+    w.u32(static_cast<std::uint32_t>(m.data.size()));
+    w.bytes(m.data);
+  }
+  void operator()(const QueryMsg& m) {
+    w.u64(m.seq);
+    w.u64(m.hash);
+    put_pose(w, m.pose);
+    w.u32(static_cast<std::uint32_t>(m.skip.size()));
+    for (std::uint32_t b : m.skip) w.u32(b);
+  }
+  void operator()(const ResultMsg& m) {
+    w.u64(m.seq);
+    w.u32(m.worker_id);
+    w.u64(m.hash);
+    w.u64(m.stats.sphere_tests);
+    w.u64(m.stats.tri_tests);
+    w.u64(m.stats.compute_ns);
+    w.u32(static_cast<std::uint32_t>(m.pairs.size()));
+    w.raw(m.pairs.data(), m.pairs.size() * sizeof(FacePair));  // {u32 probe, u32 object} LE, no padding
+  }
+  void operator()(const HeartbeatMsg& m) { w.u64(m.nonce); }
+  void operator()(const ErrorMsg& m) {
+    w.u16(static_cast<std::uint16_t>(m.code));
+    w.u64(m.ref);
+    w.u32(static_cast<std::uint32_t>(m.text.size()));
+    w.raw(m.text.data(), m.text.size());
+  }
+};
+
+MsgType type_of(const Message& m) {
+  return static_cast<MsgType>(m.index() + 1);  // variant order = MsgType order
+}
+
+Result<Message> decode_body(MsgType type, Reader& r, const Limits& L) {
+  Message out;
+  switch (type) {
+    case MsgType::Hello: {
+      HelloMsg m;
+      m.worker_id = r.u32("worker_id");
+      m.epoch = r.u64("epoch");
+      m.echo = r.u64("echo");
+      const std::uint32_t n = r.u32("held count");
+      if (r.count_ok(n, L.max_held, 12, "held count")) {
+        m.held.resize(n);
+        for (Held& h : m.held) {
+          h.hash = r.u64("held hash");
+          h.faces = r.u32("held faces");
+        }
+      }
+      out = std::move(m);
+      break;
+    }
+    case MsgType::LoadBlocks: {
+      LoadBlocksMsg m;
+      m.hash = r.u64("hash");
+      m.total_bytes = r.u64("total_bytes");
+      const std::size_t off_at = r.offset();
+      m.offset = r.u64("offset");
+      const std::uint32_t n = r.u32("chunk length");
+      if (r.ok() && m.total_bytes > L.max_blockset_bytes)
+        r.fail_at(off_at - 8, "total_bytes", ": ", m.total_bytes, " exceeds the limit ", L.max_blockset_bytes);
+      if (r.ok() && (m.offset > m.total_bytes || n > m.total_bytes - m.offset))
+        r.fail_at(off_at, "offset", ": chunk [", m.offset, ", +", n, ") outside the block set of ", m.total_bytes,
+                  " bytes");
+      if (r.ok() && n == 0) r.fail_at(off_at + 8, "chunk length", ": empty chunk");
+      if (r.count_ok(n, L.max_chunk_bytes, 1, "chunk length")) {
+        auto b = r.bytes(n, "chunk data");
+        m.data.assign(b.begin(), b.end());
+      }
+      out = std::move(m);
+      break;
+    }
+    case MsgType::Query: {
+      QueryMsg m;
+      m.seq = r.u64("seq");
+      m.hash = r.u64("hash");
+      m.pose = get_pose(r);
+      const std::uint32_t n = r.u32("skip count");
+      if (r.count_ok(n, L.max_skip, 4, "skip count")) {
+        m.skip.resize(n);
+        for (std::uint32_t i = 0; i < n && r.ok(); ++i) {
+          const std::size_t at = r.offset();
+          m.skip[i] = r.u32("skip");
+          if (r.ok() && m.skip[i] >= L.max_blocks)
+            r.fail_at(at, "skip", ": block ", m.skip[i], " is not below max_blocks = ", L.max_blocks);
+          if (r.ok() && i > 0 && m.skip[i] <= m.skip[i - 1])
+            r.fail_at(at, "skip", ": block ", m.skip[i], " after ", m.skip[i - 1], " (must be strictly ascending)");
+        }
+      }
+      out = std::move(m);
+      break;
+    }
+    case MsgType::Result: {
+      ResultMsg m;
+      m.seq = r.u64("seq");
+      m.worker_id = r.u32("worker_id");
+      m.hash = r.u64("hash");
+      m.stats.sphere_tests = r.u64("sphere_tests");
+      m.stats.tri_tests = r.u64("tri_tests");
+      m.stats.compute_ns = r.u64("compute_ns");
+      const std::uint32_t n = r.u32("pair count");
+      if (r.count_ok(n, L.max_pairs, sizeof(FacePair), "pair count")) {
+        m.pairs.resize(n);
+        auto b = r.bytes(std::size_t{n} * sizeof(FacePair), "pairs");
+        if (r.ok() && n > 0) std::memcpy(m.pairs.data(), b.data(), b.size());
+      }
+      out = std::move(m);
+      break;
+    }
+    case MsgType::Heartbeat: {
+      HeartbeatMsg m;
+      m.nonce = r.u64("nonce");
+      out = m;
+      break;
+    }
+    case MsgType::Error: {
+      ErrorMsg m;
+      const std::size_t at = r.offset();
+      const std::uint16_t code = r.u16("code");
+      if (r.ok() && (code < 1 || code > static_cast<std::uint16_t>(ErrorCode::Unexpected)))
+        r.fail_at(at, "code", ": unknown error code ", code);
+      m.code = static_cast<ErrorCode>(code);
+      m.ref = r.u64("ref");
+      const std::uint32_t n = r.u32("text length");
+      if (r.count_ok(n, L.max_text, 1, "text length")) {
+        auto b = r.bytes(n, "text");
+        m.text.assign(b.begin(), b.end());
+      }
+      out = std::move(m);
+      break;
+    }
+  }
+  if (!r.expect_end()) return Error{r.error()};
+  return out;
+}
+
+}  // namespace
+
+const char* type_name(MsgType t) {
+  switch (t) {
+    case MsgType::Hello:
+      return "Hello";
+    case MsgType::LoadBlocks:
+      return "LoadBlocks";
+    case MsgType::Query:
+      return "Query";
+    case MsgType::Result:
+      return "Result";
+    case MsgType::Heartbeat:
+      return "Heartbeat";
+    case MsgType::Error:
+      return "Error";
+  }
+  return "unknown";
+}
+
+const char* type_name(const Message& m) { return type_name(type_of(m)); }
+
+void encode(const Message& m, std::vector<std::uint8_t>& out) {
+  out.clear();
+  Writer w(out);
+  w.u32(kMagic);
+  w.u16(kVersion);
+  w.u8(static_cast<std::uint8_t>(type_of(m)));
+  w.u8(0);
+  w.u32(0);  // body length, patched below
+  std::visit(BodyEncoder{w}, m);
+  w.patch_u32(8, static_cast<std::uint32_t>(out.size() - kHeaderBytes));
+}
+
+std::vector<std::uint8_t> encode(const Message& m) {
+  std::vector<std::uint8_t> out;
+  encode(m, out);
+  return out;
+}
+
+Result<Message> decode(std::span<const std::uint8_t> frame, const Limits& limits) {
+  if (frame.size() > limits.max_message_bytes)
+    return fail("message of ", frame.size(), " bytes exceeds the limit ", limits.max_message_bytes);
+  Reader h(frame.first(std::min(frame.size(), kHeaderBytes)), "header");
+  const std::uint32_t magic = h.u32("magic");
+  if (h.ok() && magic != kMagic)
+    return fail("header at byte 0: magic: 0x", std::hex, magic, " is not \"STNP\" (0x", kMagic, ")");
+  const std::uint16_t version = h.u16("version");
+  if (h.ok() && version != kVersion)
+    return fail("header at byte 4: version: ", version, " not supported (this build speaks ", kVersion, ")");
+  const std::uint8_t type = h.u8("type");
+  if (h.ok() && (type < 1 || type > static_cast<std::uint8_t>(MsgType::Error)))
+    return fail("header at byte 6: type: unknown message type ", unsigned{type});
+  const std::uint8_t flags = h.u8("flags");
+  if (h.ok() && flags != 0) return fail("header at byte 7: flags: 0x", std::hex, unsigned{flags}, " (must be 0)");
+  const std::uint32_t body = h.u32("body length");
+  if (!h.ok()) return Error{h.error()};
+  if (body != frame.size() - kHeaderBytes)
+    return fail("header at byte 8: body length: ", body, " but the frame carries ", frame.size() - kHeaderBytes,
+                " bytes");
+  const auto t = static_cast<MsgType>(type);
+  Reader r(frame.subspan(kHeaderBytes), type_name(t), kHeaderBytes);
+  return decode_body(t, r, limits);
+}
+
+}  // namespace st::net

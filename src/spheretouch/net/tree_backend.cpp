@@ -1,0 +1,139 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Sphere-tree backend: see tree_backend.hpp.
+#include <spheretouch/net/tree_backend.hpp>
+
+#include <algorithm>
+#include <chrono>
+
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/partition.hpp>
+
+namespace st::net {
+namespace {
+
+class TreeBackend final : public CollisionBackend {
+ public:
+  explicit TreeBackend(bool per_block) : per_block_(per_block) {}
+  Status load(const BlockSet& set) override {
+    geom::TreeConfig params = geom::DefaultTreeConfig();
+    params.leaf_faces = std::clamp<std::uint32_t>(set.leaf_faces, 1, geom::kMaxLeafFaces);
+    set_ = set;
+    Result<geom::SphereTree> pt = geom::SphereTree::build(set_.probe, params);
+    if (!pt) return fail("probe tree: ", pt.error());
+    probe_tree_ = std::move(pt).value();
+    empty_ = set_.object.faces.empty();
+    if (!empty_) {
+      // One subtree per block: the blocks of a share lie apart (block-cyclic, random), and one
+      // tree over all of them would put spheres around the gaps between blocks.
+      Result<geom::SphereTree> ot = geom::SphereTree::build(
+          set_.object, params,
+          per_block_ ? std::span<const std::uint32_t>(set_.block_faces) : std::span<const std::uint32_t>());
+      if (!ot) return fail("object share tree: ", ot.error());
+      object_tree_ = std::move(ot).value();
+      // One tree over the whole share (per_block_ false) mixes blocks in its leaves: no roots,
+      // and a Query's skip list is then ignored (the skipped blocks are answered too).
+      block_roots_.clear();
+      if (per_block_) block_roots_ = geom::group_roots(object_tree_, set_.object_face_ids.size(), set_.block_faces);
+      is_root_.assign(object_tree_.num_nodes(), 0);
+      for (const auto& roots : block_roots_)
+        for (std::uint32_t r : roots) is_root_[r] = 1;
+      cut_.assign(object_tree_.num_nodes(), 0);
+      stamp_ = 0;
+    }
+    scratch_ = geom::CollideScratch{};
+    return Ok{};
+  }
+
+  /// Blocks left out: roots_ becomes the largest subtrees holding none of them (the skipped
+  /// blocks' roots and their ancestors are cut out; every other node below the root is covered
+  /// once), so the descent keeps the top levels' culling. False when no held block is skipped.
+  bool cover_without(std::span<const std::uint32_t> skip) {
+    if (++stamp_ == 0) {
+      std::fill(cut_.begin(), cut_.end(), 0);
+      stamp_ = 1;
+    }
+    bool any = false;
+    for (std::uint32_t id : skip) {
+      const auto it = std::lower_bound(set_.blocks.begin(), set_.blocks.end(), id);
+      if (it == set_.blocks.end() || *it != id) continue;
+      for (std::uint32_t r : block_roots_[std::size_t(it - set_.blocks.begin())]) {
+        cut_[r] = stamp_;  // the block itself
+        any = true;
+        for (std::uint32_t a = object_tree_.cold[r].parent; a != geom::kNoNode && cut_[a] != stamp_;
+             a = object_tree_.cold[a].parent)
+          cut_[a] = stamp_;  // ancestors: split into their children
+      }
+    }
+    if (!any) return false;
+    roots_.clear();
+    stack_.assign(1, 0);
+    while (!stack_.empty()) {
+      const std::uint32_t i = stack_.back();
+      stack_.pop_back();
+      if (cut_[i] != stamp_) {
+        roots_.push_back(i);
+      } else if (!object_tree_.nodes[i].leaf && !is_block_root(i)) {
+        const geom::SphereNode& n = object_tree_.nodes[i];
+        for (std::uint32_t c = n.first + n.count; c-- > n.first;) stack_.push_back(c);
+      }
+    }
+    return true;
+  }
+
+  QueryStats query(const geom::Pose& pose, std::span<const std::uint32_t> skip, std::vector<FacePair>& out,
+                   std::size_t max_pairs) override {
+    QueryStats st;
+    if (empty_) return st;
+    const auto t0 = std::chrono::steady_clock::now();
+    // The share keeps the object's origin and local coordinates bit for bit, so collide()
+    // computes the same transformed doubles as a single-process query.
+    geom::CollideConfig opt = geom::DefaultCollideConfig();
+    opt.max_pairs = max_pairs;
+    if (!skip.empty() && !block_roots_.empty() && cover_without(skip)) {
+      opt.restrict_object = true;
+      opt.object_roots = roots_;
+    }
+    geom::collide(set_.probe, probe_tree_, set_.object, object_tree_, pose, opt, scratch_, result_);
+    out.reserve(out.size() + result_.pairs.size());
+    for (const geom::FacePair& p : result_.pairs) out.push_back({p.probe, set_.object_face_ids[p.object]});
+    st.sphere_tests = result_.stats.node_pairs;
+    st.tri_tests = result_.stats.tri_pairs;
+    st.compute_ns =
+        std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count());
+    return st;
+  }
+
+ private:
+  BlockSet set_;
+  geom::SphereTree probe_tree_, object_tree_;
+  geom::CollideScratch scratch_;
+  geom::CollideResult result_;
+  std::vector<std::vector<std::uint32_t>> block_roots_;  // per held block: the share tree's nodes covering exactly it
+  std::vector<std::uint32_t> roots_;                     // scratch: the roots of the blocks queried
+  std::vector<std::uint8_t> is_root_;                    // per node: it is a held block's root
+  std::vector<std::uint32_t> cut_, stack_;               // per node: stamp of the query that cut it; scratch
+  std::uint32_t stamp_ = 0;
+  bool is_block_root(std::uint32_t i) const { return i < is_root_.size() && is_root_[i]; }
+  bool empty_ = true;
+  bool per_block_ = true;
+};
+
+}  // namespace
+
+BackendFactory tree_backend_factory(bool per_block) {
+  return [per_block] { return std::make_unique<TreeBackend>(per_block); };
+}
+
+Result<Blocks> tree_blocks(const geom::SphereTree& tree, std::uint32_t layer, std::uint32_t block_size) {
+  Result<geom::Partition> part = geom::make_partition(tree, layer, 1, block_size);
+  if (!part) return Error{part.error()};
+  Blocks blocks(part.value().num_blocks());
+  for (std::uint32_t b = 0; b < blocks.size(); ++b) {
+    for (std::uint32_t node : part.value().block(b))
+      blocks[b].insert(blocks[b].end(), tree.faces_begin(node), tree.faces_end(node));
+    std::sort(blocks[b].begin(), blocks[b].end());
+  }
+  return blocks;
+}
+
+}  // namespace st::net

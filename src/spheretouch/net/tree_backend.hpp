@@ -1,0 +1,22 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// The production CollisionBackend: the worker builds sphere trees (SphereTree) over the whole
+// probe and over its share of the object, and answers each Query with collide() — exact, so the
+// union over workers equals the single-process result. Also cuts an object's sphere tree into
+// the layer-n blocks that ScatterGather deals block-cyclically (paper §3.4).
+#pragma once
+#include <spheretouch/abi.hpp>
+#include <spheretouch/geom/sphere_tree.hpp>
+#include <spheretouch/net/backend.hpp>
+
+namespace st::net {
+
+/// Factory of sphere-tree backends (the daemon's and the in-process workers' default). A worker
+/// builds one subtree per block of its share; `per_block` false builds one tree over the whole
+/// share instead (what workers did before; kept to measure the difference, bench scale --share-tree).
+BackendFactory tree_backend_factory(bool per_block = true);
+
+/// The object's faces grouped by the partition of `tree`'s layer `layer` into runs of
+/// `block_size` consecutive layer spheres (geom::make_partition): blocks[b] = faces of block b.
+Result<Blocks> tree_blocks(const geom::SphereTree& tree, std::uint32_t layer, std::uint32_t block_size);
+
+}  // namespace st::net

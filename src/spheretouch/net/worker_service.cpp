@@ -1,0 +1,593 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// WorkerService (worker_service.hpp).
+#include <spheretouch/net/worker_service.hpp>
+
+#include <spheretouch/geom/check.hpp>
+#include <spheretouch/net/worker_config.hpp>
+
+#include <malloc.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/eventfd.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <random>
+#include <set>
+#include <stdexcept>
+
+namespace st::net {
+
+/// A complete upload being hashed, decoded and built on the loader thread. The thread owns a
+/// reference, so a service destroyed mid-build leaves it to finish on its own.
+struct WorkerService::LoadJob {
+  Upload up;
+  std::vector<Digest> known;  // digests held when the job started: those are not rebuilt
+  Limits limits;
+  BackendFactory factory;
+  int fd = -1;                // eventfd written once when done
+  std::uint64_t counted = 0;  // the upload's bytes as counted in buffered_
+  std::atomic<bool> cancel{false}, done{false};
+  // Results (written by the loader before `done`, read after it).
+  Digest digest{};
+  bool reuse = false;  // the digest was known: a held backend serves these bytes
+  std::unique_ptr<CollisionBackend> backend;
+  std::string error;  // non-empty: refused
+  std::uint32_t faces = 0, probe_faces = 0, blocks = 0;
+  double ms = 0;
+  ~LoadJob() {
+    if (fd >= 0) ::close(fd);
+  }
+  void run() {
+    const auto t0 = std::chrono::steady_clock::now();
+    digest = block_set_digest(up.bytes);
+    if (digest_key(digest) != up.hash) {
+      error = "block set bytes do not match their hash";
+    } else if (std::find(known.begin(), known.end(), digest) != known.end()) {
+      reuse = true;  // keep the bytes: if that backend is gone by the time this job is installed, it is rebuilt
+    } else if (!cancel.load()) {
+      Result<BlockSet> set = decode_block_set(up.bytes, limits);
+      if (!set) {
+        error = set.error();
+      } else {
+        std::vector<std::uint8_t>().swap(up.bytes);  // free the encoding before building
+        faces = static_cast<std::uint32_t>(set.value().object.faces.size());
+        probe_faces = static_cast<std::uint32_t>(set.value().probe.faces.size());
+        blocks = static_cast<std::uint32_t>(set.value().blocks.size());
+        if (!cancel.load()) {
+          backend = factory();
+          if (Status s = backend->load(set.value()); !s) {
+            error = "backend failed to load the block set: " + s.error();
+            backend.reset();
+          }
+        }
+      }
+    }
+    if (cancel.load() && error.empty() && !reuse && !backend) error = "worker stopping";
+    // The encoding, the decoded set and the build's scratch are gone: give the pages back, so a
+    // worker's resident memory is what it holds (its share), not its peak during the load.
+    if (!reuse) ::malloc_trim(0);
+    ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    done.store(true, std::memory_order_release);
+    const std::uint64_t one = 1;
+    if (fd >= 0) (void)!::write(fd, &one, sizeof one);
+  }
+};
+
+void set_common_options(zmq::socket_t& s, int sndhwm, int rcvhwm, std::int64_t max_message_bytes) {
+  s.set(zmq::sockopt::linger, 0);
+  s.set(zmq::sockopt::sndhwm, sndhwm);
+  s.set(zmq::sockopt::rcvhwm, rcvhwm);
+  s.set(zmq::sockopt::maxmsgsize, max_message_bytes);
+}
+
+WorkerService::WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFactory factory)
+    : cfg_(std::move(config)), factory_(std::move(factory)), sock_(ctx, zmq::socket_type::router) {
+  std::random_device rd;
+  do epoch_ = (std::uint64_t{rd()} << 32) ^ rd();
+  while (epoch_ == 0);
+  // The largest legitimate frame a worker receives is a LoadBlocks chunk; anything bigger is cut
+  // off by libzmq before it is buffered.
+  const std::int64_t max_in = std::int64_t(kHeaderBytes) + 64 + cfg_.limits.max_chunk_bytes;
+  set_common_options(sock_, cfg_.sndhwm, cfg_.rcvhwm, std::min<std::int64_t>(max_in, cfg_.limits.max_message_bytes));
+  if (cfg_.curve) {
+    // ZAP (RFC 27): libzmq asks the handler bound at this inproc address about every CURVE
+    // handshake; it must exist before the ROUTER accepts connections.
+    try {
+      if (Status s = check_z85_key(cfg_.curve->secret_z85, "CURVE secret key"); !s) throw std::runtime_error(s.error());
+      for (const std::string& k : cfg_.curve->allowed_clients_z85) {
+        if (Status s = check_z85_key(k, "allowed client key " + k); !s) throw std::runtime_error(s.error());
+        std::string raw(32, '\0');
+        zmq_z85_decode(reinterpret_cast<std::uint8_t*>(raw.data()), k.c_str());
+        allowed_.push_back(raw);
+      }
+      zap_ = zmq::socket_t(ctx, zmq::socket_type::rep);
+      zap_.set(zmq::sockopt::linger, 0);
+      zap_.bind("inproc://zeromq.zap.01");
+      sock_.set(zmq::sockopt::curve_server, true);
+      sock_.set(zmq::sockopt::curve_secretkey, cfg_.curve->secret_z85);
+      wipe_secret(cfg_.curve->secret_z85);  // libzmq holds it now
+      sock_.set(zmq::sockopt::zap_domain, "spheretouch");
+    } catch (const std::exception& e) { init_error_ = std::string("CURVE set-up: ") + e.what(); }
+  }
+  // Connection events: libzmq has no limit on the connections a ROUTER accepts, so the service
+  // counts them and shuts down those past max_connections (what each may queue is bounded by
+  // rcvhwm). Best effort: the descriptor of an accepted connection is shut down from this thread
+  // when its event arrives.
+  {
+    static std::atomic<std::uint64_t> serial{0};
+    const std::string addr =
+        "inproc://spheretouch-worker-monitor-" + std::to_string(::getpid()) + "-" + std::to_string(serial.fetch_add(1));
+    if (zmq_socket_monitor(sock_.handle(), addr.c_str(), ZMQ_EVENT_ACCEPTED | ZMQ_EVENT_DISCONNECTED) == 0) {
+      monitor_ = zmq::socket_t(ctx, zmq::socket_type::pair);
+      monitor_.set(zmq::sockopt::linger, 0);
+      monitor_.connect(addr);
+    }
+  }
+  // A client that reconnects with its routing id takes it over at once (a half-open old
+  // connection would otherwise hold it until the heartbeat drops it).
+  sock_.set(zmq::sockopt::router_handover, 1);
+  // ZMTP heartbeats drop half-open TCP connections of vanished clients.
+  sock_.set(zmq::sockopt::heartbeat_ivl, 1000);
+  sock_.set(zmq::sockopt::heartbeat_timeout, 3000);
+}
+
+WorkerService::~WorkerService() {
+  if (!job_) return;
+  job_->cancel.store(true);
+  if (job_->done.load(std::memory_order_acquire))
+    loader_.join();
+  else
+    loader_.detach();  // the thread holds the job; a daemon exiting need not wait for a build
+}
+
+Status WorkerService::bind(const std::string& endpoint) {
+  if (!init_error_.empty()) return Error{init_error_};
+  const bool ipc = endpoint.rfind("ipc://", 0) == 0;
+  const std::string path = ipc ? endpoint.substr(6) : std::string();
+  const bool file = ipc && !path.empty() && path[0] != '@';  // "@name": Linux abstract namespace
+  if (ipc) {
+    // Only this user (and the configured ones) may connect: libzmq compares SO_PEERCRED of each
+    // accepted connection with these filters (the option is deprecated upstream, still in 4.3).
+    std::vector<std::uint32_t> uids = cfg_.ipc_allowed_uids;
+    uids.push_back(static_cast<std::uint32_t>(::geteuid()));
+    for (std::uint32_t u : uids) {
+      const int v = static_cast<int>(u);
+      if (zmq_setsockopt(sock_.handle(), ZMQ_IPC_FILTER_UID, &v, sizeof v) != 0)
+        return fail("bind ", endpoint, ": cannot restrict ipc peers to uid ", u, ": ", zmq_strerror(zmq_errno()));
+    }
+  }
+  if (file) {
+    // Missing directories are created 0700; an existing one open to others is reported.
+    const std::filesystem::path dir = std::filesystem::path(path).parent_path();
+    if (!dir.empty()) {
+      std::vector<std::filesystem::path> missing;
+      for (std::filesystem::path d = dir; !d.empty() && !std::filesystem::exists(d); d = d.parent_path())
+        missing.push_back(d);
+      for (auto it = missing.rbegin(); it != missing.rend(); ++it)
+        if (::mkdir(it->c_str(), 0700) != 0 && errno != EEXIST)
+          return fail("bind ", endpoint, ": cannot create ", it->string(), ": ", std::strerror(errno));
+      struct stat st {};
+      if (::stat(dir.c_str(), &st) == 0 && (st.st_mode & 0002) && !(st.st_mode & S_ISVTX))
+        log(4, st::fail(dir.string(), " is writable by every user (mode ", std::oct, (st.st_mode & 07777),
+                        "): another user could replace ", path, "; use a 0700 directory")
+                   .message);
+    }
+  }
+  try {
+    if (needs_ipv6(endpoint)) sock_.set(zmq::sockopt::ipv6, 1);
+    sock_.bind(zmq_endpoint(endpoint));
+  } catch (const zmq::error_t& e) { return fail("bind ", endpoint, ": ", e.what()); }
+  if (file && ::chmod(path.c_str(), 0600) != 0)
+    return fail("bind ", endpoint, ": cannot make the socket file 0600: ", std::strerror(errno));
+  return Ok{};
+}
+
+std::string WorkerService::last_endpoint() const { return sock_.get(zmq::sockopt::last_endpoint); }
+
+std::vector<Held> WorkerService::held() const {
+  std::vector<Held> h;
+  for (const Loaded& l : sets_) h.push_back({l.hash, l.faces});
+  return h;
+}
+
+HelloMsg WorkerService::hello(const std::string& owner, std::uint64_t echo) const {
+  HelloMsg h{cfg_.worker_id, epoch_, echo, {}};
+  for (const Loaded& l : sets_)
+    if (l.owner == owner && h.held.size() < cfg_.limits.max_held) h.held.push_back({l.hash, l.faces});
+  return h;
+}
+
+std::string WorkerService::owner_of(const zmq::message_t& peer, const zmq::message_t& frame) const {
+  // Under CURVE the ZAP handler names each connection by its client key (User-Id), which a
+  // client cannot choose; else the routing id, which ScatterGather draws at random.
+  if (zap_) {
+    if (const char* id = zmq_msg_gets(frame.handle(), "User-Id"); id && *id) return std::string("key:") + id;
+  }
+  return std::string("id:") + std::string(static_cast<const char*>(peer.data()), peer.size());
+}
+
+void WorkerService::send(const std::string& peer, const Message& m) {
+  send(zmq::message_t(peer.data(), peer.size()), m);
+}
+
+void WorkerService::send_error(const std::string& peer, ErrorCode code, std::uint64_t ref, std::string text) {
+  send_error(zmq::message_t(peer.data(), peer.size()), code, ref, std::move(text));
+}
+
+void WorkerService::send(const zmq::message_t& peer, const Message& m) {
+  encode(m, out_);
+  // ROUTER without ROUTER_MANDATORY: a reply to a peer that is gone or over its HWM is dropped,
+  // never blocks. The client's deadline and sequence numbers cover the loss.
+  try {
+    zmq::message_t id(peer.data(), peer.size());
+    if (!sock_.send(id, zmq::send_flags::sndmore | zmq::send_flags::dontwait)) return;
+    (void)sock_.send(zmq::buffer(out_), zmq::send_flags::dontwait);
+  } catch (const zmq::error_t&) {}
+}
+
+void WorkerService::note_bad(const std::string& why) {
+  ++counters_.bad_messages;
+  ++bad_unlogged_;
+  const auto now = std::chrono::steady_clock::now();
+  if (now - bad_logged_ < std::chrono::seconds(1)) return;
+  log(4, st::fail(bad_unlogged_, " bad message(s) since the last report; latest: ", why).message);
+  bad_logged_ = now;
+  bad_unlogged_ = 0;
+}
+
+void WorkerService::send_error(const zmq::message_t& peer, ErrorCode code, std::uint64_t ref, std::string text) {
+  if (text.size() > cfg_.limits.max_text) text.resize(cfg_.limits.max_text);
+  ++counters_.errors_sent;
+  send(peer, ErrorMsg{code, ref, std::move(text)});
+}
+
+void WorkerService::handle_zap() {
+  // Request frames: version, request id, domain, address, routing id, mechanism, credentials.
+  std::vector<zmq::message_t> f;
+  try {
+    do {
+      f.emplace_back();
+      if (!zap_.recv(f.back(), zmq::recv_flags::dontwait)) return;
+    } while (f.back().more() && f.size() < 16);
+    while (f.back().more()) {
+      zmq::message_t junk;
+      (void)zap_.recv(junk);
+    }
+  } catch (const zmq::error_t&) { return; }
+  bool ok = false;
+  if (f.size() >= 7 && f[5].to_string_view() == "CURVE" && f[6].size() == 32) {
+    const std::string key(static_cast<const char*>(f[6].data()), 32);
+    ok = std::find(allowed_.begin(), allowed_.end(), key) != allowed_.end();
+    if (!ok) {
+      ++counters_.refused;
+      // Rate-limited per source address, not per key: a client rotating keys gets one line, then
+      // one a minute with a count, however many keys it tries.
+      constexpr std::size_t kMaxRefusedSources = 1024;  // bounds the map under a spoofed flood
+      constexpr auto kRefusalLogInterval = std::chrono::seconds(60);
+      const std::string source(f[3].to_string_view());
+      if (refusals_.size() >= kMaxRefusedSources && !refusals_.count(source)) refusals_.clear();
+      Refusal& r = refusals_[source];
+      const auto now = std::chrono::steady_clock::now();
+      if (r.logged == std::chrono::steady_clock::time_point{} || now - r.logged >= kRefusalLogInterval) {
+        char z85[41] = {};
+        zmq_z85_encode(z85, static_cast<const std::uint8_t*>(f[6].data()), 32);
+        log(4, std::string("refused CURVE client ") + z85 + " from " + source + ": not in allowed_clients" +
+                   (r.unlogged ? " (" + std::to_string(r.unlogged) + " more refusals from this address not logged)" : ""));
+        r.logged = now;
+        r.unlogged = 0;
+      } else {
+        ++r.unlogged;
+      }
+    }
+  }
+  const std::string request_id = f.size() > 1 ? f[1].to_string() : std::string();
+  const char* status = ok ? "200" : "400";
+  char user[41] = {};  // the client's key, Z85: the User-Id of its messages (owner_of)
+  if (ok) zmq_z85_encode(user, static_cast<const std::uint8_t*>(f[6].data()), 32);
+  try {
+    zap_.send(zmq::str_buffer("1.0"), zmq::send_flags::sndmore);
+    zap_.send(zmq::buffer(request_id), zmq::send_flags::sndmore);
+    zap_.send(zmq::buffer(std::string_view(status)), zmq::send_flags::sndmore);
+    zap_.send(zmq::buffer(std::string_view(ok ? "OK" : "client key not allowed")), zmq::send_flags::sndmore);
+    zap_.send(zmq::buffer(std::string_view(user)), zmq::send_flags::sndmore);
+    zap_.send(zmq::str_buffer(""), zmq::send_flags::none);
+  } catch (const zmq::error_t&) {}
+}
+
+void WorkerService::handle_monitor() {
+  for (int budget = 0; budget < 256; ++budget) {
+    zmq::message_t ev, addr;
+    try {
+      if (!monitor_.recv(ev, zmq::recv_flags::dontwait)) return;
+      if (ev.more()) (void)monitor_.recv(addr, zmq::recv_flags::none);
+    } catch (const zmq::error_t&) { return; }
+    if (ev.size() < 6) continue;
+    std::uint16_t event = 0;
+    std::uint32_t value = 0;
+    std::memcpy(&event, ev.data(), 2);
+    std::memcpy(&value, static_cast<const char*>(ev.data()) + 2, 4);
+    if (event == ZMQ_EVENT_ACCEPTED) {
+      if (++connections_ > cfg_.max_connections) {
+        ::shutdown(static_cast<int>(value), SHUT_RDWR);  // libzmq sees the end of the stream and closes it
+        ++counters_.connections_refused;
+        if (counters_.connections_refused == 1 || counters_.connections_refused % 1000 == 0)
+          log(4, st::fail("more than max_connections = ", cfg_.max_connections, " connections: refused ",
+                          counters_.connections_refused, " so far")
+                     .message);
+      }
+    } else if (event == ZMQ_EVENT_DISCONNECTED) {
+      if (connections_ > 0) --connections_;
+    }
+  }
+}
+
+bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
+  // An absent socket is polled as descriptor -1 (ignored), never as descriptor 0 (stdin).
+  zmq::pollitem_t items[4] = {{sock_.handle(), 0, ZMQ_POLLIN, 0},
+                              {zap_.handle(), -1, ZMQ_POLLIN, 0},
+                              {nullptr, job_ ? job_->fd : -1, ZMQ_POLLIN, 0},
+                              {monitor_.handle(), -1, ZMQ_POLLIN, 0}};
+  // The loader's eventfd wakes the poll when a set is built; without one (eventfd failed) the
+  // poll is kept short while a load runs.
+  if (job_ && job_->fd < 0) timeout = std::min(timeout, std::chrono::milliseconds(5));
+  try {
+    if (zmq::poll(items, 4, timeout) <= 0) {
+      if (job_ && job_->done.load(std::memory_order_acquire)) finish_job();
+      drop_idle();
+      return true;
+    }
+  } catch (const zmq::error_t& e) {
+    return e.num() != ETERM;  // EINTR (a signal): let the caller look at its stop flag
+  }
+  if (zap_ && (items[1].revents & ZMQ_POLLIN)) handle_zap();
+  if (monitor_ && (items[3].revents & ZMQ_POLLIN)) handle_monitor();
+  if (job_ && job_->done.load(std::memory_order_acquire)) finish_job();
+  drop_idle();
+  if (!(items[0].revents & ZMQ_POLLIN)) return true;
+  // Handle what is queued now, then return so the caller can tick (watchdog, stop flag).
+  for (int budget = 0; budget < 1024; ++budget) {
+    zmq::message_t peer, frame;
+    try {
+      if (!sock_.recv(peer, zmq::recv_flags::dontwait)) break;
+      ST_ASSERT(peer.more(), "a ROUTER prepends the routing id to every message");
+      if (!peer.more()) {
+        note_bad("no body frame");
+        continue;
+      }
+      (void)sock_.recv(frame, zmq::recv_flags::none);  // parts of a message arrive together
+      bool extra = frame.more();
+      for (bool more = extra; more;) {  // discard surplus frames
+        zmq::message_t junk;
+        (void)sock_.recv(junk, zmq::recv_flags::none);
+        more = junk.more();
+      }
+      if (extra || frame.size() == 0) {
+        note_bad(extra ? "more than one frame" : "empty frame");
+        send_error(peer, ErrorCode::BadMessage, 0, "expected exactly one non-empty frame per message");
+        continue;
+      }
+      handle(peer, owner_of(peer, frame), {static_cast<const std::uint8_t*>(frame.data()), frame.size()});
+    } catch (const zmq::error_t& e) { return e.num() != ETERM; }
+  }
+  return true;
+}
+
+void WorkerService::drop_upload(std::unordered_map<std::string, Upload>::iterator it) {
+  buffered_ -= it->second.bytes.capacity();
+  uploads_.erase(it);
+}
+
+void WorkerService::drop_idle() {
+  const auto now = std::chrono::steady_clock::now();
+  if (now < next_idle_check_) return;
+  next_idle_check_ = now + std::chrono::seconds(1);
+  for (auto it = uploads_.begin(); it != uploads_.end();) {
+    if (now - it->second.last_chunk < cfg_.upload_timeout) {
+      ++it;
+      continue;
+    }
+    log(5, st::fail("upload of block set ", std::hex, it->second.hash, std::dec, " abandoned after ",
+                    it->second.bytes.size(), " of ", it->second.total, " bytes: no chunk for ",
+                    cfg_.upload_timeout.count(), " ms")
+               .message);
+    ++counters_.uploads_abandoned;
+    auto gone = it++;
+    drop_upload(gone);
+  }
+  if (cfg_.idle_set_ttl.count() <= 0 || sets_.size() < 2) return;
+  std::size_t dropped = 0;
+  for (auto it = std::next(sets_.begin()); it != sets_.end();) {  // never the most recently used
+    if (now - it->last_used < cfg_.idle_set_ttl) {
+      ++it;
+      continue;
+    }
+    log(6, st::fail("dropped block set ", std::hex, it->hash, std::dec, ": not queried for ",
+                    std::chrono::duration_cast<std::chrono::seconds>(now - it->last_used).count(), " s")
+               .message);
+    it = sets_.erase(it);
+    ++dropped;
+  }
+  if (dropped) ::malloc_trim(0);  // give the freed trees back to the system, not just to malloc
+}
+
+void WorkerService::run(const std::atomic<bool>& stop, std::chrono::milliseconds period, const std::function<void()>& tick) {
+  while (!stop.load(std::memory_order_relaxed)) {
+    if (!poll_once(period)) return;
+    if (tick) tick();
+  }
+}
+
+void WorkerService::handle_message(const std::string& peer, std::span<const std::uint8_t> frame) {
+  const zmq::message_t id(peer.data(), peer.size());
+  handle(id, "id:" + peer, frame);
+}
+
+void WorkerService::handle(const zmq::message_t& peer, const std::string& owner, std::span<const std::uint8_t> frame) {
+  Result<Message> m = decode(frame, cfg_.limits);
+  if (!m) {
+    note_bad(m.error());
+    send_error(peer, ErrorCode::BadMessage, 0, m.error());
+    return;
+  }
+  Message& msg = m.value();
+  if (auto* q = std::get_if<QueryMsg>(&msg)) return on_query(peer, owner, *q);
+  if (auto* l = std::get_if<LoadBlocksMsg>(&msg)) return on_load(peer, owner, *l);
+  if (auto* h = std::get_if<HeartbeatMsg>(&msg)) {
+    ++counters_.heartbeats;
+    return send(peer, hello(owner, h->nonce));
+  }
+  note_bad(std::string("unexpected ") + type_name(msg));
+  send_error(peer, ErrorCode::Unexpected, 0, std::string("a worker does not accept ") + type_name(msg));
+}
+
+void WorkerService::on_query(const zmq::message_t& peer, const std::string& owner, const QueryMsg& q) {
+  auto it =
+      std::find_if(sets_.begin(), sets_.end(), [&](const Loaded& l) { return l.hash == q.hash && l.owner == owner; });
+  if (it == sets_.end()) {
+    send_error(peer, ErrorCode::NotLoaded, q.seq, st::fail("block set ", std::hex, q.hash, " is not held").message);
+    send(peer, hello(owner, 0));  // tell the client what is held so it can load the right set
+    return;
+  }
+  sets_.splice(sets_.begin(), sets_, it);  // most recently used first
+  it->last_used = std::chrono::steady_clock::now();
+  pairs_.clear();
+  // The backend stops past max_pairs: a block set of faces piled on each other cannot make the
+  // worker compute (and hold) N² pairs before refusing.
+  const QueryStats st = it->backend->query(q.pose, q.skip, pairs_, cfg_.limits.max_pairs);
+  if (pairs_.size() > cfg_.limits.max_pairs) {
+    ++counters_.too_many_pairs;
+    send_error(peer, ErrorCode::TooLarge, q.seq,
+               st::fail("more than max_pairs = ", cfg_.limits.max_pairs, " colliding pairs: query refused").message);
+    pairs_.clear();
+    if (pairs_.capacity() > (std::size_t{1} << 20)) pairs_.shrink_to_fit();  // do not keep an attacker's peak
+    return;
+  }
+  std::sort(pairs_.begin(), pairs_.end());
+  pairs_.erase(std::unique(pairs_.begin(), pairs_.end()), pairs_.end());
+  ++counters_.queries;
+  ResultMsg r{q.seq, cfg_.worker_id, q.hash, st, {}};
+  r.pairs.swap(pairs_);
+  send(peer, r);
+  pairs_.swap(r.pairs);  // keep the capacity for the next query
+}
+
+void WorkerService::on_load(const zmq::message_t& peer, const std::string& owner, const LoadBlocksMsg& m) {
+  // decode() has checked total_bytes ≤ max_blockset_bytes and that the chunk lies inside it.
+  auto it = uploads_.find(owner);
+  if (m.offset == 0) {
+    if (it != uploads_.end()) drop_upload(it);  // this client starts over (its own upload only)
+    const std::size_t busy = uploads_.size() + waiting_.size() + (job_ ? 1 : 0);
+    if (busy >= cfg_.max_uploads) {
+      ++counters_.uploads_refused;
+      return send_error(peer, ErrorCode::TooLarge, m.hash,
+                        st::fail("worker busy: ", busy, " block-set uploads in progress (max_uploads = ", cfg_.max_uploads,
+                                 "); send again later")
+                            .message);
+    }
+    Upload u;
+    u.owner = owner;
+    u.hash = m.hash;
+    u.total = m.total_bytes;
+    it = uploads_.emplace(owner, std::move(u)).first;
+  } else if (it == uploads_.end() || it->second.hash != m.hash || it->second.total != m.total_bytes ||
+             it->second.bytes.size() != m.offset) {
+    const bool was = it != uploads_.end();
+    if (was) drop_upload(it);
+    return send_error(
+        peer, ErrorCode::LoadFailed, m.hash,
+        st::fail("LoadBlocks chunk at offset ", m.offset, " out of order", was ? " (load abandoned)" : "").message);
+  }
+  Upload& u = it->second;
+  // Capacity grows with the bytes that actually arrive (a lying total_bytes costs nothing up
+  // front) and is counted against max_upload_bytes over every client's uploads.
+  const std::size_t need = u.bytes.size() + m.data.size(), cap = u.bytes.capacity();
+  if (need > cap) {
+    const std::size_t grown = std::min<std::uint64_t>(u.total, std::max<std::uint64_t>({need, 2 * cap, 1u << 20}));
+    if (buffered_ - cap + grown > cfg_.max_upload_bytes) {
+      ++counters_.uploads_refused;
+      const std::uint64_t hash = u.hash;
+      drop_upload(it);
+      return send_error(peer, ErrorCode::TooLarge, hash,
+                        st::fail("worker busy: uploads would buffer more than max_upload_bytes = ", cfg_.max_upload_bytes,
+                                 " bytes; load refused, send again later")
+                            .message);
+    }
+    u.bytes.reserve(grown);
+    buffered_ += u.bytes.capacity() - cap;
+  }
+  ++counters_.chunks;
+  u.bytes.insert(u.bytes.end(), m.data.begin(), m.data.end());
+  u.last_chunk = std::chrono::steady_clock::now();
+  u.peer.assign(static_cast<const char*>(peer.data()), peer.size());  // answer where the last chunk came from
+  if (u.bytes.size() < u.total) return;
+  waiting_.push_back(std::move(u));
+  uploads_.erase(it);  // its bytes stay counted in buffered_ until the loader is done with them
+  start_job();
+}
+
+void WorkerService::start_job() {
+  if (job_ || waiting_.empty()) return;
+  auto job = std::make_shared<LoadJob>();
+  job->up = std::move(waiting_.front());
+  waiting_.pop_front();
+  job->counted = job->up.bytes.capacity();
+  for (const Loaded& l : sets_) job->known.push_back(l.digest);
+  job->limits = cfg_.limits;
+  job->factory = factory_;
+  job->fd = ::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);  // −1: poll_once polls every 5 ms instead
+  job_ = job;
+  loader_ = std::thread([job] { job->run(); });
+}
+
+std::size_t WorkerService::distinct_backends() const {
+  std::set<const CollisionBackend*> d;
+  for (const Loaded& l : sets_) d.insert(l.backend.get());
+  return d.size();
+}
+
+void WorkerService::finish_job() {
+  loader_.join();
+  std::shared_ptr<LoadJob> job = std::move(job_);
+  job_ = nullptr;
+  Upload& u = job->up;
+  std::shared_ptr<CollisionBackend> backend;
+  if (job->error.empty() && job->reuse) {
+    for (const Loaded& l : sets_)
+      if (l.digest == job->digest) backend = l.backend;
+    if (!backend) {  // evicted while this job ran: build it after all
+      waiting_.push_front(std::move(u));
+      start_job();
+      return;
+    }
+    ++counters_.loads_shared;
+  }
+  buffered_ -= job->counted;  // the upload's bytes are gone now
+  if (!job->error.empty()) {
+    log(4, "load refused: " + job->error);
+    send_error(u.peer, ErrorCode::LoadFailed, u.hash, job->error);
+    start_job();
+    return;
+  }
+  if (!backend) backend = std::move(job->backend);
+  sets_.remove_if([&](const Loaded& l) { return l.hash == u.hash && l.owner == u.owner; });
+  const bool is_new = std::none_of(sets_.begin(), sets_.end(), [&](const Loaded& l) { return l.backend == backend; });
+  while (is_new && !sets_.empty() && distinct_backends() >= std::max<std::uint32_t>(cfg_.max_sets, 1)) sets_.pop_back();
+  const std::uint32_t faces = job->reuse ? 0 : job->faces;
+  sets_.push_front(Loaded{u.owner, u.hash, job->digest, faces, backend, std::chrono::steady_clock::now()});
+  if (job->reuse)
+    for (const Loaded& l : sets_)
+      if (l.backend == backend && l.faces) sets_.front().faces = l.faces;
+  ++counters_.loads;
+  log(6, st::fail("loaded block set ", std::hex, u.hash, std::dec, job->reuse ? " (same bytes as a held set)" : "",
+                  ": ", job->blocks, " blocks, ", sets_.front().faces, " object faces, ", job->probe_faces,
+                  " probe faces, in ", job->ms, " ms; holding ", sets_.size(), " set(s)")
+             .message);
+  send(u.peer, hello(u.owner, 0));
+  start_job();
+}
+
+}  // namespace st::net

@@ -1,0 +1,211 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// WorkerService: one worker of the distributed collision (paper §3.4). Binds a ZeroMQ ROUTER,
+// keeps the block sets it was sent in memory (content-addressed, LRU), and answers each Query
+// with its backend's pairs for the block set the Query names. The same code runs on a thread
+// over inproc:// (the embedded default, local_workers.hpp) and in the spheretouch-worker daemon
+// over tcp:// or ipc://. It never blocks on a send: replies to a peer that is gone or slow are
+// dropped by the ROUTER, and every malformed message gets an Error reply or is dropped.
+//
+// Clients are kept apart: each has its own upload in progress, and a block set is visible (in
+// Hello, to Query) only to the clients that sent its bytes. A client is its CURVE public key when
+// CURVE is on, else its ZeroMQ routing id (ScatterGather sets a random 16-byte one). Two clients
+// that send the same bytes share one backend in memory. Hashing, decoding and building a set run
+// on a loader thread, so the worker keeps answering heartbeats, queries and its watchdog while a
+// large set is built.
+#pragma once
+#include <spheretouch/abi.hpp>
+#include <atomic>
+#include <deque>
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <list>
+#include <memory>
+#include <optional>
+#include <string>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+#include <zmq.hpp>
+
+#include <spheretouch/net/backend.hpp>
+#include <spheretouch/net/block_set.hpp>
+#include <spheretouch/net/curve_keys.hpp>
+#include <spheretouch/net/protocol.hpp>
+
+namespace st::net {
+
+/// CURVE on the worker's socket: its secret key and the client public keys it admits (a ZAP
+/// handler in the service's context checks each connecting client against the list).
+struct CurveServer {
+  std::string secret_z85;                        ///< the worker's secret key, Z85 (40 characters)
+  std::vector<std::string> allowed_clients_z85;  ///< admitted client public keys, Z85; empty: none
+};
+
+/// What a worker is and how much it may hold.
+struct WorkerConfig {
+  std::uint32_t worker_id = 0;  ///< reported in Hello and Result
+  std::uint32_t max_sets = 3;   ///< block sets kept in memory (LRU): own share + reassigned variants
+  /// A held set not queried for this long is dropped and its memory returned to the system (the
+  /// most recently used set is always kept). Reassigned variants live through a fault and go
+  /// once it is over; a variant needed again is sent again. Zero: keep sets until LRU evicts them.
+  std::chrono::milliseconds idle_set_ttl{30'000};
+  /// Decode limits. What the worker holds is bounded by: max_sets loaded sets, each about
+  /// kSetMemoryFactor × its encoded size (≤ max_blockset_bytes); one set being built
+  /// (kBuildMemoryFactor × its size at the peak); max_upload_bytes of uploads in progress or
+  /// waiting for the loader; and, queued inside libzmq, at most rcvhwm frames of at most
+  /// max_chunk_bytes per connection, max_connections connections.
+  Limits limits = DefaultLimits();
+  /// Uploads in progress or waiting for the loader, over all clients; a client over the limit is
+  /// told TooLarge ("busy") and may retry.
+  std::uint32_t max_uploads = 4;
+  /// Bytes buffered for uploads (in progress and waiting), over all clients.
+  std::uint64_t max_upload_bytes = 2ull << 30;
+  /// An upload with no chunk for this long is abandoned and its bytes freed.
+  std::chrono::milliseconds upload_timeout{10'000};
+  int sndhwm = 64;  ///< messages queued per client before replies are dropped
+  int rcvhwm = 4;   ///< messages queued inside libzmq per connection (4 × 1 MiB chunks at most)
+  /// TCP and ipc connections held at once; one more is shut down as it is accepted, so what
+  /// libzmq may queue is bounded by max_connections × rcvhwm frames in total.
+  std::uint32_t max_connections = 64;
+  /// Log sink (syslog priority 3 error … 7 debug, message); empty: silent. Bad messages are
+  /// summarised at most once a second so a flood cannot flood the log.
+  std::function<void(int, const std::string&)> log;
+  /// On ipc:// endpoints, the users (besides the worker's own effective uid) whose processes may
+  /// connect: libzmq checks each connection's SO_PEERCRED. A filesystem path's missing directories
+  /// are created 0700 and the socket file is made 0600.
+  std::vector<std::uint32_t> ipc_allowed_uids;
+  /// Encrypt and authenticate with CURVE (any transport, ipc:// too); the service then owns its
+  /// context's ZAP endpoint, so only one CURVE service per context (the daemon's case).
+  std::optional<CurveServer> curve;
+};
+
+/// Counters since start (read on the service's thread, or after it stopped).
+struct WorkerCounters {
+  std::uint64_t queries = 0;              ///< Query messages answered with a Result
+  std::uint64_t loads = 0;                ///< block sets loaded
+  std::uint64_t chunks = 0;               ///< LoadBlocks messages accepted
+  std::uint64_t bad_messages = 0;         ///< undecodable or misframed messages
+  std::uint64_t errors_sent = 0;          ///< Error replies sent
+  std::uint64_t heartbeats = 0;           ///< Heartbeats answered
+  std::uint64_t refused = 0;              ///< CURVE handshakes refused (client key not allowed)
+  std::uint64_t too_many_pairs = 0;       ///< queries refused at max_pairs (the traversal stopped there)
+  std::uint64_t uploads_refused = 0;      ///< uploads refused: max_uploads or max_upload_bytes reached
+  std::uint64_t uploads_abandoned = 0;    ///< uploads dropped after upload_timeout without a chunk
+  std::uint64_t loads_shared = 0;         ///< loads served by a backend already built for the same bytes
+  std::uint64_t connections_refused = 0;  ///< connections shut down at max_connections
+};
+
+/// Resident memory of a held block set (tree backend) per byte of its encoding, rounded up from
+/// `spheretouch-bench hostile`: 2.7 for a 48 MiB set of 1.8 M faces, 4.8 for a 7.7 MiB one
+/// (perf/RESULTS.md).
+inline constexpr double kSetMemoryFactor = 5.0;
+/// Peak while a set is being built (encoding, decoded set and tree together): 4.8 measured for
+/// the 48 MiB set.
+inline constexpr double kBuildMemoryFactor = 6.0;
+
+/// One worker; not thread-safe: construct, bind and run it on one thread.
+class WorkerService {
+ public:
+  /// A service in `ctx` that makes one backend per loaded block set with `factory`.
+  WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFactory factory);
+  /// Binds the ROUTER to `endpoint` (tcp://, ipc://, inproc://); error names the endpoint.
+  Status bind(const std::string& endpoint);
+  /// The endpoint last bound, resolved (a tcp wildcard port becomes the real one).
+  std::string last_endpoint() const;
+  /// Stops a load in progress at its next step (a set being built is left to finish on its own
+  /// thread, which owns everything it touches).
+  ~WorkerService();
+  WorkerService(const WorkerService&) = delete;
+  WorkerService& operator=(const WorkerService&) = delete;
+  /// Waits up to `timeout` for messages and handles all that are waiting; false when the context
+  /// is being terminated (the caller should stop).
+  bool poll_once(std::chrono::milliseconds timeout);
+  /// Polls until `stop` is set, calling `tick` (if any) at least every `period`.
+  void run(const std::atomic<bool>& stop, std::chrono::milliseconds period = std::chrono::milliseconds(100),
+           const std::function<void()>& tick = {});
+  /// Handles one frame as if the client with routing id `peer` had sent it on the socket (no
+  /// CURVE identity); replies go to that routing id and are dropped if no such client is
+  /// connected. For the message-sequence fuzzer: the whole handler without a socket round trip.
+  void handle_message(const std::string& peer, std::span<const std::uint8_t> frame);
+  std::uint64_t epoch() const { return epoch_; }                ///< random per instance
+  const WorkerCounters& counters() const { return counters_; }  ///< counters so far
+  std::vector<Held> held() const;                               ///< block sets in memory (all clients), MRU first
+  std::uint64_t upload_bytes() const { return buffered_; }      ///< bytes buffered for uploads now
+  bool loading() const { return job_ != nullptr; }              ///< a set is being hashed, decoded or built
+
+ private:
+  /// One client's view of a loaded set; clients that sent the same bytes share the backend.
+  struct Loaded {
+    std::string owner;  // the client that loaded it (owner_of)
+    std::uint64_t hash;
+    Digest digest;
+    std::uint32_t faces;
+    std::shared_ptr<CollisionBackend> backend;
+    std::chrono::steady_clock::time_point last_used;
+  };
+  /// A block set arriving in chunks from one client.
+  struct Upload {
+    std::string owner, peer;  // who sends it, and the routing id to answer
+    std::uint64_t hash = 0, total = 0;
+    std::vector<std::uint8_t> bytes;
+    std::chrono::steady_clock::time_point last_chunk;
+  };
+  struct LoadJob;  // a complete upload on the loader thread (worker_service.cpp)
+  void handle(const zmq::message_t& peer, const std::string& owner, std::span<const std::uint8_t> frame);
+  void handle_zap();
+  void handle_monitor();  ///< connection accepted / closed: counts, enforces max_connections
+  void on_load(const zmq::message_t& peer, const std::string& owner, const LoadBlocksMsg& m);
+  void on_query(const zmq::message_t& peer, const std::string& owner, const QueryMsg& m);
+  void send(const zmq::message_t& peer, const Message& m);
+  void send(const std::string& peer, const Message& m);
+  void send_error(const zmq::message_t& peer, ErrorCode code, std::uint64_t ref, std::string text);
+  void send_error(const std::string& peer, ErrorCode code, std::uint64_t ref, std::string text);
+  HelloMsg hello(const std::string& owner, std::uint64_t echo) const;
+  std::string owner_of(const zmq::message_t& peer, const zmq::message_t& frame) const;
+  void log(int priority, const std::string& text) const {
+    if (cfg_.log) cfg_.log(priority, text);
+  }
+  void note_bad(const std::string& why);
+  void drop_idle();  ///< at most once a second: idle_set_ttl, upload_timeout
+  void drop_upload(std::unordered_map<std::string, Upload>::iterator it);
+  void start_job();   ///< hands the next waiting upload to the loader thread
+  void finish_job();  ///< installs (or refuses) the loader's result
+  std::size_t distinct_backends() const;
+
+  WorkerConfig cfg_;
+  BackendFactory factory_;
+  zmq::socket_t sock_;
+  zmq::socket_t zap_;                 // ZAP handler (CURVE client allow-list), or empty
+  zmq::socket_t monitor_;             // events of sock_ (accepted, disconnected), or empty
+  std::uint32_t connections_ = 0;     // TCP/ipc connections open now
+  std::vector<std::string> allowed_;  // admitted client public keys, 32 raw bytes each
+  std::string init_error_;            // a CURVE set-up failure, reported by bind()
+  std::uint64_t epoch_;
+  std::list<Loaded> sets_;                           // MRU first
+  std::unordered_map<std::string, Upload> uploads_;  // in progress, by owner
+  std::deque<Upload> waiting_;                       // complete, waiting for the loader
+  std::uint64_t buffered_ = 0;                       // Σ capacity of uploads_ and waiting_ bytes, and the job's
+  std::shared_ptr<LoadJob> job_;                     // on the loader thread, or null
+  std::thread loader_;
+  WorkerCounters counters_;
+  std::vector<FacePair> pairs_;    // reused per query
+  std::vector<std::uint8_t> out_;  // reused encode buffer
+  std::chrono::steady_clock::time_point bad_logged_{};
+  std::chrono::steady_clock::time_point next_idle_check_{};
+  std::uint64_t bad_unlogged_ = 0;
+  // Refused CURVE handshakes by source address: the first is logged, then at most one line a
+  // minute with a count, so a client retrying or rotating keys cannot flood the log. Bounded:
+  // cleared when full.
+  struct Refusal {
+    std::chrono::steady_clock::time_point logged{};
+    std::uint64_t unlogged = 0;
+  };
+  std::unordered_map<std::string, Refusal> refusals_;
+};
+
+/// Sets the socket options every spheretouch socket uses: LINGER 0, the given high-water marks,
+/// ZMQ_MAXMSGSIZE = max_message_bytes (libzmq drops a peer that sends more).
+void set_common_options(zmq::socket_t& s, int sndhwm, int rcvhwm, std::int64_t max_message_bytes);
+
+}  // namespace st::net

@@ -1,0 +1,70 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// HapticServo: the haptic thread's tick, as a TickHandler for HapticLoop:
+// read the device pose → publish it → take the newest ContactModel if one arrived →
+// interpolate the force → saturate → command the device → push one telemetry sample.
+// Everything it touches is preallocated; the tick takes no lock and never waits.
+#pragma once
+#include <spheretouch/abi.hpp>
+#include <cstdint>
+
+#include <spheretouch/geom/contact.hpp>
+#include <spheretouch/rt/constants.hpp>
+#include <spheretouch/rt/device.hpp>
+#include <spheretouch/rt/haptic_loop.hpp>
+#include <spheretouch/rt/interpolator.hpp>
+#include <spheretouch/rt/passivity.hpp>
+#include <spheretouch/rt/pose_sample.hpp>
+#include <spheretouch/rt/saturation.hpp>
+#include <spheretouch/rt/shm_status.hpp>
+#include <spheretouch/rt/telemetry.hpp>
+#include <spheretouch/rt/triple_buffer.hpp>
+
+namespace st::rt {
+
+/// Counters of a servo (read after the loop stopped, or racily for display).
+struct ServoStats {
+  std::uint64_t ticks = 0;          ///< ticks served
+  std::uint64_t models = 0;         ///< contact models taken
+  std::uint64_t pose_failures = 0;  ///< device could not deliver a pose (zero force commanded)
+  std::uint64_t saturated = 0;      ///< ticks where the saturator cut the force
+};
+
+/// The servo tick. Construct it, hand it to HapticLoop::start()/run().
+class HapticServo final : public TickHandler {
+ public:
+  /// All references must outlive the servo; telemetry may be null. The saturation peak is
+  /// lowered to the device's max_force_N() if it is above it. `period_s` is the loop's period
+  /// (it sizes the passivity guard's minimum damping).
+  HapticServo(Device& device, TripleBuffer<PoseSample>& poses, TripleBuffer<geom::ContactModel>& models,
+              const ForceLaw& law, const InterpolatorConfig& interp, SaturationConfig saturation, Telemetry* telemetry,
+              const PassivityConfig& passivity = DefaultPassivityConfig(), double period_s = 1.0 / kDefaultRateHz);
+  void tick(const TickInfo& info) noexcept override;
+  /// Publish a ServoStatus every kStatusEveryTicks ticks into `status` (null = off). Set before
+  /// the loop starts; the servo is the SeqLock's only writer.
+  void publish_status_to(SeqLock<ServoStatus>* status) { status_ = status; }
+  const ServoStats& stats() const { return stats_; }            ///< counters
+  double peak_force_N() const { return peak_force_N_; }         ///< largest |force| commanded (after the loop)
+  const Interpolator& interpolator() const { return interp_; }  ///< for inspection
+  const Saturator& saturator() const { return sat_; }           ///< for inspection
+  const PassivityGuard& passivity() const { return guard_; }    ///< for inspection
+
+ private:
+  Device& device_;
+  TripleBuffer<PoseSample>& poses_;
+  TripleBuffer<geom::ContactModel>& models_;
+  Interpolator interp_;
+  Saturator sat_;
+  PassivityGuard guard_;
+  Telemetry* telemetry_;
+  SeqLock<ServoStatus>* status_ = nullptr;
+  ServoStats stats_;
+  double peak_force_N_ = 0;  ///< largest |force| commanded
+  std::int64_t model_received_ns_ = 0;
+  std::int64_t pose_ns_ = 0;  ///< sampling time of the newest published pose
+  std::uint32_t model_contacts_ = 0;
+  std::uint64_t pose_seq_ = 0;
+  std::int64_t last_ns_ = 0;
+  std::int64_t model_pose_ns_ = 0;  ///< pose_sampled_ns of the newest model
+};
+
+}  // namespace st::rt
