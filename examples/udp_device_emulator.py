@@ -10,7 +10,7 @@ the program measures what a driver would see: poses sent, forces received (every
 sequence gaps, and the pose-to-force time (from sending a pose to receiving the first force that
 used it, on this program's clock, echoed by the servo).
 
-Wire format (version 1, little-endian; src/spheretouch/rt/udp_device.hpp and README):
+Wire format (version 1, little-endian; src/spheretouch/rt/udp_device.hpp and docs/user-guide/devices.md):
   pose  (80 bytes): "STHP" u16 version u16 buttons u64 seq i64 device_ns f64 x y z f64 qw qx qy qz
   force (64 bytes): "STHF" u16 version u16 flags u64 seq u64 pose_seq i64 pose_device_ns
                     f64 fx fy fz i64 servo_ns

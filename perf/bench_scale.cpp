@@ -8,7 +8,7 @@
 // too, on this machine: the raw ZeroMQ fan-out floor over inproc for W workers (what a round here
 // costs before any of our code), and the client's CPU per round over tcp with the echoes in a
 // separate process (what a client pays per worker on any network). A network adds its round trip
-// and its wire time; two published networks are modelled (README "When distribution pays"):
+// and its wire time; two published networks are modelled (docs/performance.md):
 //   10 GbE, kernel TCP: 16.25 us round trip (netperf TCP_RR, 1-byte, switched; Linux commit
 //     3a336cb17183 "cxgb4: Add low latency socket busy_poll support"), 10 Gbit/s;
 //   100 GbE with busy polling: 8.79 us round trip (same source, busy_poll on), 100 Gbit/s.

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # SPDX-License-Identifier: BSD-3-Clause
-# The live view's and the UDP bridge's costs, measured (README "Live view", "A bridge for real
+# The live view's and the UDP bridge's costs, measured (docs/user-guide/devices.md: "Live view", "A bridge for real
 # devices"; perf/RESULTS.md):
 #   1. haptic misses of the same run (configs/demo.toml: hand_L2 x elephant) without a viewer and
 #      with the live view open in headless Chromium, interleaved, PAIRS times; also with the

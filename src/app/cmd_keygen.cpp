@@ -2,7 +2,7 @@
 // spheretouch keygen --out PREFIX [--force]: a CURVE key pair for a worker fleet or a client:
 // PREFIX.key (the Z85 secret key, one line, mode 0600) and PREFIX.pub (the Z85 public key, one
 // line). The workers' .key goes in their [curve] secret_key_file, their .pub to every client
-// (server_key); a client's .pub goes in the workers' allow-list (README "Securing a fleet").
+// (server_key); a client's .pub goes in the workers' allow-list (docs/user-guide/security.md, "Securing a fleet").
 #include <cstdio>
 
 #include "app/commands.hpp"

@@ -26,7 +26,7 @@ using Patch = PatchTestAccess::Patch;
 
 namespace {
 
-constexpr double kDepthTol = 0.05;  // mm: the depth target for analytic shapes (README, force rendering)
+constexpr double kDepthTol = 0.05;  // mm: the depth target for analytic shapes (docs/user-guide/force-rendering.md)
 
 const Mesh& box40() {  // faces at ±20
   static const Mesh m = make_box({40, 40, 40});

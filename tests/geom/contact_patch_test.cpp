@@ -59,7 +59,7 @@ Mesh make_dumbbell() {
   }
   return dumbbell;
 }
-constexpr double kDepthTol = 0.05;  // mm: the depth target for analytic shapes (README, force rendering)
+constexpr double kDepthTol = 0.05;  // mm: the depth target for analytic shapes (docs/user-guide/force-rendering.md)
 }  // namespace
 
 TEST_CASE("contact patch: the default model is patch; names parse") {

@@ -480,7 +480,7 @@ TEST_CASE("collide() stops its traversal at max_pairs") {
   CHECK(r.pairs.size() == 2000u * 2000u);
 }
 
-TEST_CASE("workers bound to tcp://localhost and tcp://[::1] serve a client (README documents both)") {
+TEST_CASE("workers bound to tcp://localhost and tcp://[::1] serve a client (docs/user-guide/fleet.md documents both)") {
   zmq::context_t ctx;
   const test::NetScene s = test::small_scene(6);
   for (const std::string host : {"localhost", "[::1]"}) {

@@ -154,7 +154,7 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
           std::fprintf(stderr,
                        "warning: %s is not a loopback or ipc:// endpoint and no CURVE keys are set: poses, block "
                        "sets and results cross the network in plaintext, unauthenticated (set server_key and "
-                       "client_key, README \"Securing a fleet\")\n",
+                       "client_key, docs/user-guide/security.md, \"Securing a fleet\")\n",
                        ep.c_str());
   } else {
     if (spec.workers < 1) return fail("distribution: no workers (use --workers N or --connect EP,...)");

@@ -7,8 +7,9 @@
 namespace st::geom {
 
 Result<LoadedMesh> detail::load_with_assimp(const std::string& path, const LoadConfig&) {
-  return fail(path, ": this spheretouch was built without assimp (meson -Dassimp=disabled): only .off, .obj, .ply "
-                    "and .stl are read; convert the mesh, or rebuild with libassimp-dev");
+  return fail(path,
+              ": this spheretouch was built without assimp (meson -Dassimp=disabled): only .off, .obj, .ply "
+              "and .stl are read; convert the mesh, or rebuild with libassimp-dev");
 }
 
 // Every other extension would be assimp's: load_with_assimp() then says it is not built in.

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // The SIMD vocabulary of the collision core: float lanes per instruction set, so each kernel is
 // written once, and the choice of instruction set at RUN time, so one binary runs on any x86-64
-// (no -march in any build flag; README, "Portable binaries").
+// (no -march in any build flag; docs/library.md, "Portable binaries").
 //
 // * Lanes/Mask come in one namespace per ISA: scalar (1 float), sse2 (4: the x86-64 baseline) and
 //   avx2 (8; with FMA). Each operation is one IEEE float operation per

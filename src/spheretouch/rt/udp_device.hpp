@@ -4,7 +4,7 @@
 // examples/udp_device_emulator.py) sends one pose datagram per servo tick of its own and reads
 // back the force datagrams the servo sends every tick.
 //
-// Wire format, version 1, little-endian, one message per datagram (README "A bridge for real
+// Wire format, version 1, little-endian, one message per datagram (docs/user-guide/devices.md, "A bridge for real
 // devices"):
 //
 //   pose, driver -> spheretouch, 80 bytes        force, spheretouch -> driver, 64 bytes
