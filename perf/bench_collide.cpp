@@ -19,6 +19,7 @@
 #include "fcl_peer.hpp"
 #endif
 #include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/simd.hpp>
 #include <spheretouch/geom/mesh_io.hpp>
 #include <spheretouch/geom/pose_io.hpp>
 #include <spheretouch/geom/sphere_tree.hpp>
@@ -121,6 +122,10 @@ struct PoseRow {
   std::size_t pairs = 0;
   geom::CollideStats stats;
   double p50_us = 0, p95_us = 0, min_us = 0;
+  /// The same query without the triangle filter (every candidate through the exact test: the path
+  /// before it), timed in alternating blocks with the one above; and whether its pairs are the same.
+  double base_p50_us = 0, base_p95_us = 0, base_min_us = 0;
+  bool base_same = true;
   bool fcl = false;
   double fcl_p50_us = 0, fcl_p95_us = 0, fcl_min_us = 0;
   std::size_t fcl_pairs = 0, only_ours = 0, only_fcl = 0;
@@ -136,6 +141,7 @@ void add_collide(CLI::App& app) {
     unsigned leaf = geom::DefaultTreeConfig().leaf_faces;
     std::uint64_t seed = 1;
     bool fcl = false, json = false;
+    std::string isa;
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd =
@@ -155,7 +161,22 @@ void add_collide(CLI::App& app) {
   cmd->add_option("--build-mesh", a->build_mesh, "also time our tree build and FCL's OBBRSS build of this mesh")
       ->check(CLI::ExistingFile);
   cmd->add_flag("--json", a->json, "print one JSON object instead of the table");
+  cmd->add_option("--isa", a->isa,
+                  "run the SIMD kernels on this instruction set (scalar, sse2, avx2, avx512; default: the best the CPU "
+                  "has, or ST_SIMD)");
   cmd->callback([a] {
+    if (!a->isa.empty()) {
+      geom::simd::Isa isa;
+      if (!geom::simd::parse_isa(a->isa, isa)) {
+        std::fprintf(stderr, "--isa %s: expected scalar, sse2, avx2 or avx512\n", a->isa.c_str());
+        throw CLI::RuntimeError(2);
+      }
+      if (!geom::simd::set_isa(isa)) {
+        std::fprintf(stderr, "--isa %s: this CPU or build has at most %s\n", a->isa.c_str(),
+                     geom::simd::isa_name(geom::simd::best_isa()));
+        throw CLI::RuntimeError(2);
+      }
+    }
 #ifndef ST_HAVE_FCL
     if (a->fcl || !a->build_mesh.empty()) {
       std::fprintf(stderr, "--fcl/--build-mesh: this spheretouch-bench was built without FCL (libfcl-dev)\n");
@@ -243,9 +264,14 @@ void add_collide(CLI::App& app) {
       for (const auto& [pose, comment] : read_poses(a->poses)) {
         PoseRow row;
         row.comment = comment;
-        std::vector<double> ours, theirs;
+        std::vector<double> ours, base, theirs;
         ours.reserve(a->runs);
-        geom::collide(s.probe, s.pt, s.object, s.ot, pose, {}, sc, r);  // warm
+        base.reserve(a->runs);
+        geom::CollideConfig no_filter;
+        no_filter.tri_filter = false;
+        geom::CollideResult rb;
+        geom::collide(s.probe, s.pt, s.object, s.ot, pose, no_filter, sc, rb);  // warm
+        geom::collide(s.probe, s.pt, s.object, s.ot, pose, {}, sc, r);
         // Ours and FCL's in alternating blocks of 10 queries, so a change of machine load during
         // the run affects both alike while each still runs warm, back to back.
         for (int done = 0; done < a->runs;) {
@@ -254,6 +280,11 @@ void add_collide(CLI::App& app) {
             t0 = std::chrono::steady_clock::now();
             geom::collide(s.probe, s.pt, s.object, s.ot, pose, {}, sc, r);
             ours.push_back(1e6 * seconds_since(t0));
+          }
+          for (int i = 0; i < block; ++i) {
+            t0 = std::chrono::steady_clock::now();
+            geom::collide(s.probe, s.pt, s.object, s.ot, pose, no_filter, sc, rb);
+            base.push_back(1e6 * seconds_since(t0));
           }
 #ifdef ST_HAVE_FCL
           for (int i = 0; peer && i < block; ++i) {
@@ -270,6 +301,18 @@ void add_collide(CLI::App& app) {
         row.p50_us = percentile(ours, 0.5);
         row.p95_us = percentile(ours, 0.95);
         row.min_us = percentile(ours, 0.0);
+        row.base_p50_us = percentile(base, 0.5);
+        row.base_p95_us = percentile(base, 0.95);
+        row.base_min_us = percentile(base, 0.0);
+        {
+          geom::CollideConfig o = no_filter;
+          o.sort_pairs = true;
+          geom::CollideResult sorted_base, sorted;
+          geom::collide(s.probe, s.pt, s.object, s.ot, pose, o, sc, sorted_base);
+          o.tri_filter = true;
+          geom::collide(s.probe, s.pt, s.object, s.ot, pose, o, sc, sorted);
+          row.base_same = sorted.pairs == sorted_base.pairs;
+        }
 #ifdef ST_HAVE_FCL
         if (peer) {
           row.fcl = true;
@@ -319,10 +362,12 @@ void add_collide(CLI::App& app) {
     if (a->json) {
       std::printf(
           "{\"probe\": \"%s\", \"object\": \"%s\", \"probe_faces\": %zu, \"object_faces\": %zu, \"leaf_faces\": %u, "
-          "\"runs\": %d,\n \"build\": {\"probe_s\": %.4f, \"object_s\": %.4f, \"probe_bytes_per_face\": %.1f, "
+          "\"runs\": %d, \"isa\": \"%s\",\n \"build\": {\"probe_s\": %.4f, \"object_s\": %.4f, "
+          "\"probe_bytes_per_face\": %.1f, "
           "\"object_bytes_per_face\": %.1f, \"scratch_bytes\": %zu, \"fcl_both_s\": %.4f",
           a->probe.c_str(), a->object.c_str(), s.probe.num_faces(), s.object.num_faces(), a->leaf, a->runs,
-          probe_build_s, object_build_s, bpf_probe, bpf_object, scratch_bytes, fcl_build_s);
+          geom::simd::isa_name(geom::simd::active_isa()), probe_build_s, object_build_s, bpf_probe, bpf_object,
+          scratch_bytes, fcl_build_s);
       if (!a->build_mesh.empty())
         std::printf(
             ", \"big_mesh\": \"%s\", \"big_faces\": %zu, \"big_s\": %.4f, \"big_bytes_per_face\": %.1f, \"big_fcl_s\": "
@@ -333,10 +378,13 @@ void add_collide(CLI::App& app) {
         const PoseRow& w = rows[i];
         std::printf(
             "%s\n  {\"contacts\": %u, \"pairs\": %zu, \"p50_us\": %.2f, \"p95_us\": %.2f, \"min_us\": %.2f, "
-            "\"node_pairs\": %llu, \"leaf_pairs\": %llu, \"tri_tests\": %llu",
+            "\"node_pairs\": %llu, \"leaf_pairs\": %llu, \"tri_tests\": %llu, \"tri_exact\": %llu, "
+            "\"base_p50_us\": %.2f, \"base_p95_us\": %.2f, \"base_min_us\": %.2f, \"filter_ratio\": %.4f, "
+            "\"filter_same_pairs\": %s",
             i ? "," : "", w.contacts, w.pairs, w.p50_us, w.p95_us, w.min_us,
             static_cast<unsigned long long>(w.stats.node_pairs), static_cast<unsigned long long>(w.stats.leaf_pairs),
-            static_cast<unsigned long long>(w.stats.tri_pairs));
+            static_cast<unsigned long long>(w.stats.tri_pairs), static_cast<unsigned long long>(w.stats.tri_exact),
+            w.base_p50_us, w.base_p95_us, w.base_min_us, w.p50_us / w.base_p50_us, w.base_same ? "true" : "false");
         if (w.fcl)
           std::printf(
               ", \"fcl_p50_us\": %.2f, \"fcl_p95_us\": %.2f, \"fcl_min_us\": %.2f, \"ratio\": %.4f, \"fcl_pairs\": "
@@ -352,18 +400,21 @@ void add_collide(CLI::App& app) {
         "leaf_faces %u; probe %zu faces (tree %.3f s, %.1f B/face), object %zu faces (tree %.3f s, %.1f B/face)",
         a->leaf, s.probe.num_faces(), probe_build_s, bpf_probe, s.object.num_faces(), object_build_s, bpf_object);
     if (a->fcl) std::printf("; FCL OBBRSS build of both %.3f s", fcl_build_s);
-    std::printf("; %d runs per pose; query scratch %.1f MB\n", a->runs, double(scratch_bytes) / 1e6);
+    std::printf("; %d runs per pose; query scratch %.1f MB; SIMD %s\n", a->runs, double(scratch_bytes) / 1e6,
+                geom::simd::isa_name(geom::simd::active_isa()));
     if (!rows.empty()) {
-      std::printf("%8s %8s %10s %10s %10s %9s %9s %9s", "contacts", "pairs", "node_pairs", "leaf_pairs", "tri_tests",
-                  "p50_ms", "p95_ms", "min_ms");
+      std::printf("%8s %8s %10s %10s %10s %9s %9s %9s %9s %9s %7s %5s", "contacts", "pairs", "node_pairs", "leaf_pairs",
+                  "tri_tests", "tri_exact", "p50_ms", "p95_ms", "min_ms", "base_p50", "filter", "same");
       if (a->fcl)
         std::printf(" %9s %9s %7s %9s %9s %8s", "fcl_p50", "fcl_min", "ratio", "fcl_pairs", "only_ours", "only_fcl");
       std::printf("\n");
     }
     for (const PoseRow& w : rows) {
-      std::printf("%8u %8zu %10llu %10llu %10llu %9.4f %9.4f %9.4f", w.contacts, w.pairs,
-                  static_cast<unsigned long long>(w.stats.node_pairs), static_cast<unsigned long long>(w.stats.leaf_pairs),
-                  static_cast<unsigned long long>(w.stats.tri_pairs), w.p50_us / 1e3, w.p95_us / 1e3, w.min_us / 1e3);
+      std::printf("%8u %8zu %10llu %10llu %10llu %9llu %9.4f %9.4f %9.4f %9.4f %7.3f %5s", w.contacts, w.pairs,
+                  static_cast<unsigned long long>(w.stats.node_pairs),
+                  static_cast<unsigned long long>(w.stats.leaf_pairs), static_cast<unsigned long long>(w.stats.tri_pairs),
+                  static_cast<unsigned long long>(w.stats.tri_exact), w.p50_us / 1e3, w.p95_us / 1e3, w.min_us / 1e3,
+                  w.base_p50_us / 1e3, w.p50_us / w.base_p50_us, w.base_same ? "yes" : "NO");
       if (w.fcl)
         std::printf(" %9.4f %9.4f %7.3f %9zu %9zu %8zu", w.fcl_p50_us / 1e3, w.fcl_min_us / 1e3,
                     w.p50_us / w.fcl_p50_us, w.fcl_pairs, w.only_ours, w.only_fcl);

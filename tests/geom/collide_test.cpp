@@ -337,6 +337,91 @@ TEST_CASE("every SIMD instruction set gives the same pairs and counters (run-tim
   REQUIRE(simd::set_isa(before));
 }
 
+// A pair of one-triangle-per-cell meshes: cell c holds probe triangle c and object triangle c,
+// cells 10 x scale apart, so the candidate pairs are exactly the same-cell pairs.
+struct CellPairs {
+  std::vector<Vec3> pv, ov;
+  void add(const std::array<Vec3, 3>& p, const std::array<Vec3, 3>& o, double scale) {
+    const double cell = 10 * scale;
+    const Vec3 at(cell * static_cast<double>(pv.size() / 3), 0, 0);
+    for (const Vec3& v : p) pv.push_back(v + at);
+    for (const Vec3& v : o) ov.push_back(v + at);
+  }
+  static Mesh mesh(const char* name, const std::vector<Vec3>& v) {
+    std::vector<Tri> f;
+    for (std::uint32_t i = 0; i + 2 < v.size(); i += 3) f.push_back({i, i + 1, i + 2});
+    return make_mesh(name, v, f);
+  }
+};
+
+TEST_CASE("the certified triangle filter decides as the exact test does, at every scale and ISA") {
+  using simd::Isa;
+  std::mt19937_64 rng(20261126);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  const auto tri = [&](double scale) {
+    return std::array<Vec3, 3>{Vec3(unit(rng), unit(rng), unit(rng)) * scale, Vec3(unit(rng), unit(rng), unit(rng)) * scale,
+                               Vec3(unit(rng), unit(rng), unit(rng)) * scale};
+  };
+  const Isa before = simd::active_isa();
+  for (const double scale : {1e-6, 1e-3, 1.0, 1e3, 1e6}) {
+    CAPTURE(scale);
+    CellPairs generic, hard;
+    for (int c = 0; c < 150; ++c) generic.add(tri(scale), tri(scale), scale);  // random: apart or deep
+    for (int c = 0; c < 40; ++c) {
+      const auto o = tri(scale);
+      const Vec3 n = (o[1] - o[0]).cross(o[2] - o[0]).normalized();
+      const Vec3 inside = (o[0] + o[1] + o[2]) / 3;
+      auto p = tri(scale);
+      // Touching at a shared vertex, exactly.
+      hard.add({o[1], p[1], p[2]}, o, scale);
+      // A vertex on the face (barycentric point, rounded), the rest above or below.
+      hard.add({inside, inside + n * scale, inside + (p[2] - p[1]) * 0.5 + n * scale}, o, scale);
+      // Coplanar and overlapping; coplanar and apart; parallel 1e-9 x scale above.
+      hard.add({o[0] * 0.5 + inside * 0.5, o[1] * 0.5 + inside * 0.5, o[2] * 0.5 + inside * 0.5}, o, scale);
+      hard.add({o[0] * 2.0 - inside, o[1] * 2.0 - inside - (o[1] - o[0]) * 1.5, o[2] * 2.0 - inside}, o, scale);
+      hard.add({o[0] + n * 1e-9 * scale, o[1] + n * 1e-9 * scale, o[2] + n * 1e-9 * scale}, o, scale);
+      // Degenerate: a segment through the face, a point on it; an edge nearly parallel to one of O's.
+      hard.add({inside - n * scale, inside + n * scale, inside}, o, scale);
+      hard.add({inside, inside, inside}, o, scale);
+      const Vec3 e = (o[1] - o[0]) + n.cross(o[1] - o[0]) * 1e-7;
+      hard.add({o[0] + n * 1e-7 * scale, o[0] + n * 1e-7 * scale + e, inside - n * 0.3 * scale}, o, scale);
+    }
+    for (CellPairs* cells : {&generic, &hard}) {
+      const bool is_generic = cells == &generic;
+      CAPTURE(is_generic);
+      Body probe(CellPairs::mesh("probe", cells->pv)), object(CellPairs::mesh("object", cells->ov));
+      const Pose id = Pose::Identity();
+      std::vector<FacePair> ref = brute_force(probe.mesh, object.mesh, id);
+      std::sort(ref.begin(), ref.end());
+      for (int i = 0; i <= static_cast<int>(simd::best_isa()); ++i) {
+        const std::string isa_name = simd::isa_name(static_cast<Isa>(i));
+        CAPTURE(isa_name);
+        REQUIRE(simd::set_isa(static_cast<Isa>(i)));
+        CollideScratch scratch;
+        CollideConfig opt;
+        opt.sort_pairs = true;
+        CollideResult with, without;
+        collide(probe.mesh, probe.tree, object.mesh, object.tree, id, opt, scratch, with);
+        opt.tri_filter = false;
+        collide(probe.mesh, probe.tree, object.mesh, object.tree, id, opt, scratch, without);
+        CHECK(with.pairs == ref);
+        CHECK(without.pairs == ref);
+        CHECK(with.stats.tri_pairs == without.stats.tri_pairs);
+        CHECK(without.stats.tri_exact == without.stats.tri_pairs);  // off: every candidate exact
+        CHECK(with.stats.tri_exact <= with.stats.tri_pairs);
+        if (is_generic) {
+          // Random triangles in the same box: apart or deeply crossing, well conditioned; the filter
+          // must decide nearly all of them (it is the point), and the set must not be trivial.
+          CHECK(with.stats.tri_pairs >= 100);
+          CHECK(!ref.empty());
+          CHECK(with.stats.tri_exact * 20 <= with.stats.tri_pairs);
+        }
+      }
+    }
+  }
+  REQUIRE(simd::set_isa(before));
+}
+
 TEST_CASE("approximate mode is a superset of exact") {
   const Mesh* hand = st::test::model_mesh("hand.off");
   const Mesh* ele = st::test::model_mesh("elephant.off");

@@ -32,6 +32,12 @@
 #include <spheretouch/geom/simd.hpp>
 #include <spheretouch/geom/tri_tri.hpp>
 
+// GCC 12's AVX-512 min/max intrinsics pass _mm512_undefined_ps() (a self-initialised variable) as
+// the unused merge source, which -Wmaybe-uninitialized reports wherever they are inlined.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
+
 namespace st::geom {
 namespace {
 
@@ -181,16 +187,29 @@ template <class Lanes>
 struct CollideQuery;
 
 #define ST_COLLIDE_SIMD simd::scalar
+#define ST_COLLIDE_WIDE_SIMD simd::scalar
 #include "collide_traversal.inl"
 #undef ST_COLLIDE_SIMD
+#undef ST_COLLIDE_WIDE_SIMD
 #if defined(ST_SIMD_X86)
 #define ST_COLLIDE_SIMD simd::sse2
+#define ST_COLLIDE_WIDE_SIMD simd::sse2
 #include "collide_traversal.inl"
 #undef ST_COLLIDE_SIMD
+#undef ST_COLLIDE_WIDE_SIMD
 ST_TARGET_AVX2_BEGIN
 #define ST_COLLIDE_SIMD simd::avx2
+#define ST_COLLIDE_WIDE_SIMD simd::avx2
 #include "collide_traversal.inl"
 #undef ST_COLLIDE_SIMD
+#undef ST_COLLIDE_WIDE_SIMD
+ST_TARGET_END
+ST_TARGET_AVX512_BEGIN
+#define ST_COLLIDE_SIMD simd::avx2
+#define ST_COLLIDE_WIDE_SIMD simd::avx512
+#include "collide_traversal.inl"
+#undef ST_COLLIDE_SIMD
+#undef ST_COLLIDE_WIDE_SIMD
 ST_TARGET_END
 #endif
 
@@ -287,6 +306,9 @@ void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object
 
   switch (simd::active_isa()) {
 #if defined(ST_SIMD_X86)
+    case simd::Isa::avx512:
+      run_query<simd::avx512::Lanes>(probe, probe_tree, object, object_tree, options, scratch, result, rt, s, slack, gen);
+      break;
     case simd::Isa::avx2:
       run_query<simd::avx2::Lanes>(probe, probe_tree, object, object_tree, options, scratch, result, rt, s, slack, gen);
       break;

@@ -77,14 +77,22 @@ struct CollideConfig {
   /// then holds at most max_pairs plus one leaf pair's worth (64 × 64). A worker answering a
   /// hostile block set (every face on top of every other) must not compute N² pairs first.
   std::size_t max_pairs = SIZE_MAX;
+  /// Decide triangle pairs with the certified float filter first (collide_traversal.inl, up to 16
+  /// pairs per instruction on AVX-512), the exact test only for those it leaves undecided. Exact
+  /// either way (the same pairs); false runs the exact test on every candidate (for measuring).
+  bool tri_filter = true;
 };
 inline CollideConfig DefaultCollideConfig() { return {}; }  ///< exact, unsorted, whole object
+
+/// Candidate triangle pairs the leaf stage gathers before its filter runs (one AVX-512 step).
+inline constexpr std::uint32_t kTriBatch = 16;
 
 /// Counters of one query (Box2D-style, for tests and benchmarks).
 struct CollideStats {
   std::uint64_t node_pairs = 0;    ///< sphere pairs tested
   std::uint64_t leaf_pairs = 0;    ///< leaf-leaf pairs reached (exact mode)
-  std::uint64_t tri_pairs = 0;     ///< exact tri_tri_overlap calls
+  std::uint64_t tri_pairs = 0;     ///< candidate triangle pairs (face boxes overlapping) tested
+  std::uint64_t tri_exact = 0;     ///< of those, decided by tri_tri_overlap (the filter's undecided)
   std::uint64_t sphere_pairs = 0;  ///< approximate mode: overlapping sphere pairs reported
   /// traversals stopped: a tree deeper than its num_depths (or > kMaxTreeDepth); 0 for valid trees
   std::uint64_t truncated = 0;

@@ -1,17 +1,22 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // The collision query's traversal and leaf stage (collide.cpp), compiled once per instruction set:
 // collide.cpp includes this file inside each ISA's target region (simd.hpp) with ST_COLLIDE_SIMD
-// naming that ISA's namespace (simd::sse2, ...), so each ISA gets its own CollideQuery
-// specialisation, kernels included, and collide() runs the one simd::active_isa() names.
+// naming the namespace of the node and box kernels' lanes (simd::sse2, ...) and ST_COLLIDE_WIDE_SIMD
+// that of the triangle filter's (the same, except on AVX-512: 16 lanes for the triangles, 8 for
+// the nodes, whose arrays are padded for 8 children, and the boxes, measured faster at 8: the
+// 16-lane gathers cost more than they save at 24 faces a leaf), so each ISA gets its own
+// CollideQuery specialisation, kernels included, and collide() runs the one simd::active_isa() names.
 // No #include here: everything is defined inside the region, for its ISA.
 
 template <>
-struct CollideQuery<ST_COLLIDE_SIMD::Lanes> {
+struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
   using Lanes = ST_COLLIDE_SIMD::Lanes;
   using Mask = ST_COLLIDE_SIMD::Mask;
+  using WideLanes = ST_COLLIDE_WIDE_SIMD::Lanes;
+  using WideMask = ST_COLLIDE_WIDE_SIMD::Mask;
 
-  // The three filters are written once over Lanes (this ISA's), a step of Lanes::width lanes at a
-  // time; every ISA gives the same masks.
+  // The three filters are written once over this ISA's lanes, a step of a whole vector at a time;
+  // every ISA gives the same masks.
 
   // Bit k (k < n <= 8) set when sphere k of a float SoA block (x at c[0], y at c[st], z at c[2 st],
   // radius at c[3 st]) meets the sphere (qx, qy, qz; qr): |c_k - q|^2 <= (r_k + qr)^2 in float.
@@ -66,6 +71,113 @@ struct CollideQuery<ST_COLLIDE_SIMD::Lanes> {
     return m;
   }
 
+  // One candidate axis `a` of the triangle filter: P's and O's projections (lanes of 16 pairs,
+  // coordinates relative to O's vertex 0, so O's own vertex 0 projects to 0). `sep` gains the lanes
+  // whose gap along a exceeds the bound (disjoint, proved), `inter` keeps the lanes whose
+  // projections overlap by more than the bound on both sides (see tri_filter).
+  [[gnu::always_inline]] static void tri_axis(WideLanes ax, WideLanes ay, WideLanes az, const WideLanes* p,
+                                              const WideLanes* o, WideLanes bound, WideMask& sep, WideMask& inter) {
+    const WideLanes d0 = ax * p[0] + ay * p[1] + az * p[2];
+    const WideLanes d1 = ax * p[3] + ay * p[4] + az * p[5];
+    const WideLanes d2 = ax * p[6] + ay * p[7] + az * p[8];
+    const WideLanes e1 = ax * o[0] + ay * o[1] + az * o[2];
+    const WideLanes e2 = ax * o[3] + ay * o[4] + az * o[5];
+    const WideLanes zero = WideLanes::broadcast(0.0f);
+    const WideLanes pmin = min(d0, min(d1, d2)), pmax = max(d0, max(d1, d2));
+    const WideLanes omin = min(zero, min(e1, e2)), omax = max(zero, max(e1, e2));
+    sep = sep | ((omin - pmax) > bound) | ((pmin - omax) > bound);
+    inter = inter & ((pmax - omin) > bound) & ((omax - pmin) > bound);
+  }
+
+  // The certified triangle filter: for n <= kTriBatch pairs, v[0..8][i] = probe triangle i's
+  // vertices and v[9..14][i] = the object triangle's vertices 1 and 2, each minus the object
+  // triangle's vertex 0, in double then rounded to float. Sets bit i of `decided` when pair i is
+  // proved disjoint or proved intersecting, and then bit i of `overlap` to the answer; an
+  // undecided pair goes to tri_tri_overlap.
+  //
+  // Why it never errs. Axes: the two normals and the nine edge crosses, as float cross products
+  // of float edges. Disjoint: ANY direction along which the projections are apart separates the
+  // triangles, so an axis' rounding does not matter, only that of the gap. Intersecting: the
+  // origin is in P - O (closed) iff h(a) = max_P a.p - min_O a.o >= 0 for every facet normal a of
+  // P - O, and for triangles those normals are among +-n_P, +-n_O, +-e_i x f_j; so both gaps of all
+  // 11 axes exceeding the bound, with the bound covering the computed axis' distance from the
+  // exact one, proves it. Bound, with u = 2^-24 and M = the largest |coordinate| of the 15 floats:
+  // a vertex is within 1.03 u M of its exact value (one double, one float rounding); an edge within
+  // 4.1 u M, |edge| <= 2M; an axis component within 48.4 u M^2 of the exact cross of exact edges,
+  // |axis|_1 <= 24.1 M^2, so h moves by at most 296 u M^3 from axis error; a projection (3-term
+  // float dot) is within 97.1 u M^3 of the exact axis-times-exact-vertex; a gap (two projections
+  // and a subtraction) within 243 u M^3. Together 539 u M^3 < bound = 2^-14 M^3 = 1024 u M^3,
+  // computed in float with three roundings (>= 1020 u M^3). Lanes with M outside [2^-30, 2^36]
+  // (underflow below the bound, overflow of the products) or a non-finite coordinate are left
+  // undecided, so NaN never decides anything. Separation and intersection both proved cannot
+  // happen; should rounding ever claim both, the pair is left to the exact test.
+  // The lanes of one step of a batch (v as for tri_filter, from column j): the 15 coordinates, the
+  // bound, the edges and the lanes the analysis covers (live, finite, M in range).
+  struct TriStep {
+    WideLanes p[9], o[6], bound, ex[3], ey[3], ez[3], fx[3], fy[3], fz[3];
+    std::uint32_t ok;  ///< bit l: lane l may be decided
+  };
+  [[gnu::always_inline]] static void tri_step(const float (*v)[kTriBatch], std::uint32_t n, std::uint32_t j, TriStep& t) {
+    for (int k = 0; k < 9; ++k) t.p[k] = WideLanes::load(v[k] + j);
+    for (int k = 0; k < 6; ++k) t.o[k] = WideLanes::load(v[9 + k] + j);
+    WideLanes m = abs(t.o[0]), sum = t.o[0];
+    for (int k = 1; k < 6; ++k) m = max(m, abs(t.o[k])), sum = sum + t.o[k];
+    for (int k = 0; k < 9; ++k) m = max(m, abs(t.p[k])), sum = sum + t.p[k];
+    // (sum - sum) is 0 for finite coordinates, NaN if any is NaN or infinite (or the sum overflows).
+    t.ok = (WideMask::first(n - j) & ((sum - sum) <= WideLanes::broadcast(0.0f)) &
+            (m >= WideLanes::broadcast(0x1p-30f)) & (m <= WideLanes::broadcast(0x1p36f)))
+               .bits();
+    t.bound = WideLanes::broadcast(0x1p-14f) * m * m * m;
+    // Edges: P's e0 = p1 - p0, e1 = p2 - p1, e2 = p0 - p2; O's f0 = o1, f1 = o2 - o1, f2 = -o2.
+    for (int k = 0; k < 3; ++k) {
+      const int a = 3 * k, b = 3 * ((k + 1) % 3);
+      t.ex[k] = t.p[b] - t.p[a], t.ey[k] = t.p[b + 1] - t.p[a + 1], t.ez[k] = t.p[b + 2] - t.p[a + 2];
+    }
+    const WideLanes zero = WideLanes::broadcast(0.0f);
+    t.fx[0] = t.o[0], t.fy[0] = t.o[1], t.fz[0] = t.o[2];
+    t.fx[1] = t.o[3] - t.o[0], t.fy[1] = t.o[4] - t.o[1], t.fz[1] = t.o[5] - t.o[2];
+    t.fx[2] = zero - t.o[3], t.fy[2] = zero - t.o[4], t.fz[2] = zero - t.o[5];
+  }
+  // The two normals' axes of a step.
+  [[gnu::always_inline]] static void tri_normals(const TriStep& t, WideMask& sep, WideMask& inter) {
+    tri_axis(t.ey[0] * t.ez[1] - t.ez[0] * t.ey[1], t.ez[0] * t.ex[1] - t.ex[0] * t.ez[1],
+             t.ex[0] * t.ey[1] - t.ey[0] * t.ex[1], t.p, t.o, t.bound, sep, inter);
+    tri_axis(t.fy[0] * t.fz[1] - t.fz[0] * t.fy[1], t.fz[0] * t.fx[1] - t.fx[0] * t.fz[1],
+             t.fx[0] * t.fy[1] - t.fy[0] * t.fx[1], t.p, t.o, t.bound, sep, inter);
+  }
+
+  // The first, cheap pass: bit i set when pair i is proved disjoint along one of the two normals
+  // (most candidates: boxes overlapping, triangles apart). The others go to tri_filter.
+  static std::uint32_t tri_apart_by_normals(const float (*v)[kTriBatch], std::uint32_t n) {
+    std::uint32_t apart = 0;
+    for (std::uint32_t j = 0; j < n; j += WideLanes::width) {
+      TriStep t;
+      tri_step(v, n, j, t);
+      WideMask sep = WideMask::first(0), inter = WideMask::first(32);
+      tri_normals(t, sep, inter);
+      apart |= (sep.bits() & t.ok) << j;
+    }
+    return apart;
+  }
+
+  static void tri_filter(const float (*v)[kTriBatch], std::uint32_t n, std::uint32_t& decided, std::uint32_t& overlap) {
+    decided = overlap = 0;
+    for (std::uint32_t j = 0; j < n; j += WideLanes::width) {
+      TriStep t;
+      tri_step(v, n, j, t);
+      WideMask sep = WideMask::first(0), inter = WideMask::first(32);
+      tri_normals(t, sep, inter);
+      if ((sep.bits() & t.ok) != t.ok)
+        for (int a = 0; a < 3; ++a)
+          for (int b = 0; b < 3; ++b)
+            tri_axis(t.ey[a] * t.fz[b] - t.ez[a] * t.fy[b], t.ez[a] * t.fx[b] - t.ex[a] * t.fz[b],
+                     t.ex[a] * t.fy[b] - t.ey[a] * t.fx[b], t.p, t.o, t.bound, sep, inter);
+      const std::uint32_t sp = sep.bits() & t.ok, in = inter.bits() & t.ok;
+      decided |= (sp ^ in) << j;
+      overlap |= (in & ~sp) << j;
+    }
+  }
+
   const Mesh& P;
   const SphereTree& PT;
   const Mesh& O;
@@ -79,6 +191,14 @@ struct CollideQuery<ST_COLLIDE_SIMD::Lanes> {
   std::uint32_t gen = 0;
   bool exact = true;
   std::uint32_t stop = 0;  // approximate mode: layer at which nodes become terminal
+  // Candidate triangle pairs waiting for the filter (probe slot, object face), flushed when full
+  // and at the end of each descent.
+  std::uint32_t tri_slot[kTriBatch] = {}, tri_face[kTriBatch] = {};
+  std::uint32_t tri_n = 0;
+  // ... and those the normals did not settle, with their coordinates, waiting for the full filter.
+  std::uint32_t full_slot[kTriBatch] = {}, full_face[kTriBatch] = {};
+  std::uint32_t full_n = 0;
+  alignas(64) float full_v[15][kTriBatch] = {};
 
   // Probe node i's sphere in object-local into the float SoA: centre apply(rt, c) rounded to
   // float, radius s·r + slack.
@@ -207,17 +327,99 @@ struct CollideQuery<ST_COLLIDE_SIMD::Lanes> {
       std::uint64_t mf = std::popcount(mp) == 1 ? mp : (probe_mask(hp.first, hp.count, b) & mp);
       if (mf == 0) continue;
       const std::uint32_t of = OT.face_order[ho.first + j];
-      const Tri& ot = O.faces[of];
-      const Vec3& o0 = O.local[ot[0]];
-      const Vec3& o1 = O.local[ot[1]];
-      const Vec3& o2 = O.local[ot[2]];
       for (; mf != 0; mf &= mf - 1) {
         const std::uint32_t slot = hp.first + static_cast<unsigned>(std::countr_zero(mf));
         ++res.stats.tri_pairs;
-        const auto& ix = sc.lidx_[slot];
-        if (tri_tri_overlap(sc.ptx_[ix[0]], sc.ptx_[ix[1]], sc.ptx_[ix[2]], o0, o1, o2)) emit(PT.face_order[slot], of);
+        if (!opt.tri_filter) {
+          if (exact_pair(slot, of)) emit(PT.face_order[slot], of);
+          continue;
+        }
+        tri_slot[tri_n] = slot;
+        tri_face[tri_n] = of;
+        if (++tri_n == kTriBatch) flush_tris();
       }
     }
+  }
+
+  // tri_tri_overlap on the very doubles the box filters bounded (counted in stats.tri_exact).
+  bool exact_pair(std::uint32_t slot, std::uint32_t of) {
+    ++res.stats.tri_exact;
+    const auto& ix = sc.lidx_[slot];
+    const Tri& ot = O.faces[of];
+    return tri_tri_overlap(sc.ptx_[ix[0]], sc.ptx_[ix[1]], sc.ptx_[ix[2]], O.local[ot[0]], O.local[ot[1]], O.local[ot[2]]);
+  }
+
+  // The waiting candidates (probe slot, object face) as tri_filter reads them: coordinates minus
+  // the object triangle's vertex 0, in double, then rounded to float.
+  void prep_tris(const std::uint32_t* slots, const std::uint32_t* faces, std::uint32_t n, float (*v)[kTriBatch]) const {
+    for (std::uint32_t i = 0; i < n; ++i) {
+      const auto& ix = sc.lidx_[slots[i]];
+      const Tri& ot = O.faces[faces[i]];
+      const Vec3& o0 = O.local[ot[0]];
+      for (int k = 0; k < 3; ++k)
+        for (int c = 0; c < 3; ++c) v[3 * k + c][i] = static_cast<float>(sc.ptx_[ix[k]][c] - o0[c]);
+      // Candidates come grouped by object face (leaf_leaf's inner loop): its two edges once.
+      if (i > 0 && faces[i] == faces[i - 1]) {
+        for (int r = 9; r < 15; ++r) v[r][i] = v[r][i - 1];
+        continue;
+      }
+      for (int k = 1; k < 3; ++k)
+        for (int c = 0; c < 3; ++c) v[9 + 3 * (k - 1) + c][i] = static_cast<float>(O.local[ot[k]][c] - o0[c]);
+    }
+    for (std::uint32_t i = n; i < kTriBatch; ++i)
+      for (int r = 0; r < 15; ++r) v[r][i] = 0.0f;  // lanes past n: read by whole steps, never decided
+  }
+
+  // Checking mode (ST_CHECKS: debug, sanitizer and fuzzer builds): a decision of the filter
+  // against the exact test (not counted in tri_exact).
+  void check_decision([[maybe_unused]] std::uint32_t slot, [[maybe_unused]] std::uint32_t of, [[maybe_unused]] bool hit) const {
+#if defined(ST_CHECKS)
+    const auto& ix = sc.lidx_[slot];
+    const Tri& ot = O.faces[of];
+    ST_ASSERT(hit == tri_tri_overlap(sc.ptx_[ix[0]], sc.ptx_[ix[1]], sc.ptx_[ix[2]], O.local[ot[0]], O.local[ot[1]],
+                                     O.local[ot[2]]),
+              "the triangle filter's decision is the exact test's");
+#endif
+  }
+
+  // The waiting candidates through the normals' pass; those it cannot prove apart wait for the
+  // full filter (flush_full), so its nine edge axes run on full batches of the hard pairs only.
+  void flush_tris() {
+    if (tri_n == 0) return;
+    alignas(64) float v[15][kTriBatch];
+    prep_tris(tri_slot, tri_face, tri_n, v);
+    const std::uint32_t apart = tri_apart_by_normals(v, tri_n);
+    for (std::uint32_t i = 0; i < tri_n; ++i) {
+      if ((apart >> i) & 1u) {
+        check_decision(tri_slot[i], tri_face[i], false);
+        continue;
+      }
+      full_slot[full_n] = tri_slot[i];
+      full_face[full_n] = tri_face[i];
+      for (int r = 0; r < 15; ++r) full_v[r][full_n] = v[r][i];
+      if (++full_n == kTriBatch) flush_full();
+    }
+    tri_n = 0;
+  }
+
+  // The full filter on the pairs the normals did not settle; the undecided through the exact test.
+  void flush_full() {
+    if (full_n == 0) return;
+    for (std::uint32_t i = full_n; i < kTriBatch; ++i)
+      for (int r = 0; r < 15; ++r) full_v[r][i] = 0.0f;
+    std::uint32_t decided = 0, overlap = 0;
+    tri_filter(full_v, full_n, decided, overlap);
+    for (std::uint32_t i = 0; i < full_n; ++i) {
+      bool hit;
+      if ((decided >> i) & 1u) {
+        hit = (overlap >> i) & 1u;
+        check_decision(full_slot[i], full_face[i], hit);
+      } else {
+        hit = exact_pair(full_slot[i], full_face[i]);
+      }
+      if (hit) emit(PT.face_order[full_slot[i]], full_face[i]);
+    }
+    full_n = 0;
   }
 
   void approx_pair(std::uint32_t p, std::uint32_t o) {
@@ -238,7 +440,14 @@ struct CollideQuery<ST_COLLIDE_SIMD::Lanes> {
     ST_ASSERT(n <= sc.stack_cap_, "descend() leaves room for kMaxChildren before each push");
   }
 
+  // One descent from (proot, oroot), then the candidates it left waiting.
   void descend(std::uint32_t proot, std::uint32_t oroot) {
+    walk(proot, oroot);
+    flush_tris();
+    flush_full();
+  }
+
+  void walk(std::uint32_t proot, std::uint32_t oroot) {
     auto* stack = sc.stack_.data();
     const float* ps = sc.psph_.data();
     const float* os = sc.osph_.data();

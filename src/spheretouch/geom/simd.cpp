@@ -12,7 +12,9 @@ Isa detect() {
 #if defined(ST_SIMD_X86)
   __builtin_cpu_init();
   // AVX2 kernels are compiled with FMA too (the same Haswell generation; every AVX2 CPU has it).
-  if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) return Isa::avx2;
+  const bool avx2 = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  if (avx2 && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl")) return Isa::avx512;
+  if (avx2) return Isa::avx2;
   return Isa::sse2;
 #else
   return Isa::scalar;
@@ -64,12 +66,14 @@ const char* isa_name(Isa isa) {
       return "sse2";
     case Isa::avx2:
       return "avx2";
+    case Isa::avx512:
+      return "avx512";
   }
   return "?";
 }
 
 bool parse_isa(std::string_view name, Isa& isa) {
-  for (const Isa i : {Isa::scalar, Isa::sse2, Isa::avx2})
+  for (const Isa i : {Isa::scalar, Isa::sse2, Isa::avx2, Isa::avx512})
     if (name == isa_name(i)) {
       isa = i;
       return true;

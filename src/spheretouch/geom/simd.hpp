@@ -3,16 +3,17 @@
 // written once, and the choice of instruction set at RUN time, so one binary runs on any x86-64
 // (no -march in any build flag; docs/library.md, "Portable binaries").
 //
-// * Lanes/Mask come in one namespace per ISA: scalar (1 float), sse2 (4: the x86-64 baseline) and
-//   avx2 (8; with FMA). Each operation is one IEEE float operation per
+// * Lanes/Mask come in one namespace per ISA: scalar (1 float), sse2 (4: the x86-64 baseline),
+//   avx2 (8; with FMA) and avx512 (16; F, VL). min/max follow the SSE instructions' rule (the
+//   second operand when either is NaN) on every ISA. Each operation is one IEEE float operation per
 //   lane, so a kernel gives the same bits on all of them (the project compiles with
 //   -ffp-contract=off: no multiply-add is fused behind the kernel's back).
-// * Code for an ISA above the baseline lives between ST_TARGET_AVX2_BEGIN and ST_TARGET_END: GCC's `#pragma GCC target` (Clang: `#pragma clang attribute`) compiles the
+// * Code for an ISA above the baseline lives between ST_TARGET_AVX2_BEGIN (or _AVX512_) and ST_TARGET_END: GCC's `#pragma GCC target` (Clang: `#pragma clang attribute`) compiles the
 //   functions DEFINED there for that ISA. Templates and inline functions defined elsewhere (the
 //   standard library, Eigen) keep the baseline, so no AVX instruction can leak into code that runs
 //   on a CPU without it through a shared inline copy. Nothing may be #included inside a region.
 // * active_isa() is what the dispatching code (collide.cpp) runs: the best the CPU has, lowered by
-//   the environment variable ST_SIMD (scalar, sse2, avx2) or set_isa(); with -Dsimd=false
+//   the environment variable ST_SIMD (scalar, sse2, avx2, avx512) or set_isa(); with -Dsimd=false
 //   (ST_NO_SIMD) or off x86-64 only the scalar path exists.
 #pragma once
 #include <spheretouch/abi.hpp>
@@ -26,9 +27,12 @@
 
 #if defined(ST_SIMD_X86) && defined(__clang__)
 #define ST_TARGET_AVX2_BEGIN _Pragma("clang attribute push(__attribute__((target(\"avx2,fma\"))), apply_to = function)")
+#define ST_TARGET_AVX512_BEGIN \
+  _Pragma("clang attribute push(__attribute__((target(\"avx2,fma,avx512f,avx512vl\"))), apply_to = function)")
 #define ST_TARGET_END _Pragma("clang attribute pop")
 #elif defined(ST_SIMD_X86)
 #define ST_TARGET_AVX2_BEGIN _Pragma("GCC push_options") _Pragma("GCC target(\"avx2,fma\")")
+#define ST_TARGET_AVX512_BEGIN _Pragma("GCC push_options") _Pragma("GCC target(\"avx2,fma,avx512f,avx512vl\")")
 #define ST_TARGET_END _Pragma("GCC pop_options")
 #endif
 
@@ -39,6 +43,7 @@ enum class Isa : std::uint8_t {
   scalar = 0,  ///< one float at a time (any CPU; the only path with -Dsimd=false)
   sse2 = 1,    ///< 4 floats (every x86-64)
   avx2 = 2,    ///< 8 floats, with FMA (Haswell and later)
+  avx512 = 3,  ///< 16 floats, AVX-512 F and VL (Skylake-SP and later)
 };
 
 /// The widest ISA this CPU and this build support (ignores ST_SIMD and set_isa()).
@@ -48,10 +53,14 @@ Isa active_isa();
 /// Runs the kernels on `isa` from now on (all threads); false, changing nothing, when this CPU or
 /// build lacks it. For tests and benchmarks that compare the paths.
 bool set_isa(Isa isa);
-/// "scalar", "sse2" or "avx2".
+/// "scalar", "sse2", "avx2" or "avx512".
 const char* isa_name(Isa isa);
 /// The ISA named `name` (as isa_name() spells it); false when the name is none of them.
 bool parse_isa(std::string_view name, Isa& isa);
+
+// Per ISA: Mask (one flag per lane; first(live), bits(), &, |) and Lanes (width floats: load,
+// broadcast, gather, + - *, min, max, abs, comparisons). Operators are free functions, not
+// in-class friends: GCC does not give friends defined in a class the target of their region.
 
 namespace scalar {
 
@@ -59,10 +68,11 @@ namespace scalar {
 struct Mask {
   bool v;  ///< the flag
 
-  static Mask first(std::uint32_t live) { return {live > 0}; }                      ///< set when live > 0
-  std::uint32_t bits() const { return v; }                                          ///< bit 0 = the flag
-  friend Mask operator&(Mask a, Mask b) { return {static_cast<bool>(a.v & b.v)}; }  ///< and, no branch
+  static Mask first(std::uint32_t live) { return {live > 0}; }  ///< set when live > 0
+  std::uint32_t bits() const { return v; }                      ///< bit 0 = the flag
 };
+inline Mask operator&(Mask a, Mask b) { return {static_cast<bool>(a.v & b.v)}; }  ///< and, no branch
+inline Mask operator|(Mask a, Mask b) { return {static_cast<bool>(a.v | b.v)}; }  ///< or, no branch
 
 /// One float.
 struct Lanes {
@@ -76,12 +86,16 @@ struct Lanes {
   static Lanes gather(const float* p, std::uint32_t live) {
     return {live > 0 ? *p : 0.0f};
   }
-  friend Lanes operator+(Lanes a, Lanes b) { return {a.v + b.v}; }   ///< a + b
-  friend Lanes operator-(Lanes a, Lanes b) { return {a.v - b.v}; }   ///< a - b
-  friend Lanes operator*(Lanes a, Lanes b) { return {a.v * b.v}; }   ///< a · b
-  friend Mask operator<=(Lanes a, Lanes b) { return {a.v <= b.v}; }  ///< a <= b (false for NaN)
-  friend Mask operator>=(Lanes a, Lanes b) { return {a.v >= b.v}; }  ///< a >= b (false for NaN)
 };
+inline Lanes operator+(Lanes a, Lanes b) { return {a.v + b.v}; }        ///< a + b
+inline Lanes operator-(Lanes a, Lanes b) { return {a.v - b.v}; }        ///< a - b
+inline Lanes operator*(Lanes a, Lanes b) { return {a.v * b.v}; }        ///< a · b
+inline Lanes min(Lanes a, Lanes b) { return {a.v < b.v ? a.v : b.v}; }  ///< as minps (b if NaN)
+inline Lanes max(Lanes a, Lanes b) { return {a.v > b.v ? a.v : b.v}; }  ///< as maxps (b if NaN)
+inline Lanes abs(Lanes a) { return {__builtin_fabsf(a.v)}; }            ///< |a|
+inline Mask operator<=(Lanes a, Lanes b) { return {a.v <= b.v}; }       ///< a <= b (false for NaN)
+inline Mask operator>=(Lanes a, Lanes b) { return {a.v >= b.v}; }       ///< a >= b (false for NaN)
+inline Mask operator>(Lanes a, Lanes b) { return {a.v > b.v}; }         ///< a > b (false for NaN)
 
 }  // namespace scalar
 
@@ -100,8 +114,9 @@ struct Mask {
     return {_mm_castsi128_ps(_mm_cmpgt_epi32(n, lane))};
   }
   std::uint32_t bits() const { return static_cast<std::uint32_t>(_mm_movemask_ps(v)); }  ///< bit l = lane l
-  friend Mask operator&(Mask a, Mask b) { return {_mm_and_ps(a.v, b.v)}; }               ///< lane-wise and
 };
+inline Mask operator&(Mask a, Mask b) { return {_mm_and_ps(a.v, b.v)}; }  ///< lane-wise and
+inline Mask operator|(Mask a, Mask b) { return {_mm_or_ps(a.v, b.v)}; }   ///< lane-wise or
 
 /// 4 floats.
 struct Lanes {
@@ -117,14 +132,19 @@ struct Lanes {
       return {_mm_setr_ps(p[0], p[Stride], p[2 * Stride], p[3 * Stride])};
     return {_mm_setr_ps(live > 0 ? p[0] : 0.0f, live > 1 ? p[Stride] : 0.0f, live > 2 ? p[2 * Stride] : 0.0f, 0.0f)};
   }
-  friend Lanes operator+(Lanes a, Lanes b) { return {_mm_add_ps(a.v, b.v)}; }  ///< lane-wise a + b
-  friend Lanes operator-(Lanes a, Lanes b) { return {_mm_sub_ps(a.v, b.v)}; }  ///< lane-wise a - b
-  friend Lanes operator*(Lanes a, Lanes b) { return {_mm_mul_ps(a.v, b.v)}; }  ///< lane-wise a · b
-  /// a <= b per lane; false where either is NaN, as in scalar float.
-  friend Mask operator<=(Lanes a, Lanes b) { return {_mm_cmple_ps(a.v, b.v)}; }
-  /// a >= b per lane; false where either is NaN, as in scalar float.
-  friend Mask operator>=(Lanes a, Lanes b) { return {_mm_cmpge_ps(a.v, b.v)}; }
 };
+inline Lanes operator+(Lanes a, Lanes b) { return {_mm_add_ps(a.v, b.v)}; }     ///< lane-wise a + b
+inline Lanes operator-(Lanes a, Lanes b) { return {_mm_sub_ps(a.v, b.v)}; }     ///< lane-wise a - b
+inline Lanes operator*(Lanes a, Lanes b) { return {_mm_mul_ps(a.v, b.v)}; }     ///< lane-wise a · b
+inline Lanes min(Lanes a, Lanes b) { return {_mm_min_ps(a.v, b.v)}; }           ///< lane-wise min (b if NaN)
+inline Lanes max(Lanes a, Lanes b) { return {_mm_max_ps(a.v, b.v)}; }           ///< lane-wise max (b if NaN)
+inline Lanes abs(Lanes a) { return {_mm_andnot_ps(_mm_set1_ps(-0.0f), a.v)}; }  ///< lane-wise |a|
+/// a <= b per lane; false where either is NaN, as in scalar float.
+inline Mask operator<=(Lanes a, Lanes b) { return {_mm_cmple_ps(a.v, b.v)}; }
+/// a >= b per lane; false where either is NaN, as in scalar float.
+inline Mask operator>=(Lanes a, Lanes b) { return {_mm_cmpge_ps(a.v, b.v)}; }
+/// a > b per lane; false where either is NaN, as in scalar float.
+inline Mask operator>(Lanes a, Lanes b) { return {_mm_cmpgt_ps(a.v, b.v)}; }
 
 }  // namespace sse2
 
@@ -143,6 +163,8 @@ struct Mask {
   }
   std::uint32_t bits() const { return static_cast<std::uint32_t>(_mm256_movemask_ps(v)); }  ///< bit l = lane l
 };
+inline Mask operator&(Mask a, Mask b) { return {_mm256_and_ps(a.v, b.v)}; }  ///< lane-wise and
+inline Mask operator|(Mask a, Mask b) { return {_mm256_or_ps(a.v, b.v)}; }   ///< lane-wise or
 
 /// 8 floats.
 struct Lanes {
@@ -160,19 +182,65 @@ struct Lanes {
     return {_mm256_mask_i32gather_ps(_mm256_setzero_ps(), p, idx, Mask::first(live).v, 4)};
   }
 };
-
-// Free functions, not in-class friends: GCC does not apply the region's target to friends
-// defined in a class.
-inline Mask operator&(Mask a, Mask b) { return {_mm256_and_ps(a.v, b.v)}; }     ///< lane-wise and
-inline Lanes operator+(Lanes a, Lanes b) { return {_mm256_add_ps(a.v, b.v)}; }  ///< lane-wise a + b
-inline Lanes operator-(Lanes a, Lanes b) { return {_mm256_sub_ps(a.v, b.v)}; }  ///< lane-wise a - b
-inline Lanes operator*(Lanes a, Lanes b) { return {_mm256_mul_ps(a.v, b.v)}; }  ///< lane-wise a · b
+inline Lanes operator+(Lanes a, Lanes b) { return {_mm256_add_ps(a.v, b.v)}; }        ///< lane-wise a + b
+inline Lanes operator-(Lanes a, Lanes b) { return {_mm256_sub_ps(a.v, b.v)}; }        ///< lane-wise a - b
+inline Lanes operator*(Lanes a, Lanes b) { return {_mm256_mul_ps(a.v, b.v)}; }        ///< lane-wise a · b
+inline Lanes min(Lanes a, Lanes b) { return {_mm256_min_ps(a.v, b.v)}; }              ///< lane-wise min (b if NaN)
+inline Lanes max(Lanes a, Lanes b) { return {_mm256_max_ps(a.v, b.v)}; }              ///< lane-wise max (b if NaN)
+inline Lanes abs(Lanes a) { return {_mm256_andnot_ps(_mm256_set1_ps(-0.0f), a.v)}; }  ///< lane-wise |a|
 /// a <= b per lane; false where either is NaN, as in scalar float.
 inline Mask operator<=(Lanes a, Lanes b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_LE_OQ)}; }
 /// a >= b per lane; false where either is NaN, as in scalar float.
 inline Mask operator>=(Lanes a, Lanes b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_GE_OQ)}; }
+/// a > b per lane; false where either is NaN, as in scalar float.
+inline Mask operator>(Lanes a, Lanes b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_GT_OQ)}; }
 
 }  // namespace avx2
+ST_TARGET_END
+
+ST_TARGET_AVX512_BEGIN
+namespace avx512 {
+
+/// One flag per lane, in an AVX-512 mask register.
+struct Mask {
+  __mmask16 v;  ///< bit l = lane l
+
+  /// Lanes l < live are set (live may exceed the width).
+  static Mask first(std::uint32_t live) { return {static_cast<__mmask16>(live >= 16 ? 0xffffu : (1u << live) - 1u)}; }
+  std::uint32_t bits() const { return v; }  ///< bit l = lane l
+};
+inline Mask operator&(Mask a, Mask b) { return {static_cast<__mmask16>(a.v & b.v)}; }  ///< lane-wise and
+inline Mask operator|(Mask a, Mask b) { return {static_cast<__mmask16>(a.v | b.v)}; }  ///< lane-wise or
+
+/// 16 floats.
+struct Lanes {
+  static constexpr int width = 16;  ///< floats per step
+  __m512 v;                         ///< the floats
+
+  static Lanes load(const float* p) { return {_mm512_loadu_ps(p)}; }  ///< p[0, 16), unaligned
+  static Lanes broadcast(float x) { return {_mm512_set1_ps(x)}; }     ///< x in every lane
+  /// Lane l = p[l·Stride] for l < live, 0 for the others, whose addresses are never read.
+  template <int Stride>
+  static Lanes gather(const float* p, std::uint32_t live) {
+    const __m512i idx = _mm512_mullo_epi32(_mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
+                                           _mm512_set1_epi32(Stride));
+    return {_mm512_mask_i32gather_ps(_mm512_setzero_ps(), Mask::first(live).v, idx, p, 4)};
+  }
+};
+inline Lanes operator+(Lanes a, Lanes b) { return {_mm512_add_ps(a.v, b.v)}; }  ///< lane-wise a + b
+inline Lanes operator-(Lanes a, Lanes b) { return {_mm512_sub_ps(a.v, b.v)}; }  ///< lane-wise a - b
+inline Lanes operator*(Lanes a, Lanes b) { return {_mm512_mul_ps(a.v, b.v)}; }  ///< lane-wise a · b
+inline Lanes min(Lanes a, Lanes b) { return {_mm512_min_ps(a.v, b.v)}; }        ///< lane-wise min (b if NaN)
+inline Lanes max(Lanes a, Lanes b) { return {_mm512_max_ps(a.v, b.v)}; }        ///< lane-wise max (b if NaN)
+inline Lanes abs(Lanes a) { return {_mm512_abs_ps(a.v)}; }                      ///< lane-wise |a|
+/// a <= b per lane; false where either is NaN, as in scalar float.
+inline Mask operator<=(Lanes a, Lanes b) { return {_mm512_cmp_ps_mask(a.v, b.v, _CMP_LE_OQ)}; }
+/// a >= b per lane; false where either is NaN, as in scalar float.
+inline Mask operator>=(Lanes a, Lanes b) { return {_mm512_cmp_ps_mask(a.v, b.v, _CMP_GE_OQ)}; }
+/// a > b per lane; false where either is NaN, as in scalar float.
+inline Mask operator>(Lanes a, Lanes b) { return {_mm512_cmp_ps_mask(a.v, b.v, _CMP_GT_OQ)}; }
+
+}  // namespace avx512
 ST_TARGET_END
 
 #endif  // ST_SIMD_X86
