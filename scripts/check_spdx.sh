@@ -9,7 +9,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 mapfile -t files < <(git ls-files '*.cpp' '*.hpp' '*.inl' '*.in' '*.py' '*.sh' '*.gp' '*.js' '*.html' '*.target' \
   'meson.build' '*/meson.build' 'meson_options.txt' '.ci/run' 'configs/*.toml' 'perf/*.toml' 'pyproject.toml' \
-  'CMakeLists.txt' '*.cmake' '*.pyi')
+  'CMakeLists.txt' '*.cmake' '*.pyi' 'docs/Doxyfile')
 bad=()
 for f in "${files[@]}"; do
   [ -f "$f" ] || continue  # deleted in the work tree, not yet in the index

@@ -17,6 +17,7 @@ packages=(g++ meson ninja-build pkg-config
           doctest-dev libtomlplusplus-dev libcli11-dev libsystemd-dev libfcl-dev systemd
           clang libclang-rt-14-dev   # clang + libFuzzer runtime: tests/fuzz/run_fuzz.sh
           clang-format               # scripts/format.sh --check
+          doxygen                    # scripts/check_docs.sh: the API reference of the installed headers
           cmake                      # tests/install: a CMake consumer of the installed package
           pybind11-dev python3-dev python3-numpy   # the Python module (python/)
           libcivetweb-dev libjs-three              # the live view (spheretouch run --view)

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// <spheretouch/abi.hpp>: the ABI namespace. Every header of the library includes this first, so
-// every name is declared in st::SPHERETOUCH_ABI (an inline namespace: users write st::geom::Mesh).
+/// \file
+/// <spheretouch/abi.hpp>: the ABI namespace. Every header of the library includes this first, so
+/// every name is declared in st::SPHERETOUCH_ABI (an inline namespace: users write st::geom::Mesh).
 //
 // Why. Eigen lays out its fixed-size vectorisable types (Isometry3d, Quaterniond, Vector4d) by
 // EIGEN_MAX_STATIC_ALIGN_BYTES, which follows the compiler's -m flags (16 with SSE, 32 with AVX, 64
@@ -15,7 +16,9 @@
 
 #include <spheretouch/version.hpp>
 
+/// Pastes two tokens (SPHERETOUCH_ABI's helper; use SPHERETOUCH_ABI_CAT).
 #define SPHERETOUCH_ABI_CAT2(a, b) a##b
+/// Pastes two tokens after expanding them (builds SPHERETOUCH_ABI's name).
 #define SPHERETOUCH_ABI_CAT(a, b) SPHERETOUCH_ABI_CAT2(a, b)
 /// The inline namespace of this ABI: v<major>_a<Eigen static alignment in bytes>, e.g. v0_a16.
 #define SPHERETOUCH_ABI                                                                           \
@@ -26,14 +29,24 @@
 // extends st::SPHERETOUCH_ABI::geom (a namespace of the inline set is reopened by its plain name).
 // A header that opened one of these before including this one would make the name ambiguous: a
 // compile error, never a silent second namespace.
+/// spheretouch: haptic rendering of large meshes with exact collision detection. The public API
+/// (Body, ComputeCollision, collide()) is in `<spheretouch/collide.hpp>`.
 namespace st {
 inline namespace SPHERETOUCH_ABI {
 namespace detail {}
+/// The collision core (pkg-config `spheretouch`): meshes, sphere trees, collide(), contact models;
+/// mesh files in `spheretouch-meshio`.
 namespace geom {}
+/// The haptic side (`spheretouch-rt`): force laws, interpolation, passivity, the servo loop,
+/// shared-memory exchange.
 namespace rt {}
+/// Distributed collision (`spheretouch-net`): the worker service, scatter-gather, the wire protocol.
 namespace net {}
+/// The main job of `spheretouch run`: the collision thread, scenes, run outputs (headers not installed).
 namespace engine {}
+/// The live view's web server (headers not installed).
 namespace view {}
+/// Checked reading of TOML scene and worker configs (headers not installed).
 namespace config {}
 }  // namespace SPHERETOUCH_ABI
 }  // namespace st

@@ -1,9 +1,10 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// <spheretouch/collide.hpp>: the collision core's public API (depends on Eigen only; link the
-// `spheretouch` pkg-config package). In the spirit of Coal's collide(o1, o2, request, result)
-// and ComputeCollision: a Body pairs a mesh with its sphere tree and its frame, a request says
-// what to compute, a result answers colliding(), the pairs and the counters, and a
-// ComputeCollision keeps the scratch of one (probe, object) pair between queries.
+/// \file
+/// <spheretouch/collide.hpp>: the collision core's public API (depends on Eigen only; link the
+/// `spheretouch` pkg-config package). In the spirit of Coal's collide(o1, o2, request, result)
+/// and ComputeCollision: a Body pairs a mesh with its sphere tree and its frame, a request says
+/// what to compute, a result answers colliding(), the pairs and the counters, and a
+/// ComputeCollision keeps the scratch of one (probe, object) pair between queries.
 //
 // Frames, one name each (the same names are used by every header of the project):
 //  * world frame: where Body::frame() places a body; any fixed frame of the caller's.
@@ -104,6 +105,7 @@ struct CollisionResult {
 /// per thread and pair.
 class ComputeCollision {
  public:
+  /// The pair to collide; the caches are sized on the first query.
   ComputeCollision(Body probe, Body object);
   /// Collides the bodies at their frames.
   void operator()(const CollisionRequest& request, CollisionResult& result);

@@ -1,11 +1,12 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Contact models: from the colliding (probe face, object face) pairs of one collision round, the
-// force direction FD, the penetration PD and a local contact plane that the haptic thread renders
-// and interpolates from. The result is plain data (ContactModel) so a TripleBuffer can carry it.
-// Frames (named as in mesh.hpp): `pose` maps the probe frame into the object frame, the frame
-// the builder works in (the haptic side's world). Every vector of ContactModel is in the object
-// frame except probe_point, which is a probe vertex in the probe frame (the haptic side moves it
-// with the pose of each tick).
+/// \file
+/// Contact models: from the colliding (probe face, object face) pairs of one collision round, the
+/// force direction FD, the penetration PD and a local contact plane that the haptic thread renders
+/// and interpolates from. The result is plain data (ContactModel) so a TripleBuffer can carry it.
+/// Frames (named as in mesh.hpp): `pose` maps the probe frame into the object frame, the frame
+/// the builder works in (the haptic side's world). Every vector of ContactModel is in the object
+/// frame except probe_point, which is a probe vertex in the probe frame (the haptic side moves it
+/// with the pose of each tick).
 //
 // Two models, chosen by ContactConfig::model:
 //
@@ -205,8 +206,8 @@ class ContactBuilder {
  public:
   explicit ContactBuilder(ContactConfig config = DefaultContactConfig());  ///< config must pass check()
   ~ContactBuilder();
-  ContactBuilder(ContactBuilder&&) noexcept;
-  ContactBuilder& operator=(ContactBuilder&&) noexcept;
+  ContactBuilder(ContactBuilder&&) noexcept;             ///< takes the history and scratch
+  ContactBuilder& operator=(ContactBuilder&&) noexcept;  ///< takes the history and scratch
   /// Builds what the model needs per mesh (the patch model's VertexFaces, ~28 B/vertex) so
   /// that the first build() does not pay for it; build() calls it when the meshes changed.
   void prepare(const Mesh& probe, const Mesh& object);

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// The patch contact model's depth search: one side's directional penetration depth along FD (Kim,
-// Lin & Manocha 2002, on the contact patch only), the deepest of one body's points inside the
-// other found by steepest-ascent climbs over its vertices, then refined where edges cross.
+/// \file
+/// The patch contact model's depth search: one side's directional penetration depth along FD (Kim,
+/// Lin & Manocha 2002, on the contact patch only), the deepest of one body's points inside the
+/// other found by steepest-ascent climbs over its vertices, then refined where edges cross.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <cstdint>
@@ -29,9 +30,11 @@ struct DepthMemory {
   /// rim around a hole, would be searched every time).
   std::uint32_t known[kKnown] = {UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX,
                                  UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX};
+  ///@{
   /// The patrol's climb (see DepthSearch): the vertex it stopped at (UINT32_MAX: none under
   /// way), the face that vertex left through, and how many climbs it has started.
   std::uint32_t patrol = UINT32_MAX, patrol_face = UINT32_MAX, patrol_k = 0;
+  ///@}
   /// A remembered maximum was lost (no longer inside) since the last search for new regions:
   /// its region may have no maximum followed any more.
   bool lost = false;

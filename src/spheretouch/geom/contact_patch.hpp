@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// The patch contact model's state and scratch (ContactBuilder::Patch) and its per-body state
-// (PatchBody); the model is defined in contact.hpp. Internal to src/spheretouch/geom: contact.cpp owns one
-// per builder. Its parts: the segment kernel (contact_segments.hpp), the surface walk
-// (surface_walk.hpp), the contact regions (contact_regions.hpp), the depth search (contact_depth.hpp).
+/// \file
+/// The patch contact model's state and scratch (ContactBuilder::Patch) and its per-body state
+/// (PatchBody); the model is defined in contact.hpp. Internal to src/spheretouch/geom: contact.cpp owns one
+/// per builder. Its parts: the segment kernel (contact_segments.hpp), the surface walk
+/// (surface_walk.hpp), the contact regions (contact_regions.hpp), the depth search (contact_depth.hpp).
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <array>
@@ -30,8 +31,10 @@ inline constexpr std::uint8_t kFront = 2;        ///< and (object faces) not tur
 /// What the patch model keeps per body: the faces around each vertex, and per-vertex and per-face
 /// search state stamped with the round (nothing is cleared between rounds).
 struct PatchBody {
-  const Mesh* mesh = nullptr;              ///< the body it was sized for
-  std::size_t nv = 0, nf = 0;              ///< vertex and face counts it was sized for
+  const Mesh* mesh = nullptr;  ///< the body it was sized for
+  ///@{
+  std::size_t nv = 0, nf = 0;  ///< vertex and face counts it was sized for
+  ///@}
   VertexFaces vf;                          ///< faces around each vertex
   std::vector<std::uint32_t> visit_stamp;  ///< round in which a vertex's exit distance was found
   std::vector<std::uint32_t> path_stamp;   ///< serial of the climb that stood on a vertex
@@ -63,10 +66,12 @@ struct PatchBody {
   /// its face collides round after round (an entry is neither moved nor copied): entries of
   /// faces that stopped colliding are reused from the round after.
   std::vector<Fixed> store;
-  std::vector<std::uint32_t> store_seen;         ///< per entry: the round its face was last counted colliding
-  std::vector<std::uint32_t> store_free;         ///< entries free for new faces
+  std::vector<std::uint32_t> store_seen;  ///< per entry: the round its face was last counted colliding
+  std::vector<std::uint32_t> store_free;  ///< entries free for new faces
+  ///@{
   std::vector<std::uint32_t> entry, prev_entry;  ///< per slot: its entry, this round and the last
-  std::vector<std::uint32_t> to_fill;            ///< slots whose entries are new this round (read from the mesh)
+  ///@}
+  std::vector<std::uint32_t> to_fill;  ///< slots whose entries are new this round (read from the mesh)
   /// The fixed part of this round's slot.
   Fixed& fixed(std::uint32_t slot) {
     ST_ASSERT(slot < entry.size() && entry[slot] < store.size(), "a slot of this round, settled");
@@ -138,7 +143,7 @@ struct PatchBody {
 
 /// ContactBuilder's patch model (see contact.hpp for what it computes).
 struct ContactBuilder::Patch {
-  explicit Patch(const ContactConfig& c) : config(c) {}
+  explicit Patch(const ContactConfig& c) : config(c) {}  ///< the builder's knobs; no per-mesh data yet
   /// Sizes the per-body state for these meshes (kept while they stay the same).
   void prepare(const Mesh& probe, const Mesh& object);
   /// The model for `pairs` at `pose` (ContactBuilder::build()).
@@ -206,8 +211,10 @@ struct ContactBuilder::Patch {
   bool clear_planes(const Mesh& probe, Vec3& n, double& pd, Vec3& tracked_local, Vec3& plane_pt);
   PlaneClusters planes;  ///< scratch (clear_planes)
 
-  ContactConfig config;         ///< the builder's knobs
+  ContactConfig config;  ///< the builder's knobs
+  ///@{
   PatchBody probe_s, object_s;  ///< per-mesh data (prepare()) and per-round state
+  ///@}
   // History.
   bool have_prev = false;                ///< prev_n is the last model's FD
   Vec3 prev_n{Vec3::Zero()};             ///< the last model's FD

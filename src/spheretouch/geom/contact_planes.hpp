@@ -1,11 +1,12 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// The depth of a contact against several planes at once: a probe in a crease, an inner corner or
-// a pocket must clear every wall, and the smallest translation that does is not along the patch's
-// summed normal. The colliding faces are grouped into planar clusters; where the clusters face
-// each other (a concave contact), the way out is the smallest t with n_i·t >= d_i for every
-// cluster's normal n_i and depth d_i: the multi-plane god-object of Zilles & Salisbury (1995) and
-// the constraint-based proxy of Ortega, Redon & Coquillart (2007), here a QP of up to four
-// half-spaces solved by enumerating active sets. Internal to src/spheretouch/geom (the patch model).
+/// \file
+/// The depth of a contact against several planes at once: a probe in a crease, an inner corner or
+/// a pocket must clear every wall, and the smallest translation that does is not along the patch's
+/// summed normal. The colliding faces are grouped into planar clusters; where the clusters face
+/// each other (a concave contact), the way out is the smallest t with n_i·t >= d_i for every
+/// cluster's normal n_i and depth d_i: the multi-plane god-object of Zilles & Salisbury (1995) and
+/// the constraint-based proxy of Ortega, Redon & Coquillart (2007), here a QP of up to four
+/// half-spaces solved by enumerating active sets. Internal to src/spheretouch/geom (the patch model).
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <array>
@@ -25,11 +26,11 @@ struct PlaneCluster {
 
 /// Up to kMaxPlanes clusters of a contact's faces.
 struct PlaneClusters {
-  static constexpr int kMaxPlanes = 4;
-  std::array<PlaneCluster, kMaxPlanes> c{};
-  int n = 0;              ///< clusters found
+  static constexpr int kMaxPlanes = 4;       ///< the QP's half-spaces at most (contact_planes.cpp)
+  std::array<PlaneCluster, kMaxPlanes> c{};  ///< the clusters, [0, n) in use
+  int n = 0;                                 ///< clusters found
   bool overflow = false;  ///< a face fitted none and there was no room: not a few planes (a curved patch)
-  void clear() { n = 0, overflow = false; }
+  void clear() { n = 0, overflow = false; }  ///< empties, for the next contact
   /// Adds a face (unit normal, centroid): it joins the cluster whose plane it lies in, else opens
   /// one. A face whose normal is within kPlanarCos of a cluster's but off its plane, or turned less
   /// than kApartCos from it without being in it, makes the patch curved (overflow).

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// The patch contact model's contact regions: one body's colliding faces grouped into regions
-// (faces sharing a vertex join) over one union-find, so that the depth search can look for
-// maxima in the regions none of its remembered maxima follows (contact_depth.cpp).
+/// \file
+/// The patch contact model's contact regions: one body's colliding faces grouped into regions
+/// (faces sharing a vertex join) over one union-find, so that the depth search can look for
+/// maxima in the regions none of its remembered maxima follows (contact_depth.cpp).
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <algorithm>

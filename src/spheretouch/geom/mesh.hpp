@@ -1,12 +1,13 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Mesh: indexed triangles of one rigid body.
-// Frames, one name each, used by every header:
-//  * the body's frame ("object frame", "probe frame"): the coordinates of its mesh file, mm.
-//    A pose maps the probe frame into the object frame.
-//  * the body's local frame: its frame shifted by `origin` (the body's centre, kept in double).
-//    Vertices are stored in it so a body placed 10^6 mm from the origin keeps full precision;
-//    large offsets live only in poses and origins. Trees and collide()'s caches use it.
-//  * the world frame: where the public API's Body::frame() places a body (spheretouch/collide.hpp).
+/// \file
+/// Mesh: indexed triangles of one rigid body.
+/// Frames, one name each, used by every header:
+///  * the body's frame ("object frame", "probe frame"): the coordinates of its mesh file, mm.
+///    A pose maps the probe frame into the object frame.
+///  * the body's local frame: its frame shifted by `origin` (the body's centre, kept in double).
+///    Vertices are stored in it so a body placed 10^6 mm from the origin keeps full precision;
+///    large offsets live only in poses and origins. Trees and collide()'s caches use it.
+///  * the world frame: where the public API's Body::frame() places a body (spheretouch/collide.hpp).
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <Eigen/Core>
@@ -21,9 +22,9 @@
 
 namespace st::geom {
 
-using Vec3 = Eigen::Vector3d;
-using Pose = Eigen::Isometry3d;  ///< rigid transform, double precision, mm
-using Tri = std::array<std::uint32_t, 3>;
+using Vec3 = Eigen::Vector3d;              ///< point or vector, double precision, mm
+using Pose = Eigen::Isometry3d;            ///< rigid transform, double precision, mm
+using Tri = std::array<std::uint32_t, 3>;  ///< a face's vertex indices
 
 /// Axis-aligned box in double precision.
 struct Box {
@@ -74,14 +75,15 @@ struct Mesh {
 /// mesh or a stale cache file, not a forged one).
 class WordHash {
  public:
-  explicit WordHash(std::uint64_t seed) : h_(seed) {}
+  explicit WordHash(std::uint64_t seed) : h_(seed) {}  ///< starts from `seed`
+  /// Mixes in one 64-bit word.
   void word(std::uint64_t w) {
     h_ ^= w * 0x87c37b91114253d5ull;
     h_ = std::rotl(h_, 31) * 0x4cf5ad432745937full + 0x52dce729ull;
   }
   /// Bytes as 8-byte little-endian words; the last, partial one tagged with its length.
   void bytes(const void* p, std::size_t n);
-  std::uint64_t finish() const;
+  std::uint64_t finish() const;  ///< the hash of every word so far, avalanched
 
  private:
   std::uint64_t h_;

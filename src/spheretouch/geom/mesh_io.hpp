@@ -1,9 +1,10 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Mesh import and export. OFF, OBJ, PLY and STL (ASCII and binary) are read by our own parsers
-// in double precision (correctly rounded std::from_chars), because Debian's assimp rounds to
-// float, and because assimp 5.2.5 crashes on a truncated binary PLY header and leaks on a
-// truncated ASCII STL (found by tests/fuzz); every other format goes through assimp with no
-// post-processing, so face order is kept.
+/// \file
+/// Mesh import and export. OFF, OBJ, PLY and STL (ASCII and binary) are read by our own parsers
+/// in double precision (correctly rounded std::from_chars), because Debian's assimp rounds to
+/// float, and because assimp 5.2.5 crashes on a truncated binary PLY header and leaks on a
+/// truncated ASCII STL (found by tests/fuzz); every other format goes through assimp with no
+/// post-processing, so face order is kept.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <string>
@@ -25,8 +26,8 @@ struct LoadConfig {
   /// Memory assimp may use: this floor plus assimp_memory_per_byte × the input's bytes (the file,
   /// plus its directory's files when allow_external_files). Past it the load is refused.
   std::uint32_t assimp_memory_floor_mb = 512;
-  std::uint32_t assimp_memory_per_byte = 64;
-  std::uint32_t assimp_cpu_seconds = 120;  ///< CPU time assimp may take
+  std::uint32_t assimp_memory_per_byte = 64;  ///< bytes of memory per byte of input, on top of the floor
+  std::uint32_t assimp_cpu_seconds = 120;     ///< CPU time assimp may take
 };
 
 /// What the loader did, for `spheretouch info` and logs.

@@ -1,10 +1,11 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Partition of an object's layer-n spheres over W workers (paper §3.4): runs of B consecutive
-// layer-n nodes (depth-first, spatially coherent order) form blocks, and a mapping deals the blocks
-// to workers. Block-cyclic (Pacheco, "Parallel Programming with MPI"): block k goes to worker
-// k mod W, so a contact region, which covers neighbouring blocks, is spread over the workers; the
-// alternatives are here to measure that choice (spheretouch-bench scale): contiguous (worker w gets
-// one run of ~blocks/W neighbouring blocks) and random (each block to a seeded random worker).
+/// \file
+/// Partition of an object's layer-n spheres over W workers (paper §3.4): runs of B consecutive
+/// layer-n nodes (depth-first, spatially coherent order) form blocks, and a mapping deals the blocks
+/// to workers. Block-cyclic (Pacheco, "Parallel Programming with MPI"): block k goes to worker
+/// k mod W, so a contact region, which covers neighbouring blocks, is spread over the workers; the
+/// alternatives are here to measure that choice (spheretouch-bench scale): contiguous (worker w gets
+/// one run of ~blocks/W neighbouring blocks) and random (each block to a seeded random worker).
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <cstdint>
@@ -85,14 +86,19 @@ struct SplitModelConfig {
 
 /// The automatic split: layer and block size for `workers` workers and `mapping`.
 struct SplitChoice {
-  std::uint32_t layer = 0, block_size = 1, blocks = 0;
+  ///@{
+  std::uint32_t layer = 0, block_size = 1, blocks = 0;  ///< the split: layer n, nodes per block, blocks
+  ///@}
   double predicted_max = 0;   ///< mean over the sampled regions of the slowest worker's work (faces)
   double predicted_mean = 0;  ///< mean over the regions of the mean worker's work (faces)
+  /// predicted_max / predicted_mean (1: balanced).
   double imbalance() const { return predicted_mean > 0 ? predicted_max / predicted_mean : 1.0; }
   std::uint32_t candidates = 0;  ///< splits compared
   std::string why;               ///< one line for the run's summary
 };
 
+/// choose_split()'s `fixed_layer` when the layer is not pinned.
+inline constexpr std::uint32_t kFree = 0xffffffffu;
 /// Picks the layer and block size that minimise the predicted critical path of a round: contact
 /// regions (`cfg.sites` spheres of `cfg.contact_radius` around leaves spread over the object) are
 /// dealt to the workers by each candidate split; a worker's work in a region = faces of its leaves
@@ -101,7 +107,6 @@ struct SplitChoice {
 /// block sizes 1, 2, 4, ... that give every worker at least min_blocks_per_worker blocks (none is
 /// ever empty). `fixed_layer` (kFree = free) / `fixed_block_size` (0 = free) pin one knob (the
 /// manual override of one). Fails when no candidate gives `workers` workers a block each.
-inline constexpr std::uint32_t kFree = 0xffffffffu;
 Result<SplitChoice> choose_split(const SphereTree& tree, std::uint32_t workers, Mapping mapping,
                                  const SplitModelConfig& cfg = {}, std::uint32_t fixed_layer = kFree,
                                  std::uint32_t fixed_block_size = 0);

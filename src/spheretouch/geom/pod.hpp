@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Trivially copyable mirrors of the Eigen types, for values that cross threads or processes
-// by plain copy (TripleBuffer, shared memory, telemetry). Eigen's own types have user-provided
-// copy constructors, so they are not trivially copyable; convert at the edges with the helpers.
+/// \file
+/// Trivially copyable mirrors of the Eigen types, for values that cross threads or processes
+/// by plain copy (TripleBuffer, shared memory, telemetry). Eigen's own types have user-provided
+/// copy constructors, so they are not trivially copyable; convert at the edges with the helpers.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <Eigen/Core>
@@ -13,7 +14,9 @@ namespace st::geom {
 
 /// A 3-vector of doubles, plain data.
 struct PodVec3 {
+  ///@{
   double x = 0, y = 0, z = 0;  ///< components
+  ///@}
 };
 
 /// A rigid transform, plain data: rotation row-major r[3*row+col], translation t.

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Pose files: one rigid transform per line as 16 numbers separated by whitespace
-// (spaces/tabs; commas are not separators), a row-major 4×4 matrix whose last row is 0 0 0 1;
-// '#' starts a comment to the end of the line, blank lines are ignored. Checked where they enter.
+/// \file
+/// Pose files: one rigid transform per line as 16 numbers separated by whitespace
+/// (spaces/tabs; commas are not separators), a row-major 4×4 matrix whose last row is 0 0 0 1;
+/// '#' starts a comment to the end of the line, blank lines are ignored. Checked where they enter.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <string>
@@ -25,8 +26,8 @@ std::string check_rigid(const Eigen::Matrix4d& m, double tolerance = kPoseOrthon
 /// A pose and the newest comment before it (or on its line), text after '#', trailing blanks cut:
 /// tools annotate poses that way ("# contacts 105 (target 100)").
 struct PoseLine {
-  Pose pose;
-  std::string comment;
+  Pose pose;            ///< the pose, as read
+  std::string comment;  ///< "" when there is none
 };
 /// Every pose of a pose file with its comment; errors as read_poses.
 Result<std::vector<PoseLine>> read_pose_lines(const std::string& path);

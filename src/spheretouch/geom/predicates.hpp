@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Exact orientation predicates on double inputs, the only arithmetic the triangle test uses.
-// A floating-point filter with Shewchuk's error bound decides almost every call; when it cannot,
-// the sign is computed exactly with expansion arithmetic (predicates.cpp). No epsilon anywhere.
+/// \file
+/// Exact orientation predicates on double inputs, the only arithmetic the triangle test uses.
+/// A floating-point filter with Shewchuk's error bound decides almost every call; when it cannot,
+/// the sign is computed exactly with expansion arithmetic (predicates.cpp). No epsilon anywhere.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <cmath>

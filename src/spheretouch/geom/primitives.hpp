@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Small generated meshes (closed, outward-oriented) so tests and the embedded default need no
-// download: an icosphere, a box and a capsule fingertip.
+/// \file
+/// Small generated meshes (closed, outward-oriented) so tests and the embedded default need no
+/// download: an icosphere, a box and a capsule fingertip.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <spheretouch/geom/mesh.hpp>

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Result<T>: the value of a cold, validating step (import, config, decode) or an error
-// message naming the file, field or offset at fault. Hot paths never use it.
+/// \file
+/// Result<T>: the value of a cold, validating step (import, config, decode) or an error
+/// message naming the file, field or offset at fault. Hot paths never use it.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <sstream>
@@ -35,7 +36,7 @@ class [[nodiscard]] Result {
 
 /// Result of a step that produces no value.
 struct Ok {};
-using Status = Result<Ok>;
+using Status = Result<Ok>;  ///< success (Ok) or an Error
 
 /// Builds an Error from pieces streamed together: fail("f.off:", line, ": expected 3 numbers").
 template <class... Args>

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// SphereTree: the layered boundary spheres of paper §3.3 (Fujiwara's octree-like hierarchy) over
-// one body, in its body-local frame. Balanced: every leaf holds floor(F/M) or ceil(F/M) faces
-// (M = ceil(F/leaf_faces)), the "almost constant number of faces per leaf" of the paper.
+/// \file
+/// SphereTree: the layered boundary spheres of paper §3.3 (Fujiwara's octree-like hierarchy) over
+/// one body, in its body-local frame. Balanced: every leaf holds floor(F/M) or ceil(F/M) faces
+/// (M = ceil(F/leaf_faces)), the "almost constant number of faces per leaf" of the paper.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <cstdint>

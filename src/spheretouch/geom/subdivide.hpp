@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Loop subdivision (C. T. Loop, "Smooth Subdivision Surfaces Based on Triangles", 1987) for
-// closed, oriented 2-manifold meshes: each level turns every face into four. Deterministic.
+/// \file
+/// Loop subdivision (Charles Loop, "Smooth Subdivision Surfaces Based on Triangles", 1987) for
+/// closed, oriented 2-manifold meshes: each level turns every face into four. Deterministic.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <spheretouch/geom/mesh.hpp>

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Point location on one body's surface seen along a direction (the patch contact model's exit
-// distances: the depth search, the held contact). Internal to src/spheretouch/geom; the patch model is in
-// contact_patch.hpp.
+/// \file
+/// Point location on one body's surface seen along a direction (the patch contact model's exit
+/// distances: the depth search, the held contact). Internal to src/spheretouch/geom; the patch model is in
+/// contact_patch.hpp.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <cstdint>
@@ -17,7 +18,9 @@ struct SurfaceWalk {
   const Mesh* mesh = nullptr;              ///< the surface's body
   const VertexFaces* vf = nullptr;         ///< its faces around each vertex
   ContactBuilder::Patch* patch = nullptr;  ///< set when the surface is the probe (vertices move with the pose)
+  ///@{
   Vec3 d{Vec3::UnitZ()}, u{Vec3::UnitX()}, w{Vec3::UnitY()};  ///< direction and the plane ⊥ d
+  ///@}
   /// Sets the direction (unit) and derives the plane basis.
   void set_direction(const Vec3& dir);
   /// The walk's test that a face (a, b, c) faces d, from det = its projected area's orientation

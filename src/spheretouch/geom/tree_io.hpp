@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// SphereTree persistence: a versioned little-endian binary file that is read back without
-// rebuilding. A stale file (built from another mesh or other params) and a corrupt one (bad
-// magic, version, size or checksum) are told apart in the error message.
+/// \file
+/// SphereTree persistence: a versioned little-endian binary file that is read back without
+/// rebuilding. A stale file (built from another mesh or other params) and a corrupt one (bad
+/// magic, version, size or checksum) are told apart in the error message.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <cstdint>

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Exact triangle-triangle overlap test for closed triangles (touching counts as colliding).
-// Right for coplanar, edge-on-edge, vertex-on-face and degenerate triangles; exact on the
-// double inputs (floating-point filter with an exact fallback), no scale-dependent epsilon.
+/// \file
+/// Exact triangle-triangle overlap test for closed triangles (touching counts as colliding).
+/// Right for coplanar, edge-on-edge, vertex-on-face and degenerate triangles; exact on the
+/// double inputs (floating-point filter with an exact fallback), no scale-dependent epsilon.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <spheretouch/geom/mesh.hpp>

@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// CollisionBackend: the narrow interface a worker answers queries through. The collision core
-// (SphereTree + collide() restricted to the worker's blocks) plugs in behind it; until it lands,
-// reference_backend.hpp provides an exact-by-construction stand-in. A backend is built once per
-// block set (cold: may allocate, may take a while) and then queried many times (hot).
+/// \file
+/// CollisionBackend: the narrow interface a worker answers queries through. The collision core
+/// (SphereTree + collide() restricted to the worker's blocks) plugs in behind it; until it lands,
+/// reference_backend.hpp provides an exact-by-construction stand-in. A backend is built once per
+/// block set (cold: may allocate, may take a while) and then queried many times (hot).
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <functional>

@@ -1,11 +1,12 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// BlockSet: what one worker needs in memory to answer queries (paper §3.4) — self-contained
-// geometry, not tree internals. The whole probe mesh, plus the worker's share of the object:
-// the faces of its blocks (block-cyclic over the object's layer-n spheres) with their GLOBAL
-// face indices and only the vertices they use, and the tree parameters the worker builds its own
-// sphere tree with. Exact results do not depend on the tree's shape, so the union of the
-// workers' pairs equals the single-process result. The canonical encoding is hashed (BLAKE2b)
-// to address block sets by content: a worker that already holds a hash is not sent it again.
+/// \file
+/// BlockSet: what one worker needs in memory to answer queries (paper §3.4) — self-contained
+/// geometry, not tree internals. The whole probe mesh, plus the worker's share of the object:
+/// the faces of its blocks (block-cyclic over the object's layer-n spheres) with their GLOBAL
+/// face indices and only the vertices they use, and the tree parameters the worker builds its own
+/// sphere tree with. Exact results do not depend on the tree's shape, so the union of the
+/// workers' pairs equals the single-process result. The canonical encoding is hashed (BLAKE2b)
+/// to address block sets by content: a worker that already holds a hash is not sent it again.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <array>
@@ -48,12 +49,13 @@ Result<BlockSet> make_block_set(const geom::Mesh& probe, const geom::Mesh& objec
 std::vector<std::uint8_t> encode_block_set(const BlockSet& s);
 /// Content digest of an encoding: BLAKE2b-256 (libsodium's crypto_generichash) over every byte.
 using Digest = std::array<std::uint8_t, 32>;
+/// Content digest of an encoding: BLAKE2b-256 over every byte.
 Digest block_set_digest(std::span<const std::uint8_t> encoded);
 /// The key a block set is named by on the wire: the digest's first 8 bytes, little-endian. A
 /// second set with a given key costs ~2^64 BLAKE2b evaluations to find (FNV-1a, used before,
 /// could be matched in microseconds).
 std::uint64_t block_set_hash(std::span<const std::uint8_t> encoded);
-std::uint64_t digest_key(const Digest& d);
+std::uint64_t digest_key(const Digest& d);  ///< the key of a digest (block_set_hash's value)
 /// Decodes and validates an encoding: counts against `limits`, every face index in range,
 /// ids strictly ascending and below their totals, every coordinate finite.
 Result<BlockSet> decode_block_set(std::span<const std::uint8_t> encoded, const Limits& limits);

@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// CURVE key files (CurveZMQ, RFC 26): a key pair is PREFIX.key, the Z85 secret key on one line
-// (mode 0600), and PREFIX.pub, the Z85 public key on one line. The one implementation of making,
-// writing and reading them: `spheretouch keygen`, `spheretouch-worker --keygen`, the worker's
-// [curve] config and the app's client keys all go through here.
+/// \file
+/// CURVE key files (CurveZMQ, RFC 26): a key pair is PREFIX.key, the Z85 secret key on one line
+/// (mode 0600), and PREFIX.pub, the Z85 public key on one line. The one implementation of making,
+/// writing and reading them: `spheretouch keygen`, `spheretouch-worker --keygen`, the worker's
+/// [curve] config and the app's client keys all go through here.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <string>

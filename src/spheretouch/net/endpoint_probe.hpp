@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Why a worker does not answer: connects one throw-away DEALER, with the client's security
-// settings, to a worker endpoint and watches libzmq's socket monitor for the outcome of the
-// connect and of the ZMTP/CURVE handshake (a refused client key, a security mismatch, nothing
-// listening). Start-up diagnostics only: never used while rounds run.
+/// \file
+/// Why a worker does not answer: connects one throw-away DEALER, with the client's security
+/// settings, to a worker endpoint and watches libzmq's socket monitor for the outcome of the
+/// connect and of the ZMTP/CURVE handshake (a refused client key, a security mismatch, nothing
+/// listening). Start-up diagnostics only: never used while rounds run.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <chrono>
@@ -16,7 +17,7 @@ enum class ProbeOutcome {
   handshake_ok,        ///< connected and the handshake succeeded: the worker is reachable
   auth_refused,        ///< the worker's ZAP handler refused this client's CURVE key
   security_mismatch,   ///< one side uses CURVE and the other does not
-  handshake_failed,    ///< the handshake failed otherwise (e.g. a wrong server key)
+  handshake_failed,    ///< the handshake failed otherwise (such as a wrong server key)
   connection_refused,  ///< nothing accepts connections at the endpoint
   no_connection,       ///< no connection within the timeout (host down, filtered, slow)
 };
@@ -24,7 +25,7 @@ enum class ProbeOutcome {
 /// The outcome and a sentence for the user.
 struct ProbeResult {
   ProbeOutcome outcome = ProbeOutcome::no_connection;  ///< what happened
-  std::string detail;                                  ///< e.g. "the worker refused this client's CURVE key"
+  std::string detail;  ///< in words, such as "the worker refused this client's CURVE key"
   /// True when waiting longer cannot help (a refused key, a mismatch, a failed handshake).
   bool definitive() const {
     return outcome == ProbeOutcome::auth_refused || outcome == ProbeOutcome::security_mismatch ||

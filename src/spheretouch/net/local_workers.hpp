@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// LocalWorkers: N WorkerServices on threads of this process — the embedded default (inproc://),
-// and the benchmark's workers over ipc:// or tcp:// loopback. Each worker can be stopped and
-// started again (a fresh epoch, empty memory), as a crashed and restarted daemon would be.
+/// \file
+/// LocalWorkers: N WorkerServices on threads of this process — the embedded default (inproc://),
+/// and the benchmark's workers over ipc:// or tcp:// loopback. Each worker can be stopped and
+/// started again (a fresh epoch, empty memory), as a crashed and restarted daemon would be.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <atomic>

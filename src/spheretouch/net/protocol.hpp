@@ -1,8 +1,10 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Wire protocol between the scatter-gather client and the workers (paper §3.4). One ZeroMQ frame per message: a 12-byte header {magic "STNP", version u16, type u8,
-// flags u8 = 0, body length u32} and a little-endian body. decode() checks every length, count,
-// index and number against explicit Limits before using or allocating from it, and its error
-// names the message, the field and the byte offset.
+/// \file
+/// Wire protocol between the scatter-gather client and the workers (paper §3.4). One ZeroMQ frame
+/// per message: a 12-byte header {magic "STNP", version u16, type u8, flags u8 = 0, body length
+/// u32} and a little-endian body. decode() checks every length, count, index and number against
+/// explicit Limits before using or allocating from it, and its error names the message, the field
+/// and the byte offset.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <cstddef>
@@ -64,6 +66,7 @@ enum class MsgType : std::uint8_t { Hello = 1, LoadBlocks = 2, Query = 3, Result
 struct Held {
   std::uint64_t hash = 0;   ///< content hash of the block set (block_set.hpp)
   std::uint32_t faces = 0;  ///< object faces in it
+  /// Field by field.
   friend bool operator==(const Held&, const Held&) = default;
 };
 
@@ -74,6 +77,7 @@ struct HelloMsg {
   std::uint64_t epoch = 0;      ///< random per process start: a new epoch means memory was lost
   std::uint64_t echo = 0;       ///< nonce of the Heartbeat answered, 0 if unsolicited
   std::vector<Held> held;       ///< block sets in memory, most recently used first
+  /// Field by field.
   friend bool operator==(const HelloMsg&, const HelloMsg&) = default;
 };
 
@@ -84,6 +88,7 @@ struct LoadBlocksMsg {
   std::uint64_t total_bytes = 0;   ///< size of the whole encoded block set
   std::uint64_t offset = 0;        ///< where this chunk starts
   std::vector<std::uint8_t> data;  ///< chunk bytes, offset + size <= total_bytes
+  /// Field by field.
   friend bool operator==(const LoadBlocksMsg&, const LoadBlocksMsg&) = default;
 };
 
@@ -96,6 +101,7 @@ struct QueryMsg {
   /// Global block ids to leave out, strictly ascending, at most Limits::max_skip; ids the set
   /// does not hold are ignored.
   std::vector<std::uint32_t> skip;
+  /// Field by field (the pose's matrices exactly).
   friend bool operator==(const QueryMsg& a, const QueryMsg& b) {
     return a.seq == b.seq && a.hash == b.hash && a.pose.matrix() == b.pose.matrix() && a.skip == b.skip;
   }
@@ -108,6 +114,7 @@ struct ResultMsg {
   std::uint64_t hash = 0;       ///< the block set used
   QueryStats stats;             ///< work counters
   std::vector<FacePair> pairs;  ///< colliding (probe, global object) face pairs
+  /// Field by field; of the stats, the sphere and triangle tests and compute_ns.
   friend bool operator==(const ResultMsg& a, const ResultMsg& b) {
     return a.seq == b.seq && a.worker_id == b.worker_id && a.hash == b.hash && a.pairs == b.pairs &&
            a.stats.sphere_tests == b.stats.sphere_tests && a.stats.tri_tests == b.stats.tri_tests &&
@@ -118,6 +125,7 @@ struct ResultMsg {
 /// Client → worker: liveness probe; the worker answers with a Hello echoing `nonce`.
 struct HeartbeatMsg {
   std::uint64_t nonce = 0;  ///< echoed in HelloMsg::echo
+  /// Field by field.
   friend bool operator==(const HeartbeatMsg&, const HeartbeatMsg&) = default;
 };
 
@@ -135,6 +143,7 @@ struct ErrorMsg {
   ErrorCode code = ErrorCode::BadMessage;  ///< category
   std::uint64_t ref = 0;                   ///< Query seq or block-set hash concerned, else 0
   std::string text;                        ///< human-readable, <= Limits::max_text bytes
+  /// Field by field.
   friend bool operator==(const ErrorMsg&, const ErrorMsg&) = default;
 };
 

@@ -1,10 +1,11 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// ReferenceBackend: a simple, deterministic CollisionBackend — a uniform grid over the share's
-// faces, an exact bounding-box filter, and a separating-axis triangle test (closed triangles).
-// It stands in for collide() until the collision core lands (the daemon's default), and is the
-// reference the distributed tests compare against: whether a pair collides depends only on the
-// two triangles' coordinates, never on the grid or the share, so the union of the workers'
-// results equals the result over the whole object bit for bit.
+/// \file
+/// ReferenceBackend: a simple, deterministic CollisionBackend — a uniform grid over the share's
+/// faces, an exact bounding-box filter, and a separating-axis triangle test (closed triangles).
+/// It stands in for collide() until the collision core lands (the daemon's default), and is the
+/// reference the distributed tests compare against: whether a pair collides depends only on the
+/// two triangles' coordinates, never on the grid or the share, so the union of the workers'
+/// results equals the result over the whole object bit for bit.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <spheretouch/net/backend.hpp>

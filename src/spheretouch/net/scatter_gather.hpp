@@ -1,14 +1,15 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// ScatterGather: the client side of the distributed collision (paper §3.4), owned by the
-// collision thread. One DEALER per worker, so every request is addressed to the worker that
-// holds the blocks (never round-robin). Each round sends one Query per live worker and gathers
-// until all have replied or the round's deadline passes; replies of older rounds are dropped by
-// sequence number, and the merged pairs are sorted and deduplicated. The client knows the whole
-// partition: a worker that misses `miss_limit` deadlines is marked down and its blocks are dealt
-// block-cyclically to the live workers, each of which is sent its enlarged block set (LoadBlocks,
-// content-addressed: never re-sent to a worker that already holds that hash). A worker that
-// answers again is given back its own blocks (reloaded if its epoch changed). A round says whether
-// it is complete: whether the block sets of the replies it merged cover every block.
+/// \file
+/// ScatterGather: the client side of the distributed collision (paper §3.4), owned by the
+/// collision thread. One DEALER per worker, so every request is addressed to the worker that
+/// holds the blocks (never round-robin). Each round sends one Query per live worker and gathers
+/// until all have replied or the round's deadline passes; replies of older rounds are dropped by
+/// sequence number, and the merged pairs are sorted and deduplicated. The client knows the whole
+/// partition: a worker that misses `miss_limit` deadlines is marked down and its blocks are dealt
+/// block-cyclically to the live workers, each of which is sent its enlarged block set (LoadBlocks,
+/// content-addressed: never re-sent to a worker that already holds that hash). A worker that
+/// answers again is given back its own blocks (reloaded if its epoch changed). A round says whether
+/// it is complete: whether the block sets of the replies it merged cover every block.
 //
 // Client assist (ScatterConfig::assist_blocks, off by default): a static deal leaves one worker
 // with more of a contact's work than the others, a different one at each pose. Each round the
@@ -76,7 +77,7 @@
 
 namespace st::net {
 
-using Clock = std::chrono::steady_clock;
+using Clock = std::chrono::steady_clock;  ///< the clock of deadlines and timeouts
 
 /// How the client talks to its workers.
 struct ScatterConfig {
@@ -88,7 +89,7 @@ struct ScatterConfig {
   std::chrono::milliseconds held_refresh_period{5000};
   std::chrono::milliseconds load_timeout{10000};  ///< an upload not acknowledged in this long fails
   /// A worker asked but silent this long gets a fresh socket: libzmq gives up on a connection for
-  /// good after a protocol error (e.g. an oversized or garbled frame) and never reconnects it.
+  /// good after a protocol error (such as an oversized or garbled frame) and never reconnects it.
   std::chrono::milliseconds reconnect_after{1000};
   std::uint32_t chunk_bytes = 256u << 10;  ///< LoadBlocks chunk size (≤ limits.max_chunk_bytes)
   std::uint32_t leaf_faces = geom::DefaultTreeConfig().leaf_faces;  ///< tree parameter sent with every block set
@@ -100,9 +101,11 @@ struct ScatterConfig {
   /// Busy-poll for replies this long before blocking in poll(), us: trades CPU on the collision
   /// thread's core for the wake-up latency of an idle core (tens of us on a VM). 0 = never spin.
   std::uint32_t spin_us = 0;
+  ///@{
   /// CURVE: the workers' public key (one fleet key) and this client's key pair, Z85; all empty
   /// for plain loopback / ipc.
   std::string curve_server_public, curve_public, curve_secret;
+  ///@}
   /// This client's ZeroMQ routing id on every worker (1–255 bytes, first byte not 0). A worker
   /// shows a client only the block sets it sent, so without CURVE this id is the client's
   /// identity: keep it secret. Empty (the default): 16 random bytes per client, so a restarted
@@ -150,7 +153,7 @@ struct WorkerStatus {
   std::uint64_t bytes_sent = 0;              ///< LoadBlocks bytes sent to it so far
   std::uint32_t loads_sent = 0;              ///< block sets sent to it so far
   std::size_t sets_held = 0;                 ///< block sets it holds, from its last Hello
-  /// Why the last message from it this client could not read was refused (empty: none), e.g.
+  /// Why the last message from it this client could not read was refused (empty: none), such as
   /// "header at byte 4: version: 1 not supported (this build speaks 2)": a daemon of another version.
   std::string unreadable;
 };

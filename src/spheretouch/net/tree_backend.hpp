@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// The production CollisionBackend: the worker builds sphere trees (SphereTree) over the whole
-// probe and over its share of the object, and answers each Query with collide() — exact, so the
-// union over workers equals the single-process result. Also cuts an object's sphere tree into
-// the layer-n blocks that ScatterGather deals block-cyclically (paper §3.4).
+/// \file
+/// The production CollisionBackend: the worker builds sphere trees (SphereTree) over the whole
+/// probe and over its share of the object, and answers each Query with collide() — exact, so the
+/// union over workers equals the single-process result. Also cuts an object's sphere tree into
+/// the layer-n blocks that ScatterGather deals block-cyclically (paper §3.4).
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <spheretouch/geom/sphere_tree.hpp>

@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Little-endian byte writer and bounds-checked reader for the wire protocol (protocol.hpp) and
-// the block-set encoding (block_set.hpp). The reader never reads past its span, keeps the first
-// error (what was read, at which byte offset, what was expected) and checks every count against
-// a limit and against the bytes left before the caller allocates anything from it.
+/// \file
+/// Little-endian byte writer and bounds-checked reader for the wire protocol (protocol.hpp) and
+/// the block-set encoding (block_set.hpp). The reader never reads past its span, keeps the first
+/// error (what was read, at which byte offset, what was expected) and checks every count against
+/// a limit and against the bytes left before the caller allocates anything from it.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <bit>

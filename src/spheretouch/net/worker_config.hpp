@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Configuration of the spheretouch-worker daemon (TOML, `--config FILE`) and its bind policy:
-// safe by default — a worker binds loopback (or ipc://) unless told otherwise, and binding any
-// other address needs CURVE keys or an explicit `insecure = true` / `--insecure`.
+/// \file
+/// Configuration of the spheretouch-worker daemon (TOML, `--config FILE`) and its bind policy:
+/// safe by default — a worker binds loopback (or ipc://) unless told otherwise, and binding any
+/// other address needs CURVE keys or an explicit `insecure = true` / `--insecure`.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <cstdint>
@@ -44,6 +45,7 @@ std::string zmq_endpoint(const std::string& endpoint);
 /// True for a tcp endpoint with a bracketed IPv6 host ("tcp://[::1]:5550"): its socket needs
 /// ZMQ_IPV6 set before bind() or connect().
 bool needs_ipv6(const std::string& endpoint);
+/// True for an endpoint only this host can reach: inproc://, ipc://, or tcp:// on a loopback address.
 bool is_local_endpoint(const std::string& endpoint);
 /// Refuses a non-local bind unless CURVE (secret key file and allowed clients) is configured or
 /// `insecure` is set; checks log_level, the endpoint scheme and the client keys.

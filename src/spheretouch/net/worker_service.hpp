@@ -1,10 +1,11 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// WorkerService: one worker of the distributed collision (paper §3.4). Binds a ZeroMQ ROUTER,
-// keeps the block sets it was sent in memory (content-addressed, LRU), and answers each Query
-// with its backend's pairs for the block set the Query names. The same code runs on a thread
-// over inproc:// (the embedded default, local_workers.hpp) and in the spheretouch-worker daemon
-// over tcp:// or ipc://. It never blocks on a send: replies to a peer that is gone or slow are
-// dropped by the ROUTER, and every malformed message gets an Error reply or is dropped.
+/// \file
+/// WorkerService: one worker of the distributed collision (paper §3.4). Binds a ZeroMQ ROUTER,
+/// keeps the block sets it was sent in memory (content-addressed, LRU), and answers each Query
+/// with its backend's pairs for the block set the Query names. The same code runs on a thread
+/// over inproc:// (the embedded default, local_workers.hpp) and in the spheretouch-worker daemon
+/// over tcp:// or ipc://. It never blocks on a send: replies to a peer that is gone or slow are
+/// dropped by the ROUTER, and every malformed message gets an Error reply or is dropped.
 //
 // Clients are kept apart: each has its own upload in progress, and a block set is visible (in
 // Hello, to Query) only to the clients that sent its bytes. A client is its CURVE public key when

@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Monotonic time in integer nanoseconds, the one clock of the real-time core. CLOCK_MONOTONIC
-// is system-wide, so timestamps compare across processes sharing a segment (ShmSegment).
-// On Linux x86-64 clock_gettime is served by the vDSO (no system call) when the clocksource
-// is tsc or kvm-clock; the haptic tick relies on that (HapticLoop: "no syscall but the sleep").
+/// \file
+/// Monotonic time in integer nanoseconds, the one clock of the real-time core. CLOCK_MONOTONIC
+/// is system-wide, so timestamps compare across processes sharing a segment (ShmSegment).
+/// On Linux x86-64 clock_gettime is served by the vDSO (no system call) when the clocksource
+/// is tsc or kvm-clock; the haptic tick relies on that (HapticLoop: "no syscall but the sleep").
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <cstdint>

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Constants of the real-time core, each with its unit and the reason for its value.
-// Device figures are the SensAble/3D Systems PHANToM Omni (Touch) data sheet, the device of the
-// paper (§3.1); the loop rate is OpenHaptics' servo loop and the paper's "1 KHz" (§3.2).
+/// \file
+/// Constants of the real-time core, each with its unit and the reason for its value.
+/// Device figures are the SensAble/3D Systems PHANToM Omni (Touch) data sheet, the device of the
+/// paper (§3.1); the loop rate is OpenHaptics' servo loop and the paper's "1 KHz" (§3.2).
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <cstddef>
@@ -33,10 +34,10 @@ inline constexpr double kOmniStableStiffnessNPerMm = 0.7;
 inline constexpr double kPaperA = 3.0;
 /// Paper eq. (1) constant b, N (multiplies a dimensionless log, so it carries the unit).
 inline constexpr double kPaperB = 0.8;
-/// Default base of eq. (1)'s log: e. The paper writes "log"; with base e the law's steepest
-/// (tangent) segment has slope b·e^(a-1)/u, see kDefaultPdUnitMm.
+/// Default base of the log in the paper's equation (1): e. The paper writes "log"; with base e the
+/// law's steepest (tangent) segment has slope b·e^(a-1)/u, see kDefaultPdUnitMm.
 inline constexpr double kDefaultLogBase = 2.718281828459045;
-/// Default unit of PD inside eq. (1), mm: 10 mm (cm). With base e the continuous law (linear from
+/// Default unit of PD inside equation (1), mm: 10 mm (cm). With base e the continuous law (linear from
 /// the origin, tangent to the log curve) has maximum stiffness 0.8·e²/10 = 0.591 N/mm, inside the
 /// Omni's stable range; with PD in mm it would be 5.9 N/mm, ten times too stiff.
 inline constexpr double kDefaultPdUnitMm = 10.0;

@@ -1,9 +1,10 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Device: what the haptic loop talks to each tick (a PHANToM through OpenHaptics' HD API, or the
-// SimulatedDevice). Poses and forces are in the object's frame (the haptic side's world):
-// the pose maps probe file coordinates to object file coordinates, mm; forces are N. Mapping the
-// device's own workspace onto the object is the implementation's job. Both calls run on the
-// tick path: noexcept, no allocation, no blocking.
+/// \file
+/// Device: what the haptic loop talks to each tick (a PHANToM through OpenHaptics' HD API, or the
+/// SimulatedDevice). Poses and forces are in the object's frame (the haptic side's world):
+/// the pose maps probe file coordinates to object file coordinates, mm; forces are N. Mapping the
+/// device's own workspace onto the object is the implementation's job. Both calls run on the
+/// tick path: noexcept, no allocation, no blocking.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <Eigen/Core>

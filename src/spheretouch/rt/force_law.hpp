@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Force laws: force magnitude (N) from penetration depth (mm). The paper's eq. (1),
-// F = (log(PD) + a)·b, made finite, non-negative, continuous and device-safe; plus a linear
-// spring for comparison. magnitude_N() is the 1 kHz path: noexcept, no allocation, and for any
-// double input (NaN, ±Inf, negative, denormal) it returns a finite value in [0, max_force_N].
+/// \file
+/// Force laws: force magnitude (N) from penetration depth (mm). The paper's eq. (1),
+/// F = (log(PD) + a)·b, made finite, non-negative, continuous and device-safe; plus a linear
+/// spring for comparison. magnitude_N() is the 1 kHz path: noexcept, no allocation, and for any
+/// double input (NaN, ±Inf, negative, denormal) it returns a finite value in [0, max_force_N].
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <spheretouch/geom/result.hpp>

@@ -1,11 +1,12 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// HapticLoop: the servo loop. Ticks at absolute deadlines on
-// CLOCK_MONOTONIC (clock_nanosleep, TIMER_ABSTIME), so lateness never accumulates into drift.
-// A deadline whose tick cannot start before the next deadline is skipped and counted as a miss;
-// the loop never runs ticks back to back to catch up. Real-time settings (SCHED_FIFO,
-// affinity, mlockall, pre-faulted stack) are applied only when asked, and every refusal is
-// reported (unlike CHAI3D, which ignores a refused priority). The tick path takes no lock,
-// allocates nothing, logs nothing and makes no system call but the sleep (clock reads are vDSO).
+/// \file
+/// HapticLoop: the servo loop. Ticks at absolute deadlines on
+/// CLOCK_MONOTONIC (clock_nanosleep, TIMER_ABSTIME), so lateness never accumulates into drift.
+/// A deadline whose tick cannot start before the next deadline is skipped and counted as a miss;
+/// the loop never runs ticks back to back to catch up. Real-time settings (SCHED_FIFO,
+/// affinity, mlockall, pre-faulted stack) are applied only when asked, and every refusal is
+/// reported (unlike CHAI3D, which ignores a refused priority). The tick path takes no lock,
+/// allocates nothing, logs nothing and makes no system call but the sleep (clock reads are vDSO).
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <atomic>
@@ -57,10 +58,12 @@ struct RtStep {
 };
 /// Outcome of all real-time requests; describe() names each refusal and its reason.
 struct RtReport {
+  ///@{
   RtStep fifo, affinity, mlock, prefault;  ///< one per request
-  bool all_applied() const;                ///< no requested step was refused
-  std::string describe() const;            ///< "SCHED_FIFO 80: refused (Operation not permitted); ..."
-  std::size_t stack_left = 0;  ///< bytes of the loop thread's stack below its frame, when a pre-fault was refused
+  ///@}
+  bool all_applied() const;      ///< no requested step was refused
+  std::string describe() const;  ///< "SCHED_FIFO 80: refused (Operation not permitted); ..."
+  std::size_t stack_left = 0;    ///< bytes of the loop thread's stack below its frame, when a pre-fault was refused
 };
 
 /// Stack kept free below a pre-fault for the tick path and signal delivery.
@@ -79,6 +82,7 @@ std::size_t default_thread_stack();
 /// Deadline bookkeeping, separate from the clock so tests can drive it with synthetic times.
 class DeadlineSchedule {
  public:
+  /// Deadlines first_deadline_ns + k · period_ns, k = 0, 1, ...
   DeadlineSchedule(std::int64_t first_deadline_ns, std::int64_t period_ns) noexcept
       : deadline_(first_deadline_ns), period_(period_ns) {}
   std::int64_t deadline_ns() const noexcept { return deadline_; }  ///< next deadline to serve

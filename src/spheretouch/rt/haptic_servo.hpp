@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// HapticServo: the haptic thread's tick, as a TickHandler for HapticLoop:
-// read the device pose → publish it → take the newest ContactModel if one arrived →
-// interpolate the force → saturate → command the device → push one telemetry sample.
-// Everything it touches is preallocated; the tick takes no lock and never waits.
+/// \file
+/// HapticServo: the haptic thread's tick, as a TickHandler for HapticLoop:
+/// read the device pose → publish it → take the newest ContactModel if one arrived →
+/// interpolate the force → saturate → command the device → push one telemetry sample.
+/// Everything it touches is preallocated; the tick takes no lock and never waits.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <cstdint>

@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// LatencyHistogram: fixed-size log-linear histogram of nanosecond values (HdrHistogram's bucket
-// scheme, cut down): 64 bins per octave, so any reported percentile is within 1.6 % of the
-// true value; exact count, min, max and sum. record() is O(1), allocation-free, noexcept: it is
-// what the haptic tick uses. Not thread-safe: one writer; read after the writer has stopped.
+/// \file
+/// LatencyHistogram: fixed-size log-linear histogram of nanosecond values (HdrHistogram's bucket
+/// scheme, cut down): 64 bins per octave, so any reported percentile is within 1.6 % of the
+/// true value; exact count, min, max and sum. record() is O(1), allocation-free, noexcept: it is
+/// what the haptic tick uses. Not thread-safe: one writer; read after the writer has stopped.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <array>

@@ -1,22 +1,23 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Interpolator: the force between contact updates (paper §3.7). The collision side publishes a
-// ContactModel every few to hundreds of milliseconds; the haptic tick needs a force every 1 ms
-// from the device pose it has now. Three selectable methods:
-//  * hold:  the force of the newest model, F = law(PD)·FD (zero-order hold; the baseline).
-//  * paper: B = A + D (§3.7): A = law(PD)·FD at the model, D the probe's movement since, turned
-//           into force by a gain (N/mm), B = A - gain·D, with |D| capped (so B cannot grow while
-//           updates stop) and B's component against FD removed (a surface never pulls).
-//  * plane: PD recomputed every tick against the newest local contact plane,
-//           PD(t) = (plane_point - pose(t)·probe_point)·FD, F = law(PD(t))·FD; a new model is
-//           cross-faded in: at its arrival the old and the new model are evaluated at the SAME
-//           pose (the current one), and their difference decays linearly over crossfade_ns, or
-//           kCrossfadeRounds recent intervals between models if that is shorter, so the
-//           cross-fade hides only what the models disagree on, never the probe's motion, and a
-//           fast crossing follows the geometry. A "no contact" model after one in contact ends the contact: the old
-//           model, still evaluated at each tick's pose, fades out over kReleaseFadeNs, never rising.
-// In every mode: a model older than stale_timeout_ns (no update received) fades the force
-// linearly to zero over fade_ns; optional damping -c·(v·FD)·FD never makes the force pull;
-// every input is checked for finiteness and a bad one yields zero force, counted.
+/// \file
+/// Interpolator: the force between contact updates (paper §3.7). The collision side publishes a
+/// ContactModel every few to hundreds of milliseconds; the haptic tick needs a force every 1 ms
+/// from the device pose it has now. Three selectable methods:
+///  * hold:  the force of the newest model, F = law(PD)·FD (zero-order hold; the baseline).
+///  * paper: B = A + D (§3.7): A = law(PD)·FD at the model, D the probe's movement since, turned
+///           into force by a gain (N/mm), B = A - gain·D, with |D| capped (so B cannot grow while
+///           updates stop) and B's component against FD removed (a surface never pulls).
+///  * plane: PD recomputed every tick against the newest local contact plane,
+///           PD(t) = (plane_point - pose(t)·probe_point)·FD, F = law(PD(t))·FD; a new model is
+///           cross-faded in: at its arrival the old and the new model are evaluated at the SAME
+///           pose (the current one), and their difference decays linearly over crossfade_ns, or
+///           kCrossfadeRounds recent intervals between models if that is shorter, so the
+///           cross-fade hides only what the models disagree on, never the probe's motion, and a
+///           fast crossing follows the geometry. A "no contact" model after one in contact ends the contact: the old
+///           model, still evaluated at each tick's pose, fades out over kReleaseFadeNs, never rising.
+/// In every mode: a model older than stale_timeout_ns (no update received) fades the force
+/// linearly to zero over fade_ns; optional damping -c·(v·FD)·FD never makes the force pull;
+/// every input is checked for finiteness and a bad one yields zero force, counted.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <Eigen/Geometry>

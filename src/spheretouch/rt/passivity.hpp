@@ -1,25 +1,26 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// PassivityGuard: keeps the rendered surface from injecting energy into the user's hand. A
-// sampled spring of stiffness k held for a period T gives back up to k·T/2 more than it took per
-// unit of velocity (Colgate & Schenkel 1997, "Passivity of a class of sampled-data systems");
-// contact models that change between collision rounds can inject more. Two stages, both along
-// the contact normal only (damping a slide sideways would feel like syrup):
-//  1. Minimum damping b = colgate_margin · k·T/2, the rate-independent bound for the law's
-//     steepest slope k at the servo period T.
-//  2. Time-domain passivity control (Hannaford & Ryu 2002, "Time-domain passivity control of
-//     haptic interfaces", IEEE T-RA 18(1)): an observer sums the energy the commanded force put
-//     into the device, E = Σ F_k·(x_{k+1} − x_k) (exactly what a zero-order-hold force does on
-//     the moving end effector). Ours acts on the energy the cycle would end with, E + F_n²/(2k)
-//     (the surface still holds at least F_n²/(2k) to give back): when it is > 0 a damper
-//     α = (E + F_n²/2k) / (4·T·v_n²), capped at max_damping, dissipates the excess over the next
-//     four ticks, while there is still force to take it from; α lets go by at most 20 % a tick,
-//     so the force it took comes back without a step (one-tick removal chattered on a fast
-//     release). When contact ends, E keeps only a
-//     positive debt (it restarts at 0 otherwise), so every contact cycle starts with no credit.
-// The guard never makes the force pull the probe into the object (the normal component stays
-// >= 0) and never raises it above the saturator's ceiling (it runs before the Saturator, and the
-// observer is fed the force actually commanded, after saturation). Tick-path safe: noexcept, no
-// allocation.
+/// \file
+/// PassivityGuard: keeps the rendered surface from injecting energy into the user's hand. A
+/// sampled spring of stiffness k held for a period T gives back up to k·T/2 more than it took per
+/// unit of velocity (Colgate & Schenkel 1997, "Passivity of a class of sampled-data systems");
+/// contact models that change between collision rounds can inject more. Two stages, both along
+/// the contact normal only (damping a slide sideways would feel like syrup):
+///  1. Minimum damping b = colgate_margin · k·T/2, the rate-independent bound for the law's
+///     steepest slope k at the servo period T.
+///  2. Time-domain passivity control (Hannaford & Ryu 2002, "Time-domain passivity control of
+///     haptic interfaces", IEEE T-RA 18(1)): an observer sums the energy the commanded force put
+///     into the device, E = Σ F_k·(x_{k+1} − x_k) (exactly what a zero-order-hold force does on
+///     the moving end effector). Ours acts on the energy the cycle would end with, E + F_n²/(2k)
+///     (the surface still holds at least F_n²/(2k) to give back): when it is > 0 a damper
+///     α = (E + F_n²/2k) / (4·T·v_n²), capped at max_damping, dissipates the excess over the next
+///     four ticks, while there is still force to take it from; α lets go by at most 20 % a tick,
+///     so the force it took comes back without a step (one-tick removal chattered on a fast
+///     release). When contact ends, E keeps only a
+///     positive debt (it restarts at 0 otherwise), so every contact cycle starts with no credit.
+/// The guard never makes the force pull the probe into the object (the normal component stays
+/// >= 0) and never raises it above the saturator's ceiling (it runs before the Saturator, and the
+/// observer is fed the force actually commanded, after saturation). Tick-path safe: noexcept, no
+/// allocation.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <Eigen/Core>

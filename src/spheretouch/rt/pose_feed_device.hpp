@@ -1,11 +1,12 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// PoseFeedDevice: a Device whose poses another thread pushes at its own rate (the live view's
-// page: `[device] kind = "browser"`), upsampled to the servo's 1 kHz: each tick interpolates from
-// the previous pose to the newest over the interval at which they arrived (translation linearly,
-// rotation by slerp, as Trajectory::at does), so a 30-60 Hz source moves the probe without steps,
-// one source period behind. Offers are checked (finite, unit quaternion, within range) before they
-// reach the servo; the servo reads a triple buffer and never waits. The force commanded is kept
-// for display only (a browser cannot render it).
+/// \file
+/// PoseFeedDevice: a Device whose poses another thread pushes at its own rate (the live view's
+/// page: `[device] kind = "browser"`), upsampled to the servo's 1 kHz: each tick interpolates from
+/// the previous pose to the newest over the interval at which they arrived (translation linearly,
+/// rotation by slerp, as Trajectory::at does), so a 30-60 Hz source moves the probe without steps,
+/// one source period behind. Offers are checked (finite, unit quaternion, within range) before they
+/// reach the servo; the servo reads a triple buffer and never waits. The force commanded is kept
+/// for display only (a browser cannot render it).
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <atomic>
@@ -16,6 +17,7 @@
 
 namespace st::rt {
 
+/// A Device moved by poses another thread offers (the live view's page), upsampled to the servo rate.
 class PoseFeedDevice final : public Device {
  public:
   /// `grip`: probe file coordinates -> the tool frame (fingertip at the origin); `home`: the tip's
@@ -27,7 +29,7 @@ class PoseFeedDevice final : public Device {
   bool read_pose(std::int64_t now_ns, Eigen::Isometry3d& pose) noexcept override;
   void command_force(std::int64_t now_ns, const Eigen::Vector3d& force_N) noexcept override;
   double max_force_N() const noexcept override { return max_force_N_; }
-  const Eigen::Vector3d& home() const { return home_; }
+  const Eigen::Vector3d& home() const { return home_; }  ///< the tip's position before the first offer, object mm
   std::uint64_t offers() const { return offers_.load(std::memory_order_relaxed); }    ///< poses taken
   std::uint64_t refused() const { return refused_.load(std::memory_order_relaxed); }  ///< poses refused
 

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// PoseSample: the device pose the haptic thread publishes each tick for the collision thread
-//. Plain data with a sequence number and the sampling time, so the
-// collision side can stamp its ContactModel with the pose it was computed at.
+/// \file
+/// PoseSample: the device pose the haptic thread publishes each tick for the collision thread.
+/// Plain data with a sequence number and the sampling time, so the collision side can stamp its
+/// ContactModel with the pose it was computed at.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <cstdint>

@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Saturator: the last stage before the device. Caps the force at the device's peak force and,
-// optionally, pulls the ceiling down to the continuous force when the RMS force over the last
-// ~tau seconds approaches it (an I²t-style thermal guard; CHAI3D never clamps — we always do).
-// Non-finite input becomes zero force and is counted. apply() is tick-path safe.
+/// \file
+/// Saturator: the last stage before the device. Caps the force at the device's peak force and,
+/// optionally, pulls the ceiling down to the continuous force when the RMS force over the last
+/// ~tau seconds approaches it (an I²t-style thermal guard; CHAI3D never clamps — we always do).
+/// Non-finite input becomes zero force and is counted. apply() is tick-path safe.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <Eigen/Core>

@@ -1,12 +1,13 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// SeqLock<T>: one writer publishes a plain struct, any number of readers copy it without ever
-// blocking the writer (the live status in the shared-memory segment, read by `spheretouch
-// monitor` through a read-only mapping, which a TripleBuffer's single reader cannot allow).
-// After Boehm, "Can seqlocks get along with programming language memory models?" (MSPC 2012):
-// the payload is stored as relaxed atomic words, so a reader racing a write is not a data race;
-// a release fence after the odd sequence store and an acquire fence before the re-check order it.
-// The writer is wait-free (one store per word); a reader retries while a write is in progress.
-// Payloads from a few words (status) to 128 KiB (rt::ViewFrame) use it.
+/// \file
+/// SeqLock<T>: one writer publishes a plain struct, any number of readers copy it without ever
+/// blocking the writer (the live status in the shared-memory segment, read by `spheretouch
+/// monitor` through a read-only mapping, which a TripleBuffer's single reader cannot allow).
+/// After Boehm, "Can seqlocks get along with programming language memory models?" (MSPC 2012):
+/// the payload is stored as relaxed atomic words, so a reader racing a write is not a data race;
+/// a release fence after the odd sequence store and an acquire fence before the re-check order it.
+/// The writer is wait-free (one store per word); a reader retries while a write is in progress.
+/// Payloads from a few words (status) to 128 KiB (rt::ViewFrame) use it.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <algorithm>

@@ -1,9 +1,10 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// ShmSegment: a named POSIX shared-memory segment holding the pose and contact-model triple
-// buffers, so the haptic servo can run as its own process.
-// A versioned header (magic, layout version, sizes, creator pid and start time) guards it:
-// attach() refuses anything that does not match this build or whose creator is dead;
-// create() replaces a segment left by a dead process and refuses one whose creator lives.
+/// \file
+/// ShmSegment: a named POSIX shared-memory segment holding the pose and contact-model triple
+/// buffers, so the haptic servo can run as its own process.
+/// A versioned header (magic, layout version, sizes, creator pid and start time) guards it:
+/// attach() refuses anything that does not match this build or whose creator is dead;
+/// create() replaces a segment left by a dead process and refuses one whose creator lives.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <atomic>

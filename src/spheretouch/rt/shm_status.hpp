@@ -1,10 +1,11 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// ShmStatus: the live status area of the shared-memory segment (after the two triple buffers).
-// The haptic servo and the collision thread each publish a small struct through a SeqLock, the
-// collision thread also a view frame (ViewFrame), and the run says once which scene and meshes
-// it loaded (SceneRef), so any number of read-only attachers (`spheretouch monitor`, its
-// `--view`, the run's own status line and view) can watch a session without consuming the
-// triple buffers' single reader's updates.
+/// \file
+/// ShmStatus: the live status area of the shared-memory segment (after the two triple buffers).
+/// The haptic servo and the collision thread each publish a small struct through a SeqLock, the
+/// collision thread also a view frame (ViewFrame), and the run says once which scene and meshes
+/// it loaded (SceneRef), so any number of read-only attachers (`spheretouch monitor`, its
+/// `--view`, the run's own status line and view) can watch a session without consuming the
+/// triple buffers' single reader's updates.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <atomic>
@@ -57,9 +58,11 @@ static_assert(std::is_trivially_copyable_v<CollisionStatus> && sizeof(CollisionS
 struct SceneRef {
   static constexpr std::size_t kMaxPath = 4096;  ///< PATH_MAX on Linux, with the NUL
   char scene_path[kMaxPath] = {};                ///< absolute, NUL-terminated; "" = none (not from a file, or too long)
+  ///@{
   std::uint64_t probe_hash = 0, object_hash = 0;        ///< geom::mesh_hash of each body as loaded
   std::uint32_t probe_vertices = 0, probe_faces = 0;    ///< the probe's counts
   std::uint32_t object_vertices = 0, object_faces = 0;  ///< the object's counts
+  ///@}
 };
 static_assert(std::is_trivially_copyable_v<SceneRef> && sizeof(SceneRef) == 4128);
 

@@ -1,10 +1,11 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// SimulatedDevice: a Device for tests, benchmarks and demos without hardware. The probe follows
-// a scripted trajectory of timed poses (from a file, or the built-in approach / press / slide /
-// release against a plane), optionally held by a virtual user: a spring-damper hand with mass
-// that pulls the probe toward the scripted pose while the commanded force pushes back, so the
-// rendered contact feeds back into the motion. Every commanded force is recorded into
-// preallocated storage; records past its capacity are counted, not lost silently.
+/// \file
+/// SimulatedDevice: a Device for tests, benchmarks and demos without hardware. The probe follows
+/// a scripted trajectory of timed poses (from a file, or the built-in approach / press / slide /
+/// release against a plane), optionally held by a virtual user: a spring-damper hand with mass
+/// that pulls the probe toward the scripted pose while the commanded force pushes back, so the
+/// rendered contact feeds back into the motion. Every commanded force is recorded into
+/// preallocated storage; records past its capacity are counted, not lost silently.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <string>

@@ -1,9 +1,10 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// SpscQueue<T>: bounded wait-free single-producer single-consumer ring, after rigtorp/SPSCQueue:
-// head and tail on their own cache lines, each side caching the other's index to cut cache-line
-// traffic, explicit acquire/release at every shared access, storage allocated once up front.
-// try_push/try_pop never block and never allocate. (moodycamel's ReaderWriterQueue would do the
-// same job; its standalone fences are opaque to ThreadSanitizer, this is TSan-clean.)
+/// \file
+/// SpscQueue<T>: bounded wait-free single-producer single-consumer ring, after rigtorp/SPSCQueue:
+/// head and tail on their own cache lines, each side caching the other's index to cut cache-line
+/// traffic, explicit acquire/release at every shared access, storage allocated once up front.
+/// try_push/try_pop never block and never allocate. (moodycamel's ReaderWriterQueue would do the
+/// same job; its standalone fences are opaque to ThreadSanitizer, this is TSan-clean.)
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <atomic>

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Telemetry: each haptic tick pushes one fixed-size sample into a lock-free SPSC queue; a writer
-// thread drains it to a CSV file. A full queue drops the sample and counts it; the count is in
-// stats(), in the file's last line and in the writer's summary — drops are never silent.
+/// \file
+/// Telemetry: each haptic tick pushes one fixed-size sample into a lock-free SPSC queue; a writer
+/// thread drains it to a CSV file. A full queue drops the sample and counts it; the count is in
+/// stats(), in the file's last line and in the writer's summary — drops are never silent.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <atomic>

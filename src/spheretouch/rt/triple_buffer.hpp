@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// TripleBuffer<T>: wait-free single-producer single-consumer exchange of the latest value
-//.
+/// \file
+/// TripleBuffer<T>: wait-free single-producer single-consumer exchange of the latest value.
+//
 // After HadrienG2/triple-buffer: three slots, each side owns one, and one atomic byte holds the
 // third ("back") slot's index plus a dirty bit. Both sides swap that byte with acq_rel: the
 // writer must acquire the reader's release of the slot it gets back (the Acquire-only swap of

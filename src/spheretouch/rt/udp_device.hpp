@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// UdpDevice: a Device fed by a real haptic device's driver program over UDP (the bridge). The
-// driver (a loop around OpenHaptics, Force Dimension's SDK, CHAI3D or libnifalcon; see
-// examples/udp_device_emulator.py) sends one pose datagram per servo tick of its own and reads
-// back the force datagrams the servo sends every tick.
+/// \file
+/// UdpDevice: a Device fed by a real haptic device's driver program over UDP (the bridge). The
+/// driver (a loop around OpenHaptics, Force Dimension's SDK, CHAI3D or libnifalcon; see
+/// examples/udp_device_emulator.py) sends one pose datagram per servo tick of its own and reads
+/// back the force datagrams the servo sends every tick.
 //
 // Wire format, version 1, little-endian, one message per datagram (docs/user-guide/devices.md, "A bridge for real
 // devices"):
@@ -48,30 +49,36 @@ namespace st::rt {
 
 inline constexpr std::uint32_t kPoseMagic = 0x50485453u;   ///< "STHP" little-endian
 inline constexpr std::uint32_t kForceMagic = 0x46485453u;  ///< "STHF" little-endian
-inline constexpr std::uint16_t kBridgeVersion = 1;
-inline constexpr std::size_t kPoseBytes = 80, kForceBytes = 64;
+inline constexpr std::uint16_t kBridgeVersion = 1;         ///< the wire format's version
+///@{
+inline constexpr std::size_t kPoseBytes = 80, kForceBytes = 64;  ///< datagram sizes, bytes
+///@}
 inline constexpr std::uint16_t kForceFading = 1;  ///< the force is being faded (driver silent or just back)
 inline constexpr std::uint16_t kForceNoPose = 2;  ///< no valid pose yet: the force is zero
 
 /// A pose datagram's fields.
 struct PosePacket {
-  std::uint16_t buttons = 0;
-  std::uint64_t seq = 0;
-  std::int64_t device_ns = 0;
+  std::uint16_t buttons = 0;            ///< reported, not used
+  std::uint64_t seq = 0;                ///< +1 per pose
+  std::int64_t device_ns = 0;           ///< the driver's clock at sampling
   std::array<double, 3> tip{};          ///< device mm
   std::array<double, 4> q{1, 0, 0, 0};  ///< w, x, y, z
 };
 /// A force datagram's fields.
 struct ForcePacket {
-  std::uint16_t flags = 0;
-  std::uint64_t seq = 0, pose_seq = 0;
-  std::int64_t pose_device_ns = 0, servo_ns = 0;
+  std::uint16_t flags = 0;  ///< kForceFading, kForceNoPose
+  ///@{
+  std::uint64_t seq = 0, pose_seq = 0;  ///< +1 per force sent; the newest pose taken
+  ///@}
+  ///@{
+  std::int64_t pose_device_ns = 0, servo_ns = 0;  ///< that pose's device_ns (echoed); the servo's clock when sent
+  ///@}
   std::array<double, 3> force{};  ///< N
 };
 
 /// Why a datagram was refused (kOk: accepted as a pose).
 enum class PoseReject : std::uint8_t { kOk, kSize, kMagic, kVersion, kNonFinite, kRange, kQuaternion };
-const char* to_string(PoseReject r);
+const char* to_string(PoseReject r);  ///< the reason in words, for messages
 
 /// Encodes a pose (kPoseBytes bytes into out).
 void encode_pose(const PosePacket& p, std::uint8_t* out);
@@ -94,7 +101,7 @@ struct UdpDeviceConfig {
   double max_abs_mm = 1e6;              ///< a tip coordinate beyond this is refused
   double max_force_N = 10;              ///< the device's peak force
 };
-inline UdpDeviceConfig DefaultUdpDeviceConfig() { return {}; }
+inline UdpDeviceConfig DefaultUdpDeviceConfig() { return {}; }  ///< loopback, latching the first driver
 
 /// Counters (read while running, relaxed).
 struct UdpDeviceStats {
@@ -109,6 +116,7 @@ struct UdpDeviceStats {
   std::atomic<std::uint16_t> last_reject{0};  ///< PoseReject of the last malformed datagram
 };
 
+/// A Device fed over UDP by a real haptic device's driver program (the bridge).
 class UdpDevice final : public Device {
  public:
   /// Opens and binds the socket and starts the receiver thread. `grip` maps probe file
@@ -123,8 +131,8 @@ class UdpDevice final : public Device {
   void command_force(std::int64_t now_ns, const Eigen::Vector3d& force_N) noexcept override;
   double max_force_N() const noexcept override { return config_.max_force_N; }
 
-  const UdpDeviceStats& stats() const { return stats_; }
-  std::string address() const { return bound_; }  ///< the bound address:port (port resolved when 0)
+  const UdpDeviceStats& stats() const { return stats_; }  ///< counters, updated while running
+  std::string address() const { return bound_; }          ///< the bound address:port (port resolved when 0)
   /// One line for the run's summary: poses, refusals by kind, forces, fades.
   std::string summary() const;
 

@@ -1,10 +1,11 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// ViewFrame: what a live viewer shows of one collision round (the pose, the colliding probe and
-// object faces, the contact model). The collision thread publishes one at most kViewRateHz times
-// a second into the shared-memory status area (ShmStatus::view, a SeqLock), so the run's own
-// view and a monitor attached later (`spheretouch monitor --view`) read the same frames.
-// A frame read from a segment may have been written by anyone who can write the segment:
-// sanitize_view_frame() bounds it before a viewer uses it.
+/// \file
+/// ViewFrame: what a live viewer shows of one collision round (the pose, the colliding probe and
+/// object faces, the contact model). The collision thread publishes one at most kViewRateHz times
+/// a second into the shared-memory status area (ShmStatus::view, a SeqLock), so the run's own
+/// view and a monitor attached later (`spheretouch monitor --view`) read the same frames.
+/// A frame read from a segment may have been written by anyone who can write the segment:
+/// sanitize_view_frame() bounds it before a viewer uses it.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <cstddef>
@@ -20,8 +21,12 @@ inline constexpr std::uint32_t kViewMaxFaces = 16384;
 /// draws no faster), and one frame fill (~tens of µs) per 16.7 ms keeps it off the round's cost.
 inline constexpr double kViewRateHz = 60;
 
+/// One collision round as a viewer shows it; plain data, published through a SeqLock.
 struct ViewFrame {
+  ///@{
+  /// `flags` bits: in contact, face lists cut at kViewMaxFaces; kKnownFlags = every bit defined.
   static constexpr std::uint32_t kInContact = 1, kTruncated = 2, kKnownFlags = 3;
+  ///@}
   std::uint64_t round = 0;                                 ///< collision round (0: no frame yet)
   std::uint64_t pose_seq = 0;                              ///< the pose it answered
   std::int64_t made_ns = 0;                                ///< when the frame was filled, CLOCK_MONOTONIC
@@ -32,7 +37,9 @@ struct ViewFrame {
   double round_ms = 0;                                     ///< the round's time
   std::uint32_t contacts = 0;                              ///< paper §3.5 contacts
   std::uint32_t flags = 0;                                 ///< kInContact, kTruncated
-  std::uint32_t n_probe = 0, n_object = 0;                 ///< colliding faces listed below
+  ///@{
+  std::uint32_t n_probe = 0, n_object = 0;  ///< colliding faces listed below
+  ///@}
   /// Probe faces in [0, n_probe), then object faces in [n_probe, n_probe + n_object); each list
   /// distinct and ascending. One array, so the part in use is one prefix of the frame.
   std::uint32_t faces[2 * kViewMaxFaces];
