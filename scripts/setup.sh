@@ -21,6 +21,7 @@ packages=(g++ meson ninja-build pkg-config
           cmake                      # tests/install: a CMake consumer of the installed package
           pybind11-dev python3-dev python3-numpy   # the Python module (python/)
           libcivetweb-dev libjs-three              # the live view (spheretouch run --view)
+          nlohmann-json3-dev                       # JSON: the view's page reports, the benchmarks' output
           chromium)                                # the live view's browser tests (headless)
 missing=()
 for p in "${packages[@]}"; do

@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <random>
 #include <string>
 
@@ -49,6 +50,12 @@ inline void write_file(const std::string& path, const std::string& data) {
   std::ofstream o(path, std::ios::binary);
   o.write(data.data(), static_cast<std::streamsize>(data.size()));
   REQUIRE(o.good());
+}
+
+/// The whole file (empty when it cannot be read).
+inline std::string read_file(const std::string& path) {
+  std::ifstream i(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(i), std::istreambuf_iterator<char>());
 }
 
 /// Directory of the model set (scripts/models.sh): $ST_MODEL_DIR, else $ST_SOURCE_ROOT/.cache/models.

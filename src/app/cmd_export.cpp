@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// spheretouch export IN -o OUT.off: convert, rescale and Loop-subdivide a mesh (the model set
+// spheretouch export IN -o OUT.{off,ply,obj}: convert, rescale and Loop-subdivide a mesh (the model set
 // is built with it: scripts/models.sh).
 #include <cmath>
 #include <cstdio>
@@ -22,11 +22,12 @@ struct ExportArgs {
 
 void add_export(CLI::App& app) {
   auto a = std::make_shared<ExportArgs>();
-  CLI::App* cmd = app.add_subcommand("export",
-                                     "Write a mesh as OFF (double precision, face order kept), "
-                                     "optionally rescaled and Loop-subdivided");
+  CLI::App* cmd = app.add_subcommand(
+      "export",
+      "Write a mesh as OFF, PLY or OBJ (by the output's extension; double precision, face order kept), "
+      "optionally rescaled and Loop-subdivided");
   cmd->add_option("mesh", a->in, "input mesh")->required()->check(CLI::ExistingFile);
-  cmd->add_option("-o,--out", a->out, "output .off file")->required();
+  cmd->add_option("-o,--out", a->out, "output mesh: .off, .ply (ASCII) or .obj, by its extension")->required();
   add_load_options(cmd, a->load);
   cmd->add_option("--diagonal", a->diagonal_mm,
                   "scale the input so its bounding-box diagonal is this many mm (before subdividing, so every "
@@ -57,7 +58,7 @@ void add_export(CLI::App& app) {
       }
       mesh = std::move(r).value();
     }
-    if (Status s = geom::write_off(mesh, a->out); !s) {
+    if (Status s = geom::write_mesh(mesh, a->out); !s) {
       std::fprintf(stderr, "spheretouch: %s\n", s.error().c_str());
       throw CLI::RuntimeError(2);
     }

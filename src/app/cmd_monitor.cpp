@@ -107,7 +107,10 @@ std::string status_line(const rt::ShmSegment& seg, std::int64_t now) {
   else
     appendf(line, "no contact model yet");
   const std::uint32_t lost = st.collision_lost.load(std::memory_order_relaxed);
-  if (lost == 2 || !seg.creator_alive())
+  // A run that ended normally (its servo finished) exits: that is no death.
+  if (state == rt::ServoState::finished)
+    appendf(line, seg.creator_alive() ? " | run ending" : " | run ended");
+  else if (lost == 2 || !seg.creator_alive())
     appendf(line, " | collision process %d DEAD", seg.header().creator_pid);
   else if (lost == 1)
     appendf(line, " | collision side SILENT");

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <filesystem>
 #include <thread>
 
 #include "app/commands.hpp"
@@ -20,6 +21,9 @@ namespace {
 
 std::atomic<int> g_signal{0};
 extern "C" void on_signal(int sig) { g_signal.store(sig); }
+
+/// Where --view listens when given without an address.
+constexpr const char* kDefaultViewAddress = "127.0.0.1:8080";
 
 struct RunArgs {
   std::string scene;
@@ -34,7 +38,23 @@ struct RunArgs {
 
 [[noreturn]] void die(int code, const std::string& msg) { fail_command("spheretouch", code, msg); }
 
-void run(const RunArgs& a) {
+// `run --view SCENE`: --view's address is optional, so CLI11 hands it the scene. When no scene was
+// given and --view's value is no ADDR:PORT but a file, it is the scene and the view takes its
+// default address.
+RunArgs resolve_view_or_scene(RunArgs a) {
+  if (!a.scene.empty()) return a;
+  if (!a.view.empty() && !view::check_listen(a.view).empty() && std::filesystem::is_regular_file(a.view)) {
+    a.scene = a.view;
+    a.view = kDefaultViewAddress;
+    return a;
+  }
+  die(2,
+      "run: a scene file is required: spheretouch run [OPTIONS] SCENE.toml (configs/demo.toml documents every "
+      "field)");
+}
+
+void run(const RunArgs& given) {
+  const RunArgs a = resolve_view_or_scene(given);
   Result<engine::Scene> sr = engine::load_scene(a.scene);
   if (!sr) die(2, sr.error());
   engine::Scene s = std::move(sr).value();
@@ -169,7 +189,8 @@ void add_run(CLI::App& app) {
       "device running the scene's script. Writes a run directory: ticks.csv, trace.json, contact.ply,\n"
       "summary.txt. --split: the servo runs as its own process on a shared-memory segment\n"
       "(`spheretouch monitor` watches either kind of run).");
-  cmd->add_option("scene", a->scene, "scene file (configs/demo.toml documents every field)")->required()->check(CLI::ExistingFile);
+  // Not required() here: `run --view SCENE` hands the scene to --view (resolve_view_or_scene).
+  cmd->add_option("scene", a->scene, "scene file (configs/demo.toml documents every field)")->check(CLI::ExistingFile);
   cmd->add_option("--duration", a->duration_s, "seconds to run (overrides [run] duration_s)")->check(CLI::Range(0.01, 1e6));
   cmd->add_option("--workers", a->workers,
                   "in-process workers (overrides [workers] count; 0 = collide in the collision thread)")
@@ -188,7 +209,7 @@ void add_run(CLI::App& app) {
                   "serve a live view of the run at ADDR:PORT (default 127.0.0.1:8080): the object, the probe, "
                   "the colliding faces in red, the force, the figures; open the printed URL in a browser")
       ->expected(0, 1)
-      ->default_str("127.0.0.1:8080");
+      ->default_str(kDefaultViewAddress);
   cmd->add_flag("--split", a->split,
                 "run the haptic servo as its own process on the shared-memory segment: it keeps the device\n"
                 "safe (force fades to zero) and finishes its run if the collision side dies");

@@ -34,6 +34,40 @@ TEST_CASE("info on a generated and a real mesh reports reader, topology and coun
   CHECK(contains(r.output, "precision double"));
 }
 
+TEST_CASE("export writes the format the output's extension names, or refuses it") {
+  st::test::TempDir d;
+  st::test::write_file(d.file("t.off"), "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 1 2 3\n3 0 3 2\n");
+  auto r = run_command(spheretouch_exe() + " export " + d.file("t.off") + " -o " + d.file("t.ply"));
+  INFO(r.output);
+  CHECK(r.exit_code == 0);
+  CHECK(st::test::read_file(d.file("t.ply")).rfind("ply\n", 0) == 0);  // PLY, as named (it was OFF)
+  r = run_command(spheretouch_exe() + " info " + d.file("t.ply"));
+  CHECK(r.exit_code == 0);
+  CHECK(contains(r.output, "faces       4 "));
+  r = run_command(spheretouch_exe() + " export " + d.file("t.off") + " -o " + d.file("t.stl"));
+  CHECK(r.exit_code == 2);
+  CHECK(contains(r.output, "t.stl: cannot write '.stl' meshes"));
+  CHECK_FALSE(std::filesystem::exists(d.file("t.stl")));
+}
+
+TEST_CASE("run --view SCENE takes SCENE as the scene (the view on its default address)") {
+  st::test::TempDir d;
+  // A scene with an unknown section: the run stops at its parse, naming it, so nothing binds.
+  st::test::write_file(d.file("s.toml"), "[nonsense]\nx = 1\n");
+  auto r = run_command(spheretouch_exe() + " run --view " + d.file("s.toml"));
+  INFO(r.output);
+  CHECK(r.exit_code == 2);
+  CHECK(contains(r.output, "s.toml"));
+  CHECK(contains(r.output, "nonsense"));
+  CHECK_FALSE(contains(r.output, "expected ADDR:PORT"));  // before: the scene was taken as the address
+  r = run_command(spheretouch_exe() + " run");
+  CHECK(r.exit_code == 2);
+  CHECK(contains(r.output, "a scene file is required"));
+  r = run_command(spheretouch_exe() + " run --view not-an-address");
+  CHECK(r.exit_code == 2);
+  CHECK(contains(r.output, "a scene file is required"));
+}
+
 TEST_CASE("info and export fail with the file named, exit code 2") {
   st::test::TempDir d;
   st::test::write_file(d.file("bad.off"), "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n");

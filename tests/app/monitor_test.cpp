@@ -168,6 +168,7 @@ TEST_CASE(
   CHECK(run_rc == 0);
   CHECK(mon_rc == 0);
   CHECK(contains(log, "session finished"));
+  CHECK_FALSE(contains(log, "DEAD"));  // a run that ended normally is not reported dead
   CHECK(contains(log, "view: " + url + ": 1 page(s)"));
   CHECK_FALSE(contains(log, "bad frames"));
 

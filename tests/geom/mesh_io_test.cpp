@@ -448,6 +448,49 @@ TEST_CASE("a mesh 10^6 mm from the origin keeps its shape to 1e-9 relative") {
   }
 }
 
+TEST_CASE("write_mesh writes the format the extension names, and reads back the same mesh") {
+  st::test::TempDir d;
+  std::string s = "OFF\n5 5 0\n";
+  const Vec3 v[5] = {{0.1, 0.2, 0.3}, {1e6 + 0.123456789, -2, 3}, {1.0 / 3, 2.0 / 3, 1e-9}, {-5, 7, 11}, {2, 2, 2}};
+  char buf[128];
+  for (const Vec3& p : v) {
+    std::snprintf(buf, sizeof buf, "%.17g %.17g %.17g\n", p.x(), p.y(), p.z());
+    s += buf;
+  }
+  s += "3 0 1 2\n3 0 2 3\n3 1 3 4\n3 2 4 0\n3 4 3 2\n";
+  write_file(d.file("in.off"), s);
+  const Mesh m = load_mesh(d.file("in.off")).value().mesh;
+  for (const std::string ext : {".off", ".ply", ".obj", ".PLY"}) {
+    CAPTURE(ext);
+    const std::string out = d.file("out" + ext);
+    REQUIRE(write_mesh(m, out).ok());
+    Result<LoadedMesh> back = load_mesh(out);
+    REQUIRE(back.ok());
+    CHECK(back.value().report.precision.rfind("double", 0) == 0);
+    REQUIRE(back.value().mesh.num_faces() == m.num_faces());
+    for (std::uint32_t f = 0; f < m.num_faces(); ++f)
+      for (int k = 0; k < 3; ++k) {
+        // As exact as loading the original: a body is stored relative to its centre, so each
+        // vertex comes back within a few ulps of the body's largest coordinate (1e6 mm here).
+        const Vec3 want = v[m.faces[f][k]];
+        const Vec3 got = back.value().mesh.vertex(back.value().mesh.faces[f][k]);
+        CHECK((got - want).norm() <= 4 * 0x1p-52 * 1e6);
+      }
+  }
+  // The file says what it is: a .ply starts as PLY, an .obj has v/f lines.
+  CHECK(st::test::read_file(d.file("out.ply")).rfind("ply\n", 0) == 0);
+  CHECK(st::test::read_file(d.file("out.obj")).find("\nf 1 2 3\n") != std::string::npos);
+  // Any other extension is refused, naming it, and writes nothing.
+  for (const std::string bad : {"out.stl", "out.gltf", "out"}) {
+    CAPTURE(bad);
+    const Status r = write_mesh(m, d.file(bad));
+    REQUIRE_FALSE(r.ok());
+    CHECK(r.error().find("cannot write") != std::string::npos);
+    CHECK(r.error().find(".off, .ply or .obj") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(d.file(bad)));
+  }
+}
+
 TEST_CASE("real meshes: the model set loads closed and manifold") {
   for (const char* name : {"hand.off", "hand_L2.off", "elephant.off", "armadillo_L1.off"}) {
     Result<LoadedMesh> r = load_mesh(st::test::model(name));

@@ -125,6 +125,18 @@ TEST_CASE("HapticServo: renders contact from a slow collision side, finite, satu
     fmax = std::max(fmax, r.force_N.norm());
   }
   CHECK(fmax > 1.0);  // 4 mm deep: law gives ~1.4 N
+  // The ticks' flags, by name: contact while pressed, a pose every tick (the simulated device
+  // always gives one), no bit but the named ones.
+  std::vector<TelemetrySample> samples(4000);
+  samples.resize(tele.drain_to(samples.data(), samples.size()));
+  REQUIRE(!samples.empty());
+  std::size_t in_contact = 0;
+  for (const TelemetrySample& s : samples) {
+    in_contact += (s.flags & kTickInContact) != 0;
+    CHECK((s.flags & kTickNoPose) == 0);
+    CHECK((s.flags & ~(kTickInContact | kTickSaturated | kTickNoPose)) == 0);
+  }
+  CHECK(in_contact > samples.size() / 4);
   MESSAGE("ticks " << ls.ticks << ", misses " << ls.misses << ", models " << servo.stats().models << ", max force "
                    << fmax << " N, allocations while armed " << allocs);
 }

@@ -93,8 +93,20 @@ std::uint32_t CollideScratch::next_generation() {
   return gen_;
 }
 
+namespace {
+// The tree was built for this mesh: every face it names is one of the mesh's (a worker's tree of
+// its blocks names a subset). O(faces): evaluated only where asserts are checked.
+bool names_faces_of(const SphereTree& tree, const Mesh& mesh) {
+  for (const std::uint32_t f : tree.face_order)
+    if (f >= mesh.faces.size()) return false;
+  return true;
+}
+}  // namespace
+
 void CollideScratch::prepare(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object,
                              const SphereTree& object_tree) {
+  ST_ASSERT(names_faces_of(probe_tree, probe), "collide(): the probe tree was built for the probe mesh");
+  ST_ASSERT(names_faces_of(object_tree, object), "collide(): the object tree was built for the object mesh");
   // The probe's part is derived again only for another probe: a client answering several object
   // blocks (net::ScatterConfig::assist_blocks) switches object trees every query, and the probe's
   // leaves take far longer to derive than a block's spheres.

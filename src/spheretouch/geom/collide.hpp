@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// collide(): exact face-level collision of a probe (the hand) against an object by simultaneous
-// descent of their SphereTrees with the relative transform (paper §3.3, Coal/FCL traversal).
+/// \file
+/// collide(): exact face-level collision of a probe (the hand) against an object by simultaneous
+/// descent of their SphereTrees with the relative transform (paper §3.3, Coal/FCL traversal).
 // Nothing is transformed wholesale: sphere centres and probe vertices are mapped as visited.
 #pragma once
 #include <spheretouch/abi.hpp>
@@ -37,10 +38,10 @@ inline Vec3 apply(const RelTransform& rt, const Vec3& p) {
 
 /// A colliding face pair, named by input-file face indices.
 struct FacePair {
-  std::uint32_t probe;   ///< probe face index
-  std::uint32_t object;  ///< object face index
-  friend bool operator==(const FacePair&, const FacePair&) = default;
-  friend auto operator<=>(const FacePair&, const FacePair&) = default;
+  std::uint32_t probe;                                                  ///< probe face index
+  std::uint32_t object;                                                 ///< object face index
+  friend bool operator==(const FacePair&, const FacePair&) = default;   ///< both indices equal
+  friend auto operator<=>(const FacePair&, const FacePair&) = default;  ///< by probe, then object face
 };
 
 /// Distinct probe faces and distinct object faces of a pair list: paper §3.5's "number of
@@ -107,6 +108,7 @@ struct CollideResult {
   std::uint32_t object_faces = 0;                                     ///< distinct object faces in `pairs`
   CollideStats stats;                                                 ///< counters
   std::uint32_t contacts() const { return probe_faces + object_faces; }  ///< paper §3.5 "number of contacts"
+  /// Empties the result for the next query, keeping the vectors' capacity.
   void clear() {
     pairs.clear();
     sphere_pairs.clear();

@@ -44,7 +44,9 @@ std::string check(const ContactConfig& c) {
   return os.str();
 }
 
-ContactBuilder::ContactBuilder(ContactConfig config) : config_(config), patch_(std::make_unique<Patch>(config)) {}
+ContactBuilder::ContactBuilder(ContactConfig config) : config_(config), patch_(std::make_unique<Patch>(config)) {
+  ST_ASSERT(check(config).empty(), "a ContactBuilder's config passes check() (contact.hpp)");
+}
 ContactBuilder::~ContactBuilder() = default;
 ContactBuilder::ContactBuilder(ContactBuilder&&) noexcept = default;
 ContactBuilder& ContactBuilder::operator=(ContactBuilder&&) noexcept = default;

@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// The patch contact model's segment kernel: the intersection segment of each colliding (object
-// face, probe face) row and its vector area, summed over the rows (Stokes: the vector area of the
-// object surface inside the probe, FD's direction), or the first segment's midpoint (the areas'
-// origin). Rows are computed four at a time; the SIMD stays in contact_segments.cpp.
+/// \file
+/// The patch contact model's segment kernel: the intersection segment of each colliding (object
+/// face, probe face) row and its vector area, summed over the rows (Stokes: the vector area of the
+/// object surface inside the probe, FD's direction), or the first segment's midpoint (the areas'
+/// origin). Rows are computed four at a time; the SIMD stays in contact_segments.cpp.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <spheretouch/geom/mesh.hpp>
@@ -13,9 +14,9 @@ namespace st::geom {
 /// round's common frame (the local frame of the body with more colliding faces), its unit normal
 /// (zero: degenerate, no direction) and its plane's offset c = n·v0.
 struct FaceRec {
-  Vec3 v[3];
-  Vec3 n;
-  double c;
+  Vec3 v[3];  ///< vertices, mm, in the round's common frame
+  Vec3 n;     ///< unit normal (zero for a degenerate face)
+  double c;   ///< plane offset n·v0, mm
 };
 static_assert(sizeof(FaceRec) == 13 * sizeof(double), "FaceRec is read as 13 doubles");
 

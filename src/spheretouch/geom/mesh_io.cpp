@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <charconv>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -139,13 +140,26 @@ Result<LoadedMesh> load_mesh(const std::string& path, const LoadConfig& options)
   return r;
 }
 
-Status write_off(const Mesh& mesh, const std::string& path) {
+namespace {
+
+// The mesh as text in `format` ("off", "ply" or "obj"), shortest round-trip doubles, faces in order.
+std::string mesh_text(const Mesh& mesh, std::string_view format) {
   std::string out;
-  out.reserve(mesh.num_vertices() * 60 + mesh.num_faces() * 24 + 64);
-  out += "OFF\n" + std::to_string(mesh.num_vertices()) + " " + std::to_string(mesh.num_faces()) + " 0\n";
+  out.reserve(mesh.num_vertices() * 60 + mesh.num_faces() * 24 + 256);
+  const std::string nv = std::to_string(mesh.num_vertices()), nf = std::to_string(mesh.num_faces());
+  if (format == "off") {
+    out += "OFF\n" + nv + " " + nf + " 0\n";
+  } else if (format == "ply") {
+    out += "ply\nformat ascii 1.0\ncomment spheretouch export\nelement vertex " + nv +
+           "\nproperty double x\nproperty double y\nproperty double z\nelement face " + nf +
+           "\nproperty list uchar int vertex_indices\nend_header\n";
+  } else {
+    out += "# spheretouch export: " + nv + " vertices, " + nf + " faces\n";
+  }
   char buf[32];
   for (std::uint32_t i = 0; i < mesh.num_vertices(); ++i) {
     const Vec3 p = mesh.vertex(i);
+    if (format == "obj") out += "v ";
     for (int k = 0; k < 3; ++k) {
       auto r = std::to_chars(buf, buf + sizeof buf, p[k]);  // shortest round-trip form
       out.append(buf, r.ptr);
@@ -153,19 +167,35 @@ Status write_off(const Mesh& mesh, const std::string& path) {
     }
   }
   for (const Tri& f : mesh.faces) {
-    out += "3";
+    out += format == "obj" ? "f" : "3";
     for (int k = 0; k < 3; ++k) {
       out += ' ';
-      auto r = std::to_chars(buf, buf + sizeof buf, f[k]);
+      auto r = std::to_chars(buf, buf + sizeof buf, f[k] + (format == "obj" ? 1u : 0u));  // OBJ counts from 1
       out.append(buf, r.ptr);
     }
     out += '\n';
   }
+  return out;
+}
+
+Status write_text(const std::string& out, const std::string& path) {
   std::ofstream o(path, std::ios::binary);
   if (!o) return fail(path, ": cannot create (", std::strerror(errno), ")");
   o.write(out.data(), static_cast<std::streamsize>(out.size()));
   if (!o) return fail(path, ": write error");
   return Ok{};
+}
+
+}  // namespace
+
+Status write_off(const Mesh& mesh, const std::string& path) { return write_text(mesh_text(mesh, "off"), path); }
+
+Status write_mesh(const Mesh& mesh, const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (ext == ".off" || ext == ".ply" || ext == ".obj") return write_text(mesh_text(mesh, ext.substr(1)), path);
+  return fail(path, ": cannot write '", ext.empty() ? std::string("(no extension)") : ext,
+              "' meshes (expected .off, .ply or .obj: the format is chosen by the extension)");
 }
 
 }  // namespace st::geom

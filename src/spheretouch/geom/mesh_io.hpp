@@ -78,6 +78,10 @@ Result<LoadedMesh> parse_mesh(std::string_view bytes, const std::string& ext, co
 
 /// Writes OFF with shortest round-trip doubles (reads back to the same coordinates).
 Status write_off(const Mesh& mesh, const std::string& path);
+/// Writes the format `path`'s extension names: .off, .ply (ASCII, double) or .obj, shortest
+/// round-trip doubles, faces in order (each reads back to the same mesh); any other extension is
+/// refused with a message naming it, and nothing is written.
+Status write_mesh(const Mesh& mesh, const std::string& path);
 
 /// File extensions the loader accepts (ours and assimp's), lower case with the dot.
 std::vector<std::string> supported_extensions();

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // Partition of a layer over workers (see partition.hpp).
 #include <spheretouch/geom/partition.hpp>
+#include <spheretouch/geom/check.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -66,6 +67,7 @@ std::vector<std::uint32_t> block_owners(std::uint32_t num_blocks, std::uint32_t 
         break;
       }
     }
+    ST_ASSERT(owners[k] < workers, "every block goes to one of the workers");
   }
   return owners;
 }

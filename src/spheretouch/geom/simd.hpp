@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// The SIMD vocabulary of the collision core: float lanes per instruction set, so each kernel is
-// written once, and the choice of instruction set at RUN time, so one binary runs on any x86-64
-// (no -march in any build flag; docs/library.md, "Portable binaries").
+/// \file
+/// The SIMD vocabulary of the collision core: float lanes per instruction set, so each kernel is
+/// written once, and the choice of instruction set at RUN time, so one binary runs on any x86-64
+/// (no -march in any build flag; docs/library.md, "Portable binaries").
 //
 // * Lanes/Mask come in one namespace per ISA: scalar (1 float), sse2 (4: the x86-64 baseline),
 //   avx2 (8; with FMA) and avx512 (16; F, VL). min/max follow the SSE instructions' rule (the
@@ -21,21 +22,29 @@
 #include <string_view>
 
 #if !defined(ST_NO_SIMD) && defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+/// Defined when the x86-64 SIMD paths (SSE2, AVX2, AVX-512) are compiled in.
 #define ST_SIMD_X86 1
 #include <immintrin.h>
 #endif
 
 #if defined(ST_SIMD_X86) && defined(__clang__)
+/// Starts a region whose functions are compiled for AVX2 + FMA (ends at ST_TARGET_END).
 #define ST_TARGET_AVX2_BEGIN _Pragma("clang attribute push(__attribute__((target(\"avx2,fma\"))), apply_to = function)")
+/// Starts a region whose functions are compiled for AVX-512 F + VL (and AVX2 + FMA).
 #define ST_TARGET_AVX512_BEGIN \
   _Pragma("clang attribute push(__attribute__((target(\"avx2,fma,avx512f,avx512vl\"))), apply_to = function)")
+/// Ends the region ST_TARGET_AVX2_BEGIN or ST_TARGET_AVX512_BEGIN started.
 #define ST_TARGET_END _Pragma("clang attribute pop")
 #elif defined(ST_SIMD_X86)
+/// Starts a region whose functions are compiled for AVX2 + FMA (ends at ST_TARGET_END).
 #define ST_TARGET_AVX2_BEGIN _Pragma("GCC push_options") _Pragma("GCC target(\"avx2,fma\")")
+/// Starts a region whose functions are compiled for AVX-512 F + VL (and AVX2 + FMA).
 #define ST_TARGET_AVX512_BEGIN _Pragma("GCC push_options") _Pragma("GCC target(\"avx2,fma,avx512f,avx512vl\")")
+/// Ends the region ST_TARGET_AVX2_BEGIN or ST_TARGET_AVX512_BEGIN started.
 #define ST_TARGET_END _Pragma("GCC pop_options")
 #endif
 
+/// SIMD lanes per instruction set and the run-time choice among them.
 namespace st::geom::simd {
 
 /// An instruction set a kernel can run on, in increasing order of width.
@@ -62,6 +71,7 @@ bool parse_isa(std::string_view name, Isa& isa);
 // broadcast, gather, + - *, min, max, abs, comparisons). Operators are free functions, not
 // in-class friends: GCC does not give friends defined in a class the target of their region.
 
+/// One float at a time: any CPU, and the only path with -Dsimd=false.
 namespace scalar {
 
 /// One flag.
@@ -101,6 +111,7 @@ inline Mask operator>(Lanes a, Lanes b) { return {a.v > b.v}; }         ///< a >
 
 #if defined(ST_SIMD_X86)
 
+/// 4 floats (SSE2, every x86-64).
 namespace sse2 {
 
 /// One flag per lane, held as the all-ones/all-zeros lanes that SSE comparisons produce.
@@ -149,6 +160,7 @@ inline Mask operator>(Lanes a, Lanes b) { return {_mm_cmpgt_ps(a.v, b.v)}; }
 }  // namespace sse2
 
 ST_TARGET_AVX2_BEGIN
+/// 8 floats (AVX2 with FMA).
 namespace avx2 {
 
 /// One flag per lane, held as the all-ones/all-zeros lanes that AVX comparisons produce.
@@ -199,6 +211,7 @@ inline Mask operator>(Lanes a, Lanes b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_G
 ST_TARGET_END
 
 ST_TARGET_AVX512_BEGIN
+/// 16 floats (AVX-512 F and VL).
 namespace avx512 {
 
 /// One flag per lane, in an AVX-512 mask register.

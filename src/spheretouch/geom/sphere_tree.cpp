@@ -22,6 +22,7 @@
 // exactly, and a culling test that is conservative for the stored spheres (collide.cpp adds its
 // own arithmetic slack) never rejects a pair the exact double test would accept.
 #include <spheretouch/geom/sphere_tree.hpp>
+#include <spheretouch/geom/check.hpp>
 
 #include <algorithm>
 #include <bit>
@@ -184,6 +185,8 @@ struct Builder {
       t.nodes[node].leaf = 1;
       t.nodes[node].first = cn.face_begin;
       t.nodes[node].count = static_cast<std::uint16_t>(cn.face_end - cn.face_begin);
+      ST_ASSERT(t.nodes[node].count >= 1 && t.nodes[node].count <= kMaxLeafFaces,
+                "a leaf holds 1..kMaxLeafFaces faces (collide() keeps them in 64-bit masks)");
       cn.desc_end = cn.face_begin;  // unused for leaves
       return;
     }
@@ -204,6 +207,7 @@ struct Builder {
     t.nodes[node].leaf = 0;
     t.nodes[node].first = first;
     t.nodes[node].count = static_cast<std::uint16_t>(n);
+    ST_ASSERT(n >= 1 && n <= kMaxChildren, "an inner node has 1..kMaxChildren children (the traversal's SoA padding)");
     for (int k = 0; k < n; ++k) {
       t.cold[first + k].parent = node;
       build_child(first + static_cast<std::uint32_t>(k), g[k]);

@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
 /// \file
 /// CollisionBackend: the narrow interface a worker answers queries through. The collision core
-/// (SphereTree + collide() restricted to the worker's blocks) plugs in behind it; until it lands,
-/// reference_backend.hpp provides an exact-by-construction stand-in. A backend is built once per
+/// (SphereTree + collide() restricted to the worker's blocks, tree_backend.hpp) is the one the
+/// daemon and the engine use; reference_backend.hpp is an independent, exact-by-construction
+/// one the distributed tests compare against. A backend is built once per
 /// block set (cold: may allocate, may take a while) and then queried many times (hot).
 #pragma once
 #include <spheretouch/abi.hpp>

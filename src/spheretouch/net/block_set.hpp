@@ -66,9 +66,9 @@ std::vector<std::vector<std::uint32_t>> deal_blocks(std::uint32_t num_blocks, st
 /// Block-cyclic mapping (paper §3.4, [10]): block b goes to worker b mod workers.
 std::vector<std::vector<std::uint32_t>> block_cyclic(std::uint32_t num_blocks, std::uint32_t workers);
 
-/// Stand-in for the sphere tree's layer-n blocks until the collision core lands: faces sorted
-/// along a Morton curve of their centroids and cut into runs of `faces_per_block` (spatially
-/// compact blocks, like the spheres of one layer).
+/// Blocks without a sphere tree (the benchmarks' scatter floor and hostile clients, and tests):
+/// faces sorted along a Morton curve of their centroids and cut into runs of `faces_per_block`
+/// (spatially compact blocks, like the spheres of one layer; runs use the tree's layer-n blocks).
 Blocks spatial_blocks(const geom::Mesh& object, std::uint32_t faces_per_block);
 
 }  // namespace st::net

@@ -9,6 +9,16 @@
 
 namespace st::net {
 
+// The wire's type byte of a message is its variant index + 1: the alternatives' order is the
+// protocol's, asserted so a reordering cannot silently renumber the messages.
+static_assert(std::variant_size_v<Message> == 6, "a new message needs its MsgType and a line below");
+static_assert(std::is_same_v<std::variant_alternative_t<std::size_t(MsgType::Hello) - 1, Message>, HelloMsg>);
+static_assert(std::is_same_v<std::variant_alternative_t<std::size_t(MsgType::LoadBlocks) - 1, Message>, LoadBlocksMsg>);
+static_assert(std::is_same_v<std::variant_alternative_t<std::size_t(MsgType::Query) - 1, Message>, QueryMsg>);
+static_assert(std::is_same_v<std::variant_alternative_t<std::size_t(MsgType::Result) - 1, Message>, ResultMsg>);
+static_assert(std::is_same_v<std::variant_alternative_t<std::size_t(MsgType::Heartbeat) - 1, Message>, HeartbeatMsg>);
+static_assert(std::is_same_v<std::variant_alternative_t<std::size_t(MsgType::Error) - 1, Message>, ErrorMsg>);
+
 namespace {
 
 void put_pose(Writer& w, const geom::Pose& p) {
@@ -77,7 +87,7 @@ struct BodyEncoder {
 };
 
 MsgType type_of(const Message& m) {
-  return static_cast<MsgType>(m.index() + 1);  // variant order = MsgType order
+  return static_cast<MsgType>(m.index() + 1);  // variant order = MsgType order (asserted below)
 }
 
 Result<Message> decode_body(MsgType type, Reader& r, const Limits& L) {

@@ -2,7 +2,7 @@
 /// \file
 /// ReferenceBackend: a simple, deterministic CollisionBackend — a uniform grid over the share's
 /// faces, an exact bounding-box filter, and a separating-axis triangle test (closed triangles).
-/// It stands in for collide() until the collision core lands (the daemon's default), and is the
+/// It shares no code with collide() (the daemon's backend, tree_backend.hpp), so it is the
 /// reference the distributed tests compare against: whether a pair collides depends only on the
 /// two triangles' coordinates, never on the grid or the share, so the union of the workers'
 /// results equals the result over the whole object bit for bit.

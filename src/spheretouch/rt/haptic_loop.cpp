@@ -14,6 +14,7 @@
 #include <future>
 #include <sstream>
 
+#include <spheretouch/geom/check.hpp>
 #include <spheretouch/rt/clock.hpp>
 #include <spheretouch/rt/constants.hpp>
 
@@ -158,7 +159,9 @@ RtReport HapticLoop::apply_realtime(const HapticLoopConfig& c) {
 }
 
 HapticLoop::HapticLoop(const HapticLoopConfig& config)
-    : config_(config), period_ns_(static_cast<std::int64_t>(std::llround(1e9 / config.rate_hz))) {}
+    : config_(config), period_ns_(static_cast<std::int64_t>(std::llround(1e9 / config.rate_hz))) {
+  ST_ASSERT(check(config).empty(), "a HapticLoop's config passes check() (haptic_loop.hpp)");
+}
 
 HapticLoop::~HapticLoop() { stop(); }
 

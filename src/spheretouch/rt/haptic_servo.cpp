@@ -61,7 +61,8 @@ void HapticServo::tick(const TickInfo& info) noexcept {
   ++stats_.ticks;
   const double f_norm = f.norm();
   if (f_norm > peak_force_N_) peak_force_N_ = f_norm;
-  const std::uint32_t flags = (interp_.state().in_contact ? 1u : 0u) | (sat_.limited() ? 2u : 0u) | (have_pose ? 0u : 4u);
+  const std::uint32_t flags = (interp_.state().in_contact ? kTickInContact : 0u) |
+                              (sat_.limited() ? kTickSaturated : 0u) | (have_pose ? 0u : kTickNoPose);
   if (status_ && info.tick % kStatusEveryTicks == 0) {
     ServoStatus st;
     st.updated_ns = now;

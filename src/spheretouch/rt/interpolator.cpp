@@ -5,6 +5,7 @@
 #include <cmath>
 #include <sstream>
 
+#include <spheretouch/geom/check.hpp>
 #include <spheretouch/rt/constants.hpp>
 
 namespace st::rt {
@@ -47,7 +48,9 @@ std::string Interpolator::check(const InterpolatorConfig& c) {
   return os.str();
 }
 
-Interpolator::Interpolator(const ForceLaw& law, const InterpolatorConfig& config) : law_(law), c_(config) {}
+Interpolator::Interpolator(const ForceLaw& law, const InterpolatorConfig& config) : law_(law), c_(config) {
+  ST_ASSERT(check(config).empty(), "an Interpolator's config passes check() (interpolator.hpp)");
+}
 
 namespace {
 bool model_ok(const geom::ContactModel& m) {

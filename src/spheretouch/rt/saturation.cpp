@@ -5,6 +5,7 @@
 #include <cmath>
 #include <sstream>
 
+#include <spheretouch/geom/check.hpp>
 #include <spheretouch/rt/constants.hpp>
 
 namespace st::rt {
@@ -24,7 +25,9 @@ std::string Saturator::check(const SaturationConfig& c) {
   return os.str();
 }
 
-Saturator::Saturator(const SaturationConfig& config) : c_(config), ceiling_(config.peak_N) {}
+Saturator::Saturator(const SaturationConfig& config) : c_(config), ceiling_(config.peak_N) {
+  ST_ASSERT(check(config).empty(), "a Saturator's config passes check() (saturation.hpp)");
+}
 
 double Saturator::rms_N() const noexcept { return std::sqrt(mean_sq_); }
 

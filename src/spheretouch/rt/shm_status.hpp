@@ -34,7 +34,7 @@ struct ServoStatus {
   double penetration_mm = 0;           ///< PD used this tick
   double fade = 0;                     ///< stale-fade factor in [0, 1]
   std::uint32_t contacts = 0;          ///< newest model's contacts (paper §3.5)
-  std::uint32_t flags = 0;             ///< bit 0 in contact, bit 1 saturated, bit 2 pose read failed
+  std::uint32_t flags = 0;             ///< kTickInContact | kTickSaturated | kTickNoPose (telemetry.hpp)
 };
 static_assert(std::is_trivially_copyable_v<ServoStatus> && sizeof(ServoStatus) == 128);
 

@@ -13,6 +13,7 @@
 #include <type_traits>
 
 #include <spheretouch/rt/constants.hpp>
+#include <spheretouch/geom/check.hpp>
 
 namespace st::rt {
 
@@ -30,6 +31,7 @@ class SpscQueue {
   /// Producer: appends v; false when full (the caller counts the drop).
   [[nodiscard]] bool try_push(const T& v) noexcept {
     const std::size_t tail = tail_.load(std::memory_order_relaxed);
+    ST_ASSERT(tail < slots_, "the producer's index stays inside the ring");
     std::size_t next = tail + 1;
     if (next == slots_) next = 0;
     if (next == head_cache_) {
@@ -47,6 +49,7 @@ class SpscQueue {
       tail_cache_ = tail_.load(std::memory_order_acquire);
       if (head == tail_cache_) return false;
     }
+    ST_ASSERT(head < slots_, "the consumer's index stays inside the ring");
     out = buf_[head];
     std::size_t next = head + 1;
     if (next == slots_) next = 0;

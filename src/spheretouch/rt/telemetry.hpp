@@ -18,6 +18,11 @@
 
 namespace st::rt {
 
+/// Bits of a servo tick's flags (TelemetrySample::flags, ServoStatus::flags, the telemetry CSV).
+inline constexpr std::uint32_t kTickInContact = 1u << 0;  ///< the interpolated model was in contact
+inline constexpr std::uint32_t kTickSaturated = 1u << 1;  ///< the saturator limited the force
+inline constexpr std::uint32_t kTickNoPose = 1u << 2;     ///< the device gave no pose this tick
+
 /// One tick, plain data (128 bytes).
 struct TelemetrySample {
   std::uint64_t tick = 0;         ///< tick number
@@ -31,7 +36,7 @@ struct TelemetrySample {
   double penetration_mm = 0;      ///< PD used
   double fade = 0;                ///< stale-fade factor
   double ceiling_N = 0;           ///< saturation ceiling
-  std::uint32_t flags = 0;        ///< bit 0 in contact, bit 1 saturated, bit 2 pose read failed
+  std::uint32_t flags = 0;        ///< kTickInContact | kTickSaturated | kTickNoPose
   std::uint32_t misses = 0;       ///< loop misses so far (low 32 bits)
 };
 static_assert(std::is_trivially_copyable_v<TelemetrySample> && sizeof(TelemetrySample) == 128);

@@ -3,6 +3,7 @@
 #include <spheretouch/view/view_server.hpp>
 
 #include <civetweb.h>
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <chrono>
@@ -212,22 +213,22 @@ int ViewServer::data(mg_connection* conn, int bits, const char* data, std::size_
 
 int ViewServer::handle(mg_connection* conn, int opcode, const char* data, std::size_t len) {
   if (opcode == MG_WEBSOCKET_OPCODE_TEXT) {
-    // {"fps": F, "frames": N, "red": R}: numbers after their keys; anything else is refused.
-    const std::string_view t(data, len);
-    auto number = [&](std::string_view key, double& out) {
-      const auto at = t.find(key);
-      if (at == std::string_view::npos) return false;
-      const std::string tail(t.substr(at + key.size(), 32));
-      char* end = nullptr;
-      out = std::strtod(tail.c_str(), &end);
-      return end != tail.c_str() && std::isfinite(out) && out >= 0 && out < 1e12;
+    // The page's report, a JSON object {"fps": F, "frames": N[, "seconds": S]} of numbers in
+    // [0, 1e12); anything else (not JSON, another shape, a key inside a string) is refused.
+    const nlohmann::json j = len > kMaxTextBytes
+                                 ? nlohmann::json()
+                                 : nlohmann::json::parse(data, data + len, nullptr, /*allow_exceptions=*/false);
+    auto number = [&](const char* key, double& out) {
+      if (!j.is_object() || !j.contains(key) || !j[key].is_number()) return false;
+      out = j[key].get<double>();
+      return std::isfinite(out) && out >= 0 && out < 1e12;
     };
     double fps = 0, frames = 0, seconds = 0;
-    if (len > kMaxTextBytes || !number("\"fps\":", fps) || !number("\"frames\":", frames)) {
+    if (len > kMaxTextBytes || !number("fps", fps) || !number("frames", frames)) {
       note_bad(len > kMaxTextBytes ? "text message too long" : "expected {\"fps\": F, \"frames\": N}");
       return 1;
     }
-    if (!number("\"seconds\":", seconds)) seconds = 0;
+    if (!number("seconds", seconds)) seconds = 0;
     std::lock_guard<std::mutex> l(mu_);
     stats_.page_fps = fps;
     stats_.page_frames = std::uint64_t(frames);
