@@ -1,9 +1,12 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// The `spheretouch` Python module (pybind11, numpy): meshes from arrays or files, sphere trees,
-// exact collision queries for one pose or a batch, the contact models and the force law.
+// spheretouch._core, the C++ half of the `spheretouch` Python package (pybind11, numpy): meshes
+// from arrays or files, sphere trees, exact collision queries for one pose or a batch, the contact
+// models and the force law, named as in C++ (ComputeCollision, ContactBuilder, ...).
 // Conventions: arrays are numpy; poses are 4x4 float64 rigid transforms (probe frame -> object
 // frame, mm); face pairs are (k, 2) uint32 arrays of (probe face, object face) file indices.
-// Errors raise ValueError with the project's message (file, field or index at fault).
+// Errors raise ValueError with a short message (the file, field, row or index at fault; never the
+// array). Threads: queries release the GIL; an object used from two threads at once serialises
+// on its own lock (a ComputeCollision or ContactBuilder keeps scratch between calls).
 #include <pybind11/eigen.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
@@ -11,6 +14,8 @@
 
 #include <cmath>
 #include <memory>
+#include <mutex>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -19,6 +24,7 @@
 #include <spheretouch/geom/pose_io.hpp>
 #include <spheretouch/rt/force_law.hpp>
 #include <spheretouch/collide.hpp>
+#include <spheretouch/version.hpp>
 
 namespace py = pybind11;
 using namespace st;
@@ -32,10 +38,30 @@ T take(Result<T> r) {
 }
 
 using Array3d = py::array_t<double, py::array::c_style | py::array::forcecast>;
+using IndexArray = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>;
+
+// "(3,)", "(2, 4, 4)": an array's shape for a message (the array itself is never printed).
+std::string shape_of(const py::array& a) {
+  std::ostringstream os;
+  os << '(';
+  for (py::ssize_t i = 0; i < a.ndim(); ++i) os << (i ? ", " : "") << a.shape(i);
+  os << (a.ndim() == 1 ? ",)" : ")");
+  return os.str();
+}
+
+// Indices must come as integers: a float array would be truncated silently by the cast.
+IndexArray index_array(const py::handle& h, const std::string& what) {
+  const py::array a = py::array::ensure(h);
+  if (!a) throw py::value_error(what + ": expected an integer array");
+  const char kind = a.dtype().kind();
+  if (a.size() > 0 && kind != 'i' && kind != 'u')
+    throw py::value_error(what + ": expected integer indices, got dtype " + std::string(py::str(a.dtype())));
+  return IndexArray::ensure(a);
+}
 
 Pose to_pose(const Array3d& a, const char* what) {
   if (a.ndim() != 2 || a.shape(0) != 4 || a.shape(1) != 4)
-    throw py::value_error(std::string(what) + ": expected a 4x4 array");
+    throw py::value_error(std::string(what) + ": expected a 4x4 array, got shape " + shape_of(a));
   Eigen::Matrix4d m;
   for (int r = 0; r < 4; ++r)
     for (int c = 0; c < 4; ++c) m(r, c) = a.at(r, c);
@@ -70,27 +96,33 @@ py::array_t<std::uint32_t> pairs_array(const std::vector<FacePair>& pairs) {
   return a;
 }
 
-std::vector<FacePair> pairs_from(const py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>& a) {
-  if (a.ndim() != 2 || (a.shape(1) != 2 && a.shape(0) != 0)) throw py::value_error("pairs: expected a (k, 2) array");
+// (k, 2) integer pairs (probe face, object face), each index checked against its mesh.
+std::vector<FacePair> pairs_from(const py::handle& h, std::size_t probe_faces, std::size_t object_faces) {
+  const IndexArray a = index_array(h, "pairs");
+  if (a.ndim() != 2 || (a.shape(1) != 2 && a.shape(0) != 0))
+    throw py::value_error("pairs: expected a (k, 2) array, got shape " + shape_of(a));
   std::vector<FacePair> out;
   out.reserve(static_cast<std::size_t>(a.shape(0)));
   auto r = a.unchecked<2>();
   for (py::ssize_t i = 0; i < a.shape(0); ++i) {
     const std::int64_t p = r(i, 0), o = r(i, 1);
-    // Out-of-range indices are the contact builder's to flag (kBadInput); only the uint32 range is ours.
-    if (p < 0 || o < 0 || p > UINT32_MAX || o > UINT32_MAX)
-      throw py::value_error("pairs: row " + std::to_string(i) + ": face index out of the uint32 range");
+    if (p < 0 || static_cast<std::uint64_t>(p) >= probe_faces)
+      throw py::value_error("pairs: row " + std::to_string(i) + ": probe face " + std::to_string(p) +
+                            " out of range [0, " + std::to_string(probe_faces) + ")");
+    if (o < 0 || static_cast<std::uint64_t>(o) >= object_faces)
+      throw py::value_error("pairs: row " + std::to_string(i) + ": object face " + std::to_string(o) +
+                            " out of range [0, " + std::to_string(object_faces) + ")");
     out.push_back({static_cast<std::uint32_t>(p), static_cast<std::uint32_t>(o)});
   }
   return out;
 }
 
-std::shared_ptr<Mesh> mesh_from_arrays(const Array3d& vertices,
-                                       const py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>& faces,
-                                       const std::string& name) {
+std::shared_ptr<Mesh> mesh_from_arrays(const Array3d& vertices, const py::handle& face_array, const std::string& name) {
   if (vertices.ndim() != 2 || vertices.shape(1) != 3)
-    throw py::value_error(name + ": vertices: expected an (n, 3) array");
-  if (faces.ndim() != 2 || faces.shape(1) != 3) throw py::value_error(name + ": faces: expected an (m, 3) array");
+    throw py::value_error(name + ": vertices: expected an (n, 3) array, got shape " + shape_of(vertices));
+  const IndexArray faces = index_array(face_array, name + ": faces");
+  if (faces.ndim() != 2 || faces.shape(1) != 3)
+    throw py::value_error(name + ": faces: expected an (m, 3) array, got shape " + shape_of(faces));
   std::vector<Vec3> pos(static_cast<std::size_t>(vertices.shape(0)));
   auto v = vertices.unchecked<2>();
   for (py::ssize_t i = 0; i < vertices.shape(0); ++i)
@@ -142,20 +174,43 @@ py::dict stats_dict(const CollideStats& s) {
   d["node_pairs"] = s.node_pairs;
   d["leaf_pairs"] = s.leaf_pairs;
   d["tri_pairs"] = s.tri_pairs;
+  d["tri_exact"] = s.tri_exact;
   d["sphere_pairs"] = s.sphere_pairs;
   d["truncated"] = s.truncated;
   d["pair_limit_hit"] = s.pair_limit_hit;
   return d;
 }
 
+// A ComputeCollision or ContactBuilder with the lock that serialises its users: calls release
+// the GIL, so two Python threads could otherwise run one object's scratch at once.
+struct PyComputeCollision {
+  ComputeCollision c;
+  std::mutex mu;
+};
+struct PyContactBuilder {
+  geom::ContactBuilder b;
+  std::mutex mu;
+};
+
 }  // namespace
 
-PYBIND11_MODULE(spheretouch, m) {
+PYBIND11_MODULE(_core, m) {
   m.doc() =
       "spheretouch: exact face-level collision of large meshes (layered boundary spheres), contact models "
       "and force law. Poses are 4x4 rigid transforms in mm (probe frame -> object frame).";
+  m.attr("__version__") = SPHERETOUCH_VERSION_STRING;
   m.attr("EXACT") = geom::kExact;
   m.attr("LEAF_SPHERES") = geom::kLeafSpheres;
+  // ContactModel.flags bits (C++: st::geom::kInContact, ...).
+  m.attr("IN_CONTACT") = std::uint32_t{geom::kInContact};
+  m.attr("NORMALS_DISAGREE") = std::uint32_t{geom::kNormalsDisagree};
+  m.attr("REPLANED") = std::uint32_t{geom::kReplaned};
+  m.attr("DEGENERATE_SKIPPED") = std::uint32_t{geom::kDegenerateSkipped};
+  m.attr("BAD_INPUT") = std::uint32_t{geom::kBadInput};
+  m.attr("HELD") = std::uint32_t{geom::kHeld};
+  m.attr("NORMAL_FALLBACK") = std::uint32_t{geom::kNormalFallback};
+  m.attr("INSIDE_CAPPED") = std::uint32_t{geom::kInsideCapped};
+  m.attr("PLANES") = std::uint32_t{geom::kPlanes};
 
   py::class_<Mesh, std::shared_ptr<Mesh>>(m, "Mesh",
                                           "An indexed triangle mesh (mm); face i is the file's i-th triangle.")
@@ -163,9 +218,9 @@ PYBIND11_MODULE(spheretouch, m) {
            "From an (n, 3) float array of vertices and an (m, 3) int array of faces (counter-clockwise from outside).")
       .def_property_readonly("vertices", &vertices_array, "(n, 3) float64 copy of the vertices, body frame, mm")
       .def_property_readonly("faces", &faces_array, "(m, 3) uint32 copy of the faces")
-      .def_property_readonly("num_vertices", &Mesh::num_vertices)
-      .def_property_readonly("num_faces", &Mesh::num_faces)
-      .def_readonly("name", &Mesh::name)
+      .def_property_readonly("num_vertices", &Mesh::num_vertices, "number of vertices")
+      .def_property_readonly("num_faces", &Mesh::num_faces, "number of triangles")
+      .def_readonly("name", &Mesh::name, "the mesh's name (its file, or the name given)")
       .def("__repr__", [](const Mesh& me) {
         return "<spheretouch.Mesh '" + me.name + "' " + std::to_string(me.num_vertices()) + " vertices, " +
                std::to_string(me.num_faces()) + " faces>";
@@ -177,10 +232,14 @@ PYBIND11_MODULE(spheretouch, m) {
         geom::LoadConfig o;
         o.units = units;
         o.scale = scale;
-        return std::make_shared<Mesh>(take(geom::load_mesh(path, o)).mesh);
+        geom::LoadedMesh lm = take(geom::load_mesh(path, o));
+        if (!lm.report.size_warning.empty() && PyErr_WarnEx(PyExc_UserWarning, lm.report.size_warning.c_str(), 1) < 0)
+          throw py::error_already_set();  // warnings turned into errors
+        return std::make_shared<Mesh>(std::move(lm.mesh));
       },
       py::arg("path"), py::arg("units") = "mm", py::arg("scale") = 1.0,
-      "Reads a mesh file (OFF, OBJ, PLY, STL; other formats through assimp). units: um, mm, cm, m, in.");
+      "Reads a mesh file (OFF, OBJ, PLY, STL; other formats through assimp). units: um, mm, cm, m, in. Warns "
+      "(UserWarning) when the object's size is implausible in those units (a mesh in metres read as mm).");
 
   py::class_<SphereTree, std::shared_ptr<SphereTree>>(m, "SphereTree", "Layered boundary spheres over one mesh.")
       .def(py::init([](const Mesh& mesh, std::uint32_t leaf_faces) {
@@ -190,10 +249,11 @@ PYBIND11_MODULE(spheretouch, m) {
            }),
            py::arg("mesh"), py::arg("leaf_faces") = geom::DefaultTreeConfig().leaf_faces,
            "Builds the tree; every leaf holds at most leaf_faces (1..64) faces.")
-      .def_property_readonly("num_nodes", &SphereTree::num_nodes)
-      .def_property_readonly("num_leaves", &SphereTree::num_leaves)
-      .def_property_readonly("num_layers", [](const SphereTree& t) { return t.num_depths; })
-      .def_property_readonly("num_faces", &SphereTree::num_faces);
+      .def_property_readonly("num_nodes", &SphereTree::num_nodes, "spheres in the tree")
+      .def_property_readonly("num_leaves", &SphereTree::num_leaves, "leaf spheres (each holds a few faces)")
+      .def_property_readonly(
+          "num_layers", [](const SphereTree& t) { return t.num_depths; }, "layers, root = 0")
+      .def_property_readonly("num_faces", &SphereTree::num_faces, "faces under the tree");
 
   py::class_<Body>(m, "Body", "A mesh, its tree and its frame (body frame -> world, 4x4).")
       .def(py::init([](std::shared_ptr<Mesh> mesh, std::shared_ptr<SphereTree> tree, const Array3d& frame) {
@@ -207,37 +267,45 @@ PYBIND11_MODULE(spheretouch, m) {
            "A body; the tree is built with the default leaf size when not given.")
       .def_property(
           "frame", [](const Body& b) { return to_array(b.frame()); },
-          [](Body& b, const Array3d& f) { b.set_frame(to_pose(f, "frame")); })
-      .def_property_readonly("mesh", [](const Body& b) { return std::const_pointer_cast<Mesh>(b.shared_mesh()); });
+          [](Body& b, const Array3d& f) { b.set_frame(to_pose(f, "frame")); }, "body frame -> world, 4x4")
+      .def_property_readonly(
+          "mesh", [](const Body& b) { return std::const_pointer_cast<Mesh>(b.shared_mesh()); }, "the body's mesh");
 
   py::class_<CollisionResult>(m, "CollisionResult", "What one query found.")
       .def_property_readonly(
           "pairs", [](const CollisionResult& r) { return pairs_array(r.pairs); },
           "(k, 2) uint32: (probe face, object face)")
-      .def_property_readonly("colliding", &CollisionResult::colliding)
+      .def_property_readonly("colliding", &CollisionResult::colliding, "True when any pair was found")
       .def_property_readonly("contacts", &CollisionResult::contacts, "distinct probe faces + distinct object faces")
-      .def_readonly("probe_faces", &CollisionResult::probe_faces)
-      .def_readonly("object_faces", &CollisionResult::object_faces)
+      .def_readonly("probe_faces", &CollisionResult::probe_faces, "distinct probe faces in pairs")
+      .def_readonly("object_faces", &CollisionResult::object_faces, "distinct object faces in pairs")
       .def_readonly("complete", &CollisionResult::complete, "False when the query stopped at max_pairs")
-      .def_property_readonly("stats", [](const CollisionResult& r) { return stats_dict(r.stats); });
+      .def_property_readonly(
+          "stats", [](const CollisionResult& r) { return stats_dict(r.stats); },
+          "traversal counters: node_pairs, leaf_pairs, tri_pairs, tri_exact, sphere_pairs, truncated, pair_limit_hit");
 
-  py::class_<ComputeCollision>(m, "Collider",
-                               "Collision of one (probe, object) pair with its scratch kept between queries.")
-      .def(py::init<Body, Body>(), py::arg("probe"), py::arg("object"))
+  py::class_<PyComputeCollision>(
+      m, "ComputeCollision",
+      "Collision of one (probe, object) pair with its scratch kept between queries. Calls "
+      "from several threads on one object take turns; use one per thread to run in parallel.")
+      .def(py::init([](Body probe, Body object) {
+             return std::unique_ptr<PyComputeCollision>(
+                 new PyComputeCollision{ComputeCollision(std::move(probe), std::move(object)), {}});
+           }),
+           py::arg("probe"), py::arg("object"), "The pair to collide; the caches are sized on the first query.")
       .def(
           "query",
-          [](ComputeCollision& c, const std::optional<Array3d>& pose, std::optional<std::size_t> max_pairs,
+          [](PyComputeCollision& c, const std::optional<Array3d>& pose, std::optional<std::size_t> max_pairs,
              std::optional<int> approximate_layer, bool sort) {
             const CollisionRequest req = make_request(max_pairs, approximate_layer, sort);
             CollisionResult r;
-            if (pose) {
-              const Pose p = to_pose(*pose, "pose");
-              py::gil_scoped_release unlock;
-              c.at_relative(p, req, r);
-            } else {
-              py::gil_scoped_release unlock;
-              c(req, r);
-            }
+            const std::optional<Pose> p = pose ? std::optional<Pose>(to_pose(*pose, "pose")) : std::nullopt;
+            py::gil_scoped_release unlock;
+            std::lock_guard<std::mutex> lock(c.mu);
+            if (p)
+              c.c.at_relative(*p, req, r);
+            else
+              c.c(req, r);
             return r;
           },
           py::arg("pose") = py::none(), py::arg("max_pairs") = py::none(), py::arg("approximate_layer") = py::none(),
@@ -245,23 +313,24 @@ PYBIND11_MODULE(spheretouch, m) {
           "Collides at `pose` (probe frame -> object frame), or at the bodies' frames when pose is None.")
       .def(
           "pairs",
-          [](ComputeCollision& c, const Array3d& pose, std::optional<std::size_t> max_pairs) {
+          [](PyComputeCollision& c, const Array3d& pose, std::optional<std::size_t> max_pairs) {
             const CollisionRequest req = make_request(max_pairs, std::nullopt, true);
             const Pose p = to_pose(pose, "pose");
             CollisionResult r;
             {
               py::gil_scoped_release unlock;
-              c.at_relative(p, req, r);
+              std::lock_guard<std::mutex> lock(c.mu);
+              c.c.at_relative(p, req, r);
             }
             return pairs_array(r.pairs);
           },
           py::arg("pose"), py::arg("max_pairs") = py::none(), "The sorted colliding pairs at one pose, (k, 2) uint32.")
       .def(
           "batch",
-          [](ComputeCollision& c, const py::array_t<double, py::array::c_style | py::array::forcecast>& poses,
+          [](PyComputeCollision& c, const py::array_t<double, py::array::c_style | py::array::forcecast>& poses,
              std::optional<std::size_t> max_pairs) {
             if (poses.ndim() != 3 || poses.shape(1) != 4 || poses.shape(2) != 4)
-              throw py::value_error("poses: expected an (N, 4, 4) array");
+              throw py::value_error("poses: expected an (N, 4, 4) array, got shape " + shape_of(poses));
             const CollisionRequest req = make_request(max_pairs, std::nullopt, true);
             std::vector<Pose> ps(static_cast<std::size_t>(poses.shape(0)));
             auto a = poses.unchecked<3>();
@@ -276,9 +345,10 @@ PYBIND11_MODULE(spheretouch, m) {
             std::vector<std::vector<FacePair>> out(ps.size());
             {
               py::gil_scoped_release unlock;
+              std::lock_guard<std::mutex> lock(c.mu);
               CollisionResult r;
               for (std::size_t i = 0; i < ps.size(); ++i) {
-                c.at_relative(ps[i], req, r);
+                c.c.at_relative(ps[i], req, r);
                 out[i] = r.pairs;
               }
             }
@@ -287,46 +357,64 @@ PYBIND11_MODULE(spheretouch, m) {
             return l;
           },
           py::arg("poses"), py::arg("max_pairs") = py::none(),
-          "Sorted pairs for each of N poses ((N, 4, 4) array): a list of (k, 2) uint32 arrays.");
+          "Sorted pairs for each of N poses ((N, 4, 4) array): a list of (k, 2) uint32 arrays.")
+      .def_property_readonly(
+          "probe", [](PyComputeCollision& c) { return c.c.probe(); }, "a copy of the probe body")
+      .def_property_readonly(
+          "object", [](PyComputeCollision& c) { return c.c.object(); }, "a copy of the object body");
+  // The name of earlier releases, kept so existing scripts run: the same class.
+  m.attr("Collider") = m.attr("ComputeCollision");
 
   py::class_<geom::ContactModel>(m, "ContactModel", "FD, PD and the local contact plane of one round (object frame).")
-      .def_property_readonly("in_contact", &geom::ContactModel::in_contact)
-      .def_property_readonly("force_dir",
-                             [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.force_dir)); })
-      .def_readonly("penetration_mm", &geom::ContactModel::penetration_mm)
-      .def_property_readonly("contact_point",
-                             [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.contact_point)); })
-      .def_property_readonly("plane_point",
-                             [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.plane_point)); })
+      .def_property_readonly("in_contact", &geom::ContactModel::in_contact, "FD, PD and the plane are meaningful")
+      .def_property_readonly(
+          "force_dir", [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.force_dir)); },
+          "FD: unit force direction, object frame")
+      .def_readonly("penetration_mm", &geom::ContactModel::penetration_mm, "PD: penetration depth, mm")
+      .def_property_readonly(
+          "contact_point", [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.contact_point)); },
+          "a point of the contact, object frame, mm")
+      .def_property_readonly(
+          "plane_point", [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.plane_point)); },
+          "a point of the local contact plane (normal FD), object frame, mm")
       .def_property_readonly(
           "probe_point", [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.probe_point)); },
           "deepest probe point, probe frame")
-      .def_property_readonly("proxy_offset", [](const geom::ContactModel& c) { return to_array(c.proxy_offset()); })
-      .def_readonly("flags", &geom::ContactModel::flags)
-      .def_readonly("contacts", &geom::ContactModel::contacts)
-      .def_readonly("object_faces", &geom::ContactModel::object_faces)
-      .def_readonly("probe_faces", &geom::ContactModel::probe_faces);
+      .def_property_readonly(
+          "proxy_offset", [](const geom::ContactModel& c) { return to_array(c.proxy_offset()); },
+          "PD · FD: where the probe would rest outside the object, relative to its pose, mm")
+      .def_readonly("flags", &geom::ContactModel::flags, "IN_CONTACT | HELD | PLANES | ... (module constants)")
+      .def_readonly("contacts", &geom::ContactModel::contacts, "distinct probe faces + distinct object faces")
+      .def_readonly("object_faces", &geom::ContactModel::object_faces, "distinct colliding object faces")
+      .def_readonly("probe_faces", &geom::ContactModel::probe_faces, "distinct colliding probe faces");
 
-  py::class_<geom::ContactBuilder>(m, "ContactBuilder",
-                                   "Builds contact models, keeping the model's history between rounds.")
+  py::class_<PyContactBuilder>(m, "ContactBuilder",
+                               "Builds contact models, keeping the model's history between rounds. Calls from several "
+                               "threads on one builder take turns.")
       .def(py::init([](const std::string& model) {
              geom::ContactConfig c = geom::DefaultContactConfig();
              c.model = take(geom::parse_contact_model(model));
-             return geom::ContactBuilder(c);
+             return std::unique_ptr<PyContactBuilder>(new PyContactBuilder{geom::ContactBuilder(c), {}});
            }),
            py::arg("model") = "patch", "model: 'patch' (default) or 'paper' (paper §3.6)")
       .def(
           "build",
-          [](geom::ContactBuilder& b, const Mesh& probe, const Mesh& object, const Array3d& pose,
-             const py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>& pairs) {
+          [](PyContactBuilder& b, const Mesh& probe, const Mesh& object, const Array3d& pose, const py::handle& pairs) {
             const Pose p = to_pose(pose, "pose");
-            const std::vector<FacePair> ps = pairs_from(pairs);
+            const std::vector<FacePair> ps = pairs_from(pairs, probe.num_faces(), object.num_faces());
             py::gil_scoped_release unlock;
-            return b.build(probe, object, p, ps);
+            std::lock_guard<std::mutex> lock(b.mu);
+            return b.b.build(probe, object, p, ps);
           },
           py::arg("probe"), py::arg("object"), py::arg("pose"), py::arg("pairs"),
           "The contact model for the pairs found at pose (probe frame -> object frame).")
-      .def("reset", &geom::ContactBuilder::reset, "Forgets the history (as if contact had ended).");
+      .def(
+          "reset",
+          [](PyContactBuilder& b) {
+            std::lock_guard<std::mutex> lock(b.mu);
+            b.b.reset();
+          },
+          "Forgets the history (as if contact had ended).");
 
   py::class_<rt::ForceLaw>(m, "ForceLaw", "Force magnitude (N) from penetration depth (mm): paper eq. (1) or a spring.")
       .def(py::init([](const std::string& kind, std::optional<double> spring_N_per_mm, std::optional<double> max_force_N) {
@@ -339,7 +427,8 @@ PYBIND11_MODULE(spheretouch, m) {
              if (max_force_N) c.max_force_N = *max_force_N;
              return take(rt::ForceLaw::make(c));
            }),
-           py::arg("kind") = "log", py::arg("spring_N_per_mm") = py::none(), py::arg("max_force_N") = py::none())
+           py::arg("kind") = "log", py::arg("spring_N_per_mm") = py::none(), py::arg("max_force_N") = py::none(),
+           "kind: 'log' (paper eq. 1) or 'linear' (a spring of spring_N_per_mm); max_force_N caps it")
       .def("magnitude", &rt::ForceLaw::magnitude_N, py::arg("pd_mm"), "N, finite, in [0, max_force_N] for any input")
       .def(
           "force",
@@ -348,5 +437,6 @@ PYBIND11_MODULE(spheretouch, m) {
             return to_array(law.magnitude_N(c.penetration_mm) * geom::to_eigen(c.force_dir));
           },
           py::arg("contact"), "The force vector at the model's own pose, N, object frame: magnitude(PD) · FD.")
-      .def_property_readonly("max_stiffness_N_per_mm", &rt::ForceLaw::max_stiffness_N_per_mm);
+      .def_property_readonly("max_stiffness_N_per_mm", &rt::ForceLaw::max_stiffness_N_per_mm,
+                             "the law's largest slope, N/mm (sizes damping and passivity)");
 }

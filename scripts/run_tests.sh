@@ -88,6 +88,9 @@ if [ "$sanitizers" != 0 ]; then
     # The core-only build with nothing but eigen3 visible to pkg-config (tests/install).
     ST_JOBS="$jobs" tests/install/check_core_only.sh build-core >"$bg/core.log" 2>&1
     finished core $?
+    # pip install . into a venv (pyproject.toml, meson-python), offline.
+    tests/install/check_pip.sh >"$bg/pip.log" 2>&1
+    finished pip $?
     if [ "$fuzz_secs" != 0 ]; then ST_JOBS="$jobs" tests/fuzz/run_fuzz.sh 0 >"$bg/fuzz.log" 2>&1; finished fuzz $?; fi
   ) &
   bg_pid=$!
@@ -119,6 +122,7 @@ if [ "$sanitizers" != 0 ]; then
     TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1:suppressions=$PWD/tests/tsan.supp run_suites build-tsan rt net
   fi
   built core || true  # built() prints the log and marks the run failed
+  built pip || true
   # libFuzzer targets (clang, ASan+UBSan, LeakSanitizer): each runs ST_FUZZ seconds (default 30;
   # 0 skips) from a copy of its committed corpus, four at a time; any crash, leak, UBSan report,
   # timeout or violated property fails the run (tests/fuzz/run_fuzz.sh).

@@ -20,6 +20,7 @@ packages=(g++ meson ninja-build pkg-config
           doxygen                    # scripts/check_docs.sh: the API reference of the installed headers
           cmake                      # tests/install: a CMake consumer of the installed package
           pybind11-dev python3-dev python3-numpy   # the Python module (python/)
+          python3-mesonpy patchelf python3-venv mypy  # pip install . (pyproject.toml), its stubs checked
           libcivetweb-dev libjs-three              # the live view (spheretouch run --view)
           nlohmann-json3-dev                       # JSON: the view's page reports, the benchmarks' output
           chromium)                                # the live view's browser tests (headless)

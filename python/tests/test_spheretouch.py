@@ -70,7 +70,7 @@ def test_mesh_from_arrays_and_errors():
 def test_boxes_touch_exactly_when_they_overlap():
     a = st.Body(st.Mesh(*box((10, 10, 10)), name="a"))
     b = st.Body(st.Mesh(*box((10, 10, 10)), name="b"))
-    c = st.Collider(a, b)
+    c = st.ComputeCollision(a, b)
     # Overlapping by 1 mm along x: the faces cross; 11 mm apart: nothing.
     r = c.query(translation(9, 0.5, 0.25))
     assert r.colliding and r.complete and len(r.pairs) > 0
@@ -79,7 +79,7 @@ def test_boxes_touch_exactly_when_they_overlap():
     # Body frames: the same relative pose expressed as two world frames gives the same pairs.
     a.frame = translation(100, 200, 300) @ translation(9, 0.5, 0.25)
     b.frame = translation(100, 200, 300)
-    c2 = st.Collider(a, b)
+    c2 = st.ComputeCollision(a, b)
     assert (c2.query().pairs == r.pairs).all()
     # first pair only, and a cap.
     first = c.query(translation(9, 0.5, 0.25), max_pairs=1)
@@ -95,7 +95,7 @@ def test_boxes_touch_exactly_when_they_overlap():
 
 def test_bad_poses_are_refused_with_a_message():
     m = st.Mesh(*box((1, 1, 1)))
-    c = st.Collider(st.Body(m), st.Body(m))
+    c = st.ComputeCollision(st.Body(m), st.Body(m))
     bad = np.eye(4)
     bad[0, 0] = 2.0
     expect_error(lambda: c.query(bad), "pose", "orthonormal")
@@ -147,7 +147,7 @@ def test_hand_elephant_pairs_match_the_command_line():
     elephant = os.path.join(MODELS, "elephant.off")
     probe, obj = st.load_mesh(hand), st.load_mesh(elephant)
     assert probe.num_faces > 10000 and obj.num_faces > 10000
-    c = st.Collider(st.Body(probe), st.Body(obj))
+    c = st.ComputeCollision(st.Body(probe), st.Body(obj))
     poses = perf_poses()[::3]
     ref = query_reference(hand, elephant, poses)
     assert len(ref) == len(poses)
@@ -165,7 +165,7 @@ def test_contact_model_and_force():
     # A 20 mm box pressed 2 mm into a 100 mm box's top face: FD = +z, PD = 2 mm (patch model).
     big = st.Mesh(*box((100, 100, 100)), name="object")
     small = st.Mesh(*box((20, 20, 20)), name="probe")
-    c = st.Collider(st.Body(small), st.Body(big))
+    c = st.ComputeCollision(st.Body(small), st.Body(big))
     pose = translation(3, -4, 50 + 10 - 2)
     pairs = c.pairs(pose)
     assert len(pairs) > 0
@@ -185,8 +185,11 @@ def test_contact_model_and_force():
     # No pairs: no contact, zero force. Bad pair indices: finite, flagged, never a crash.
     none = st.ContactBuilder().build(small, big, pose, np.zeros((0, 2), dtype=np.uint32))
     assert not none.in_contact and (law.force(none) == 0).all()
-    bad = st.ContactBuilder().build(small, big, pose, np.array([[99999, 0]]))
-    assert np.isfinite(bad.force_dir).all() and bad.flags != 0
+    # Out-of-range pair indices: a clear error naming the row and the range (not a flagged model).
+    expect_error(lambda: st.ContactBuilder().build(small, big, pose, np.array([[99999, 0]])),
+                 "pairs: row 0: probe face 99999 out of range [0, 12)")
+    expect_error(lambda: st.ContactBuilder().build(small, big, pose, np.array([[0, 0], [1, -1]])),
+                 "pairs: row 1: object face -1 out of range")
     for pd in (float("nan"), -1.0, float("inf"), 1e300):
         assert 0 <= law.magnitude(pd) <= 3.3 + 1e-12
 
@@ -200,6 +203,104 @@ def test_file_errors_name_the_file():
     finally:
         os.unlink(path)
     expect_error(lambda: st.load_mesh(path + ".missing.off"), "missing")
+
+
+def test_names_version_and_constants_match_cpp():
+    assert st.Collider is st.ComputeCollision  # the earlier name, kept as an alias
+    parts = st.__version__.split(".")
+    assert len(parts) == 3 and all(p.isdigit() for p in parts), st.__version__
+    # ContactModel.flags bits, as in C++ (st::geom::kInContact = 1 << 0, ...).
+    assert (st.IN_CONTACT, st.NORMALS_DISAGREE, st.REPLANED, st.DEGENERATE_SKIPPED, st.BAD_INPUT, st.HELD,
+            st.NORMAL_FALLBACK, st.INSIDE_CAPPED, st.PLANES) == tuple(1 << i for i in range(9))
+    v, f = box((10, 10, 10))
+    m = st.Mesh(v, f)
+    pose = translation(0, 0, 9.0)  # 1 mm deep on a 10 mm box against itself
+    model = st.ContactBuilder().build(m, m, pose, st.ComputeCollision(st.Body(m), st.Body(m)).pairs(pose))
+    assert model.flags & st.IN_CONTACT
+
+
+def test_every_public_name_has_a_docstring():
+    missing = []
+    for name in st.__all__:
+        obj = getattr(st, name)
+        if isinstance(obj, (int, str)):
+            continue
+        if not (obj.__doc__ or "").strip():
+            missing.append(name)
+        if isinstance(obj, type):
+            for attr, member in vars(obj).items():
+                if attr.startswith("_"):
+                    continue
+                if not (getattr(member, "__doc__", None) or "").strip():
+                    missing.append(f"{name}.{attr}")
+    assert not missing, f"no docstring: {missing}"
+
+
+def test_float_indices_and_bad_shapes_are_refused_briefly():
+    v, f = box((10, 10, 10))
+    expect_error(lambda: st.Mesh(v, f.astype(np.float64)), "faces: expected integer indices, got dtype float64")
+    expect_error(lambda: st.Mesh(v, f[:, :2]), "faces: expected an (m, 3) array, got shape (12, 2)")
+    m = st.Mesh(v, f)
+    c = st.ComputeCollision(st.Body(m), st.Body(m))
+    big = np.zeros(10000)
+    msg = expect_error(lambda: c.pairs(big), "pose: expected a 4x4 array, got shape (10000,)")
+    assert len(msg) < 120, msg  # the array is never printed
+    expect_error(lambda: c.batch(np.zeros((2, 3, 4))), "poses: expected an (N, 4, 4) array, got shape (2, 3, 4)")
+    expect_error(lambda: st.ContactBuilder().build(m, m, np.eye(4), np.array([[0.0, 1.0]])),
+                 "pairs: expected integer indices, got dtype float64")
+
+
+def test_one_object_from_two_threads_takes_turns():
+    import threading
+    v, f = box((10, 10, 10))
+    m = st.Mesh(v, f)
+    c = st.ComputeCollision(st.Body(m), st.Body(m))
+    poses = [translation(0.1 * i, 0.05 * i, 9.5 - 0.01 * i) for i in range(40)]
+    want = [c.pairs(p).tolist() for p in poses]
+    wrong = []
+    builder = st.ContactBuilder()
+
+    def work(offset):
+        for k in range(300):
+            i = (k + offset) % len(poses)
+            got = c.pairs(poses[i]).tolist()
+            if got != want[i]:
+                wrong.append(i)
+            model = builder.build(m, m, poses[i], np.array(got, dtype=np.int64).reshape(-1, 2))
+            if not np.isfinite(model.force_dir).all():
+                wrong.append(-1)
+
+    threads = [threading.Thread(target=work, args=(t * 7,)) for t in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not wrong, f"{len(wrong)} wrong answers from a shared ComputeCollision/ContactBuilder"
+
+
+def test_a_clear_message_when_numpy_is_missing():
+    code = "import sys; sys.modules['numpy'] = None\ntry:\n    import spheretouch\nexcept ImportError as e:\n    print(e)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=dict(os.environ))
+    assert "spheretouch needs numpy" in out.stdout, out.stdout + out.stderr
+
+
+def test_load_mesh_warns_when_the_size_is_implausible_for_its_units():
+    import warnings
+    with tempfile.NamedTemporaryFile("w", suffix=".off", delete=False) as fh:
+        v, f = box((0.2, 0.2, 0.2))  # a 20 cm box written in metres
+        fh.write(f"OFF\n{len(v)} {len(f)} 0\n")
+        fh.writelines(f"{x} {y} {z}\n" for x, y, z in v)
+        fh.writelines(f"3 {a} {b} {c}\n" for a, b, c in f)
+        path = fh.name
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            st.load_mesh(path)
+            st.load_mesh(path, units="m")
+        msgs = [str(w.message) for w in caught]
+        assert len(msgs) == 1 and "implausibly small" in msgs[0] and 'units = "m"' in msgs[0], msgs
+    finally:
+        os.unlink(path)
 
 
 def main():

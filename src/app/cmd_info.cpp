@@ -62,6 +62,8 @@ void add_info(CLI::App& app) {
       }
       print_info(r.value());
       std::fflush(stdout);
+      if (!r.value().report.size_warning.empty())
+        std::fprintf(stderr, "spheretouch: %s\n", r.value().report.size_warning.c_str());
     }
     if (failed) throw CLI::RuntimeError(2);
   });

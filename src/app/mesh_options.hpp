@@ -23,6 +23,8 @@ inline geom::LoadedMesh load_or_exit(const std::string& path, const geom::LoadCo
     std::fprintf(stderr, "spheretouch: %s\n", r.error().c_str());
     throw CLI::RuntimeError(2);
   }
+  if (!r.value().report.size_warning.empty())
+    std::fprintf(stderr, "spheretouch: %s\n", r.value().report.size_warning.c_str());
   return std::move(r).value();
 }
 

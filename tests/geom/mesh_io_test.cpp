@@ -491,6 +491,34 @@ TEST_CASE("write_mesh writes the format the extension names, and reads back the 
   }
 }
 
+TEST_CASE("a mesh whose size is implausible in its units gets a warning naming the units that fit") {
+  st::test::TempDir d;
+  // A 20 cm box written in metres (a CAD export), read as the default millimetres: 0.35 mm across.
+  write_file(d.file("box_m.off"),
+             "OFF\n8 12 0\n0 0 0\n0.2 0 0\n0 0.2 0\n0.2 0.2 0\n0 0 0.2\n0.2 0 0.2\n0 0.2 0.2\n0.2 0.2 0.2\n"
+             "3 0 2 1\n3 1 2 3\n3 4 5 6\n3 5 7 6\n3 0 1 4\n3 1 5 4\n3 2 6 3\n3 3 6 7\n3 0 4 2\n3 2 4 6\n"
+             "3 1 3 5\n3 3 7 5\n");
+  Result<LoadedMesh> mm = load_mesh(d.file("box_m.off"));
+  REQUIRE(mm.ok());  // loaded anyway: the user may mean it
+  const std::string& w = mm.value().report.size_warning;
+  INFO(w);
+  CHECK(w.find("box_m.off") != std::string::npos);
+  CHECK(w.find("implausibly small") != std::string::npos);
+  CHECK(w.find("units = \"m\" would make it 346 mm") != std::string::npos);
+  // Read in metres: 346 mm across, plausible, no warning.
+  LoadConfig in_m;
+  in_m.units = "m";
+  CHECK(load_mesh(d.file("box_m.off"), in_m).value().report.size_warning.empty());
+  // Far too large (a building in mm read as metres).
+  LoadConfig huge;
+  huge.units = "m";
+  huge.scale = 1e4;
+  const std::string big = load_mesh(d.file("box_m.off"), huge).value().report.size_warning;
+  CHECK(big.find("implausibly large") != std::string::npos);
+  // The model set is plausible as it is.
+  CHECK(load_mesh(st::test::model("hand.off")).value().report.size_warning.empty());
+}
+
 TEST_CASE("real meshes: the model set loads closed and manifold") {
   for (const char* name : {"hand.off", "hand_L2.off", "elephant.off", "armadillo_L1.off"}) {
     Result<LoadedMesh> r = load_mesh(st::test::model(name));

@@ -165,6 +165,18 @@ TEST_CASE("bad bodies and requests are refused with a message") {
   st::Result<st::Body> b = st::Body::make(bad);
   REQUIRE_FALSE(b.ok());
   CHECK(st::test::contains(b.error(), "broken-box"));
+  // value() on an error throws the error's message (not std::bad_variant_access, message lost).
+  bool threw = false;
+  try {
+    (void)b.value();
+  } catch (const st::BadResultAccess& e) {
+    threw = true;
+    CHECK(std::string(e.what()) == b.error());
+  }
+  CHECK(threw);
+  CHECK_THROWS_AS((void)std::move(b).value(), st::BadResultAccess);
+  const st::Result<int> fine = 3;
+  CHECK(fine.error().empty());  // no error: an empty message, not a throw
 
   // A tree built for another mesh.
   auto box = std::make_shared<const st::geom::Mesh>(st::geom::make_box({1, 1, 1}));

@@ -108,15 +108,15 @@ else
 fi
 
 # The Python module from the install tree.
-pyso=$(find "$scratch/root" -name 'spheretouch*.so' -path '*-packages*' | head -1)
+pyso=$(find "$scratch/root" -name '_core*.so' -path '*-packages/spheretouch/*' | head -1)
 if [ -n "$pyso" ]; then
-  PYTHONPATH=$(dirname "$pyso") /usr/bin/python3 -c "
+  PYTHONPATH=$(dirname "$(dirname "$pyso")") /usr/bin/python3 -c "
 import numpy as np, spheretouch as st
 assert st.__file__.startswith('$scratch'), st.__file__
 v = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
 f = np.array([[0,1,3],[0,3,2],[4,6,7],[4,7,5],[0,4,5],[0,5,1],[2,3,7],[2,7,6],[0,2,6],[0,6,4],[1,5,7],[1,7,3]])
 m = st.Mesh(v, f)
-c = st.Collider(st.Body(m), st.Body(m))
+c = st.ComputeCollision(st.Body(m), st.Body(m))
 t = np.eye(4); t[:3, 3] = (0.5, 0.25, 0.125)
 far = t.copy(); far[0, 3] = 3.5
 assert c.query(t).colliding and not c.query(far).colliding

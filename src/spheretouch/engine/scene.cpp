@@ -388,6 +388,10 @@ Result<geom::Mesh> load_body(const BodySpec& b, const std::string& field) {
   o.scale = b.scale;
   Result<geom::LoadedMesh> r = geom::load_mesh(b.mesh, o);
   if (!r) return fail("[", field, "] ", r.error());
+  // Loads anyway (a tiny or huge object may be meant), but says so where the run starts.
+  if (!r.value().report.size_warning.empty())
+    std::fprintf(stderr, "[%s] %s (set [%s] units or scale)\n", field.c_str(), r.value().report.size_warning.c_str(),
+                 field.c_str());
   return std::move(r.value().mesh);
 }
 

@@ -90,6 +90,33 @@ Result<LoadedMesh> finish(const std::string& name, const std::vector<Vec3>& pos,
 
 using namespace detail;
 
+namespace {
+
+// LoadReport::size_warning for a mesh read as `options` says.
+std::string size_warning(const Mesh& mesh, const std::string& path, const LoadConfig& options) {
+  const double d = mesh.bounds().diagonal();
+  if (!(d > 0) || (d >= kPlausibleMinMm && d <= kPlausibleMaxMm)) return {};
+  // The unit that would bring the diagonal nearest 300 mm (a hand-sized object), if any.
+  const double file_units = d / (unit_to_mm(options.units).value() * options.scale);
+  const char* best = nullptr;
+  double best_err = 1e300;
+  for (const char* u : {"um", "mm", "cm", "m", "in"}) {
+    const double mm = file_units * unit_to_mm(u).value() * options.scale;
+    const double err = std::abs(std::log10(mm / 300.0));
+    if (mm >= kPlausibleMinMm && mm <= kPlausibleMaxMm && err < best_err) best = u, best_err = err;
+  }
+  std::ostringstream os;
+  os.precision(3);
+  os << path << ": warning: " << d << " mm across (bounding-box diagonal) read as units = \"" << options.units << "\""
+     << (options.scale != 1.0 ? " with scale" : "") << ": implausibly " << (d < kPlausibleMinMm ? "small" : "large")
+     << " for a touched object";
+  if (best && best != options.units)
+    os << "; units = \"" << best << "\" would make it " << file_units * unit_to_mm(best).value() * options.scale << " mm";
+  return os.str();
+}
+
+}  // namespace
+
 Result<double> unit_to_mm(std::string_view units) {
   if (units == "mm") return 1.0;
   if (units == "um") return 1e-3;
@@ -137,6 +164,7 @@ Result<LoadedMesh> load_mesh(const std::string& path, const LoadConfig& options)
     if (Status v = m.validate(); !v) return Error{v.error()};
   }
   r.value().report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  r.value().report.size_warning = size_warning(r.value().mesh, path, options);
   return r;
 }
 

@@ -40,7 +40,15 @@ struct LoadReport {
   std::size_t welded_vertices = 0;        ///< exact duplicate vertices merged (assimp path only)
   std::vector<std::uint32_t> degenerate;  ///< zero-area faces (kept, see DEGENERATE_POLICY)
   double seconds = 0;                     ///< wall time to read and build the mesh
+  /// A size implausible for a touchable object in the units the mesh was read in (a mesh in
+  /// metres read as millimetres is 1000x too small): what and which units would fit; else empty.
+  std::string size_warning;
 };
+
+/// Objects a person touches through a haptic device, in mm: a bounding-box diagonal outside
+/// [kPlausibleMinMm, kPlausibleMaxMm] after units and scale earns LoadReport::size_warning.
+inline constexpr double kPlausibleMinMm = 1.0;
+inline constexpr double kPlausibleMaxMm = 1e5;  ///< 100 m
 
 /// Degenerate (zero-area) faces are kept where they are: they take part in collision as the
 /// segment or point they span, and no other face is renumbered.
