@@ -66,6 +66,8 @@ for c in ET.parse(os.path.join(xml, "index.xml")).getroot().findall("compound"):
     kind, name = c.get("kind"), c.findtext("name")
     if kind not in ("namespace", "file") or name.endswith("::detail") or "::detail::" in name:
         continue
+    if name == "std" or name.startswith("std::"):  # named by a base class (std::runtime_error): not ours
+        continue
     d = ET.parse(os.path.join(xml, c.get("refid") + ".xml")).getroot().find("compounddef")
     if text(d.find("briefdescription")) or text(d.find("detaileddescription")):
         continue
