@@ -1,17 +1,16 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // The patch contact model's segment kernel (contact_segments.hpp): per (object face, probe face)
 // row, the intersection segment along n_object × n_probe and its vector area, four rows at a time
-// in GCC/Clang vector extensions (the project's SIMD for this kernel lives in this file only).
+// in GCC/Clang vector extensions, compiled for the baseline and for AVX2 (contact_segments_kernel.inl)
+// and chosen at run time with the collision core's kernels (simd.hpp: one switch for all).
 #include <spheretouch/geom/contact_segments.hpp>
 
 #include <cmath>
 #include <cstring>
 #include <limits>
-#if defined(__AVX__)
-#include <immintrin.h>
-#endif
 
 #include <spheretouch/geom/check.hpp>
+#include <spheretouch/geom/simd.hpp>
 
 // The segment computation's 4-lane vectors (D4 below) are passed between always-inlined helpers
 // of this file only: no ABI is crossed, so GCC's note that passing them changes without AVX is moot.
@@ -29,130 +28,21 @@ namespace {
 typedef double D4 __attribute__((vector_size(32)));
 using M4 = decltype(D4{} < D4{});  ///< per-lane flags (all bits set or none), from comparisons
 
-inline D4 splat(double x) { return D4{x, x, x, x}; }
-/// m ? a : b per lane.
-[[gnu::always_inline]] inline D4 pick(const M4& m, const D4& a, const D4& b) {
-  return (D4)(((M4)a & m) | ((M4)b & ~m));
-}
-/// b < a ? b : a and a < b ? b : a per lane (NaN as in those scalar selects).
-[[gnu::always_inline]] inline D4 min4(const D4& a, const D4& b) { return pick(b < a, b, a); }
-[[gnu::always_inline]] inline D4 max4(const D4& a, const D4& b) { return pick(a < b, b, a); }
-[[gnu::always_inline]] inline D4 sqrt4(const D4& x) {
-#if defined(__AVX__)
-  return _mm256_sqrt_pd(x);
-#else
-  return D4{std::sqrt(x[0]), std::sqrt(x[1]), std::sqrt(x[2]), std::sqrt(x[3])};
+namespace seg_base {
+#define ST_SEG_SQRT4(x) \
+  D4 { std::sqrt((x)[0]), std::sqrt((x)[1]), std::sqrt((x)[2]), std::sqrt((x)[3]) }
+#include "contact_segments_kernel.inl"
+#undef ST_SEG_SQRT4
+}  // namespace seg_base
+#if defined(ST_SIMD_X86)
+ST_TARGET_AVX2_BEGIN
+namespace seg_avx2 {
+#define ST_SEG_SQRT4(x) D4(_mm256_sqrt_pd(x))
+#include "contact_segments_kernel.inl"
+#undef ST_SEG_SQRT4
+}  // namespace seg_avx2
+ST_TARGET_END
 #endif
-}
-
-/// Four records as columns: vertices, unit normal and plane offset, lane l = row l.
-struct Rec4 {
-  D4 x[3], y[3], z[3], nx, ny, nz, c;
-};
-
-/// Fields [f, f + 4) of four records r[0..3] as four columns (a 4 × 4 transpose).
-[[gnu::always_inline]] inline void columns4(const double* const r[4], int f, D4& c0, D4& c1, D4& c2, D4& c3) {
-  D4 x0, x1, x2, x3;
-  std::memcpy(&x0, r[0] + f, sizeof(D4));
-  std::memcpy(&x1, r[1] + f, sizeof(D4));
-  std::memcpy(&x2, r[2] + f, sizeof(D4));
-  std::memcpy(&x3, r[3] + f, sizeof(D4));
-  const D4 t0 = __builtin_shufflevector(x0, x1, 0, 4, 2, 6), t1 = __builtin_shufflevector(x0, x1, 1, 5, 3, 7);
-  const D4 t2 = __builtin_shufflevector(x2, x3, 0, 4, 2, 6), t3 = __builtin_shufflevector(x2, x3, 1, 5, 3, 7);
-  c0 = __builtin_shufflevector(t0, t2, 0, 1, 4, 5);
-  c1 = __builtin_shufflevector(t1, t3, 0, 1, 4, 5);
-  c2 = __builtin_shufflevector(t0, t2, 2, 3, 6, 7);
-  c3 = __builtin_shufflevector(t1, t3, 2, 3, 6, 7);
-}
-
-/// The records p[0..3] as columns (FaceRec: v0, v1, v2, n, c = 13 doubles).
-[[gnu::always_inline]] inline Rec4 load4(const FaceRec* const p[4]) {
-  const double* const r[4] = {p[0]->v[0].data(), p[1]->v[0].data(), p[2]->v[0].data(), p[3]->v[0].data()};
-  Rec4 q;
-  columns4(r, 0, q.x[0], q.y[0], q.z[0], q.x[1]);
-  columns4(r, 4, q.y[1], q.z[1], q.x[2], q.y[2]);
-  columns4(r, 8, q.z[2], q.nx, q.ny, q.nz);
-  q.c = D4{r[0][12], r[1][12], r[2][12], r[3][12]};
-  return q;
-}
-
-/// Where a triangle with signed distances d0..d2 to the other triangle's plane and heights
-/// t0..t2 = x·L along the line direction L crosses that plane: the interval [lo, hi] of x·L, ok
-/// when it crosses (not all distances of one strict sign). Branch-free: an edge crossing the
-/// plane at d_i / (d_i − d_j) along it counts when its ends' signs differ, the quotient of the
-/// others is discarded (0/0 on an edge that does not cross is never selected).
-///
-/// A vertex exactly on the plane (d = 0) counts as on its positive side (a symbolic perturbation,
-/// as in Edelsbrunner & Mücke's simulation of simplicity): the decision depends on the vertex and
-/// the plane only, so two faces sharing an edge that lies in the plane agree, and the curve is
-/// counted once instead of twice or not at all.
-[[gnu::always_inline]] inline void crossing(const D4& d0, const D4& d1, const D4& d2, const D4& t0, const D4& t1,
-                                            const D4& t2, D4& lo, D4& hi, M4& ok) {
-  const D4 inf = splat(std::numeric_limits<double>::infinity()), zero = splat(0);
-  const M4 n0 = d0 < zero, n1 = d1 < zero, n2 = d2 < zero;
-  const M4 c01 = n0 ^ n1, c12 = n1 ^ n2, c20 = n2 ^ n0;
-  const D4 s01 = d0 / (d0 - d1), s12 = d1 / (d1 - d2), s20 = d2 / (d2 - d0);  // d_j = 0 gives vertex j
-  const D4 e01 = t0 + s01 * (t1 - t0), e12 = t1 + s12 * (t2 - t1), e20 = t2 + s20 * (t0 - t2);
-  lo = min4(min4(pick(c01, e01, inf), pick(c12, e12, inf)), pick(c20, e20, inf));
-  hi = max4(max4(pick(c01, e01, -inf), pick(c12, e12, -inf)), pick(c20, e20, -inf));
-  ok = c01 | c12 | c20;
-}
-
-/// The intersection segments of four rows: per row, the segment of object face a and probe
-/// face b (unit normals) along L = n_a × n_b, the direction the boundary of the object surface
-/// inside the probe runs (the inside on its left seen from outside): its vector area
-/// ½ (s0 − o) × (s1 − o) and that area's length (both 0 where there is no segment: parallel
-/// planes, no crossing, or the intervals meet in a point), and its end points s0, s1 relative to
-/// o. With t = x·L on the line, s1 − s0 = (hi − lo) L / |L|², and (s0 − o) × L = c_b n_a − c_a n_b
-/// for any point of the line (c = n·(v0 − o): the records' offsets c = n·v0 less n·o; the
-/// component along L drops out). The line's point nearest o is x0 = (c_a (n_b × L) + c_b (L × n_a))
-/// / |L|² relative to o, so s − o = x0 + (t − o·L) L / |L|². (Each row's area is measured from a
-/// point o near the patch: the sum does not depend on o, but the sum of the rows' lengths does,
-/// and FD's cancellation test compares the two.) Inlined, a caller's unused outputs cost nothing.
-struct Seg4 {
-  M4 ok;                            ///< a segment
-  D4 px, py, pz, pabs;              ///< vector area and its length (0 where none)
-  D4 s0x, s0y, s0z, s1x, s1y, s1z;  ///< end points − o (where ok)
-};
-[[gnu::always_inline]] inline Seg4 segments4(const Rec4& a, const Rec4& b, const D4& ox, const D4& oy, const D4& oz) {
-  const D4 lx = a.ny * b.nz - a.nz * b.ny, ly = a.nz * b.nx - a.nx * b.nz, lz = a.nx * b.ny - a.ny * b.nx;
-  const D4 l2 = lx * lx + ly * ly + lz * lz;  // unit normals: |L| = sin of the angle between the planes
-  D4 da[3], db[3], ta[3], tb[3];
-  for (int k = 0; k < 3; ++k) {
-    da[k] = b.nx * (a.x[k] - b.x[0]) + b.ny * (a.y[k] - b.y[0]) + b.nz * (a.z[k] - b.z[0]);  // a's vertices vs b's plane
-    db[k] = a.nx * (b.x[k] - a.x[0]) + a.ny * (b.y[k] - a.y[0]) + a.nz * (b.z[k] - a.z[0]);  // b's vertices vs a's plane
-    ta[k] = a.x[k] * lx + a.y[k] * ly + a.z[k] * lz;
-    tb[k] = b.x[k] * lx + b.y[k] * ly + b.z[k] * lz;
-  }
-  D4 alo, ahi, blo, bhi;
-  M4 aok, bok;
-  crossing(da[0], da[1], da[2], ta[0], ta[1], ta[2], alo, ahi, aok);
-  crossing(db[0], db[1], db[2], tb[0], tb[1], tb[2], blo, bhi, bok);
-  const D4 lo = max4(alo, blo), hi = min4(ahi, bhi);
-  Seg4 s;
-  s.ok = (l2 > splat(1e-24)) & aok & bok & (hi > lo);  // parallel planes: touching or coplanar, no curve
-  const D4 inv = splat(1) / l2, zero = splat(0);
-  // Selects, not a zero scale: a row without a segment adds exactly nothing to the sums, even
-  // where its products overflow.
-  const D4 scale = splat(0.5) * (hi - lo) * inv;
-  const D4 ca = a.c - (a.nx * ox + a.ny * oy + a.nz * oz), cb = b.c - (b.nx * ox + b.ny * oy + b.nz * oz);
-  const D4 vx = cb * a.nx - ca * b.nx, vy = cb * a.ny - ca * b.ny, vz = cb * a.nz - ca * b.nz;
-  s.px = pick(s.ok, scale * vx, zero);
-  s.py = pick(s.ok, scale * vy, zero);
-  s.pz = pick(s.ok, scale * vz, zero);
-  s.pabs = pick(s.ok, sqrt4(scale * scale * (vx * vx + vy * vy + vz * vz)), zero);
-  const D4 x0 = (ca * (b.ny * lz - b.nz * ly) + cb * (ly * a.nz - lz * a.ny)) * inv;
-  const D4 y0 = (ca * (b.nz * lx - b.nx * lz) + cb * (lz * a.nx - lx * a.nz)) * inv;
-  const D4 z0 = (ca * (b.nx * ly - b.ny * lx) + cb * (lx * a.ny - ly * a.nx)) * inv;
-  const D4 ol = ox * lx + oy * ly + oz * lz, s0 = (lo - ol) * inv, s1 = (hi - ol) * inv;
-  s.s0x = x0 + s0 * lx;
-  s.s0y = y0 + s0 * ly;
-  s.s0z = z0 + s0 * lz;
-  s.s1x = x0 + s1 * lx;
-  s.s1y = y0 + s1 * ly;
-  s.s1z = z0 + s1 * lz;
-  return s;
-}
 
 /// A record with no normal: padding rows (no segment, nothing added).
 const FaceRec& no_record() {
@@ -173,20 +63,12 @@ SegmentAreaSum::SegmentAreaSum(const Vec3& origin) : origin_{origin.x(), origin.
 
 void SegmentAreaSum::run(int n) {
   ST_ASSERT(n % 4 == 0 && n <= kBatch, "whole groups of four rows");
-  const D4 ox = splat(origin_[0]), oy = splat(origin_[1]), oz = splat(origin_[2]);
-  D4 sx, sy, sz, sabs;  // the sums in registers while the batch runs (same order as row by row)
-  std::memcpy(&sx, sum_[0], sizeof(D4));
-  std::memcpy(&sy, sum_[1], sizeof(D4));
-  std::memcpy(&sz, sum_[2], sizeof(D4));
-  std::memcpy(&sabs, sum_[3], sizeof(D4));
-  for (int k = 0; k < n; k += 4) {
-    const Seg4 g = segments4(load4(object_ + k), load4(probe_ + k), ox, oy, oz);
-    sx += g.px, sy += g.py, sz += g.pz, sabs += g.pabs;
-  }
-  std::memcpy(sum_[0], &sx, sizeof(D4));
-  std::memcpy(sum_[1], &sy, sizeof(D4));
-  std::memcpy(sum_[2], &sz, sizeof(D4));
-  std::memcpy(sum_[3], &sabs, sizeof(D4));
+#if defined(ST_SIMD_X86)
+  if (simd::active_isa() >= simd::Isa::avx2)
+    seg_avx2::sum_rows(object_, probe_, n, origin_, sum_);
+  else
+#endif
+    seg_base::sum_rows(object_, probe_, n, origin_, sum_);
   n_ = 0;
 }
 
@@ -214,15 +96,18 @@ double SegmentAreaSum::abs_sum() const {
 }
 
 void FirstSegment::run() {
-  // Measured from the common frame's origin (a body's centre): the rounding of one segment's end
-  // points is ~1e-16 of the body's size.
-  const D4 zero = splat(0);
-  const Seg4 g = segments4(load4(object_), load4(probe_), zero, zero, zero);
-  for (int l = 0; l < 4 && !found_; ++l)
-    if (g.ok[l]) {
-      midpoint_ = 0.5 * Vec3(g.s0x[l] + g.s1x[l], g.s0y[l] + g.s1y[l], g.s0z[l] + g.s1z[l]);
-      found_ = true;
-    }
+  Vec3 m;
+  bool found = false;
+#if defined(ST_SIMD_X86)
+  if (simd::active_isa() >= simd::Isa::avx2)
+    found = seg_avx2::first_midpoint(object_, probe_, m);
+  else
+#endif
+    found = seg_base::first_midpoint(object_, probe_, m);
+  if (found && !found_) {
+    midpoint_ = m;
+    found_ = true;
+  }
   n_ = 0;
 }
 
