@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "bench.hpp"
+#include "bench_json.hpp"
 #ifdef ST_HAVE_FCL
 #include "fcl_peer.hpp"
 #endif
@@ -360,40 +361,55 @@ void add_collide(CLI::App& app) {
     const double bpf_probe = double(s.pt.bytes()) / double(s.probe.num_faces());
     const double bpf_object = double(s.ot.bytes()) / double(s.object.num_faces());
     if (a->json) {
-      std::printf(
-          "{\"probe\": \"%s\", \"object\": \"%s\", \"probe_faces\": %zu, \"object_faces\": %zu, \"leaf_faces\": %u, "
-          "\"runs\": %d, \"isa\": \"%s\",\n \"build\": {\"probe_s\": %.4f, \"object_s\": %.4f, "
-          "\"probe_bytes_per_face\": %.1f, "
-          "\"object_bytes_per_face\": %.1f, \"scratch_bytes\": %zu, \"fcl_both_s\": %.4f",
-          a->probe.c_str(), a->object.c_str(), s.probe.num_faces(), s.object.num_faces(), a->leaf, a->runs,
-          geom::simd::isa_name(geom::simd::active_isa()), probe_build_s, object_build_s, bpf_probe, bpf_object,
-          scratch_bytes, fcl_build_s);
-      if (!a->build_mesh.empty())
-        std::printf(
-            ", \"big_mesh\": \"%s\", \"big_faces\": %zu, \"big_s\": %.4f, \"big_bytes_per_face\": %.1f, \"big_fcl_s\": "
-            "%.4f",
-            a->build_mesh.c_str(), big_faces, big_build_s, big_bytes_per_face, big_fcl_build_s);
-      std::printf("},\n \"poses\": [");
-      for (std::size_t i = 0; i < rows.size(); ++i) {
-        const PoseRow& w = rows[i];
-        std::printf(
-            "%s\n  {\"contacts\": %u, \"pairs\": %zu, \"p50_us\": %.2f, \"p95_us\": %.2f, \"min_us\": %.2f, "
-            "\"node_pairs\": %llu, \"leaf_pairs\": %llu, \"tri_tests\": %llu, \"tri_exact\": %llu, "
-            "\"base_p50_us\": %.2f, \"base_p95_us\": %.2f, \"base_min_us\": %.2f, \"filter_ratio\": %.4f, "
-            "\"filter_same_pairs\": %s",
-            i ? "," : "", w.contacts, w.pairs, w.p50_us, w.p95_us, w.min_us,
-            static_cast<unsigned long long>(w.stats.node_pairs), static_cast<unsigned long long>(w.stats.leaf_pairs),
-            static_cast<unsigned long long>(w.stats.tri_pairs), static_cast<unsigned long long>(w.stats.tri_exact),
-            w.base_p50_us, w.base_p95_us, w.base_min_us, w.p50_us / w.base_p50_us, w.base_same ? "true" : "false");
-        if (w.fcl)
-          std::printf(
-              ", \"fcl_p50_us\": %.2f, \"fcl_p95_us\": %.2f, \"fcl_min_us\": %.2f, \"ratio\": %.4f, \"fcl_pairs\": "
-              "%zu, "
-              "\"only_ours\": %zu, \"only_fcl\": %zu",
-              w.fcl_p50_us, w.fcl_p95_us, w.fcl_min_us, w.p50_us / w.fcl_p50_us, w.fcl_pairs, w.only_ours, w.only_fcl);
-        std::printf("}");
+      Json build = {{"probe_s", round_to(probe_build_s, 4)},
+                    {"object_s", round_to(object_build_s, 4)},
+                    {"probe_bytes_per_face", round_to(bpf_probe, 1)},
+                    {"object_bytes_per_face", round_to(bpf_object, 1)},
+                    {"scratch_bytes", scratch_bytes},
+                    {"fcl_both_s", round_to(fcl_build_s, 4)}};
+      if (!a->build_mesh.empty()) {
+        build["big_mesh"] = a->build_mesh;
+        build["big_faces"] = big_faces;
+        build["big_s"] = round_to(big_build_s, 4);
+        build["big_bytes_per_face"] = round_to(big_bytes_per_face, 1);
+        build["big_fcl_s"] = round_to(big_fcl_build_s, 4);
       }
-      std::printf("]}\n");
+      Json poses = Json::array();
+      for (const PoseRow& w : rows) {
+        Json p = {{"contacts", w.contacts},
+                  {"pairs", w.pairs},
+                  {"p50_us", round_to(w.p50_us, 2)},
+                  {"p95_us", round_to(w.p95_us, 2)},
+                  {"min_us", round_to(w.min_us, 2)},
+                  {"node_pairs", w.stats.node_pairs},
+                  {"leaf_pairs", w.stats.leaf_pairs},
+                  {"tri_tests", w.stats.tri_pairs},
+                  {"tri_exact", w.stats.tri_exact},
+                  {"base_p50_us", round_to(w.base_p50_us, 2)},
+                  {"base_p95_us", round_to(w.base_p95_us, 2)},
+                  {"base_min_us", round_to(w.base_min_us, 2)},
+                  {"filter_ratio", round_to(w.p50_us / w.base_p50_us, 4)},
+                  {"filter_same_pairs", w.base_same}};
+        if (w.fcl) {
+          p["fcl_p50_us"] = round_to(w.fcl_p50_us, 2);
+          p["fcl_p95_us"] = round_to(w.fcl_p95_us, 2);
+          p["fcl_min_us"] = round_to(w.fcl_min_us, 2);
+          p["ratio"] = round_to(w.p50_us / w.fcl_p50_us, 4);
+          p["fcl_pairs"] = w.fcl_pairs;
+          p["only_ours"] = w.only_ours;
+          p["only_fcl"] = w.only_fcl;
+        }
+        poses.push_back(std::move(p));
+      }
+      print_json({{"probe", a->probe},
+                  {"object", a->object},
+                  {"probe_faces", s.probe.num_faces()},
+                  {"object_faces", s.object.num_faces()},
+                  {"leaf_faces", a->leaf},
+                  {"runs", a->runs},
+                  {"isa", geom::simd::isa_name(geom::simd::active_isa())},
+                  {"build", std::move(build)},
+                  {"poses", std::move(poses)}});
       return;
     }
     std::printf(

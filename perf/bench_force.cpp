@@ -28,6 +28,7 @@
 
 #include <spheretouch/engine/scene.hpp>
 #include "bench.hpp"
+#include "bench_json.hpp"
 #include "bench_tables_common.hpp"
 #include <spheretouch/engine/distributed.hpp>
 #include "force_scenes.hpp"
@@ -1075,58 +1076,81 @@ void add_force(CLI::App& app) {
       return std::string(b);
     };
     if (a->json) {
-      std::printf("{\"collision_ticks\": %d, \"quick\": %s, \"scenes\": [", a->collision_ticks, a->quick ? "true" : "false");
-      for (std::size_t i = 0; i < all.size(); ++i) {
-        const Figures& f = all[i];
-        std::printf(
-            "%s\n  {\"scene\": \"%s\", \"model\": \"%s\", \"loop\": \"%s\", \"dF_p99_N\": %s, \"dF_max_N\": %s, "
-            "\"angle_p99_deg\": %s, \"flips45_per_s\": %s, \"energy_per_cycle_mJ\": %s, \"energy_cycle_max_mJ\": %s, "
-            "\"cycles\": %d, \"still_rms_30hz_N\": %s, \"depth_err_mm\": %s, \"depth_err_rms_mm\": %s, "
-            "\"popthrough\": %s, \"round_us_p50\": %s, \"collide_us_p50\": %s, \"contact_us_p50\": %s, "
-            "\"contacts_p50\": %s, \"ticks\": %zu, \"contact_ticks\": %zu}",
-            i ? "," : "", f.scene.c_str(), f.model.c_str(), f.loop.c_str(), num(f.dF_p99).c_str(),
-            num(f.dF_max).c_str(), num(f.angle_p99).c_str(), num(f.flips45_per_s).c_str(),
-            num(f.energy_per_cycle).c_str(), num(f.energy_cycle_max).c_str(), f.cycles,
-            f.still_rms < 0 ? "null" : num(f.still_rms).c_str(), f.depth_err < 0 ? "null" : num(f.depth_err).c_str(),
-            f.depth_err_rms < 0 ? "null" : num(f.depth_err_rms).c_str(),
-            f.popthrough < 0 ? "null" : std::to_string(f.popthrough).c_str(), num(f.round_us_p50).c_str(),
-            num(f.collide_us_p50).c_str(), num(f.contact_us_p50).c_str(), num(f.contacts_p50).c_str(), f.ticks,
-            f.contact_ticks);
+      // Six significant digits, as the table shows them; null for a non-finite figure and for the
+      // ones a scene does not have (negative).
+      auto jnum = [](double v) { return std::isfinite(v) ? Json(round_sig(v, 6)) : Json(nullptr); };
+      auto opt = [&](double v) { return v < 0 ? Json(nullptr) : jnum(v); };
+      Json scene_rows = Json::array();
+      for (const Figures& f : all)
+        scene_rows.push_back({{"scene", f.scene},
+                              {"model", f.model},
+                              {"loop", f.loop},
+                              {"dF_p99_N", jnum(f.dF_p99)},
+                              {"dF_max_N", jnum(f.dF_max)},
+                              {"angle_p99_deg", jnum(f.angle_p99)},
+                              {"flips45_per_s", jnum(f.flips45_per_s)},
+                              {"energy_per_cycle_mJ", jnum(f.energy_per_cycle)},
+                              {"energy_cycle_max_mJ", jnum(f.energy_cycle_max)},
+                              {"cycles", f.cycles},
+                              {"still_rms_30hz_N", opt(f.still_rms)},
+                              {"depth_err_mm", opt(f.depth_err)},
+                              {"depth_err_rms_mm", opt(f.depth_err_rms)},
+                              {"popthrough", f.popthrough < 0 ? Json(nullptr) : Json(f.popthrough)},
+                              {"round_us_p50", jnum(f.round_us_p50)},
+                              {"collide_us_p50", jnum(f.collide_us_p50)},
+                              {"contact_us_p50", jnum(f.contact_us_p50)},
+                              {"contacts_p50", jnum(f.contacts_p50)},
+                              {"ticks", f.ticks},
+                              {"contact_ticks", f.contact_ticks}});
+      Json truth = Json::array();
+      for (const TruthRow& row : truth_rows) {
+        const TruthFigures& t = row.tf;
+        const Figures& f = all[row.fig];
+        const Json identical = t.workers_identical < 0 ? Json(nullptr) : Json(t.workers_identical != 0);
+        truth.push_back({{"scene", f.scene},
+                         {"model", f.model},
+                         {"loop", f.loop},
+                         {"f_err_rms_N", jnum(t.f_err_rms)},
+                         {"f_err_max_N", jnum(t.f_err_max)},
+                         {"over_law_max_N", jnum(t.over_law_max)},
+                         {"pd_over_max_mm", jnum(t.pd_over_max)},
+                         {"round_dir_p99_deg", jnum(t.round_dir_p99)},
+                         {"round_dir_max_deg", jnum(t.round_dir_max)},
+                         {"dir_err_p50_deg", jnum(t.dir_err_p50)},
+                         {"dir_err_p90_deg", jnum(t.dir_err_p90)},
+                         {"dir_err_max_deg", jnum(t.dir_err_max)},
+                         {"lag_p50_deg", jnum(t.lag_p50)},
+                         {"lag_p90_deg", jnum(t.lag_p90)},
+                         {"step_max_N", jnum(t.step_max)},
+                         {"clear01_max_N", jnum(t.clear01_max)},
+                         {"clear03_max_N", jnum(t.clear03_max)},
+                         {"keep_min", opt(t.keep_min)},
+                         {"twin_dir_p99_deg", opt(t.twin_dir_p99)},
+                         {"twin_dir_max_deg", opt(t.twin_dir_max)},
+                         {"order_fd", jnum(t.order_fd)},
+                         {"order_pd_mm", jnum(t.order_pd)},
+                         {"workers_identical", identical},
+                         {"workers_checked", t.workers_checked},
+                         {"energy_per_cycle_mJ", jnum(f.energy_per_cycle)},
+                         {"still_rms_30hz_N", opt(f.still_rms)}});
       }
-      std::printf("\n], \"truth\": [");
-      for (std::size_t i = 0; i < truth_rows.size(); ++i) {
-        const TruthFigures& t = truth_rows[i].tf;
-        const Figures& f = all[truth_rows[i].fig];
-        std::printf(
-            "%s\n  {\"scene\": \"%s\", \"model\": \"%s\", \"loop\": \"%s\", \"f_err_rms_N\": %s, \"f_err_max_N\": %s, "
-            "\"over_law_max_N\": %s, \"pd_over_max_mm\": %s, \"round_dir_p99_deg\": %s, \"round_dir_max_deg\": %s, "
-            "\"dir_err_p50_deg\": %s, \"dir_err_p90_deg\": %s, \"dir_err_max_deg\": %s, \"lag_p50_deg\": %s, "
-            "\"lag_p90_deg\": %s, \"step_max_N\": %s, "
-            "\"clear01_max_N\": %s, \"clear03_max_N\": %s, \"keep_min\": %s, \"twin_dir_p99_deg\": %s, "
-            "\"twin_dir_max_deg\": %s, \"order_fd\": %s, \"order_pd_mm\": %s, \"workers_identical\": %s, "
-            "\"workers_checked\": \"%s\", \"energy_per_cycle_mJ\": %s, \"still_rms_30hz_N\": %s}",
-            i ? "," : "", f.scene.c_str(), f.model.c_str(), f.loop.c_str(), num(t.f_err_rms).c_str(),
-            num(t.f_err_max).c_str(), num(t.over_law_max).c_str(), num(t.pd_over_max).c_str(),
-            num(t.round_dir_p99).c_str(), num(t.round_dir_max).c_str(), num(t.dir_err_p50).c_str(),
-            num(t.dir_err_p90).c_str(), num(t.dir_err_max).c_str(), num(t.lag_p50).c_str(), num(t.lag_p90).c_str(),
-            num(t.step_max).c_str(), num(t.clear01_max).c_str(), num(t.clear03_max).c_str(),
-            t.keep_min < 0 ? "null" : num(t.keep_min).c_str(), t.twin_dir_p99 < 0 ? "null" : num(t.twin_dir_p99).c_str(),
-            t.twin_dir_max < 0 ? "null" : num(t.twin_dir_max).c_str(), num(t.order_fd).c_str(), num(t.order_pd).c_str(),
-            t.workers_identical < 0 ? "null" : (t.workers_identical ? "true" : "false"), t.workers_checked.c_str(),
-            num(f.energy_per_cycle).c_str(), f.still_rms < 0 ? "null" : num(f.still_rms).c_str());
-      }
-      std::printf("\n], \"contact_cost_slide_mm\": %s, \"contact_cost\": [", num(a->cost_slide_mm).c_str());
-      for (std::size_t i = 0; i < costs.size(); ++i) {
-        const Cost& c = costs[i];
-        std::printf(
-            "%s\n  {\"contacts\": %u, \"model\": \"%s\", \"collide_us_p50\": %s, \"contact_cold_us_p50\": %s, "
-            "\"contact_warm_us_p50\": %s, \"contact_warm_us_mean\": %s, \"share_cold\": %s, \"share_warm\": %s, "
-            "\"share_warm_mean\": %s}",
-            i ? "," : "", c.contacts, c.model.c_str(), num(c.collide_us).c_str(), num(c.cold_us).c_str(),
-            num(c.warm_us).c_str(), num(c.warm_mean_us).c_str(), num(c.cold_us / c.collide_us).c_str(),
-            num(c.warm_us / c.collide_us).c_str(), num(c.warm_mean_us / c.collide_us).c_str());
-      }
-      std::printf("\n]}\n");
+      Json cost = Json::array();
+      for (const Cost& c : costs)
+        cost.push_back({{"contacts", c.contacts},
+                        {"model", c.model},
+                        {"collide_us_p50", jnum(c.collide_us)},
+                        {"contact_cold_us_p50", jnum(c.cold_us)},
+                        {"contact_warm_us_p50", jnum(c.warm_us)},
+                        {"contact_warm_us_mean", jnum(c.warm_mean_us)},
+                        {"share_cold", jnum(c.cold_us / c.collide_us)},
+                        {"share_warm", jnum(c.warm_us / c.collide_us)},
+                        {"share_warm_mean", jnum(c.warm_mean_us / c.collide_us)}});
+      print_json({{"collision_ticks", a->collision_ticks},
+                  {"quick", a->quick},
+                  {"scenes", std::move(scene_rows)},
+                  {"truth", std::move(truth)},
+                  {"contact_cost_slide_mm", jnum(a->cost_slide_mm)},
+                  {"contact_cost", std::move(cost)}});
       return;
     }
     std::printf("force rendering in simulated time, a collision round every %d ticks (delivered %d ticks later)\n",

@@ -19,6 +19,7 @@
 #include <zmq.hpp>
 
 #include "bench.hpp"
+#include "bench_json.hpp"
 #include <spheretouch/geom/primitives.hpp>
 #include <spheretouch/net/block_set.hpp>
 #include <spheretouch/net/protocol.hpp>
@@ -368,19 +369,23 @@ void add_hostile(CLI::App& app) {
     bool all_ok = true;
     for (const CaseResult& c : results) all_ok &= (c.outcome == Outcome::refused || c.outcome == Outcome::answered);
     if (a->json) {
-      std::printf(
-          "{\"worker\": \"%s\", \"quiet_ms_p50\": %.4f, \"quiet_ms_p99\": %.4f, \"quiet_rss_mb\": %.1f, \"cases\": [",
-          ep.c_str(), quiet_p50, quiet_p99, rss_quiet);
-      for (std::size_t i = 0; i < results.size(); ++i) {
-        const CaseResult& c = results[i];
-        std::printf(
-            "%s\n  {\"case\": \"%s\", \"outcome\": \"%s\", \"worker_rss_mb\": %.1f, \"answer_ms\": %.4f, "
-            "\"answer_ms_p99\": %.4f, \"vs_quiet_p50\": %.2f, \"honest_rounds\": %u, \"honest_incomplete\": %u}",
-            i ? "," : "", c.name.c_str(), outcome_name(c.outcome), c.worker_rss_mb, c.answer_ms_p50, c.answer_ms_p99,
-            c.answer_ms_p50 / quiet_p50, c.honest_rounds, c.honest_incomplete);
-      }
-      std::printf("\n], \"set_memory_factor\": %.2f, \"all_refused_or_answered\": %s}\n", set_factor,
-                  all_ok ? "true" : "false");
+      Json cases = Json::array();
+      for (const CaseResult& c : results)
+        cases.push_back({{"case", c.name},
+                         {"outcome", outcome_name(c.outcome)},
+                         {"worker_rss_mb", round_to(c.worker_rss_mb, 1)},
+                         {"answer_ms", round_to(c.answer_ms_p50, 4)},
+                         {"answer_ms_p99", round_to(c.answer_ms_p99, 4)},
+                         {"vs_quiet_p50", round_to(c.answer_ms_p50 / quiet_p50, 2)},
+                         {"honest_rounds", c.honest_rounds},
+                         {"honest_incomplete", c.honest_incomplete}});
+      print_json({{"worker", ep},
+                  {"quiet_ms_p50", round_to(quiet_p50, 4)},
+                  {"quiet_ms_p99", round_to(quiet_p99, 4)},
+                  {"quiet_rss_mb", round_to(rss_quiet, 1)},
+                  {"cases", std::move(cases)},
+                  {"set_memory_factor", round_to(set_factor, 2)},
+                  {"all_refused_or_answered", all_ok}});
     } else {
       std::printf("honest client, quiet: round %.3f ms p50, %.3f ms p99; worker RSS %.1f MiB\n\n", quiet_p50, quiet_p99,
                   rss_quiet);

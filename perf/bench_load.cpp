@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "bench.hpp"
+#include "bench_json.hpp"
 #include <spheretouch/geom/mesh_io.hpp>
 
 namespace st::bench {
@@ -24,7 +25,7 @@ void add_load(CLI::App& app) {
   cmd->add_option("--runs", a->runs, "loads per mesh")->check(CLI::Range(1, 100))->capture_default_str();
   cmd->add_flag("--json", a->json, "print one JSON object");
   cmd->callback([a] {
-    if (a->json) std::printf("{\"load\": [");
+    Json out = {{"load", Json::array()}};
     for (std::size_t i = 0; i < a->paths.size(); ++i) {
       std::vector<double> s;
       std::size_t faces = 0;
@@ -39,15 +40,15 @@ void add_load(CLI::App& app) {
         faces = m.value().mesh.num_faces();
       }
       std::sort(s.begin(), s.end());
-      const double med = s[s.size() / 2];
+      const double med = s[s.size() / 2], fastest = s.front();
       if (a->json)
-        std::printf("%s{\"mesh\": \"%s\", \"faces\": %zu, \"median_s\": %.4f, \"min_s\": %.4f}", i ? ", " : "",
-                    a->paths[i].c_str(), faces, med, s.front());
+        out["load"].push_back(
+            {{"mesh", a->paths[i]}, {"faces", faces}, {"median_s", round_to(med, 4)}, {"min_s", round_to(fastest, 4)}});
       else
         std::printf("%-50s %9zu faces  median %.3f s  min %.3f s  (%d runs)\n", a->paths[i].c_str(), faces, med,
-                    s.front(), a->runs);
+                    fastest, a->runs);
     }
-    if (a->json) std::printf("]}\n");
+    if (a->json) print_json(out);
   });
 }
 

@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "bench.hpp"
+#include "bench_json.hpp"
 #include <spheretouch/geom/contact.hpp>
 #include <spheretouch/rt/clock.hpp>
 #include <spheretouch/rt/haptic_loop.hpp>
@@ -175,21 +176,29 @@ void add_exchange_impl(CLI::App& app) {
     const double ratio50 = p(*mtx.read, 0.5) / std::max(1.0, p(*tri.read, 0.5));
     const double ratio99 = p(*mtx.read, 0.99) / std::max(1.0, p(*tri.read, 0.99));
     if (a->json) {
-      std::printf(
-          "{\"triple_ns_p50\": %.0f, \"triple_ns_p99\": %.0f, \"mutex_ns_p50\": %.0f, \"mutex_ns_p99\": %.0f, "
-          "\"triple_ns_max\": %lld, \"mutex_ns_max\": %lld, "
-          "\"ratio_p50\": %.2f, \"ratio_p99\": %.2f, \"reads\": %llu, "
-          "\"triple_publish_ns_p50\": %.0f, \"triple_publish_ns_p99\": %.0f, "
-          "\"mutex_publish_ns_p50\": %.0f, \"mutex_publish_ns_p99\": %.0f, "
-          "\"triple_publishes\": %llu, \"mutex_publishes\": %llu, \"timer_ns_p50\": %.0f, "
-          "\"triple_update_only_ns_p50\": %.0f, \"triple_update_only_ns_p99\": %.0f, "
-          "\"line_floor_ns_p50\": %.0f, \"line_floor_ns_p99\": %.0f, \"payload_bytes\": %zu}\n",
-          p(*tri.read, 0.5), p(*tri.read, 0.99), p(*mtx.read, 0.5), p(*mtx.read, 0.99),
-          static_cast<long long>(tri.read->max_ns()), static_cast<long long>(mtx.read->max_ns()), ratio50, ratio99,
-          static_cast<unsigned long long>(tri.read->count()), p(*tri.publish, 0.5), p(*tri.publish, 0.99),
-          p(*mtx.publish, 0.5), p(*mtx.publish, 0.99), static_cast<unsigned long long>(tri.publishes),
-          static_cast<unsigned long long>(mtx.publishes), p(timer, 0.5), p(*upd.read, 0.5), p(*upd.read, 0.99),
-          p(*line.read, 0.5), p(*line.read, 0.99), sizeof(geom::ContactModel));
+      // The histograms count whole nanoseconds: the percentiles go in as integers, as before.
+      auto ns = [](const LatencyHistogram& h, double q) { return h.percentile_ns(q); };
+      print_json({{"triple_ns_p50", ns(*tri.read, 0.5)},
+                  {"triple_ns_p99", ns(*tri.read, 0.99)},
+                  {"mutex_ns_p50", ns(*mtx.read, 0.5)},
+                  {"mutex_ns_p99", ns(*mtx.read, 0.99)},
+                  {"triple_ns_max", tri.read->max_ns()},
+                  {"mutex_ns_max", mtx.read->max_ns()},
+                  {"ratio_p50", round_to(ratio50, 2)},
+                  {"ratio_p99", round_to(ratio99, 2)},
+                  {"reads", tri.read->count()},
+                  {"triple_publish_ns_p50", ns(*tri.publish, 0.5)},
+                  {"triple_publish_ns_p99", ns(*tri.publish, 0.99)},
+                  {"mutex_publish_ns_p50", ns(*mtx.publish, 0.5)},
+                  {"mutex_publish_ns_p99", ns(*mtx.publish, 0.99)},
+                  {"triple_publishes", tri.publishes},
+                  {"mutex_publishes", mtx.publishes},
+                  {"timer_ns_p50", ns(timer, 0.5)},
+                  {"triple_update_only_ns_p50", ns(*upd.read, 0.5)},
+                  {"triple_update_only_ns_p99", ns(*upd.read, 0.99)},
+                  {"line_floor_ns_p50", ns(*line.read, 0.5)},
+                  {"line_floor_ns_p99", ns(*line.read, 0.99)},
+                  {"payload_bytes", sizeof(geom::ContactModel)}});
     } else {
       std::printf("take-newest ContactModel (%zu B), reader at 1 kHz, writer flat out, %.0f s per variant\n",
                   sizeof(geom::ContactModel), a->seconds);
@@ -283,13 +292,11 @@ void bare_round(std::int64_t periods, std::int64_t period_ns, LatencyStats& s) {
   }
 }
 
-void print_latency_json(const char* name, const LatencyStats& s) {
-  auto us = [&](double q) { return static_cast<double>(s.wake->percentile_ns(q)) / 1000.0; };
-  std::printf(
-      "\"%s\": {\"p50_us\": %.1f, \"p99_us\": %.1f, \"p999_us\": %.1f, \"max_us\": %.1f, \"ticks\": %llu, "
-      "\"misses\": %llu}",
-      name, us(0.5), us(0.99), us(0.999), static_cast<double>(s.wake->max_ns()) / 1000.0,
-      static_cast<unsigned long long>(s.ticks), static_cast<unsigned long long>(s.misses));
+Json latency_json(const LatencyStats& s) {
+  auto us = [&](double q) { return round_to(static_cast<double>(s.wake->percentile_ns(q)) / 1000.0, 1); };
+  return {{"p50_us", us(0.5)},    {"p99_us", us(0.99)},
+          {"p999_us", us(0.999)}, {"max_us", round_to(static_cast<double>(s.wake->max_ns()) / 1000.0, 1)},
+          {"ticks", s.ticks},     {"misses", s.misses}};
 }
 
 void add_haptic_impl(CLI::App& app) {
@@ -396,18 +403,19 @@ void add_haptic_impl(CLI::App& app) {
                          std::max<double>(1.0, static_cast<double>(bare.wake->percentile_ns(0.999)));
     const rt::TelemetryStats ts = telemetry.stats();
     if (a->json) {
-      std::printf("{");
-      print_latency_json("bare", bare);
-      std::printf(", ");
-      print_latency_json("loop", loop);
-      std::printf(
-          ", \"tick_compute_p999_us\": %.2f, \"tick_compute_p50_us\": %.2f, \"tick_compute_max_us\": %.1f, "
-          "\"p999_ratio\": %.3f, \"seconds\": %.1f, \"rate_hz\": %.1f, \"load\": %s, \"models\": %llu, "
-          "\"telemetry_pushed\": %llu, \"telemetry_dropped\": %llu, \"rt\": \"%s\"}\n",
-          compute_p999_us, static_cast<double>(compute->percentile_ns(0.5)) / 1000.0,
-          static_cast<double>(compute->max_ns()) / 1000.0, ratio, a->seconds, a->rate_hz, a->no_load ? "false" : "true",
-          static_cast<unsigned long long>(servo.stats().models), static_cast<unsigned long long>(ts.pushed),
-          static_cast<unsigned long long>(ts.dropped), rt_report.c_str());
+      print_json({{"bare", latency_json(bare)},
+                  {"loop", latency_json(loop)},
+                  {"tick_compute_p999_us", round_to(compute_p999_us, 2)},
+                  {"tick_compute_p50_us", round_to(static_cast<double>(compute->percentile_ns(0.5)) / 1000.0, 2)},
+                  {"tick_compute_max_us", round_to(static_cast<double>(compute->max_ns()) / 1000.0, 1)},
+                  {"p999_ratio", round_to(ratio, 3)},
+                  {"seconds", a->seconds},
+                  {"rate_hz", a->rate_hz},
+                  {"load", !a->no_load},
+                  {"models", servo.stats().models},
+                  {"telemetry_pushed", ts.pushed},
+                  {"telemetry_dropped", ts.dropped},
+                  {"rt", rt_report}});
     } else {
       std::printf("wake-up latency at %.0f Hz, %.0f s per variant, %s; real-time: %s\n", a->rate_hz, a->seconds,
                   a->no_load ? "no load" : "other core saturated", rt_report.c_str());

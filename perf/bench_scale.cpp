@@ -46,6 +46,7 @@
 #include <sys/socket.h>
 
 #include "bench.hpp"
+#include "bench_json.hpp"
 #include "fanout_floor.hpp"
 #include <spheretouch/geom/collide.hpp>
 #include <spheretouch/geom/mesh_io.hpp>
@@ -952,86 +953,122 @@ void run_scale(const ScaleArgs& a) {
   };
 
   if (a.json) {
-    std::printf("{\"bench\": \"scale\", \"probe\": \"%s\", \"object\": \"%s\", \"object_faces\": %zu, \"runs\": %d,\n",
-                a.probe.c_str(), a.object.c_str(), object.faces.size(), a.runs);
-    std::printf(" \"share_tree\": \"%s\", \"contact_radius_mm\": %.3f, \"object_bytes\": %.0f,\n", a.share_tree.c_str(),
-                model.contact_radius, object_bytes);
-    std::printf(" \"client_cpu_tcp\": {\"workers\": [1, 2, 4, 8, 16], \"us_per_round\": [");
-    for (std::size_t i = 0; i < cpu_tcp.size(); ++i) std::printf("%s%.2f", i ? ", " : "", cpu_tcp[i]);
-    std::printf("], \"fit_a_us\": %.2f, \"fit_b_us_per_worker\": %.3f},\n", cpu_a, cpu_b);
-    std::printf(" \"client_message_work_us\": %.3f,\n", msg_work);
-    std::printf(" \"test_cost\": {\"us_per_sphere_test\": %.6f, \"us_per_tri_test\": %.6f},\n", cost_sphere_us, cost_tri_us);
-    std::printf(" \"networks\": [");
-    for (std::size_t k = 0; k < std::size(kNetworks); ++k)
-      std::printf("%s{\"name\": \"%s\", \"rtt_us\": %.2f, \"bytes_per_us\": %.0f, \"vm_client\": %s}", k ? ", " : "",
-                  kNetworks[k].name, kNetworks[k].rtt_us, kNetworks[k].bytes_per_us,
-                  kNetworks[k].vm_client ? "true" : "false");
-    std::printf("],\n \"inproc_floor\": [");
-    for (std::size_t k = 0; k < floors.size(); ++k)
-      std::printf("%s{\"workers\": %u, \"p50_us\": %.2f}", k ? ", " : "", floors[k].first, floors[k].second);
-    std::printf("],\n \"validation\": [");
-    for (std::size_t k = 0; k < checks.size(); ++k)
-      std::printf(
-          "%s\n  {\"pose\": %zu, \"workers\": %u, \"floor_us\": %.2f, \"predicted_us\": %.2f, "
-          "\"measured_us\": %.2f, \"compute_alone_us\": %.2f, \"compute_in_round_us\": %.2f, "
-          "\"gather_us\": %.2f, \"compute_corun_us\": %.2f, \"predicted_corun_us\": %.2f}",
-          k ? "," : "", checks[k].pose, checks[k].workers, checks[k].floor_us, checks[k].predicted_us,
-          checks[k].measured_us, checks[k].compute_alone_us, checks[k].compute_in_round_us, checks[k].gather_us,
-          checks[k].compute_corun_us, checks[k].predicted_corun_us);
-    std::printf("],\n \"memory\": [");
-    for (std::size_t k = 0; k < memory.size(); ++k)
-      std::printf(
-          "%s\n  {\"workers\": %u, \"mapping\": \"%s\", \"max_share_faces\": %.0f, \"max_share_bytes\": %.0f, "
-          "\"per_worker_over_single\": %.4f}",
-          k ? "," : "", memory[k].workers, geom::to_string(memory[k].mapping), memory[k].max_share_faces,
-          memory[k].max_share_bytes, memory[k].max_share_bytes / object_bytes);
-    std::printf("],\n \"rows\": [");
-    for (std::size_t k = 0; k < rows.size(); ++k) {
-      const Row& r = rows[k];
-      std::printf(
-          "%s\n  {\"pose\": %zu, \"contacts\": %u, \"workers\": %u, \"mapping\": \"%s\", \"layer\": %u, "
-          "\"block_size\": %u, \"blocks\": %u, \"auto_split\": %s, \"busy_workers\": %u, \"single_us\": %.2f, "
-          "\"max_worker_us\": %.2f, \"mean_worker_us\": %.2f, \"sum_worker_us\": %.2f, \"imbalance\": %.3f, "
-          "\"redundancy\": %.3f, \"client_us\": %.2f, \"compute_round_us\": %.2f, \"max_reply_bytes\": %zu, "
-          "\"compute_speedup\": %.3f, \"sphere_tests_ratio\": %.3f, \"tri_tests_ratio\": %.3f, "
-          "\"imbalance_counted\": %.3f, \"redundancy_counted\": %.3f, \"oracle_imbalance\": %.3f, "
-          "\"block_imbalance\": %.3f, \"shipped_imbalance\": %.3f, \"shipped_blocks\": %u, \"shipped_faces\": %u, "
-          "\"assisted_imbalance\": %.3f, \"assist_critical\": %.3f, \"assist_client\": %.3f, \"assisted_blocks\": %u",
-          k ? "," : "", r.pose, r.contacts, r.workers, geom::to_string(r.mapping), r.split.layer, r.split.block_size,
-          r.split.blocks, r.split.automatic ? "true" : "false", r.busy, r.single_us, r.max_us, r.mean_us, r.sum_us,
-          r.imbalance(), r.redundancy(), r.client_us, r.compute_round_us, r.max_reply_bytes,
-          r.single_us / r.compute_round_us, r.sphere_ratio(), r.tri_ratio(), r.work_imbalance(), r.work_redundancy(),
-          r.oracle_imbalance, r.block_imbalance, r.shipped_imbalance, r.shipped_blocks, r.shipped_faces,
-          r.assisted_imbalance, r.assist_critical, r.assist_client, r.assisted_blocks);
-      for (const Network& n : kNetworks)
-        std::printf(", \"round_%s_us\": %.2f, \"speedup_%s\": %.3f", n.name, predicted(r, n), n.name,
-                    r.single_us / predicted(r, n));
-      std::printf("}");
+    // Byte and face counts are whole numbers held in doubles: integers in the JSON, as before.
+    auto whole = [](double v) { return static_cast<std::int64_t>(std::llround(v)); };
+    Json us_per_round = Json::array();
+    for (double v : cpu_tcp) us_per_round.push_back(round_to(v, 2));
+    Json networks = Json::array();
+    for (const Network& n : kNetworks)
+      networks.push_back({{"name", n.name},
+                          {"rtt_us", round_to(n.rtt_us, 2)},
+                          {"bytes_per_us", whole(n.bytes_per_us)},
+                          {"vm_client", n.vm_client}});
+    Json inproc_floor = Json::array();
+    for (const auto& [W, p50] : floors) inproc_floor.push_back({{"workers", W}, {"p50_us", round_to(p50, 2)}});
+    Json validation = Json::array();
+    for (const Check& c : checks)
+      validation.push_back({{"pose", c.pose},
+                            {"workers", c.workers},
+                            {"floor_us", round_to(c.floor_us, 2)},
+                            {"predicted_us", round_to(c.predicted_us, 2)},
+                            {"measured_us", round_to(c.measured_us, 2)},
+                            {"compute_alone_us", round_to(c.compute_alone_us, 2)},
+                            {"compute_in_round_us", round_to(c.compute_in_round_us, 2)},
+                            {"gather_us", round_to(c.gather_us, 2)},
+                            {"compute_corun_us", round_to(c.compute_corun_us, 2)},
+                            {"predicted_corun_us", round_to(c.predicted_corun_us, 2)}});
+    Json mem = Json::array();
+    for (const Memory& m : memory)
+      mem.push_back({{"workers", m.workers},
+                     {"mapping", geom::to_string(m.mapping)},
+                     {"max_share_faces", whole(m.max_share_faces)},
+                     {"max_share_bytes", whole(m.max_share_bytes)},
+                     {"per_worker_over_single", round_to(m.max_share_bytes / object_bytes, 4)}});
+    Json rws = Json::array();
+    for (const Row& r : rows) {
+      Json j = {{"pose", r.pose},
+                {"contacts", r.contacts},
+                {"workers", r.workers},
+                {"mapping", geom::to_string(r.mapping)},
+                {"layer", r.split.layer},
+                {"block_size", r.split.block_size},
+                {"blocks", r.split.blocks},
+                {"auto_split", r.split.automatic},
+                {"busy_workers", r.busy},
+                {"single_us", round_to(r.single_us, 2)},
+                {"max_worker_us", round_to(r.max_us, 2)},
+                {"mean_worker_us", round_to(r.mean_us, 2)},
+                {"sum_worker_us", round_to(r.sum_us, 2)},
+                {"imbalance", round_to(r.imbalance(), 3)},
+                {"redundancy", round_to(r.redundancy(), 3)},
+                {"client_us", round_to(r.client_us, 2)},
+                {"compute_round_us", round_to(r.compute_round_us, 2)},
+                {"max_reply_bytes", r.max_reply_bytes},
+                {"compute_speedup", round_to(r.single_us / r.compute_round_us, 3)},
+                {"sphere_tests_ratio", round_to(r.sphere_ratio(), 3)},
+                {"tri_tests_ratio", round_to(r.tri_ratio(), 3)},
+                {"imbalance_counted", round_to(r.work_imbalance(), 3)},
+                {"redundancy_counted", round_to(r.work_redundancy(), 3)},
+                {"oracle_imbalance", round_to(r.oracle_imbalance, 3)},
+                {"block_imbalance", round_to(r.block_imbalance, 3)},
+                {"shipped_imbalance", round_to(r.shipped_imbalance, 3)},
+                {"shipped_blocks", r.shipped_blocks},
+                {"shipped_faces", r.shipped_faces},
+                {"assisted_imbalance", round_to(r.assisted_imbalance, 3)},
+                {"assist_critical", round_to(r.assist_critical, 3)},
+                {"assist_client", round_to(r.assist_client, 3)},
+                {"assisted_blocks", r.assisted_blocks}};
+      for (const Network& n : kNetworks) {
+        j[std::string("round_") + n.name + "_us"] = round_to(predicted(r, n), 2);
+        j[std::string("speedup_") + n.name] = round_to(r.single_us / predicted(r, n), 3);
+      }
+      rws.push_back(std::move(j));
     }
-    std::printf("\n],\n \"assist_rounds\": [");
-    for (std::size_t k = 0; k < assist_rounds.size(); ++k) {
-      const AssistRound& x = assist_rounds[k];
-      std::printf(
-          "%s\n  {\"pose\": %zu, \"contacts\": %u, \"workers\": %u, \"assist_blocks\": %u, \"blocks_assisted\": %u, "
-          "\"imbalance_counted\": %.3f, \"assisted_imbalance\": %.3f, \"assist_critical\": %.3f, \"assist_client\": "
-          "%.3f}",
-          k ? "," : "", x.pose, x.contacts, assist_w, a.assist_blocks, x.blocks, x.imbalance, x.assisted, x.critical,
-          x.client);
-    }
-    std::printf("\n],\n \"summary\": [");
-    for (std::size_t k = 0; k < summaries.size(); ++k) {
-      const Summary& u = summaries[k];
-      std::printf("%s\n  {\"workers\": %u, \"mapping\": \"%s\", \"poses\": %zu", k ? "," : "", u.workers,
-                  geom::to_string(u.mapping), u.poses);
+    Json assist = Json::array();
+    for (const AssistRound& x : assist_rounds)
+      assist.push_back({{"pose", x.pose},
+                        {"contacts", x.contacts},
+                        {"workers", assist_w},
+                        {"assist_blocks", a.assist_blocks},
+                        {"blocks_assisted", x.blocks},
+                        {"imbalance_counted", round_to(x.imbalance, 3)},
+                        {"assisted_imbalance", round_to(x.assisted, 3)},
+                        {"assist_critical", round_to(x.critical, 3)},
+                        {"assist_client", round_to(x.client, 3)}});
+    Json summary = Json::array();
+    for (const Summary& u : summaries) {
+      Json j = {{"workers", u.workers}, {"mapping", geom::to_string(u.mapping)}, {"poses", u.poses}};
       for (auto [name, sp] : {std::pair{"imbalance_counted", &u.imbalance_counted}, std::pair{"imbalance", &u.imbalance},
                               std::pair{"redundancy_counted", &u.redundancy_counted},
                               std::pair{"redundancy", &u.redundancy}, std::pair{"oracle_imbalance", &u.oracle},
                               std::pair{"block_imbalance", &u.block}, std::pair{"shipped_imbalance", &u.shipped},
                               std::pair{"assisted_imbalance", &u.assisted}, std::pair{"assist_critical", &u.critical}})
-        std::printf(", \"%s\": {\"mean\": %.3f, \"median\": %.3f, \"max\": %.3f}", name, sp->mean, sp->median, sp->max);
-      std::printf("}");
+        j[name] = {{"mean", round_to(sp->mean, 3)}, {"median", round_to(sp->median, 3)}, {"max", round_to(sp->max, 3)}};
+      summary.push_back(std::move(j));
     }
-    std::printf("\n]}\n");
+    print_json({{"bench", "scale"},
+                {"probe", a.probe},
+                {"object", a.object},
+                {"object_faces", object.faces.size()},
+                {"runs", a.runs},
+                {"share_tree", a.share_tree},
+                {"contact_radius_mm", round_to(model.contact_radius, 3)},
+                {"object_bytes", whole(object_bytes)},
+                {"client_cpu_tcp",
+                 {{"workers", cpu_ws},
+                  {"us_per_round", std::move(us_per_round)},
+                  {"fit_a_us", round_to(cpu_a, 2)},
+                  {"fit_b_us_per_worker", round_to(cpu_b, 3)}}},
+                {"client_message_work_us", round_to(msg_work, 3)},
+                {"test_cost",
+                 {{"us_per_sphere_test", round_to(cost_sphere_us, 6)}, {"us_per_tri_test", round_to(cost_tri_us, 6)}}},
+                {"networks", std::move(networks)},
+                {"inproc_floor", std::move(inproc_floor)},
+                {"validation", std::move(validation)},
+                {"memory", std::move(mem)},
+                {"rows", std::move(rws)},
+                {"assist_rounds", std::move(assist)},
+                {"summary", std::move(summary)}});
     return;
   }
 

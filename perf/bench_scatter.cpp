@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "bench.hpp"
+#include "bench_json.hpp"
 #include "fanout_floor.hpp"
 #include <spheretouch/geom/primitives.hpp>
 #include <spheretouch/net/local_workers.hpp>
@@ -234,13 +235,21 @@ void add_scatter(CLI::App& app) {
     const Stats f = summarise(flo);
 
     if (a->json)
-      std::printf(
-          "{\"bench\": \"scatter\", \"workers\": %d, \"transport\": \"%s\", \"gap_us\": %d, \"rounds\": %d, "
-          "\"incomplete\": %d, \"p50_us\": %.1f, \"p99_us\": %.1f, \"max_us\": %.1f, \"mean_us\": %.1f, "
-          "\"baseline_p50_us\": %.1f, \"baseline_p99_us\": %.1f, \"floor_p50_us\": %.1f, \"floor_p99_us\": %.1f, "
-          "\"lost\": %d}\n",
-          a->workers, a->transport.c_str(), a->gap_us, a->rounds, incomplete, s.p50, s.p99, s.max, s.mean, b.p50, b.p99,
-          f.p50, f.p99, lost);
+      print_json({{"bench", "scatter"},
+                  {"workers", a->workers},
+                  {"transport", a->transport},
+                  {"gap_us", a->gap_us},
+                  {"rounds", a->rounds},
+                  {"incomplete", incomplete},
+                  {"p50_us", round_to(s.p50, 1)},
+                  {"p99_us", round_to(s.p99, 1)},
+                  {"max_us", round_to(s.max, 1)},
+                  {"mean_us", round_to(s.mean, 1)},
+                  {"baseline_p50_us", round_to(b.p50, 1)},
+                  {"baseline_p99_us", round_to(b.p99, 1)},
+                  {"floor_p50_us", round_to(f.p50, 1)},
+                  {"floor_p99_us", round_to(f.p99, 1)},
+                  {"lost", lost}});
     else
       std::printf(
           "scatter  %d workers  %-6s gap %5d us  %d rounds (%d incomplete)  p50 %7.1f us  p99 %7.1f us  max %8.1f us"

@@ -387,13 +387,16 @@ def force(out, md, summary):
         def g2(v, fmt):
             return "–" if v is None else format(v, fmt)
         for r in f["truth"]:
-            order = "same" if r["order_fd"] == 0 and r["order_pd_mm"] == 0 else f"{max(r['order_fd'], r['order_pd_mm']):.2g}"
+            # The bench writes null for a figure it could not compute (non-finite): a dash here.
+            ofd, opd = r["order_fd"], r["order_pd_mm"]
+            order = ("–" if ofd is None or opd is None else
+                     "same" if ofd == 0 and opd == 0 else f"{max(ofd, opd):.2g}")
             workers = "–" if r["workers_identical"] is None else ("same " + r["workers_checked"] if r["workers_identical"] else "DIFFER")
-            md.append(f"| {r['scene']} | {r['model']} | {r['loop']} | {r['f_err_rms_N']:.3f} ({r['f_err_max_N']:.2f}) | "
-                      f"{r['over_law_max_N']:.3f} | {r['pd_over_max_mm']:.3f} | {r['round_dir_p99_deg']:.2f} | "
-                      f"{r['dir_err_p90_deg']:.1f} | {r['lag_p90_deg']:.1f} | {r['step_max_N']:.3f} | "
-                      f"{r['clear01_max_N']:.3f} / {r['clear03_max_N']:.3f} | {g2(r['keep_min'], '.2f')} | "
-                      f"{g2(r['twin_dir_p99_deg'], '.2g')} | {r['energy_per_cycle_mJ']:.4f} | "
+            md.append(f"| {r['scene']} | {r['model']} | {r['loop']} | {g2(r['f_err_rms_N'], '.3f')} ({g2(r['f_err_max_N'], '.2f')}) | "
+                      f"{g2(r['over_law_max_N'], '.3f')} | {g2(r['pd_over_max_mm'], '.3f')} | {g2(r['round_dir_p99_deg'], '.2f')} | "
+                      f"{g2(r['dir_err_p90_deg'], '.1f')} | {g2(r['lag_p90_deg'], '.1f')} | {g2(r['step_max_N'], '.3f')} | "
+                      f"{g2(r['clear01_max_N'], '.3f')} / {g2(r['clear03_max_N'], '.3f')} | {g2(r['keep_min'], '.2f')} | "
+                      f"{g2(r['twin_dir_p99_deg'], '.2g')} | {g2(r['energy_per_cycle_mJ'], '.4f')} | "
                       f"{g2(r['still_rms_30hz_N'], '.2g')} | {order} | {workers} |")
         md.append("")
     if f.get("contact_cost"):
@@ -404,10 +407,12 @@ def force(out, md, summary):
         md.append("| contacts | model | collide() µs | contact cold µs | contact warm µs (mean) | cold / collide | "
                   "warm / collide (mean) |")
         md.append("|---:|---|---:|---:|---:|---:|---:|")
+        def pct(v):
+            return "–" if v is None else f"{100 * v:.0f}"
         for c in f["contact_cost"]:
-            md.append(f"| {c['contacts']} | {c['model']} | {c['collide_us_p50']:.0f} | {c['contact_cold_us_p50']:.0f} | "
-                      f"{c['contact_warm_us_p50']:.0f} ({c['contact_warm_us_mean']:.0f}) | {100 * c['share_cold']:.0f} % | "
-                      f"{100 * c['share_warm']:.0f} % ({100 * c['share_warm_mean']:.0f} %) |")
+            md.append(f"| {c['contacts']} | {c['model']} | {g(c['collide_us_p50'], '.0f')} | {g(c['contact_cold_us_p50'], '.0f')} | "
+                      f"{g(c['contact_warm_us_p50'], '.0f')} ({g(c['contact_warm_us_mean'], '.0f')}) | {pct(c['share_cold'])} % | "
+                      f"{pct(c['share_warm'])} % ({pct(c['share_warm_mean'])} %) |")
         md.append("")
     summary["force"] = f
 

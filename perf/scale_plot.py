@@ -25,8 +25,8 @@ def load(paths, want):
         name = d['object'].split('/')[-1].rsplit('.', 1)[0]
         lines = {}
         for r in rows:
-            if r['pose'] != pose:
-                continue
+            if r['pose'] != pose or r['speedup_10GbE'] is None or r['compute_speedup'] is None:
+                continue  # null: a speed-up the bench could not compute (a zero time)
             lines.setdefault(r['mapping'], []).append((r['workers'], r['speedup_10GbE'], r['compute_speedup']))
         panels.append((f"{name} ({d['object_faces']:,} faces), pose {pose}: {contacts:,} contacts", lines))
     return panels
