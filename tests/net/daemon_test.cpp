@@ -6,6 +6,9 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <regex>
 #include <sys/stat.h>
 
@@ -350,6 +353,28 @@ TEST_CASE("daemon: refuses a non-loopback bind without --insecure; a config file
     zmq::context_t ctx;
     zmq::socket_t d = dealer_to(ctx, "tcp://127.0.0.1:" + std::to_string(port), 5000);
     CHECK(std::get<HelloMsg>(decoded(request(d, encode(HeartbeatMsg{1})))).worker_id == 9);
+  }
+}
+
+TEST_CASE("the systemd units' Documentation= names pages of this repository that exist") {
+  const char* src = std::getenv("ST_SOURCE_ROOT");
+  REQUIRE(src);
+  const std::string prefix = "https://github.com/spheretouch/spheretouch/blob/main/";
+  for (const char* unit :
+       {"daemons/systemd/spheretouch-worker@.service.in", "daemons/systemd/spheretouch-workers.target"}) {
+    CAPTURE(unit);
+    std::ifstream in(std::string(src) + "/" + unit);
+    REQUIRE(in.good());
+    int docs = 0;
+    for (std::string line; std::getline(in, line);) {
+      if (line.rfind("Documentation=", 0) != 0) continue;
+      ++docs;
+      const std::string url = line.substr(std::strlen("Documentation="));
+      CAPTURE(url);
+      REQUIRE(url.rfind(prefix, 0) == 0);
+      CHECK(std::filesystem::exists(std::string(src) + "/" + url.substr(prefix.size())));  // not outside the repo
+    }
+    CHECK(docs >= 1);
   }
 }
 

@@ -277,6 +277,7 @@ void sort_face_pairs(std::span<FacePair> pairs, std::vector<std::uint64_t>& scra
   const std::uint64_t object_mask = (std::uint64_t(1) << object_bits) - 1;
   for (std::size_t i = 0; i < n; ++i)
     pairs[i] = {std::uint32_t(a[i] >> object_bits), std::uint32_t(a[i] & object_mask)};
+  ST_ASSERT(std::is_sorted(pairs.begin(), pairs.end()), "the radix passes leave the pairs in (probe, object) order");
 }
 
 FaceCounts count_faces(std::span<const FacePair> pairs, std::vector<std::uint32_t>& scratch) {

@@ -334,6 +334,7 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
           if (exact_pair(slot, of)) emit(PT.face_order[slot], of);
           continue;
         }
+        ST_ASSERT(tri_n < kTriBatch, "a full batch was flushed before the next candidate");
         tri_slot[tri_n] = slot;
         tri_face[tri_n] = of;
         if (++tri_n == kTriBatch) flush_tris();
@@ -394,6 +395,7 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
         check_decision(tri_slot[i], tri_face[i], false);
         continue;
       }
+      ST_ASSERT(full_n < kTriBatch, "a full batch of hard pairs was filtered before the next");
       full_slot[full_n] = tri_slot[i];
       full_face[full_n] = tri_face[i];
       for (int r = 0; r < 15; ++r) full_v[r][full_n] = v[r][i];
