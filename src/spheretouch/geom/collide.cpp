@@ -96,7 +96,7 @@ std::uint32_t CollideScratch::next_generation() {
 namespace {
 // The tree was built for this mesh: every face it names is one of the mesh's (a worker's tree of
 // its blocks names a subset). O(faces): evaluated only where asserts are checked.
-bool names_faces_of(const SphereTree& tree, const Mesh& mesh) {
+[[maybe_unused]] bool names_faces_of(const SphereTree& tree, const Mesh& mesh) {
   for (const std::uint32_t f : tree.face_order)
     if (f >= mesh.faces.size()) return false;
   return true;
