@@ -3,6 +3,7 @@
 #pragma once
 #include <doctest/doctest.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -50,6 +51,13 @@ inline void write_file(const std::string& path, const std::string& data) {
   std::ofstream o(path, std::ios::binary);
   o.write(data.data(), static_cast<std::streamsize>(data.size()));
   REQUIRE(o.good());
+}
+
+/// x moved by `ulps` representable doubles (up for ulps > 0, down for ulps < 0).
+inline double nudge(double x, int ulps) {
+  for (; ulps > 0; --ulps) x = std::nextafter(x, HUGE_VAL);
+  for (; ulps < 0; ++ulps) x = std::nextafter(x, -HUGE_VAL);
+  return x;
 }
 
 /// The whole file (empty when it cannot be read).

@@ -1,7 +1,12 @@
 // SPDX-License-Identifier: BSD-3-Clause
 /// \file
-/// <spheretouch/abi.hpp>: the ABI namespace. Every header of the library includes this first, so
-/// every name is declared in st::SPHERETOUCH_ABI (an inline namespace: users write st::geom::Mesh).
+/// <spheretouch/abi.hpp>: the ABI namespace. Every header of the library includes this first and
+/// opens its namespace as `namespace st::inline SPHERETOUCH_ABI::geom {`, so every name is declared
+/// in st::SPHERETOUCH_ABI (an inline namespace: users write st::geom::Mesh).
+//
+// The explicit form, because compilers differ on `namespace st::geom {` once st::v0_a16::geom
+// exists: GCC reopens the inline namespace's member (CWG 2061), Clang 14 makes a new st::geom
+// (found by the CI's Clang fuzz build as a link error). tests/install checks the installed headers.
 //
 // Why. Eigen lays out its fixed-size vectorisable types (Isometry3d, Quaterniond, Vector4d) by
 // EIGEN_MAX_STATIC_ALIGN_BYTES, which follows the compiler's -m flags (16 with SSE, 32 with AVX, 64
@@ -25,10 +30,7 @@
   SPHERETOUCH_ABI_CAT(SPHERETOUCH_ABI_CAT(SPHERETOUCH_ABI_CAT(v, SPHERETOUCH_VERSION_MAJOR), _a), \
                       EIGEN_MAX_STATIC_ALIGN_BYTES)
 
-// The library's namespaces, declared once inside the ABI namespace: a later `namespace st::geom {`
-// extends st::SPHERETOUCH_ABI::geom (a namespace of the inline set is reopened by its plain name).
-// A header that opened one of these before including this one would make the name ambiguous: a
-// compile error, never a silent second namespace.
+// The library's namespaces, declared inside the ABI namespace (each header opens its own as above).
 /// spheretouch: haptic rendering of large meshes with exact collision detection. The public API
 /// (Body, ComputeCollision, collide()) is in `<spheretouch/collide.hpp>`.
 namespace st {

@@ -62,6 +62,9 @@ void run(const Body& probe, const Body& object, const Pose& relative, const Coll
   }
   geom::CollideConfig options = geom::DefaultCollideConfig();
   options.stop_layer = request.approximate_layer;
+  options.object_roots = request.object_roots;
+  options.restrict_object = request.restrict_object;
+  options.tri_filter = request.tri_filter;
   // geom::collide stops once more than options.max_pairs are found: stop at the first max_pairs.
   options.max_pairs = request.max_pairs == SIZE_MAX ? SIZE_MAX : request.max_pairs - 1;
   geom::collide(probe.mesh(), probe.tree(), object.mesh(), object.tree(), relative, options, scratch, inner);

@@ -21,6 +21,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -76,6 +77,14 @@ struct CollisionRequest {
   /// approximate mode reports every face pair of the overlapping sphere pairs there (a superset).
   int approximate_layer = geom::kExact;
   bool sort_pairs = true;  ///< pairs sorted by (probe face, object face)
+  /// With restrict_object: only the object subtrees under these node indices (a worker's blocks:
+  /// geom::group_roots, partition.hpp), which must be disjoint subtrees; empty = nothing. The
+  /// span must outlive the query.
+  std::span<const std::uint32_t> object_roots{};
+  bool restrict_object = false;  ///< use object_roots instead of the whole object
+  /// Decide candidate triangle pairs with the certified float filter before the exact test (the
+  /// same pairs either way; false measures the exact test alone).
+  bool tri_filter = true;
 
   static CollisionRequest all_pairs() { return {}; }                                       ///< every colliding pair
   static CollisionRequest first_pair() { return {.max_pairs = 1}; }                        ///< "do they touch?"

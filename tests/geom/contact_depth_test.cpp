@@ -14,7 +14,7 @@
 #include <spheretouch/geom/primitives.hpp>
 #include "test_models.hpp"
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 /// The patch model's parts, for the tests (a friend of ContactBuilder).
 struct PatchTestAccess {
   using Patch = ContactBuilder::Patch;

@@ -10,6 +10,7 @@
 #include <random>
 
 #include "exact_ref.hpp"
+#include "test_util.hpp"
 
 using st::geom::orient2d;
 using st::geom::orient3d;
@@ -17,12 +18,6 @@ using st::geom::Vec3;
 namespace detail = st::geom::detail;
 
 namespace {
-
-double nudge(double x, int ulps) {
-  for (; ulps > 0; --ulps) x = std::nextafter(x, HUGE_VAL);
-  for (; ulps < 0; ++ulps) x = std::nextafter(x, -HUGE_VAL);
-  return x;
-}
 
 /// Random configurations: generic, collinear/coplanar by construction (rounded), ulp-perturbed,
 /// integer-grid (exactly degenerate), translated far from the origin, scaled by 2^k.
@@ -53,7 +48,7 @@ struct Gen {
       const double s = uni(-2, 2), t = uni(-2, 2);
       p[3] = p[0] + s * (p[1] - p[0]) + t * (p[2] - p[0]);  // rounded: near the plane
       if (kind == 3)
-        for (int k = 0; k < 3; ++k) p[3][k] = nudge(p[3][k], pick(-2, 2));
+        for (int k = 0; k < 3; ++k) p[3][k] = st::test::nudge(p[3][k], pick(-2, 2));
       if (kind == 4) p[2] = p[0] + uni(-2, 2) * (p[1] - p[0]);  // near-collinear base
     }
     // Translate (exactly representable shift is not required: the reference sees the doubles).
@@ -78,12 +73,12 @@ TEST_CASE("orient2d: hand cases and sign conventions") {
   CHECK(orient2d(0.1, 0.1, 0.2, 0.2, 0.3, 0.3) == st::test::ref_orient2d(0.1, 0.1, 0.2, 0.2, 0.3, 0.3));
   // A point one ulp off a long line, far from the origin.
   const double big = 1e6;
-  CHECK(orient2d(big, big, big + 1, big + 1, nudge(big + 3, 1), big + 3) == -1);
-  CHECK(orient2d(big, big, big + 1, big + 1, nudge(big + 3, -1), big + 3) == 1);
+  CHECK(orient2d(big, big, big + 1, big + 1, st::test::nudge(big + 3, 1), big + 3) == -1);
+  CHECK(orient2d(big, big, big + 1, big + 1, st::test::nudge(big + 3, -1), big + 3) == 1);
   CHECK(orient2d(big, big, big + 1, big + 1, big + 3, big + 3) == 0);
   // Huge and tiny magnitudes (overflow of the filter, subnormal-free exact stage).
-  CHECK(orient2d(0, 0, 1e300, 1e300, 2e300, nudge(2e300, 1)) == 1);
-  CHECK(orient2d(0, 0, 1e-300, 1e-300, 2e-300, nudge(2e-300, -1)) == -1);
+  CHECK(orient2d(0, 0, 1e300, 1e300, 2e300, st::test::nudge(2e300, 1)) == 1);
+  CHECK(orient2d(0, 0, 1e-300, 1e-300, 2e-300, st::test::nudge(2e-300, -1)) == -1);
   CHECK(orient2d(0, 0, 1e-300, 1e-300, 2e-300, 2e-300) == 0);
   CHECK(orient2d(NAN, 0, 1, 0, 0, 1) == 0);
 }
@@ -99,8 +94,8 @@ TEST_CASE("orient3d: hand cases and sign conventions") {
   const Vec3 x = o + Vec3(1, 0, 0), y = o + Vec3(0, 1, 0);
   const Vec3 on = o + Vec3(3, 5, 0);
   CHECK(orient3d(o, x, y, on) == 0);
-  CHECK(orient3d(o, x, y, Vec3(on.x(), on.y(), nudge(on.z(), 1))) == 1);
-  CHECK(orient3d(o, x, y, Vec3(on.x(), on.y(), nudge(on.z(), -1))) == -1);
+  CHECK(orient3d(o, x, y, Vec3(on.x(), on.y(), st::test::nudge(on.z(), 1))) == 1);
+  CHECK(orient3d(o, x, y, Vec3(on.x(), on.y(), st::test::nudge(on.z(), -1))) == -1);
   // Beyond the filter's range (2^300) and far below it.
   const double h = 0x1p400, l = 0x1p-400;
   CHECK(orient3d(h * a, h * b, h * c, Vec3(h, h, 0x1p100)) == 1);

@@ -13,6 +13,8 @@
 #include <spheretouch/geom/pose_io.hpp>
 #include <spheretouch/geom/primitives.hpp>
 #include <spheretouch/collide.hpp>
+#include <spheretouch/contact.hpp>
+#include <spheretouch/load_mesh.hpp>
 #include "test_models.hpp"
 #include "test_util.hpp"
 
@@ -156,6 +158,61 @@ TEST_CASE("approximate requests report a superset of the exact pairs") {
   REQUIRE(exact.colliding());
   CHECK(approx.pairs.size() >= exact.pairs.size());
   CHECK(api_is_subset(exact.pairs, approx.pairs));
+}
+
+TEST_CASE("the object-block restriction, the contact patch and load_mesh through the public API") {
+  const st::Body hand = api_body(*st::test::model_mesh("hand_L2.off"));
+  const st::Body ele = api_body(*st::test::model_mesh("elephant.off"));
+  st::ComputeCollision pair(hand, ele);
+  const char* root_dir = std::getenv("ST_SOURCE_ROOT");
+  const st::Result<std::vector<st::Pose>> poses =
+      st::geom::read_poses(std::string(root_dir ? root_dir : ".") + "/perf/results/poses/hand_elephant.txt");
+  REQUIRE(poses.ok());
+  const st::Pose pose = poses.value().at(5);  // ~1,000 contacts
+  st::CollisionResult all, part, none;
+  pair.at_relative(pose, st::CollisionRequest::all_pairs(), all);
+  REQUIRE(all.colliding());
+  // The root's children split in two halves: the two restricted queries' pairs are the whole set.
+  const st::geom::SphereNode& root = ele.tree().nodes[0];
+  REQUIRE(root.count >= 2);
+  std::vector<std::uint32_t> first, second;
+  for (std::uint32_t k = 0; k < root.count; ++k) (k < root.count / 2 ? first : second).push_back(root.first + k);
+  std::vector<st::FacePair> merged;
+  for (const auto* roots : {&first, &second}) {
+    st::CollisionRequest r = st::CollisionRequest::all_pairs();
+    r.restrict_object = true;
+    r.object_roots = *roots;
+    pair.at_relative(pose, r, part);
+    merged.insert(merged.end(), part.pairs.begin(), part.pairs.end());
+  }
+  std::sort(merged.begin(), merged.end());
+  CHECK(merged == all.pairs);
+  st::CollisionRequest empty = st::CollisionRequest::all_pairs();
+  empty.restrict_object = true;
+  pair.at_relative(pose, empty, none);
+  CHECK_FALSE(none.colliding());
+  st::CollisionRequest unfiltered = st::CollisionRequest::all_pairs();
+  unfiltered.tri_filter = false;
+  pair.at_relative(pose, unfiltered, part);
+  CHECK(part.pairs == all.pairs);
+  CHECK(part.stats.tri_exact == part.stats.tri_pairs);
+
+  // The contact model of what the query found, as the builder gives it directly.
+  st::ComputeContactPatch patch;
+  const st::ContactModel m = patch(pair, pose, all);
+  st::geom::ContactBuilder direct;
+  const st::ContactModel d = direct.build(hand.mesh(), ele.mesh(), pose, all.pairs);
+  CHECK(m.in_contact());
+  CHECK(m.penetration_mm == d.penetration_mm);
+  CHECK((st::geom::to_eigen(m.force_dir) - st::geom::to_eigen(d.force_dir)).norm() == 0.0);
+
+  // st::load_mesh: the mesh geom::load_mesh reads, or its error.
+  const st::Result<st::Mesh> loaded = st::load_mesh(st::test::model("hand_L2.off"));
+  REQUIRE(loaded.ok());
+  CHECK(loaded.value().num_faces() == hand.mesh().num_faces());
+  const st::Result<st::Mesh> missing = st::load_mesh("/nonexistent/hand.off");
+  CHECK_FALSE(missing.ok());
+  CHECK(st::test::contains(missing.error(), "/nonexistent/hand.off"));
 }
 
 TEST_CASE("bad bodies and requests are refused with a message") {

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "exact_ref.hpp"
+#include "test_util.hpp"
 
 using st::geom::tri_tri_overlap;
 using st::geom::Vec3;
@@ -182,12 +183,6 @@ Tri3 map(const Tri3& t, F f) {
   return {f(t[0]), f(t[1]), f(t[2])};
 }
 
-double nudge(double x, int ulps) {
-  for (; ulps > 0; --ulps) x = std::nextafter(x, HUGE_VAL);
-  for (; ulps < 0; ++ulps) x = std::nextafter(x, -HUGE_VAL);
-  return x;
-}
-
 }  // namespace
 
 TEST_CASE("tri_tri: hand cases agree with the exact reference") {
@@ -249,50 +244,50 @@ TEST_CASE("tri_tri: one-ulp perturbations flip touching pairs") {
       {"vertex on face (apex height)",
        [](double c, int d) {
          const Tri3 p{Vec3(0, 0, c), Vec3(4, 0, c), Vec3(0, 4, c)};
-         const Tri3 q{Vec3(1, 1, nudge(c, d)), Vec3(1, 2, c + 1), Vec3(2, 1, c + 1)};
+         const Tri3 q{Vec3(1, 1, st::test::nudge(c, d)), Vec3(1, 2, c + 1), Vec3(2, 1, c + 1)};
          return std::make_pair(p, q);
        },
        true, true, false},
       {"edge on edge (3D)",
        [](double c, int d) {
          const Tri3 p{Vec3(-1, 0, c), Vec3(1, 0, c), Vec3(0, 0, c + 1)};
-         const Tri3 q{Vec3(0, -1, nudge(c, d)), Vec3(0, 1, nudge(c, d)), Vec3(0, 0, c - 1)};
+         const Tri3 q{Vec3(0, -1, st::test::nudge(c, d)), Vec3(0, 1, st::test::nudge(c, d)), Vec3(0, 0, c - 1)};
          return std::make_pair(p, q);
        },
        false, true, true},
       {"coplanar vertex on edge (in-plane)",
        [](double c, int d) {
          const Tri3 p{Vec3(0, c, 5), Vec3(2, c, 5), Vec3(0, c + 2, 5)};
-         const Tri3 q{Vec3(1, nudge(c, d), 5), Vec3(0, c - 2, 5), Vec3(2, c - 2, 5)};
+         const Tri3 q{Vec3(1, st::test::nudge(c, d), 5), Vec3(0, c - 2, 5), Vec3(2, c - 2, 5)};
          return std::make_pair(p, q);
        },
        false, true, true},
       {"near-coplanar: apex on edge, rest one ulp above the plane",
        [](double c, int d) {
-         const double up = nudge(c, 1);
+         const double up = st::test::nudge(c, 1);
          const Tri3 p{Vec3(0, 0, c), Vec3(2, 0, c), Vec3(0, 2, c)};
-         const Tri3 q{Vec3(1, nudge(0.0 + c, d) - c, c), Vec3(0, -2, up), Vec3(2, -2, up)};
+         const Tri3 q{Vec3(1, st::test::nudge(0.0 + c, d) - c, c), Vec3(0, -2, up), Vec3(2, -2, up)};
          return std::make_pair(p, q);
        },
        false, true, true},
       {"vertex on vertex",
        [](double c, int d) {
          const Tri3 p{Vec3(c, c, c), Vec3(c + 1, c, c), Vec3(c, c + 1, c)};
-         const Tri3 q{Vec3(c, c, nudge(c, d)), Vec3(c - 1, c, c + 1), Vec3(c, c - 1, c + 1)};
+         const Tri3 q{Vec3(c, c, st::test::nudge(c, d)), Vec3(c - 1, c, c + 1), Vec3(c, c - 1, c + 1)};
          return std::make_pair(p, q);
        },
        false, true, false},  // pushed through, Q's cut lies outside P's corner
       {"segment end on face",
        [](double c, int d) {
          const Tri3 p{Vec3(0, 0, c), Vec3(4, 0, c), Vec3(0, 4, c)};
-         const Tri3 q{Vec3(1, 1, nudge(c, d)), Vec3(1, 1, c + 2), Vec3(1, 1, c + 2)};
+         const Tri3 q{Vec3(1, 1, st::test::nudge(c, d)), Vec3(1, 1, c + 2), Vec3(1, 1, c + 2)};
          return std::make_pair(p, q);
        },
        true, true, false},
       {"point on face",
        [](double c, int d) {
          const Tri3 p{Vec3(0, 0, c), Vec3(4, 0, c), Vec3(0, 4, c)};
-         const Vec3 v(1, 1, nudge(c, d));
+         const Vec3 v(1, 1, st::test::nudge(c, d));
          return std::make_pair(p, Tri3{v, v, v});
        },
        false, true, false},
@@ -300,7 +295,7 @@ TEST_CASE("tri_tri: one-ulp perturbations flip touching pairs") {
        [](double c, int d) {
          const Vec3 a(c, 0, 0), b(c + 1, 0, 0);
          const Tri3 p{Vec3(c - 1, 0, 0), a, a};
-         return std::make_pair(p, Tri3{Vec3(nudge(c, d), 0, 0), b, b});
+         return std::make_pair(p, Tri3{Vec3(st::test::nudge(c, d), 0, 0), b, b});
        },
        true, true, false},
   };
@@ -309,7 +304,7 @@ TEST_CASE("tri_tri: one-ulp perturbations flip touching pairs") {
     const Vec3 o(c, c, c);
     const Tri3 p{o, o + Vec3(2, -2, 0), o + Vec3(2, 0, -2)};
     const Vec3 apex = o + Vec3(1, -1, 0);  // on P's edge
-    const Tri3 q{Vec3(nudge(apex.x(), d), apex.y(), apex.z()), o + Vec3(4, 1, 1), o + Vec3(3, 3, 0)};
+    const Tri3 q{Vec3(st::test::nudge(apex.x(), d), apex.y(), apex.z()), o + Vec3(4, 1, 1), o + Vec3(3, 3, 0)};
     return std::make_pair(p, q);
   };
   // Exact 2^k scalings keep every ulp relation; 2^±250 also exercise the rescaling path.

@@ -45,6 +45,10 @@ done
 # Installed headers include each other as <spheretouch/...> only: a user's own geom/mesh.hpp can
 # never be picked up in place of ours.
 if grep -rn '#include "' "$incdir/spheretouch"; then fail "an installed header includes with quotes (above)"; fi
+# ... and opens its namespaces inside the ABI namespace (abi.hpp: Clang does not reopen it by name).
+if grep -rnE '^namespace st::(geom|rt|net|engine|view|config|detail)\b' "$incdir/spheretouch"; then
+  fail "an installed header opens a library namespace outside st::SPHERETOUCH_ABI (above)"
+fi
 
 # The example, built against the installed library only, three ways: whatever -march the user
 # picks, the Cflags keep the library's layout of Pose, so the pairs are right.

@@ -19,7 +19,7 @@
 
 #include <spheretouch/geom/result.hpp>
 
-namespace st::config {
+namespace st::inline SPHERETOUCH_ABI::config {
 
 /// Parses TOML text; a syntax error names the file, line and column.
 inline Result<toml::table> parse_toml(std::string_view text, const std::string& file) {

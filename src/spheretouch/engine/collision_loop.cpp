@@ -9,7 +9,7 @@
 #include <spheretouch/geom/pod.hpp>
 #include <spheretouch/rt/clock.hpp>
 
-namespace st::engine {
+namespace st::inline SPHERETOUCH_ABI::engine {
 
 CollisionLoop::CollisionLoop(const geom::Mesh& probe, const geom::Mesh& object, rt::TripleBuffer<rt::PoseSample>& poses,
                              rt::TripleBuffer<geom::ContactModel>& models, CollideFn collide, double rate_hz,

@@ -19,7 +19,7 @@
 #include <spheretouch/rt/triple_buffer.hpp>
 #include <spheretouch/engine/view_feed.hpp>
 
-namespace st::engine {
+namespace st::inline SPHERETOUCH_ABI::engine {
 
 /// One finished collision round, for the trace and the summary.
 struct RoundRecord {

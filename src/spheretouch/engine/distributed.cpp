@@ -12,7 +12,7 @@
 #include <spheretouch/net/tree_backend.hpp>
 #include <spheretouch/net/worker_config.hpp>
 
-namespace st::engine {
+namespace st::inline SPHERETOUCH_ABI::engine {
 
 int Fleet::up() const {
   int n = 0;

@@ -19,7 +19,7 @@
 #include <spheretouch/net/local_workers.hpp>
 #include <spheretouch/net/scatter_gather.hpp>
 
-namespace st::engine {
+namespace st::inline SPHERETOUCH_ABI::engine {
 
 /// A client's CURVE settings: the workers' public key and this client's key pair, Z85.
 struct ClientCurve {

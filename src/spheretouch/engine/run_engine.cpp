@@ -28,7 +28,7 @@
 #include <spheretouch/rt/shm_segment.hpp>
 #include <spheretouch/rt/telemetry.hpp>
 
-namespace st::engine {
+namespace st::inline SPHERETOUCH_ABI::engine {
 
 namespace {
 

@@ -27,11 +27,11 @@
 #include <spheretouch/rt/shm_status.hpp>
 #include <spheretouch/geom/result.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 class PoseFeedDevice;
 }
 
-namespace st::engine {
+namespace st::inline SPHERETOUCH_ABI::engine {
 
 /// What the caller adds to a scene.
 struct RunOptions {

@@ -11,7 +11,7 @@
 
 #include <spheretouch/geom/collide.hpp>
 
-namespace st::engine {
+namespace st::inline SPHERETOUCH_ABI::engine {
 
 Status write_contact_ply(const std::string& path, const geom::Mesh& probe, const geom::Mesh& object,
                          const geom::Pose& pose, const std::vector<geom::FacePair>& pairs) {

@@ -9,7 +9,7 @@
 #include <spheretouch/engine/collision_loop.hpp>
 #include <spheretouch/geom/mesh.hpp>
 
-namespace st::engine {
+namespace st::inline SPHERETOUCH_ABI::engine {
 
 /// Writes both bodies in the object's frame (probe placed by `pose`) as one ASCII PLY with
 /// per-face colours: colliding faces red, the rest grey (object) or light blue (probe). Faces

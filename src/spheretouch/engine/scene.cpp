@@ -16,7 +16,7 @@
 #include <spheretouch/geom/primitives.hpp>
 #include <spheretouch/net/curve_keys.hpp>
 
-namespace st::engine {
+namespace st::inline SPHERETOUCH_ABI::engine {
 
 using config::TomlReader;
 

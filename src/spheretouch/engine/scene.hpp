@@ -21,7 +21,7 @@
 #include <spheretouch/rt/simulated_device.hpp>
 #include <spheretouch/rt/udp_device.hpp>
 
-namespace st::engine {
+namespace st::inline SPHERETOUCH_ABI::engine {
 
 /// [workers] assist_blocks = "auto" with worker daemons: at ~1,000 contacts the client assist
 /// takes 5-8 blocks a round (spheretouch-bench scale, perf/RESULTS.md "Client assist").

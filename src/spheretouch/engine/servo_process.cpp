@@ -24,7 +24,7 @@
 
 extern char** environ;
 
-namespace st::engine {
+namespace st::inline SPHERETOUCH_ABI::engine {
 
 Status write_servo_results(const std::string& path, const ServoResults& r) {
   std::FILE* f = std::fopen(path.c_str(), "w");

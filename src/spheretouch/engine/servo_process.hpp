@@ -17,7 +17,7 @@
 #include <spheretouch/rt/shm_status.hpp>
 #include <spheretouch/rt/simulated_device.hpp>
 
-namespace st::engine {
+namespace st::inline SPHERETOUCH_ABI::engine {
 
 /// What a servo reports at its end (servo.txt: one "key value" per line).
 struct ServoResults {

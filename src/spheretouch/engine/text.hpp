@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <string>
 
-namespace st::engine {
+namespace st::inline SPHERETOUCH_ABI::engine {
 
 /// Appends printf-style text to `out`, whatever its length; the compiler checks the format
 /// against the arguments.

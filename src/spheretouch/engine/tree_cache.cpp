@@ -9,7 +9,7 @@
 
 #include <spheretouch/geom/tree_io.hpp>
 
-namespace st::engine {
+namespace st::inline SPHERETOUCH_ABI::engine {
 
 std::string default_tree_cache_dir() {
   if (const char* d = std::getenv("ST_TREE_CACHE"); d && *d) return d;

@@ -7,7 +7,7 @@
 
 #include <spheretouch/geom/sphere_tree.hpp>
 
-namespace st::engine {
+namespace st::inline SPHERETOUCH_ABI::engine {
 
 /// Where cached trees live: $ST_TREE_CACHE, else $XDG_CACHE_HOME/spheretouch/trees, else
 /// ~/.cache/spheretouch/trees.

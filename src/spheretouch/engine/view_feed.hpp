@@ -19,7 +19,7 @@
 #include <spheretouch/rt/seqlock.hpp>
 #include <spheretouch/rt/view_frame.hpp>
 
-namespace st::engine {
+namespace st::inline SPHERETOUCH_ABI::engine {
 
 class ViewFeed {
  public:

@@ -7,6 +7,7 @@
 #include <cstdlib>
 
 namespace st {
+inline namespace SPHERETOUCH_ABI {
 namespace {
 std::atomic<AssertHandler> g_handler{nullptr};
 }  // namespace
@@ -28,4 +29,5 @@ void detail::assert_failed(const char* cond, const char* what, const char* file,
   std::abort();
 }
 
+}  // namespace SPHERETOUCH_ABI
 }  // namespace st

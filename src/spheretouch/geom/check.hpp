@@ -10,6 +10,7 @@
 #include <spheretouch/abi.hpp>
 
 namespace st {
+inline namespace SPHERETOUCH_ABI {
 
 /// What a broken invariant reports.
 struct AssertInfo {
@@ -36,6 +37,7 @@ namespace detail {
 [[noreturn]] void assert_failed(const char* cond, const char* what, const char* file, int line);
 }  // namespace detail
 
+}  // namespace SPHERETOUCH_ABI
 }  // namespace st
 
 #if defined(ST_CHECKS)

@@ -38,7 +38,7 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #endif
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 namespace {
 
 // Error-free transformations (Dekker/Knuth; Ogita, Rump, Oishi 2005 "Accurate sum and dot product").

@@ -14,7 +14,7 @@
 #include <spheretouch/geom/mesh.hpp>
 #include <spheretouch/geom/sphere_tree.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 /// Probe local frame -> object local frame (mesh.hpp): p_obj_local = R p_probe_local + t. The ONE arithmetic every
 /// caller (collide, references in tests, tools) uses, so "the same transformed doubles" is literal.

@@ -11,7 +11,7 @@
 #include <spheretouch/geom/check.hpp>
 #include <spheretouch/geom/contact_patch.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 Result<ContactModelKind> parse_contact_model(std::string_view name) {
   if (name == "paper") return ContactModelKind::paper;

@@ -92,7 +92,7 @@
 #include <spheretouch/geom/mesh.hpp>
 #include <spheretouch/geom/pod.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 /// Face with |cross| <= kDegenerateRel · longest edge² is degenerate (sin of its smallest angle
 /// below ~1e-12: no direction can be trusted from it).

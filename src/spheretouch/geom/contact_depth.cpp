@@ -13,7 +13,7 @@
 #include <spheretouch/geom/contact_patch.hpp>
 #include <spheretouch/geom/contact_regions.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 namespace {
 

@@ -12,7 +12,7 @@
 #include <spheretouch/geom/contact.hpp>
 #include <spheretouch/geom/surface_walk.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 struct PatchBody;  // contact_patch.hpp
 

@@ -30,7 +30,7 @@
 #include <spheretouch/geom/contact_segments.hpp>
 #include <spheretouch/geom/surface_walk.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 // ---------------------------------------------------------------------------------------------
 // Vertex adjacency.

@@ -18,7 +18,7 @@
 #include <spheretouch/geom/contact_regions.hpp>
 #include <spheretouch/geom/contact_segments.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 /// Unit normal and centroid of face f of m, m's local frame; false when degenerate or non-finite.
 bool face_frame(const Mesh& m, std::uint32_t f, Vec3& centroid, Vec3& normal);

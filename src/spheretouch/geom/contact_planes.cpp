@@ -7,7 +7,7 @@
 #include <cmath>
 #include <limits>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 void PlaneClusters::add(const Vec3& normal, const Vec3& centroid) {
   assert(std::abs(normal.norm() - 1) < 1e-6);

@@ -14,7 +14,7 @@
 
 #include <spheretouch/geom/mesh.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 /// A set of colliding faces that lie in one plane (to within kPlanarCos).
 struct PlaneCluster {

@@ -7,7 +7,7 @@
 #include <spheretouch/geom/check.hpp>
 #include <spheretouch/geom/contact_patch.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 namespace {
 

@@ -10,7 +10,7 @@
 #include <cstdint>
 #include <vector>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 struct PatchBody;  // contact_patch.hpp
 

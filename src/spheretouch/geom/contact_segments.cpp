@@ -16,7 +16,7 @@
 // of this file only: no ABI is crossed, so GCC's note that passing them changes without AVX is moot.
 #pragma GCC diagnostic ignored "-Wpsabi"
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 namespace {
 

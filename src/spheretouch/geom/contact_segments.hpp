@@ -8,7 +8,7 @@
 #include <spheretouch/abi.hpp>
 #include <spheretouch/geom/mesh.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 /// A colliding face as the patch model's segment computation reads it: its vertices in the
 /// round's common frame (the local frame of the body with more colliding faces), its unit normal

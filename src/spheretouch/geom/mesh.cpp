@@ -8,7 +8,7 @@
 #include <cmath>
 #include <cstring>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 Box Mesh::local_bounds() const {
   Box b;

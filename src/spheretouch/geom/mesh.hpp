@@ -20,7 +20,7 @@
 
 #include <spheretouch/geom/result.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 using Vec3 = Eigen::Vector3d;              ///< point or vector, double precision, mm
 using Pose = Eigen::Isometry3d;            ///< rigid transform, double precision, mm

@@ -16,7 +16,7 @@
 
 #include <spheretouch/geom/mesh_io_detail.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 namespace detail {
 
 /// Reads a whole file; the error names the file.

@@ -13,7 +13,7 @@
 
 #include <spheretouch/geom/mesh.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 /// How a file is turned into a Mesh.
 struct LoadConfig {

@@ -15,7 +15,7 @@
 
 #include <spheretouch/geom/mesh_io.hpp>
 
-namespace st::geom::detail {
+namespace st::inline SPHERETOUCH_ABI::geom::detail {
 
 /// The one error helper of the text readers: "name:line" then the message pieces.
 template <class... Args>

@@ -4,7 +4,7 @@
 // with a message saying why, instead of the importer list mesh_io_assimp.cpp would consult.
 #include <spheretouch/geom/mesh_io_detail.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 Result<LoadedMesh> detail::load_with_assimp(const std::string& path, const LoadConfig&) {
   return fail(path,

@@ -9,7 +9,7 @@
 
 #include <spheretouch/geom/mesh_io_detail.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 using namespace detail;
 

@@ -7,7 +7,7 @@
 #include <cmath>
 #include <cstdio>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 std::span<const std::uint32_t> Partition::block(std::uint32_t k) const {
   const std::size_t b = std::size_t{k} * block_size;

@@ -16,7 +16,7 @@
 
 #include <spheretouch/geom/sphere_tree.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 /// How blocks are dealt to workers.
 enum class Mapping : std::uint8_t {

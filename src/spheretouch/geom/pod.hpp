@@ -10,7 +10,7 @@
 #include <cmath>
 #include <type_traits>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 /// A 3-vector of doubles, plain data.
 struct PodVec3 {

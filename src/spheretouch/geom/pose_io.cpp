@@ -14,7 +14,7 @@
 #include <sstream>
 #include <system_error>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 namespace {
 
 constexpr int kValues = 16;

@@ -12,7 +12,7 @@
 #include <spheretouch/geom/mesh.hpp>
 #include <spheretouch/geom/result.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 /// Largest accepted entry of |RᵀR − I| for the rotation block: catches typos and reflections,
 /// lets through matrices printed with ~7 significant digits. Accepted poses are kept as written.

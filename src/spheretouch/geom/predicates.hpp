@@ -9,7 +9,7 @@
 
 #include <spheretouch/geom/mesh.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 /// Sign of (b−a)×(c−a): +1 when a,b,c turn counter-clockwise, −1 clockwise, 0 collinear. Exact.
 int orient2d(double ax, double ay, double bx, double by, double cx, double cy) noexcept;

@@ -6,7 +6,7 @@
 #include <map>
 #include <numbers>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 Mesh make_icosphere(double radius_mm, int frequency) {
   const double p = (1 + std::sqrt(5.0)) / 2;  // golden ratio

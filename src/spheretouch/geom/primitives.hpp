@@ -6,7 +6,7 @@
 #include <spheretouch/abi.hpp>
 #include <spheretouch/geom/mesh.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 /// Geodesic sphere: an icosahedron whose edges are split into `frequency` parts, projected onto
 /// the sphere; 20·frequency² faces (frequency 7 gives 980, the paper's ~960-face ball).

@@ -5,7 +5,7 @@
 #include <atomic>
 #include <cstdlib>
 
-namespace st::geom::simd {
+namespace st::inline SPHERETOUCH_ABI::geom::simd {
 namespace {
 
 Isa detect() {

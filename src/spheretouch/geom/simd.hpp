@@ -45,7 +45,7 @@
 #endif
 
 /// SIMD lanes per instruction set and the run-time choice among them.
-namespace st::geom::simd {
+namespace st::inline SPHERETOUCH_ABI::geom::simd {
 
 /// An instruction set a kernel can run on, in increasing order of width.
 enum class Isa : std::uint8_t {

@@ -30,7 +30,7 @@
 #include <cstring>
 #include <limits>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 namespace {
 
 // GCC 12.2 at -O3 -march=native (tree SLP vectorizer) was seen to drop the double->float->double

@@ -11,7 +11,7 @@
 
 #include <spheretouch/geom/mesh.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 /// How a SphereTree is built. Part of the tree file's hash (tree_io.hpp).
 struct TreeConfig {

@@ -7,7 +7,7 @@
 #include <cmath>
 #include <numbers>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 namespace {
 
 Result<Mesh> subdivide_once(const Mesh& in) {

@@ -6,7 +6,7 @@
 #include <spheretouch/abi.hpp>
 #include <spheretouch/geom/mesh.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 /// Subdivides `levels` times. Face f of level k becomes faces 4f..4f+3 of level k+1: the corners
 /// at v0, v1, v2 then the middle triangle. Old vertices keep their indices; edge vertices follow

@@ -11,7 +11,7 @@
 #include <spheretouch/geom/check.hpp>
 #include <spheretouch/geom/contact_patch.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 void SurfaceWalk::set_direction(const Vec3& dir) {
   ST_ASSERT(std::abs(dir.squaredNorm() - 1) < 1e-9, "the walk's direction is a unit vector");

@@ -9,7 +9,7 @@
 
 #include <spheretouch/geom/contact.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 /// Point location on one body's surface seen along a direction d: walks from a start face across
 /// edges (Guibas & Stolfi's walk) over the faces that face d, to the face above a point, and

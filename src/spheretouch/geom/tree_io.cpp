@@ -17,7 +17,7 @@
 #include <cstring>
 #include <fstream>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 namespace {
 
 static_assert(std::endian::native == std::endian::little, "tree files are little-endian");

@@ -12,7 +12,7 @@
 
 #include <spheretouch/geom/sphere_tree.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 inline constexpr std::uint32_t kTreeFormatVersion = 1;  ///< bump when the layout or build changes
 

@@ -34,7 +34,7 @@
 
 #include <spheretouch/geom/predicates.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 namespace {
 
 using detail::orient3d_bounded;

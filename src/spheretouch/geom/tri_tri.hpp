@@ -7,7 +7,7 @@
 #include <spheretouch/abi.hpp>
 #include <spheretouch/geom/mesh.hpp>
 
-namespace st::geom {
+namespace st::inline SPHERETOUCH_ABI::geom {
 
 /// True when closed triangles (a0,a1,a2) and (b0,b1,b2) share at least one point. Exact.
 /// A zero-area triangle is the segment or point its vertices span. Hot path: no allocation,

@@ -15,7 +15,7 @@
 #include <spheretouch/net/block_set.hpp>
 #include <spheretouch/net/protocol.hpp>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 /// Collides the probe against one worker's share of the object.
 class CollisionBackend {

@@ -9,7 +9,7 @@
 
 #include <sodium.h>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 namespace {
 

@@ -19,7 +19,7 @@
 #include <spheretouch/geom/sphere_tree.hpp>
 #include <spheretouch/net/protocol.hpp>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 /// One worker's share of the work, as geometry.
 struct BlockSet {

@@ -15,7 +15,7 @@
 #include <cstdlib>
 #include <cstring>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 namespace {
 

@@ -10,7 +10,7 @@
 
 #include <spheretouch/geom/result.hpp>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 /// Overwrites a string's characters with zeros (sodium_memzero: not optimised away) and empties
 /// it; for every copy of a secret key once it has been handed to libzmq. Copies made by earlier

@@ -11,7 +11,7 @@
 #include <cstdio>
 #include <cstring>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 namespace {
 

@@ -10,7 +10,7 @@
 #include <string>
 #include <zmq.hpp>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 /// What a probe saw, most telling first.
 enum class ProbeOutcome {

@@ -4,7 +4,7 @@
 
 #include <future>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 std::string inproc_endpoint(int i, const std::string& tag) {
   return "inproc://spheretouch-worker-" + (tag.empty() ? "" : tag + "-") + std::to_string(i);

@@ -15,7 +15,7 @@
 
 #include <spheretouch/net/worker_service.hpp>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 /// Workers on threads, stopped and joined on destruction.
 class LocalWorkers {

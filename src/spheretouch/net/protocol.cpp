@@ -7,7 +7,7 @@
 #include <spheretouch/geom/pose_io.hpp>
 #include <spheretouch/net/wire.hpp>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 // The wire's type byte of a message is its variant index + 1: the alternatives' order is the
 // protocol's, asserted so a reordering cannot silently renumber the messages.

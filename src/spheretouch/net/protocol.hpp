@@ -19,7 +19,7 @@
 #include <spheretouch/geom/mesh.hpp>
 #include <spheretouch/geom/result.hpp>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 inline constexpr std::uint32_t kMagic = 0x504E5453;  ///< "STNP" read as a little-endian u32
 inline constexpr std::uint16_t kVersion = 2;         ///< bumped on any incompatible change (2: Query skip list)

@@ -8,7 +8,7 @@
 #include <numeric>
 #include <unordered_map>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 namespace {
 

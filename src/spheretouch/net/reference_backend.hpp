@@ -10,7 +10,7 @@
 #include <spheretouch/abi.hpp>
 #include <spheretouch/net/backend.hpp>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 /// Grid + SAT backend; see the file comment.
 std::unique_ptr<CollisionBackend> make_reference_backend();

@@ -20,7 +20,7 @@
 
 #include <spheretouch/net/worker_service.hpp>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 namespace {
 

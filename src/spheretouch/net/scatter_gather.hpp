@@ -75,7 +75,7 @@
 #include <spheretouch/net/block_set.hpp>
 #include <spheretouch/net/protocol.hpp>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 using Clock = std::chrono::steady_clock;  ///< the clock of deadlines and timeouts
 

@@ -8,7 +8,7 @@
 #include <spheretouch/geom/collide.hpp>
 #include <spheretouch/geom/partition.hpp>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 namespace {
 
 class TreeBackend final : public CollisionBackend {

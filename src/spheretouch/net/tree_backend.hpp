@@ -9,7 +9,7 @@
 #include <spheretouch/geom/sphere_tree.hpp>
 #include <spheretouch/net/backend.hpp>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 /// Factory of sphere-tree backends (the daemon's and the in-process workers' default). A worker
 /// builds one subtree per block of its share; `per_block` false builds one tree over the whole

@@ -19,7 +19,7 @@
 static_assert(std::endian::native == std::endian::little,
               "wire encoding is little-endian and written with memcpy: port the writer/reader first");
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 /// Appends little-endian values to a byte vector.
 class Writer {

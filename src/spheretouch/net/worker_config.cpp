@@ -12,7 +12,7 @@
 #include <spheretouch/config/toml_reader.hpp>
 #include <spheretouch/net/worker_service.hpp>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::string& source, DaemonConfig c) {
   Result<toml::table> parsed = config::parse_toml(text, source);

@@ -13,7 +13,7 @@
 #include <spheretouch/geom/result.hpp>
 #include <spheretouch/net/curve_keys.hpp>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 /// Everything a worker daemon is configured with; defaults are safe.
 struct DaemonConfig {

@@ -19,7 +19,7 @@
 #include <set>
 #include <stdexcept>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 /// A complete upload being hashed, decoded and built on the loader thread. The thread owns a
 /// reference, so a service destroyed mid-build leaves it to finish on its own.

@@ -34,7 +34,7 @@
 #include <spheretouch/net/curve_keys.hpp>
 #include <spheretouch/net/protocol.hpp>
 
-namespace st::net {
+namespace st::inline SPHERETOUCH_ABI::net {
 
 /// CURVE on the worker's socket: its secret key and the client public keys it admits (a ZAP
 /// handler in the service's context checks each connecting client against the list).

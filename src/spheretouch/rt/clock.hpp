@@ -9,7 +9,7 @@
 #include <cstdint>
 #include <ctime>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// Now on CLOCK_MONOTONIC, ns.
 inline std::int64_t now_ns() noexcept {

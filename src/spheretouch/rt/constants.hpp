@@ -8,7 +8,7 @@
 #include <cstddef>
 #include <cstdint>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// Bytes in a cache line on x86-64 and most ARMv8 cores; the unit of false-sharing padding.
 /// (std::hardware_destructive_interference_size is also 64 here but warns as ABI-unstable.)

@@ -11,7 +11,7 @@
 #include <Eigen/Geometry>
 #include <cstdint>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// A haptic device seen from the servo loop.
 class Device {

@@ -7,7 +7,7 @@
 #include <spheretouch/geom/check.hpp>
 #include <spheretouch/rt/constants.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 ForceLawConfig DefaultForceLawConfig() { return ForceLawConfig{}; }
 

@@ -9,7 +9,7 @@
 #include <spheretouch/geom/result.hpp>
 #include <spheretouch/rt/constants.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// Which law.
 enum class LawKind { log, linear };

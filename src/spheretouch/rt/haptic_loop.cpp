@@ -18,7 +18,7 @@
 #include <spheretouch/rt/clock.hpp>
 #include <spheretouch/rt/constants.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 HapticLoopConfig DefaultHapticLoopConfig() { return HapticLoopConfig{}; }
 

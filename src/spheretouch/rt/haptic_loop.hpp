@@ -18,7 +18,7 @@
 #include <spheretouch/rt/constants.hpp>
 #include <spheretouch/rt/histogram.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// Loop settings; the initializers (= DefaultHapticLoopConfig()) give 1 kHz and no real-time requests.
 struct HapticLoopConfig {

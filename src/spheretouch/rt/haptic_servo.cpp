@@ -4,7 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 namespace {
 SaturationConfig capped(SaturationConfig s, const Device& d) {

@@ -20,7 +20,7 @@
 #include <spheretouch/rt/telemetry.hpp>
 #include <spheretouch/rt/triple_buffer.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// Counters of a servo (read after the loop stopped, or racily for display).
 struct ServoStats {

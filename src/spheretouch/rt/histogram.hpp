@@ -12,7 +12,7 @@
 
 #include <spheretouch/rt/constants.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// Histogram of non-negative nanosecond values (negative values count as 0).
 class LatencyHistogram {

@@ -8,7 +8,7 @@
 #include <spheretouch/geom/check.hpp>
 #include <spheretouch/rt/constants.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 Result<InterpMode> parse_interp_mode(std::string_view name) {
   if (name == "hold") return InterpMode::hold;

@@ -30,7 +30,7 @@
 #include <spheretouch/rt/constants.hpp>
 #include <spheretouch/rt/force_law.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// Interpolation method.
 enum class InterpMode { hold, paper, plane };

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <sstream>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 namespace {
 /// Energy over which the passivity controller fades in before the predicted end-of-cycle energy

@@ -27,7 +27,7 @@
 #include <cstdint>
 #include <string>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// Guard settings; DefaultPassivityConfig() gives the documented defaults.
 struct PassivityConfig {

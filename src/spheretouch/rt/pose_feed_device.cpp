@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 PoseFeedDevice::PoseFeedDevice(const Eigen::Isometry3d& grip, const Eigen::Vector3d& home, double max_force_N,
                                double max_abs_mm)

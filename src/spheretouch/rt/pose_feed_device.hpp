@@ -15,7 +15,7 @@
 #include <spheretouch/rt/device.hpp>
 #include <spheretouch/rt/triple_buffer.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// A Device moved by poses another thread offers (the live view's page), upsampled to the servo rate.
 class PoseFeedDevice final : public Device {

@@ -10,7 +10,7 @@
 
 #include <spheretouch/geom/pod.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// One device pose sample.
 struct PoseSample {

@@ -8,7 +8,7 @@
 #include <spheretouch/geom/check.hpp>
 #include <spheretouch/rt/constants.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 SaturationConfig DefaultSaturationConfig() { return SaturationConfig{}; }
 

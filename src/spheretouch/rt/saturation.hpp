@@ -12,7 +12,7 @@
 
 #include <spheretouch/rt/constants.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// Saturation settings; the initializers (= DefaultSaturationConfig()) are the Omni's: 3.3 N
 /// peak, 0.88 N continuous, 10 s.

@@ -18,7 +18,7 @@
 
 #include <spheretouch/rt/constants.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// Single-writer, multi-reader latest value. Address-free: may live in shared memory.
 template <class T>

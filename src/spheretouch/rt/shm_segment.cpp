@@ -17,7 +17,7 @@
 
 #include <spheretouch/rt/clock.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 static_assert(offsetof(ShmHeader, creator_pid) == 32 && offsetof(ShmHeader, creator_start_ticks) == 40,
               "these offsets are frozen across layout versions (liveness check of old segments)");

@@ -18,7 +18,7 @@
 #include <spheretouch/rt/shm_status.hpp>
 #include <spheretouch/rt/triple_buffer.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// First bytes of the segment. Plain data except the state word. The fields up to
 /// creator_start_ticks keep their offsets in every layout version, so a newer build can still

@@ -16,7 +16,7 @@
 #include <spheretouch/rt/seqlock.hpp>
 #include <spheretouch/rt/view_frame.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// What the servo publishes every kStatusEveryTicks ticks (from the tick path: plain stores).
 struct ServoStatus {

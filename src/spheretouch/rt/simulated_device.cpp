@@ -9,7 +9,7 @@
 
 #include <spheretouch/geom/pose_io.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 Eigen::Isometry3d Trajectory::at(double t_s) const {
   if (keys.empty()) return Eigen::Isometry3d::Identity();

@@ -15,7 +15,7 @@
 #include <spheretouch/rt/constants.hpp>
 #include <spheretouch/rt/device.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// One scripted pose.
 struct TimedPose {

@@ -15,7 +15,7 @@
 #include <spheretouch/rt/constants.hpp>
 #include <spheretouch/geom/check.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// Bounded SPSC queue of trivially copyable values.
 template <class T>

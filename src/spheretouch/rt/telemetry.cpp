@@ -5,7 +5,7 @@
 #include <chrono>
 #include <cstring>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 Telemetry::Telemetry(std::size_t capacity) : queue_(capacity) {}
 

@@ -16,7 +16,7 @@
 #include <spheretouch/rt/constants.hpp>
 #include <spheretouch/rt/spsc_queue.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// Bits of a servo tick's flags (TelemetrySample::flags, ServoStatus::flags, the telemetry CSV).
 inline constexpr std::uint32_t kTickInContact = 1u << 0;  ///< the interpolated model was in contact

@@ -17,7 +17,7 @@
 
 #include <spheretouch/rt/constants.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// Latest-value SPSC exchange. Exactly one writer thread and one reader thread.
 /// Payloads should carry a sequence number and a monotonic timestamp so the reader knows how

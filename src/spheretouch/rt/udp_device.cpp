@@ -14,7 +14,7 @@
 
 #include <spheretouch/rt/clock.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 namespace {
 

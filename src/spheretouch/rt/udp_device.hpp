@@ -45,7 +45,7 @@
 #include <spheretouch/rt/device.hpp>
 #include <spheretouch/rt/triple_buffer.hpp>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 inline constexpr std::uint32_t kPoseMagic = 0x50485453u;   ///< "STHP" little-endian
 inline constexpr std::uint32_t kForceMagic = 0x46485453u;  ///< "STHF" little-endian

@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 bool sanitize_view_frame(ViewFrame& f, std::uint32_t probe_faces, std::uint32_t object_faces, const char** why) noexcept {
   auto refuse = [why](const char* w) {

@@ -12,7 +12,7 @@
 #include <cstdint>
 #include <type_traits>
 
-namespace st::rt {
+namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// Colliding faces a frame carries per body; more are counted (ViewFrame::kTruncated). 16384 ids
 /// cover a hand pressed flat into a million-face object; a frame is then 128 KiB.

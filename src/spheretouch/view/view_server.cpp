@@ -17,7 +17,7 @@
 #include <spheretouch/net/wire.hpp>
 #include <spheretouch/rt/clock.hpp>
 
-namespace st::view {
+namespace st::inline SPHERETOUCH_ABI::view {
 
 namespace assets {
 extern const std::string_view view_html;

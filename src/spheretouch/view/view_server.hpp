@@ -46,7 +46,7 @@
 struct mg_context;
 struct mg_connection;
 
-namespace st::view {
+namespace st::inline SPHERETOUCH_ABI::view {
 
 struct ViewServerConfig {
   std::string listen = "127.0.0.1:8080";                  ///< ADDR:PORT (port 0: any free port)
