@@ -113,7 +113,7 @@ TEST_CASE("orient2d/orient3d agree with the exact big-integer determinant (rando
     const int want3 = st::test::ref_orient3d(p[0], p[1], p[2], p[3]);
     ++count[want3 + 1];
     REQUIRE(orient3d(p[0], p[1], p[2], p[3]) == want3);
-    REQUIRE(detail::orient3d_exact(p[0], p[1], p[2], p[3]) == want3);
+    REQUIRE(st::geom::detail::orient3d_exact(p[0], p[1], p[2], p[3]) == want3);
     // Argument permutations: an odd permutation negates the sign.
     REQUIRE(orient3d(p[1], p[0], p[2], p[3]) == -want3);
     REQUIRE(orient3d(p[3], p[1], p[2], p[0]) == -want3);
@@ -123,7 +123,7 @@ TEST_CASE("orient2d/orient3d agree with the exact big-integer determinant (rando
       const Vec3 &u = p[t[0]], &v = p[t[1]], &w = p[t[2]];
       const int want2 = st::test::ref_orient2d(u.x(), u.y(), v.x(), v.y(), w.x(), w.y());
       REQUIRE(orient2d(u.x(), u.y(), v.x(), v.y(), w.x(), w.y()) == want2);
-      REQUIRE(detail::orient2d_exact(u.x(), u.y(), v.x(), v.y(), w.x(), w.y()) == want2);
+      REQUIRE(st::geom::detail::orient2d_exact(u.x(), u.y(), v.x(), v.y(), w.x(), w.y()) == want2);
       REQUIRE(orient2d(v.x(), v.y(), u.x(), u.y(), w.x(), w.y()) == -want2);
     }
   }
