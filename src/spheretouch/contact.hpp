@@ -24,8 +24,7 @@ class ComputeContactPatch {
   explicit ComputeContactPatch(ContactConfig config = geom::DefaultContactConfig()) : builder_(config) {}
   /// The model of `collision` (its pairs, found at `relative`: probe frame -> object frame; use
   /// the same pose the query ran at). Object frame, except probe_point (probe frame).
-  ContactModel operator()(const Body& probe, const Body& object, const Pose& relative,
-                          const CollisionResult& collision) {
+  ContactModel operator()(const Body& probe, const Body& object, const Pose& relative, const CollisionResult& collision) {
     return builder_.build(probe.mesh(), object.mesh(), relative, collision.pairs);
   }
   /// The model of what `pair` found at its last query at `relative`.

@@ -89,28 +89,6 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
     inter = inter & ((pmax - omin) > bound) & ((omax - pmin) > bound);
   }
 
-  // The certified triangle filter: for n <= kTriBatch pairs, v[0..8][i] = probe triangle i's
-  // vertices and v[9..14][i] = the object triangle's vertices 1 and 2, each minus the object
-  // triangle's vertex 0, in double then rounded to float. Sets bit i of `decided` when pair i is
-  // proved disjoint or proved intersecting, and then bit i of `overlap` to the answer; an
-  // undecided pair goes to tri_tri_overlap.
-  //
-  // Why it never errs. Axes: the two normals and the nine edge crosses, as float cross products
-  // of float edges. Disjoint: ANY direction along which the projections are apart separates the
-  // triangles, so an axis' rounding does not matter, only that of the gap. Intersecting: the
-  // origin is in P - O (closed) iff h(a) = max_P a.p - min_O a.o >= 0 for every facet normal a of
-  // P - O, and for triangles those normals are among +-n_P, +-n_O, +-e_i x f_j; so both gaps of all
-  // 11 axes exceeding the bound, with the bound covering the computed axis' distance from the
-  // exact one, proves it. Bound, with u = 2^-24 and M = the largest |coordinate| of the 15 floats:
-  // a vertex is within 1.03 u M of its exact value (one double, one float rounding); an edge within
-  // 4.1 u M, |edge| <= 2M; an axis component within 48.4 u M^2 of the exact cross of exact edges,
-  // |axis|_1 <= 24.1 M^2, so h moves by at most 296 u M^3 from axis error; a projection (3-term
-  // float dot) is within 97.1 u M^3 of the exact axis-times-exact-vertex; a gap (two projections
-  // and a subtraction) within 243 u M^3. Together 539 u M^3 < bound = 2^-14 M^3 = 1024 u M^3,
-  // computed in float with three roundings (>= 1020 u M^3). Lanes with M outside [2^-30, 2^36]
-  // (underflow below the bound, overflow of the products) or a non-finite coordinate are left
-  // undecided, so NaN never decides anything. Separation and intersection both proved cannot
-  // happen; should rounding ever claim both, the pair is left to the exact test.
   // The lanes of one step of a batch (v as for tri_filter, from column j): the 15 coordinates, the
   // bound, the edges and the lanes the analysis covers (live, finite, M in range).
   struct TriStep {
@@ -160,6 +138,28 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
     return apart;
   }
 
+  // The certified triangle filter: for n <= kTriBatch pairs, v[0..8][i] = probe triangle i's
+  // vertices and v[9..14][i] = the object triangle's vertices 1 and 2, each minus the object
+  // triangle's vertex 0, in double then rounded to float. Sets bit i of `decided` when pair i is
+  // proved disjoint or proved intersecting, and then bit i of `overlap` to the answer; an
+  // undecided pair goes to tri_tri_overlap.
+  //
+  // Why it never errs. Axes: the two normals and the nine edge crosses, as float cross products
+  // of float edges. Disjoint: ANY direction along which the projections are apart separates the
+  // triangles, so an axis' rounding does not matter, only that of the gap. Intersecting: the
+  // origin is in P - O (closed) iff h(a) = max_P a.p - min_O a.o >= 0 for every facet normal a of
+  // P - O, and for triangles those normals are among +-n_P, +-n_O, +-e_i x f_j; so both gaps of all
+  // 11 axes exceeding the bound, with the bound covering the computed axis' distance from the
+  // exact one, proves it. Bound, with u = 2^-24 and M = the largest |coordinate| of the 15 floats:
+  // a vertex is within 1.03 u M of its exact value (one double, one float rounding); an edge within
+  // 4.1 u M, |edge| <= 2M; an axis component within 48.4 u M^2 of the exact cross of exact edges,
+  // |axis|_1 <= 24.1 M^2, so h moves by at most 296 u M^3 from axis error; a projection (3-term
+  // float dot) is within 97.1 u M^3 of the exact axis-times-exact-vertex; a gap (two projections
+  // and a subtraction) within 243 u M^3. Together 539 u M^3 < bound = 2^-14 M^3 = 1024 u M^3,
+  // computed in float with three roundings (>= 1020 u M^3). Lanes with M outside [2^-30, 2^36]
+  // (underflow below the bound, overflow of the products) or a non-finite coordinate are left
+  // undecided, so NaN never decides anything. Separation and intersection both proved cannot
+  // happen; should rounding ever claim both, the pair is left to the exact test.
   static void tri_filter(const float (*v)[kTriBatch], std::uint32_t n, std::uint32_t& decided, std::uint32_t& overlap) {
     decided = overlap = 0;
     for (std::uint32_t j = 0; j < n; j += WideLanes::width) {
