@@ -49,7 +49,7 @@ inline const geom::Mesh* model_mesh(const std::string& name) {
   auto it = cache.find(name);
   if (it == cache.end()) {
     auto r = geom::load_mesh(st::test::model(name));
-    REQUIRE_MESSAGE(r.ok(), (r.ok() ? std::string() : r.error()));  // the message is built on success too (-s)
+    REQUIRE_MESSAGE(r.ok(), r.error());  // error() is empty on success (the message is built then too, with -s)
     it = cache.emplace(name, std::move(r.value().mesh)).first;
   }
   return &it->second;

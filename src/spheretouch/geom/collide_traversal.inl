@@ -345,9 +345,18 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
   // tri_tri_overlap on the very doubles the box filters bounded (counted in stats.tri_exact).
   bool exact_pair(std::uint32_t slot, std::uint32_t of) {
     ++res.stats.tri_exact;
+    return overlaps(slot, of);
+  }
+  // The exact test itself, uncounted (exact_pair, and the checking mode below).
+  bool overlaps(std::uint32_t slot, std::uint32_t of) const {
     const auto& ix = sc.lidx_[slot];
     const Tri& ot = O.faces[of];
     return tri_tri_overlap(sc.ptx_[ix[0]], sc.ptx_[ix[1]], sc.ptx_[ix[2]], O.local[ot[0]], O.local[ot[1]], O.local[ot[2]]);
+  }
+  // Lanes n.. of a batch: read by whole steps, never decided.
+  static void pad_lanes(float (*v)[kTriBatch], std::uint32_t n) {
+    for (std::uint32_t i = n; i < kTriBatch; ++i)
+      for (int r = 0; r < 15; ++r) v[r][i] = 0.0f;
   }
 
   // The waiting candidates (probe slot, object face) as tri_filter reads them: coordinates minus
@@ -367,20 +376,13 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
       for (int k = 1; k < 3; ++k)
         for (int c = 0; c < 3; ++c) v[9 + 3 * (k - 1) + c][i] = static_cast<float>(O.local[ot[k]][c] - o0[c]);
     }
-    for (std::uint32_t i = n; i < kTriBatch; ++i)
-      for (int r = 0; r < 15; ++r) v[r][i] = 0.0f;  // lanes past n: read by whole steps, never decided
+    pad_lanes(v, n);
   }
 
   // Checking mode (ST_CHECKS: debug, sanitizer and fuzzer builds): a decision of the filter
   // against the exact test (not counted in tri_exact).
-  void check_decision([[maybe_unused]] std::uint32_t slot, [[maybe_unused]] std::uint32_t of, [[maybe_unused]] bool hit) const {
-#if defined(ST_CHECKS)
-    const auto& ix = sc.lidx_[slot];
-    const Tri& ot = O.faces[of];
-    ST_ASSERT(hit == tri_tri_overlap(sc.ptx_[ix[0]], sc.ptx_[ix[1]], sc.ptx_[ix[2]], O.local[ot[0]], O.local[ot[1]],
-                                     O.local[ot[2]]),
-              "the triangle filter's decision is the exact test's");
-#endif
+  void check_decision(std::uint32_t slot, std::uint32_t of, bool hit) const {
+    ST_ASSERT(hit == overlaps(slot, of), "the triangle filter's decision is the exact test's");
   }
 
   // The waiting candidates through the normals' pass; those it cannot prove apart wait for the
@@ -407,8 +409,7 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
   // The full filter on the pairs the normals did not settle; the undecided through the exact test.
   void flush_full() {
     if (full_n == 0) return;
-    for (std::uint32_t i = full_n; i < kTriBatch; ++i)
-      for (int r = 0; r < 15; ++r) full_v[r][i] = 0.0f;
+    pad_lanes(full_v, full_n);
     std::uint32_t decided = 0, overlap = 0;
     tri_filter(full_v, full_n, decided, overlap);
     for (std::uint32_t i = 0; i < full_n; ++i) {
