@@ -54,8 +54,9 @@ fi
 build() {  # name input diagonal levels
   [ -s "$out/$1" ] && return 0
   echo "models: $1"
-  "$exe" export "$src/$2" -o "$out/$1.tmp" --diagonal "$3" --subdivide "$4"
-  mv "$out/$1.tmp" "$out/$1"
+  local tmp="$out/${1%.off}.tmp.off"  # export picks the format by extension: keep .off last
+  "$exe" export "$src/$2" -o "$tmp" --diagonal "$3" --subdivide "$4"
+  mv "$tmp" "$out/$1"
 }
 build hand.off         hand.off             100 0
 build hand_L2.off      hand.off             100 2
