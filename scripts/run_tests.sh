@@ -46,6 +46,8 @@ say "scripts/format.sh --check"
 scripts/format.sh --check || { status=1; failed=$((failed + 1)); failed_steps+=" format"; }
 say "scripts/check_spdx.sh"
 scripts/check_spdx.sh || { status=1; failed=$((failed + 1)); failed_steps+=" spdx"; }
+say "scripts/check_api.sh"
+scripts/check_api.sh || { status=1; failed=$((failed + 1)); failed_steps+=" api"; }
 say "scripts/check_docs.sh"
 ST_DOCS_OUT="${ST_DOCS_OUT:-build-docs}" scripts/check_docs.sh || { status=1; failed=$((failed + 1)); failed_steps+=" docs"; }
 

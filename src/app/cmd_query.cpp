@@ -6,12 +6,13 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <memory>
 
 #include "app/commands.hpp"
 #include <spheretouch/engine/distributed.hpp>
 #include "app/mesh_options.hpp"
 #include <spheretouch/engine/tree_cache.hpp>
-#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/collide.hpp>
 #include <spheretouch/geom/partition.hpp>
 #include <spheretouch/geom/pose_io.hpp>
 
@@ -40,15 +41,21 @@ struct QueryArgs {
   bool count_only = false, stats = false, no_cache = false;
 };
 
-/// Loads a body's tree through the cache, reporting a rejected cache file on stderr.
-geom::SphereTree tree_or_exit(const geom::Mesh& mesh, const geom::TreeConfig& params, const std::string& dir) {
+/// A body: the mesh with its tree through the cache, reporting a rejected cache file on stderr.
+Body body_or_exit(geom::Mesh mesh, const geom::TreeConfig& params, const std::string& dir) {
   Result<CachedTree> r = tree_for(mesh, params, dir);
   if (!r) {
     std::fprintf(stderr, "spheretouch: %s\n", r.error().c_str());
     throw CLI::RuntimeError(2);
   }
   if (!r.value().note.empty()) std::fprintf(stderr, "spheretouch: tree cache: %s\n", r.value().note.c_str());
-  return std::move(r.value().tree);
+  Result<Body> body = Body::make(std::make_shared<const geom::Mesh>(std::move(mesh)),
+                                 std::make_shared<const geom::SphereTree>(std::move(r.value().tree)));
+  if (!body) {
+    std::fprintf(stderr, "spheretouch: %s\n", body.error().c_str());
+    throw CLI::RuntimeError(2);
+  }
+  return std::move(body).value();
 }
 
 void run_query(const QueryArgs& a) {
@@ -58,8 +65,8 @@ void run_query(const QueryArgs& a) {
     std::fprintf(stderr, "spheretouch: %s\n", curve.error().c_str());
     throw CLI::RuntimeError(2);
   }
-  const geom::LoadedMesh probe = load_or_exit(a.probe, a.load);
-  const geom::LoadedMesh object = load_or_exit(a.object, a.load);
+  geom::LoadedMesh probe_file = load_or_exit(a.probe, a.load);
+  geom::LoadedMesh object_file = load_or_exit(a.object, a.load);
   Result<std::vector<geom::Pose>> poses = geom::read_poses(a.poses);
   if (!poses) {
     std::fprintf(stderr, "spheretouch: %s\n", poses.error().c_str());
@@ -68,8 +75,11 @@ void run_query(const QueryArgs& a) {
   geom::TreeConfig params = geom::DefaultTreeConfig();
   params.leaf_faces = a.leaf_faces;
   const std::string cache = a.no_cache ? "" : a.cache_dir;
-  const geom::SphereTree ptree = tree_or_exit(probe.mesh, params, cache);
-  const geom::SphereTree otree = tree_or_exit(object.mesh, params, cache);
+  ComputeCollision collider(body_or_exit(std::move(probe_file.mesh), params, cache),
+                            body_or_exit(std::move(object_file.mesh), params, cache));
+  const geom::Mesh& probe = collider.probe().mesh();
+  const geom::Mesh& object = collider.object().mesh();
+  const geom::SphereTree& otree = collider.object().tree();
 
   // --workers N / --connect: the same query through scatter-gather over workers.
   std::unique_ptr<Fleet> fleet;
@@ -86,7 +96,7 @@ void run_query(const QueryArgs& a) {
     spec.leaf_faces = a.leaf_faces;
     spec.curve = curve.value();
     spec.note = [](const std::string& m) { std::fprintf(stderr, "spheretouch: %s\n", m.c_str()); };
-    Result<std::unique_ptr<Fleet>> f = start_fleet(spec, probe.mesh, object.mesh, otree);
+    Result<std::unique_ptr<Fleet>> f = start_fleet(spec, probe, object, otree);
     if (!f) {
       std::fprintf(stderr, "spheretouch: %s\n", f.error().c_str());
       throw CLI::RuntimeError(2);
@@ -107,10 +117,14 @@ void run_query(const QueryArgs& a) {
     for (std::uint32_t w = 0; w < a.blocks; ++w) roots.push_back(part.value().worker_roots(w));
   }
 
-  geom::CollideConfig opt = geom::DefaultCollideConfig();
-  opt.stop_layer = a.approx_layer;
-  geom::CollideScratch scratch;
-  geom::CollideResult result;
+  CollisionRequest request;
+  request.approximate_layer = a.approx_layer;
+  request.sort_pairs = false;  // the merged pairs are sorted below
+  if (const std::string bad = check(request); !bad.empty()) {
+    std::fprintf(stderr, "spheretouch: --approx-layer: %s\n", bad.c_str());
+    throw CLI::RuntimeError(2);
+  }
+  CollisionResult result;
   std::vector<geom::FacePair> merged;
   std::vector<std::uint32_t> tmp;
   std::vector<double> times_us;
@@ -137,14 +151,14 @@ void run_query(const QueryArgs& a) {
         stats.node_pairs = round.stats.sphere_tests;
         stats.tri_pairs = round.stats.tri_tests;
       } else if (roots.empty()) {
-        geom::collide(probe.mesh, ptree, object.mesh, otree, pose, opt, scratch, result);
+        collider.at_relative(pose, request, result);
         merged.insert(merged.end(), result.pairs.begin(), result.pairs.end());
         stats = result.stats;
       } else {
         for (const auto& w : roots) {
-          opt.object_roots = w;
-          opt.restrict_object = true;
-          geom::collide(probe.mesh, ptree, object.mesh, otree, pose, opt, scratch, result);
+          request.object_roots = w;
+          request.restrict_object = true;
+          collider.at_relative(pose, request, result);
           merged.insert(merged.end(), result.pairs.begin(), result.pairs.end());
           stats.node_pairs += result.stats.node_pairs;
           stats.tri_pairs += result.stats.tri_pairs;

@@ -16,11 +16,12 @@ Result<Body> Body::make(Mesh mesh, const TreeConfig& params, const Pose& frame) 
               std::make_shared<const SphereTree>(std::move(tree).value()), frame);
 }
 
-Result<Body> Body::make(std::shared_ptr<const Mesh> mesh, std::shared_ptr<const SphereTree> tree, const Pose& frame) {
+Result<Body> Body::make(std::shared_ptr<const Mesh> mesh, std::shared_ptr<const SphereTree> tree, const Pose& frame,
+                        std::span<const std::uint32_t> groups) {
   if (!mesh || !tree) return fail("Body::make: mesh and tree must not be null");
-  if (tree->mesh_hash != geom::tree_hash(*mesh, tree->params))
+  if (const std::uint64_t h = geom::tree_hash(*mesh, tree->params, groups); tree->mesh_hash != h)
     return fail(mesh->name, ": the tree was built for another mesh or with other parameters (hash ", tree->mesh_hash,
-                ", this mesh gives ", geom::tree_hash(*mesh, tree->params), ")");
+                ", this mesh gives ", h, groups.empty() ? "" : " with these groups", ")");
   if (!frame.matrix().allFinite()) return fail(mesh->name, ": the frame is not finite");
   return Body(std::move(mesh), std::move(tree), frame);
 }
@@ -66,10 +67,15 @@ void run(const Body& probe, const Body& object, const Pose& relative, const Coll
   options.restrict_object = request.restrict_object;
   options.tri_filter = request.tri_filter;
   // geom::collide stops once more than options.max_pairs are found: stop at the first max_pairs.
-  options.max_pairs = request.max_pairs == SIZE_MAX ? SIZE_MAX : request.max_pairs - 1;
+  const bool capped = request.max_pairs != SIZE_MAX;
+  options.max_pairs = capped ? request.max_pairs - 1 : SIZE_MAX;
+  // Uncapped, the inner query sorts (a radix sort); capped, the first max_pairs found are kept,
+  // then sorted below.
+  options.sort_pairs = request.sort_pairs && !capped;
   geom::collide(probe.mesh(), probe.tree(), object.mesh(), object.tree(), relative, options, scratch, inner);
   result.stats = inner.stats;
-  result.pairs.assign(inner.pairs.begin(), inner.pairs.end());
+  // Swapped, not copied: both vectors keep their capacity, so later queries allocate nothing.
+  result.pairs.swap(inner.pairs);
   result.probe_faces = inner.probe_faces;
   result.object_faces = inner.object_faces;
   if (inner.stats.pair_limit_hit) {
@@ -83,7 +89,7 @@ void run(const Body& probe, const Body& object, const Pose& relative, const Coll
       result.object_faces = counts.object_faces;
     }
   }
-  if (request.sort_pairs) std::sort(result.pairs.begin(), result.pairs.end());
+  if (request.sort_pairs && capped) std::sort(result.pairs.begin(), result.pairs.end());
 }
 
 }  // namespace
@@ -91,6 +97,8 @@ void run(const Body& probe, const Body& object, const Pose& relative, const Coll
 ComputeCollision::ComputeCollision(Body probe, Body object) : probe_(std::move(probe)), object_(std::move(object)) {
   scratch_.prepare(probe_.mesh(), probe_.tree(), object_.mesh(), object_.tree());
 }
+
+void ComputeCollision::set_object(Body object) { object_ = std::move(object); }
 
 void ComputeCollision::operator()(const CollisionRequest& request, CollisionResult& result) {
   run(probe_, object_, relative_pose(probe_, object_), request, scratch_, inner_, result);

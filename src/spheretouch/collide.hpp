@@ -50,8 +50,10 @@ class Body {
                            const Pose& frame = Pose::Identity());
   /// A body from a mesh and a tree already built (or read from a file) for it. The error says
   /// when the tree was built for another mesh or with other parameters (its hash differs).
+  /// `groups`: the run sizes the tree was built with (SphereTree::build's `groups`, e.g. a
+  /// worker's blocks, whose subtrees CollisionRequest::object_roots names), empty when none.
   static Result<Body> make(std::shared_ptr<const Mesh> mesh, std::shared_ptr<const SphereTree> tree,
-                           const Pose& frame = Pose::Identity());
+                           const Pose& frame = Pose::Identity(), std::span<const std::uint32_t> groups = {});
 
   const Mesh& mesh() const { return *mesh_; }                               ///< the mesh (faces by input-file index)
   const SphereTree& tree() const { return *tree_; }                         ///< its sphere tree
@@ -125,6 +127,11 @@ class ComputeCollision {
   /// Collides at a relative pose (probe frame -> object frame), the pose the rest of the
   /// project passes around; the bodies' frames are not used.
   void at_relative(const Pose& relative, const CollisionRequest& request, CollisionResult& result);
+
+  /// Replaces the object and keeps the probe's caches (derived from the probe's tree, which take
+  /// far longer to build than an object's): one probe against several objects or object blocks
+  /// in turn. The object's caches are derived again on the next query.
+  void set_object(Body object);
 
   Body& probe() { return probe_; }                                ///< the first body
   Body& object() { return object_; }                              ///< the second body

@@ -215,6 +215,74 @@ TEST_CASE("the object-block restriction, the contact patch and load_mesh through
   CHECK(st::test::contains(missing.error(), "/nonexistent/hand.off"));
 }
 
+TEST_CASE("one probe against object blocks in turn: grouped trees and set_object, as the workers use them") {
+  const st::Body probe = api_body(st::geom::make_capsule(4, 12, 10));
+  const st::Body whole = api_body(st::geom::make_icosphere(20, 6));
+  // Two blocks of the object's faces (even and odd indices: interleaved, as block-cyclic shares
+  // are), each its own body; and one body over both blocks whose tree keeps them in separate
+  // subtrees (SphereTree::build's groups).
+  const st::geom::Mesh& m = whole.mesh();
+  std::vector<std::vector<std::uint32_t>> ids(2);
+  for (std::uint32_t f = 0; f < m.num_faces(); ++f) ids[f % 2].push_back(f);
+  auto part_of = [&](const std::vector<std::uint32_t>& faces) {
+    st::geom::Mesh part;
+    part.name = "block";
+    part.origin = m.origin;
+    part.local = m.local;  // every vertex: the faces keep their vertex indices
+    for (std::uint32_t f : faces) part.faces.push_back(m.faces[f]);
+    return part;
+  };
+  st::geom::Mesh grouped = part_of(ids[0]);
+  for (std::uint32_t f : ids[1]) grouped.faces.push_back(m.faces[f]);
+  const std::vector<std::uint32_t> groups = {std::uint32_t(ids[0].size()), std::uint32_t(ids[1].size())};
+  const std::uint32_t split = groups[0];  // grouped faces below it are block 0's
+  auto gmesh = std::make_shared<const st::geom::Mesh>(grouped);
+  st::Result<st::geom::SphereTree> gt = st::geom::SphereTree::build(*gmesh, st::geom::DefaultTreeConfig(), groups);
+  REQUIRE(gt.ok());
+  auto gtree = std::make_shared<const st::geom::SphereTree>(std::move(gt).value());
+  // The grouped tree's hash includes the groups: without them the body is refused, with them made.
+  CHECK_FALSE(st::Body::make(gmesh, gtree).ok());
+  st::Result<st::Body> gbody = st::Body::make(gmesh, gtree, st::Pose::Identity(), groups);
+  REQUIRE_MESSAGE(gbody.ok(), gbody.error());
+  const std::vector<std::vector<std::uint32_t>> roots = st::geom::group_roots(*gtree, m.num_faces(), groups);
+  REQUIRE(roots.size() == 2);
+
+  const st::Body block0 = api_body(part_of(ids[0])), block1 = api_body(part_of(ids[1]));
+  st::ComputeCollision whole_pair(probe, whole), grouped_pair(probe, gbody.value()), blocks(probe, block0);
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-24, 24);
+  int touching = 0;
+  st::CollisionResult all, r;
+  for (int i = 0; i < 30; ++i) {
+    st::Pose pose = st::Pose::Identity();
+    pose.linear() = st::test::random_rotation(rng);
+    pose.translation() = st::Vec3(u(rng), u(rng), u(rng));
+    whole_pair.at_relative(pose, st::CollisionRequest::all_pairs(), all);
+    touching += all.colliding() ? 1 : 0;
+    std::vector<st::FacePair> by_blocks, by_groups;
+    for (int b = 0; b < 2; ++b) {
+      // The block bodies in turn through one collider (set_object keeps the probe's caches).
+      blocks.set_object(b == 0 ? block0 : block1);
+      blocks.at_relative(pose, st::CollisionRequest::all_pairs(), r);
+      for (const st::FacePair& p : r.pairs) by_blocks.push_back({p.probe, ids[b][p.object]});
+      // The grouped body restricted to one group's subtrees (a worker skipping the other block).
+      st::CollisionRequest only = st::CollisionRequest::all_pairs();
+      only.restrict_object = true;
+      only.object_roots = roots[b];
+      grouped_pair.at_relative(pose, only, r);
+      for (const st::FacePair& p : r.pairs) {
+        CHECK((p.object < split) == (b == 0));  // only the asked group's faces
+        by_groups.push_back({p.probe, p.object < split ? ids[0][p.object] : ids[1][p.object - split]});
+      }
+    }
+    std::sort(by_blocks.begin(), by_blocks.end());
+    std::sort(by_groups.begin(), by_groups.end());
+    CHECK(by_blocks == all.pairs);
+    CHECK(by_groups == all.pairs);
+  }
+  CHECK(touching >= 5);
+}
+
 TEST_CASE("bad bodies and requests are refused with a message") {
   st::geom::Mesh bad = st::geom::make_box({1, 1, 1});
   bad.name = "broken-box";

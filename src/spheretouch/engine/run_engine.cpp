@@ -14,8 +14,12 @@
 #include <cstring>
 #include <ctime>
 #include <filesystem>
+#include <memory>
+#include <optional>
 #include <thread>
+#include <tuple>
 
+#include <spheretouch/collide.hpp>
 #include <spheretouch/engine/collision_loop.hpp>
 #include <spheretouch/engine/run_outputs.hpp>
 #include <spheretouch/engine/servo_process.hpp>
@@ -49,13 +53,16 @@ std::string new_run_dir(const std::string& wanted) {
 struct RunEngine::State {
   Scene s;
   RunOptions opt;
-  geom::Mesh probe, object;
-  CachedTree ptree, otree;
+  // The meshes and their trees, loaded once and shared (the collider, the fleet's set-up, the
+  // collision loop and the outputs use them).
+  std::optional<Body> probe_body, object_body;
+  const geom::Mesh& probe() const { return probe_body->mesh(); }
+  const geom::Mesh& object() const { return object_body->mesh(); }
   rt::Trajectory script;
-  // Collision backend: collide() in the collision thread, or a fleet of workers.
-  geom::CollideScratch scratch;
-  geom::CollideResult result;
-  geom::CollideConfig copt = geom::DefaultCollideConfig();
+  // Collision backend: a ComputeCollision in the collision thread, or a fleet of workers.
+  std::optional<ComputeCollision> collider;
+  CollisionRequest request;
+  CollisionResult result;
   std::string backend = "in the collision thread";
   std::unique_ptr<Fleet> fleet;
   net::RoundResult round;
@@ -107,21 +114,24 @@ Status RunEngine::State::prepare() {
   if (!pm) return fail(s.file, ": ", pm.error());
   Result<geom::Mesh> om = load_body(s.object, "object");
   if (!om) return fail(s.file, ": ", om.error());
-  probe = std::move(pm).value();
-  object = std::move(om).value();
   const std::string cache = s.tree_cache ? default_tree_cache_dir() : "";
-  Result<CachedTree> pt = tree_for(probe, s.tree, cache);
+  Result<CachedTree> pt = tree_for(pm.value(), s.tree, cache);
   if (!pt) return Error{pt.error()};
-  Result<CachedTree> ot = tree_for(object, s.tree, cache);
+  Result<CachedTree> ot = tree_for(om.value(), s.tree, cache);
   if (!ot) return Error{ot.error()};
-  ptree = std::move(pt).value();
-  otree = std::move(ot).value();
-  for (const CachedTree* t : {&ptree, &otree})
+  for (const CachedTree* t : {&pt.value(), &ot.value()})
     if (!t->note.empty()) note("tree cache: " + t->note);
+  const bool cached = ot.value().source == TreeSource::cached;
+  for (auto [mesh, tree, body] : {std::tuple{&pm, &pt, &probe_body}, std::tuple{&om, &ot, &object_body}}) {
+    Result<Body> b = Body::make(std::make_shared<const geom::Mesh>(std::move(*mesh).value()),
+                                std::make_shared<const geom::SphereTree>(std::move(tree->value().tree)));
+    if (!b) return fail(s.file, ": ", b.error());
+    body->emplace(std::move(b).value());
+  }
   {
     char line[160];
-    std::snprintf(line, sizeof line, "probe %zu faces, object %zu faces; trees %s", probe.num_faces(),
-                  object.num_faces(), otree.source == TreeSource::cached ? "from the cache" : "built");
+    std::snprintf(line, sizeof line, "probe %zu faces, object %zu faces; trees %s", probe().num_faces(),
+                  object().num_faces(), cached ? "from the cache" : "built");
     note(line);
   }
 
@@ -129,9 +139,9 @@ Status RunEngine::State::prepare() {
     return fail(s.file, ": device.kind = \"browser\" drives the run's own servo thread (not --split)");
   if (s.device.kind == "udp" || s.device.kind == "browser") {
     // A device drives the probe; the script is the grip (for the split servo, as a one-pose trajectory).
-    script.keys = {rt::TimedPose{0.0, probe_grip(s, probe)}};
+    script.keys = {rt::TimedPose{0.0, probe_grip(s, probe())}};
   } else if (s.device.script == "builtin") {
-    script = builtin_script(s, probe, object);
+    script = builtin_script(s, probe(), object());
   } else {
     Result<rt::Trajectory> t = rt::load_trajectory(s.device.script);
     if (!t) return Error{t.error()};
@@ -139,12 +149,13 @@ Status RunEngine::State::prepare() {
   }
 
   // Collision backend. Workers and daemons plug in here (scatter-gather); 0 = this thread.
-  copt.stop_layer = s.approx_layer;
+  request.approximate_layer = s.approx_layer;
   // Pairs in (probe, object) order, as the workers' merge gives them: the contact model is then
   // the same at every worker count, and the builder need not sort them.
-  copt.sort_pairs = true;
+  request.sort_pairs = true;
   collide_fn = [this](std::uint64_t, const geom::Pose& pose, RoundOutput& out) {
-    geom::collide(probe, ptree.tree, object, otree.tree, pose, copt, scratch, result);
+    if (!collider) collider.emplace(*probe_body, *object_body);  // in the collision thread: its caches
+    collider->at_relative(pose, request, result);
     out.pairs.assign(result.pairs.begin(), result.pairs.end());
   };
   if (!s.endpoints.empty() || s.workers > 0) {
@@ -158,7 +169,7 @@ Status RunEngine::State::prepare() {
     spec.mapping = s.mapping;
     // A contact region for the automatic split: a quarter of the probe's bounding sphere (the
     // patch a hand or tool presses into a surface), in object millimetres.
-    spec.contact_radius = 0.25 * double(ptree.tree.nodes[0].radius);
+    spec.contact_radius = 0.25 * double(probe_body->tree().nodes[0].radius);
     spec.leaf_faces = s.tree.leaf_faces;
     spec.miss_limit = std::uint32_t(s.down_after);
     // "auto": daemons run on other machines, whose collision thread waits idle for their replies;
@@ -168,7 +179,7 @@ Status RunEngine::State::prepare() {
     spec.curve = opt.curve;
     spec.note = opt.note;
     note("starting workers and loading their blocks ...");
-    Result<std::unique_ptr<Fleet>> f = start_fleet(spec, probe, object, otree.tree);
+    Result<std::unique_ptr<Fleet>> f = start_fleet(spec, probe(), object(), object_body->tree());
     if (!f) return Error{f.error()};
     fleet = std::move(f).value();
     backend = fleet->description;
@@ -199,7 +210,7 @@ Status RunEngine::State::prepare() {
   // monitor` can watch any run; with a split servo the servo process attaches to it. The run
   // says at once which scene and meshes it loaded (monitor --view loads the same).
   const auto ref = std::make_unique<rt::SceneRef>(
-      scene_ref(opt.scene_path.empty() ? "" : std::filesystem::absolute(opt.scene_path).string(), probe, object));
+      scene_ref(opt.scene_path.empty() ? "" : std::filesystem::absolute(opt.scene_path).string(), probe(), object()));
   const std::string shm_name = opt.shm_name.empty() ? "/spheretouch-" + std::to_string(getpid()) : opt.shm_name;
   Result<std::unique_ptr<rt::ShmSegment>> segr = rt::ShmSegment::create(shm_name);
   if (!segr) return Error{segr.error()};
@@ -224,7 +235,7 @@ Status RunEngine::State::prepare() {
     } else if (s.device.kind == "browser") {
       // The page starts the tip where the built-in script starts: above the target, off the surface.
       const geom::Pose grip = script.keys.front().pose;
-      const geom::Vec3 home = (builtin_script(s, probe, object).keys.front().pose * grip.inverse()).translation();
+      const geom::Vec3 home = (builtin_script(s, probe(), object()).keys.front().pose * grip.inverse()).translation();
       feed = std::make_unique<rt::PoseFeedDevice>(grip, home, s.saturation.peak_N);
       device = feed.get();
     } else {
@@ -245,7 +256,7 @@ Status RunEngine::State::prepare() {
     script_file = dir + "/script.txt";
     if (Status w = write_trajectory(script_file, script); !w) return w;
   }
-  collision = std::make_unique<CollisionLoop>(probe, object, shm->poses(), shm->models(), collide_fn,
+  collision = std::make_unique<CollisionLoop>(probe(), object(), shm->poses(), shm->models(), collide_fn,
                                               s.collision_rate_hz, 0, s.contact);
   collision->publish_status_to(&status.collision);
   // Every run publishes view frames, so that a live view (run --view, or monitor --view
@@ -495,7 +506,7 @@ RunReport RunEngine::finish(int signal) {
   if (s.write_ply) {
     if (collision.peak_pairs().empty()) {
       appendf(summary, "    contact.ply   not written: the probe never touched the object\n");
-    } else if (Status st = write_contact_ply(e.dir + "/contact.ply", e.probe, e.object, collision.peak_pose(),
+    } else if (Status st = write_contact_ply(e.dir + "/contact.ply", e.probe(), e.object(), collision.peak_pose(),
                                              collision.peak_pairs());
                !st) {
       appendf(summary, "    contact.ply: %s\n", st.error().c_str());
@@ -530,8 +541,8 @@ void RunEngine::save(RunReport& report) {
 }
 
 rt::PoseFeedDevice* RunEngine::pose_feed() const { return s_->feed.get(); }
-const geom::Mesh& RunEngine::probe() const { return s_->probe; }
-const geom::Mesh& RunEngine::object() const { return s_->object; }
+const geom::Mesh& RunEngine::probe() const { return s_->probe(); }
+const geom::Mesh& RunEngine::object() const { return s_->object(); }
 const rt::ShmStatus& RunEngine::shm_status() const { return s_->shm->status(); }
 const Scene& RunEngine::scene() const { return s_->s; }
 const std::string& RunEngine::backend() const { return s_->backend; }

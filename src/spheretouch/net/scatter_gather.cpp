@@ -3,6 +3,7 @@
 #include <spheretouch/net/scatter_gather.hpp>
 
 #include <spheretouch/geom/check.hpp>
+#include <spheretouch/collide.hpp>
 #include <spheretouch/geom/collide.hpp>
 #include <spheretouch/geom/sphere_tree.hpp>
 #include <spheretouch/net/worker_config.hpp>
@@ -207,20 +208,21 @@ struct ScatterGather::Impl {
   std::vector<std::uint8_t> buf;      // encode buffer
   // Client assist (cfg.assist_blocks): what the client needs to answer blocks itself.
   struct LocalBlock {
-    geom::Mesh mesh;                 // the block's faces and the vertices they use (object origin, local coords)
-    geom::SphereTree tree;           // built as a worker builds a block's subtree
+    // The block's faces and the vertices they use (object origin, local coords), with the tree a
+    // worker builds for a block's subtree.
+    std::optional<Body> body;
     std::vector<std::uint32_t> ids;  // global face id of each face
     std::uint64_t used = 0;          // last round it was answered in
   };
-  geom::SphereTree probe_tree;                          // the probe's tree (built when assist is on)
+  std::optional<Body> probe_body;                       // the probe and its tree (built when assist is on)
   std::vector<std::uint32_t> face_block;                // object face -> its block
   std::vector<double> block_work;                       // per block: pairs it gave last round (0 where none)
   std::vector<std::uint32_t> worked;                    // blocks with block_work > 0
   std::vector<std::uint32_t> taken;                     // blocks the client answers this round, ascending
   std::vector<BlockWork> candidates;                    // scratch for choose_assist
   std::unordered_map<std::uint32_t, LocalBlock> local;  // blocks answered so far (bounded, LRU)
-  geom::CollideScratch assist_scratch;
-  geom::CollideResult assist_result;
+  std::optional<ComputeCollision> assist;               // the probe against one local block at a time
+  CollisionResult assist_result;
   std::vector<zmq::pollitem_t> items;
   RoundResult* out = nullptr;
 
@@ -664,20 +666,21 @@ struct ScatterGather::Impl {
       for (std::uint32_t f : lb.ids) verts.insert(verts.end(), object.faces[f].begin(), object.faces[f].end());
       std::sort(verts.begin(), verts.end());
       verts.erase(std::unique(verts.begin(), verts.end()), verts.end());
-      lb.mesh.name = object.name + " (block)";
-      lb.mesh.origin = object.origin;
-      for (std::uint32_t v : verts) lb.mesh.local.push_back(object.local[v]);
+      geom::Mesh mesh;
+      mesh.name = object.name + " (block)";
+      mesh.origin = object.origin;
+      for (std::uint32_t v : verts) mesh.local.push_back(object.local[v]);
       auto at = [&](std::uint32_t v) {
         return static_cast<std::uint32_t>(std::lower_bound(verts.begin(), verts.end(), v) - verts.begin());
       };
       for (std::uint32_t f : lb.ids)
-        lb.mesh.faces.push_back({at(object.faces[f][0]), at(object.faces[f][1]), at(object.faces[f][2])});
+        mesh.faces.push_back({at(object.faces[f][0]), at(object.faces[f][1]), at(object.faces[f][2])});
       geom::TreeConfig params = geom::DefaultTreeConfig();
       params.leaf_faces = std::clamp<std::uint32_t>(scene->leaf_faces, 1, geom::kMaxLeafFaces);
-      Result<geom::SphereTree> t = geom::SphereTree::build(lb.mesh, params);
-      ST_ASSERT(t.ok(), "a block of our own object builds a tree");
-      if (!t) return nullptr;
-      lb.tree = std::move(t).value();
+      Result<Body> body = Body::make(std::move(mesh), params);
+      ST_ASSERT(body.ok(), "a block of our own object builds a tree");
+      if (!body) return nullptr;
+      lb.body.emplace(std::move(body).value());
       it = local.emplace(b, std::move(lb)).first;
     }
     it->second.used = cur_seq;
@@ -692,10 +695,16 @@ struct ScatterGather::Impl {
     for (std::uint32_t b : taken) {
       LocalBlock* lb = local_block(b);
       if (!lb) continue;  // not covered: the round says it is incomplete
-      geom::CollideConfig opt = geom::DefaultCollideConfig();
-      opt.max_pairs = cfg.limits.max_pairs;
-      geom::collide(scene->probe, probe_tree, lb->mesh, lb->tree, pose, opt, assist_scratch, assist_result);
-      if (assist_result.stats.pair_limit_hit) continue;
+      // One collider for every block: the probe's caches stay, the block's are derived per query.
+      if (!assist)
+        assist.emplace(*probe_body, *lb->body);
+      else
+        assist->set_object(*lb->body);
+      CollisionRequest request;
+      request.max_pairs = cfg.limits.max_pairs >= SIZE_MAX - 1 ? SIZE_MAX : cfg.limits.max_pairs + 1;
+      request.sort_pairs = false;  // the round's merge sorts
+      assist->at_relative(pose, request, assist_result);
+      if (!assist_result.complete) continue;  // more than max_pairs: left to the workers' refusal
       for (const geom::FacePair& fp : assist_result.pairs) out->pairs.push_back({fp.probe, lb->ids[fp.object]});
       out->assist.sphere_tests += assist_result.stats.node_pairs;
       out->assist.tri_tests += assist_result.stats.tri_pairs;
@@ -789,7 +798,11 @@ Result<std::unique_ptr<ScatterGather>> ScatterGather::create(zmq::context_t& ctx
     params.leaf_faces = std::clamp<std::uint32_t>(sc.leaf_faces, 1, geom::kMaxLeafFaces);
     Result<geom::SphereTree> pt = geom::SphereTree::build(sc.probe, params);
     if (!pt) return fail("scatter-gather: client assist: probe tree: ", pt.error());
-    impl->probe_tree = std::move(pt).value();
+    // The body shares the scene's probe (an aliasing pointer: the scene data owns the mesh).
+    Result<Body> pb = Body::make(std::shared_ptr<const geom::Mesh>(impl->scene, &sc.probe),
+                                 std::make_shared<const geom::SphereTree>(std::move(pt).value()));
+    if (!pb) return fail("scatter-gather: client assist: probe: ", pb.error());
+    impl->probe_body.emplace(std::move(pb).value());
     impl->face_block.assign(sc.object.faces.size(), UINT32_MAX);
     for (std::uint32_t b = 0; b < nblocks; ++b)
       for (std::uint32_t f : sc.blocks[b])

@@ -4,8 +4,11 @@
 
 #include <algorithm>
 #include <chrono>
+#include <memory>
+#include <optional>
+#include <utility>
 
-#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/collide.hpp>
 #include <spheretouch/geom/partition.hpp>
 
 namespace st::inline SPHERETOUCH_ABI::net {
@@ -18,29 +21,36 @@ class TreeBackend final : public CollisionBackend {
     geom::TreeConfig params = geom::DefaultTreeConfig();
     params.leaf_faces = std::clamp<std::uint32_t>(set.leaf_faces, 1, geom::kMaxLeafFaces);
     set_ = set;
-    Result<geom::SphereTree> pt = geom::SphereTree::build(set_.probe, params);
+    collider_.reset();
+    // The meshes move into the bodies the collider shares; set_ keeps the ids and blocks.
+    auto probe = std::make_shared<const geom::Mesh>(std::exchange(set_.probe, {}));
+    auto object = std::make_shared<const geom::Mesh>(std::exchange(set_.object, {}));
+    Result<geom::SphereTree> pt = geom::SphereTree::build(*probe, params);
     if (!pt) return fail("probe tree: ", pt.error());
-    probe_tree_ = std::move(pt).value();
-    empty_ = set_.object.faces.empty();
-    if (!empty_) {
-      // One subtree per block: the blocks of a share lie apart (block-cyclic, random), and one
-      // tree over all of them would put spheres around the gaps between blocks.
-      Result<geom::SphereTree> ot = geom::SphereTree::build(
-          set_.object, params,
-          per_block_ ? std::span<const std::uint32_t>(set_.block_faces) : std::span<const std::uint32_t>());
-      if (!ot) return fail("object share tree: ", ot.error());
-      object_tree_ = std::move(ot).value();
-      // One tree over the whole share (per_block_ false) mixes blocks in its leaves: no roots,
-      // and a Query's skip list is then ignored (the skipped blocks are answered too).
-      block_roots_.clear();
-      if (per_block_) block_roots_ = geom::group_roots(object_tree_, set_.object_face_ids.size(), set_.block_faces);
-      is_root_.assign(object_tree_.num_nodes(), 0);
-      for (const auto& roots : block_roots_)
-        for (std::uint32_t r : roots) is_root_[r] = 1;
-      cut_.assign(object_tree_.num_nodes(), 0);
-      stamp_ = 0;
-    }
-    scratch_ = geom::CollideScratch{};
+    empty_ = object->faces.empty();
+    if (empty_) return Ok{};
+    // One subtree per block: the blocks of a share lie apart (block-cyclic, random), and one
+    // tree over all of them would put spheres around the gaps between blocks.
+    const std::span<const std::uint32_t> groups =
+        per_block_ ? std::span<const std::uint32_t>(set_.block_faces) : std::span<const std::uint32_t>();
+    Result<geom::SphereTree> ot = geom::SphereTree::build(*object, params, groups);
+    if (!ot) return fail("object share tree: ", ot.error());
+    object_tree_ = std::make_shared<const geom::SphereTree>(std::move(ot).value());
+    const geom::SphereTree& tree = *object_tree_;
+    // One tree over the whole share (per_block_ false) mixes blocks in its leaves: no roots,
+    // and a Query's skip list is then ignored (the skipped blocks are answered too).
+    block_roots_.clear();
+    if (per_block_) block_roots_ = geom::group_roots(tree, set_.object_face_ids.size(), set_.block_faces);
+    is_root_.assign(tree.num_nodes(), 0);
+    for (const auto& roots : block_roots_)
+      for (std::uint32_t r : roots) is_root_[r] = 1;
+    cut_.assign(tree.num_nodes(), 0);
+    stamp_ = 0;
+    Result<Body> pb = Body::make(std::move(probe), std::make_shared<const geom::SphereTree>(std::move(pt).value()));
+    if (!pb) return fail("probe: ", pb.error());
+    Result<Body> ob = Body::make(std::move(object), object_tree_, geom::Pose::Identity(), groups);
+    if (!ob) return fail("object share: ", ob.error());
+    collider_.emplace(std::move(pb).value(), std::move(ob).value());
     return Ok{};
   }
 
@@ -48,6 +58,7 @@ class TreeBackend final : public CollisionBackend {
   /// blocks' roots and their ancestors are cut out; every other node below the root is covered
   /// once), so the descent keeps the top levels' culling. False when no held block is skipped.
   bool cover_without(std::span<const std::uint32_t> skip) {
+    const geom::SphereTree& tree = *object_tree_;
     if (++stamp_ == 0) {
       std::fill(cut_.begin(), cut_.end(), 0);
       stamp_ = 1;
@@ -59,8 +70,7 @@ class TreeBackend final : public CollisionBackend {
       for (std::uint32_t r : block_roots_[std::size_t(it - set_.blocks.begin())]) {
         cut_[r] = stamp_;  // the block itself
         any = true;
-        for (std::uint32_t a = object_tree_.cold[r].parent; a != geom::kNoNode && cut_[a] != stamp_;
-             a = object_tree_.cold[a].parent)
+        for (std::uint32_t a = tree.cold[r].parent; a != geom::kNoNode && cut_[a] != stamp_; a = tree.cold[a].parent)
           cut_[a] = stamp_;  // ancestors: split into their children
       }
     }
@@ -72,8 +82,8 @@ class TreeBackend final : public CollisionBackend {
       stack_.pop_back();
       if (cut_[i] != stamp_) {
         roots_.push_back(i);
-      } else if (!object_tree_.nodes[i].leaf && !is_block_root(i)) {
-        const geom::SphereNode& n = object_tree_.nodes[i];
+      } else if (!tree.nodes[i].leaf && !is_block_root(i)) {
+        const geom::SphereNode& n = tree.nodes[i];
         for (std::uint32_t c = n.first + n.count; c-- > n.first;) stack_.push_back(c);
       }
     }
@@ -85,15 +95,17 @@ class TreeBackend final : public CollisionBackend {
     QueryStats st;
     if (empty_) return st;
     const auto t0 = std::chrono::steady_clock::now();
-    // The share keeps the object's origin and local coordinates bit for bit, so collide()
+    // The share keeps the object's origin and local coordinates bit for bit, so the query
     // computes the same transformed doubles as a single-process query.
-    geom::CollideConfig opt = geom::DefaultCollideConfig();
-    opt.max_pairs = max_pairs;
+    CollisionRequest request;
+    // The service's limit is "more than max_pairs": ask for one more, so a full answer shows it.
+    request.max_pairs = max_pairs >= SIZE_MAX - 1 ? SIZE_MAX : max_pairs + 1;
+    request.sort_pairs = false;  // the client's merge sorts
     if (!skip.empty() && !block_roots_.empty() && cover_without(skip)) {
-      opt.restrict_object = true;
-      opt.object_roots = roots_;
+      request.restrict_object = true;
+      request.object_roots = roots_;
     }
-    geom::collide(set_.probe, probe_tree_, set_.object, object_tree_, pose, opt, scratch_, result_);
+    collider_->at_relative(pose, request, result_);
     out.reserve(out.size() + result_.pairs.size());
     for (const geom::FacePair& p : result_.pairs) out.push_back({p.probe, set_.object_face_ids[p.object]});
     st.sphere_tests = result_.stats.node_pairs;
@@ -104,10 +116,10 @@ class TreeBackend final : public CollisionBackend {
   }
 
  private:
-  BlockSet set_;
-  geom::SphereTree probe_tree_, object_tree_;
-  geom::CollideScratch scratch_;
-  geom::CollideResult result_;
+  BlockSet set_;  // the ids and blocks (its meshes are moved into the collider's bodies)
+  std::shared_ptr<const geom::SphereTree> object_tree_;  // the share's tree (shared with the collider)
+  std::optional<ComputeCollision> collider_;             // empty for an empty share
+  CollisionResult result_;
   std::vector<std::vector<std::uint32_t>> block_roots_;  // per held block: the share tree's nodes covering exactly it
   std::vector<std::uint32_t> roots_;                     // scratch: the roots of the blocks queried
   std::vector<std::uint8_t> is_root_;                    // per node: it is a held block's root
