@@ -3,6 +3,8 @@
 // what a program or a benchmark does with it.
 #include <doctest/doctest.h>
 
+#include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <fstream>
 #include <memory>
@@ -11,6 +13,8 @@
 
 #include <spheretouch/engine/run_engine.hpp>
 #include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/rt/clock.hpp>
+#include <spheretouch/rt/device.hpp>
 #include <spheretouch/rt/view_frame.hpp>
 #include "test_util.hpp"
 
@@ -152,4 +156,101 @@ TEST_CASE("scene reference: records the path and the meshes; tells other meshes 
   CHECK(st::engine::compare_scene_ref(ref, object, object).find("the probe has ") == 0);
   const std::string long_path(st::rt::SceneRef::kMaxPath, 'x');  // too long to record: none
   CHECK(std::string(st::engine::scene_ref(long_path, probe, object).scene_path).empty());
+}
+
+namespace {
+
+/// A device of the caller's: replays the engine's trajectory by the time it is asked at, counts
+/// its calls and the forces it was given.
+class ReplayDevice final : public st::rt::Device {
+ public:
+  const st::rt::Trajectory* path = nullptr;
+  std::int64_t t0 = 0;
+  std::atomic<std::uint64_t> reads{0}, forces{0};
+  double peak_N = 0;
+  bool read_pose(std::int64_t now_ns, Eigen::Isometry3d& pose) noexcept override {
+    if (!path) return false;
+    if (t0 == 0) t0 = now_ns;
+    pose = path->at(double(now_ns - t0) * 1e-9);
+    reads.fetch_add(1, std::memory_order_relaxed);
+    return true;
+  }
+  void command_force(std::int64_t, const Eigen::Vector3d& f) noexcept override {
+    forces.fetch_add(1, std::memory_order_relaxed);
+    peak_N = std::max(peak_N, f.norm());
+  }
+  double max_force_N() const noexcept override { return 2.0; }
+};
+
+}  // namespace
+
+TEST_CASE("run engine: a caller's device, polled by the haptic thread or ticked from its own callback") {
+  st::test::TempDir dir;
+  for (const bool clocked : {false, true}) {
+    CAPTURE(clocked);
+    auto scene = st::engine::parse_scene(
+        engine_scene_text("[workers]\ncount = 0\n[run]\nduration_s = 2.5\n[output]\ndir = \"" +
+                          dir.file(clocked ? "clocked" : "polled") + "\"\nstatus = \"off\"\ntrace = false\n"),
+        "e.toml", ".");
+    REQUIRE_MESSAGE(scene.ok(), scene.error());
+    ReplayDevice device;
+    st::engine::RunOptions opt;
+    opt.device = &device;
+    opt.device_clocked = clocked;
+    auto made = st::engine::RunEngine::prepare(scene.value(), opt);
+    REQUIRE_MESSAGE(made.ok(), made.error());
+    st::engine::RunEngine& run = *made.value();
+    device.path = &run.trajectory();
+    REQUIRE(run.trajectory().duration_s() > 2.0);  // the built-in press and slide
+    run.tick(st::rt::now_ns());                    // before start(): nothing happens
+    CHECK(device.reads.load() == 0);
+    REQUIRE(run.start().ok());
+    std::atomic<bool> stop{false};
+    std::thread callback;
+    if (clocked)  // the device's own 1 kHz servo callback
+      callback = std::thread([&] {
+        for (std::int64_t next = st::rt::now_ns(); !stop.load(); next += 1'000'000) {
+          while (st::rt::now_ns() < next) std::this_thread::sleep_for(std::chrono::microseconds(100));
+          run.tick(st::rt::now_ns());
+        }
+      });
+    std::vector<std::string> events;
+    while (run.poll(false, events)) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    st::engine::RunReport report = run.finish(0);
+    const std::uint64_t reads_at_finish = device.reads.load();
+    if (clocked) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the callback keeps calling after finish()
+      CHECK(device.reads.load() == reads_at_finish);               // ... and nothing happens
+      stop.store(true);
+      callback.join();
+      CHECK(st::test::contains(report.summary, "the device's own callback"));
+    } else {
+      CHECK(st::test::contains(report.summary, "servo thread"));
+    }
+    CHECK(report.failures.empty());
+    // About one pose read and one force per millisecond, from whichever clock ticked.
+    CHECK(reads_at_finish > 1500);
+    CHECK(device.forces.load() == reads_at_finish);
+    // The probe pressed into the object: the device felt it, within its own limit.
+    CHECK(device.peak_N > 0.2);
+    CHECK(device.peak_N <= 2.0 + 1e-9);
+  }
+}
+
+TEST_CASE("run engine: a caller's device is refused with the split servo, and device_clocked without a device") {
+  auto scene = st::engine::parse_scene(engine_scene_text("[workers]\ncount = 0\n"), "e.toml", ".");
+  REQUIRE(scene.ok());
+  ReplayDevice device;
+  st::engine::RunOptions split;
+  split.device = &device;
+  split.split = true;
+  split.scene_path = "e.toml";
+  auto a = st::engine::RunEngine::prepare(scene.value(), split);
+  REQUIRE_FALSE(a.ok());
+  CHECK(st::test::contains(a.error(), "RunOptions::device"));
+  st::engine::RunOptions clocked;
+  clocked.device_clocked = true;
+  auto b = st::engine::RunEngine::prepare(scene.value(), clocked);
+  REQUIRE_FALSE(b.ok());
+  CHECK(st::test::contains(b.error(), "device_clocked"));
 }

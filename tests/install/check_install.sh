@@ -12,6 +12,9 @@
 #    build that bypasses those Cflags with a wider alignment fails to LINK (abi.hpp), never runs;
 #  * it links statically too (pkg-config --static: Requires.private/Libs.private are complete);
 #  * a CMake consumer builds with find_package(spheretouch 0.1 REQUIRED) and runs;
+#  * examples/custom_device.cpp (a device of the program's own, clocked by its own callback)
+#    builds through `pkg-config spheretouch-engine` and through CMake's spheretouch::engine, and
+#    runs configs/small.toml for 5 s with the servo ticked from its callback;
 #  * an installed header never includes another but as <spheretouch/...>.
 set -euo pipefail
 build=$1 examples=$2
@@ -24,7 +27,7 @@ meson install -C "$build" --destdir "$scratch/root" --no-rebuild --quiet >"$scra
 
 pcdir=$(dirname "$(find "$scratch/root" -name spheretouch.pc | head -1)")
 [ -f "$pcdir/spheretouch.pc" ] || fail "no spheretouch.pc installed"
-for name in spheretouch spheretouch-meshio spheretouch-rt spheretouch-net; do
+for name in spheretouch spheretouch-meshio spheretouch-rt spheretouch-net spheretouch-engine; do
   [ -f "$pcdir/$name.pc" ] || fail "$name.pc not installed"
 done
 grep -q -- '-march' "$pcdir"/spheretouch*.pc && fail "an installed .pc file carries -march: $(grep -l -- -march "$pcdir"/*.pc)"
@@ -93,23 +96,38 @@ echo "example linked statically: right pairs"
 # CMake: find_package(spheretouch 0.1 REQUIRED) from the installed tree (relocatable config).
 if command -v cmake >/dev/null; then
   mkdir -p "$scratch/cmake-src"
-  cp "$examples/touch_boxes.cpp" "$scratch/cmake-src/"
+  cp "$examples/touch_boxes.cpp" "$examples/custom_device.cpp" "$scratch/cmake-src/"
   cat >"$scratch/cmake-src/CMakeLists.txt" <<'CMAKE'
 cmake_minimum_required(VERSION 3.16)
 project(touch_boxes CXX)
-find_package(spheretouch 0.1 REQUIRED COMPONENTS core net)
+find_package(spheretouch 0.1 REQUIRED COMPONENTS core net engine)
 add_executable(touch_boxes touch_boxes.cpp)
 target_link_libraries(touch_boxes PRIVATE spheretouch::core)
+add_executable(custom_device custom_device.cpp)
+target_link_libraries(custom_device PRIVATE spheretouch::engine)
 CMAKE
   cmake -S "$scratch/cmake-src" -B "$scratch/cmake-build" -G Ninja -DCMAKE_PREFIX_PATH="$(cd "$incdir/.." && pwd)" \
     -DCMAKE_BUILD_RPATH="$libdir" >"$scratch/cmake.log" 2>&1 && cmake --build "$scratch/cmake-build" >>"$scratch/cmake.log" 2>&1 ||
     { cat "$scratch/cmake.log"; fail "a CMake consumer does not build with find_package(spheretouch 0.1 REQUIRED)"; }
   out=$("$scratch/cmake-build/touch_boxes") || fail "the CMake-built example failed"
   [ "$(grep -c 'colliding 1' <<<"$out")" = 3 ] || fail "the CMake-built example should see 3 touching steps"
-  echo "CMake consumer (find_package(spheretouch 0.1 REQUIRED COMPONENTS core net)): right pairs"
+  [ -x "$scratch/cmake-build/custom_device" ] || fail "the CMake consumer did not build custom_device (spheretouch::engine)"
+  echo "CMake consumer (find_package(spheretouch 0.1 REQUIRED COMPONENTS core net engine)): right pairs; custom_device built"
 else
   fail "cmake not found (scripts/setup.sh installs it)"
 fi
+
+# A device of the program's own through the installed engine (pkg-config spheretouch-engine).
+c++ -std=c++20 -O1 -o "$scratch/custom_device" "$examples/custom_device.cpp" $(pkg-config --cflags --libs spheretouch-engine) \
+  -Wl,-rpath,"$libdir" 2>"$scratch/cc.log" || { cat "$scratch/cc.log"; fail "custom_device does not build through pkg-config spheretouch-engine"; }
+# The engine's own library dependencies are found the way an installed system finds them (here
+# LD_LIBRARY_PATH; an executable's RUNPATH covers only its direct ones).
+LD_LIBRARY_PATH="$libdir" "$scratch/custom_device" "$examples/../configs/small.toml" --seconds 5 >"$scratch/device.out" 2>"$scratch/device.err" ||
+  { cat "$scratch/device.err" "$scratch/device.out"; fail "custom_device failed on configs/small.toml"; }
+grep -q "^vendor callback device: [1-9][0-9]* ticks" "$scratch/device.out" ||
+  { cat "$scratch/device.out"; fail "custom_device: the callback did not tick the servo"; }
+grep -q "the device's own callback" "$scratch/device.err" || fail "custom_device: the run's summary does not say the device clocked the servo"
+echo "custom_device (pkg-config spheretouch-engine): $(cat "$scratch/device.out")"
 
 # The Python module from the install tree.
 pyso=$(find "$scratch/root" -name '_core*.so' -path '*-packages/spheretouch/*' | head -1)

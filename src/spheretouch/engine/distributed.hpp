@@ -1,9 +1,10 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// The app's side of distribution: start N in-process workers (inproc://, the embedded default)
-// or connect to worker daemons, deal the object's layer-n sphere blocks over them and wait until
-// every worker holds its share; with CURVE keys for daemons that require them, and a clear error
-// (endpoint, reason, what to fix) when a daemon refuses this client. Used by `query
-// --workers/--connect` and by `run`.
+/// \file
+/// <spheretouch/engine/distributed.hpp>: the client's side of distribution. Start N in-process
+/// workers (inproc://, the embedded default) or connect to worker daemons, deal the object's
+/// layer-n sphere blocks over them and wait until every worker holds its share; with CURVE keys
+/// for daemons that require them, and a clear error (endpoint, reason, what to fix) when a daemon
+/// refuses this client. Used by `query --workers/--connect` and by RunEngine.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <chrono>
@@ -38,11 +39,12 @@ Result<ClientCurve> load_client_curve(const std::string& server_key_file, const 
 struct FleetSpec {
   int workers = 0;                     ///< in-process workers (ignored when endpoints are given)
   std::vector<std::string> endpoints;  ///< worker daemons
-  /// Distribution: sphere layer and layer spheres per block; geom::kFree / 0 = automatic
-  /// (geom::choose_split for this object and worker count, contact regions of contact_radius).
-  std::uint32_t layer = geom::kFree, block_size = 0;
-  geom::Mapping mapping = geom::Mapping::block_cyclic;              ///< how blocks are dealt
-  double contact_radius = 10;                                       ///< mm, for the automatic split
+  /// Distribution: the sphere layer dealt in blocks; geom::kFree = automatic (geom::choose_split
+  /// for this object and worker count, contact regions of contact_radius).
+  std::uint32_t layer = geom::kFree;
+  std::uint32_t block_size = 0;                         ///< layer spheres per block; 0 = automatic (with the layer)
+  geom::Mapping mapping = geom::Mapping::block_cyclic;  ///< how blocks are dealt
+  double contact_radius = 10;                           ///< mm, for the automatic split
   std::uint32_t leaf_faces = geom::DefaultTreeConfig().leaf_faces;  ///< tree knob sent to workers
   std::uint32_t miss_limit = 3;                                     ///< missed deadlines before a worker is marked down
   std::uint32_t assist_blocks = 0;  ///< blocks the client answers itself each round (net::ScatterConfig::assist_blocks)
@@ -57,12 +59,12 @@ struct FleetSpec {
 
 /// A running fleet: its context, the in-process workers (if any) and the client.
 struct Fleet {
-  zmq::context_t ctx{1};
-  std::unique_ptr<net::LocalWorkers> local;
-  std::unique_ptr<net::ScatterGather> client;
-  std::uint32_t blocks = 0;  ///< blocks dealt
-  std::string description;   ///< "2 in-process workers" / "3 daemons"
-  std::string split;         ///< how the object was split and why ("layer 3, block size 1: ...")
+  zmq::context_t ctx{1};                       ///< the fleet's ZeroMQ context (inproc:// needs one shared)
+  std::unique_ptr<net::LocalWorkers> local;    ///< the in-process workers; null with daemons
+  std::unique_ptr<net::ScatterGather> client;  ///< the scatter-gather client: round() per pose
+  std::uint32_t blocks = 0;                    ///< blocks dealt
+  std::string description;                     ///< "2 in-process workers" / "3 daemons"
+  std::string split;                           ///< how the object was split and why ("layer 3, block size 1: ...")
   /// Workers currently up (not marked down).
   int up() const;
 };

@@ -85,6 +85,13 @@ struct RunEngine::State {
   bool started = false, finished = false;
   pid_t servo_pid = 0;
   std::string servo_where = "servo thread";
+  // A caller's device clocked by its own callback (RunOptions::device_clocked): tick() runs the
+  // servo. `accepting` opens at start() and closes at finish(), which then waits for a tick in
+  // progress (in_tick) to end; both sides use sequentially consistent stores and loads.
+  std::atomic<bool> accepting{false}, in_tick{false};
+  std::uint64_t ext_ticks = 0, ext_misses = 0;
+  std::int64_t ext_last_ns = 0;
+  bool device_clocked() const { return opt.device != nullptr && opt.device_clocked; }
   std::int64_t t_start = 0, t_end = 0;
   int servo_exit = -1;     // split: the servo process's exit code once it ended
   bool forwarded = false;  // split: a stop was passed on to the servo
@@ -107,6 +114,9 @@ Status RunEngine::State::prepare() {
     if (Status st = rt::set_default_thread_stack(s.thread_stack_bytes); !st)
       return fail(s.file, ": haptic.thread_stack_kb: ", st.error());
   if (opt.split && opt.scene_path.empty()) return fail("run: the split servo needs the scene file (scene_path)");
+  if (opt.device && opt.split)
+    return fail("run: a caller's device (RunOptions::device) drives the in-process servo: not with the split servo");
+  if (opt.device_clocked && !opt.device) return fail("run: RunOptions::device_clocked needs RunOptions::device");
 
   // Only the bodies the scene names are loaded; trees come from the cache when valid.
   note("loading probe and object ...");
@@ -137,7 +147,7 @@ Status RunEngine::State::prepare() {
 
   if (s.device.kind == "browser" && opt.split)
     return fail(s.file, ": device.kind = \"browser\" drives the run's own servo thread (not --split)");
-  if (s.device.kind == "udp" || s.device.kind == "browser") {
+  if (!opt.device && (s.device.kind == "udp" || s.device.kind == "browser")) {
     // A device drives the probe; the script is the grip (for the split servo, as a one-pose trajectory).
     script.keys = {rt::TimedPose{0.0, probe_grip(s, probe())}};
   } else if (s.device.script == "builtin") {
@@ -224,7 +234,9 @@ Status RunEngine::State::prepare() {
   if (!opt.split) {
     // Commanded forces go to the per-tick trace, not into device records: memory stays flat however long the run.
     rt::Device* device = nullptr;
-    if (s.device.kind == "udp") {
+    if (opt.device) {
+      device = opt.device;  // the caller's: the scene's [device] kind is not used
+    } else if (s.device.kind == "udp") {
       rt::UdpDeviceConfig uc = s.device.udp;
       uc.max_force_N = s.saturation.peak_N;
       Result<std::unique_ptr<rt::UdpDevice>> u = rt::UdpDevice::open(uc, script.keys.front().pose);
@@ -322,6 +334,14 @@ Status RunEngine::start() {
     }
     e.servo_where = "servo process pid " + std::to_string(e.servo_pid);
     e.collision->start();
+  } else if (e.device_clocked()) {
+    // The caller's callback ticks the servo (tick()); no haptic thread of ours.
+    status.servo_start_ticks.store(rt::process_start_ticks(getpid()), std::memory_order_relaxed);
+    status.servo_pid.store(getpid(), std::memory_order_relaxed);
+    e.collision->start();
+    e.servo_where = "the device's own callback";
+    e.accepting.store(true);
+    status.servo_state.store(std::uint32_t(rt::ServoState::running), std::memory_order_release);
   } else {
     status.servo_start_ticks.store(rt::process_start_ticks(getpid()), std::memory_order_relaxed);
     status.servo_pid.store(getpid(), std::memory_order_relaxed);
@@ -390,8 +410,39 @@ RunStatus RunEngine::status() const {
   return r;
 }
 
+void RunEngine::tick(std::int64_t now_ns) noexcept {
+  State& e = *s_;
+  e.in_tick.store(true);
+  if (!e.accepting.load() || !e.device_clocked()) {  // before start(), after finish(), or not ours to call
+    e.in_tick.store(false);
+    return;
+  }
+  // Misses are periods without a call: a gap of k periods (rounded) after the previous tick
+  // misses k - 1 of them. Measured from gaps, not from the first tick's phase, so a device
+  // clock running a little fast or slow against [haptic] rate_hz does not count as misses.
+  const std::int64_t period = e.loop->period_ns();
+  rt::TickInfo info;
+  info.tick = e.ext_ticks;
+  if (e.ext_ticks > 0 && now_ns > e.ext_last_ns) {
+    const std::int64_t periods = std::max<std::int64_t>(1, (now_ns - e.ext_last_ns + period / 2) / period);
+    e.ext_misses += std::uint64_t(periods - 1);
+  }
+  info.deadline_index = e.ext_ticks + e.ext_misses;
+  info.deadline_ns = now_ns;
+  info.woke_ns = now_ns;
+  info.period_ns = period;
+  e.servo->tick(info);
+  ++e.ext_ticks;
+  e.ext_last_ns = now_ns;
+  e.in_tick.store(false);
+}
+
 void RunEngine::State::stop_all() {
-  if (!opt.split) {
+  if (device_clocked()) {
+    accepting.store(false);
+    while (in_tick.load()) std::this_thread::sleep_for(std::chrono::microseconds(20));  // one tick: ~tens of us
+    shm->status().servo_state.store(std::uint32_t(rt::ServoState::finished), std::memory_order_release);
+  } else if (!opt.split) {
     loop->stop();
     shm->status().servo_state.store(std::uint32_t(rt::ServoState::finished), std::memory_order_release);
   }
@@ -426,12 +477,17 @@ RunReport RunEngine::finish(int signal) {
     else
       failures.push_back(r.error() + " (the servo's figures below are missing)");
   } else {
-    const rt::LoopStats& ls = e.loop->stats();
     sres.seconds = secs;
-    sres.ticks = ls.ticks;
-    sres.misses = ls.misses;
-    sres.overruns = ls.overruns;
-    sres.wake_p99_us = double(ls.wake_latency.percentile_ns(0.99)) / 1000.0;
+    if (e.device_clocked()) {  // the device's callback was the clock: no wake-ups of ours
+      sres.ticks = e.ext_ticks;
+      sres.misses = e.ext_misses;
+    } else {
+      const rt::LoopStats& ls = e.loop->stats();
+      sres.ticks = ls.ticks;
+      sres.misses = ls.misses;
+      sres.overruns = ls.overruns;
+      sres.wake_p99_us = double(ls.wake_latency.percentile_ns(0.99)) / 1000.0;
+    }
     sres.peak_force_N = e.servo->peak_force_N();
     sres.models = e.servo->stats().models;
     if (e.telemetry) {
@@ -450,10 +506,15 @@ RunReport RunEngine::finish(int signal) {
   const double servo_secs = sres.seconds > 0 ? sres.seconds : secs;
   appendf(summary, "summary\n");
   appendf(summary, "  duration        %.2f s\n", secs);
-  appendf(summary, "  haptic          %llu ticks (%.1f Hz), %llu misses, %llu overruns, wake-up p99 %.1f us; %s\n",
-          static_cast<unsigned long long>(sres.ticks), double(sres.ticks) / servo_secs,
-          static_cast<unsigned long long>(sres.misses), static_cast<unsigned long long>(sres.overruns),
-          sres.wake_p99_us, e.servo_where.c_str());
+  if (e.device_clocked())  // the device's callback wakes the servo: its wake-ups are not ours to time
+    appendf(summary, "  haptic          %llu ticks (%.1f Hz), %llu misses (gaps between the callback's calls); %s\n",
+            static_cast<unsigned long long>(sres.ticks), double(sres.ticks) / servo_secs,
+            static_cast<unsigned long long>(sres.misses), e.servo_where.c_str());
+  else
+    appendf(summary, "  haptic          %llu ticks (%.1f Hz), %llu misses, %llu overruns, wake-up p99 %.1f us; %s\n",
+            static_cast<unsigned long long>(sres.ticks), double(sres.ticks) / servo_secs,
+            static_cast<unsigned long long>(sres.misses), static_cast<unsigned long long>(sres.overruns),
+            sres.wake_p99_us, e.servo_where.c_str());
   appendf(summary, "  collision       %llu rounds (%.1f Hz), latency p50 %.3f ms, p99 %.3f ms, %llu incomplete; %s\n",
           static_cast<unsigned long long>(collision.rounds()), double(collision.rounds()) / secs,
           double(lat.percentile_ns(0.5)) * 1e-6, double(lat.percentile_ns(0.99)) * 1e-6,
@@ -541,6 +602,7 @@ void RunEngine::save(RunReport& report) {
 }
 
 rt::PoseFeedDevice* RunEngine::pose_feed() const { return s_->feed.get(); }
+const rt::Trajectory& RunEngine::trajectory() const { return s_->script; }
 const geom::Mesh& RunEngine::probe() const { return s_->probe(); }
 const geom::Mesh& RunEngine::object() const { return s_->object(); }
 const rt::ShmStatus& RunEngine::shm_status() const { return s_->shm->status(); }

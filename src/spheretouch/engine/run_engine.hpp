@@ -1,18 +1,32 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// RunEngine: the main job of `spheretouch run` as a library. A probe touches an object with force
-// at 1 kHz: the haptic thread (HapticLoop + HapticServo, or the servo as its own process) never
-// waits; the collision thread (CollisionLoop) answers poses with contact models, colliding in its
-// own thread or through a fleet of workers (scatter-gather); the triple buffers live in a named
-// shared-memory segment that `spheretouch monitor` can watch; telemetry goes to a run directory.
-//
-// The command line (src/app/cmd_run.cpp) owns what is about the terminal: arguments, signals, the
-// status line and where the summary is printed. A program or a benchmark drives the same engine:
-//
-//   auto e = RunEngine::prepare(scene, options);   // bodies, trees, script, backend, outputs
-//   e->start();                                    // servo and collision thread running
-//   while (e->poll(stop_requested)) sleep 20 ms;   // until the duration or a stop
-//   RunReport r = e->finish(signal);               // stopped; outputs written; the summary
-//   e->save(r);                                    // summary.txt (and trace cleanup)
+/// \file
+/// <spheretouch/engine/run_engine.hpp>: RunEngine, the main job of `spheretouch run` as a library
+/// (pkg-config `spheretouch-engine`, CMake `spheretouch::engine`). A probe touches an object with
+/// force at 1 kHz: the haptic side (the servo: HapticLoop + HapticServo, or the servo as its own
+/// process) never waits; the collision thread (CollisionLoop) answers poses with contact models,
+/// colliding in its own thread or through a fleet of workers (scatter-gather); the triple buffers
+/// live in a named shared-memory segment that `spheretouch monitor` can watch; telemetry goes to
+/// a run directory.
+///
+/// The command line (src/app/cmd_run.cpp) owns what is about the terminal: arguments, signals,
+/// the status line and where the summary is printed. A program drives the same engine:
+///
+///     auto e = RunEngine::prepare(scene, options);   // bodies, trees, script, backend, outputs
+///     e->start();                                    // servo and collision thread running
+///     while (e->poll(stop_requested, notes)) sleep 20 ms;  // until the duration or a stop
+///     RunReport r = e->finish(0);                    // stopped; outputs written; the summary
+///     e->save(r);                                    // summary.txt (and trace cleanup)
+///
+/// **Your own device** (a vendor SDK's: OpenHaptics, Force Dimension's dhd, libnifalcon, CHAI3D's
+/// device layer): implement rt::Device (the rules are in <spheretouch/rt/device.hpp>) and set
+/// RunOptions::device. Two ways to clock the servo:
+///  * the engine's haptic thread ticks at the scene's `[haptic] rate_hz` and calls your device
+///    (read_pose(), then command_force()): for a device whose driver keeps its newest pose in
+///    memory (RunOptions::device_clocked = false, the default);
+///  * your device's own servo callback (hdScheduleAsynchronous, a dhd loop) calls tick() once a
+///    period and the engine starts no haptic thread (device_clocked = true): the pose the
+///    callback just read becomes a force in the same call, with no wait for another thread's
+///    tick. examples/custom_device.cpp does this.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <atomic>
@@ -28,8 +42,9 @@
 #include <spheretouch/geom/result.hpp>
 
 namespace st::inline SPHERETOUCH_ABI::rt {
+class Device;
 class PoseFeedDevice;
-}
+}  // namespace st::rt
 
 namespace st::inline SPHERETOUCH_ABI::engine {
 
@@ -39,12 +54,20 @@ struct RunOptions {
   /// the spheretouch executable can do this). Needs `scene_path`.
   bool split = false;
   std::string scene_path;  ///< the scene file (the split servo reads its settings from it)
-  std::string shm_name;    ///< shared-memory segment ("" = /spheretouch-<pid>)
+  std::string shm_name;    ///< shared-memory segment ("" = /spheretouch-PID, PID this process)
   ClientCurve curve;       ///< CURVE keys for worker daemons (empty: plain)
   /// Progress notes during prepare() and start() ("loading probe and object ..."); may be empty.
   std::function<void(const std::string&)> note;
   /// Set (to a signal number) to abandon start()'s wait for the split servo; may be null.
   const std::atomic<int>* stop = nullptr;
+  /// A device of the caller's, used instead of the scene's `[device]` (its kind, UDP and script
+  /// settings are not used; trajectory() is the scene's script, for a device that replays it).
+  /// Not owned: it must outlive the engine. Not with `split`. Its max_force_N() lowers the
+  /// scene's saturation peak when below it.
+  rt::Device* device = nullptr;
+  /// With `device`: the device's own periodic callback clocks the servo by calling tick(), and
+  /// the engine starts no haptic thread. False: the engine's haptic thread polls the device.
+  bool device_clocked = false;
 };
 
 /// A snapshot for a status line, read while the run goes on.
@@ -64,10 +87,11 @@ struct RunStatus {
 /// The end of a run: the summary (always complete, whatever happened to the files) and every
 /// output that could not be written whole (the run then failed: exit status 1 in the CLI).
 struct RunReport {
-  std::string summary;
-  std::vector<std::string> failures;
+  std::string summary;                ///< the summary printed and saved (summary.txt)
+  std::vector<std::string> failures;  ///< outputs not written whole, one message each
 };
 
+/// One run of a scene: prepare(), start(), poll() until it is over, finish(), save().
 class RunEngine {
  public:
   /// Loads the bodies the scene names, their trees (from the cache when valid), the script;
@@ -94,13 +118,26 @@ class RunEngine {
   /// asked for no trace; failures are added to `report`.
   void save(RunReport& report);
 
+  /// One servo tick at `now_ns` (CLOCK_MONOTONIC, rt::now_ns()), for RunOptions::device_clocked:
+  /// call it from your device's servo callback once a period, after the device has its newest
+  /// pose; the servo reads it (Device::read_pose), computes the force and commands it
+  /// (Device::command_force) before tick() returns. Takes no lock, allocates nothing, never
+  /// waits; one caller thread at a time. Calls before start() or after finish() (or without
+  /// device_clocked) do nothing, so a callback may keep running around them. A gap of k periods
+  /// between two calls counts k - 1 misses.
+  void tick(std::int64_t now_ns) noexcept;
+  /// The scene's trajectory (the built-in press-and-slide script or its `[device] script` file),
+  /// probe pose in the object frame over time: what the simulated device plays, and what a
+  /// caller's device may replay.
+  const rt::Trajectory& trajectory() const;
+
   /// [device] kind = "browser": the device the live view's page drives (null otherwise).
   rt::PoseFeedDevice* pose_feed() const;
   const geom::Mesh& probe() const;   ///< the probe as loaded
   const geom::Mesh& object() const;  ///< the object as loaded
   /// The run's status area: servo and collision status, the scene reference and the view frames.
   const rt::ShmStatus& shm_status() const;
-  const Scene& scene() const;
+  const Scene& scene() const;              ///< the scene run
   std::string split() const;               ///< how the object was dealt to workers and why ("" without workers)
   const std::string& backend() const;      ///< "in the collision thread", "2 in-process workers", ...
   const std::string& servo_where() const;  ///< "servo thread" or "servo process pid N"

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Scene files (configs/*.toml): what `spheretouch run` touches and with which knobs. Every field
-// is checked where it is read, unknown keys are rejected, and only the bodies named are loaded.
-// configs/demo.toml documents every field.
+/// \file
+/// <spheretouch/engine/scene.hpp>: scene files (configs/*.toml), what `spheretouch run` and
+/// RunEngine touch and with which knobs. Every field is checked where it is read, unknown keys
+/// are rejected, and only the bodies named are loaded. configs/demo.toml documents every field.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <string>
@@ -29,12 +30,16 @@ inline constexpr std::uint32_t kAutoAssistBlocks = 8;
 
 /// One body: a mesh file, the model set ("model:NAME") or a generated shape.
 struct BodySpec {
-  std::string mesh;                                     ///< resolved file path; empty for a generated body
-  std::string builtin;                                  ///< "icosphere", "box", "capsule" when generated
+  std::string mesh;     ///< resolved file path; empty for a generated body
+  std::string builtin;  ///< "icosphere", "box", "capsule" when generated
+  ///@{
   double radius_mm = 10, length_mm = 30, size_mm = 40;  ///< generated shape dimensions
-  int frequency = 7, segments = 24;                     ///< generated shape resolution
-  std::string units = "mm";                             ///< unit of the file's coordinates
-  double scale = 1;                                     ///< extra factor
+  ///@}
+  ///@{
+  int frequency = 7, segments = 24;  ///< generated shape resolution
+  ///@}
+  std::string units = "mm";  ///< unit of the file's coordinates
+  double scale = 1;          ///< extra factor
 };
 
 /// The device: a simulated one (a script) or a real one behind the UDP bridge.
@@ -45,7 +50,8 @@ struct DeviceSpec {
   bool target_top = true;                                  ///< builtin: touch the object's highest point along +z
   geom::Vec3 target{geom::Vec3::Zero()};   ///< builtin: surface point, object frame, mm (target_top false)
   geom::Vec3 normal{geom::Vec3::UnitZ()};  ///< builtin: approach against this outward normal
-  double press_mm = 3, slide_mm = 20;      ///< builtin: press depth and slide length, mm
+  double press_mm = 3;                     ///< builtin: press depth, mm
+  double slide_mm = 20;                    ///< builtin: slide length, mm
   rt::VirtualUser user;                    ///< spring-damper hand reacting to the force
   bool repeat = false;                     ///< replay the script from its start each time it ends
 };
@@ -53,15 +59,17 @@ struct DeviceSpec {
 /// Everything a run needs, with defaults from the libraries' Default…() functions.
 struct Scene {
   std::string file;                                   ///< the scene file (for messages)
-  BodySpec probe, object;                             ///< the hand and the touched object
+  BodySpec probe;                                     ///< the hand (or tool) the device moves
+  BodySpec object;                                    ///< the touched object
   bool probe_tip_auto = true;                         ///< fingertip = probe's lowest vertex along the approach
   geom::Vec3 probe_tip{geom::Vec3::Zero()};           ///< fingertip, probe file coordinates, mm
   geom::Vec3 probe_rotation_deg{geom::Vec3::Zero()};  ///< probe orientation (XYZ Euler, about the tip)
   geom::TreeConfig tree = geom::DefaultTreeConfig();  ///< leaf size
   bool tree_cache = true;                             ///< read/write trees in the tree cache
-  /// Distribution: sphere layer whose spheres are dealt in blocks, and layer spheres per block;
-  /// geom::kFree / 0 = chosen by geom::choose_split() for the scene and worker count ("auto").
-  std::uint32_t layer = geom::kFree, block_size = 0;
+  /// Distribution: the sphere layer whose spheres are dealt in blocks; geom::kFree = chosen by
+  /// geom::choose_split() for the scene and worker count ("auto").
+  std::uint32_t layer = geom::kFree;
+  std::uint32_t block_size = 0;                         ///< layer spheres per block; 0 = chosen with the layer ("auto")
   geom::Mapping mapping = geom::Mapping::block_cyclic;  ///< how blocks are dealt to workers
   int workers = 2;                                      ///< in-process workers (0 = collide in the collision thread)
   std::vector<std::string> endpoints;                   ///< worker daemons (overrides `workers`)
@@ -77,16 +85,18 @@ struct Scene {
   rt::HapticLoopConfig haptic = rt::DefaultHapticLoopConfig();  ///< servo loop
   /// stack of every thread run starts ([haptic] thread_stack_kb); 0 = glibc's default
   std::size_t thread_stack_bytes = 1 << 20;
-  rt::ForceLawConfig law = rt::DefaultForceLawConfig();              ///< eq. (1) or spring
-  rt::SaturationConfig saturation = rt::DefaultSaturationConfig();   ///< device limits
-  rt::InterpolatorConfig interp = rt::DefaultInterpolatorConfig();   ///< between contact updates
-  geom::ContactConfig contact = geom::DefaultContactConfig();        ///< contact model (patch or paper)
-  rt::PassivityConfig passivity = rt::DefaultPassivityConfig();      ///< energy guard in the servo
-  DeviceSpec device;                                                 ///< simulated device
-  double duration_s = 6;                                             ///< run length (the built-in script takes 5 s)
-  std::string out_dir;                                               ///< run directory ("" = runs/<timestamp>)
-  bool write_trace = true, write_perfetto = true, write_ply = true;  ///< outputs
-  std::string status = "auto";                                       ///< status line: auto, tty, plain, off
+  rt::ForceLawConfig law = rt::DefaultForceLawConfig();             ///< eq. (1) or spring
+  rt::SaturationConfig saturation = rt::DefaultSaturationConfig();  ///< device limits
+  rt::InterpolatorConfig interp = rt::DefaultInterpolatorConfig();  ///< between contact updates
+  geom::ContactConfig contact = geom::DefaultContactConfig();       ///< contact model (patch or paper)
+  rt::PassivityConfig passivity = rt::DefaultPassivityConfig();     ///< energy guard in the servo
+  DeviceSpec device;                                                ///< simulated device
+  double duration_s = 6;                                            ///< run length (the built-in script takes 5 s)
+  std::string out_dir;                                              ///< run directory ("" = runs/TIMESTAMP)
+  bool write_trace = true;                                          ///< ticks.csv and rounds.csv in the run directory
+  bool write_perfetto = true;                                       ///< trace.json (Perfetto / chrome://tracing)
+  bool write_ply = true;        ///< contact.ply: the contact state at peak penetration
+  std::string status = "auto";  ///< status line: auto, tty, plain, off
 };
 
 /// The defaults (a capsule fingertip against an icosphere: needs no download).
