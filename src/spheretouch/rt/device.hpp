@@ -1,10 +1,27 @@
 // SPDX-License-Identifier: BSD-3-Clause
 /// \file
-/// Device: what the haptic loop talks to each tick (a PHANToM through OpenHaptics' HD API, or the
-/// SimulatedDevice). Poses and forces are in the object's frame (the haptic side's world):
-/// the pose maps probe file coordinates to object file coordinates, mm; forces are N. Mapping the
-/// device's own workspace onto the object is the implementation's job. Both calls run on the
-/// tick path: noexcept, no allocation, no blocking.
+/// <spheretouch/rt/device.hpp>: Device, what the servo talks to each tick: a vendor SDK's device
+/// (OpenHaptics, Force Dimension's dhd, libnifalcon, CHAI3D's device layer), the UDP bridge, the
+/// browser page or the SimulatedDevice. A program hands its own to the run engine with
+/// engine::RunOptions::device (examples/custom_device.cpp).
+///
+/// The rules an implementation follows:
+///  * **Frames and units.** The pose maps probe file coordinates to object file coordinates
+///    (the haptic side's world), mm; forces are N in the object's frame. Mapping the device's
+///    workspace onto the object (scale, offset, the grip on the probe) is the implementation's job.
+///  * **The tick path.** read_pose() and command_force() run on the servo's thread once a tick
+///    (1 kHz), read_pose() first: noexcept, no allocation, no lock, no blocking, no system call
+///    that can sleep. A driver call that can block (USB, a socket) runs on a thread of its own
+///    that hands the newest value over (a triple buffer, rt/triple_buffer.hpp).
+///  * **The clock.** Either the engine's haptic thread calls the device (the default), or the
+///    device's own servo callback calls engine::RunEngine::tick(), inside which both calls run
+///    (engine::RunOptions::device_clocked): then the pose the callback just read becomes a force
+///    before tick() returns.
+///  * **No pose.** read_pose() returning false makes the servo command zero force that tick and
+///    count it; return false rather than a stale or made-up pose.
+///  * **Force.** command_force() gets a finite force, already saturated to max_force_N() (the
+///    servo lowers its peak to it) and passed through the passivity guard; send it as it is.
+///  * **Lifetime.** The device outlives the engine that uses it; the engine never deletes it.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <Eigen/Core>
