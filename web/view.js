@@ -161,6 +161,11 @@
   arrow.line.renderOrder = 11;
   arrow.cone.renderOrder = 11;
   scene.add(arrow);
+  // The proxy: where the probe would rest outside the object, the device's pose moved out by the
+  // contact model's PD along FD (what the force pulls the hand towards). Drawn translucent while in
+  // contact, sharing the probe's geometry.
+  const ghost = new THREE.MeshBasicMaterial({ color: 0x9fd3ff, transparent: true, opacity: 0.35, depthWrite: false });
+  let proxy = null;
   const forces = [];  // [t, |F|]
   let last = null, fresh = false, prevTicks = 0, prevRounds = 0, prevT = 0, hapticHz = 0, collisionHz = 0;
   let startedAt = performance.now(), textAt = 0, drawn = 0, fps = 0, fpsFrames = 0, fpsSince = performance.now(), snapshotSent = false, meshAt = 0;
@@ -177,10 +182,14 @@
     const pv = take(Float32Array, 3 * pnv), pf = take(Uint32Array, 3 * pnf);
     const ov = take(Float32Array, 3 * onv), of = take(Uint32Array, 3 * onf);
     if (object) stillScene.remove(object.mesh), scene.remove(object.overlay);
-    if (probe) scene.remove(probe.group);
+    if (probe) scene.remove(probe.group), scene.remove(proxy);
     object = makeBody(ov, of, grey, [0.72, 0.70, 0.65]);
     probe = makeBody(pv, pf, blue, [0.50, 0.65, 0.85]);
     probe.group.matrixAutoUpdate = false;
+    proxy = new THREE.Mesh(probe.mesh.geometry, ghost);
+    proxy.matrixAutoUpdate = false;
+    proxy.visible = false;
+    scene.add(proxy);
     stillScene.add(object.mesh);
     scene.add(object.overlay);
     still.key = '';  // a new object: drawn again whatever the camera does
@@ -238,6 +247,12 @@
     const post = new THREE.Matrix4().makeTranslation(-objectOrigin[0], -objectOrigin[1], -objectOrigin[2]);
     probe.group.matrix.copy(post.multiply(m).multiply(pre));
     probe.group.matrixWorldNeedsUpdate = true;
+    proxy.visible = (fr.flags & 1) !== 0 && fr.pd > 0;
+    if (proxy.visible) {
+      const out = new THREE.Matrix4().makeTranslation(fr.pd * fr.fd[0], fr.pd * fr.fd[1], fr.pd * fr.fd[2]);
+      proxy.matrix.copy(out.multiply(probe.group.matrix));
+      proxy.matrixWorldNeedsUpdate = true;
+    }
     highlight(object, fr.objectFaces);
     highlight(probe, fr.probeFaces);
     const fmag = Math.hypot(fr.force[0], fr.force[1], fr.force[2]);

@@ -7,8 +7,10 @@
 
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <thread>
 
 #include "alloc_counter.hpp"
@@ -131,12 +133,24 @@ TEST_CASE("HapticServo: renders contact from a slow collision side, finite, satu
   samples.resize(tele.drain_to(samples.data(), samples.size()));
   REQUIRE(!samples.empty());
   std::size_t in_contact = 0;
+  double proxy_off = 0;  // largest distance of the proxy from the wall's plane while pressed
   for (const TelemetrySample& s : samples) {
     in_contact += (s.flags & kTickInContact) != 0;
     CHECK((s.flags & kTickNoPose) == 0);
     CHECK((s.flags & ~(kTickInContact | kTickSaturated | kTickNoPose)) == 0);
+    // The proxy: the tip moved out along the wall's normal (+z) by the depth: on the wall's
+    // plane while pressed (the tip's lowest point is its origin), the tip itself otherwise.
+    CHECK(std::abs(s.proxy_mm[0] - s.position_mm[0]) < 1e-12);  // the normal is +z to rounding
+    CHECK(std::abs(s.proxy_mm[1] - s.position_mm[1]) < 1e-12);
+    if ((s.flags & kTickInContact) && s.penetration_mm > 0) {
+      CHECK(s.proxy_mm[2] == doctest::Approx(s.position_mm[2] + s.penetration_mm).epsilon(1e-12));
+      proxy_off = std::max(proxy_off, std::abs(s.proxy_mm[2]));
+    } else if (!(s.flags & kTickInContact)) {
+      CHECK(s.proxy_mm[2] == s.position_mm[2]);
+    }
   }
   CHECK(in_contact > samples.size() / 4);
+  CHECK(proxy_off < 1e-6);  // the plane's depth is exact for a flat wall
   MESSAGE("ticks " << ls.ticks << ", misses " << ls.misses << ", models " << servo.stats().models << ", max force "
                    << fmax << " N, allocations while armed " << allocs);
 }

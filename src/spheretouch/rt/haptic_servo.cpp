@@ -90,8 +90,15 @@ void HapticServo::tick(const TickInfo& info) noexcept {
     s.pose_seq = have_pose ? pose_seq_ : 0;
     s.model_seq = interp_.model_seq();
     s.model_age_ns = model_pose_ns_ ? now - model_pose_ns_ : -1;
-    if (have_pose)
-      for (int i = 0; i < 3; ++i) s.position_mm[i] = pose.translation()(i);
+    if (have_pose) {
+      // The proxy: the probe moved out of the object by the depth along the contact normal.
+      const double pd = interp_.state().in_contact ? std::max(0.0, interp_.state().penetration_mm) : 0.0;
+      const Eigen::Vector3d proxy = pose.translation() + pd * interp_.normal();
+      for (int i = 0; i < 3; ++i) {
+        s.position_mm[i] = pose.translation()(i);
+        s.proxy_mm[i] = proxy(i);
+      }
+    }
     for (int i = 0; i < 3; ++i) s.force_N[i] = f(i);
     s.penetration_mm = interp_.state().penetration_mm;
     s.fade = interp_.state().fade;

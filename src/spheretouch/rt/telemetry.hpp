@@ -38,8 +38,11 @@ struct TelemetrySample {
   double ceiling_N = 0;           ///< saturation ceiling
   std::uint32_t flags = 0;        ///< kTickInContact | kTickSaturated | kTickNoPose
   std::uint32_t misses = 0;       ///< loop misses so far (low 32 bits)
+  /// The proxy: where the probe would rest outside the object, object frame (position_mm moved
+  /// out by PD along the contact normal FD while in contact; position_mm otherwise).
+  double proxy_mm[3] = {};
 };
-static_assert(std::is_trivially_copyable_v<TelemetrySample> && sizeof(TelemetrySample) == 128);
+static_assert(std::is_trivially_copyable_v<TelemetrySample> && sizeof(TelemetrySample) == 152);
 
 /// Counters of a telemetry stream.
 struct TelemetryStats {
