@@ -35,13 +35,13 @@ std::size_t Telemetry::drain_to(TelemetrySample* out, std::size_t max) noexcept 
 
 void Telemetry::write(const TelemetrySample& s) {
   if (failed_.load(std::memory_order_relaxed)) return;
-  const int n = std::fprintf(file_, "%llu,%lld,%lld,%llu,%llu,%lld,%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.4g,%.4g,%u,%u,%.9g,%.9g,%.9g\n",
-                             static_cast<unsigned long long>(s.tick), static_cast<long long>(s.t_ns),
-                             static_cast<long long>(s.latency_ns), static_cast<unsigned long long>(s.pose_seq),
-                             static_cast<unsigned long long>(s.model_seq), static_cast<long long>(s.model_age_ns),
-                             s.position_mm[0], s.position_mm[1], s.position_mm[2], s.force_N[0], s.force_N[1],
-                             s.force_N[2], s.penetration_mm, s.fade, s.ceiling_N, s.flags, s.misses, s.proxy_mm[0],
-                             s.proxy_mm[1], s.proxy_mm[2]);
+  const int n = std::fprintf(
+      file_, "%llu,%lld,%lld,%llu,%llu,%lld,%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.4g,%.4g,%u,%u,%.9g,%.9g,%.9g\n",
+      static_cast<unsigned long long>(s.tick), static_cast<long long>(s.t_ns), static_cast<long long>(s.latency_ns),
+      static_cast<unsigned long long>(s.pose_seq), static_cast<unsigned long long>(s.model_seq),
+      static_cast<long long>(s.model_age_ns), s.position_mm[0], s.position_mm[1], s.position_mm[2], s.force_N[0],
+      s.force_N[1], s.force_N[2], s.penetration_mm, s.fade, s.ceiling_N, s.flags, s.misses, s.proxy_mm[0],
+      s.proxy_mm[1], s.proxy_mm[2]);
   if (n < 0) {  // a full disk: say which file and why, once, and stop writing
     error_ = path_ + ": write failed: " + std::strerror(errno);
     failed_.store(true, std::memory_order_release);
