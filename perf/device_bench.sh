@@ -8,16 +8,17 @@
 #   2. the UDP bridge on the same scene (configs/udp_small.toml: small.toml with [device] kind =
 #      "udp"), driven by examples/udp_device_emulator.py at 1 kHz on loopback: its pose-to-force time
 #      (driver sends a pose -> receives the force computed from it).
-# usage: perf/device_bench.sh [SECONDS]   (default 5); writes perf/results/device.json
+# usage: perf/device_bench.sh [SECONDS] [OUT]   (default 5 s, perf/results); writes OUT/device.json
 set -euo pipefail
 cd "$(dirname "$0")/.."
 secs="${1:-5}"
+results="${2:-perf/results}"
 for exe in build/spheretouch build/examples/custom_device; do
   [ -x "$exe" ] || { echo "device_bench: $exe missing (scripts/setup.sh build)" >&2; exit 2; }
 done
 work=$(mktemp -d)
 trap 'pkill -P $$ 2>/dev/null || true; rm -rf "$work"' EXIT
-mkdir -p perf/results
+mkdir -p "$results"
 
 echo "device_bench: in-process device (callback-clocked), then the built-in simulated device, ${secs} s each" >&2
 build/examples/custom_device configs/small.toml --seconds "$secs" --compare --json >"$work/inproc.json" 2>"$work/inproc.log" ||
@@ -30,14 +31,14 @@ for _ in $(seq 300); do grep -q "listening on" "$work/udp.log" 2>/dev/null && br
 python3 examples/udp_device_emulator.py --seconds "$secs" --from 0,0,56 --to-point 0,0,46 --json >"$work/udp.json"
 wait "$upid" || true
 
-python3 - "$work/inproc.json" "$work/udp.json" <<'PY'
+python3 - "$work/inproc.json" "$work/udp.json" "$results/device.json" <<'PY'
 import json, sys
 inp = json.load(open(sys.argv[1]))
 udp = json.load(open(sys.argv[2]))
 out = {"in_process": inp, "udp": udp,
        "p99_ratio_in_process_to_udp": inp["pose_to_force_us_p99"] / udp["pose_to_force_us_p99"],
        "p50_ratio_in_process_to_udp": inp["pose_to_force_us_p50"] / udp["pose_to_force_us_p50"]}
-json.dump(out, open("perf/results/device.json", "w"), indent=1)
+json.dump(out, open(sys.argv[3], "w"), indent=1)
 rate = lambda m, t: 100.0 * m / max(1, t)
 print(f"in-process device (callback-clocked): {inp['vendor_ticks']} ticks, {inp['vendor_misses']} misses "
       f"({rate(inp['vendor_misses'], inp['vendor_ticks']):.2f} %); pose-to-force p50 {inp['pose_to_force_us_p50']:.1f} us, "

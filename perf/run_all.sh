@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # SPDX-License-Identifier: BSD-3-Clause
 # The perf harness: regenerates the paper's Tables 1-3, the peers, the speed/accuracy
-# trade, the force rendering quality (paper vs patch contact model), their CSVs, PNG plots, a JSON
-# summary and the harness sections of perf/RESULTS.md.
+# trade, the force rendering quality (paper vs patch contact model), the collision core per SIMD
+# instruction set, the hostile-client, scale-out, live-view and device benches, their CSVs, PNG
+# plots, a JSON summary and perf/RESULTS.md (written whole: the current results, each table with
+# its command; earlier runs are in git history).
 #   perf/run_all.sh            full run (<= 15 min on the 2-core dev VM): perf/results/, perf/RESULTS.md
 #   perf/run_all.sh --quick    every benchmark with tiny counts (<= 2 min), for CI; asserts nothing
 #                              about speed; writes build/perf-quick/ and leaves perf/ untouched
@@ -101,6 +103,26 @@ for m in "${t3_models[@]}"; do
   esac
 done
 
+# The collision core on each instruction set the CPU has (AVX-512 and AVX2 where present): the
+# certified triangle filter against today's path (every candidate through the exact test), same run.
+isas=()
+flags=$(grep -m1 '^flags' /proc/cpuinfo || true)
+[[ " $flags " == *" avx512f "* && " $flags " == *" avx512vl "* ]] && isas+=(avx512)
+[[ " $flags " == *" avx2 "* && " $flags " == *" fma "* ]] && isas+=(avx2)
+isas+=(sse2)
+if [ $quick = 1 ]; then isas=("${isas[0]}"); collide_runs=5; collide_objects=(elephant); else collide_runs=300; collide_objects=(elephant armadillo_L2); fi
+log "collision core: filter vs exact test, ISAs ${isas[*]}"
+for o in "${collide_objects[@]}"; do
+  if [ "$o" = elephant ]; then pf="$out/poses/hand_elephant.txt"; else
+    pf="$out/poses/hand_${o}_targets.txt"
+    "$bench" collide --probe "$hand" --object "$models/$o.off" --find-poses "$pf" --targets 100,500,1000,1500 >/dev/null
+  fi
+  for isa in "${isas[@]}"; do
+    "$bench" collide --probe "$hand" --object "$models/$o.off" --poses "$pf" --runs "$collide_runs" --isa "$isa" --json \
+      > "$out/collide_${o}_${isa}.json"
+  done
+done
+
 log "table 1: hand x elephant, contacts x workers ($workers)"
 "$bench" table1 --probe "$hand" --object "$models/elephant.off" --poses "$out/poses/hand_elephant.txt" \
   --workers "$workers" --worker-bin "$worker" --rounds "$rounds1" --csv "$out/table1.csv" > "$out/table1.txt"
@@ -169,6 +191,9 @@ fi
 if [ $quick = 0 ]; then  # needs the browser and ~3 minutes; the browser tests cover the page in CI
   log "live view and UDP bridge: haptic misses with and without a viewer, page frame rate, pose-to-force time"
   perf/view_bench.sh 12 3 > "$out/view.txt"
+  log "in-process device (callback-clocked) against the UDP bridge, same run"
+  ninja -C "$build" -j"${ST_JOBS:-1}" examples/custom_device >/dev/null
+  perf/device_bench.sh 5 "$out" > "$out/device.txt"
 fi
 
 log "report"

@@ -80,6 +80,9 @@ void run_servo(const ServoArgs& a) {
   rt::HapticServo servo(device, shm.poses(), shm.models(), law.value(), s.interp, s.saturation, telemetry.get(),
                         s.passivity, 1.0 / s.haptic.rate_hz);
   servo.publish_status_to(&status.servo);
+  rt::WrenchConfig wrench = s.device.wrench;
+  wrench.tcp_mm = a.tcp_mm;  // resolved by the run (the tip needs the probe mesh)
+  servo.set_wrench(wrench);
 
   on_stop_signals(on_servo_signal);
 
@@ -188,7 +191,12 @@ void add_servo(CLI::App& app) {
   cmd->add_option("--out", a->out, "run directory")->required();
   cmd->add_option("--duration", a->duration_s, "seconds")->required();
   cmd->add_option("--parent", a->parent, "collision process pid")->required();
-  cmd->callback([a] { run_servo(*a); });
+  auto tcp = std::make_shared<std::vector<double>>();
+  cmd->add_option("--tcp", *tcp, "tool centre point x,y,z (probe mm)")->delimiter(',')->expected(3);
+  cmd->callback([a, tcp] {
+    if (tcp->size() == 3) a->tcp_mm = geom::Vec3((*tcp)[0], (*tcp)[1], (*tcp)[2]);
+    run_servo(*a);
+  });
 }
 
 }  // namespace st::app

@@ -254,3 +254,30 @@ TEST_CASE("run engine: a caller's device is refused with the split servo, and de
   REQUIRE_FALSE(b.ok());
   CHECK(st::test::contains(b.error(), "device_clocked"));
 }
+
+TEST_CASE("scene: [device] dof, torque_limit_nm and tcp_mm; the tool point defaults to the probe's tip") {
+  auto six = st::engine::parse_scene(
+      engine_scene_text("[device]\ndof = 6\ntorque_limit_nm = 0.05\ntcp_mm = [0.0, 0.0, 12.5]\n"), "w.toml", ".");
+  REQUIRE_MESSAGE(six.ok(), six.error());
+  CHECK(six.value().device.wrench.dof == 6);
+  CHECK(six.value().device.wrench.torque_limit_Nm == 0.05);
+  CHECK_FALSE(six.value().device.tcp_auto);
+  const st::geom::Mesh capsule = st::geom::make_capsule(6, 30, 24);
+  CHECK(st::engine::tool_point(six.value(), capsule) == st::geom::Vec3(0, 0, 12.5));
+  // Default: 3-DOF, the tool point at the probe's tip (its lowest vertex along the approach).
+  auto dflt = st::engine::parse_scene(engine_scene_text(""), "d.toml", ".");
+  REQUIRE(dflt.ok());
+  CHECK(dflt.value().device.wrench.dof == 3);
+  CHECK(dflt.value().device.tcp_auto);
+  CHECK(st::engine::tool_point(dflt.value(), capsule).z() == doctest::Approx(-(15.0 + 6.0)));
+  for (const auto& [text, field] : {std::pair<std::string, std::string>{"dof = 5\n", "dof"},
+                                    {"dof = 6\n", "torque_limit_nm"},
+                                    {"torque_limit_nm = -1.0\n", "torque_limit_nm"},
+                                    {"tcp_mm = [1.0, 2.0]\n", "tcp_mm"}}) {
+    CAPTURE(text);
+    auto bad = st::engine::parse_scene(engine_scene_text("[device]\n" + text), "bad.toml", ".");
+    REQUIRE_FALSE(bad.ok());
+    CHECK(st::test::contains(bad.error(), field));
+    CHECK(st::test::contains(bad.error(), "bad.toml"));
+  }
+}

@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <fstream>
 #include <sstream>
 #include <thread>
@@ -99,14 +100,19 @@ inline std::vector<TickCsvRow> read_tick_csv(const std::string& csv) {
   std::ifstream in(csv);
   std::vector<TickCsvRow> rows;
   std::string line;
-  std::getline(in, line);  // header
+  std::getline(in, line);  // header: the 23 columns below
+  REQUIRE(
+      line ==
+      "tick,t_ns,latency_ns,pose_seq,model_seq,model_age_ns,x_mm,y_mm,z_mm,fx_N,fy_N,fz_N,pd_mm,fade,ceiling_N,flags,"
+      "misses,proxy_x_mm,proxy_y_mm,proxy_z_mm,tx_Nm,ty_Nm,tz_Nm");
   double t0 = -1;
   while (std::getline(in, line)) {
     if (line.empty() || line[0] == '#') continue;
     std::vector<double> v;
     std::stringstream ss(line);
     for (std::string cell; std::getline(ss, cell, ',');) v.push_back(std::stod(cell));
-    REQUIRE(v.size() == 17);
+    REQUIRE(v.size() == 23);
+    for (double x : v) REQUIRE(std::isfinite(x));  // the proxy and the torque too
     if (t0 < 0) t0 = v[1];
     rows.push_back({static_cast<std::uint64_t>(v[0]), static_cast<std::uint64_t>(v[16]), (v[1] - t0) * 1e-9,
                     static_cast<std::uint64_t>(v[4]), std::sqrt(v[9] * v[9] + v[10] * v[10] + v[11] * v[11]), int(v[15])});

@@ -756,3 +756,72 @@ TEST_CASE("contact patch: PD never exceeds the exact directional depth along FD 
   }
   CHECK(checked > 100);
 }
+
+TEST_CASE("contact patch: the pressure point is the patch's centre: flat press, end-on sphere, continuous sliding") {
+  // A 20 mm box pressed 1 mm flat into the 40 mm box's top face (z = 20), away from its edges:
+  // the intersection curve is the probe's 20 x 20 square at z = 20, its centroid under the probe's
+  // centre, wherever the probe is and however the object is placed.
+  const Mesh cube = make_box({20, 20, 20});
+  for (const Vec3& offset : {Vec3(0, 0, 0), Vec3(1e5, -3e5, 2e5)}) {
+    Mesh box = box40();
+    box.origin += offset;
+    ContactBuilder b;
+    const Pose p = pose_at(offset + Vec3(3.25, -4.5, 29.0));
+    const ContactModel m = model_at(b, cube, box, p);
+    REQUIRE(m.in_contact());
+    const Vec3 c = to_eigen(m.pressure_point);
+    CHECK(c.x() == doctest::Approx(offset.x() + 3.25).epsilon(1e-12));
+    CHECK(c.y() == doctest::Approx(offset.y() - 4.5).epsilon(1e-12));
+    CHECK(c.z() == doctest::Approx(offset.z() + 20.0).epsilon(1e-12));
+  }
+  // Over the top face's edge (x = 20): the probe spans x in [5, 25]; the curve is the square's
+  // part on the top face (x = 5 side, the y = ±10 sides to x = 20), the 1 mm drops down the side
+  // face and the probe's bottom edge across it at z = 19. The object surface inside the probe is
+  // the top face's 15 x 20 overlap (centre (12.5, 0, 20)) and the side face's 20 x 1 strip
+  // (centre (20, 0, 19.5)); FD is their vector area's direction, and the pressure point is their
+  // centroid seen along FD: the centres weighted by their areas along FD (up to a shift along FD,
+  // which moves no torque).
+  {
+    ContactBuilder b;
+    const ContactModel m = model_at(b, cube, box40(), pose_at(Vec3(15, 0, 29.0)));
+    REQUIRE(m.in_contact());
+    const Vec3 top_area(0, 0, 15 * 20), side_area(20 * 1, 0, 0);
+    const Vec3 n = (top_area + side_area).normalized();
+    REQUIRE(angle_deg(fd(m), n) < 1e-9);
+    const double wt = top_area.dot(n), ws = side_area.dot(n);
+    const Vec3 expect = (wt * Vec3(12.5, 0, 20) + ws * Vec3(20, 0, 19.5)) / (wt + ws);
+    CHECK((to_eigen(m.pressure_point) - expect).cross(n).norm() < 1e-9);
+  }
+  // A capsule pressed end-on: its cap's rings are symmetric about its axis, so the curve's
+  // centroid is on the axis (the force's line of action passes through the sphere's centre).
+  {
+    const Mesh capsule = make_capsule(8, 30, 32);
+    ContactBuilder b;
+    // The capsule's tip is at z = 15 + 8 = 23 (probe frame): pressed 0.7 mm, hanging down (+z up).
+    Pose p = Pose::Identity();
+    p.linear() = Eigen::AngleAxisd(kPi, Vec3::UnitX()).toRotationMatrix();
+    p.translation() = Vec3(2.5, -1.0, 20.0 + 23.0 - 0.7);
+    const ContactModel m = model_at(b, capsule, box40(), p);
+    REQUIRE(m.in_contact());
+    const Vec3 c = to_eigen(m.pressure_point);
+    CHECK(std::abs(c.x() - 2.5) < 1e-9);
+    CHECK(std::abs(c.y() + 1.0) < 1e-9);
+  }
+  // Sliding the flat press across the face edge in 0.05 mm steps: the pressure point moves across
+  // FD in steps of the same order (no jump as faces enter and leave the patch; along FD it sits on
+  // the contact plane, which moves no torque).
+  {
+    ContactBuilder b;
+    Vec3 last = Vec3::Zero();
+    double worst = 0;
+    for (int i = 0; i <= 400; ++i) {
+      const double x = 0.0 + 0.05 * i;  // probe centre from x = 0 to 20: its edge crosses the face's edge
+      const ContactModel m = model_at(b, cube, box40(), pose_at(Vec3(x, 0, 29.0)));
+      REQUIRE(m.in_contact());
+      const Vec3 c = to_eigen(m.pressure_point);
+      if (i > 0) worst = std::max(worst, (c - last).cross(fd(m)).norm());
+      last = c;
+    }
+    CHECK(worst < 0.1);  // two steps' worth at most (the overlap's centre moves at half the speed)
+  }
+}

@@ -18,6 +18,7 @@
 #include <spheretouch/rt/clock.hpp>
 #include <spheretouch/rt/simulated_device.hpp>
 #include "rt_test_util.hpp"
+#include "test_util.hpp"
 
 using namespace st::rt;
 using namespace st::geom;
@@ -190,4 +191,87 @@ TEST_CASE("HapticServo: when the collision side stops, the force fades to zero")
   CHECK(r[150].force_N.norm() > 0.0);
   CHECK(r[250].force_N.norm() == 0.0);
   CHECK(r[399].force_N.norm() == 0.0);
+}
+
+namespace {
+/// A 6-DOF device that holds a fixed pose and records the last wrench or force it was given.
+struct WrenchDevice final : Device {
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  Eigen::Vector3d force = Eigen::Vector3d::Zero(), torque = Eigen::Vector3d::Zero();
+  int wrenches = 0, forces = 0;
+  double torque_max = 0.5;
+  bool read_pose(std::int64_t, Eigen::Isometry3d& p) noexcept override {
+    p = pose;
+    return true;
+  }
+  void command_force(std::int64_t, const Eigen::Vector3d& f) noexcept override {
+    force = f;
+    ++forces;
+  }
+  void command_wrench(std::int64_t, const Eigen::Vector3d& f, const Eigen::Vector3d& t) noexcept override {
+    force = f;
+    torque = t;
+    ++wrenches;
+  }
+  double max_force_N() const noexcept override { return 3.3; }
+  double max_torque_Nm() const noexcept override { return torque_max; }
+};
+}  // namespace
+
+TEST_CASE(
+    "HapticServo: the wrench: torque about the tool point to 6-DOF devices, saturated; force only to 3-DOF ones") {
+  CHECK(check(WrenchConfig{}).empty());
+  CHECK(st::test::contains(check(WrenchConfig{.dof = 4}), "dof"));
+  CHECK(st::test::contains(check(WrenchConfig{.dof = 6}), "torque_limit_nm"));
+  for (const int dof : {3, 6}) {
+    CAPTURE(dof);
+    auto poses = std::make_unique<TripleBuffer<PoseSample>>();
+    auto models = std::make_unique<TripleBuffer<ContactModel>>();
+    WrenchDevice dev;
+    dev.pose.translation() = Eigen::Vector3d(0, 0, -2);  // 2 mm into the wall z < 0
+    HapticServo servo(dev, *poses, *models, ForceLaw{}, DefaultInterpolatorConfig(), DefaultSaturationConfig(), nullptr);
+    // The tool point 40 mm above the probe's origin: a lever of 40 mm over a 10 mm offset.
+    servo.set_wrench({.dof = dof, .torque_limit_Nm = 0.02, .tcp_mm = Eigen::Vector3d(0, 0, 40)});
+    ContactModel m{};
+    m.seq = 1;
+    m.flags = kInContact;
+    m.pose = to_pod(dev.pose);
+    m.force_dir = to_pod(Eigen::Vector3d(0, 0, 1));
+    m.probe_point = to_pod(Eigen::Vector3d(0, 0, 0));
+    m.plane_point = to_pod(Eigen::Vector3d(0, 0, 0));
+    m.pressure_point = to_pod(Eigen::Vector3d(10, 0, 0));  // the patch's centre 10 mm off the tool's axis
+    m.penetration_mm = 2;
+    models->write(m);
+    TickInfo info;
+    info.period_ns = 1'000'000;
+    for (int k = 0; k < 20; ++k) {
+      info.tick = std::uint64_t(k);
+      info.deadline_index = info.tick;
+      info.woke_ns = info.deadline_ns = 1'000'000'000 + k * 1'000'000;
+      servo.tick(info);
+    }
+    REQUIRE(dev.force.z() > 0.1);
+    // τ = (c − r) × F = (10, 0, −42) mm × (0, 0, F): (0, −10 F, 0) N·mm, above the 0.02 N·m limit
+    // once F > 2 N, within it below.
+    const double want = 1e-2 * dev.force.z();
+    if (dof == 6) {
+      CHECK(dev.forces == 0);
+      CHECK(dev.wrenches == 20);
+      CHECK(dev.torque.y() == doctest::Approx(-std::min(want, 0.02)));
+      CHECK(std::abs(dev.torque.x()) < 1e-15);
+      CHECK(std::abs(dev.torque.z()) < 1e-15);
+      CHECK(servo.peak_torque_Nm() == doctest::Approx(want));
+      // A device rendering less torque than the scene allows lowers the ceiling.
+      dev.torque_max = 0.001;
+      servo.set_wrench({.dof = 6, .torque_limit_Nm = 0.02, .tcp_mm = Eigen::Vector3d(0, 0, 40)});
+      info.tick = info.deadline_index = 20;
+      info.woke_ns = info.deadline_ns = 1'000'000'000 + 20 * 1'000'000;
+      servo.tick(info);
+      CHECK(dev.torque.norm() == doctest::Approx(0.001));
+    } else {
+      CHECK(dev.wrenches == 0);
+      CHECK(dev.forces == 20);
+      CHECK(servo.peak_torque_Nm() == doctest::Approx(want));  // computed and reported, not commanded
+    }
+  }
 }

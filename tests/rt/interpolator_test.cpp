@@ -10,6 +10,9 @@
 #include <limits>
 #include <random>
 
+#include <spheretouch/collide.hpp>
+#include <spheretouch/geom/contact.hpp>
+#include <spheretouch/geom/primitives.hpp>
 #include <spheretouch/rt/constants.hpp>
 #include <spheretouch/rt/saturation.hpp>
 
@@ -352,4 +355,131 @@ TEST_CASE("interpolator: the cross-fade lasts kCrossfadeRounds model intervals w
   }
   CHECK(mid > law.magnitude_N(1.0) + 1e-3);                            // still fading
   CHECK(done == doctest::Approx(law.magnitude_N(1.0)).epsilon(1e-4));  // done within the span, not 10 ms
+}
+
+TEST_CASE("Interpolator: the torque is the force's moment about the tool point, carried with the probe") {
+  using st::geom::to_pod;
+  InterpolatorConfig c = DefaultInterpolatorConfig();
+  ForceLaw law;
+  Interpolator in(law, c);
+  const Eigen::Vector3d tcp(0, 0, 10);  // the tool point, probe frame: 10 mm above the probe's origin
+  in.set_tool_point(tcp);
+  // A flat press: FD = +z, the plane at z = 0, the probe's origin 1 mm below it; the patch's
+  // centre 6 mm off the tool point along x (a box pressed off-centre).
+  st::geom::ContactModel m{};
+  m.seq = 1;
+  m.flags = st::geom::kInContact;
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.translation() = Eigen::Vector3d(0, 0, -1);
+  m.pose = to_pod(pose);
+  m.force_dir = to_pod(Eigen::Vector3d(0, 0, 1));
+  m.probe_point = to_pod(Eigen::Vector3d(0, 0, 0));
+  m.plane_point = to_pod(Eigen::Vector3d(0, 0, 0));
+  m.contact_point = to_pod(Eigen::Vector3d(6, 0, 0));
+  m.pressure_point = to_pod(Eigen::Vector3d(6, 0, 0));
+  m.penetration_mm = 1;
+  in.on_model(m, 1'000'000);
+  const Eigen::Vector3d f = in.force(pose, 1'000'000 + kDefaultCrossfadeNs * 10);
+  REQUIRE(f.z() > 0.1);
+  // Analytic: (pressure point − tool point) × F = (6, 0, −11) mm × (0, 0, Fz) = (0, −6 Fz, 0) N·mm.
+  const Eigen::Vector3d expect = 1e-3 * Eigen::Vector3d(6, 0, -11).cross(f);
+  CHECK((in.torque_Nm() - expect).norm() <= 1e-12 * expect.norm());
+  CHECK(in.torque_Nm().y() == doctest::Approx(-6e-3 * f.z()));
+  // The probe turned 30° about z at the same depth: the lever arm turns with it (carried with
+  // the probe between models).
+  Eigen::Isometry3d turned = pose;
+  turned.linear() = Eigen::AngleAxisd(M_PI / 6, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  const Eigen::Vector3d f2 = in.force(turned, 1'000'000 + kDefaultCrossfadeNs * 11);
+  const Eigen::Vector3d lever = turned.linear() * Eigen::Vector3d(6, 0, -11);
+  CHECK((in.torque_Nm() - 1e-3 * lever.cross(f2)).norm() <= 1e-12 * in.torque_Nm().norm());
+  // A pressure point on the tool point's line along the force: no torque.
+  m.seq = 2;
+  m.pressure_point = to_pod(Eigen::Vector3d(0, 0, -0.5));
+  in.on_model(m, 200'000'000);
+  in.force(pose, 200'000'000 + kDefaultCrossfadeNs * 10);
+  CHECK(in.torque_Nm().norm() < 1e-15);
+}
+
+TEST_CASE("Interpolator: a new model's lever arm is cross-faded in: the torque moves in small steps") {
+  using st::geom::to_pod;
+  Interpolator in(ForceLaw{}, DefaultInterpolatorConfig());
+  st::geom::ContactModel m{};
+  m.flags = st::geom::kInContact;
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.translation() = Eigen::Vector3d(0, 0, -1);
+  m.pose = to_pod(pose);
+  m.force_dir = to_pod(Eigen::Vector3d(0, 0, 1));
+  m.penetration_mm = 1;
+  std::int64_t t = 1'000'000;
+  Eigen::Vector3d last = Eigen::Vector3d::Zero();
+  double worst = 0, peak = 0;
+  for (int round = 0; round < 40; ++round) {
+    m.seq = std::uint64_t(round + 1);
+    m.pressure_point = to_pod(Eigen::Vector3d(round % 2 ? 8.0 : -8.0, 0, 0));  // the centre jumps 16 mm a round
+    in.on_model(m, t);
+    for (int k = 0; k < 2; ++k, t += 1'000'000) {  // a round every 2 ticks
+      in.force(pose, t);
+      if (round > 2) worst = std::max(worst, (in.torque_Nm() - last).norm());
+      peak = std::max(peak, in.torque_Nm().norm());
+      last = in.torque_Nm();
+    }
+  }
+  REQUIRE(peak > 0);
+  // A switch at once would step by the whole 16 mm lever (2 x peak); the cross-fade spreads it.
+  CHECK(worst < 0.6 * peak);
+}
+
+namespace {
+// The model the patch builder makes for `probe` at `pose` against `object` (every colliding pair).
+st::geom::ContactModel built_model(const st::geom::Mesh& probe, const st::geom::Mesh& object, const Eigen::Isometry3d& pose) {
+  st::Result<st::Body> p = st::Body::make(probe), o = st::Body::make(object);
+  REQUIRE(p.ok());
+  REQUIRE(o.ok());
+  st::CollisionResult r;
+  st::ComputeCollision(p.value(), o.value()).at_relative(pose, st::CollisionRequest::all_pairs(), r);
+  st::geom::ContactBuilder builder;
+  st::geom::ContactModel m = builder.build(probe, object, pose, r.pairs);
+  m.seq = 1;
+  m.pose = st::geom::to_pod(pose);
+  return m;
+}
+}  // namespace
+
+TEST_CASE("Interpolator: wrench of real contacts: a box pressed off its tool point, a sphere end about its centre") {
+  const st::geom::Mesh plate = st::geom::make_box({200, 200, 200});  // top face at z = 100
+  {
+    // A 20 mm box pressed 1 mm flat; the tool point 6 mm off its axis on its top face. The force
+    // acts at the middle of the pressed square: τ = (c − r) × F = (−6, 0, −20) mm × (0, 0, F).
+    const st::geom::Mesh cube = st::geom::make_box({20, 20, 20});
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.translation() = Eigen::Vector3d(13.0, -7.0, 100 + 10 - 1.0);
+    Interpolator in(ForceLaw{}, DefaultInterpolatorConfig());
+    in.set_tool_point(Eigen::Vector3d(6, 0, 10));
+    const st::geom::ContactModel m = built_model(cube, plate, pose);
+    REQUIRE(m.in_contact());
+    in.on_model(m, 1'000'000);
+    const Eigen::Vector3d f = in.force(pose, 2'000'000);
+    REQUIRE(f.z() > 0.01);
+    const Eigen::Vector3d analytic = 1e-3 * Eigen::Vector3d(-6, 0, -20).cross(Eigen::Vector3d(0, 0, f.z()));
+    CHECK((in.torque_Nm() - analytic).norm() <= 0.02 * analytic.norm());
+    MESSAGE("box off-centre: torque " << in.torque_Nm().transpose() << " N·m, analytic " << analytic.transpose());
+  }
+  {
+    // A capsule's spherical end pressed end-on: about the end's centre no torque (the force's line
+    // of action passes through it).
+    const st::geom::Mesh capsule = st::geom::make_capsule(8, 30, 32);  // end centres at z = ±15
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();  // tip down
+    pose.translation() = Eigen::Vector3d(4.0, 2.0, 100 + 23 - 0.8);
+    Interpolator in(ForceLaw{}, DefaultInterpolatorConfig());
+    in.set_tool_point(Eigen::Vector3d(0, 0, 15));
+    const st::geom::ContactModel m = built_model(capsule, plate, pose);
+    REQUIRE(m.in_contact());
+    in.on_model(m, 1'000'000);
+    const Eigen::Vector3d f = in.force(pose, 2'000'000);
+    REQUIRE(f.norm() > 0.01);
+    CHECK(in.torque_Nm().norm() <= 1e-6);
+    MESSAGE("sphere end on a plane: |torque| about its centre " << in.torque_Nm().norm() << " N·m at |F| " << f.norm()
+                                                                << " N");
+  }
 }

@@ -263,6 +263,9 @@ Status RunEngine::State::prepare() {
     servo = std::make_unique<rt::HapticServo>(*device, shm->poses(), shm->models(), *law, s.interp, s.saturation,
                                               telemetry.get(), s.passivity, 1.0 / s.haptic.rate_hz);
     servo->publish_status_to(&status.servo);
+    rt::WrenchConfig wrench = s.device.wrench;
+    wrench.tcp_mm = tool_point(s, probe());
+    servo->set_wrench(wrench);
   } else {
     // The servo gets the trajectory as a file (it loads no meshes) and the scene for its settings.
     script_file = dir + "/script.txt";
@@ -313,6 +316,7 @@ Status RunEngine::start() {
     sa.out = std::filesystem::absolute(e.dir).string();
     sa.duration_s = e.s.duration_s;
     sa.parent = getpid();
+    sa.tcp_mm = tool_point(e.s, e.probe());
     Result<pid_t> sp = spawn_servo(sa);
     if (!sp) return Error{sp.error()};
     e.servo_pid = sp.value();

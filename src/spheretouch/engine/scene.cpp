@@ -306,6 +306,17 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     r.boolean("virtual_user", s.device.user.enabled);
     r.number("user_stiffness_n_per_mm", s.device.user.stiffness_N_per_mm, 1e-6, 100);
     r.boolean("repeat", s.device.repeat);
+    r.integer("dof", s.device.wrench.dof, 3, 6);
+    if (s.device.wrench.dof != 3 && s.device.wrench.dof != 6) r.error("dof", "must be 3 or 6");
+    r.number("torque_limit_nm", s.device.wrench.torque_limit_Nm, 0, 100);
+    std::vector<double> tcp;
+    r.numbers("tcp_mm", tcp, 3);
+    if (!tcp.empty()) {
+      s.device.tcp_auto = false;
+      s.device.wrench.tcp_mm = vec3(tcp);
+    }
+    if (s.device.wrench.dof == 6 && !(s.device.wrench.torque_limit_Nm > 0))
+      r.error("torque_limit_nm", "a 6-DOF device (dof = 6) needs a torque limit > 0, N·m");
     if (Status st = r.finish(); !st) return Error{st.error()};
   }
   {
@@ -375,6 +386,10 @@ geom::Pose probe_grip(const Scene& s, const geom::Mesh& probe) {
   g.rotate(R);
   g.translate(-tip);
   return g;
+}
+
+geom::Vec3 tool_point(const Scene& s, const geom::Mesh& probe) {
+  return s.device.tcp_auto ? geom::Vec3(probe_grip(s, probe).inverse().translation()) : s.device.wrench.tcp_mm;
 }
 
 Result<geom::Mesh> load_body(const BodySpec& b, const std::string& field) {

@@ -15,6 +15,7 @@
 #include <spheretouch/geom/sphere_tree.hpp>
 #include <spheretouch/rt/force_law.hpp>
 #include <spheretouch/rt/haptic_loop.hpp>
+#include <spheretouch/rt/haptic_servo.hpp>
 #include <spheretouch/rt/interpolator.hpp>
 #include <spheretouch/rt/passivity.hpp>
 #include <spheretouch/rt/saturation.hpp>
@@ -54,6 +55,10 @@ struct DeviceSpec {
   double slide_mm = 20;                    ///< builtin: slide length, mm
   rt::VirtualUser user;                    ///< spring-damper hand reacting to the force
   bool repeat = false;                     ///< replay the script from its start each time it ends
+  /// The wrench ([device] dof, torque_limit_nm, tcp_mm): 3-DOF by default; the tool centre point
+  /// is the probe's tip unless tcp_mm is given (tcp_auto).
+  rt::WrenchConfig wrench;
+  bool tcp_auto = true;  ///< tool centre point = the probe's tip (Scene::probe_tip or its lowest vertex)
 };
 
 /// Everything a run needs, with defaults from the libraries' Default…() functions.
@@ -98,6 +103,10 @@ struct Scene {
   bool write_ply = true;        ///< contact.ply: the contact state at peak penetration
   std::string status = "auto";  ///< status line: auto, tty, plain, off
 };
+
+/// The tool centre point torques are taken about, probe file coordinates, mm: `[device] tcp_mm`,
+/// or the probe's tip (the grip's origin, probe_grip()).
+geom::Vec3 tool_point(const Scene& s, const geom::Mesh& probe);
 
 /// The defaults (a capsule fingertip against an icosphere: needs no download).
 Scene DefaultScene();

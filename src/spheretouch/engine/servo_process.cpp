@@ -126,9 +126,12 @@ Result<pid_t> spawn_servo(const ServoArgs& a) {
   exe[n] = 0;
   char dur[64];
   std::snprintf(dur, sizeof dur, "%.17g", a.duration_s);
+  char tcp[160];
+  std::snprintf(tcp, sizeof tcp, "%.17g,%.17g,%.17g", a.tcp_mm.x(), a.tcp_mm.y(), a.tcp_mm.z());
   std::vector<std::string> args = {
       "spheretouch", "servo", "--shm", a.shm,        "--scene", a.scene,    "--script",
-      a.script,      "--out", a.out,   "--duration", dur,       "--parent", std::to_string(a.parent)};
+      a.script,      "--out", a.out,   "--duration", dur,       "--parent", std::to_string(a.parent),
+      "--tcp",       tcp};
   std::vector<char*> argv;
   for (std::string& s : args) argv.push_back(s.data());
   argv.push_back(nullptr);

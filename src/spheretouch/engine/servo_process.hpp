@@ -13,6 +13,7 @@
 #include <string>
 #include <sys/types.h>
 
+#include <spheretouch/geom/mesh.hpp>
 #include <spheretouch/geom/result.hpp>
 #include <spheretouch/rt/shm_status.hpp>
 #include <spheretouch/rt/simulated_device.hpp>
@@ -63,9 +64,10 @@ Status write_trajectory(const std::string& path, const rt::Trajectory& t);
 
 /// Arguments of the hidden `spheretouch servo` subcommand.
 struct ServoArgs {
-  std::string shm, scene, script, out;  ///< segment, scene file, trajectory file, run directory
-  double duration_s = -1;               ///< run length
-  int parent = 0;                       ///< the collision process's pid (death detection)
+  std::string shm, scene, script, out;    ///< segment, scene file, trajectory file, run directory
+  double duration_s = -1;                 ///< run length
+  int parent = 0;                         ///< the collision process's pid (death detection)
+  geom::Vec3 tcp_mm{geom::Vec3::Zero()};  ///< the tool centre point (the servo loads no meshes to find the tip)
 };
 /// Starts `spheretouch servo` (this executable, /proc/self/exe) with `a`; returns its pid.
 Result<pid_t> spawn_servo(const ServoArgs& a);

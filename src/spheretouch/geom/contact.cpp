@@ -178,6 +178,7 @@ ContactModel ContactBuilder::build_paper(const Mesh& probe, const Mesh& object, 
   m.force_dir = to_pod(best_normal);
   const Vec3& pv = probe_points_[best_vertex];
   m.contact_point = to_pod(pv - (pv - best_centroid).dot(best_normal) * best_normal + object.origin);
+  m.pressure_point = m.contact_point;
 
   // First contact face: record at contact start; re-record when FD has turned too far from it.
   const double cos_limit = std::cos(config_.replane_angle_deg * 3.14159265358979323846 / 180.0);

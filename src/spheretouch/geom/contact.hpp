@@ -144,8 +144,14 @@ struct ContactModel {
   PodPose pose;                      ///< probe→object pose it was computed at
   PodVec3 force_dir;                 ///< FD, unit, pushes the probe out of the object; 0 if none
   PodVec3 contact_point;  ///< paper: nearest probe vertex on the nearest face; patch: where the deepest point leaves the surface, mm
-  PodVec3 probe_point;             ///< deepest probe point, probe frame, mm
-  PodVec3 plane_point;             ///< local contact plane: a point, mm (normal = force_dir)
+  PodVec3 probe_point;  ///< deepest probe point, probe frame, mm
+  PodVec3 plane_point;  ///< local contact plane: a point, mm (normal = force_dir)
+  /// Where the force acts, for its moment (the wrench's torque), object file coordinates, mm.
+  /// patch: the centroid of the area the intersection curve encloses seen along FD (a uniform
+  /// pressure's centre: the middle of a flat press, the foot of a sphere's centre; without area
+  /// along FD the curve's length-weighted centroid), on the contact plane (plane_point, FD);
+  /// held contact and paper: contact_point.
+  PodVec3 pressure_point;
   double penetration_mm = 0;       ///< PD >= 0 (paper: below the first contact face; patch: directional depth)
   std::uint32_t object_faces = 0;  ///< distinct colliding object faces
   std::uint32_t probe_faces = 0;   ///< distinct colliding probe faces
@@ -169,7 +175,7 @@ struct ContactModel {
   Vec3 proxy_offset() const { return penetration_mm * to_eigen(force_dir); }
 };
 static_assert(std::is_trivially_copyable_v<ContactModel>);
-static_assert(sizeof(ContactModel) == 288, "ContactModel layout is pinned (shared memory, telemetry)");
+static_assert(sizeof(ContactModel) == 312, "ContactModel layout is pinned (shared memory, telemetry)");
 
 /// Builder knobs; DefaultContactConfig() gives the documented defaults.
 struct ContactConfig {

@@ -286,6 +286,7 @@ bool ContactBuilder::Patch::hold(const Mesh& probe, const Mesh& object, ContactM
   m.probe_point = to_pod(held_tracked + probe.origin);
   m.plane_point = to_pod(on_surface + object.origin);
   m.contact_point = m.plane_point;
+  m.pressure_point = m.contact_point;
   have_prev = true;
   prev_n = held_n;
   return true;
@@ -400,7 +401,10 @@ ContactModel ContactBuilder::Patch::build(const Mesh& probe, const Mesh& object,
   }
   Vec3 tracked_local;  // the probe point PD is measured at, probe-local
   std::uint32_t face = UINT32_MAX;
-  if (penetration(probe, object, n, m, tracked_local, face)) keep_contact(n, tracked_local, face);
+  if (penetration(probe, object, n, m, tracked_local, face)) {
+    keep_contact(n, tracked_local, face);
+    m.pressure_point = pressure_point(object, to_eigen(m.force_dir), m.plane_point);
+  }
   return m;
 }
 
@@ -515,6 +519,22 @@ ContactBuilder::Patch::FaceNormals ContactBuilder::Patch::make_records(ContactMo
   return faces;
 }
 
+PodVec3 ContactBuilder::Patch::pressure_point(const Mesh& object, const Vec3& n, const PodVec3& plane) const {
+  // The curve's sums are in the common frame: FD goes into it, the centre comes out of it. The
+  // centre's component along n depends on the fan's origin (and moves no torque: the force is
+  // along n), so it is taken from the contact plane: a point on the plane, under the patch.
+  const Vec3 nc = probe_frame ? Vec3(rot.transpose() * n) : n;
+  Vec3 c;
+  if (!curve_sums.area_centroid(nc, c)) {
+    if (!(curve_sums.length() > 0)) return plane;
+    c = curve_sums.centroid();
+  }
+  const Vec3 p = to_eigen(plane) - object.origin;  // object-local, as the centre
+  Vec3 local = probe_frame ? Vec3(rot * c + shift) : c;
+  local -= (local - p).dot(n) * n;
+  return local.allFinite() ? to_pod(local + object.origin) : plane;
+}
+
 ContactBuilder::Patch::CurveArea ContactBuilder::Patch::vector_area() {
   // The vector area of the object surface inside the probe, from the intersection curve:
   // A = ½ Σ (s0 − o) × (s1 − o) over the pairs' segments, four pairs at a time (segments4), in
@@ -541,6 +561,7 @@ ContactBuilder::Patch::CurveArea ContactBuilder::Patch::vector_area() {
   out.area = sums.area();  // the front part's with history, else all of it
   if (probe_frame) out.area = rot * out.area;
   out.abs_sum = sums.abs_sum();
+  curve_sums = sums;
   return out;
 }
 

@@ -183,6 +183,13 @@ struct ContactBuilder::Patch {
   };
   /// The vector area from the pairs' segments (contact_segments.hpp), measured from curve_point().
   CurveArea vector_area();
+  /// The sums of the last vector_area() (common frame), for the pressure point once FD is known.
+  SegmentAreaSum curve_sums{Vec3::Zero()};
+  /// ContactModel::pressure_point for FD n (object frame) and the contact plane through `plane`
+  /// (object file coordinates): the centre of the area the curve of the last vector_area()
+  /// encloses seen along n (else its length-weighted centroid), moved along n onto the plane;
+  /// `plane` itself without a curve.
+  PodVec3 pressure_point(const Mesh& object, const Vec3& n, const PodVec3& plane) const;
   /// FD into n (unit) from the curve, else the fallbacks; false: no contact direction.
   bool force_direction(ContactModel& m, const CurveArea& curve, const FaceNormals& faces, Vec3& n);
   /// PD along n, both ways (DepthSearch), the probe point (tracked_local, probe-local) and the

@@ -95,6 +95,40 @@ double SegmentAreaSum::abs_sum() const {
   return lanes_sum(sabs);
 }
 
+double SegmentAreaSum::length() const {
+  ST_ASSERT(n_ == 0, "finish() ran after the last add()");
+  D4 s;
+  std::memcpy(&s, sum_[4], sizeof(D4));
+  return lanes_sum(s);
+}
+
+Vec3 SegmentAreaSum::centroid() const {
+  ST_ASSERT(n_ == 0, "finish() ran after the last add()");
+  const double len = length();
+  const Vec3 o(origin_[0], origin_[1], origin_[2]);
+  if (!(len > 0)) return o;
+  D4 mx, my, mz;
+  std::memcpy(&mx, sum_[5], sizeof(D4));
+  std::memcpy(&my, sum_[6], sizeof(D4));
+  std::memcpy(&mz, sum_[7], sizeof(D4));
+  return o + Vec3(lanes_sum(mx), lanes_sum(my), lanes_sum(mz)) / len;
+}
+
+bool SegmentAreaSum::area_centroid(const Vec3& n, Vec3& out) const {
+  ST_ASSERT(n_ == 0, "finish() ran after the last add()");
+  const double an = n.dot(area());
+  if (!(an > 0)) return false;
+  Vec3 moment = Vec3::Zero();  // Σ (a·n) (s0 + s1), relative to the origin
+  for (int j = 0; j < 3; ++j)
+    for (int k = 0; k < 3; ++k) {
+      D4 s;
+      std::memcpy(&s, sum_[8 + 3 * j + k], sizeof(D4));
+      moment[k] += n[j] * lanes_sum(s);
+    }
+  out = Vec3(origin_[0], origin_[1], origin_[2]) + moment / (3 * an);
+  return out.allFinite();
+}
+
 void FirstSegment::run() {
   Vec3 m;
   bool found = false;

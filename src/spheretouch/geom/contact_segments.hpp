@@ -39,12 +39,25 @@ class SegmentAreaSum {
   Vec3 area() const;
   /// Σ|a| over the rows (after finish()).
   double abs_sum() const;
+  /// The curve's length: Σ|s1 − s0| over the rows (after finish()).
+  double length() const;
+  /// The curve's centroid: its segments' midpoints weighted by their lengths, common frame (the
+  /// origin when there is no segment).
+  Vec3 centroid() const;
+  /// The centroid of the area the curve encloses, seen along the unit direction `n` (the patch's
+  /// centre: where a uniform pressure's resultant acts), common frame: the fan of triangles
+  /// (o, s0, s1) weighted by their areas along n, Σ (a·n) (o + s0 + s1) / 3 / Σ a·n. For a closed
+  /// planar curve it is the enclosed region's centroid whatever o is. False when Σ a·n is not
+  /// positive (no area along n).
+  bool area_centroid(const Vec3& n, Vec3& out) const;
 
  private:
   static constexpr int kBatch = 32;  ///< rows gathered per call of run(), a multiple of 4
   void run(int n);                   ///< computes rows [0, n), n a multiple of 4, and empties the batch
   double origin_[3];
-  double sum_[4][4] = {};  ///< per component (x, y, z of Σa, then Σ|a|), per lane: row 4k + lane's share
+  /// per component (x, y, z of Σa, Σ|a|, Σ length, x, y, z of Σ length · midpoint, then the nine
+  /// Σ a_j (s0 + s1)_k), per lane: row 4k + lane's share
+  double sum_[17][4] = {};
   const FaceRec* object_[kBatch];
   const FaceRec* probe_[kBatch];
   int n_ = 0;

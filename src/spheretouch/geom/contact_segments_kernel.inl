@@ -124,23 +124,30 @@ struct Seg4 {
   return s;
 }
 
-/// SegmentAreaSum::run's rows: n (a multiple of 4) rows of object[k], probe[k] into sum.
+/// SegmentAreaSum::run's rows: n (a multiple of 4) rows of object[k], probe[k] into sum (rows
+/// 0-3: Σa and Σ|a|; rows 4-7: Σ length and Σ length · midpoint; rows 8-16: Σ a_j (s0 + s1)_k,
+/// j-major; points relative to o).
 inline void sum_rows(const FaceRec* const* object, const FaceRec* const* probe, int n, const double* origin,
                      double (*sum)[4]) {
-  const D4 ox = splat(origin[0]), oy = splat(origin[1]), oz = splat(origin[2]);
-  D4 sx, sy, sz, sabs;  // the sums in registers while the batch runs (same order as row by row)
-  std::memcpy(&sx, sum[0], sizeof(D4));
-  std::memcpy(&sy, sum[1], sizeof(D4));
-  std::memcpy(&sz, sum[2], sizeof(D4));
-  std::memcpy(&sabs, sum[3], sizeof(D4));
+  const D4 ox = splat(origin[0]), oy = splat(origin[1]), oz = splat(origin[2]), zero = splat(0), half = splat(0.5);
+  D4 s[17];  // the sums while the batch runs (same order as row by row)
+  for (int i = 0; i < 17; ++i) std::memcpy(&s[i], sum[i], sizeof(D4));
   for (int k = 0; k < n; k += 4) {
     const Seg4 g = segments4(load4(object + k), load4(probe + k), ox, oy, oz);
-    sx += g.px, sy += g.py, sz += g.pz, sabs += g.pabs;
+    s[0] += g.px, s[1] += g.py, s[2] += g.pz, s[3] += g.pabs;
+    // Selects again: a row without a segment has undefined end points and adds exactly nothing.
+    const D4 dx = g.s1x - g.s0x, dy = g.s1y - g.s0y, dz = g.s1z - g.s0z;
+    const D4 len = pick(g.ok, sqrt4(dx * dx + dy * dy + dz * dz), zero);
+    const D4 m[3] = {pick(g.ok, g.s0x + g.s1x, zero), pick(g.ok, g.s0y + g.s1y, zero), pick(g.ok, g.s0z + g.s1z, zero)};
+    s[4] += len;
+    s[5] += len * (half * m[0]);
+    s[6] += len * (half * m[1]);
+    s[7] += len * (half * m[2]);
+    const D4 a[3] = {g.px, g.py, g.pz};  // zero where there is no segment
+    for (int j = 0; j < 3; ++j)
+      for (int k = 0; k < 3; ++k) s[8 + 3 * j + k] += a[j] * m[k];
   }
-  std::memcpy(sum[0], &sx, sizeof(D4));
-  std::memcpy(sum[1], &sy, sizeof(D4));
-  std::memcpy(sum[2], &sz, sizeof(D4));
-  std::memcpy(sum[3], &sabs, sizeof(D4));
+  for (int i = 0; i < 17; ++i) std::memcpy(sum[i], &s[i], sizeof(D4));
 }
 
 /// FirstSegment::run's four rows: the first row (in order) with a segment, its midpoint; false if none.

@@ -21,6 +21,10 @@
 ///    count it; return false rather than a stale or made-up pose.
 ///  * **Force.** command_force() gets a finite force, already saturated to max_force_N() (the
 ///    servo lowers its peak to it) and passed through the passivity guard; send it as it is.
+///  * **Torque (6-DOF devices).** A device that renders torque overrides command_wrench() and
+///    max_torque_Nm() (> 0); with the scene's `[device] dof = 6` the servo then calls
+///    command_wrench() instead of command_force(), with the torque about the tool centre point
+///    (`[device] tcp_mm`), N·m in the object's frame, finite and within max_torque_Nm().
 ///  * **Lifetime.** The device outlives the engine that uses it; the engine never deletes it.
 #pragma once
 #include <spheretouch/abi.hpp>
@@ -41,6 +45,14 @@ class Device {
   virtual void command_force(std::int64_t now_ns, const Eigen::Vector3d& force_N) noexcept = 0;
   /// The device's peak force, N (the servo's saturation must not exceed it).
   virtual double max_force_N() const noexcept = 0;
+  /// Commands a force and a torque about the tool centre point (N, N·m, object frame), finite and
+  /// saturated. 6-DOF devices override it; the default sends the force alone (a 3-DOF device).
+  virtual void command_wrench(std::int64_t now_ns, const Eigen::Vector3d& force_N, const Eigen::Vector3d& torque_Nm) noexcept {
+    (void)torque_Nm;
+    command_force(now_ns, force_N);
+  }
+  /// The device's peak torque, N·m; 0 (the default) for a device that renders no torque.
+  virtual double max_torque_Nm() const noexcept { return 0.0; }
 };
 
 }  // namespace st::rt

@@ -3,6 +3,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <string>
+
+#include <spheretouch/geom/check.hpp>
 
 namespace st::inline SPHERETOUCH_ABI::rt {
 
@@ -14,6 +17,22 @@ SaturationConfig capped(SaturationConfig s, const Device& d) {
   return s;
 }
 }  // namespace
+
+std::string check(const WrenchConfig& c) {
+  if (c.dof != 3 && c.dof != 6) return "dof: must be 3 or 6, got " + std::to_string(c.dof);
+  if (!std::isfinite(c.torque_limit_Nm) || c.torque_limit_Nm < 0) return "torque_limit_nm: must be finite and >= 0";
+  if (c.dof == 6 && !(c.torque_limit_Nm > 0)) return "torque_limit_nm: a 6-DOF device needs a torque limit > 0";
+  if (!c.tcp_mm.allFinite()) return "tcp_mm: must be finite";
+  return {};
+}
+
+void HapticServo::set_wrench(const WrenchConfig& config) {
+  ST_ASSERT(check(config).empty(), "the wrench config passed check()");
+  wrench_ = config;
+  interp_.set_tool_point(config.tcp_mm);
+  const double dev = device_.max_torque_Nm();
+  torque_ceiling_Nm_ = config.dof == 6 ? std::min(config.torque_limit_Nm, std::isfinite(dev) && dev > 0 ? dev : 0.0) : 0.0;
+}
 
 HapticServo::HapticServo(Device& device, TripleBuffer<PoseSample>& poses, TripleBuffer<geom::ContactModel>& models,
                          const ForceLaw& law, const InterpolatorConfig& interp, SaturationConfig saturation,
@@ -57,7 +76,18 @@ void HapticServo::tick(const TickInfo& info) noexcept {
   const Eigen::Vector3d f = sat_.apply(guarded, dt_s);
   guard_.commanded(f);
   if (sat_.limited()) ++stats_.saturated;
-  device_.command_force(now, f);
+  // The torque: the commanded force's moment about the tool point (its lever arm from the
+  // interpolator), within the torque ceiling; commanded to 6-DOF devices only.
+  Eigen::Vector3d tau = 1e-3 * interp_.lever_mm().cross(f);
+  if (!tau.allFinite()) tau.setZero();
+  const double tau_norm = tau.norm();
+  if (tau_norm > peak_torque_Nm_) peak_torque_Nm_ = tau_norm;
+  if (wrench_.dof == 6) {
+    if (tau_norm > torque_ceiling_Nm_) tau *= torque_ceiling_Nm_ > 0 ? torque_ceiling_Nm_ / tau_norm : 0.0;
+    device_.command_wrench(now, f, tau);
+  } else {
+    device_.command_force(now, f);
+  }
   ++stats_.ticks;
   const double f_norm = f.norm();
   if (f_norm > peak_force_N_) peak_force_N_ = f_norm;
@@ -99,7 +129,10 @@ void HapticServo::tick(const TickInfo& info) noexcept {
         s.proxy_mm[i] = proxy(i);
       }
     }
-    for (int i = 0; i < 3; ++i) s.force_N[i] = f(i);
+    for (int i = 0; i < 3; ++i) {
+      s.force_N[i] = f(i);
+      s.torque_Nm[i] = tau(i);
+    }
     s.penetration_mm = interp_.state().penetration_mm;
     s.fade = interp_.state().fade;
     s.ceiling_N = sat_.ceiling_N();

@@ -30,6 +30,15 @@ struct ServoStats {
   std::uint64_t saturated = 0;      ///< ticks where the saturator cut the force
 };
 
+/// The wrench a servo renders ([device] dof, torque_limit_nm, tcp_mm in a scene).
+struct WrenchConfig {
+  int dof = 3;  ///< 3: force only (the torque is computed and reported, not commanded); 6: force and torque
+  double torque_limit_Nm = 0.0;  ///< 6-DOF: torque ceiling, N·m (lowered to the device's max_torque_Nm())
+  Eigen::Vector3d tcp_mm{Eigen::Vector3d::Zero()};  ///< tool centre point, probe file coordinates, mm
+};
+/// Empty when the config is usable, else a message naming the bad field.
+std::string check(const WrenchConfig& config);
+
 /// The servo tick. Construct it, hand it to HapticLoop::start()/run().
 class HapticServo final : public TickHandler {
  public:
@@ -43,6 +52,10 @@ class HapticServo final : public TickHandler {
   /// Publish a ServoStatus every kStatusEveryTicks ticks into `status` (null = off). Set before
   /// the loop starts; the servo is the SeqLock's only writer.
   void publish_status_to(SeqLock<ServoStatus>* status) { status_ = status; }
+  /// The wrench to render (config must pass check()); before the loop starts. Default: 3-DOF,
+  /// torques about the probe's origin.
+  void set_wrench(const WrenchConfig& config);
+  double peak_torque_Nm() const { return peak_torque_Nm_; }     ///< largest |torque| computed (after the loop)
   const ServoStats& stats() const { return stats_; }            ///< counters
   double peak_force_N() const { return peak_force_N_; }         ///< largest |force| commanded (after the loop)
   const Interpolator& interpolator() const { return interp_; }  ///< for inspection
@@ -60,6 +73,9 @@ class HapticServo final : public TickHandler {
   SeqLock<ServoStatus>* status_ = nullptr;
   ServoStats stats_;
   double peak_force_N_ = 0;  ///< largest |force| commanded
+  WrenchConfig wrench_;
+  double torque_ceiling_Nm_ = 0;  ///< 6-DOF: min(torque_limit_Nm, the device's max_torque_Nm())
+  double peak_torque_Nm_ = 0;     ///< largest |torque| computed
   std::int64_t model_received_ns_ = 0;
   std::int64_t pose_ns_ = 0;  ///< sampling time of the newest published pose
   std::uint32_t model_contacts_ = 0;

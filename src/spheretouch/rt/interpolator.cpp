@@ -107,6 +107,11 @@ void Interpolator::on_model(const geom::ContactModel& model, std::int64_t now_ns
     force_a_.setZero();
     return;
   }
+  // The lever arm of the force about the tool point, carried with the probe (probe frame); the
+  // one in use cross-fades to it like the force does.
+  lever_ = geom::to_eigen(model_.pose).inverse() * geom::to_eigen(model_.pressure_point) - tcp_;
+  if (!lever_.allFinite()) lever_.setZero();
+  lever_from_ = have_lever_ ? last_lever_ : lever_;
   fd_ = geom::to_eigen(model_.force_dir).normalized();
   probe_point_ = geom::to_eigen(model_.probe_point);
   plane_point_ = geom::to_eigen(model_.plane_point);
@@ -118,6 +123,8 @@ Eigen::Vector3d Interpolator::force(const Eigen::Isometry3d& pose, std::int64_t 
   const double dt_s = last_ns_ ? static_cast<double>(now_ns - last_ns_) * 1e-9 : 0.0;
   last_ns_ = now_ns;
   state_ = InterpState{};
+  torque_.setZero();
+  lever_out_.setZero();
   if (!pose.matrix().allFinite()) {
     ++bad_poses_;
     last_out_.setZero();
@@ -136,6 +143,7 @@ Eigen::Vector3d Interpolator::force(const Eigen::Isometry3d& pose, std::int64_t 
   Eigen::Vector3d f = Eigen::Vector3d::Zero();
   double pd = 0;
   Eigen::Vector3d p = Eigen::Vector3d::Zero();
+  Eigen::Vector3d lever = lever_;  // the lever arm of this tick's force (probe frame)
   if (contact_) {
     p = pose * probe_point_;
     switch (c_.mode) {
@@ -162,6 +170,7 @@ Eigen::Vector3d Interpolator::force(const Eigen::Isometry3d& pose, std::int64_t 
   if (c_.mode == InterpMode::plane && releasing_) {
     // The contact ended: the old model at this pose, fading out over kReleaseFadeNs, never rising.
     const double w = 1.0 - static_cast<double>(std::max<std::int64_t>(now_ns - release_ns_, 0)) / kReleaseFadeNs;
+    lever = last_lever_;  // the released model's
     if (w > 0 && prev_contact_) {
       p = pose * prev_probe_point_;
       pd = (prev_plane_point_ - p).dot(prev_fd_);
@@ -194,7 +203,10 @@ Eigen::Vector3d Interpolator::force(const Eigen::Isometry3d& pose, std::int64_t 
     // With arrivals every tick this is exponential smoothing with time constant ~crossfade_ns.
     const double faded = static_cast<double>(std::max<std::int64_t>(idle, 0)) + dt_s * 1e9;
     const double span = crossfade_span();
-    if (span > 0 && faded < span) f += offset_ * (1.0 - faded / span);
+    if (span > 0 && faded < span) {
+      f += offset_ * (1.0 - faded / span);
+      lever += (lever_from_ - lever_) * (1.0 - faded / span);
+    }
   } else {
     pending_offset_ = false;
   }
@@ -216,6 +228,16 @@ Eigen::Vector3d Interpolator::force(const Eigen::Isometry3d& pose, std::int64_t 
   if (!f.allFinite()) f.setZero();
   if ((f * fade).norm() < kMinRenderedForceN) f.setZero();  // a released force reaches exactly 0
   last_out_ = f * fade;  // what was commanded: the next cross-fade starts from it (even after a stall)
+  // The torque about the tool point: the force at the pressure point, mm -> m.
+  lever_out_ = last_out_.squaredNorm() > 0 ? Eigen::Vector3d(pose.linear() * lever) : Eigen::Vector3d::Zero();
+  if (!lever_out_.allFinite()) lever_out_.setZero();
+  torque_ = 1e-3 * lever_out_.cross(last_out_);
+  if (contact_) {
+    last_lever_ = lever;
+    have_lever_ = true;
+  } else if (!releasing_) {
+    have_lever_ = false;
+  }
   state_.penetration_mm = std::isfinite(pd) ? pd : 0.0;
   state_.fade = fade;
   state_.raw_force_N = f.norm();

@@ -84,6 +84,18 @@ class Interpolator {
   /// The contact normal FD of the model in use (unit, object frame), zero when not in contact.
   const Eigen::Vector3d& normal() const noexcept { return fd_; }
 
+  /// The point torques are taken about (the device's tool centre point), probe file coordinates,
+  /// mm. Default: the probe's origin.
+  void set_tool_point(const Eigen::Vector3d& tcp_mm) noexcept { tcp_ = tcp_mm; }
+  /// The moment of the last force() output about the tool point, N·m, object frame: the force
+  /// acting at the model's pressure point (ContactModel::pressure_point, carried with the probe
+  /// between models), τ = (pressure point − tool point) × F. Continuous in time: a new model's
+  /// lever arm is cross-faded in like its force; zero when the force acts through the tool point.
+  const Eigen::Vector3d& torque_Nm() const noexcept { return torque_; }
+  /// The lever arm of the last force() output: pressure point − tool point, object frame, mm (zero
+  /// without a force). The servo takes the moment of the force it finally commands with it.
+  const Eigen::Vector3d& lever_mm() const noexcept { return lever_out_; }
+
  private:
   Eigen::Vector3d contact_force(const Eigen::Isometry3d& pose, double& pd_mm) const noexcept;
   /// The cross-fade's length now, ns: crossfade_ns, or kCrossfadeRounds recent model intervals.
@@ -99,6 +111,13 @@ class Interpolator {
   Eigen::Vector3d anchor_{Eigen::Vector3d::Zero()};       ///< probe_point at the model's pose, object frame
   Eigen::Vector3d force_a_{Eigen::Vector3d::Zero()};      ///< A = law(PD)·FD
   Eigen::Vector3d offset_{Eigen::Vector3d::Zero()};       ///< plane: jump at the last arrival, decaying
+  Eigen::Vector3d tcp_{Eigen::Vector3d::Zero()};          ///< tool point, probe file coordinates
+  Eigen::Vector3d lever_{Eigen::Vector3d::Zero()};        ///< pressure point − tool point, probe frame (newest model)
+  Eigen::Vector3d lever_from_{Eigen::Vector3d::Zero()};   ///< the lever in use when the newest model arrived
+  Eigen::Vector3d last_lever_{Eigen::Vector3d::Zero()};   ///< the lever used at the last force()
+  bool have_lever_ = false;                               ///< last_lever_ is a contact's
+  Eigen::Vector3d torque_{Eigen::Vector3d::Zero()};       ///< last force()'s torque, N·m
+  Eigen::Vector3d lever_out_{Eigen::Vector3d::Zero()};    ///< last force()'s lever arm, object frame, mm
   // The model before the newest one (plane cross-fade: both are evaluated at the same pose).
   bool prev_contact_ = false;
   Eigen::Vector3d prev_fd_{Eigen::Vector3d::Zero()}, prev_probe_point_{Eigen::Vector3d::Zero()},

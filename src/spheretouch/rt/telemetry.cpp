@@ -16,7 +16,7 @@ Result<std::unique_ptr<Telemetry>> Telemetry::open(const std::string& path, std:
   std::setvbuf(f, nullptr, _IOFBF, 1 << 20);
   std::fputs(
       "tick,t_ns,latency_ns,pose_seq,model_seq,model_age_ns,x_mm,y_mm,z_mm,fx_N,fy_N,fz_N,pd_mm,fade,ceiling_N,flags,"
-      "misses,proxy_x_mm,proxy_y_mm,proxy_z_mm\n",
+      "misses,proxy_x_mm,proxy_y_mm,proxy_z_mm,tx_Nm,ty_Nm,tz_Nm\n",
       f);
   auto t = std::make_unique<Telemetry>(capacity);
   t->file_ = f;
@@ -35,13 +35,15 @@ std::size_t Telemetry::drain_to(TelemetrySample* out, std::size_t max) noexcept 
 
 void Telemetry::write(const TelemetrySample& s) {
   if (failed_.load(std::memory_order_relaxed)) return;
-  const int n = std::fprintf(
-      file_, "%llu,%lld,%lld,%llu,%llu,%lld,%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.4g,%.4g,%u,%u,%.9g,%.9g,%.9g\n",
-      static_cast<unsigned long long>(s.tick), static_cast<long long>(s.t_ns), static_cast<long long>(s.latency_ns),
-      static_cast<unsigned long long>(s.pose_seq), static_cast<unsigned long long>(s.model_seq),
-      static_cast<long long>(s.model_age_ns), s.position_mm[0], s.position_mm[1], s.position_mm[2], s.force_N[0],
-      s.force_N[1], s.force_N[2], s.penetration_mm, s.fade, s.ceiling_N, s.flags, s.misses, s.proxy_mm[0],
-      s.proxy_mm[1], s.proxy_mm[2]);
+  const int n = std::fprintf(file_,
+                             "%llu,%lld,%lld,%llu,%llu,%lld,%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.4g,%.4g,%u,%u,%.9g,%."
+                             "9g,%.9g,%.6g,%.6g,%.6g\n",
+                             static_cast<unsigned long long>(s.tick), static_cast<long long>(s.t_ns),
+                             static_cast<long long>(s.latency_ns), static_cast<unsigned long long>(s.pose_seq),
+                             static_cast<unsigned long long>(s.model_seq), static_cast<long long>(s.model_age_ns),
+                             s.position_mm[0], s.position_mm[1], s.position_mm[2], s.force_N[0], s.force_N[1],
+                             s.force_N[2], s.penetration_mm, s.fade, s.ceiling_N, s.flags, s.misses, s.proxy_mm[0],
+                             s.proxy_mm[1], s.proxy_mm[2], s.torque_Nm[0], s.torque_Nm[1], s.torque_Nm[2]);
   if (n < 0) {  // a full disk: say which file and why, once, and stop writing
     error_ = path_ + ": write failed: " + std::strerror(errno);
     failed_.store(true, std::memory_order_release);

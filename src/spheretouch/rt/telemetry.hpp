@@ -41,8 +41,11 @@ struct TelemetrySample {
   /// The proxy: where the probe would rest outside the object, object frame (position_mm moved
   /// out by PD along the contact normal FD while in contact; position_mm otherwise).
   double proxy_mm[3] = {};
+  /// The torque about the tool centre point, N·m, object frame (commanded to 6-DOF devices; for
+  /// 3-DOF ones what the contact's moment is).
+  double torque_Nm[3] = {};
 };
-static_assert(std::is_trivially_copyable_v<TelemetrySample> && sizeof(TelemetrySample) == 152);
+static_assert(std::is_trivially_copyable_v<TelemetrySample> && sizeof(TelemetrySample) == 176);
 
 /// Counters of a telemetry stream.
 struct TelemetryStats {
