@@ -36,6 +36,7 @@
 #include <spheretouch/geom/contact.hpp>
 #include <spheretouch/geom/primitives.hpp>
 #include <spheretouch/rt/haptic_servo.hpp>
+#include <spheretouch/rt/interpolator.hpp>
 #include <spheretouch/rt/simulated_device.hpp>
 
 namespace st::bench {
@@ -72,7 +73,8 @@ struct ForceScene {
   double ball_mm = 0;   // the ball's radius
   std::string twin;     // the same scene on the other tessellation (coarse ↔ subdivided), for the direction check
   bool crease = false;  // a concave scene: no force above law(true depth) + 0.05 N
-  double keep_t0 = 0, keep_t1 = 0;  // plate: slid under the plate; the force's share of its value at keep_t0
+  double keep_t0 = 0, keep_t1 = 0;     // plate: slid under the plate; the force's share of its value at keep_t0
+  geom::Vec3 tcp{geom::Vec3::Zero()};  // the tool centre point torques are taken about, probe file coordinates
 };
 
 /// A body of a generated mesh, its tree built with `tree` (default: the project's).
@@ -196,6 +198,34 @@ ForceScene hand_scene(const std::string& name, const std::string& probe_path, co
   s.still_t1 = 2.0;
   s.slide_t0 = 2.0;
   s.slide_t1 = 4.0;
+  // Torques about the middle of the hand's bounding box (the palm: where a grip would hold it).
+  const geom::Box bb = s.probe.mesh.bounds();
+  s.tcp = 0.5 * (bb.lo + bb.hi);
+  return s;
+}
+
+/// The hand scene with a twist: during the slide the hand also turns 10° about the vertical
+/// through its tip and back (the rotational energy needs a rotation to measure).
+ForceScene hand_twist_scene(const std::string& name, const std::string& probe_path, const std::string& object_path) {
+  ForceScene s = hand_scene(name, probe_path, object_path);
+  const rt::Trajectory base = s.script;
+  geom::Vec3 tip_local = s.probe.mesh.vertex(0);  // the hand's lowest point (the script presses it down)
+  for (std::uint32_t i = 0; i < s.probe.mesh.num_vertices(); ++i)
+    if (s.probe.mesh.vertex(i).z() < tip_local.z()) tip_local = s.probe.mesh.vertex(i);
+  rt::Trajectory tr;
+  const double end = base.duration_s();
+  for (int k = 0; k <= int(end * 100); ++k) {  // a key every 10 ms: the turn follows a smooth profile
+    const double t = std::min(end, k * 0.01);
+    Eigen::Isometry3d pose = base.at(t);
+    const double u = std::clamp((t - s.slide_t0) / (s.slide_t1 - s.slide_t0), 0.0, 1.0);
+    const double angle = (10.0 * kPi / 180.0) * std::sin(kPi * u);  // 0 -> 10° -> 0 over the slide
+    const geom::Vec3 tip = pose * tip_local;
+    Eigen::Isometry3d turn = Eigen::Isometry3d::Identity();
+    turn.linear() = Eigen::AngleAxisd(angle, geom::Vec3::UnitZ()).toRotationMatrix();
+    pose = Eigen::Translation3d(tip) * turn * Eigen::Translation3d(-tip) * pose;
+    tr.keys.push_back({t, pose});
+  }
+  s.script = std::move(tr);
   return s;
 }
 
@@ -489,6 +519,8 @@ struct Model {
 struct Tick {
   Eigen::Vector3d x, f;
   double pd = 0;
+  Eigen::Vector3d tau{Eigen::Vector3d::Zero()};     ///< torque about the scene's tool point, N·m
+  Eigen::Vector3d dtheta{Eigen::Vector3d::Zero()};  ///< the device's rotation to the next tick (axis · angle), rad
   /// Generated scenes: FD of a model built at this tick's own pose (what the geometry says now,
   /// with no latency or interpolation; zero when not in contact there).
   Eigen::Vector3d fd_now{Eigen::Vector3d::Zero()};
@@ -529,6 +561,7 @@ Replay replay(const ForceScene& s, const Model& model, bool closed, int C, engin
   if (s.truth) sat.sustained = false;
   rt::HapticServo servo(dev, *poses, *models, rt::ForceLaw{}, rt::DefaultInterpolatorConfig(), sat, nullptr,
                         model.passivity, 1e-3);
+  servo.set_wrench({.dof = 3, .torque_limit_Nm = 0, .tcp_mm = s.tcp});
   geom::ContactBuilder builder(model.contact), permuted(model.contact), instant(model.contact);
   geom::CollideResult r_now;
   builder.prepare(s.probe.mesh, s.object.mesh);
@@ -554,6 +587,14 @@ Replay replay(const ForceScene& s, const Model& model, bool closed, int C, engin
     servo.tick(info);
     const rt::ForceRecord& rec = dev.records().back();
     out.ticks.push_back({rec.position, rec.force_N, servo.interpolator().state().penetration_mm});
+    // The torque the servo takes (the commanded force's moment about the tool point) and the
+    // script's rotation over the next tick (the user's hand turns as scripted).
+    out.ticks.back().tau = 1e-3 * servo.interpolator().lever_mm().cross(rec.force_N);
+    {
+      const Eigen::Matrix3d r0 = s.script.at(double(k) * 1e-3).linear(), r1 = s.script.at(double(k + 1) * 1e-3).linear();
+      const Eigen::AngleAxisd d(r1 * r0.transpose());
+      out.ticks.back().dtheta = d.angle() * d.axis();
+    }
     if (order_check) {  // a generated scene: the geometry's own FD at this tick's pose
       geom::Pose at = geom::Pose::Identity();
       at.translation() = rec.position;
@@ -644,6 +685,12 @@ struct Figures {
   int popthrough = -1, cycles = 0;
   double round_us_p50 = 0, collide_us_p50 = 0, contact_us_p50 = 0, contacts_p50 = 0;
   std::size_t ticks = 0, contact_ticks = 0;
+  // The torque about the scene's tool point (N·m): its peak, per-tick step p99 (in the slide
+  // window) and that step over the peak, per-tick direction change p99 (ticks above 5 % of the
+  // peak), the rotational energy τ·dθ per contact cycle (mJ; mean and largest) with the
+  // translational one added (the total, F·dx + τ·dθ), and its buzz (RMS above 30 Hz, holding still).
+  double tau_peak = 0, dtau_p99 = 0, dtau_rel = 0, tau_dir_p99 = 0, rot_energy_per_cycle = 0, rot_energy_max = 0,
+         total_energy_max = 0, tau_buzz = -1;
 };
 
 Figures measure(const ForceScene& s, const Replay& rp) {
@@ -685,6 +732,46 @@ Figures measure(const ForceScene& s, const Replay& rp) {
   }
   if (on) cyc.push_back(e);  // a cycle still open at the end
   fg.cycles = int(cyc.size());
+  {
+    // The torque's figures, and τ·dθ per contact cycle (J → mJ), alone and with F·dx.
+    std::vector<double> dtau, tdir, rot, total;
+    double er = 0, et = 0;
+    bool c_on = false;
+    for (std::size_t i = 0; i < T.size(); ++i) fg.tau_peak = std::max(fg.tau_peak, T[i].tau.norm());
+    for (std::size_t i = 0; i + 1 < T.size(); ++i) {
+      const bool f_on = T[i].f.norm() > 0;
+      if (f_on && !c_on) er = et = 0;
+      if (f_on) {
+        er += 1e3 * T[i].tau.dot(T[i].dtheta);
+        et += T[i].f.dot(T[i + 1].x - T[i].x);
+      }
+      if (!f_on && c_on) rot.push_back(er), total.push_back(er + et);
+      c_on = f_on;
+      if (i == 0) continue;
+      const bool on_t = T[i].f.norm() > 0 || T[i - 1].f.norm() > 0;
+      if (!on_t || (window && (t_of(i) < s.slide_t0 || t_of(i) > s.slide_t1))) continue;
+      dtau.push_back((T[i].tau - T[i - 1].tau).norm());
+      if (T[i].tau.norm() > 0.05 * fg.tau_peak && T[i - 1].tau.norm() > 0.05 * fg.tau_peak)
+        tdir.push_back(angle_deg(T[i].tau, T[i - 1].tau));
+    }
+    if (c_on) rot.push_back(er), total.push_back(er + et);
+    fg.dtau_p99 = quantile(dtau, 0.99);
+    fg.dtau_rel = fg.tau_peak > 0 ? fg.dtau_p99 / fg.tau_peak : 0;
+    fg.tau_dir_p99 = quantile(tdir, 0.99);
+    if (!rot.empty()) {
+      double sum = 0;
+      for (double r : rot) sum += r;
+      fg.rot_energy_per_cycle = sum / double(rot.size());
+      fg.rot_energy_max = *std::max_element(rot.begin(), rot.end());
+      fg.total_energy_max = *std::max_element(total.begin(), total.end());
+    }
+    if (s.still_t1 > s.still_t0) {
+      std::vector<Eigen::Vector3d> tau;
+      for (std::size_t i = std::size_t(s.still_t0 * 1000); i < std::min(T.size(), std::size_t(s.still_t1 * 1000)); ++i)
+        tau.push_back(T[i].tau);
+      fg.tau_buzz = rms_above(tau, 30.0);
+    }
+  }
   if (!cyc.empty()) {
     double sum = 0;
     for (double c : cyc) sum += c;
@@ -864,6 +951,70 @@ void write_trace(const std::string& path, const Replay& rp, const ForceScene& s)
 /// sliding 0.01 mm per round into the pose), against collide() in the same loop. The warm rounds
 /// repeat the pose, or with slide_mm > 0 move the probe that far along x each round, through it
 /// (centred on it).
+/// Analytic wrench checks: a probe pressed into a 200 mm box's top face (z = 100) at one pose,
+/// the patch model built from every colliding pair, the interpolator's torque against the moment
+/// the geometry gives.
+struct WrenchCheck {
+  std::string name;
+  double torque_Nm = 0, analytic_Nm = 0, error_Nm = 0, rel_error = 0;
+};
+std::vector<WrenchCheck> wrench_checks() {
+  const geom::Mesh plate = geom::make_box({200, 200, 200});
+  auto run = [&](const std::string& name, const geom::Mesh& probe, const Eigen::Isometry3d& pose, const geom::Vec3& tcp,
+                 const std::function<Eigen::Vector3d(const Eigen::Vector3d&)>& analytic) {
+    geom::SphereTree pt = geom::SphereTree::build(probe).value(), ot = geom::SphereTree::build(plate).value();
+    geom::CollideScratch sc;
+    geom::CollideResult r;
+    geom::collide(probe, pt, plate, ot, pose, kEngineCollide, sc, r);
+    geom::ContactBuilder b;
+    geom::ContactModel m = b.build(probe, plate, pose, r.pairs);
+    if (!m.in_contact()) die("wrench check " + name + ": no contact");
+    m.seq = 1;
+    m.pose = geom::to_pod(pose);
+    rt::Interpolator in(rt::ForceLaw{}, rt::DefaultInterpolatorConfig());
+    in.set_tool_point(tcp);
+    in.on_model(m, 1'000'000);
+    const Eigen::Vector3d f = in.force(pose, 2'000'000), want = analytic(f);
+    WrenchCheck c;
+    c.name = name;
+    c.torque_Nm = in.torque_Nm().norm();
+    c.analytic_Nm = want.norm();
+    c.error_Nm = (in.torque_Nm() - want).norm();
+    c.rel_error = c.analytic_Nm > 0 ? c.error_Nm / c.analytic_Nm : 0;
+    return c;
+  };
+  std::vector<WrenchCheck> out;
+  {
+    // A 20 mm box pressed 1 mm flat, torques about a point on its top face 6 mm off its axis:
+    // the force acts at the middle of the pressed square, τ = (−6, 0, −20) mm × F.
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.translation() = Eigen::Vector3d(13, -7, 109);
+    out.push_back(
+        run("box_off_centre", geom::make_box({20, 20, 20}), pose, geom::Vec3(6, 0, 10),
+            [](const Eigen::Vector3d& f) { return Eigen::Vector3d(1e-3 * Eigen::Vector3d(-6, 0, -20).cross(f)); }));
+  }
+  {
+    // The same box over the face's edge (x = 100), torques about its centre: a uniform pressure on
+    // the overlap x in [95, 100] of the top face acts at x = 97.5. The patch's FD also weighs the
+    // 1 mm strip of the side face inside the box; the error shows that share.
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.translation() = Eigen::Vector3d(105, 0, 109);
+    out.push_back(
+        run("box_over_edge", geom::make_box({20, 20, 20}), pose, geom::Vec3(0, 0, 0), [&](const Eigen::Vector3d& f) {
+          return Eigen::Vector3d(1e-3 * (Eigen::Vector3d(97.5, 0, 100) - pose.translation()).cross(f));
+        }));
+  }
+  {
+    // A capsule's spherical end pressed end-on: about the end's centre no torque.
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.linear() = Eigen::AngleAxisd(kPi, geom::Vec3::UnitX()).toRotationMatrix();
+    pose.translation() = Eigen::Vector3d(4, 2, 100 + 23 - 0.8);
+    out.push_back(run("sphere_end_about_centre", geom::make_capsule(8, 30, 32), pose, geom::Vec3(0, 0, 15),
+                      [](const Eigen::Vector3d&) { return Eigen::Vector3d::Zero(); }));
+  }
+  return out;
+}
+
 struct Cost {
   std::uint32_t contacts = 0;
   std::string model;
@@ -930,7 +1081,8 @@ std::vector<Cost> contact_cost(const Body& probe, const Body& object, const std:
 
 void add_force(CLI::App& app) {
   struct Args {
-    std::string scenes = "box,sphere,plate,hand_elephant,hand_armadillo,meshes", models = "paper,patch", trace_dir, poses;
+    std::string scenes = "box,sphere,plate,hand_elephant,hand_armadillo,hand_elephant_twist,meshes",
+                models = "paper,patch", trace_dir, poses;
     std::string workers_check = "1,2,4";
     int collision_ticks = 2, cost_runs = 30;
     double cost_slide_mm = 0;
@@ -991,19 +1143,21 @@ void add_force(CLI::App& app) {
         scenes.push_back(sphere_scene(a->quick));
       else if (n == "plate")
         scenes.push_back(plate_scene());
-      else if (n == "hand_elephant" || n == "hand_armadillo") {
-        const std::string obj = n == "hand_elephant" ? "elephant.off" : "armadillo_L2.off";
+      else if (n == "hand_elephant" || n == "hand_armadillo" || n == "hand_elephant_twist") {
+        const std::string obj = n == "hand_armadillo" ? "armadillo_L2.off" : "elephant.off";
         if (!std::filesystem::exists(dir + "/hand_L2.off") || !std::filesystem::exists(dir + "/" + obj)) {
           std::fprintf(stderr, "force: skipping %s: the model set is not in %s (scripts/models.sh)\n", n.c_str(),
                        dir.c_str());
           continue;
         }
-        scenes.push_back(hand_scene(n, dir + "/hand_L2.off", dir + "/" + obj));
+        scenes.push_back(n == "hand_elephant_twist" ? hand_twist_scene(n, dir + "/hand_L2.off", dir + "/" + obj)
+                                                    : hand_scene(n, dir + "/hand_L2.off", dir + "/" + obj));
       } else if (auto g = generated_scenes(n); !g.empty()) {
         for (ForceScene& x : g) scenes.push_back(std::move(x));
       } else {
         die("--scenes: unknown scene '" + n +
-            "' (box, sphere, plate, hand_elephant, hand_armadillo, box_edge, box_corner, ridge, crease, "
+            "' (box, sphere, plate, hand_elephant, hand_armadillo, hand_elephant_twist, box_edge, box_corner, ridge, "
+            "crease, "
             "inner_corner, pocket, plate_through, release, meshes)");
       }
     }
@@ -1101,7 +1255,15 @@ void add_force(CLI::App& app) {
                               {"contact_us_p50", jnum(f.contact_us_p50)},
                               {"contacts_p50", jnum(f.contacts_p50)},
                               {"ticks", f.ticks},
-                              {"contact_ticks", f.contact_ticks}});
+                              {"contact_ticks", f.contact_ticks},
+                              {"tau_peak_Nm", jnum(f.tau_peak)},
+                              {"dtau_p99_Nm", jnum(f.dtau_p99)},
+                              {"dtau_p99_over_peak", jnum(f.dtau_rel)},
+                              {"tau_dir_p99_deg", jnum(f.tau_dir_p99)},
+                              {"rot_energy_per_cycle_mJ", jnum(f.rot_energy_per_cycle)},
+                              {"rot_energy_cycle_max_mJ", jnum(f.rot_energy_max)},
+                              {"total_energy_cycle_max_mJ", jnum(f.total_energy_max)},
+                              {"tau_buzz_30hz_Nm", opt(f.tau_buzz)}});
       Json truth = Json::array();
       for (const TruthRow& row : truth_rows) {
         const TruthFigures& t = row.tf;
@@ -1145,8 +1307,16 @@ void add_force(CLI::App& app) {
                         {"share_cold", jnum(c.cold_us / c.collide_us)},
                         {"share_warm", jnum(c.warm_us / c.collide_us)},
                         {"share_warm_mean", jnum(c.warm_mean_us / c.collide_us)}});
+      Json wrench = Json::array();
+      for (const WrenchCheck& w : wrench_checks())
+        wrench.push_back({{"case", w.name},
+                          {"torque_Nm", jnum(w.torque_Nm)},
+                          {"analytic_Nm", jnum(w.analytic_Nm)},
+                          {"error_Nm", jnum(w.error_Nm)},
+                          {"rel_error", jnum(w.rel_error)}});
       print_json({{"collision_ticks", a->collision_ticks},
                   {"quick", a->quick},
+                  {"wrench_checks", std::move(wrench)},
                   {"scenes", std::move(scene_rows)},
                   {"truth", std::move(truth)},
                   {"contact_cost_slide_mm", jnum(a->cost_slide_mm)},
@@ -1164,6 +1334,19 @@ void add_force(CLI::App& app) {
                   f.energy_cycle_max, f.still_rms < 0 ? "-" : num(f.still_rms).c_str(),
                   f.depth_err < 0 ? "-" : num(f.depth_err).c_str(),
                   f.popthrough < 0 ? "-" : std::to_string(f.popthrough).c_str(), f.round_us_p50, f.contact_us_p50);
+    std::printf(
+        "\ntorque about the scene's tool point (hand scenes: the hand's bounding-box centre), N·m, mJ\n"
+        "%-20s %-6s %-6s %10s %10s %9s %9s %10s %10s %10s %10s\n",
+        "scene", "model", "loop", "tau_peak", "dtau_p99", "dtau/peak", "dir_p99", "Erot/cyc", "Erot_max", "Etot_max",
+        "buzz");
+    for (const Figures& f : all)
+      std::printf("%-20s %-6s %-6s %10.5f %10.6f %9.4f %9.3f %10.5f %10.5f %10.5f %10s\n", f.scene.c_str(),
+                  f.model.c_str(), f.loop.c_str(), f.tau_peak, f.dtau_p99, f.dtau_rel, f.tau_dir_p99, f.rot_energy_per_cycle,
+                  f.rot_energy_max, f.total_energy_max, f.tau_buzz < 0 ? "-" : num(f.tau_buzz).c_str());
+    std::printf("\nwrench checks (patch model, one pose each): |torque| against the analytic moment, N·m\n");
+    for (const WrenchCheck& w : wrench_checks())
+      std::printf("  %-24s torque %.6g, analytic %.6g, error %.3g (%.2f %%)\n", w.name.c_str(), w.torque_Nm,
+                  w.analytic_Nm, w.error_Nm, 100 * w.rel_error);
     if (!truth_rows.empty()) {
       std::printf(
           "\ngenerated scenes against the analytic truth (ball probe: the smallest clearing translation); N, mm, deg\n"
