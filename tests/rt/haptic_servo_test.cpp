@@ -275,3 +275,55 @@ TEST_CASE(
     }
   }
 }
+
+TEST_CASE("HapticServo: the rotational guard keeps the torque's work on a turning hand at or below zero") {
+  // The hand turns at 1 rad/s about −y while the contact's torque points along −y (the patch's
+  // centre 10 mm off the tool's axis): without the guard the torque feeds the rotation (energy
+  // into the hand); with it the observer takes the torque along the rotation away.
+  double work_mJ[2] = {0, 0};
+  for (const bool guarded : {false, true}) {
+    CAPTURE(guarded);
+    auto poses = std::make_unique<TripleBuffer<PoseSample>>();
+    auto models = std::make_unique<TripleBuffer<ContactModel>>();
+    WrenchDevice dev;
+    dev.torque_max = 1.0;
+    dev.pose.translation() = Eigen::Vector3d(0, 0, -2);
+    PassivityConfig pc = DefaultPassivityConfig();
+    pc.enabled = guarded;
+    HapticServo servo(dev, *poses, *models, ForceLaw{}, DefaultInterpolatorConfig(), DefaultSaturationConfig(), nullptr, pc);
+    servo.set_wrench({.dof = 6, .torque_limit_Nm = 1.0, .tcp_mm = Eigen::Vector3d(0, 0, 40)});
+    ContactModel m{};
+    m.seq = 1;
+    m.flags = kInContact;
+    m.pose = to_pod(dev.pose);
+    m.force_dir = to_pod(Eigen::Vector3d(0, 0, 1));
+    m.plane_point = to_pod(Eigen::Vector3d(0, 0, 0));
+    m.pressure_point = to_pod(Eigen::Vector3d(10, 0, -2));
+    m.penetration_mm = 2;
+    models->write(m);
+    TickInfo info;
+    info.period_ns = 1'000'000;
+    Eigen::Vector3d last_tau = Eigen::Vector3d::Zero();
+    double peak = 0;
+    for (int k = 0; k < 400; ++k) {
+      const Eigen::Matrix3d before = dev.pose.linear();
+      dev.pose.linear() = Eigen::AngleAxisd(-1e-3 * k, Eigen::Vector3d::UnitY()).toRotationMatrix();
+      const Eigen::AngleAxisd d(dev.pose.linear() * before.transpose());
+      work_mJ[guarded] += 1e3 * last_tau.dot(d.angle() * d.axis());  // last command over this rotation
+      info.tick = info.deadline_index = std::uint64_t(k);
+      info.woke_ns = info.deadline_ns = 1'000'000'000 + k * 1'000'000;
+      servo.tick(info);
+      last_tau = dev.torque;
+      peak = std::max(peak, dev.torque.norm());
+      REQUIRE(dev.torque.allFinite());
+    }
+    CHECK(peak > 0);  // a torque was rendered
+    if (guarded) {
+      CHECK(servo.rotational_guard_ticks() > 0);
+      CHECK(servo.rotational_energy_mJ() == doctest::Approx(work_mJ[1]).epsilon(1e-6));
+    }
+  }
+  MESSAGE("torque's work on the turning hand: unguarded " << work_mJ[0] << " mJ, guarded " << work_mJ[1] << " mJ");
+  CHECK(work_mJ[0] > 0.05);   // the contact feeds the rotation
+  CHECK(work_mJ[1] <= 1e-3);  // the guard keeps it at zero, within one tick's work
+}

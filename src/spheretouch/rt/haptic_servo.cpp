@@ -43,7 +43,59 @@ HapticServo::HapticServo(Device& device, TripleBuffer<PoseSample>& poses, Triple
       interp_(law, interp),
       sat_(capped(saturation, device)),
       guard_(passivity, law.max_stiffness_N_per_mm(), period_s),
-      telemetry_(telemetry) {}
+      telemetry_(telemetry),
+      passivity_on_(passivity.enabled),
+      margin_(passivity.colgate_margin),
+      period_s_(period_s),
+      stiffness_N_per_mm_(law.max_stiffness_N_per_mm()) {}
+
+Eigen::Vector3d HapticServo::guard_torque(const Eigen::Vector3d& tau, const Eigen::Matrix3d& R, bool in_contact,
+                                          double dt_s) noexcept {
+  // The rotational counterpart of the translational guard (passivity.hpp), for the torque a
+  // 6-DOF device renders. The contact's rotational stiffness is the law's k times the lever's
+  // square (τ = ℓ × F, and F changes by k·(dθ × ℓ)); held between collision rounds (the
+  // collision period T) it needs damping b >= K·T/2 to stay passive (Colgate's bound for a
+  // sampled spring), applied with the translational guard's margin and never larger than the
+  // torque itself. Then an energy observer over the commanded torque's work τ·dθ, reset at each
+  // contact's start: while it is above zero (the contact has put energy into the hand's
+  // rotation), the torque's component along the rotation is removed and, within the torque's own
+  // size, turned into a brake that takes the excess back over the next tick (if it turns as this one).
+  Eigen::Vector3d dtheta = Eigen::Vector3d::Zero();
+  if (have_rot_) {
+    const Eigen::AngleAxisd d(R * last_rot_.transpose());
+    dtheta = d.angle() * d.axis();
+    if (!dtheta.allFinite()) dtheta.setZero();
+  }
+  last_rot_ = R;
+  have_rot_ = true;
+  // Work of last tick's command over the rotation since (J -> mJ).
+  if (in_contact)
+    rot_energy_mJ_ += 1e3 * last_tau_.dot(dtheta);
+  else
+    rot_energy_mJ_ = 0;
+  if (dt_s > 0 && dt_s < 0.1) omega_ += 0.3 * (dtheta / dt_s - omega_);  // one-pole low-pass, as the interpolator's
+  Eigen::Vector3d out = tau;
+  if (passivity_on_ && in_contact) {
+    const double lever_m = 1e-3 * interp_.lever_mm().norm();
+    const double T = std::max(period_s_, interp_.model_interval_ns() * 1e-9);
+    const double k_rot = 1e3 * stiffness_N_per_mm_ * lever_m * lever_m;  // N·m/rad (k in N/m)
+    Eigen::Vector3d damp = -(margin_ * k_rot * T / 2) * omega_;
+    const double tn = tau.norm(), dn = damp.norm();
+    if (dn > tn && dn > 0) damp *= tn / dn;
+    out += damp;
+    // The observer: the torque along this tick's rotation is what does work on the next one.
+    const double w2 = dtheta.squaredNorm();
+    if (rot_energy_mJ_ > 0 && w2 > 0) {
+      const double along = out.dot(dtheta) / w2;  // N·m per rad of rotation
+      const double need = 1e-3 * rot_energy_mJ_ / w2;
+      const double take = std::min(std::max(along, 0.0) + need, std::max(along, 0.0) + out.norm() / std::sqrt(w2));
+      out -= take * dtheta;
+      ++rot_guard_ticks_;
+    }
+  }
+  if (!out.allFinite()) out.setZero();
+  return out;
+}
 
 void HapticServo::tick(const TickInfo& info) noexcept {
   const std::int64_t now = info.woke_ns;
@@ -83,7 +135,10 @@ void HapticServo::tick(const TickInfo& info) noexcept {
   const double tau_norm = tau.norm();
   if (tau_norm > peak_torque_Nm_) peak_torque_Nm_ = tau_norm;
   if (wrench_.dof == 6) {
-    if (tau_norm > torque_ceiling_Nm_) tau *= torque_ceiling_Nm_ > 0 ? torque_ceiling_Nm_ / tau_norm : 0.0;
+    tau = have_pose ? guard_torque(tau, pose.linear(), interp_.state().in_contact, dt_s) : Eigen::Vector3d::Zero();
+    const double tn = tau.norm();
+    if (tn > torque_ceiling_Nm_) tau *= torque_ceiling_Nm_ > 0 ? torque_ceiling_Nm_ / tn : 0.0;
+    last_tau_ = tau;
     device_.command_wrench(now, f, tau);
   } else {
     device_.command_force(now, f);

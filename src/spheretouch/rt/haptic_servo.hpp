@@ -55,8 +55,12 @@ class HapticServo final : public TickHandler {
   /// The wrench to render (config must pass check()); before the loop starts. Default: 3-DOF,
   /// torques about the probe's origin.
   void set_wrench(const WrenchConfig& config);
-  double peak_torque_Nm() const { return peak_torque_Nm_; }     ///< largest |torque| computed (after the loop)
-  const ServoStats& stats() const { return stats_; }            ///< counters
+  double peak_torque_Nm() const { return peak_torque_Nm_; }  ///< largest |torque| computed (after the loop)
+  /// 6-DOF: the rotational energy observer, Σ τ·dθ the commanded torque put into the device since
+  /// the contact began, mJ (the rotational passivity guard keeps it at or below zero).
+  double rotational_energy_mJ() const { return rot_energy_mJ_; }
+  std::uint64_t rotational_guard_ticks() const { return rot_guard_ticks_; }  ///< ticks the rotational guard acted
+  const ServoStats& stats() const { return stats_; }                         ///< counters
   double peak_force_N() const { return peak_force_N_; }         ///< largest |force| commanded (after the loop)
   const Interpolator& interpolator() const { return interp_; }  ///< for inspection
   const Saturator& saturator() const { return sat_; }           ///< for inspection
@@ -76,6 +80,20 @@ class HapticServo final : public TickHandler {
   WrenchConfig wrench_;
   double torque_ceiling_Nm_ = 0;  ///< 6-DOF: min(torque_limit_Nm, the device's max_torque_Nm())
   double peak_torque_Nm_ = 0;     ///< largest |torque| computed
+  /// The rotational guard (6-DOF, passivity enabled): the device's rotation last tick, its
+  /// filtered angular velocity, the observer's energy and the torque last commanded.
+  Eigen::Matrix3d last_rot_{Eigen::Matrix3d::Identity()};
+  bool have_rot_ = false;
+  Eigen::Vector3d omega_{Eigen::Vector3d::Zero()};  ///< rad/s
+  Eigen::Vector3d last_tau_{Eigen::Vector3d::Zero()};
+  double rot_energy_mJ_ = 0;
+  std::uint64_t rot_guard_ticks_ = 0;
+  bool passivity_on_ = true;
+  double margin_ = 2.0;  ///< PassivityConfig::colgate_margin
+  double period_s_ = 1e-3;
+  double stiffness_N_per_mm_ = 0;
+  /// 6-DOF: the torque to command for `tau` (N·m), the device at rotation R, dt_s after the last tick.
+  Eigen::Vector3d guard_torque(const Eigen::Vector3d& tau, const Eigen::Matrix3d& R, bool in_contact, double dt_s) noexcept;
   std::int64_t model_received_ns_ = 0;
   std::int64_t pose_ns_ = 0;  ///< sampling time of the newest published pose
   std::uint32_t model_contacts_ = 0;

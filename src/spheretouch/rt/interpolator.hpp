@@ -95,6 +95,9 @@ class Interpolator {
   /// The lever arm of the last force() output: pressure point − tool point, object frame, mm (zero
   /// without a force). The servo takes the moment of the force it finally commands with it.
   const Eigen::Vector3d& lever_mm() const noexcept { return lever_out_; }
+  /// The recent interval between models (the collision period as the servo sees it), ns; 0 before
+  /// two models arrived.
+  double model_interval_ns() const noexcept { return interval_ns_; }
 
  private:
   Eigen::Vector3d contact_force(const Eigen::Isometry3d& pose, double& pd_mm) const noexcept;
