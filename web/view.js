@@ -220,8 +220,9 @@
       pd: f(160), roundMs: f(168), force: [f(176), f(184), f(192)],
       ticks: u64(200), misses: u64(208), rounds: u64(216), t: f(224),
       contacts: d.getUint32(232, true), np: d.getUint32(236, true), no: d.getUint32(240, true),
+      torque: [f(248), f(256), f(264)],
     };
-    const ids = new Uint32Array(buf.slice(248, 248 + 4 * (fr.np + fr.no)));
+    const ids = new Uint32Array(buf.slice(272, 272 + 4 * (fr.np + fr.no)));
     fr.probeFaces = ids.subarray(0, fr.np);
     fr.objectFaces = ids.subarray(fr.np);
     if (prevT && fr.t > prevT + 0.25) {
@@ -282,7 +283,8 @@
     statusEl.textContent =
       `t ${fr.t.toFixed(1)} s | haptic ${hapticHz.toFixed(0)} Hz, ${fr.misses} misses | ` +
       `collision ${collisionHz.toFixed(0)} Hz, ${fr.roundMs.toFixed(2)} ms | ${fr.contacts} contacts | ` +
-      `PD ${fr.pd.toFixed(3)} mm | |F| ${fmag.toFixed(3)} N | view ${fps.toFixed(0)} fps` +
+      `PD ${fr.pd.toFixed(3)} mm | |F| ${fmag.toFixed(3)} N | ` +
+      `|τ| ${(1000 * Math.hypot(fr.torque[0], fr.torque[1], fr.torque[2])).toFixed(1)} N·mm | view ${fps.toFixed(0)} fps` +
       (fr.flags & 2 ? ' | faces truncated' : '');
   }
 

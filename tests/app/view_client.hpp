@@ -5,6 +5,7 @@
 #include <civetweb.h>
 #include <doctest/doctest.h>
 
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <mutex>
@@ -65,26 +66,30 @@ struct ViewFrameCounts {
 /// and `object_faces` faces: its size matches its face counts; face ids in range, object ids
 /// distinct and ascending; a frame listing object faces is in contact and its contacts (paper
 /// §3.5) are the faces it lists.
+/// Where an "STVF" frame's face lists start (after the torque at 248).
+inline constexpr std::size_t kFacesAt = 272;
+
 inline ViewFrameCounts view_check_frames(const std::vector<std::string>& binary, std::size_t first,
                                          std::uint32_t probe_faces, std::uint32_t object_faces) {
   ViewFrameCounts c;
   for (std::size_t i = first; i < binary.size(); ++i) {
     const std::string& f = binary[i];
-    REQUIRE(f.size() >= 248);
+    REQUIRE(f.size() >= kFacesAt);
     REQUIRE(f.compare(0, 4, "STVF") == 0);
     ++c.frames;
     const std::uint32_t np = view_at<std::uint32_t>(f, 236), no = view_at<std::uint32_t>(f, 240);
-    REQUIRE(f.size() == 248 + 4 * std::size_t(np + no));
+    REQUIRE(f.size() == kFacesAt + 4 * std::size_t(np + no));
+    for (int k = 0; k < 3; ++k) CHECK(std::isfinite(view_at<double>(f, 248 + 8 * k)));  // the torque
     const std::uint32_t flags = view_at<std::uint32_t>(f, 4);
     if (no > 0) {
       ++c.with_faces;
       CHECK((flags & 1) != 0);                           // in contact
       CHECK(view_at<std::uint32_t>(f, 232) == np + no);  // contacts = distinct colliding faces
     }
-    for (std::uint32_t k = 0; k < np; ++k) CHECK(view_at<std::uint32_t>(f, 248 + 4 * k) < probe_faces);
+    for (std::uint32_t k = 0; k < np; ++k) CHECK(view_at<std::uint32_t>(f, kFacesAt + 4 * k) < probe_faces);
     for (std::uint32_t k = 1; k < no; ++k)
-      CHECK(view_at<std::uint32_t>(f, 248 + 4 * (np + k - 1)) < view_at<std::uint32_t>(f, 248 + 4 * (np + k)));
-    for (std::uint32_t k = 0; k < no; ++k) CHECK(view_at<std::uint32_t>(f, 248 + 4 * (np + k)) < object_faces);
+      CHECK(view_at<std::uint32_t>(f, kFacesAt + 4 * (np + k - 1)) < view_at<std::uint32_t>(f, kFacesAt + 4 * (np + k)));
+    for (std::uint32_t k = 0; k < no; ++k) CHECK(view_at<std::uint32_t>(f, kFacesAt + 4 * (np + k)) < object_faces);
   }
   return c;
 }

@@ -210,7 +210,7 @@ TEST_CASE("device kind browser: synthetic wheel events in headless Chromium pres
       ws = mg_connect_websocket_client("127.0.0.1", port, 0, err, sizeof err, "/ws", nullptr, view_on_data, nullptr, &msgs);
     std::lock_guard<std::mutex> l(msgs.mu);
     for (const std::string& f : msgs.binary)
-      if (f.size() >= 248 && f.compare(0, 4, "STVF") == 0 && view_at<double>(f, 160) > 1.5) return true;
+      if (f.size() >= st::test::kFacesAt && f.compare(0, 4, "STVF") == 0 && view_at<double>(f, 160) > 1.5) return true;
     msgs.binary.clear();
     return false;
   };

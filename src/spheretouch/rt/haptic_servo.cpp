@@ -165,6 +165,7 @@ void HapticServo::tick(const TickInfo& info) noexcept {
     st.fade = interp_.state().fade;
     st.contacts = model_contacts_;
     st.flags = flags;
+    for (int i = 0; i < 3; ++i) st.torque_Nm[i] = tau(i);
     status_->store(st);
   }
   if (telemetry_) {

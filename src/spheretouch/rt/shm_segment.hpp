@@ -43,7 +43,7 @@ inline constexpr std::uint64_t kShmMagic = 0x3154524D48535453ull;
 /// 2: the status area (ShmStatus) after the triple buffers. 3: ContactModel 288 B (contact model
 /// kind, inside vertex counts). 4: ShmStatus ends with the scene reference and the view frame
 /// (SceneRef, ViewFrame: the live view reads the segment). 5: ContactModel 312 B (pressure_point,
-/// the wrench's point of application).
+/// the wrench's point of application), ServoStatus 152 B (torque_Nm).
 inline constexpr std::uint32_t kShmLayoutVersion = 5;
 
 /// The whole segment.

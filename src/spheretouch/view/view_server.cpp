@@ -335,7 +335,8 @@ void ViewServer::push() {
     // 136 f64 contact_point[3], 160 f64 penetration_mm, 168 f64 round_ms, 176 f64 force_N[3]
     // (the servo's, this tick), 200 u64 servo ticks, 208 u64 misses, 216 u64 collision rounds,
     // 224 f64 seconds since the view started, 232 u32 contacts, 236 u32 n_probe, 240 u32 n_object,
-    // 244 u32 reserved, 248 u32 probe faces[n_probe], then u32 object faces[n_object].
+    // 244 u32 reserved, 248 f64 torque_Nm[3] (the servo's, about the tool centre point), 272 u32
+    // probe faces[n_probe], then u32 object faces[n_object].
     msg.clear();
     net::Writer w(msg);
     w.raw("STVF", 4);
@@ -355,6 +356,7 @@ void ViewServer::push() {
     w.u32(frame->n_probe);
     w.u32(frame->n_object);
     w.u32(0);
+    for (double v : servo.torque_Nm) w.f64(std::isfinite(v) ? v : 0.0);
     w.raw(frame->faces, 4 * (std::size_t(frame->n_probe) + frame->n_object));
     std::uint64_t sent = 0, bytes = 0;
     for (mg_connection* c : to) {
