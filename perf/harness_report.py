@@ -380,6 +380,34 @@ def force(out, md, summary):
                   f"{g(r.get('depth_err_mm'), '.3f')} | {g(r.get('popthrough'), 'd')} | {g(r.get('round_us_p50'), '.0f')} "
                   f"({g(r.get('contact_us_p50'), '.0f')}) |")
     md.append("")
+    rows_tau = [r for r in f.get("scenes") or [] if r.get("tau_peak_Nm") is not None]
+    if rows_tau:
+        md.append("Torque about the scene's tool point (hands: the hand's bounding-box centre; the generated scenes: "
+                  "the ball's centre), computed by the servo from the commanded force and the contact model's pressure "
+                  "point: peak, per-tick step p99 (over the slide) and that step over the peak, per-tick direction "
+                  "change p99 (above 5 % of the peak), the torque's work on the hand's rotation per contact cycle "
+                  "(mean, max) and with the force's (max), buzz (RMS >= 30 Hz holding still). `hand_elephant_twist` "
+                  "turns the hand 10° and back during the slide. Targets (patch): step p99 <= 1 % of the peak on the "
+                  "hand slides, rotational energy per cycle <= 0; a peak below 1e-9 N·m (a ball about its centre) shows no "
+                  "ratio or direction.\n")
+        md.append("| scene | model | loop | τ peak N·m | dτ p99 N·m | dτ p99 / peak | dir p99 ° | rot. energy/cycle mJ (max) | total max mJ | buzz N·m |")
+        md.append("|---|---|---|---:|---:|---:|---:|---:|---:|---:|")
+        for r in rows_tau:
+            if (r.get("tau_peak_Nm") or 0) < 1e-9:  # no torque (a ball about its centre): ratios of rounding noise
+                r = dict(r, dtau_p99_over_peak=None, tau_dir_p99_deg=None)
+            md.append(f"| {r.get('scene', '–')} | {r.get('model', '–')} | {r.get('loop', '–')} | {g(r.get('tau_peak_Nm'), '.5f')} | "
+                      f"{g(r.get('dtau_p99_Nm'), '.2e')} | {g(r.get('dtau_p99_over_peak'), '.4f')} | {g(r.get('tau_dir_p99_deg'), '.3f')} | "
+                      f"{g(r.get('rot_energy_per_cycle_mJ'), '.4f')} ({g(r.get('rot_energy_cycle_max_mJ'), '.4f')}) | "
+                      f"{g(r.get('total_energy_cycle_max_mJ'), '.4f')} | {g(r.get('tau_buzz_30hz_Nm'), '.2g')} |")
+        md.append("")
+    if f.get("wrench_checks"):
+        md.append("Wrench checks (patch model, one pose each, against the analytic moment):\n")
+        md.append("| case | torque N·m | analytic N·m | error N·m | relative |")
+        md.append("|---|---:|---:|---:|---:|")
+        for w in f["wrench_checks"]:
+            md.append(f"| {w.get('case', '–')} | {g(w.get('torque_Nm'), '.4g')} | {g(w.get('analytic_Nm'), '.4g')} | "
+                      f"{g(w.get('error_Nm'), '.3g')} | {g(w.get('rel_error'), '.2%')} |")
+        md.append("")
     if f.get("truth"):
         md.append("Generated CAD-like solids (written by the bench: faces as large as the solid's cells, or split "
                   "16 x 16) touched by a ball, against the analytic truth: the smallest translation that clears the "

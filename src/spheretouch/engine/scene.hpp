@@ -26,7 +26,7 @@
 namespace st::inline SPHERETOUCH_ABI::engine {
 
 /// [workers] assist_blocks = "auto" with worker daemons: at ~1,000 contacts the client assist
-/// takes 5-8 blocks a round (spheretouch-bench scale, perf/RESULTS.md "Client assist").
+/// takes 5-8 blocks a round (spheretouch-bench scale, perf/RESULTS.md "Scale-out", client assist).
 inline constexpr std::uint32_t kAutoAssistBlocks = 8;
 
 /// One body: a mesh file, the model set ("model:NAME") or a generated shape.

@@ -77,7 +77,7 @@ struct SplitModelConfig {
   std::uint32_t min_blocks_per_worker = 1;  ///< a worker always holds at least this many blocks
   /// Cost of a block a worker enters, in faces tested: keeps the model from cutting into ever
   /// smaller blocks. 1 was fitted to spheretouch-bench scale (elephant, armadillo L1 and L2,
-  /// W = 8): larger values picked larger blocks that measured worse (perf/RESULTS.md).
+  /// W = 8): larger values picked larger blocks that measured worse (perf/RESULTS.md at commit 09e4e24).
   double block_cost_faces = 1;
   /// Two splits within this relative cost are a tie, won by the one with fewer blocks (0: the
   /// cheapest wins; the measurements did not favour fewer blocks).

@@ -19,7 +19,7 @@ struct TreeConfig {
   /// so every leaf is in (leaf_faces/2, leaf_faces] once F >= leaf_faces. Default 24: since collide()
   /// filters a leaf pair's faces with 8-wide box masks, exact queries of hand_L2 x elephant at
   /// 100..1,500 contacts time best at 24..48 (8 is 30..45% slower, 16 about 10%), and 24 keeps
-  /// leaf spheres (approximate mode) the smallest of those (perf/RESULTS.md, "Collision core").
+  /// leaf spheres (approximate mode) the smallest of those (perf/RESULTS.md at commit 09e4e24, "Collision core").
   std::uint32_t leaf_faces = 24;
 };
 inline TreeConfig DefaultTreeConfig() { return {}; }  ///< Box2D-style default config
