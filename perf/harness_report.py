@@ -462,7 +462,8 @@ def esc(s):
     return s.replace("_", "\\_")
 
 
-GP_COMMON = """set terminal pngcairo size 900,560 font 'DejaVu Sans,10'
+GP_COMMON = """# SPDX-License-Identifier: BSD-3-Clause
+set terminal pngcairo size 900,560 font 'DejaVu Sans,10'
 set datafile separator ','
 set key outside right top
 set grid

@@ -96,7 +96,7 @@ def png(panels, out):
         gp.append('plot ' + ', '.join(cmds) + ", 1 with lines lc rgb '#888888' dt 3 notitle")
     gp.append('unset multiplot')
     with open(base + '.gp', 'w') as f:
-        f.write('\n'.join(gp) + '\n')
+        f.write('# SPDX-License-Identifier: BSD-3-Clause\n' + '\n'.join(gp) + '\n')
     subprocess.run(['gnuplot', base + '.gp'], check=True)
 
 

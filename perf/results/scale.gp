@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: BSD-3-Clause
 set terminal pngcairo size 1380,420 font 'DejaVu Sans,9'
 set output 'perf/results/scale.png'
 set multiplot layout 1,3

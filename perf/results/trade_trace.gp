@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: BSD-3-Clause
 set terminal pngcairo size 900,560 font 'DejaVu Sans,10'
 set datafile separator ','
 set key outside right top
