@@ -381,6 +381,9 @@ PYBIND11_MODULE(_core, m) {
           "probe_point", [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.probe_point)); },
           "deepest probe point, probe frame")
       .def_property_readonly(
+          "pressure_point", [](const geom::ContactModel& c) { return to_array(geom::to_eigen(c.pressure_point)); },
+          "where the force acts, for its torque: the patch's centre on the contact plane, object frame, mm")
+      .def_property_readonly(
           "proxy_offset", [](const geom::ContactModel& c) { return to_array(c.proxy_offset()); },
           "PD · FD: where the probe would rest outside the object, relative to its pose, mm")
       .def_readonly("flags", &geom::ContactModel::flags, "IN_CONTACT | HELD | PLANES | ... (module constants)")

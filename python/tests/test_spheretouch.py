@@ -174,6 +174,8 @@ def test_contact_model_and_force():
     assert model.in_contact
     assert np.allclose(model.force_dir, [0, 0, 1], atol=1e-9), model.force_dir
     assert abs(model.penetration_mm - 2.0) < 1e-9, model.penetration_mm
+    # The force acts at the pressed square's middle, on the top face: under the probe's centre.
+    assert np.allclose(model.pressure_point, [3, -4, 50], atol=1e-9), model.pressure_point
     law = st.ForceLaw()
     f = law.force(model)
     assert np.allclose(f, law.magnitude(2.0) * np.array([0, 0, 1.0]))
