@@ -699,7 +699,9 @@ Figures measure(const ForceScene& s, const Replay& rp) {
   fg.ticks = T.size();
   auto t_of = [](std::size_t i) { return double(i) * 1e-3; };
   const bool window = s.slide_t1 > s.slide_t0;
-  std::vector<double> dF, ang;
+  for (const Tick& t : T) fg.tau_peak = std::max(fg.tau_peak, t.tau.norm());
+  // Per tick (over the slide window): the force's and the torque's steps and turns.
+  std::vector<double> dF, ang, dtau, tdir;
   int flips = 0;
   bool flipping = false;
   for (std::size_t i = 1; i < T.size(); ++i) {
@@ -714,75 +716,51 @@ Figures measure(const ForceScene& s, const Replay& rp) {
     if (!on || (window && (t_of(i) < s.slide_t0 || t_of(i) > s.slide_t1))) continue;
     dF.push_back((T[i].f - T[i - 1].f).norm());
     if (T[i].f.norm() > kDirMinN && T[i - 1].f.norm() > kDirMinN) ang.push_back(angle_deg(T[i].f, T[i - 1].f));
+    dtau.push_back((T[i].tau - T[i - 1].tau).norm());
+    const double tau_min = 0.05 * fg.tau_peak;  // a turn of a torque near zero is noise
+    if (T[i].tau.norm() > tau_min && T[i - 1].tau.norm() > tau_min) tdir.push_back(angle_deg(T[i].tau, T[i - 1].tau));
   }
   fg.dF_max = dF.empty() ? 0 : *std::max_element(dF.begin(), dF.end());
   fg.dF_p99 = quantile(dF, 0.99);
   fg.angle_p99 = quantile(ang, 0.99);
   fg.flips45_per_s = fg.contact_ticks ? flips / (double(fg.contact_ticks) * 1e-3) : 0;
-  // Energy per contact cycle (force on → off).
-  std::vector<double> cyc;
-  double e = 0;
+  fg.dtau_p99 = quantile(dtau, 0.99);
+  fg.dtau_rel = fg.tau_peak > 0 ? fg.dtau_p99 / fg.tau_peak : 0;
+  fg.tau_dir_p99 = quantile(tdir, 0.99);
+  // Energy per contact cycle (force on → off): the force's work F·dx (mJ: N·mm), the torque's
+  // τ·dθ (J → mJ), and their sum.
+  std::vector<double> cyc, rot, total;
+  double e = 0, er = 0;
   bool on = false;
   for (std::size_t i = 0; i + 1 < T.size(); ++i) {
     const bool f_on = T[i].f.norm() > 0;
-    if (f_on && !on) e = 0;
-    if (f_on) e += T[i].f.dot(T[i + 1].x - T[i].x);
-    if (!f_on && on) cyc.push_back(e);
+    if (f_on && !on) e = er = 0;
+    if (f_on) {
+      e += T[i].f.dot(T[i + 1].x - T[i].x);
+      er += 1e3 * T[i].tau.dot(T[i].dtheta);
+    }
+    if (!f_on && on) cyc.push_back(e), rot.push_back(er), total.push_back(e + er);
     on = f_on;
   }
-  if (on) cyc.push_back(e);  // a cycle still open at the end
+  if (on) cyc.push_back(e), rot.push_back(er), total.push_back(e + er);  // a cycle still open at the end
   fg.cycles = int(cyc.size());
-  {
-    // The torque's figures, and τ·dθ per contact cycle (J → mJ), alone and with F·dx.
-    std::vector<double> dtau, tdir, rot, total;
-    double er = 0, et = 0;
-    bool c_on = false;
-    for (std::size_t i = 0; i < T.size(); ++i) fg.tau_peak = std::max(fg.tau_peak, T[i].tau.norm());
-    for (std::size_t i = 0; i + 1 < T.size(); ++i) {
-      const bool f_on = T[i].f.norm() > 0;
-      if (f_on && !c_on) er = et = 0;
-      if (f_on) {
-        er += 1e3 * T[i].tau.dot(T[i].dtheta);
-        et += T[i].f.dot(T[i + 1].x - T[i].x);
-      }
-      if (!f_on && c_on) rot.push_back(er), total.push_back(er + et);
-      c_on = f_on;
-      if (i == 0) continue;
-      const bool on_t = T[i].f.norm() > 0 || T[i - 1].f.norm() > 0;
-      if (!on_t || (window && (t_of(i) < s.slide_t0 || t_of(i) > s.slide_t1))) continue;
-      dtau.push_back((T[i].tau - T[i - 1].tau).norm());
-      if (T[i].tau.norm() > 0.05 * fg.tau_peak && T[i - 1].tau.norm() > 0.05 * fg.tau_peak)
-        tdir.push_back(angle_deg(T[i].tau, T[i - 1].tau));
-    }
-    if (c_on) rot.push_back(er), total.push_back(er + et);
-    fg.dtau_p99 = quantile(dtau, 0.99);
-    fg.dtau_rel = fg.tau_peak > 0 ? fg.dtau_p99 / fg.tau_peak : 0;
-    fg.tau_dir_p99 = quantile(tdir, 0.99);
-    if (!rot.empty()) {
-      double sum = 0;
-      for (double r : rot) sum += r;
-      fg.rot_energy_per_cycle = sum / double(rot.size());
-      fg.rot_energy_max = *std::max_element(rot.begin(), rot.end());
-      fg.total_energy_max = *std::max_element(total.begin(), total.end());
-    }
-    if (s.still_t1 > s.still_t0) {
-      std::vector<Eigen::Vector3d> tau;
-      for (std::size_t i = std::size_t(s.still_t0 * 1000); i < std::min(T.size(), std::size_t(s.still_t1 * 1000)); ++i)
-        tau.push_back(T[i].tau);
-      fg.tau_buzz = rms_above(tau, 30.0);
-    }
-  }
+  auto mean = [](const std::vector<double>& v) { return std::accumulate(v.begin(), v.end(), 0.0) / double(v.size()); };
+  auto max = [](const std::vector<double>& v) { return *std::max_element(v.begin(), v.end()); };
   if (!cyc.empty()) {
-    double sum = 0;
-    for (double c : cyc) sum += c;
-    fg.energy_per_cycle = sum / double(cyc.size());
-    fg.energy_cycle_max = *std::max_element(cyc.begin(), cyc.end());
+    fg.energy_per_cycle = mean(cyc);
+    fg.energy_cycle_max = max(cyc);
+    fg.rot_energy_per_cycle = mean(rot);
+    fg.rot_energy_max = max(rot);
+    fg.total_energy_max = max(total);
   }
-  if (s.still_t1 > s.still_t0) {
-    std::vector<Eigen::Vector3d> f;
-    for (std::size_t i = std::size_t(s.still_t0 * 1000); i < std::min(T.size(), std::size_t(s.still_t1 * 1000)); ++i)
+  if (s.still_t1 > s.still_t0) {  // holding still: what oscillates at >= 30 Hz
+    std::vector<Eigen::Vector3d> f, tau;
+    for (std::size_t i = std::size_t(s.still_t0 * 1000); i < std::min(T.size(), std::size_t(s.still_t1 * 1000)); ++i) {
       f.push_back(T[i].f);
+      tau.push_back(T[i].tau);
+    }
     fg.still_rms = rms_above(f, 30.0);
+    fg.tau_buzz = rms_above(tau, 30.0);
   }
   if (s.depth_ref && !s.plate) {
     double worst = 0, sq = 0;

@@ -942,22 +942,28 @@ def summary_table(summ, md):
     return True
 
 
-def scale_doc(doc, md):
+def object_docs(doc, md, prefix, cmd):
+    """(object, JSON) of each `<prefix>_<object>.json` in the results: the SCALE_OBJECTS first (a
+    note in md for each one missing or unreadable), then any other object found."""
     files = {}
-    for p in sorted(glob.glob(doc.path("scale_*.json"))):
-        o = os.path.basename(p)[len("scale_"):-len(".json")]
+    for p in sorted(glob.glob(doc.path(prefix + "_*.json"))):
+        o = os.path.basename(p)[len(prefix) + 1:-len(".json")]
         if not o.endswith("_one_tree"):
             files[o] = p
-    objects = [o for o in SCALE_OBJECTS] + sorted(o for o in files if o not in SCALE_OBJECTS)
-    plot = os.path.exists(doc.path("scale.png"))
-    for o in objects:
+    for o in list(SCALE_OBJECTS) + sorted(o for o in files if o not in SCALE_OBJECTS):
         if o not in files:
-            md.append(doc.missing(f"scale_{o}.json", CMD_SCALE.replace("<object>", o)))
+            md.append(doc.missing(f"{prefix}_{o}.json", cmd.replace("<object>", o)))
             continue
         d = jload(files[o])
         if not isinstance(d, dict):
-            md.append(f"_`scale_{o}.json` unreadable_\n")
+            md.append(f"_`{prefix}_{o}.json` unreadable_\n")
             continue
+        yield o, d
+
+
+def scale_doc(doc, md):
+    plot = os.path.exists(doc.path("scale.png"))
+    for o, d in object_docs(doc, md, "scale", CMD_SCALE):
         md.append(f"### {o} ({f_count(d.get('object_faces'))} faces)\n")
         parts = scale_inputs(d)
         if parts:
@@ -1028,15 +1034,7 @@ def scale_doc(doc, md):
             md += md_table(["mapping"] + [f"W={w}" for w in ws],
                            [[mp or DASH] + [f_ratio(by.get((mp, w), {}).get("per_worker_over_single")) for w in ws]
                             for mp in maps])
-    spreads = {os.path.basename(p)[len("spread_"):-len(".json")]: p for p in sorted(glob.glob(doc.path("spread_*.json")))}
-    for o in [o for o in SCALE_OBJECTS] + sorted(o for o in spreads if o not in SCALE_OBJECTS):
-        if o not in spreads:
-            md.append(doc.missing(f"spread_{o}.json", CMD_SPREAD.replace("<object>", o)))
-            continue
-        d = jload(spreads[o])
-        if not isinstance(d, dict):
-            md.append(f"_`spread_{o}.json` unreadable_\n")
-            continue
+    for o, d in object_docs(doc, md, "spread", CMD_SPREAD):
         cs = [r.get("contacts") for r in d.get("rows") or [] if isinstance(r, dict) and finite(r.get("contacts"))]
         poses = {r.get("pose") for r in d.get("rows") or [] if isinstance(r, dict)}
         md.append(f"### Spread: {o} ({f_count(d.get('object_faces'))} faces), {len(poses)} poses of "

@@ -92,6 +92,11 @@ struct CollisionRequest {
   static CollisionRequest first_pair() { return {.max_pairs = 1}; }                        ///< "do they touch?"
   static CollisionRequest capped(std::size_t n) { return {.max_pairs = n}; }               ///< at most n pairs
   static CollisionRequest approximate(int layer) { return {.approximate_layer = layer}; }  ///< superset
+  /// A service's limit: at most `limit` pairs are an answer; the query stops at limit + 1 pairs,
+  /// so a result with `complete == false` has passed it (a worker's max_pairs, net::Limits).
+  static CollisionRequest past_limit(std::size_t limit) {
+    return {.max_pairs = limit >= SIZE_MAX - 1 ? SIZE_MAX : limit + 1};
+  }
 };
 inline CollisionRequest DefaultCollisionRequest() { return {}; }  ///< all pairs, exact, sorted
 /// Empty when the request is usable, else a message naming the bad field.

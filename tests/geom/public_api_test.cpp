@@ -142,8 +142,13 @@ TEST_CASE("first-pair and capped requests return pairs of the full set, with cou
     CHECK(capped.probe_faces == c.probe_faces);
     CHECK(capped.object_faces == c.object_faces);
     if (all.pairs.size() > 50) CHECK_FALSE(capped.complete);
+    // A service's limit of 50: a full answer up to 50, else 51 pairs and not complete.
+    pair.at_relative(pose, st::CollisionRequest::past_limit(50), capped);
+    CHECK(capped.complete == (all.pairs.size() <= 50));
+    CHECK(capped.pairs.size() == std::min<std::size_t>(51, all.pairs.size()));
   }
   CHECK(checked >= 8);
+  CHECK(st::CollisionRequest::past_limit(SIZE_MAX).max_pairs == SIZE_MAX);
 }
 
 TEST_CASE("approximate requests report a superset of the exact pairs") {

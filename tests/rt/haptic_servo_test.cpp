@@ -232,16 +232,8 @@ TEST_CASE(
     HapticServo servo(dev, *poses, *models, ForceLaw{}, DefaultInterpolatorConfig(), DefaultSaturationConfig(), nullptr);
     // The tool point 40 mm above the probe's origin: a lever of 40 mm over a 10 mm offset.
     servo.set_wrench({.dof = dof, .torque_limit_Nm = 0.02, .tcp_mm = Eigen::Vector3d(0, 0, 40)});
-    ContactModel m{};
-    m.seq = 1;
-    m.flags = kInContact;
-    m.pose = to_pod(dev.pose);
-    m.force_dir = to_pod(Eigen::Vector3d(0, 0, 1));
-    m.probe_point = to_pod(Eigen::Vector3d(0, 0, 0));
-    m.plane_point = to_pod(Eigen::Vector3d(0, 0, 0));
-    m.pressure_point = to_pod(Eigen::Vector3d(10, 0, 0));  // the patch's centre 10 mm off the tool's axis
-    m.penetration_mm = 2;
-    models->write(m);
+    // The patch's centre 10 mm off the tool's axis.
+    models->write(wall_contact(dev.pose, 2, Eigen::Vector3d(10, 0, 0)));
     TickInfo info;
     info.period_ns = 1'000'000;
     for (int k = 0; k < 20; ++k) {
@@ -292,15 +284,7 @@ TEST_CASE("HapticServo: the rotational guard keeps the torque's work on a turnin
     pc.enabled = guarded;
     HapticServo servo(dev, *poses, *models, ForceLaw{}, DefaultInterpolatorConfig(), DefaultSaturationConfig(), nullptr, pc);
     servo.set_wrench({.dof = 6, .torque_limit_Nm = 1.0, .tcp_mm = Eigen::Vector3d(0, 0, 40)});
-    ContactModel m{};
-    m.seq = 1;
-    m.flags = kInContact;
-    m.pose = to_pod(dev.pose);
-    m.force_dir = to_pod(Eigen::Vector3d(0, 0, 1));
-    m.plane_point = to_pod(Eigen::Vector3d(0, 0, 0));
-    m.pressure_point = to_pod(Eigen::Vector3d(10, 0, -2));
-    m.penetration_mm = 2;
-    models->write(m);
+    models->write(wall_contact(dev.pose, 2, Eigen::Vector3d(10, 0, -2)));
     TickInfo info;
     info.period_ns = 1'000'000;
     Eigen::Vector3d last_tau = Eigen::Vector3d::Zero();

@@ -15,6 +15,7 @@
 #include <spheretouch/geom/primitives.hpp>
 #include <spheretouch/rt/constants.hpp>
 #include <spheretouch/rt/saturation.hpp>
+#include "rt_test_util.hpp"
 
 using namespace st::rt;
 using st::geom::ContactModel;
@@ -366,18 +367,9 @@ TEST_CASE("Interpolator: the torque is the force's moment about the tool point, 
   in.set_tool_point(tcp);
   // A flat press: FD = +z, the plane at z = 0, the probe's origin 1 mm below it; the patch's
   // centre 6 mm off the tool point along x (a box pressed off-centre).
-  st::geom::ContactModel m{};
-  m.seq = 1;
-  m.flags = st::geom::kInContact;
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   pose.translation() = Eigen::Vector3d(0, 0, -1);
-  m.pose = to_pod(pose);
-  m.force_dir = to_pod(Eigen::Vector3d(0, 0, 1));
-  m.probe_point = to_pod(Eigen::Vector3d(0, 0, 0));
-  m.plane_point = to_pod(Eigen::Vector3d(0, 0, 0));
-  m.contact_point = to_pod(Eigen::Vector3d(6, 0, 0));
-  m.pressure_point = to_pod(Eigen::Vector3d(6, 0, 0));
-  m.penetration_mm = 1;
+  st::geom::ContactModel m = wall_contact(pose, 1, Eigen::Vector3d(6, 0, 0));
   in.on_model(m, 1'000'000);
   const Eigen::Vector3d f = in.force(pose, 1'000'000 + kDefaultCrossfadeNs * 10);
   REQUIRE(f.z() > 0.1);
@@ -403,13 +395,9 @@ TEST_CASE("Interpolator: the torque is the force's moment about the tool point, 
 TEST_CASE("Interpolator: a new model's lever arm is cross-faded in: the torque moves in small steps") {
   using st::geom::to_pod;
   Interpolator in(ForceLaw{}, DefaultInterpolatorConfig());
-  st::geom::ContactModel m{};
-  m.flags = st::geom::kInContact;
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   pose.translation() = Eigen::Vector3d(0, 0, -1);
-  m.pose = to_pod(pose);
-  m.force_dir = to_pod(Eigen::Vector3d(0, 0, 1));
-  m.penetration_mm = 1;
+  st::geom::ContactModel m = wall_contact(pose, 1, Eigen::Vector3d::Zero());
   std::int64_t t = 1'000'000;
   Eigen::Vector3d last = Eigen::Vector3d::Zero();
   double worst = 0, peak = 0;
@@ -447,22 +435,30 @@ st::geom::ContactModel built_model(const st::geom::Mesh& probe, const st::geom::
 
 TEST_CASE("Interpolator: wrench of real contacts: a box pressed off its tool point, a sphere end about its centre") {
   const st::geom::Mesh plate = st::geom::make_box({200, 200, 200});  // top face at z = 100
+  // The force and torque about `tcp` an interpolator renders for the builder's model at `pose`.
+  auto wrench_at = [&](const st::geom::Mesh& probe, const Eigen::Isometry3d& pose, const Eigen::Vector3d& tcp,
+                       Eigen::Vector3d& torque) {
+    Interpolator in(ForceLaw{}, DefaultInterpolatorConfig());
+    in.set_tool_point(tcp);
+    const st::geom::ContactModel m = built_model(probe, plate, pose);
+    REQUIRE(m.in_contact());
+    in.on_model(m, 1'000'000);
+    const Eigen::Vector3d f = in.force(pose, 2'000'000);
+    torque = in.torque_Nm();
+    return f;
+  };
   {
     // A 20 mm box pressed 1 mm flat; the tool point 6 mm off its axis on its top face. The force
     // acts at the middle of the pressed square: τ = (c − r) × F = (−6, 0, −20) mm × (0, 0, F).
     const st::geom::Mesh cube = st::geom::make_box({20, 20, 20});
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
     pose.translation() = Eigen::Vector3d(13.0, -7.0, 100 + 10 - 1.0);
-    Interpolator in(ForceLaw{}, DefaultInterpolatorConfig());
-    in.set_tool_point(Eigen::Vector3d(6, 0, 10));
-    const st::geom::ContactModel m = built_model(cube, plate, pose);
-    REQUIRE(m.in_contact());
-    in.on_model(m, 1'000'000);
-    const Eigen::Vector3d f = in.force(pose, 2'000'000);
+    Eigen::Vector3d torque;
+    const Eigen::Vector3d f = wrench_at(cube, pose, Eigen::Vector3d(6, 0, 10), torque);
     REQUIRE(f.z() > 0.01);
     const Eigen::Vector3d analytic = 1e-3 * Eigen::Vector3d(-6, 0, -20).cross(Eigen::Vector3d(0, 0, f.z()));
-    CHECK((in.torque_Nm() - analytic).norm() <= 0.02 * analytic.norm());
-    MESSAGE("box off-centre: torque " << in.torque_Nm().transpose() << " N·m, analytic " << analytic.transpose());
+    CHECK((torque - analytic).norm() <= 0.02 * analytic.norm());
+    MESSAGE("box off-centre: torque " << torque.transpose() << " N·m, analytic " << analytic.transpose());
   }
   {
     // A capsule's spherical end pressed end-on: about the end's centre no torque (the force's line
@@ -471,15 +467,10 @@ TEST_CASE("Interpolator: wrench of real contacts: a box pressed off its tool poi
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
     pose.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();  // tip down
     pose.translation() = Eigen::Vector3d(4.0, 2.0, 100 + 23 - 0.8);
-    Interpolator in(ForceLaw{}, DefaultInterpolatorConfig());
-    in.set_tool_point(Eigen::Vector3d(0, 0, 15));
-    const st::geom::ContactModel m = built_model(capsule, plate, pose);
-    REQUIRE(m.in_contact());
-    in.on_model(m, 1'000'000);
-    const Eigen::Vector3d f = in.force(pose, 2'000'000);
+    Eigen::Vector3d torque;
+    const Eigen::Vector3d f = wrench_at(capsule, pose, Eigen::Vector3d(0, 0, 15), torque);
     REQUIRE(f.norm() > 0.01);
-    CHECK(in.torque_Nm().norm() <= 1e-6);
-    MESSAGE("sphere end on a plane: |torque| about its centre " << in.torque_Nm().norm() << " N·m at |F| " << f.norm()
-                                                                << " N");
+    CHECK(torque.norm() <= 1e-6);
+    MESSAGE("sphere end on a plane: |torque| about its centre " << torque.norm() << " N·m at |F| " << f.norm() << " N");
   }
 }

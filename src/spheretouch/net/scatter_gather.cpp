@@ -700,8 +700,7 @@ struct ScatterGather::Impl {
         assist.emplace(*probe_body, *lb->body);
       else
         assist->set_object(*lb->body);
-      CollisionRequest request;
-      request.max_pairs = cfg.limits.max_pairs >= SIZE_MAX - 1 ? SIZE_MAX : cfg.limits.max_pairs + 1;
+      CollisionRequest request = CollisionRequest::past_limit(cfg.limits.max_pairs);
       request.sort_pairs = false;  // the round's merge sorts
       assist->at_relative(pose, request, assist_result);
       if (!assist_result.complete) continue;  // more than max_pairs: left to the workers' refusal

@@ -97,9 +97,8 @@ class TreeBackend final : public CollisionBackend {
     const auto t0 = std::chrono::steady_clock::now();
     // The share keeps the object's origin and local coordinates bit for bit, so the query
     // computes the same transformed doubles as a single-process query.
-    CollisionRequest request;
-    // The service's limit is "more than max_pairs": ask for one more, so a full answer shows it.
-    request.max_pairs = max_pairs >= SIZE_MAX - 1 ? SIZE_MAX : max_pairs + 1;
+    // The service refuses more than max_pairs: the query stops one past it.
+    CollisionRequest request = CollisionRequest::past_limit(max_pairs);
     request.sort_pairs = false;  // the client's merge sorts
     if (!skip.empty() && !block_roots_.empty() && cover_without(skip)) {
       request.restrict_object = true;
