@@ -10,26 +10,61 @@ the program measures what a driver would see: poses sent, forces received (every
 sequence gaps, and the pose-to-force time (from sending a pose to receiving the first force that
 used it, on this program's clock, echoed by the servo).
 
-Wire format (version 1, little-endian; src/spheretouch/rt/udp_device.hpp and docs/user-guide/devices.md):
-  pose  (80 bytes): "STHP" u16 version u16 buttons u64 seq i64 device_ns f64 x y z f64 qw qx qy qz
-  force (64 bytes): "STHF" u16 version u16 flags u64 seq u64 pose_seq i64 pose_device_ns
-                    f64 fx fy fz i64 servo_ns
+Wire format (version 2, little-endian; src/spheretouch/rt/udp_device.hpp and docs/user-guide/devices.md):
+  pose  (120 bytes): "STHP" u16 version u16 buttons u64 session u64 seq i64 device_ns
+                     f64 x y z f64 qw qx qy qz, tag[32] = HMAC-SHA256(key, bytes 0-87)
+  force (128 bytes): "STHF" u16 version u16 flags u64 session u64 seq u64 pose_seq i64 pose_device_ns
+                     f64 fx fy fz f64 tx ty tz i64 servo_ns, tag[32] = HMAC-SHA256(key, bytes 0-95)
+  refusal (80 bytes): "STHR" u16 version u16 reason u64 session char[64] reason in words
+Version 1 (--protocol 1: an 80-byte pose and a 64-byte force without session, torque and tag) is
+taken only by a scene with [device] auth = "none"; a bridge that authenticates refuses it.
 
-  spheretouch run configs/udp_small.toml &       # [device] kind = "udp", bind = "127.0.0.1:7600"
-  examples/udp_device_emulator.py --seconds 3 --from 0,0,56 --to-point 0,0,48
+  spheretouch run configs/udp_small.toml --out run &   # prints "this run's key is in run/bridge.key"
+  examples/udp_device_emulator.py --key run/bridge.key --seconds 3 --from 0,0,56 --to-point 0,0,48
 """
 import argparse
+import hashlib
+import hmac
 import json
 import math
+import os
 import select
 import socket
 import struct
 import sys
 import time
 
-POSE = struct.Struct("<4sHHQq3d4d")
-FORCE = struct.Struct("<4sHHQQq3dq")
-assert POSE.size == 80 and FORCE.size == 64
+POSE = struct.Struct("<4sHHQQq3d4d")    # version 2, before the tag
+FORCE = struct.Struct("<4sHHQQQq3d3dq")  # version 2, before the tag
+POSE1 = struct.Struct("<4sHHQq3d4d")     # version 1
+FORCE1 = struct.Struct("<4sHHQQq3dq")    # version 1
+REFUSAL = struct.Struct("<4sHHQ64s")
+TAG = 32
+assert POSE.size + TAG == 120 and FORCE.size + TAG == 128 and POSE1.size == 80 and FORCE1.size == 64
+assert REFUSAL.size == 80
+REASONS = {1: "version 1 refused: the bridge authenticates (use --protocol 2 with --key)",
+           2: "the tag does not verify: wrong --key",
+           3: "another session holds the device (it is taken after the other driver is silent)",
+           4: "this session id was served before"}
+
+
+def read_key(path):
+    """The bridge key: 64 hexadecimal digits on the first line of a file only its owner can read."""
+    try:
+        st = os.stat(path)
+        with open(path, encoding="ascii") as f:
+            line = f.readline().strip()
+    except (OSError, UnicodeDecodeError) as e:
+        raise SystemExit(f"udp_device_emulator: {path}: cannot read the bridge key: {e}")
+    if st.st_mode & 0o077:
+        raise SystemExit(f"udp_device_emulator: {path}: the bridge key is readable by group or others (chmod 600 {path})")
+    try:
+        key = bytes.fromhex(line)
+    except ValueError:
+        key = b""
+    if len(key) != 32:
+        raise SystemExit(f"udp_device_emulator: {path}: expected 64 hexadecimal digits on the first line")
+    return key
 
 
 def vec(text):
@@ -56,9 +91,24 @@ def main():
     ap.add_argument("--period", type=float, default=2.0, help="seconds for one sweep start -> end -> start (default 2)")
     ap.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the bridge's first force (default 10)")
     ap.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    ap.add_argument("--key", help="the bridge key file (the scene's [device] key_file, or the run's RUN_DIR/bridge.key)")
+    ap.add_argument("--protocol", type=int, choices=(1, 2), default=2,
+                    help="wire version: 2 (default; authenticated with --key, or unauthenticated without it for a "
+                         "scene with auth = \"none\"), or 1 (legacy, only for auth = \"none\")")
+    ap.add_argument("--trace", metavar="CSV", help="write every force received: t_s, fx, fy, fz (N), tx, ty, tz (N·m), "
+                    "flags (plot: gnuplot -e \"set datafile separator ','; plot 'F' using 1:2 w l, '' using 1:5 w l\")")
+    ap.add_argument("--print-every", type=int, default=0, metavar="N",
+                    help="print every Nth force and torque as it arrives (0: none)")
     a = ap.parse_args()
     if not (0 < a.rate <= 10000) or not (0 < a.seconds <= 86400) or not (a.period > 0):
         ap.error("--rate must be in (0, 10000], --seconds in (0, 86400], --period > 0")
+    if a.protocol == 1 and a.key:
+        ap.error("--protocol 1 has no authentication: drop --key (or speak version 2)")
+    key = read_key(a.key) if a.key else None
+    session = int.from_bytes(os.urandom(8), "little") or 1  # random: a restarted driver is a new session
+    trace = open(a.trace, "w", encoding="ascii") if a.trace else None
+    if trace:
+        trace.write("t_s,fx_N,fy_N,fz_N,tx_Nm,ty_Nm,tz_Nm,flags\n")
 
     family = socket.AF_INET6 if ":" in a.to[0] else socket.AF_INET
     sock = socket.socket(family, socket.SOCK_DGRAM)
@@ -74,12 +124,47 @@ def main():
     last_force_seq = 0
     echoed = set()
     max_force = 0.0
+    max_torque = 0.0
     fading = 0
+    limited = 0
     late = 0
     refused = 0
+    refusals = {}  # reason -> count
+    forged = 0     # force datagrams whose tag did not verify (dropped)
+    t_start = time.monotonic_ns()
+
+    def decode(data):
+        """(flags, seq, pose_seq, pose_ns, force, torque, servo_ns), or None for a datagram that is not a force for us."""
+        nonlocal forged
+        if len(data) == REFUSAL.size and data[:4] == b"STHR":
+            _, _, reason, _, text = REFUSAL.unpack(data)
+            if reason not in refusals:
+                words = text.split(b"\0", 1)[0].decode("ascii", "replace")
+                print(f"udp_device_emulator: the bridge refused: {words} "
+                      f"({REASONS.get(reason, 'reason ' + str(reason))})", file=sys.stderr)
+            refusals[reason] = refusals.get(reason, 0) + 1
+            return None
+        if a.protocol == 1:
+            if len(data) != FORCE1.size:
+                return None
+            magic, version, flags, seq, pose_seq, pose_ns, fx, fy, fz, servo_ns = FORCE1.unpack(data)
+            if magic != b"STHF" or version != 1:
+                return None
+            return flags, seq, pose_seq, pose_ns, (fx, fy, fz), (0.0, 0.0, 0.0), servo_ns
+        if len(data) != FORCE.size + TAG:
+            return None
+        if key is not None and not hmac.compare_digest(hmac.new(key, data[:FORCE.size], hashlib.sha256).digest(),
+                                                       data[FORCE.size:]):
+            forged += 1
+            return None
+        (magic, version, flags, sess, seq, pose_seq, pose_ns, fx, fy, fz, tx, ty, tz,
+         servo_ns) = FORCE.unpack(data[:FORCE.size])
+        if magic != b"STHF" or version != 2 or sess != session:
+            return None
+        return flags, seq, pose_seq, pose_ns, (fx, fy, fz), (tx, ty, tz), servo_ns
 
     def receive(until_ns):
-        nonlocal forces, force_gaps, last_force_seq, max_force, fading, refused
+        nonlocal forces, force_gaps, last_force_seq, max_force, max_torque, fading, limited, refused
         while True:
             now = time.monotonic_ns()
             timeout = max(0.0, (until_ns - now) / 1e9)
@@ -95,18 +180,26 @@ def main():
                     refused += 1
                     break
                 t = time.monotonic_ns()
-                if len(data) != FORCE.size:
+                d = decode(data)
+                if d is None:
                     continue
-                magic, version, flags, seq, pose_seq, pose_ns, fx, fy, fz, servo_ns = FORCE.unpack(data)
-                if magic != b"STHF" or version != 1:
-                    continue
+                flags, seq, pose_seq, pose_ns, force, torque, servo_ns = d
                 forces += 1
                 if last_force_seq and seq > last_force_seq + 1:
                     force_gaps += seq - last_force_seq - 1
                 last_force_seq = max(last_force_seq, seq)
                 if flags & 1:
                     fading += 1
-                max_force = max(max_force, math.sqrt(fx * fx + fy * fy + fz * fz))
+                if flags & 4:
+                    limited += 1
+                max_force = max(max_force, math.sqrt(sum(v * v for v in force)))
+                max_torque = max(max_torque, math.sqrt(sum(v * v for v in torque)))
+                if trace:
+                    trace.write(f"{(t - t_start) / 1e9:.6f},{force[0]:.6g},{force[1]:.6g},{force[2]:.6g},"
+                                f"{torque[0]:.6g},{torque[1]:.6g},{torque[2]:.6g},{flags}\n")
+                if a.print_every and forces % a.print_every == 0:
+                    print(f"force {forces}: F = ({force[0]:+.4f}, {force[1]:+.4f}, {force[2]:+.4f}) N, "
+                          f"tau = ({torque[0]:+.5f}, {torque[1]:+.5f}, {torque[2]:+.5f}) N·m", file=sys.stderr)
                 if pose_seq not in echoed and pose_seq in sent and sent[pose_seq] == pose_ns:
                     echoed.add(pose_seq)
                     lat_us.append((t - pose_ns) / 1000.0)
@@ -123,8 +216,13 @@ def main():
         w = 2 * s if s < 0.5 else 2 - 2 * s  # 0 -> 1 -> 0
         tip = [p + w * (q - p) for p, q in zip(a.start, a.end)]
         sent[seq] = t_ns
+        if a.protocol == 1:
+            data = POSE1.pack(b"STHP", 1, 0, seq, t_ns, *tip, 1.0, 0.0, 0.0, 0.0)
+        else:
+            body = POSE.pack(b"STHP", 2, 0, session, seq, t_ns, *tip, 1.0, 0.0, 0.0, 0.0)
+            data = body + (hmac.new(key, body, hashlib.sha256).digest() if key is not None else bytes(TAG))
         try:
-            sock.send(POSE.pack(b"STHP", 1, 0, seq, t_ns, *tip, 1.0, 0.0, 0.0, 0.0))
+            sock.send(data)
         except ConnectionRefusedError:
             pass
 
@@ -132,8 +230,12 @@ def main():
     t0 = time.monotonic_ns()
     while forces == 0:
         if time.monotonic_ns() - t0 > a.wait * 1e9:
-            print(f"udp_device_emulator: no force from {a.to[0]}:{a.to[1]} within {a.wait} s", file=sys.stderr)
-            return 1
+            why = "; refused: " + ", ".join(REASONS.get(r, str(r)) for r in refusals) if refusals else ""
+            print(f"udp_device_emulator: no force from {a.to[0]}:{a.to[1]} within {a.wait} s{why}", file=sys.stderr)
+            if a.json:
+                print(json.dumps({"error": "no force", "refusals": {str(k): v for k, v in refusals.items()},
+                                  "forged_forces": forged}))
+            return 3 if refusals else 1
         send_pose(time.monotonic_ns(), t0)
         receive(time.monotonic_ns() + 10_000_000)
     warmup = (seq, forces)
@@ -142,8 +244,8 @@ def main():
     lat_us.clear()
     up_us.clear()
     down_us.clear()
-    forces = force_gaps = fading = 0
-    max_force = 0.0
+    forces = force_gaps = fading = limited = 0
+    max_force = max_torque = 0.0
 
     # The driver's loop at `rate`, absolute deadlines.
     t0 = time.monotonic_ns()
@@ -185,14 +287,24 @@ def main():
         "servo_to_driver_us_p50": q(0.5, down_us),
         "servo_to_driver_us_p99": q(0.99, down_us),
         "max_force_N": max_force,
+        "max_torque_Nm": max_torque,
+        "forces_slew_limited": limited,
+        "forged_forces": forged,
+        "refusals": {str(k): v for k, v in refusals.items()},
+        "protocol": a.protocol,
+        "authenticated": key is not None,
         "late_ticks": late,
         "seconds": elapsed,
     }
+    if trace:
+        trace.close()
     if a.json:
         print(json.dumps(out))
     else:
         print(f"poses sent {out['poses_sent']} at {a.rate:.0f} Hz ({late} late), forces received {forces} "
-              f"({out['forces_per_s']:.1f}/s, {force_gaps} seq gaps, {fading} fading), max |F| {max_force:.3f} N")
+              f"({out['forces_per_s']:.1f}/s, {force_gaps} seq gaps, {fading} fading), max |F| {max_force:.3f} N, "
+              f"max |tau| {max_torque:.4f} N·m; protocol {a.protocol}, "
+              f"{'authenticated' if key is not None else 'NOT authenticated'}")
         print(f"pose-to-force over {len(lat_us)} poses: p50 {q(0.5):.0f} us, p99 {q(0.99):.0f} us, "
               f"max {out['pose_to_force_us_max']:.0f} us")
         print(f"  of which pose -> the servo tick that used it: p50 {q(0.5, up_us):.0f} us, p99 {q(0.99, up_us):.0f} us; "

@@ -28,7 +28,7 @@ echo "device_bench: the UDP bridge with the emulator at 1 kHz, ${secs} s" >&2
 build/spheretouch run configs/udp_small.toml --duration $((secs + 3)) --out "$work/udp" >"$work/udp.log" 2>&1 &
 upid=$!
 for _ in $(seq 300); do grep -q "listening on" "$work/udp.log" 2>/dev/null && break; sleep 0.05; done
-python3 examples/udp_device_emulator.py --seconds "$secs" --from 0,0,56 --to-point 0,0,46 --json >"$work/udp.json"
+python3 examples/udp_device_emulator.py --key "$work/udp/bridge.key" --seconds "$secs" --from 0,0,56 --to-point 0,0,46 --json >"$work/udp.json"
 wait "$upid" || true
 
 python3 - "$work/inproc.json" "$work/udp.json" "$results/device.json" <<'PY'

@@ -70,7 +70,7 @@ done
 build/spheretouch run configs/udp_small.toml --duration $((secs > 8 ? secs : 8)) --out "$work/udp" > "$work/udp.log" 2>&1 &
 upid=$!
 for _ in $(seq 300); do grep -q "listening on" "$work/udp.log" 2>/dev/null && break; sleep 0.05; done
-python3 examples/udp_device_emulator.py --seconds $((secs > 8 ? secs - 3 : 5)) --from 0,0,56 --to-point 0,0,46 --json \
+python3 examples/udp_device_emulator.py --key "$work/udp/bridge.key" --seconds $((secs > 8 ? secs - 3 : 5)) --from 0,0,56 --to-point 0,0,46 --json \
   > "$work/udp.json"
 wait "$upid" || true
 

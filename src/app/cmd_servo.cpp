@@ -63,9 +63,9 @@ void run_servo(const ServoArgs& a) {
   // [device] kind = "udp": the driver's poses instead; the trajectory file holds the grip.
   std::unique_ptr<rt::UdpDevice> udp;
   if (s.device.kind == "udp") {
-    rt::UdpDeviceConfig uc = s.device.udp;
-    uc.max_force_N = s.saturation.peak_N;
-    Result<std::unique_ptr<rt::UdpDevice>> u = rt::UdpDevice::open(uc, script.value().keys.front().pose);
+    Result<rt::UdpDeviceConfig> uc = engine::udp_device_config(s, a.out, false);  // the run made the key
+    if (!uc) servo_die(2, uc.error());
+    Result<std::unique_ptr<rt::UdpDevice>> u = rt::UdpDevice::open(uc.value(), script.value().keys.front().pose);
     if (!u) servo_die(2, s.file + ": " + u.error());
     udp = std::move(u).value();
     std::fprintf(stderr, "spheretouch servo: udp device listening on %s\n", udp->address().c_str());

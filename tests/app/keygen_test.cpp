@@ -11,6 +11,7 @@
 #include <spheretouch/geom/primitives.hpp>
 #include "app/query_meshes.hpp"
 #include <spheretouch/net/curve_keys.hpp>
+#include <spheretouch/rt/udp_device.hpp>
 #include "net/process_util.hpp"
 #include "net/old_worker.hpp"
 #include "test_util.hpp"
@@ -127,6 +128,28 @@ TEST_CASE("keygen --out writes a 0600 .key and a .pub, refuses to overwrite, --f
   CHECK(net::read_key_pair(w).value().public_z85 == first_line(w + ".pub"));
   CHECK(run_command(st::test::worker_binary() + " --keygen --out " + w).exit_code == 2);
   CHECK(run_command(spheretouch_exe() + " keygen").exit_code != 0);  // --out is required
+}
+
+TEST_CASE("keygen --bridge writes a 0600 bridge key that the bridge reads; it refuses to overwrite without --force") {
+  st::test::TempDir d;
+  const std::string path = d.file("bridge.key");
+  auto r = run_command(spheretouch_exe() + " keygen --bridge --out " + path);
+  INFO(r.output);
+  REQUIRE(r.exit_code == 0);
+  CHECK(mode_of(path) == 0600);
+  const std::string line = first_line(path);
+  CHECK(line.size() == 64);
+  CHECK(line.find_first_not_of("0123456789abcdef") == std::string::npos);
+  CHECK_FALSE(contains(r.output, line));  // the secret is never printed
+  REQUIRE(st::rt::read_bridge_key(path).ok());
+  r = run_command(spheretouch_exe() + " keygen --bridge --out " + path);
+  CHECK(r.exit_code == 2);
+  CHECK(contains(r.output, path + ": already exists"));
+  CHECK(first_line(path) == line);
+  r = run_command(spheretouch_exe() + " keygen --bridge --force --out " + path);
+  REQUIRE(r.exit_code == 0);
+  CHECK(first_line(path) != line);
+  CHECK(mode_of(path) == 0600);
 }
 
 TEST_CASE("a worker whose secret key file is group-readable refuses to start, naming the file") {

@@ -211,6 +211,19 @@ Status RunEngine::State::prepare() {
   if (!ec)
     std::filesystem::permissions(dir, std::filesystem::perms::owner_all, std::filesystem::perm_options::replace, ec);
   if (ec) return fail(dir, ": cannot create the run directory (", ec.message(), ")");
+  // The UDP bridge's key, made here for this run unless the scene names one: the split servo
+  // reads it from the run directory.
+  rt::UdpDeviceConfig udp_config;
+  if (!opt.device && s.device.kind == "udp") {
+    Result<rt::UdpDeviceConfig> uc = udp_device_config(s, dir, true);
+    if (!uc) return Error{uc.error()};
+    udp_config = uc.value();
+    if (udp_config.auth == rt::BridgeAuth::kNone)
+      note("udp device: auth = \"none\": datagrams are not authenticated; anyone who can send to " + udp_config.bind +
+           " from the driver's address can move the probe (a trusted link only)");
+    else if (s.device.key_file.empty())
+      note("udp device: this run's key is in " + bridge_key_path(dir) + " (give it to the driver: --key)");
+  }
 
   Result<rt::ForceLaw> made = rt::ForceLaw::make(s.law);
   if (!made) return fail(s.file, ": ", made.error());
@@ -237,9 +250,7 @@ Status RunEngine::State::prepare() {
     if (opt.device) {
       device = opt.device;  // the caller's: the scene's [device] kind is not used
     } else if (s.device.kind == "udp") {
-      rt::UdpDeviceConfig uc = s.device.udp;
-      uc.max_force_N = s.saturation.peak_N;
-      Result<std::unique_ptr<rt::UdpDevice>> u = rt::UdpDevice::open(uc, script.keys.front().pose);
+      Result<std::unique_ptr<rt::UdpDevice>> u = rt::UdpDevice::open(udp_config, script.keys.front().pose);
       if (!u) return fail(s.file, ": ", u.error());
       udp = std::move(u).value();
       device = udp.get();

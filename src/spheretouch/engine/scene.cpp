@@ -277,6 +277,23 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     std::vector<double> offset;
     r.numbers("offset_mm", offset, 3);
     if (!offset.empty()) u.offset_mm = {offset[0], offset[1], offset[2]};
+    std::string auth = u.auth == rt::BridgeAuth::kHmac ? "hmac" : "none";
+    r.string("auth", auth, {"hmac", "none"});
+    u.auth = auth == "hmac" ? rt::BridgeAuth::kHmac : rt::BridgeAuth::kNone;
+    r.string("key_file", s.device.key_file);
+    if (!s.device.key_file.empty() && !std::filesystem::path(s.device.key_file).is_absolute())
+      s.device.key_file = dir + "/" + s.device.key_file;
+    if (!s.device.key_file.empty() && u.auth == rt::BridgeAuth::kNone)
+      r.error("key_file", "is set but auth = \"none\": remove one (an unused key would look like protection)");
+    else if (!s.device.key_file.empty())
+      if (std::string why = lookup(s.device.key_file); !why.empty())
+        r.error("key_file", "bridge key " + why + " (spheretouch keygen --bridge --out FILE makes one)");
+    r.number("session_timeout_ms", u.session_timeout_ms, 1, 600000);
+    r.integer("max_seq_jump", u.max_seq_jump, 1, 1000000000);
+    r.number("max_pose_step_mm", u.max_pose_step_mm, 1e-6, 1e6);
+    r.number("max_rotation_step_deg", u.max_rotation_step_deg, 1e-6, 180);
+    r.number("max_force_step_n", u.max_force_step_N, 1e-6, 1000);
+    r.number("max_torque_step_nm", u.max_torque_step_Nm, 1e-9, 100);
     r.string("script", s.device.script);
     if (s.device.script != "builtin" && !std::filesystem::path(s.device.script).is_absolute())
       s.device.script = dir + "/" + s.device.script;
@@ -317,6 +334,10 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     }
     if (s.device.wrench.dof == 6 && !(s.device.wrench.torque_limit_Nm > 0))
       r.error("torque_limit_nm", "a 6-DOF device (dof = 6) needs a torque limit > 0, N·m");
+    if (!(u.session_timeout_ms >= u.silence_ms))
+      r.error("session_timeout_ms", "must be >= silence_ms: a session is never replaced while its force is still on");
+    else if (s.device.kind == "udp")
+      if (std::string why = rt::check(u); !why.empty()) r.error("auth", why);
     if (Status st = r.finish(); !st) return Error{st.error()};
   }
   {
@@ -335,6 +356,33 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
   }
   if (std::string e = rt::HapticLoop::check(s.haptic); !e.empty()) return fail(name, ": [haptic] ", e);
   return s;
+}
+
+std::string bridge_key_path(const std::string& run_dir) { return run_dir + "/bridge.key"; }
+
+Result<rt::UdpDeviceConfig> udp_device_config(const Scene& s, const std::string& run_dir, bool make_key) {
+  rt::UdpDeviceConfig c = s.device.udp;
+  c.max_force_N = s.saturation.peak_N;
+  c.max_torque_Nm = s.device.wrench.dof == 6 ? s.device.wrench.torque_limit_Nm : 0.0;
+  if (c.auth == rt::BridgeAuth::kNone) return c;
+  if (!s.device.key_file.empty()) {
+    Result<rt::BridgeKey> k = rt::read_bridge_key(s.device.key_file);
+    if (!k) return fail(s.file, ": device.key_file: ", k.error());
+    c.key = k.value();
+    return c;
+  }
+  const std::string path = bridge_key_path(run_dir);
+  if (make_key) {
+    Result<rt::BridgeKey> k = rt::random_bridge_key();
+    if (!k) return fail(s.file, ": device.auth: ", k.error());
+    if (Status st = rt::write_bridge_key(path, k.value(), true); !st) return Error{st.error()};
+    c.key = k.value();
+    return c;
+  }
+  Result<rt::BridgeKey> k = rt::read_bridge_key(path);
+  if (!k) return fail(s.file, ": the run's bridge key: ", k.error());
+  c.key = k.value();
+  return c;
 }
 
 Result<Scene> load_scene(const std::string& path) {

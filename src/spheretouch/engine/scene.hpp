@@ -46,9 +46,12 @@ struct BodySpec {
 /// The device: a simulated one (a script) or a real one behind the UDP bridge.
 struct DeviceSpec {
   std::string kind = "simulated";                          ///< "simulated" or "udp"
-  rt::UdpDeviceConfig udp = rt::DefaultUdpDeviceConfig();  ///< kind = "udp"
-  std::string script = "builtin";                          ///< "builtin" or a trajectory file (t + 16 numbers a line)
-  bool target_top = true;                                  ///< builtin: touch the object's highest point along +z
+  rt::UdpDeviceConfig udp = rt::DefaultUdpDeviceConfig();  ///< kind = "udp" (its key is read when the run opens it)
+  /// kind = "udp", auth = "hmac": the shared key's file ("" = the run makes a key of its own and
+  /// writes it to bridge_key_path(), for the driver to read)
+  std::string key_file;
+  std::string script = "builtin";          ///< "builtin" or a trajectory file (t + 16 numbers a line)
+  bool target_top = true;                  ///< builtin: touch the object's highest point along +z
   geom::Vec3 target{geom::Vec3::Zero()};   ///< builtin: surface point, object frame, mm (target_top false)
   geom::Vec3 normal{geom::Vec3::UnitZ()};  ///< builtin: approach against this outward normal
   double press_mm = 3;                     ///< builtin: press depth, mm
@@ -128,6 +131,15 @@ rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, const geo
 /// The probe as the device holds it: probe file coordinates to the tool frame (the fingertip at
 /// the origin, the scene's probe rotation). A device pose is Trans(tip position) · Rot · grip.
 geom::Pose probe_grip(const Scene& s, const geom::Mesh& probe);
+
+/// Where a run that makes its own bridge key writes it: RUN_DIR/bridge.key (mode 0600).
+std::string bridge_key_path(const std::string& run_dir);
+/// The UDP bridge's settings for a run writing to `run_dir`: the scene's [device] fields, the
+/// force and torque limits (the saturation's peak; torque_limit_nm for a 6-DOF device, else no
+/// torque) and, with auth = "hmac", the key: read from key_file, or (none given) made for this
+/// run and written to bridge_key_path(run_dir) when `make_key`, else read from there (the split
+/// servo, after the run made it). Errors name the field or the file.
+Result<rt::UdpDeviceConfig> udp_device_config(const Scene& s, const std::string& run_dir, bool make_key);
 
 /// Loads (or generates) a body; errors name the scene field.
 Result<geom::Mesh> load_body(const BodySpec& spec, const std::string& field);

@@ -3,14 +3,23 @@
 #include <spheretouch/rt/udp_device.hpp>
 
 #include <arpa/inet.h>
+#include <fcntl.h>
 #include <netdb.h>
 #include <poll.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <bit>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
+
+#ifdef ST_HAVE_SODIUM
+#include <sodium.h>
+#endif
 
 #include <spheretouch/rt/clock.hpp>
 
@@ -103,6 +112,40 @@ std::string to_text(const sockaddr_storage& a) {
   return "?";
 }
 
+/// The HMAC-SHA256 tag of data[0, n) under key; false in a build without libsodium.
+bool tag_of(const BridgeKey& key, const std::uint8_t* data, std::size_t n, std::uint8_t* tag) {
+#ifdef ST_HAVE_SODIUM
+  static_assert(crypto_auth_hmacsha256_KEYBYTES == kBridgeKeyBytes && crypto_auth_hmacsha256_BYTES == kBridgeTagBytes);
+  return crypto_auth_hmacsha256(tag, data, n, key.data()) == 0;
+#else
+  (void)key, (void)data, (void)n, (void)tag;
+  return false;
+#endif
+}
+
+/// Does data[n, n + 32) hold the tag of data[0, n) under key (in constant time)?
+bool tag_verifies(const BridgeKey& key, const std::uint8_t* data, std::size_t n) {
+#ifdef ST_HAVE_SODIUM
+  return crypto_auth_hmacsha256_verify(data + n, data, n, key.data()) == 0;
+#else
+  (void)key, (void)data, (void)n;
+  return false;
+#endif
+}
+
+/// Writes the tag of out[0, n) at out + n (zeros without a key).
+void put_tag(const BridgeKey* key, std::uint8_t* out, std::size_t n) {
+  if (!key || !tag_of(*key, out, n, out + n)) std::memset(out + n, 0, kBridgeTagBytes);
+}
+
+/// Closes a descriptor on scope exit.
+struct FdCloser {
+  int fd = -1;
+  ~FdCloser() {
+    if (fd >= 0) ::close(fd);
+  }
+};
+
 }  // namespace
 
 const char* to_string(PoseReject r) {
@@ -121,30 +164,73 @@ const char* to_string(PoseReject r) {
       return "tip out of range";
     case PoseReject::kQuaternion:
       return "quaternion not unit";
+    case PoseReject::kAuth:
+      return "tag does not verify (wrong key)";
+    case PoseReject::kLegacy:
+      return "version 1 (unauthenticated) refused";
   }
   return "?";
 }
 
-void encode_pose(const PosePacket& p, std::uint8_t* out) {
-  put32(out, kPoseMagic);
-  put16(out + 4, kBridgeVersion);
-  put16(out + 6, p.buttons);
-  put64(out + 8, p.seq);
-  put64(out + 16, std::uint64_t(p.device_ns));
-  for (int i = 0; i < 3; ++i) putf(out + 24 + 8 * i, p.tip[i]);
-  for (int i = 0; i < 4; ++i) putf(out + 48 + 8 * i, p.q[i]);
+const char* to_string(BridgeRefusal r) {
+  switch (r) {
+    case BridgeRefusal::kRefusedVersion:
+      return "version 1 refused: this bridge needs version 2 with HMAC";
+    case BridgeRefusal::kBadTag:
+      return "the HMAC tag does not verify: wrong key";
+    case BridgeRefusal::kBusy:
+      return "another session holds the device; retry when it is silent";
+    case BridgeRefusal::kSessionUsed:
+      return "this session id was served before: pick a new random one";
+  }
+  return "?";
 }
 
-PoseReject decode_pose(const std::uint8_t* data, std::size_t n, double max_abs_mm, PosePacket& out) {
-  if (n != kPoseBytes) return PoseReject::kSize;
+std::size_t encode_pose(const PosePacket& p, const BridgeKey* key, std::uint8_t* out) {
+  put32(out, kPoseMagic);
+  put16(out + 4, p.version);
+  put16(out + 6, p.buttons);
+  if (p.version == kBridgeLegacyVersion) {
+    put64(out + 8, p.seq);
+    put64(out + 16, std::uint64_t(p.device_ns));
+    for (int i = 0; i < 3; ++i) putf(out + 24 + 8 * i, p.tip[i]);
+    for (int i = 0; i < 4; ++i) putf(out + 48 + 8 * i, p.q[i]);
+    return kPoseBytesV1;
+  }
+  put64(out + 8, p.session);
+  put64(out + 16, p.seq);
+  put64(out + 24, std::uint64_t(p.device_ns));
+  for (int i = 0; i < 3; ++i) putf(out + 32 + 8 * i, p.tip[i]);
+  for (int i = 0; i < 4; ++i) putf(out + 56 + 8 * i, p.q[i]);
+  put_tag(key, out, kPoseBytes - kBridgeTagBytes);
+  return kPoseBytes;
+}
+
+PoseReject decode_pose(const std::uint8_t* data, std::size_t n, double max_abs_mm, const BridgeKey* key, PosePacket& out) {
+  if (n < 8) return PoseReject::kSize;
   if (get32(data) != kPoseMagic) return PoseReject::kMagic;
-  if (get16(data + 4) != kBridgeVersion) return PoseReject::kVersion;
   PosePacket p;
+  p.version = get16(data + 4);
   p.buttons = get16(data + 6);
-  p.seq = get64(data + 8);
-  p.device_ns = std::int64_t(get64(data + 16));
-  for (int i = 0; i < 3; ++i) p.tip[i] = getf(data + 24 + 8 * i);
-  for (int i = 0; i < 4; ++i) p.q[i] = getf(data + 48 + 8 * i);
+  const std::uint8_t* at = nullptr;  // tip and quaternion
+  if (p.version == kBridgeVersion) {
+    if (n != kPoseBytes) return PoseReject::kSize;
+    if (key && !tag_verifies(*key, data, kPoseBytes - kBridgeTagBytes)) return PoseReject::kAuth;
+    p.session = get64(data + 8);
+    p.seq = get64(data + 16);
+    p.device_ns = std::int64_t(get64(data + 24));
+    at = data + 32;
+  } else if (p.version == kBridgeLegacyVersion) {
+    if (n != kPoseBytesV1) return PoseReject::kSize;
+    if (key) return PoseReject::kLegacy;
+    p.seq = get64(data + 8);
+    p.device_ns = std::int64_t(get64(data + 16));
+    at = data + 24;
+  } else {
+    return PoseReject::kVersion;
+  }
+  for (int i = 0; i < 3; ++i) p.tip[i] = getf(at + 8 * i);
+  for (int i = 0; i < 4; ++i) p.q[i] = getf(at + 24 + 8 * i);
   double q2 = 0;
   for (double v : p.tip)
     if (!std::isfinite(v)) return PoseReject::kNonFinite;
@@ -161,32 +247,194 @@ PoseReject decode_pose(const std::uint8_t* data, std::size_t n, double max_abs_m
   return PoseReject::kOk;
 }
 
-void encode_force(const ForcePacket& f, std::uint8_t* out) {
+std::size_t encode_force(const ForcePacket& f, const BridgeKey* key, std::uint8_t* out) {
   put32(out, kForceMagic);
-  put16(out + 4, kBridgeVersion);
+  put16(out + 4, f.version);
   put16(out + 6, f.flags);
-  put64(out + 8, f.seq);
-  put64(out + 16, f.pose_seq);
-  put64(out + 24, std::uint64_t(f.pose_device_ns));
-  for (int i = 0; i < 3; ++i) putf(out + 32 + 8 * i, f.force[i]);
-  put64(out + 56, std::uint64_t(f.servo_ns));
+  if (f.version == kBridgeLegacyVersion) {
+    put64(out + 8, f.seq);
+    put64(out + 16, f.pose_seq);
+    put64(out + 24, std::uint64_t(f.pose_device_ns));
+    for (int i = 0; i < 3; ++i) putf(out + 32 + 8 * i, f.force[i]);
+    put64(out + 56, std::uint64_t(f.servo_ns));
+    return kForceBytesV1;
+  }
+  put64(out + 8, f.session);
+  put64(out + 16, f.seq);
+  put64(out + 24, f.pose_seq);
+  put64(out + 32, std::uint64_t(f.pose_device_ns));
+  for (int i = 0; i < 3; ++i) putf(out + 40 + 8 * i, f.force[i]);
+  for (int i = 0; i < 3; ++i) putf(out + 64 + 8 * i, f.torque[i]);
+  put64(out + 88, std::uint64_t(f.servo_ns));
+  put_tag(key, out, kForceBytes - kBridgeTagBytes);
+  return kForceBytes;
 }
 
-bool decode_force(const std::uint8_t* data, std::size_t n, ForcePacket& out) {
-  if (n != kForceBytes || get32(data) != kForceMagic || get16(data + 4) != kBridgeVersion) return false;
+bool decode_force(const std::uint8_t* data, std::size_t n, const BridgeKey* key, ForcePacket& out) {
+  if (n < 8 || get32(data) != kForceMagic) return false;
+  const std::uint16_t version = get16(data + 4);
+  if (version == kBridgeLegacyVersion && n == kForceBytesV1) {
+    out = ForcePacket{};
+    out.version = version;
+    out.flags = get16(data + 6);
+    out.seq = get64(data + 8);
+    out.pose_seq = get64(data + 16);
+    out.pose_device_ns = std::int64_t(get64(data + 24));
+    for (int i = 0; i < 3; ++i) out.force[i] = getf(data + 32 + 8 * i);
+    out.servo_ns = std::int64_t(get64(data + 56));
+    return true;
+  }
+  if (version != kBridgeVersion || n != kForceBytes) return false;
+  if (key && !tag_verifies(*key, data, kForceBytes - kBridgeTagBytes)) return false;
+  out.version = version;
   out.flags = get16(data + 6);
-  out.seq = get64(data + 8);
-  out.pose_seq = get64(data + 16);
-  out.pose_device_ns = std::int64_t(get64(data + 24));
-  for (int i = 0; i < 3; ++i) out.force[i] = getf(data + 32 + 8 * i);
-  out.servo_ns = std::int64_t(get64(data + 56));
+  out.session = get64(data + 8);
+  out.seq = get64(data + 16);
+  out.pose_seq = get64(data + 24);
+  out.pose_device_ns = std::int64_t(get64(data + 32));
+  for (int i = 0; i < 3; ++i) out.force[i] = getf(data + 40 + 8 * i);
+  for (int i = 0; i < 3; ++i) out.torque[i] = getf(data + 64 + 8 * i);
+  out.servo_ns = std::int64_t(get64(data + 88));
   return true;
 }
 
+void encode_refusal(BridgeRefusal why, std::uint64_t session, std::uint8_t* out) {
+  std::memset(out, 0, kRefusalBytes);
+  put32(out, kRefusalMagic);
+  put16(out + 4, kBridgeVersion);
+  put16(out + 6, std::uint16_t(why));
+  put64(out + 8, session);
+  const char* text = to_string(why);
+  std::memcpy(out + 16, text, std::min<std::size_t>(std::strlen(text), kRefusalBytes - 17));
+}
+
+bool decode_refusal(const std::uint8_t* data, std::size_t n, BridgeRefusal& why, std::uint64_t& session) {
+  if (n != kRefusalBytes || get32(data) != kRefusalMagic || get16(data + 4) != kBridgeVersion) return false;
+  why = BridgeRefusal(get16(data + 6));
+  session = get64(data + 8);
+  return true;
+}
+
+bool bridge_auth_available() {
+#ifdef ST_HAVE_SODIUM
+  return true;
+#else
+  return false;
+#endif
+}
+
+Result<BridgeKey> random_bridge_key() {
+#ifdef ST_HAVE_SODIUM
+  if (sodium_init() < 0) return fail("libsodium failed to initialise: no random key");
+  BridgeKey k;
+  randombytes_buf(k.data(), k.size());
+  return k;
+#else
+  return fail(
+      "this build has no libsodium: it cannot make or check bridge keys (build with libsodium-dev, or set [device] "
+      "auth = \"none\")");
+#endif
+}
+
+Result<BridgeKey> read_bridge_key(const std::string& path) {
+  // O_NONBLOCK: a FIFO at the path must not hang us; fstat the open file (no stat-then-open race).
+  FdCloser f{::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOCTTY | O_NONBLOCK)};
+  if (f.fd < 0) return fail(path, ": cannot open the bridge key: ", std::strerror(errno));
+  struct stat st {};
+  if (::fstat(f.fd, &st) != 0) return fail(path, ": cannot stat the bridge key: ", std::strerror(errno));
+  if (!S_ISREG(st.st_mode)) return fail(path, ": the bridge key is not a regular file");
+  if (st.st_mode & 077)
+    return fail(path, ": the bridge key is accessible by group or others (mode ", std::oct, (st.st_mode & 0777),
+                "); refusing to use it (chmod 600 ", path, ")");
+  char buf[4096];
+  if (std::size_t(st.st_size) > sizeof buf)
+    return fail(path, ": ", st.st_size, " bytes: too big for a bridge key (64 hexadecimal digits on one line)");
+  std::size_t n = 0;
+  while (n < sizeof buf) {
+    const ssize_t r = ::read(f.fd, buf + n, sizeof buf - n);
+    if (r < 0 && errno == EINTR) continue;
+    if (r < 0) return fail(path, ": cannot read the bridge key: ", std::strerror(errno));
+    if (r == 0) break;
+    n += std::size_t(r);
+  }
+  std::size_t end = 0;
+  while (end < n && buf[end] != '\n') ++end;
+  while (end > 0 && std::isspace(static_cast<unsigned char>(buf[end - 1]))) --end;
+  BridgeKey k{};
+  bool ok = end == 2 * kBridgeKeyBytes;
+  for (std::size_t i = 0; ok && i < end; ++i) {
+    const int c = std::tolower(static_cast<unsigned char>(buf[i]));
+    const int v = c >= '0' && c <= '9' ? c - '0' : c >= 'a' && c <= 'f' ? c - 'a' + 10 : -1;
+    if (v < 0)
+      ok = false;
+    else
+      k[i / 2] = std::uint8_t(k[i / 2] << 4 | v);
+  }
+  std::memset(buf, 0, sizeof buf);
+  if (!ok) {
+    k.fill(0);
+    return fail(path,
+                ": first line: expected the bridge key as 64 hexadecimal digits (spheretouch keygen --bridge --out "
+                "FILE makes one)");
+  }
+  return k;
+}
+
+Status write_bridge_key(const std::string& path, const BridgeKey& key, bool replace) {
+  char line[2 * kBridgeKeyBytes + 2];
+  for (std::size_t i = 0; i < key.size(); ++i) std::snprintf(line + 2 * i, 3, "%02x", key[i]);
+  line[2 * kBridgeKeyBytes] = '\n';
+  // Replacing: a new 0600 file beside it, renamed over it (never a write through a planted symlink).
+  std::string tmp = replace ? path + ".tmp-XXXXXX" : path;
+  FdCloser f{replace ? ::mkostemp(tmp.data(), O_CLOEXEC)
+                     : ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC | O_NOCTTY, 0600)};
+  if (f.fd < 0) {
+    const int e = errno;
+    std::memset(line, 0, sizeof line);
+    if (e == EEXIST) return fail(path, ": already exists; refusing to overwrite a key file (--force replaces it)");
+    return fail(path, ": cannot create the bridge key: ", std::strerror(e));
+  }
+  bool ok = ::fchmod(f.fd, 0600) == 0;
+  for (std::size_t off = 0; ok && off < 2 * kBridgeKeyBytes + 1;) {
+    const ssize_t w = ::write(f.fd, line + off, 2 * kBridgeKeyBytes + 1 - off);
+    if (w < 0 && errno == EINTR) continue;
+    ok = w > 0;
+    if (ok) off += std::size_t(w);
+  }
+  ok = ok && ::fsync(f.fd) == 0;
+  const int e = errno;
+  std::memset(line, 0, sizeof line);
+  if (ok && replace && ::rename(tmp.c_str(), path.c_str()) != 0) ok = false;
+  if (!ok) {
+    ::unlink(tmp.c_str());
+    return fail(path, ": cannot write the bridge key: ", std::strerror(e ? e : errno));
+  }
+  return Ok{};
+}
+
+std::string check(const UdpDeviceConfig& c) {
+  if (!(c.silence_ms > 0) || !(c.fade_ms > 0)) return "silence_ms and fade_ms must be > 0";
+  if (!(c.scale > 0) || !std::isfinite(c.scale)) return "scale must be a finite number > 0";
+  if (!(c.max_force_N > 0)) return "max_force_N must be > 0";
+  if (!(c.max_torque_Nm >= 0) || !std::isfinite(c.max_torque_Nm)) return "max_torque_Nm must be a finite number >= 0";
+  if (!(c.session_timeout_ms >= c.silence_ms) || !std::isfinite(c.session_timeout_ms))
+    return "session_timeout_ms must be finite and >= silence_ms (a session is never replaced while its force is still "
+           "on)";
+  if (c.max_seq_jump < 1) return "max_seq_jump must be >= 1";
+  if (!(c.max_pose_step_mm > 0) || !(c.max_rotation_step_deg > 0) || !(c.max_force_step_N > 0) ||
+      !(c.max_torque_step_Nm > 0))
+    return "max_pose_step_mm, max_rotation_step_deg, max_force_step_N and max_torque_step_Nm must be > 0";
+  if (c.auth == BridgeAuth::kHmac && !bridge_auth_available())
+    return "auth = \"hmac\": this build has no libsodium (build with libsodium-dev, or set auth = \"none\" on a "
+           "trusted link)";
+  return "";
+}
+
 Result<std::unique_ptr<UdpDevice>> UdpDevice::open(const UdpDeviceConfig& c, const Eigen::Isometry3d& grip) {
-  if (!(c.silence_ms > 0) || !(c.fade_ms > 0)) return fail("device: silence_ms and fade_ms must be > 0");
-  if (!(c.scale > 0) || !std::isfinite(c.scale)) return fail("device: scale must be a finite number > 0");
-  if (!(c.max_force_N > 0)) return fail("device: max_force_N must be > 0");
+  if (std::string why = check(c); !why.empty()) return fail("device: ", why);
+#ifdef ST_HAVE_SODIUM
+  if (sodium_init() < 0) return fail("device: libsodium failed to initialise");
+#endif
   sockaddr_storage pinned{};  // the pinned driver, resolved once (the receiver thread compares)
   socklen_t pinned_len = 0;
   if (!c.peer.empty()) {
@@ -229,11 +477,34 @@ UdpDevice::~UdpDevice() {
   ::close(fd_);
 }
 
-void UdpDevice::receive(sockaddr_storage peer, socklen_t peer_len) noexcept {
-  // The peer: pinned by config (peer_len > 0), or the first sender of a valid pose.
-  bool have_peer = peer_len > 0;
-  std::uint64_t last_seq = 0;
-  bool any = false;
+void UdpDevice::refuse(BridgeRefusal why, std::uint64_t session, const sockaddr_storage& to, socklen_t to_len) noexcept {
+  // At most 10 a second, each no bigger than the datagram it answers: a forged source gets no
+  // amplification and no flood out of the bridge.
+  const std::int64_t t = now_ns();
+  if (last_refusal_ns_ && t - last_refusal_ns_ < 100'000'000) return;
+  last_refusal_ns_ = t;
+  std::uint8_t buf[kRefusalBytes];
+  encode_refusal(why, session, buf);
+  if (::sendto(fd_, buf, sizeof buf, MSG_DONTWAIT | MSG_NOSIGNAL, reinterpret_cast<const sockaddr*>(&to), to_len) ==
+      ssize_t(sizeof buf))
+    stats_.refusals_sent.fetch_add(1, std::memory_order_relaxed);
+}
+
+void UdpDevice::receive(sockaddr_storage pinned, socklen_t pinned_len) noexcept {
+  // One session at a time: its id (version 2; 0 for version 1), version, address, last sequence
+  // number and arrival. Sessions served before are remembered (a ring) and never taken again.
+  const BridgeKey* key = config_.auth == BridgeAuth::kHmac ? &config_.key : nullptr;
+  const std::int64_t timeout_ns = std::int64_t(config_.session_timeout_ms * 1e6);
+  struct Session {
+    bool live = false;
+    std::uint64_t id = 0, last_seq = 0, number = 0;
+    std::uint16_t version = 0;
+    sockaddr_storage peer{};
+    socklen_t peer_len = 0;
+    std::int64_t last_ns = 0;
+  } cur;
+  std::array<std::uint64_t, 16> served{};  // ids of ended sessions (version 2, authenticated)
+  std::size_t served_next = 0;
   std::uint8_t buf[256];
   while (!stop_.load(std::memory_order_relaxed)) {
     pollfd pf{fd_, POLLIN, 0};
@@ -247,27 +518,66 @@ void UdpDevice::receive(sockaddr_storage peer, socklen_t peer_len) noexcept {
           ::recvfrom(fd_, buf, sizeof buf, MSG_DONTWAIT | MSG_TRUNC, reinterpret_cast<sockaddr*>(&in.from), &in.from_len);
       if (n < 0) break;  // EAGAIN: drained (or an error: poll again)
       in.arrival_ns = now_ns();
-      if (have_peer && !same_peer(in.from, in.from_len, peer, peer_len)) {
+      if (pinned_len > 0 && !same_peer(in.from, in.from_len, pinned, pinned_len)) {
         stats_.foreign.fetch_add(1, std::memory_order_relaxed);
         continue;
       }
-      const PoseReject why = decode_pose(buf, std::size_t(n), config_.max_abs_mm, in.p);
+      const PoseReject why = decode_pose(buf, std::size_t(n), config_.max_abs_mm, key, in.p);
+      if (why == PoseReject::kAuth || why == PoseReject::kLegacy) {
+        (why == PoseReject::kAuth ? stats_.unauthenticated : stats_.old_version).fetch_add(1, std::memory_order_relaxed);
+        refuse(why == PoseReject::kAuth ? BridgeRefusal::kBadTag : BridgeRefusal::kRefusedVersion,
+               why == PoseReject::kAuth ? get64(buf + 8) : 0, in.from, in.from_len);
+        continue;
+      }
       if (why != PoseReject::kOk) {
         stats_.malformed.fetch_add(1, std::memory_order_relaxed);
         stats_.last_reject.store(std::uint16_t(why), std::memory_order_relaxed);
         continue;
       }
-      if (any && in.p.seq <= last_seq) {
-        stats_.stale.fetch_add(1, std::memory_order_relaxed);
-        continue;
+      // Authenticated, a session is its id and the address follows it (a forged source gains
+      // nothing); unauthenticated, the address is part of the session.
+      const bool silent = !cur.live || in.arrival_ns - cur.last_ns >= timeout_ns;
+      const bool same = cur.live && in.p.session == cur.id && in.p.version == cur.version &&
+                        (key || same_peer(in.from, in.from_len, cur.peer, cur.peer_len));
+      bool start = !same;
+      if (same) {
+        if (in.p.seq <= cur.last_seq) {
+          if (!silent || key) {  // authenticated: an old pose of this session is a replay, silent or not
+            stats_.stale.fetch_add(1, std::memory_order_relaxed);
+            continue;
+          }
+          start = true;  // unauthenticated and silent: the same address restarted its count
+        } else if (in.p.seq - cur.last_seq > config_.max_seq_jump && !silent) {
+          stats_.jumps.fetch_add(1, std::memory_order_relaxed);
+          continue;
+        }
       }
-      if (!have_peer) {
-        peer = in.from;
-        peer_len = in.from_len;
-        have_peer = true;
+      if (start) {
+        if (!silent) {
+          stats_.busy.fetch_add(1, std::memory_order_relaxed);
+          refuse(BridgeRefusal::kBusy, in.p.session, in.from, in.from_len);
+          continue;
+        }
+        if (key && std::find(served.begin(), served.end(), in.p.session) != served.end()) {
+          stats_.stale.fetch_add(1, std::memory_order_relaxed);
+          refuse(BridgeRefusal::kSessionUsed, in.p.session, in.from, in.from_len);
+          continue;
+        }
+        if (cur.live && key && cur.id != in.p.session) {
+          served[served_next] = cur.id;
+          served_next = (served_next + 1) % served.size();
+        }
+        cur.live = true;
+        cur.id = in.p.session;
+        cur.version = in.p.version;
+        ++cur.number;
+        stats_.sessions.fetch_add(1, std::memory_order_relaxed);
       }
-      any = true;
-      last_seq = in.p.seq;
+      cur.peer = in.from;
+      cur.peer_len = in.from_len;
+      cur.last_seq = in.p.seq;
+      cur.last_ns = in.arrival_ns;
+      in.session_no = cur.number;
       stats_.poses.fetch_add(1, std::memory_order_relaxed);
       in_.input() = in;
       publish = true;
@@ -279,21 +589,42 @@ void UdpDevice::receive(sockaddr_storage peer, socklen_t peer_len) noexcept {
 bool UdpDevice::read_pose(std::int64_t now_ns, Eigen::Isometry3d& pose) noexcept {
   if (in_.update()) {
     const Incoming& in = in_.output();
-    if (have_pose_ && in.p.seq > taken_seq_ + 1)
+    if (have_pose_ && in.session_no == cur_.session_no && in.p.seq > taken_seq_ + 1)
       stats_.gaps.fetch_add(in.p.seq - taken_seq_ - 1, std::memory_order_relaxed);
+    if (!have_pose_) {  // the very first pose is taken as it is; after it, every change is a ramp
+      shown_tip_ = Eigen::Vector3d(in.p.tip[0], in.p.tip[1], in.p.tip[2]);
+      shown_q_ = Eigen::Quaterniond(in.p.q[0], in.p.q[1], in.p.q[2], in.p.q[3]);
+    }
     cur_ = in;
     taken_seq_ = in.p.seq;
     have_pose_ = true;
   }
   (void)gain(now_ns);
   if (!have_pose_) return false;
+  // Slew limits: toward the newest pose by at most max_pose_step_mm and max_rotation_step_deg.
   const auto& p = cur_.p;
   const Eigen::Vector3d tip(p.tip[0], p.tip[1], p.tip[2]);
-  const Eigen::Vector3d off(config_.offset_mm[0], config_.offset_mm[1], config_.offset_mm[2]);
   const Eigen::Quaterniond q(p.q[0], p.q[1], p.q[2], p.q[3]);
+  bool limited = false;
+  const Eigen::Vector3d d = tip - shown_tip_;
+  if (const double len = d.norm(); len > config_.max_pose_step_mm) {
+    shown_tip_ += d * (config_.max_pose_step_mm / len);
+    limited = true;
+  } else {
+    shown_tip_ = tip;
+  }
+  const double max_turn = config_.max_rotation_step_deg * M_PI / 180;
+  if (const double turn = shown_q_.angularDistance(q); turn > max_turn) {
+    shown_q_ = shown_q_.slerp(max_turn / turn, q).normalized();
+    limited = true;
+  } else {
+    shown_q_ = q;
+  }
+  if (limited) stats_.pose_limited.fetch_add(1, std::memory_order_relaxed);
+  const Eigen::Vector3d off(config_.offset_mm[0], config_.offset_mm[1], config_.offset_mm[2]);
   Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
-  t.translate(config_.scale * tip + off);
-  t.rotate(q);
+  t.translate(config_.scale * shown_tip_ + off);
+  t.rotate(shown_q_);
   pose = t * grip_;
   return true;
 }
@@ -312,22 +643,54 @@ double UdpDevice::gain(std::int64_t now_ns) noexcept {
 }
 
 void UdpDevice::command_force(std::int64_t now_ns, const Eigen::Vector3d& force_N) noexcept {
+  command_wrench(now_ns, force_N, Eigen::Vector3d::Zero());
+}
+
+namespace {
+
+/// `sent` moved toward `target` by at most `step`; true when the limit acted.
+bool slew(Eigen::Vector3d& sent, const Eigen::Vector3d& target, double step) {
+  const Eigen::Vector3d d = target - sent;
+  const double len = d.norm();
+  if (len <= step) {
+    sent = target;
+    return false;
+  }
+  sent += d * (step / len);
+  return true;
+}
+
+}  // namespace
+
+void UdpDevice::command_wrench(std::int64_t now_ns, const Eigen::Vector3d& force_N, const Eigen::Vector3d& torque_Nm) noexcept {
   if (!have_pose_) return;  // no driver yet: nobody to send to
   ForcePacket f;
+  f.version = cur_.p.version;  // a legacy driver gets what it speaks
+  f.session = cur_.p.session;
   f.seq = ++force_seq_;
   f.pose_seq = cur_.p.seq;
   f.pose_device_ns = cur_.p.device_ns;
   f.servo_ns = now_ns;
   const double g = gain_;
   if (g < 1) f.flags |= kForceFading;
+  // The servo sends finite values; never pass on anything else. A 3-DOF device sends no torque.
+  const Eigen::Vector3d force = force_N.allFinite() ? Eigen::Vector3d(g * force_N) : Eigen::Vector3d::Zero();
+  const Eigen::Vector3d torque =
+      config_.max_torque_Nm > 0 && torque_Nm.allFinite() ? Eigen::Vector3d(g * torque_Nm) : Eigen::Vector3d::Zero();
+  const bool lf = slew(sent_force_, force, config_.max_force_step_N);
+  const bool lt = slew(sent_torque_, torque, config_.max_torque_step_Nm);
+  if (lf || lt) {
+    f.flags |= kForceLimited;
+    stats_.force_limited.fetch_add(1, std::memory_order_relaxed);
+  }
   for (int i = 0; i < 3; ++i) {
-    const double v = g * force_N[i];
-    f.force[i] = std::isfinite(v) ? v : 0.0;  // the servo sends finite forces; never pass on anything else
+    f.force[i] = sent_force_[i];
+    f.torque[i] = sent_torque_[i];
   }
   std::uint8_t buf[kForceBytes];
-  encode_force(f, buf);
-  if (::sendto(fd_, buf, sizeof buf, MSG_DONTWAIT | MSG_NOSIGNAL, reinterpret_cast<const sockaddr*>(&cur_.from),
-               cur_.from_len) == ssize_t(sizeof buf))
+  const std::size_t n = encode_force(f, config_.auth == BridgeAuth::kHmac ? &config_.key : nullptr, buf);
+  if (::sendto(fd_, buf, n, MSG_DONTWAIT | MSG_NOSIGNAL, reinterpret_cast<const sockaddr*>(&cur_.from), cur_.from_len) ==
+      ssize_t(n))
     stats_.forces.fetch_add(1, std::memory_order_relaxed);
   else
     stats_.send_errors.fetch_add(1, std::memory_order_relaxed);
@@ -338,9 +701,14 @@ std::string UdpDevice::summary() const {
   std::string s = "udp " + bound_ + ": " + n(stats_.poses) + " poses, " + n(stats_.gaps) + " seq gaps, " +
                   n(stats_.forces) + " forces sent (" + n(stats_.send_errors) + " failed), " + n(stats_.fades) +
                   " fade-outs; refused: " + n(stats_.malformed) + " malformed, " + n(stats_.stale) + " stale, " +
-                  n(stats_.foreign) + " foreign";
+                  n(stats_.foreign) + " foreign, " + n(stats_.unauthenticated) + " unauthenticated, " +
+                  n(stats_.old_version) + " old-version, " + n(stats_.jumps) + " seq jumps, " + n(stats_.busy) +
+                  " busy; " + n(stats_.sessions) + " sessions; slew-limited ticks: " + n(stats_.pose_limited) +
+                  " pose, " + n(stats_.force_limited) + " force";
   if (stats_.malformed.load(std::memory_order_relaxed))
-    s += std::string(" (last: ") + to_string(PoseReject(stats_.last_reject.load(std::memory_order_relaxed))) + ")";
+    s += std::string(" (last malformed: ") + to_string(PoseReject(stats_.last_reject.load(std::memory_order_relaxed))) +
+         ")";
+  s += config_.auth == BridgeAuth::kHmac ? "; authenticated (HMAC-SHA256)" : "; NOT authenticated (auth = none)";
   return s;
 }
 
