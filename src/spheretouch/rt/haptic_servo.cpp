@@ -43,11 +43,17 @@ HapticServo::HapticServo(Device& device, TripleBuffer<PoseSample>& poses, Triple
       interp_(law, interp),
       sat_(capped(saturation, device)),
       guard_(passivity, law.max_stiffness_N_per_mm(), period_s),
+      friction_(FrictionConfig{}, law.max_stiffness_N_per_mm(), period_s),
       telemetry_(telemetry),
       passivity_on_(passivity.enabled),
       margin_(passivity.colgate_margin),
       period_s_(period_s),
       stiffness_N_per_mm_(law.max_stiffness_N_per_mm()) {}
+
+void HapticServo::set_friction(const FrictionConfig& config) {
+  ST_ASSERT(check(config).empty(), "the friction config passed check()");
+  friction_ = Friction(config, stiffness_N_per_mm_, period_s_);
+}
 
 Eigen::Vector3d HapticServo::guard_torque(const Eigen::Vector3d& tau, const Eigen::Matrix3d& R, bool in_contact,
                                           double dt_s) noexcept {
@@ -125,8 +131,17 @@ void HapticServo::tick(const TickInfo& info) noexcept {
   // The passivity guard acts while the surface pushes (a contact cycle = force above zero).
   const Eigen::Vector3d n = raw.squaredNorm() > 0 ? interp_.normal() : Eigen::Vector3d::Zero();
   const Eigen::Vector3d guarded = have_pose ? guard_.apply(raw, pose.translation(), n, dt_s) : raw;
-  const Eigen::Vector3d f = sat_.apply(guarded, dt_s);
-  guard_.commanded(f);
+  // Friction at the tool point, under the surface's normal force after the guard.
+  Eigen::Vector3d ft = Eigen::Vector3d::Zero();
+  if (friction_.enabled()) {
+    const double fn = have_pose && interp_.state().in_contact ? std::max(0.0, guarded.dot(n)) : 0.0;
+    ft = friction_.apply(have_pose ? Eigen::Vector3d(pose * wrench_.tcp_mm) : Eigen::Vector3d::Zero(), n, fn, dt_s);
+  }
+  const Eigen::Vector3d total = guarded + ft;
+  const Eigen::Vector3d f = sat_.apply(total, dt_s);
+  // The guard observes the surface's part of what was commanded (the saturator scales the sum).
+  const double tn = total.norm();
+  guard_.commanded(ft.isZero() ? f : Eigen::Vector3d(f - (tn > 0 ? f.norm() / tn : 0.0) * ft));
   if (sat_.limited()) ++stats_.saturated;
   // The torque: the commanded force's moment about the tool point (its lever arm from the
   // interpolator), within the torque ceiling; commanded to 6-DOF devices only.
@@ -147,7 +162,8 @@ void HapticServo::tick(const TickInfo& info) noexcept {
   const double f_norm = f.norm();
   if (f_norm > peak_force_N_) peak_force_N_ = f_norm;
   const std::uint32_t flags = (interp_.state().in_contact ? kTickInContact : 0u) |
-                              (sat_.limited() ? kTickSaturated : 0u) | (have_pose ? 0u : kTickNoPose);
+                              (sat_.limited() ? kTickSaturated : 0u) | (have_pose ? 0u : kTickNoPose) |
+                              (friction_.stuck() ? kTickStuck : 0u) | (friction_.sliding() ? kTickSliding : 0u);
   if (status_ && info.tick % kStatusEveryTicks == 0) {
     ServoStatus st;
     st.updated_ns = now;

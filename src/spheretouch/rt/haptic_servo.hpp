@@ -11,6 +11,7 @@
 #include <spheretouch/geom/contact.hpp>
 #include <spheretouch/rt/constants.hpp>
 #include <spheretouch/rt/device.hpp>
+#include <spheretouch/rt/friction.hpp>
 #include <spheretouch/rt/haptic_loop.hpp>
 #include <spheretouch/rt/interpolator.hpp>
 #include <spheretouch/rt/passivity.hpp>
@@ -55,6 +56,12 @@ class HapticServo final : public TickHandler {
   /// The wrench to render (config must pass check()); before the loop starts. Default: 3-DOF,
   /// torques about the probe's origin.
   void set_wrench(const WrenchConfig& config);
+  /// The material's friction (config must pass check()); before the loop starts. Default: none.
+  /// The friction force acts at the tool centre point (set_wrench), adds to the surface's force
+  /// before saturation, and is passive on its own (friction.hpp); the passivity guard keeps
+  /// observing the surface's part alone.
+  void set_friction(const FrictionConfig& config);
+  const Friction& friction() const { return friction_; }     ///< for inspection
   double peak_torque_Nm() const { return peak_torque_Nm_; }  ///< largest |torque| computed (after the loop)
   /// 6-DOF: the rotational energy observer, Σ τ·dθ the commanded torque put into the device since
   /// the contact began, mJ (the rotational passivity guard keeps it at or below zero).
@@ -73,6 +80,7 @@ class HapticServo final : public TickHandler {
   Interpolator interp_;
   Saturator sat_;
   PassivityGuard guard_;
+  Friction friction_;
   Telemetry* telemetry_;
   SeqLock<ServoStatus>* status_ = nullptr;
   ServoStats stats_;

@@ -34,7 +34,7 @@ struct ServoStatus {
   double penetration_mm = 0;           ///< PD used this tick
   double fade = 0;                     ///< stale-fade factor in [0, 1]
   std::uint32_t contacts = 0;          ///< newest model's contacts (paper §3.5)
-  std::uint32_t flags = 0;             ///< kTickInContact | kTickSaturated | kTickNoPose (telemetry.hpp)
+  std::uint32_t flags = 0;             ///< kTick* flags (telemetry.hpp)
   double torque_Nm[3] = {};            ///< torque about the tool centre point, object frame (commanded if 6-DOF)
 };
 static_assert(std::is_trivially_copyable_v<ServoStatus> && sizeof(ServoStatus) == 152);

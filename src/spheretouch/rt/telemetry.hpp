@@ -22,6 +22,8 @@ namespace st::inline SPHERETOUCH_ABI::rt {
 inline constexpr std::uint32_t kTickInContact = 1u << 0;  ///< the interpolated model was in contact
 inline constexpr std::uint32_t kTickSaturated = 1u << 1;  ///< the saturator limited the force
 inline constexpr std::uint32_t kTickNoPose = 1u << 2;     ///< the device gave no pose this tick
+inline constexpr std::uint32_t kTickStuck = 1u << 3;      ///< friction: in contact, sticking
+inline constexpr std::uint32_t kTickSliding = 1u << 4;    ///< friction: in contact, slipping
 
 /// One tick, plain data (128 bytes).
 struct TelemetrySample {
@@ -36,7 +38,7 @@ struct TelemetrySample {
   double penetration_mm = 0;      ///< PD used
   double fade = 0;                ///< stale-fade factor
   double ceiling_N = 0;           ///< saturation ceiling
-  std::uint32_t flags = 0;        ///< kTickInContact | kTickSaturated | kTickNoPose
+  std::uint32_t flags = 0;        ///< kTickInContact | kTickSaturated | kTickNoPose | kTickStuck | kTickSliding
   std::uint32_t misses = 0;       ///< loop misses so far (low 32 bits)
   /// The proxy: where the probe would rest outside the object, object frame (position_mm moved
   /// out by PD along the contact normal FD while in contact; position_mm otherwise).
