@@ -75,6 +75,11 @@ struct ForceScene {
   bool crease = false;  // a concave scene: no force above law(true depth) + 0.05 N
   double keep_t0 = 0, keep_t1 = 0;     // plate: slid under the plate; the force's share of its value at keep_t0
   geom::Vec3 tcp{geom::Vec3::Zero()};  // the tool centre point torques are taken about, probe file coordinates
+  // Friction scenes: the material's friction, the face's outward normal (Fn and Ft are taken
+  // against it) and the hold window (a steady tangential push below μs·Fn: creep).
+  rt::FrictionConfig friction;
+  Eigen::Vector3d face_n{Eigen::Vector3d::UnitZ()};
+  double hold_t0 = 0, hold_t1 = 0;
 };
 
 /// A body of a generated mesh, its tree built with `tree` (default: the project's).
@@ -495,6 +500,98 @@ ForceScene release_scene() {
 }
 
 /// The generated scenes a name stands for ("meshes" = all of them).
+constexpr double kFrictionMuS = 0.6, kFrictionMuD = 0.4;  // the friction scenes' material
+constexpr double kFrictionFnN = 1.1;                      // their normal force in open loop, N
+
+/// The depth at which the default force law gives f_N, mm (bisection; the law is monotone).
+double depth_for_force(double f_N) {
+  const rt::ForceLaw law;
+  double lo = 0, hi = 100;
+  for (int i = 0; i < 200; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (law.magnitude_N(mid) < f_N ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+/// A ball (r 10) on the 40 mm box's top face (z = 20) with μs 0.6, μd 0.4, the stick spring the
+/// law's steepest slope; the script starts pressed to 1.1 N (open loop) at (x0, 0).
+ForceScene friction_scene(const std::string& name, Keys& k, double x0) {
+  ForceScene s;
+  s.name = name;
+  s.object = generated("box40", geom::make_box({40, 40, 40}));
+  s.probe = generated("ball10", geom::make_icosphere(10, 16));
+  s.friction.static_mu = kFrictionMuS;
+  s.friction.dynamic_mu = kFrictionMuD;
+  const double z = 30 - depth_for_force(kFrictionFnN);
+  k.at({x0, 0, 33});
+  k.to({x0, 0, z}, 0.3);
+  k.hold(0.3);
+  s.depth_ref = [](const geom::Vec3& c) { return std::max(0.0, 10.0 - (c.z() - 20.0)); };
+  return s;
+}
+
+/// Lifts the ball off the face and ends the script.
+void friction_end(ForceScene& s, Keys& k) {
+  k.hold(0.2);
+  k.to({k.last().x(), 0, 33}, 0.3);
+  k.hold(0.2);
+  s.script = k.tr;
+}
+
+/// Slide 10 mm at `speed` mm/s, stop 0.5 s (stuck: buzz), slide back: a closed slide.
+ForceScene friction_slide_scene(double speed) {
+  Keys k;
+  ForceScene s = friction_scene("friction_slide" + std::to_string(int(speed)), k, -10);
+  s.slide_t0 = k.t;
+  k.to({0, 0, k.last().z()}, 10 / speed);
+  k.hold(0.5);
+  s.still_t0 = k.t - 0.4;
+  s.still_t1 = k.t;
+  k.to({-10, 0, k.last().z()}, 10 / speed);
+  s.slide_t1 = k.t;
+  friction_end(s, k);
+  return s;
+}
+
+/// Stop and go at 10 mm/s: 5 mm, stop, 5 mm, stop, back 10 mm.
+ForceScene friction_stopgo_scene() {
+  Keys k;
+  ForceScene s = friction_scene("friction_stopgo", k, -10);
+  const double z = k.last().z();
+  s.slide_t0 = k.t;
+  k.to({-5, 0, z}, 0.5);
+  k.hold(0.5);
+  s.still_t0 = k.t - 0.4;
+  s.still_t1 = k.t;
+  k.to({0, 0, z}, 0.5);
+  k.hold(0.5);
+  k.to({-10, 0, z}, 1.0);
+  s.slide_t1 = k.t;
+  friction_end(s, k);
+  return s;
+}
+
+/// A steady tangential push of half μs·Fn (open loop: the stick spring stretched to it) held for
+/// 1 s, then a ramp at 1 mm/s past the break-away.
+ForceScene friction_hold_scene() {
+  Keys k;
+  ForceScene s = friction_scene("friction_hold", k, 0);
+  const double z = k.last().z();
+  const double stretch = 0.5 * kFrictionMuS * kFrictionFnN / rt::ForceLaw{}.max_stiffness_N_per_mm();
+  k.to({stretch, 0, z}, 0.1);
+  s.hold_t0 = k.t;
+  k.hold(1.0);
+  s.hold_t1 = k.t;
+  s.still_t0 = s.hold_t0 + 0.2;
+  s.still_t1 = s.hold_t1;
+  s.slide_t0 = k.t;
+  k.to({stretch + 3, 0, z}, 3.0);
+  s.slide_t1 = k.t;
+  friction_end(s, k);
+  return s;
+}
+
 std::vector<ForceScene> generated_scenes(const std::string& n) {
   std::vector<ForceScene> out;
   const bool all = n == "meshes";
@@ -524,6 +621,7 @@ struct Tick {
   /// Generated scenes: FD of a model built at this tick's own pose (what the geometry says now,
   /// with no latency or interpolation; zero when not in contact there).
   Eigen::Vector3d fd_now{Eigen::Vector3d::Zero()};
+  bool stuck = false, sliding = false;  ///< the servo's friction state after the tick
 };
 
 /// One collision round's model, where it was computed.
@@ -562,6 +660,7 @@ Replay replay(const ForceScene& s, const Model& model, bool closed, int C, engin
   rt::HapticServo servo(dev, *poses, *models, rt::ForceLaw{}, rt::DefaultInterpolatorConfig(), sat, nullptr,
                         model.passivity, 1e-3);
   servo.set_wrench({.dof = 3, .torque_limit_Nm = 0, .tcp_mm = s.tcp});
+  servo.set_friction(s.friction);
   geom::ContactBuilder builder(model.contact), permuted(model.contact), instant(model.contact);
   geom::CollideResult r_now;
   builder.prepare(s.probe.mesh, s.object.mesh);
@@ -587,6 +686,8 @@ Replay replay(const ForceScene& s, const Model& model, bool closed, int C, engin
     servo.tick(info);
     const rt::ForceRecord& rec = dev.records().back();
     out.ticks.push_back({rec.position, rec.force_N, servo.interpolator().state().penetration_mm});
+    out.ticks.back().stuck = servo.friction().stuck();
+    out.ticks.back().sliding = servo.friction().sliding();
     // The torque the servo takes (the commanded force's moment about the tool point) and the
     // script's rotation over the next tick (the user's hand turns as scripted).
     out.ticks.back().tau = 1e-3 * servo.interpolator().lever_mm().cross(rec.force_N);
@@ -801,6 +902,80 @@ Figures measure(const ForceScene& s, const Replay& rp) {
   fg.contact_us_p50 = med(rp.contact_us);
   fg.contacts_p50 = med(rp.contacts);
   return fg;
+}
+
+/// A friction scene's figures: Fn and Ft against the face's normal, per tick.
+struct FrictionFigures {
+  std::string scene, loop;
+  double ratio_mean = 0, ratio_p05 = 0, ratio_p95 = 0;  // Ft / (μd·Fn) on sliding ticks in the slide window
+  std::size_t sliding_ticks = 0;
+  double breakaway_ratio = 0;      // largest Ft / (μs·Fn) on a stuck tick before a break-away
+  double cone_max = 0;             // largest Ft / (μs·Fn) on any tick with Fn > 0 (<= 1: inside the friction cone)
+  int breakaways = 0, sticks = 0;  // stick -> slip, slip -> stick transitions while the probe moves on the face
+  double energy_mJ = 0;            // Σ F·dx over the slide window (a closed slide: out and back)
+  double stuck_buzz = -1;          // force RMS >= 30 Hz over the still window, N
+  double stuck_share = 0;          // share of the still window's ticks that are stuck
+  double hold_push = -1;           // hold window: mean Ft / (μs·Fn)
+  double hold_creep = -1;          // hold window, after 0.2 s to settle: the probe's largest tangential move, mm
+  double hold_offset = -1;         // hold window: mean tangential offset of the probe from where it stuck, mm (Ft / k)
+};
+
+FrictionFigures measure_friction(const ForceScene& s, const Replay& rp) {
+  FrictionFigures ff;
+  const auto& T = rp.ticks;
+  const Eigen::Vector3d n = s.face_n;
+  auto fn = [&](const Tick& t) { return t.f.dot(n); };
+  auto ft = [&](const Tick& t) { return (t.f - t.f.dot(n) * n).norm(); };
+  auto tangential = [&](const Eigen::Vector3d& v) { return Eigen::Vector3d(v - v.dot(n) * n); };
+  auto in = [](std::size_t i, double t0, double t1) { return double(i) * 1e-3 >= t0 && double(i) * 1e-3 <= t1; };
+  std::vector<double> ratio;
+  for (std::size_t i = 1; i < T.size(); ++i) {
+    if (T[i].f.dot(n) > 0) ff.cone_max = std::max(ff.cone_max, ft(T[i]) / (kFrictionMuS * fn(T[i])));
+    // Transitions while the probe moves on the face (the slide window and its last 0.1 s: a lift,
+    // where a falling Fn lets the contact slip and stick by turns, is not counted).
+    if (!in(i, s.slide_t0, s.slide_t1 + 0.1)) continue;
+    if (T[i].sliding && !T[i - 1].sliding && T[i - 1].stuck) {
+      ++ff.breakaways;
+      if (fn(T[i - 1]) > 0)
+        ff.breakaway_ratio = std::max(ff.breakaway_ratio, ft(T[i - 1]) / (kFrictionMuS * fn(T[i - 1])));
+    }
+    if (T[i].stuck && T[i - 1].sliding) ++ff.sticks;
+    if (!in(i, s.slide_t0, s.slide_t1)) continue;
+    ff.energy_mJ += T[i - 1].f.dot(T[i].x - T[i - 1].x);
+    if (T[i].sliding && fn(T[i]) > 0) ratio.push_back(ft(T[i]) / (kFrictionMuD * fn(T[i])));
+  }
+  ff.sliding_ticks = ratio.size();
+  if (!ratio.empty()) {
+    ff.ratio_mean = std::accumulate(ratio.begin(), ratio.end(), 0.0) / double(ratio.size());
+    ff.ratio_p05 = quantile(ratio, 0.05);
+    ff.ratio_p95 = quantile(ratio, 0.95);
+  }
+  if (s.still_t1 > s.still_t0) {
+    std::vector<Eigen::Vector3d> f;
+    std::size_t stuck = 0;
+    for (std::size_t i = std::size_t(s.still_t0 * 1000); i < std::min(T.size(), std::size_t(s.still_t1 * 1000)); ++i) {
+      f.push_back(T[i].f);
+      stuck += T[i].stuck;
+    }
+    ff.stuck_buzz = rms_above(f, 30.0);
+    ff.stuck_share = f.empty() ? 0 : double(stuck) / double(f.size());
+  }
+  if (s.hold_t1 > s.hold_t0) {
+    double push = 0, offset = 0, creep = 0;
+    std::size_t m = 0;
+    const std::size_t i0 = std::size_t((s.hold_t0 + 0.2) * 1000), i1 = std::min(T.size(), std::size_t(s.hold_t1 * 1000));
+    // Where the ball stuck: its position at the last tick before the push began to stretch the spring.
+    const Eigen::Vector3d stuck_at = T[std::size_t((s.hold_t0 - 0.1) * 1000) - 1].x;
+    for (std::size_t i = i0; i < i1; ++i, ++m) {
+      if (fn(T[i]) > 0) push += ft(T[i]) / (kFrictionMuS * fn(T[i]));
+      offset += tangential(T[i].x - stuck_at).norm();
+      creep = std::max(creep, tangential(T[i].x - T[i0].x).norm());
+    }
+    ff.hold_push = m ? push / double(m) : 0;
+    ff.hold_offset = m ? offset / double(m) : 0;
+    ff.hold_creep = creep;
+  }
+  return ff;
 }
 
 /// A generated scene's figures against the analytic truth (force_scenes.hpp): force error, depth
@@ -1059,7 +1234,7 @@ std::vector<Cost> contact_cost(const Body& probe, const Body& object, const std:
 
 void add_force(CLI::App& app) {
   struct Args {
-    std::string scenes = "box,sphere,plate,hand_elephant,hand_armadillo,hand_elephant_twist,meshes",
+    std::string scenes = "box,sphere,plate,hand_elephant,hand_armadillo,hand_elephant_twist,meshes,friction",
                 models = "paper,patch", trace_dir, poses;
     std::string workers_check = "1,2,4";
     int collision_ticks = 2, cost_runs = 30;
@@ -1075,7 +1250,8 @@ void add_force(CLI::App& app) {
   cmd->add_option("--scenes", a->scenes,
                   "box, sphere, plate, hand_elephant, hand_armadillo (model set); generated CAD-like solids with a "
                   "ball against the analytic truth: box_edge, box_corner, ridge, crease, inner_corner, pocket, "
-                  "plate_through, release, or meshes (all of them)")
+                  "plate_through, release, or meshes (all of them); friction: a ball sliding on a box face with "
+                  "μs 0.6, μd 0.4 at 1.1 N (2, 10, 50 mm/s, stop-and-go, a held push and a break-away ramp)")
       ->capture_default_str();
   cmd->add_option("--workers-check", a->workers_check,
                   "worker counts (in-process, scatter-gather) whose traces must equal 0 workers' on the generated "
@@ -1121,7 +1297,11 @@ void add_force(CLI::App& app) {
         scenes.push_back(sphere_scene(a->quick));
       else if (n == "plate")
         scenes.push_back(plate_scene());
-      else if (n == "hand_elephant" || n == "hand_armadillo" || n == "hand_elephant_twist") {
+      else if (n == "friction") {
+        for (double v : {2.0, 10.0, 50.0}) scenes.push_back(friction_slide_scene(v));
+        scenes.push_back(friction_stopgo_scene());
+        scenes.push_back(friction_hold_scene());
+      } else if (n == "hand_elephant" || n == "hand_armadillo" || n == "hand_elephant_twist") {
         const std::string obj = n == "hand_armadillo" ? "armadillo_L2.off" : "elephant.off";
         if (!std::filesystem::exists(dir + "/hand_L2.off") || !std::filesystem::exists(dir + "/" + obj)) {
           std::fprintf(stderr, "force: skipping %s: the model set is not in %s (scripts/models.sh)\n", n.c_str(),
@@ -1136,7 +1316,7 @@ void add_force(CLI::App& app) {
         die("--scenes: unknown scene '" + n +
             "' (box, sphere, plate, hand_elephant, hand_armadillo, hand_elephant_twist, box_edge, box_corner, ridge, "
             "crease, "
-            "inner_corner, pocket, plate_through, release, meshes)");
+            "inner_corner, pocket, plate_through, release, meshes, friction)");
       }
     }
     std::vector<int> worker_counts;
@@ -1155,6 +1335,7 @@ void add_force(CLI::App& app) {
       std::shared_ptr<Replay> rp;
     };
     std::vector<TruthRow> truth_rows;
+    std::vector<FrictionFigures> friction_rows;
     for (const ForceScene& s : scenes)
       for (const Model& m : models)
         for (bool closed : {false, true}) {
@@ -1168,6 +1349,11 @@ void add_force(CLI::App& app) {
           all.push_back(fg);
           if (!a->trace_dir.empty())
             write_trace(a->trace_dir + "/force_" + s.name + "_" + m.name + "_" + fg.loop + ".csv", *rp, s);
+          if ((s.friction.static_mu > 0 || s.friction.dynamic_mu > 0) && m.contact.model == geom::ContactModelKind::patch) {
+            friction_rows.push_back(measure_friction(s, *rp));
+            friction_rows.back().scene = s.name;
+            friction_rows.back().loop = fg.loop;
+          }
           if (!s.truth) continue;
           TruthRow row{all.size() - 1, measure_truth(s, *rp), rp};
           if (!closed && m.contact.model == geom::ContactModelKind::patch && !worker_counts.empty()) {
@@ -1292,9 +1478,30 @@ void add_force(CLI::App& app) {
                           {"analytic_Nm", jnum(w.analytic_Nm)},
                           {"error_Nm", jnum(w.error_Nm)},
                           {"rel_error", jnum(w.rel_error)}});
+      Json friction = Json::array();
+      for (const FrictionFigures& f : friction_rows)
+        friction.push_back({{"scene", f.scene},
+                            {"loop", f.loop},
+                            {"static_mu", kFrictionMuS},
+                            {"dynamic_mu", kFrictionMuD},
+                            {"ratio_mean", jnum(f.ratio_mean)},
+                            {"ratio_p05", jnum(f.ratio_p05)},
+                            {"ratio_p95", jnum(f.ratio_p95)},
+                            {"sliding_ticks", f.sliding_ticks},
+                            {"breakaway_ratio", jnum(f.breakaway_ratio)},
+                            {"cone_max", jnum(f.cone_max)},
+                            {"breakaways", f.breakaways},
+                            {"sticks", f.sticks},
+                            {"energy_closed_slide_mJ", jnum(f.energy_mJ)},
+                            {"stuck_buzz_30hz_N", opt(f.stuck_buzz)},
+                            {"stuck_share", jnum(f.stuck_share)},
+                            {"hold_push_over_static", opt(f.hold_push)},
+                            {"hold_creep_mm", opt(f.hold_creep)},
+                            {"hold_offset_mm", opt(f.hold_offset)}});
       print_json({{"collision_ticks", a->collision_ticks},
                   {"quick", a->quick},
                   {"wrench_checks", std::move(wrench)},
+                  {"friction", std::move(friction)},
                   {"scenes", std::move(scene_rows)},
                   {"truth", std::move(truth)},
                   {"contact_cost_slide_mm", jnum(a->cost_slide_mm)},
@@ -1321,6 +1528,21 @@ void add_force(CLI::App& app) {
       std::printf("%-20s %-6s %-6s %10.5f %10.6f %9.4f %9.3f %10.5f %10.5f %10.5f %10s\n", f.scene.c_str(),
                   f.model.c_str(), f.loop.c_str(), f.tau_peak, f.dtau_p99, f.dtau_rel, f.tau_dir_p99, f.rot_energy_per_cycle,
                   f.rot_energy_max, f.total_energy_max, f.tau_buzz < 0 ? "-" : num(f.tau_buzz).c_str());
+    if (!friction_rows.empty()) {
+      std::printf(
+          "\nfriction (patch model; ball on a box face, μs %.1f, μd %.1f, 1.1 N open loop): Ft/(μd·Fn) sliding (mean, "
+          "p5-p95), break-away and largest Ft/(μs·Fn), transitions while moving, F·dx over the closed slide, buzz and "
+          "stuck share holding still, the held push (Ft/(μs·Fn), creep, offset)\n"
+          "%-18s %-6s %7s %15s %7s %7s %9s %9s %9s %6s %8s %9s %8s\n",
+          kFrictionMuS, kFrictionMuD, "scene", "loop", "ratio", "p5-p95", "break", "cone", "brk/stk", "E_mJ", "buzz_N",
+          "stuck", "push", "creep_mm", "off_mm");
+      for (const FrictionFigures& f : friction_rows)
+        std::printf("%-18s %-6s %7.4f %7.4f-%-7.4f %7.4f %7.4f %4d/%-4d %9.4f %9s %6.2f %8s %9s %8s\n", f.scene.c_str(),
+                    f.loop.c_str(), f.ratio_mean, f.ratio_p05, f.ratio_p95, f.breakaway_ratio, f.cone_max, f.breakaways,
+                    f.sticks, f.energy_mJ, f.stuck_buzz < 0 ? "-" : num(f.stuck_buzz).c_str(), f.stuck_share,
+                    f.hold_push < 0 ? "-" : num(f.hold_push).c_str(), f.hold_creep < 0 ? "-" : num(f.hold_creep).c_str(),
+                    f.hold_offset < 0 ? "-" : num(f.hold_offset).c_str());
+    }
     std::printf("\nwrench checks (patch model, one pose each): |torque| against the analytic moment, N·m\n");
     for (const WrenchCheck& w : wrench_checks())
       std::printf("  %-24s torque %.6g, analytic %.6g, error %.3g (%.2f %%)\n", w.name.c_str(), w.torque_Nm,

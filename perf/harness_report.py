@@ -408,6 +408,29 @@ def force(out, md, summary):
             md.append(f"| {w.get('case', '–')} | {g(w.get('torque_Nm'), '.4g')} | {g(w.get('analytic_Nm'), '.4g')} | "
                       f"{g(w.get('error_Nm'), '.3g')} | {g(w.get('rel_error'), '.2%')} |")
         md.append("")
+    if f.get("friction"):
+        mu_s, mu_d = f["friction"][0].get("static_mu"), f["friction"][0].get("dynamic_mu")
+        md.append(f"Friction (patch model): a ball (r 10 mm) on a box face, μs {mu_s}, μd {mu_d}, the stick spring "
+                  "the law's steepest slope (0.59 N/mm), pressed to 1.1 N (open loop; the simulated hand presses "
+                  "less, ~0.39 N). slideN: 10 mm at N mm/s, a 0.5 s stop, back (a closed slide); stopgo: 5 mm, stop, "
+                  "5 mm, stop, back 10 mm at 10 mm/s; hold: a tangential push of half μs·Fn held 1 s, then a ramp at "
+                  "1 mm/s past the break-away. ratio: Ft / (μd·Fn) on sliding ticks (mean, p5-p95); break: Ft / (μs·Fn) "
+                  "on the stuck tick before a break-away (max); cone: the largest Ft / (μs·Fn) on any tick; brk/stk: "
+                  "transitions while the probe moves on the face; E: F·dx over the closed slide, mJ; buzz: force RMS "
+                  ">= 30 Hz holding still (stuck share of those ticks); push, creep, offset: the held push's Ft / "
+                  "(μs·Fn), the probe's largest tangential move after 0.2 s to settle, mm, and its mean tangential "
+                  "offset from where it stuck (the stick spring's stretch), mm. Targets: ratio 1 ± 5 %, E <= 0, buzz "
+                  "<= 0.01 N, creep <= 0.05 mm under a push below μs·Fn.\n")
+        md.append("| scene | loop | ratio (p5-p95) | break | cone | brk/stk | E mJ | buzz N (stuck) | push | creep mm | offset mm |")
+        md.append("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+        for r in f["friction"]:
+            md.append(f"| {r.get('scene', '–')} | {r.get('loop', '–')} | {g(r.get('ratio_mean'), '.4f')} "
+                      f"({g(r.get('ratio_p05'), '.4f')}-{g(r.get('ratio_p95'), '.4f')}) | {g(r.get('breakaway_ratio'), '.4f')} | "
+                      f"{g(r.get('cone_max'), '.4f')} | {r.get('breakaways', '–')}/{r.get('sticks', '–')} | "
+                      f"{g(r.get('energy_closed_slide_mJ'), '.3f')} | {g(r.get('stuck_buzz_30hz_N'), '.2g')} "
+                      f"({g(r.get('stuck_share'), '.2f')}) | {g(r.get('hold_push_over_static'), '.3f')} | "
+                      f"{g(r.get('hold_creep_mm'), '.2g')} | {g(r.get('hold_offset_mm'), '.3f')} |")
+        md.append("")
     if f.get("truth"):
         md.append("Generated CAD-like solids (written by the bench: faces as large as the solid's cells, or split "
                   "16 x 16) touched by a ball, against the analytic truth: the smallest translation that clears the "

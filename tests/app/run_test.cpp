@@ -10,6 +10,7 @@
 
 #include "app/commands.hpp"
 #include <spheretouch/engine/scene.hpp>
+#include <spheretouch/rt/telemetry.hpp>
 #include "app/process_util.hpp"
 #include "test_util.hpp"
 
@@ -213,6 +214,37 @@ TEST_CASE("run: a short scene ticks at its rate, presses with force, releases to
   CHECK(red > 0);
 }
 
+TEST_CASE(
+    "run: a material with friction (configs/friction.toml): the slide sticks, breaks away and slides; summary and "
+    "ticks.csv say so") {
+  st::test::TempDir d;
+  const std::string root = std::getenv("ST_SOURCE_ROOT") ? std::getenv("ST_SOURCE_ROOT") : ".";
+  const std::string out = d.file("run");
+  const auto r =
+      run_command(spheretouch_exe() + " run " + root + "/configs/friction.toml --out " + out + " --duration 4");
+  INFO(r.output);
+  REQUIRE(r.exit_code == 0);
+  const auto at = r.output.find("friction        static 0.8, dynamic 0.5, stick spring 0.500 N/mm: ");
+  REQUIRE(at != std::string::npos);
+  unsigned long long stuck = 0, sliding = 0, breakaways = 0;
+  REQUIRE(std::sscanf(r.output.c_str() + r.output.find(": ", at) + 2,
+                      "%llu ticks stuck, %llu sliding, %llu break-aways", &stuck, &sliding, &breakaways) == 3);
+  CHECK(stuck > 50);     // pressing in: stuck where it touched
+  CHECK(sliding > 500);  // the 20 mm slide
+  CHECK(breakaways >= 1);
+  // ticks.csv flags the same ticks: stuck (8) and sliding (16) only in contact (1), never both.
+  std::size_t flagged_stuck = 0, flagged_sliding = 0, wrong = 0;
+  for (const st::test::TickCsvRow& t : st::test::read_tick_csv(out + "/ticks.csv")) {
+    const bool is_stuck = t.flags & st::rt::kTickStuck, is_sliding = t.flags & st::rt::kTickSliding;
+    wrong += (is_stuck && is_sliding) || ((is_stuck || is_sliding) && !(t.flags & st::rt::kTickInContact));
+    flagged_stuck += is_stuck;
+    flagged_sliding += is_sliding;
+  }
+  CHECK(wrong == 0);
+  CHECK(flagged_stuck == stuck);
+  CHECK(flagged_sliding == sliding);
+}
+
 TEST_CASE("run: a full disk is an error naming the file, and the summary is printed whatever happens") {
   // /dev/full accepts the open and fails every write with ENOSPC, as a full disk does.
   REQUIRE(std::filesystem::exists("/dev/full"));
@@ -311,6 +343,25 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
        "device.max_seq_jump: expected a value in"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[device]\nkind = \"udp\"\nmax_force_step_n = -1\n",
        "device.max_force_step_n: expected a value in"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\nstatic_friction = 0.3\ndynamic_friction "
+       "= 0.5\n",
+       "force.dynamic_friction: dynamic_friction must not exceed static_friction"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\nstatic_friction = 11\n",
+       "force.static_friction: expected a value in [0, 10]"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\nfriction_stiffness_n_per_mm = -1\n",
+       "force.friction_stiffness_n_per_mm: expected a value in"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\nmaterial = 3\n",
+       "object.material: expected a [object.material] table"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[object.material]\nstickiness = 1\n",
+       "unknown key 'object.material.stickiness'"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[object.material]\nlaw = \"cubic\"\n",
+       "object.material.law: expected one of log, linear"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[object.material]\ndynamic_friction = -0.1\n",
+       "object.material.dynamic_friction: expected a value in [0, 10]"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\nstatic_friction = 0.5\ndynamic_friction "
+       "= 0.4\n"
+       "[object.material]\nstatic_friction = 0.2\n",
+       "object.material.static_friction: dynamic_friction must not exceed static_friction"},
       {"[probe]\nbuiltin = \"capsule\"\n[object\n", "TOML syntax"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[contact]\nmodel = \"nearest\"\n",
        "contact.model: expected one of patch, paper"},
@@ -413,6 +464,25 @@ TEST_CASE("scene files: configs/demo.toml and configs/small.toml parse, with the
   REQUIRE_MESSAGE(paper.ok(), paper.error());
   CHECK(paper.value().contact.model == st::geom::ContactModelKind::paper);
   CHECK_FALSE(paper.value().passivity.enabled);
+  // Materials: [force] is the default, [object.material] overrides what it names.
+  auto mat = st::engine::parse_scene(
+      "[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[object.material]\nlaw = \"linear\"\n"
+      "spring_n_per_mm = 0.8\nstatic_friction = 0.6\n"
+      "[force]\ndynamic_friction = 0.4\nstatic_friction = 0.5\ndamping_n_s_per_mm = 0.001\n",
+      "mat.toml", ".");
+  REQUIRE_MESSAGE(mat.ok(), mat.error());
+  CHECK(mat.value().law.kind == st::rt::LawKind::linear);
+  CHECK(mat.value().law.spring_N_per_mm == 0.8);
+  CHECK(mat.value().friction.static_mu == 0.6);   // the object's
+  CHECK(mat.value().friction.dynamic_mu == 0.4);  // [force]'s
+  CHECK(mat.value().interp.damping_N_s_per_mm == 0.001);
+  CHECK(demo.value().friction.static_mu == 0);  // frictionless unless a scene says otherwise
+  CHECK(demo.value().friction.dynamic_mu == 0);
+  auto fr = st::engine::load_scene(root + "/configs/friction.toml");
+  REQUIRE_MESSAGE(fr.ok(), fr.error());
+  CHECK(fr.value().friction.static_mu == 0.8);
+  CHECK(fr.value().friction.dynamic_mu == 0.5);
+  CHECK(fr.value().law.kind == st::rt::LawKind::linear);
   auto small = st::engine::load_scene(root + "/configs/small.toml");
   REQUIRE_MESSAGE(small.ok(), small.error());
   CHECK(small.value().object.builtin == "icosphere");

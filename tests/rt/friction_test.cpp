@@ -45,8 +45,8 @@ TEST_CASE("friction: stick, break-away at μs·Fn, slide at exactly μd·Fn, sti
   std::vector<double> sliding;
   for (int k = 0; k < 1000; ++k) {  // 1 s at 10 mm/s along x
     const Eigen::Vector3d f = fr.apply(p, n, fn, dt);
-    CHECK(std::abs(f.z()) <= 1e-15);  // tangential only
-    CHECK(f.norm() <= c.static_mu * fn + 1e-12);                  // never outside the cone
+    CHECK(std::abs(f.z()) <= 1e-15);              // tangential only
+    CHECK(f.norm() <= c.static_mu * fn + 1e-12);  // never outside the cone
     if (fr.stuck()) peak_stuck = std::max(peak_stuck, f.norm());
     if (fr.sliding()) sliding.push_back(-f.x());
     p.x() += v * dt;
@@ -78,8 +78,8 @@ TEST_CASE("friction: a closed path (out and back) takes energy, never gives it; 
   double work = 0;  // the friction force's work on the tool, mJ (N·mm): zero-order hold
   for (int k = 0; k <= 4000; ++k) {
     const double t = k * 1e-3;
-    const double x = 10 * std::sin(2 * M_PI * t / 2);           // two full strokes of ±10 mm
-    const double fn = 1.1 + 0.5 * std::sin(2 * M_PI * 7 * t);   // a normal force that wobbles
+    const double x = 10 * std::sin(2 * M_PI * t / 2);          // two full strokes of ±10 mm
+    const double fn = 1.1 + 0.5 * std::sin(2 * M_PI * 7 * t);  // a normal force that wobbles
     const Eigen::Vector3d next(x, 0.3 * std::sin(2 * M_PI * t), 0);
     work += f.dot(next - p);
     p = next;
@@ -91,7 +91,8 @@ TEST_CASE("friction: a closed path (out and back) takes energy, never gives it; 
   CHECK(fr.stats().sticks >= 4);
 }
 
-TEST_CASE("friction: a new contact plane does not move the stick point; no normal force or bad input ends the contact") {
+TEST_CASE(
+    "friction: a new contact plane does not move the stick point; no normal force or bad input ends the contact") {
   st::rt::FrictionConfig c = friction_test_config();
   c.damping_margin = 0;  // the spring alone: the force is k·d exactly
   st::rt::Friction fr(c, 0.5, 1e-3);

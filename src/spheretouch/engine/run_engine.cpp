@@ -277,6 +277,7 @@ Status RunEngine::State::prepare() {
     rt::WrenchConfig wrench = s.device.wrench;
     wrench.tcp_mm = tool_point(s, probe());
     servo->set_wrench(wrench);
+    servo->set_friction(s.friction);
   } else {
     // The servo gets the trajectory as a file (it loads no meshes) and the scene for its settings.
     script_file = dir + "/script.txt";
@@ -548,6 +549,18 @@ RunReport RunEngine::finish(int signal) {
               static_cast<unsigned long long>(e.servo->passivity().active_ticks()));
     appendf(summary, "  contact         model %s, interpolation %s, %s\n", geom::to_string(s.contact.model),
             rt::to_string(s.interp.mode), guard.c_str());
+  }
+  if (s.friction.static_mu > 0 || s.friction.dynamic_mu > 0) {
+    std::string counts = " (the servo process counts)";
+    if (!e.opt.split && e.servo) {
+      const rt::FrictionStats& fs = e.servo->friction().stats();
+      counts = "";
+      appendf(counts, ", stick spring %.3f N/mm: %llu ticks stuck, %llu sliding, %llu break-aways",
+              e.servo->friction().stiffness_N_per_mm(), static_cast<unsigned long long>(fs.stuck_ticks),
+              static_cast<unsigned long long>(fs.sliding_ticks), static_cast<unsigned long long>(fs.breakaways));
+    }
+    appendf(summary, "  friction        static %.3g, dynamic %.3g%s\n", s.friction.static_mu, s.friction.dynamic_mu,
+            counts.c_str());
   }
   appendf(summary, "  telemetry       %llu samples, %llu dropped\n",
           static_cast<unsigned long long>(sres.telemetry_pushed), static_cast<unsigned long long>(sres.telemetry_dropped));

@@ -33,6 +33,27 @@ std::string lookup(const std::string& path) {
   return "file " + path + " does not exist";
 }
 
+/// A material's fields, in [force] (the default material) and in [object.material]: the force
+/// law and its constants, the damping, the friction. Fields not given keep what `s` holds.
+void read_material(TomlReader& r, Scene& s) {
+  std::string law = s.law.kind == rt::LawKind::log ? "log" : "linear";
+  r.string("law", law, {"log", "linear"});
+  s.law.kind = law == "log" ? rt::LawKind::log : rt::LawKind::linear;
+  r.number("a", s.law.a, -1e6, 1e6);
+  r.number("b_n", s.law.b_N, 1e-9, 1e6);
+  r.number("log_base", s.law.log_base, 1.000001, 1e6);
+  r.number("pd_unit_mm", s.law.pd_unit_mm, 1e-9, 1e9);
+  r.number("spring_n_per_mm", s.law.spring_N_per_mm, 1e-9, 1e6);
+  r.number("damping_n_s_per_mm", s.interp.damping_N_s_per_mm, 0, 1e3);
+  r.number("static_friction", s.friction.static_mu, 0, 10);
+  r.number("dynamic_friction", s.friction.dynamic_mu, 0, 10);
+  r.number("friction_stiffness_n_per_mm", s.friction.stiffness_N_per_mm, 0, 1e6);
+  if (s.friction.dynamic_mu > s.friction.static_mu)
+    r.error(
+        r.has("dynamic_friction") ? "dynamic_friction" : "static_friction",
+        "dynamic_friction must not exceed static_friction (a contact that slides harder than it sticks never sticks)");
+}
+
 void read_body(TomlReader& r, BodySpec& b, const std::string& dir, const std::string& field) {
   std::string mesh;
   r.string("mesh", mesh);
@@ -103,6 +124,7 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
       return fail(name, ": missing section [", sec, "] (every scene names its probe and object)");
 
   auto section = [&](const char* key) { return root.get_as<toml::table>(key); };
+  const toml::table* object_material = nullptr;  // [object.material], read after [force] (its default)
   auto check_table = [&](const char* key) -> Status {
     if (root.contains(key) && !root.get_as<toml::table>(key))
       return fail(name, ": ", key, ": expected a [", key, "] table");
@@ -130,6 +152,7 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     s.object = {};
     TomlReader r(section("object"), "object", name);
     read_body(r, s.object, dir, "object");
+    object_material = r.table("material");
     if (Status st = r.finish(); !st) return Error{st.error()};
   }
   {
@@ -210,24 +233,23 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
   }
   {
     TomlReader r(section("force"), "force", name);
-    std::string law = s.law.kind == rt::LawKind::log ? "log" : "linear";
-    r.string("law", law, {"log", "linear"});
-    s.law.kind = law == "log" ? rt::LawKind::log : rt::LawKind::linear;
-    r.number("a", s.law.a, -1e6, 1e6);
-    r.number("b_n", s.law.b_N, 1e-9, 1e6);
-    r.number("log_base", s.law.log_base, 1.000001, 1e6);
-    r.number("pd_unit_mm", s.law.pd_unit_mm, 1e-9, 1e9);
-    r.number("spring_n_per_mm", s.law.spring_N_per_mm, 1e-9, 1e6);
+    read_material(r, s);
     r.number("peak_n", s.saturation.peak_N, 1e-9, 1e4);
     s.law.max_force_N = s.saturation.peak_N;
     r.boolean("sustained_limit", s.saturation.sustained);
     r.number("continuous_n", s.saturation.continuous_N, 1e-9, 1e4);
     r.number("sustained_tau_s", s.saturation.tau_s, 1e-3, 1e5);
-    r.number("damping_n_s_per_mm", s.interp.damping_N_s_per_mm, 0, 1e3);
     if (s.saturation.continuous_N > s.saturation.peak_N) r.error("continuous_n", "must not exceed peak_n");
     if (Status st = r.finish(); !st) return Error{st.error()};
     if (Result<rt::ForceLaw> l = rt::ForceLaw::make(s.law); !l) return fail(name, ": [force] ", l.error());
     if (std::string e = rt::Saturator::check(s.saturation); !e.empty()) return fail(name, ": [force] ", e);
+  }
+  if (object_material) {
+    // The object's material: [force]'s material fields (the default) overridden where it says.
+    TomlReader r(object_material, "object.material", name);
+    read_material(r, s);
+    if (Status st = r.finish(); !st) return Error{st.error()};
+    if (Result<rt::ForceLaw> l = rt::ForceLaw::make(s.law); !l) return fail(name, ": [object.material] ", l.error());
   }
   {
     TomlReader r(section("interpolation"), "interpolation", name);

@@ -14,6 +14,7 @@
 #include <spheretouch/geom/partition.hpp>
 #include <spheretouch/geom/sphere_tree.hpp>
 #include <spheretouch/rt/force_law.hpp>
+#include <spheretouch/rt/friction.hpp>
 #include <spheretouch/rt/haptic_loop.hpp>
 #include <spheretouch/rt/haptic_servo.hpp>
 #include <spheretouch/rt/interpolator.hpp>
@@ -93,7 +94,8 @@ struct Scene {
   rt::HapticLoopConfig haptic = rt::DefaultHapticLoopConfig();  ///< servo loop
   /// stack of every thread run starts ([haptic] thread_stack_kb); 0 = glibc's default
   std::size_t thread_stack_bytes = 1 << 20;
-  rt::ForceLawConfig law = rt::DefaultForceLawConfig();             ///< eq. (1) or spring
+  rt::ForceLawConfig law = rt::DefaultForceLawConfig();  ///< eq. (1) or spring (the object's material)
+  rt::FrictionConfig friction;  ///< the object's material's friction ([force], overridden by [object.material]); none by default
   rt::SaturationConfig saturation = rt::DefaultSaturationConfig();  ///< device limits
   rt::InterpolatorConfig interp = rt::DefaultInterpolatorConfig();  ///< between contact updates
   geom::ContactConfig contact = geom::DefaultContactConfig();       ///< contact model (patch or paper)

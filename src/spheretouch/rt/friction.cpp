@@ -11,7 +11,8 @@ std::string check(const FrictionConfig& c) {
   if (!(c.dynamic_mu >= 0) || !(c.dynamic_mu <= 10)) return "dynamic_friction: must be in [0, 10]";
   if (!(c.static_mu >= 0) || !(c.static_mu <= 10)) return "static_friction: must be in [0, 10]";
   if (c.dynamic_mu > c.static_mu)
-    return "dynamic_friction: must not exceed static_friction (a contact that slides harder than it sticks never sticks)";
+    return "dynamic_friction: must not exceed static_friction (a contact that slides harder than it sticks never "
+           "sticks)";
   if (!(c.stiffness_N_per_mm >= 0) || !std::isfinite(c.stiffness_N_per_mm))
     return "friction_stiffness_n_per_mm: must be a finite number >= 0 (0: the force law's steepest slope)";
   if (!(c.damping_margin >= 0) || !(c.damping_margin <= 100)) return "friction damping margin: must be in [0, 100]";

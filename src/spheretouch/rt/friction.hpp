@@ -34,10 +34,10 @@ namespace st::inline SPHERETOUCH_ABI::rt {
 
 /// Friction of a material (μs = μd = 0: none, and the servo's force is what it was without).
 struct FrictionConfig {
-  double static_mu = 0;             ///< μs: the contact slips when the tangential force would exceed μs·Fn
-  double dynamic_mu = 0;            ///< μd <= μs: the force while slipping is μd·Fn
-  double stiffness_N_per_mm = 0;    ///< the stick spring, N/mm (0: the force law's steepest slope)
-  double damping_margin = 2.0;      ///< stick damping = margin · k·T/2 (Colgate's bound; 0 = none)
+  double static_mu = 0;           ///< μs: the contact slips when the tangential force would exceed μs·Fn
+  double dynamic_mu = 0;          ///< μd <= μs: the force while slipping is μd·Fn
+  double stiffness_N_per_mm = 0;  ///< the stick spring, N/mm (0: the force law's steepest slope)
+  double damping_margin = 2.0;    ///< stick damping = margin · k·T/2 (Colgate's bound; 0 = none)
 };
 /// Empty when the config is usable (0 <= μd <= μs <= 10, finite stiffness >= 0, margin in [0, 100]), else a message naming the field.
 std::string check(const FrictionConfig& c);
@@ -61,16 +61,16 @@ class Friction {
   /// with the plane of unit normal `n` under normal force `fn_N`; `dt_s` since the last tick. A
   /// call with fn_N <= 0 (or a non-finite input) ends the contact: no stick point, zero force.
   Eigen::Vector3d apply(const Eigen::Vector3d& p_mm, const Eigen::Vector3d& n, double fn_N, double dt_s) noexcept;
-  bool stuck() const noexcept { return in_contact_ && stuck_; }       ///< in contact and sticking
-  bool sliding() const noexcept { return in_contact_ && !stuck_; }    ///< in contact and slipping
+  bool stuck() const noexcept { return in_contact_ && stuck_; }              ///< in contact and sticking
+  bool sliding() const noexcept { return in_contact_ && !stuck_; }           ///< in contact and slipping
   const Eigen::Vector3d& stick_point_mm() const noexcept { return stick_; }  ///< valid while in contact
-  const FrictionStats& stats() const noexcept { return stats_; }      ///< counters
-  double stiffness_N_per_mm() const noexcept { return k_; }           ///< the stick spring in use
+  const FrictionStats& stats() const noexcept { return stats_; }             ///< counters
+  double stiffness_N_per_mm() const noexcept { return k_; }                  ///< the stick spring in use
 
  private:
   FrictionConfig config_;
-  double k_;        // N/mm
-  double b_;        // N·s/mm, stick damping
+  double k_;  // N/mm
+  double b_;  // N·s/mm, stick damping
   double period_s_;
   bool in_contact_ = false, stuck_ = true;
   Eigen::Vector3d stick_{Eigen::Vector3d::Zero()};   // mm, object frame
