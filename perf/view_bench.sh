@@ -39,7 +39,7 @@ run_one() {  # scene viewer(0|1) label [page query] -> appends "label ticks miss
     /usr/bin/chromium --headless=new --no-sandbox --disable-gpu --enable-unsafe-swiftshader --use-angle=swiftshader \
       --disable-quic --no-first-run --disable-background-networking --disable-component-update --disable-sync \
       --window-size=800,600 --remote-debugging-port=0 --user-data-dir="$work/profile$RANDOM" \
-      "http://127.0.0.1:$port/?$query" > "$work/chromium.log" 2>&1 &
+      "http://127.0.0.1:$port/?t=$(sed -n 's/.*view: http[^ ]*?t=\([0-9a-f]*\).*/\1/p' "$out.log")&$query" > "$work/chromium.log" 2>&1 &
     browser=$!
   fi
   wait "$pid" || true

@@ -408,7 +408,7 @@
 
   let ws = null;
   function connect() {
-    ws = new WebSocket(`ws://${location.host}/ws`);
+    ws = new WebSocket(`ws://${location.host}/ws?t=${encodeURIComponent(params.get('t') || '')}`);
     ws.binaryType = 'arraybuffer';
     ws.onopen = () => { errorEl.textContent = ''; };
     ws.onmessage = (ev) => {

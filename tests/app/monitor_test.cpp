@@ -144,7 +144,7 @@ TEST_CASE(
 
   ViewMessages msgs;
   char err[256] = "";
-  mg_connection* ws = view_connect(port, msgs, err);
+  mg_connection* ws = view_connect(port, msgs, err, st::test::view_token(slurp_file(d.file("mon.log"))));
   INFO(err);
   REQUIRE(ws != nullptr);
   // Until frames with colliding object faces came (the press repeats), at most 90 s.
@@ -169,7 +169,7 @@ TEST_CASE(
   CHECK(mon_rc == 0);
   CHECK(contains(log, "session finished"));
   CHECK_FALSE(contains(log, "DEAD"));  // a run that ended normally is not reported dead
-  CHECK(contains(log, "view: " + url + ": 1 page(s)"));
+  CHECK(contains(log, "view: " + url + "?t=" + st::test::view_token(log) + ": 1 page(s)"));
   CHECK_FALSE(contains(log, "bad frames"));
 
   const auto [probe, object] = monitor_meshes(d.file("scene.toml"));
@@ -249,7 +249,7 @@ TEST_CASE("monitor --view: frames forged in the segment are checked; bad ones ar
   REQUIRE(monitor_wait_log(d.file("mon.log"), "view: http://127.0.0.1:" + std::to_string(port) + "/", mon));
   ViewMessages msgs;
   char err[256] = "";
-  mg_connection* ws = view_connect(port, msgs, err);
+  mg_connection* ws = view_connect(port, msgs, err, st::test::view_token(slurp_file(d.file("mon.log"))));
   REQUIRE(ws != nullptr);
   auto received = [&](const std::function<bool(const std::string&)>& pred) {
     for (int i = 0; i < 3000; ++i) {
@@ -307,5 +307,70 @@ TEST_CASE("monitor --view: frames forged in the segment are checked; bad ones ar
     CHECK(view_at<std::uint32_t>(f, 240) == 3);
   }
   CHECK(seen);
+  mg_exit_library();
+}
+
+TEST_CASE("monitor --view: a page that stops reading loses frames and gets cut off; another page keeps its rate") {
+  mg_init_library(0);
+  TempDir d;
+  const std::string seg_name = "/spheretouch-test-monstall-" + std::to_string(getpid());
+  std::string scene = monitor_view_scene(10.0);
+  scene.replace(scene.find("frequency = 12"), 14, "frequency = 40");  // 32,000 faces: big frames
+  write_file(d.file("scene.toml"), scene);
+  const auto [probe, object] = monitor_meshes(d.file("scene.toml"));
+  REQUIRE(object.num_faces() >= st::rt::kViewMaxFaces);
+  auto seg = st::rt::ShmSegment::create(seg_name);
+  REQUIRE(seg.ok());
+  st::rt::ShmStatus& status = seg.value()->status();
+  status.scene.store(st::engine::scene_ref(d.file("scene.toml"), probe, object));
+  // The largest frame there is: every object face listed (~64 KiB a frame, 60 a second to each page).
+  auto frame = std::make_unique<st::rt::ViewFrame>();
+  frame->round = 1;
+  frame->flags = st::rt::ViewFrame::kInContact;
+  frame->n_probe = 0;
+  frame->n_object = st::rt::kViewMaxFaces;
+  for (std::uint32_t i = 0; i < st::rt::kViewMaxFaces; ++i) frame->faces[i] = i;
+  frame->contacts = st::rt::kViewMaxFaces;
+  status.view.store(*frame);
+  const int port = free_loopback_port(SOCK_STREAM);
+  const pid_t mon = spawn_spheretouch(
+      {"monitor", "--name", seg_name, "--view", "127.0.0.1:" + std::to_string(port), "--interval", "100"},
+      d.file("mon.log"));
+  REQUIRE(monitor_wait_log(d.file("mon.log"), "view: http://127.0.0.1:" + std::to_string(port) + "/", mon));
+  const std::string token = st::test::view_token(slurp_file(d.file("mon.log")));
+  const std::string self = "127.0.0.1:" + std::to_string(port);
+  // A page that reads the meshes and a few frames, then stops reading (its socket fills in a second).
+  int stalled = -1;
+  REQUIRE(st::test::view_raw(port, st::test::view_upgrade("?t=" + token, self, "http://" + self), &stalled, nullptr,
+                             300) == 101);
+  ViewMessages msgs;
+  char err[256] = "";
+  mg_connection* ws = view_connect(port, msgs, err, token);
+  REQUIRE(ws != nullptr);
+  std::this_thread::sleep_for(std::chrono::seconds(1));
+  auto count = [&] {
+    std::lock_guard<std::mutex> l(msgs.mu);
+    const std::size_t n = msgs.binary.size();
+    msgs.binary.clear();  // 4 MB a second: keep only the count
+    return n;
+  };
+  count();
+  std::this_thread::sleep_for(std::chrono::seconds(5));
+  const std::size_t during = count();
+  // The stalled page sends nothing either: after 10 s its connection is closed, its blocked write
+  // fails, and it gets no more frames.
+  std::this_thread::sleep_for(std::chrono::seconds(7));
+  kill(mon, SIGTERM);
+  const int rc = wait_for(mon, 30);
+  mg_close_connection(ws);
+  ::close(stalled);
+  const std::string log = slurp_file(d.file("mon.log"));
+  INFO(log);
+  CHECK(rc == 0);
+  CHECK(during > 5 * 60 / 2);  // at least half of 60 frames a second, while the other page stalls
+  CHECK(contains(log, "frames dropped for slow pages"));
+  const auto failed = log.find(" writes failed");
+  REQUIRE(failed != std::string::npos);
+  CHECK(log[failed - 1] != '0');  // the stalled page's write failed: it gets no more
   mg_exit_library();
 }

@@ -5,7 +5,9 @@
 // the colliding faces in red (a snapshot the page sends back, checked pixel by pixel).
 #include <civetweb.h>
 #include <netinet/in.h>
+#include <poll.h>
 #include <sys/socket.h>
+#include <unistd.h>
 
 #include <cstring>
 #include <filesystem>
@@ -47,14 +49,14 @@ pid_t view_start_run(const st::test::TempDir& d, int port, double seconds, const
   return pid;
 }
 
-/// Debian's Chromium, headless with software WebGL, on the view's page with `query`; its pid.
-pid_t view_chromium(const st::test::TempDir& d, int port, const std::string& query) {
+/// Debian's Chromium, headless with software WebGL, on the view's page (its token) with `query`; its pid.
+pid_t view_chromium(const st::test::TempDir& d, int port, const std::string& token, const std::string& query) {
   const pid_t browser = fork();
   REQUIRE(browser >= 0);
   if (browser == 0) {
     prctl(PR_SET_PDEATHSIG, SIGKILL);
     if (!std::freopen(d.file("chromium.log").c_str(), "a", stdout) || dup2(fileno(stdout), 2) < 0) _exit(120);
-    const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/?" + query;
+    const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/?t=" + token + "&" + query;
     const std::string user = "--user-data-dir=" + d.file("chromium-profile");
     execl("/usr/bin/chromium", "chromium", "--headless=new", "--no-sandbox", "--disable-gpu",
           "--enable-unsafe-swiftshader", "--use-angle=swiftshader", "--disable-quic", "--no-first-run",
@@ -68,7 +70,8 @@ pid_t view_chromium(const st::test::TempDir& d, int port, const std::string& que
 /// GET path from the view; the body ("" on failure) and the status code.
 std::pair<int, std::string> view_get(int port, const std::string& path) {
   char err[256] = "";
-  mg_connection* c = mg_download("127.0.0.1", port, 0, err, sizeof err, "GET %s HTTP/1.0\r\n\r\n", path.c_str());
+  mg_connection* c = mg_download("127.0.0.1", port, 0, err, sizeof err, "GET %s HTTP/1.0\r\nHost: 127.0.0.1:%d\r\n\r\n",
+                                 path.c_str(), port);
   if (!c) return {0, err};
   const mg_response_info* ri = mg_get_response_info(c);
   const int code = ri ? ri->status_code : 0;
@@ -88,7 +91,7 @@ std::string view_run_with_browser(const st::test::TempDir& d, int port, const st
                                   const std::string& query, const std::function<bool()>& done) {
   const pid_t pid =
       view_start_run(d, port, 120.0, "[object]\nbuiltin = \"icosphere\"\nradius_mm = 50.0\nfrequency = 24\n", device);
-  const pid_t browser = view_chromium(d, port, query);
+  const pid_t browser = view_chromium(d, port, st::test::view_token(st::test::slurp_file(d.file("run.log"))), query);
   const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(90);
   bool reached = false;
   while (!(reached = done()) && std::chrono::steady_clock::now() < until && waitpid(pid, nullptr, WNOHANG) == 0)
@@ -129,8 +132,9 @@ TEST_CASE("run --view: the page and scripts are served; the stream carries the m
 
   ViewMessages msgs;
   char err[256] = "";
-  mg_connection* ws =
-      mg_connect_websocket_client("127.0.0.1", port, 0, err, sizeof err, "/ws", nullptr, view_on_data, nullptr, &msgs);
+  const std::string token = st::test::view_token(st::test::slurp_file(d.file("run.log")));
+  REQUIRE(token.size() == 32);
+  mg_connection* ws = st::test::view_connect(port, msgs, err, token);
   INFO(err);
   REQUIRE(ws != nullptr);
   // A page's bad messages: refused, counted, and the stream goes on.
@@ -163,6 +167,75 @@ TEST_CASE("run --view: the page and scripts are served; the stream carries the m
   CHECK(with_faces > 5);
   CHECK(st::test::contains(log, "page drew 42.5 fps (last second; 17 frames in 0.0 s"));
   CHECK(st::test::contains(log, "5 bad messages refused"));
+  mg_exit_library();
+}
+
+TEST_CASE(
+    "run --view answers only its own page: another Host, Origin or no token gets a 403, one page too many a 503; a "
+    "page that stops reading does not slow another") {
+  mg_init_library(0);
+  st::test::TempDir d;
+  const int port = st::test::free_loopback_port(SOCK_STREAM);
+  // A fine ball pressed again and again. (Its frames are small: over this test's seconds a page
+  // that stops reading only fills the kernel's socket buffers, so its sender never blocks here;
+  // that no write happens under the server's lock is by construction, view_server.cpp.)
+  const pid_t pid =
+      view_start_run(d, port, 14.0, "[object]\nbuiltin = \"icosphere\"\nradius_mm = 50.0\nfrequency = 40\n",
+                     "press_mm = 4.0\nrepeat = true\n");
+  const std::string token = st::test::view_token(st::test::slurp_file(d.file("run.log")));
+  REQUIRE(token.size() == 32);
+  const std::string self = "127.0.0.1:" + std::to_string(port);
+  // DNS rebinding: a request naming another host (the attacker's name, resolving to us).
+  CHECK(st::test::view_raw(port, "GET / HTTP/1.1\r\nHost: evil.example:" + std::to_string(port) + "\r\n\r\n") == 403);
+  CHECK(st::test::view_raw(port, "GET / HTTP/1.1\r\n\r\n") == 403);  // no Host at all
+  CHECK(st::test::view_raw(port, "GET / HTTP/1.1\r\nHost: " + self + "\r\n\r\n") == 200);
+  CHECK(st::test::view_raw(port, "GET /view.js HTTP/1.1\r\nHost: localhost:" + std::to_string(port) + "\r\n\r\n") == 200);
+  // The socket: no token, a wrong one, another site's page (cross-site WebSocket hijacking), another Host.
+  CHECK(st::test::view_raw(port, st::test::view_upgrade("", self, "http://" + self)) == 403);
+  CHECK(st::test::view_raw(port, st::test::view_upgrade("?t=" + std::string(32, '0'), self, "http://" + self)) == 403);
+  std::string reply;
+  CHECK(st::test::view_raw(port, st::test::view_upgrade("?t=" + token, self, "http://evil.example"), nullptr, &reply,
+                           300) == 403);
+  CHECK(st::test::contains(reply, "another origin"));
+  CHECK(st::test::view_raw(port, st::test::view_upgrade("?t=" + token, "evil.example:" + std::to_string(port),
+                                                        "http://evil.example:" + std::to_string(port))) == 403);
+
+  // Its own page is taken; this one reads the meshes and frames for 1.5 s, then stops reading.
+  int stalled = -1;
+  REQUIRE(st::test::view_raw(port, st::test::view_upgrade("?t=" + token, self, "http://" + self), &stalled, nullptr,
+                             1500) == 101);
+  // A second page reads on: it must get frames at the view's rate while the first stalls.
+  ViewMessages msgs;
+  char err[256] = "";
+  mg_connection* ws = st::test::view_connect(port, msgs, err, token);
+  INFO(err);
+  REQUIRE(ws != nullptr);
+  std::this_thread::sleep_for(std::chrono::seconds(2));  // the stalled page's socket fills
+  std::size_t before = 0;
+  {
+    std::lock_guard<std::mutex> l(msgs.mu);
+    before = msgs.binary.size();
+  }
+  std::this_thread::sleep_for(std::chrono::seconds(4));
+  std::size_t during = 0;
+  {
+    std::lock_guard<std::mutex> l(msgs.mu);
+    during = msgs.binary.size() - before;
+  }
+  CHECK(during > 4 * 60 / 2);  // at least half the 60 frames a second over those 4 s
+  // The page limit (4): two more pages are taken, the next gets a clear 503.
+  int more[2] = {-1, -1};
+  CHECK(st::test::view_raw(port, st::test::view_upgrade("?t=" + token, self, ""), &more[0]) == 101);
+  CHECK(st::test::view_raw(port, st::test::view_upgrade("?t=" + token, self, ""), &more[1]) == 101);
+  CHECK(st::test::view_raw(port, st::test::view_upgrade("?t=" + token, self, ""), nullptr, &reply, 300) == 503);
+  CHECK(st::test::contains(reply, "already serves 4 pages"));
+  const int rc = st::test::wait_for(pid, 60);
+  mg_close_connection(ws);
+  for (int fd : {stalled, more[0], more[1]}) ::close(fd);
+  const std::string log = st::test::slurp_file(d.file("run.log"));
+  INFO(log);
+  CHECK(rc == 0);
+  CHECK(st::test::contains(log, "refused: 6 forbidden (Host, Origin or token), 1 over the page limit"));
   mg_exit_library();
 }
 
@@ -207,7 +280,7 @@ TEST_CASE("device kind browser: synthetic wheel events in headless Chromium pres
   const auto pressed = [&] {
     char err[256] = "";
     if (!ws)
-      ws = mg_connect_websocket_client("127.0.0.1", port, 0, err, sizeof err, "/ws", nullptr, view_on_data, nullptr, &msgs);
+      ws = st::test::view_connect(port, msgs, err, st::test::view_token(st::test::slurp_file(d.file("run.log"))));
     std::lock_guard<std::mutex> l(msgs.mu);
     for (const std::string& f : msgs.binary)
       if (f.size() >= st::test::kFacesAt && f.compare(0, 4, "STVF") == 0 && view_at<double>(f, 160) > 1.5) return true;

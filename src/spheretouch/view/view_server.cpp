@@ -4,6 +4,7 @@
 
 #include <civetweb.h>
 #include <nlohmann/json.hpp>
+#include <sys/random.h>
 
 #include <algorithm>
 #include <chrono>
@@ -37,18 +38,73 @@ Result<std::string> slurp(const std::string& path) {
   return ss.str();
 }
 
+const char* reason_of(int code) {
+  switch (code) {
+    case 200:
+      return "OK";
+    case 403:
+      return "Forbidden";
+    case 503:
+      return "Service Unavailable";
+    default:
+      return "Not Found";
+  }
+}
+
 int send_text(mg_connection* conn, int code, const char* type, std::string_view body) {
   mg_printf(conn,
             "HTTP/1.1 %d %s\r\nContent-Type: %s\r\nContent-Length: %zu\r\nCache-Control: no-store\r\n"
             "X-Content-Type-Options: nosniff\r\nConnection: close\r\n\r\n",
-            code, code == 200 ? "OK" : "Not Found", type, body.size());
+            code, reason_of(code), type, body.size());
   mg_write(conn, body.data(), body.size());
   return code;
 }
 
+/// A random token: 16 bytes as 32 hex digits (getrandom: the kernel's CSPRNG).
+std::string random_token() {
+  unsigned char b[16];
+  for (std::size_t got = 0; got < sizeof b;) {
+    const ssize_t n = getrandom(b + got, sizeof b - got, 0);
+    if (n > 0) got += std::size_t(n);
+  }
+  std::string t;
+  char hex[3];
+  for (unsigned char c : b) {
+    std::snprintf(hex, sizeof hex, "%02x", c);
+    t += hex;
+  }
+  return t;
+}
+
+/// The host part of a Host header or an Origin's authority ("[::1]:8080" -> "[::1]", "a:80" -> "a").
+std::string host_part(std::string_view authority) {
+  if (!authority.empty() && authority.front() == '[') return std::string(authority.substr(0, authority.find(']') + 1));
+  return std::string(authority.substr(0, authority.find(':')));
+}
+
+/// An IP literal or "localhost": what a browser sends for this machine; a DNS name is what a
+/// rebinding attack sends (the attacker's name, now resolving to us).
+bool is_address_or_localhost(const std::string& host) {
+  if (host == "localhost") return true;
+  if (host.size() > 2 && host.front() == '[' && host.back() == ']')
+    return host.find_first_not_of("0123456789abcdefABCDEF:.", 1) == host.size() - 1;
+  if (host.empty() || host.find_first_not_of("0123456789.") != std::string::npos) return false;
+  int dots = 0;
+  for (char c : host) dots += c == '.';
+  return dots == 3;
+}
+
+/// Equal in time independent of where they differ (the token).
+bool same_secret(std::string_view a, std::string_view b) {
+  if (a.size() != b.size()) return false;
+  unsigned char d = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) d |= static_cast<unsigned char>(a[i] ^ b[i]);
+  return d == 0;
+}
+
 // C trampolines.
 int on_request(mg_connection* c, void* self) { return static_cast<ViewServer*>(self)->serve(c); }
-int on_ws_connect(const mg_connection*, void*) { return 0; }
+int on_ws_connect(const mg_connection* c, void* self) { return static_cast<ViewServer*>(self)->admit(c); }
 void on_ws_ready(mg_connection* c, void* self) { static_cast<ViewServer*>(self)->ready(c); }
 int on_ws_data(mg_connection* c, int bits, char* data, std::size_t len, void* self) {
   return static_cast<ViewServer*>(self)->data(c, bits, data, len);
@@ -72,6 +128,7 @@ Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& c,
   if (const std::string bad = check_listen(c.listen); !bad.empty()) return fail(bad);
   const auto colon = c.listen.rfind(':');
   if (!(c.rate_hz > 0 && c.rate_hz <= 240)) return fail("--view: rate must be in (0, 240] frames per second");
+  if (c.max_pages < 1 || c.max_pages > 64) return fail("--view: max_pages must be in [1, 64]");
   std::unique_ptr<ViewServer> s(new ViewServer(c, probe, object, frames, status, device));
   Result<std::string> three = slurp(c.three_dir + "/three.min.js");
   if (!three) return Error{three.error()};
@@ -100,11 +157,25 @@ Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& c,
       for (std::uint32_t v : t) m.u32(v);
   }
 
+  if (s->config_.token.empty()) s->config_.token = random_token();
   mg_init_library(0);
   s->library_ = true;
   const std::string port_opt = c.listen;
-  const char* options[] = {"listening_ports",      port_opt.c_str(), "num_threads", "4", "enable_keep_alive", "no",
-                           "websocket_timeout_ms", "3600000",        nullptr};
+  // A WebSocket holds one of civetweb's threads while it is open: max_pages of them, and four for
+  // plain requests (the page, its scripts, a refused page's 503). A request or a write that
+  // stalls for 3 s fails; a page that sends nothing for 10 s (the page reports every second) closes.
+  const std::string threads = std::to_string(c.max_pages + 4);
+  const char* options[] = {"listening_ports",
+                           port_opt.c_str(),
+                           "num_threads",
+                           threads.c_str(),
+                           "enable_keep_alive",
+                           "no",
+                           "request_timeout_ms",
+                           "3000",
+                           "websocket_timeout_ms",
+                           "10000",
+                           nullptr};
   mg_callbacks cb{};
   cb.log_message = on_log;
   s->ctx_ = mg_start(&cb, s.get(), options);
@@ -114,7 +185,7 @@ Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& c,
   mg_server_port ports[4];
   const int n = mg_get_server_ports(s->ctx_, 4, ports);
   const int port = n > 0 ? ports[0].port : 0;
-  s->url_ = "http://" + c.listen.substr(0, colon) + ":" + std::to_string(port) + "/";
+  s->url_ = "http://" + c.listen.substr(0, colon) + ":" + std::to_string(port) + "/?t=" + s->config_.token;
   s->pusher_ = std::thread([p = s.get()] { p->push(); });
   return s;
 }
@@ -123,14 +194,79 @@ ViewServer::ViewServer(const ViewServerConfig& c, const geom::Mesh& probe, const
                        const rt::SeqLock<rt::ViewFrame>& frames, const rt::ShmStatus& status, rt::PoseFeedDevice* device)
     : config_(c), probe_(probe), object_(object), frames_(frames), status_(status), device_(device) {}
 
+/// A page: its connection, its sender thread and a mailbox of one frame (the newest).
+struct ViewServer::Page {
+  mg_connection* conn = nullptr;
+  std::mutex mu;
+  std::condition_variable cv;
+  std::shared_ptr<const std::vector<std::uint8_t>> next;  // the newest frame not yet written
+  bool closing = false;                                   // the connection is closing: stop
+  bool dead = false;                                      // a write failed: no more frames
+  std::thread sender;
+};
+
 ViewServer::~ViewServer() {
   stop_.store(true);
   if (pusher_.joinable()) pusher_.join();
-  if (ctx_) mg_stop(ctx_);  // closes every connection (close handlers run) and joins civetweb's threads
+  if (ctx_) mg_stop(ctx_);  // closes every connection (close handlers run, senders joined) and joins civetweb's threads
   if (library_) mg_exit_library();
 }
 
+std::string ViewServer::refuse_why(const mg_connection* conn, bool websocket) const {
+  const char* host = mg_get_header(conn, "Host");
+  if (!host || !is_address_or_localhost(host_part(host)))
+    return "the Host header must name this machine by address or as localhost";
+  if (!websocket) return "";
+  const mg_request_info* ri = mg_get_request_info(conn);
+  std::string_view query = ri && ri->query_string ? ri->query_string : "";
+  std::string_view token;
+  for (std::size_t at = 0; at <= query.size();) {
+    const std::size_t end = std::min(query.find('&', at), query.size());
+    if (query.substr(at, 2) == "t=") token = query.substr(at + 2, end - at - 2);
+    at = end + 1;
+  }
+  if (!same_secret(token, config_.token)) return "no or a wrong token (open the URL the run printed)";
+  // A browser names the page that opens the socket: it must be this server's own page.
+  if (const char* origin = mg_get_header(conn, "Origin")) {
+    const std::string_view o = origin;
+    if (o.substr(0, 7) != "http://" || o.substr(7) != std::string_view(host))
+      return "a page of another origin may not open the view's socket";
+  }
+  return "";
+}
+
+int ViewServer::admit(const mg_connection* conn) {
+  auto* c = const_cast<mg_connection*>(conn);  // civetweb hands the handshake's connection as const
+  if (const std::string why = refuse_why(conn, true); !why.empty()) {
+    {
+      std::lock_guard<std::mutex> l(mu_);
+      ++stats_.forbidden;
+    }
+    send_text(c, 403, "text/plain", "forbidden: " + why + "\n");
+    return 1;
+  }
+  std::lock_guard<std::mutex> l(mu_);
+  const std::int64_t now = rt::now_ns();
+  std::erase_if(admitted_, [now](const auto& a) { return now - a.second > 10'000'000'000; });
+  admitted_.erase(conn);  // this thread's connection object, reused: not a page yet
+  if (pages_.size() + admitted_.size() >= config_.max_pages) {
+    ++stats_.busy;
+    send_text(c, 503, "text/plain",
+              "the live view already serves " + std::to_string(config_.max_pages) + " pages; close one and retry\n");
+    return 1;
+  }
+  admitted_[conn] = now;
+  return 0;
+}
+
 int ViewServer::serve(mg_connection* conn) {
+  if (const std::string why = refuse_why(conn, false); !why.empty()) {
+    {
+      std::lock_guard<std::mutex> l(mu_);
+      ++stats_.forbidden;
+    }
+    return send_text(conn, 403, "text/plain", "forbidden: " + why + "\n");
+  }
   const mg_request_info* ri = mg_get_request_info(conn);
   const std::string uri = ri && ri->local_uri ? ri->local_uri : "";
   if (uri == "/" || uri == "/index.html") return send_text(conn, 200, "text/html; charset=utf-8", assets::view_html);
@@ -153,10 +289,42 @@ void ViewServer::ready(mg_connection* conn) {
   }
   mg_unlock_connection(conn);
   std::lock_guard<std::mutex> l(mu_);
+  admitted_.erase(conn);
   ++stats_.clients;
   if (w > 0) {
     stats_.bytes += mesh_msg_.size();
-    clients_.push_back(conn);
+    auto page = std::make_unique<Page>();
+    page->conn = conn;
+    Page* p = page.get();
+    p->sender = std::thread([this, p] { send_loop(p); });
+    pages_.push_back(std::move(page));
+  }
+}
+
+void ViewServer::send_loop(Page* p) {
+  for (;;) {
+    std::shared_ptr<const std::vector<std::uint8_t>> msg;
+    {
+      std::unique_lock<std::mutex> l(p->mu);
+      p->cv.wait(l, [p] { return p->closing || (p->next && !p->dead); });
+      if (p->closing) return;
+      msg.swap(p->next);
+    }
+    // Only this thread writes frames to this page, and under no lock of the server's: a page
+    // that stops reading blocks here (until the write times out), no one else.
+    mg_lock_connection(p->conn);
+    const int n =
+        mg_websocket_write(p->conn, MG_WEBSOCKET_OPCODE_BINARY, reinterpret_cast<const char*>(msg->data()), msg->size());
+    mg_unlock_connection(p->conn);
+    std::lock_guard<std::mutex> l(mu_);
+    if (n > 0) {
+      ++stats_.frames;
+      stats_.bytes += msg->size();
+    } else {
+      ++stats_.write_failures;
+      std::lock_guard<std::mutex> pl(p->mu);
+      p->dead = true;
+    }
   }
 }
 
@@ -289,10 +457,24 @@ int ViewServer::handle(mg_connection* conn, int opcode, const char* data, std::s
 }
 
 void ViewServer::closed(const mg_connection* conn) {
-  std::lock_guard<std::mutex> l(mu_);
-  partial_.erase(conn);
-  if (driver_ == conn) driver_ = nullptr;  // another page may drive now
-  clients_.erase(std::remove(clients_.begin(), clients_.end(), conn), clients_.end());
+  std::unique_ptr<Page> page;
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    partial_.erase(conn);
+    admitted_.erase(conn);
+    if (driver_ == conn) driver_ = nullptr;  // another page may drive now
+    const auto it = std::find_if(pages_.begin(), pages_.end(), [conn](const auto& p) { return p->conn == conn; });
+    if (it == pages_.end()) return;
+    page = std::move(*it);
+    pages_.erase(it);
+  }
+  // The sender stops before civetweb frees the connection (a write in progress ends at its timeout).
+  {
+    std::lock_guard<std::mutex> l(page->mu);
+    page->closing = true;
+  }
+  page->cv.notify_one();
+  page->sender.join();
 }
 
 void ViewServer::push() {
@@ -301,20 +483,17 @@ void ViewServer::push() {
   frame->n_probe = frame->n_object = 0;
   const auto probe_faces = std::uint32_t(probe_.faces.size()), object_faces = std::uint32_t(object_.faces.size());
   std::uint64_t seen = 0;  // the frames' SeqLock version last read
-  std::vector<std::uint8_t> msg;
   const std::int64_t t0 = rt::now_ns();
   const auto period = std::chrono::nanoseconds(std::int64_t(1e9 / config_.rate_hz));
   auto next_at = std::chrono::steady_clock::now();
-  std::vector<mg_connection*> to;
   while (!stop_.load(std::memory_order_relaxed)) {
     next_at += period;
     std::this_thread::sleep_until(next_at);
     if (std::chrono::steady_clock::now() - next_at > 4 * period) next_at = std::chrono::steady_clock::now();
     {
       std::lock_guard<std::mutex> l(mu_);
-      to = clients_;
+      if (pages_.empty()) continue;
     }
-    if (to.empty()) continue;
     // The newest frame if one came (a few tries: a writer that keeps the SeqLock busy costs this
     // thread little), checked; else the last good one again.
     if (const std::uint64_t v = frames_.version(); v != seen) {
@@ -337,8 +516,8 @@ void ViewServer::push() {
     // 224 f64 seconds since the view started, 232 u32 contacts, 236 u32 n_probe, 240 u32 n_object,
     // 244 u32 reserved, 248 f64 torque_Nm[3] (the servo's, about the tool centre point), 272 u32
     // probe faces[n_probe], then u32 object faces[n_object].
-    msg.clear();
-    net::Writer w(msg);
+    auto msg = std::make_shared<std::vector<std::uint8_t>>();  // built once, shared by every page's mailbox
+    net::Writer w(*msg);
     w.raw("STVF", 4);
     w.u32(frame->flags);
     w.u64(frame->round);
@@ -358,19 +537,18 @@ void ViewServer::push() {
     w.u32(0);
     for (double v : servo.torque_Nm) w.f64(std::isfinite(v) ? v : 0.0);
     w.raw(frame->faces, 4 * (std::size_t(frame->n_probe) + frame->n_object));
-    std::uint64_t sent = 0, bytes = 0;
-    for (mg_connection* c : to) {
-      std::lock_guard<std::mutex> l(mu_);  // a connection closed meanwhile is no longer listed
-      if (std::find(clients_.begin(), clients_.end(), c) == clients_.end()) continue;
-      mg_lock_connection(c);
-      const int n =
-          mg_websocket_write(c, MG_WEBSOCKET_OPCODE_BINARY, reinterpret_cast<const char*>(msg.data()), msg.size());
-      mg_unlock_connection(c);
-      if (n > 0) ++sent, bytes += msg.size();
-    }
+    // Into every page's mailbox; a frame its page has not taken yet is replaced (dropped).
+    const std::shared_ptr<const std::vector<std::uint8_t>> frame_msg = std::move(msg);
     std::lock_guard<std::mutex> l(mu_);
-    stats_.frames += sent;
-    stats_.bytes += bytes;
+    for (const auto& p : pages_) {
+      {
+        std::lock_guard<std::mutex> pl(p->mu);
+        if (p->dead) continue;
+        if (p->next) ++stats_.dropped;
+        p->next = frame_msg;
+      }
+      p->cv.notify_one();
+    }
   }
 }
 
@@ -391,6 +569,12 @@ std::string ViewServer::summary() const {
                 s.bad_messages ? (", " + std::to_string(s.bad_messages) + " bad messages refused").c_str() : "");
   std::string out = line;
   if (s.bad_frames) out += ", " + std::to_string(s.bad_frames) + " bad frames not sent";
+  if (s.dropped || s.write_failures)
+    out += ", " + std::to_string(s.dropped) + " frames dropped for slow pages, " + std::to_string(s.write_failures) +
+           " writes failed";
+  if (s.forbidden || s.busy)
+    out += "; refused: " + std::to_string(s.forbidden) + " forbidden (Host, Origin or token), " +
+           std::to_string(s.busy) + " over the page limit";
   if (device_) out += "; browser device: " + std::to_string(s.poses) + " poses taken";
   return out;
 }

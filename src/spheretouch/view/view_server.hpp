@@ -22,6 +22,15 @@
 //   page -> server: text {"fps": F, "frames": N, "seconds": S, "red": R} once a second; binary "STVS" + a PNG
 //     of the canvas (saved as view.png in the run directory) when the page was opened with
 //     ?snapshot=1 and it has drawn colliding faces.
+// Who may connect: every request must name this machine in its Host header (an IP address or
+// "localhost": a DNS name is what a DNS-rebinding page sends), and /ws needs the per-server
+// random token the printed URL carries (?t=...) and, from a browser, an Origin of that same host
+// (a page on another site cannot open it: cross-site WebSocket hijacking). Refusals are 403s,
+// counted. At most max_pages pages at once (one more gets a 503); each page has its own sender
+// thread with a one-frame mailbox, so a page that stops reading loses frames (counted) and slows
+// no one: nothing is written under the server's lock, and a write that stalls for the request
+// timeout (3 s) fails and that page gets no more frames. A page that sends nothing for 10 s
+// (the real one reports every second) is closed.
 //   With [device] kind = "browser": server -> page text {"device": "browser", "home": [x, y, z]}
 //   after the meshes; page -> server binary "STVP" u32 0, f64 tip x y z (object file mm), f64 qw qx
 //   qy qz, 64 bytes, at the page's frame rate; the first page to send one drives, others are refused.
@@ -29,6 +38,7 @@
 #include <spheretouch/abi.hpp>
 #include <atomic>
 #include <cstdint>
+#include <condition_variable>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -53,6 +63,8 @@ struct ViewServerConfig {
   double rate_hz = 60;                                    ///< frames per second sent to each page
   std::string three_dir = "/usr/share/javascript/three";  ///< Debian's libjs-three
   std::string out_dir;                                    ///< where snapshots go (view.png); "" = none
+  std::size_t max_pages = 4;                              ///< pages at once; one more gets a 503
+  std::string token;  ///< the WebSocket's token ("" = a random one per server: the URL carries it)
 };
 
 struct ViewStats {
@@ -67,6 +79,10 @@ struct ViewStats {
   std::uint64_t bad_messages = 0;  ///< messages from a page that were refused
   std::uint64_t bad_frames = 0;    ///< frames that failed their checks (rt::sanitize_view_frame), not sent
   std::uint64_t poses = 0;         ///< browser device: poses a page sent that were taken
+  std::uint64_t forbidden = 0;  ///< requests refused (403): a Host that is not an address, a foreign Origin, no token
+  std::uint64_t busy = 0;       ///< pages refused (503): max_pages already open
+  std::uint64_t dropped = 0;    ///< frames a slow page never got (its next frame replaced it)
+  std::uint64_t write_failures = 0;  ///< frame writes that failed or timed out (that page gets no more)
 };
 
 /// "" when `listen` has the ADDR:PORT form --view takes, else the error (checked before a run
@@ -84,13 +100,16 @@ class ViewServer {
   ~ViewServer();
   ViewServer(const ViewServer&) = delete;
   ViewServer& operator=(const ViewServer&) = delete;
-  std::string url() const { return url_; }  ///< http://ADDR:PORT/
+  std::string url() const {
+    return url_;
+  }  ///< http://ADDR:PORT/?t=TOKEN (the token is the key: share the URL with care)
   ViewStats stats() const;
   /// One line for the run's summary.
   std::string summary() const;
 
   // civetweb callbacks (public for the C trampolines).
   int serve(mg_connection* conn);
+  int admit(const mg_connection* conn);  // the WebSocket handshake: 0 admits, else a 403/503 was sent
   void ready(mg_connection* conn);
   int data(mg_connection* conn, int bits, const char* data, std::size_t len);
   void closed(const mg_connection* conn);
@@ -99,7 +118,11 @@ class ViewServer {
  private:
   ViewServer(const ViewServerConfig& c, const geom::Mesh& probe, const geom::Mesh& object,
              const rt::SeqLock<rt::ViewFrame>& frames, const rt::ShmStatus& status, rt::PoseFeedDevice* device);
-  void push();  // the writer thread
+  struct Page;
+  void push();              // the frame thread: builds each frame once, hands it to every page's mailbox
+  void send_loop(Page* p);  // a page's sender thread
+  /// "" when the request may be served, else why not (403).
+  std::string refuse_why(const mg_connection* conn, bool websocket) const;
   void note_bad(const std::string& why);
   void note_bad_frame(const char* why);
 
@@ -115,8 +138,12 @@ class ViewServer {
   std::vector<std::uint8_t> mesh_msg_;  // the "STVM" message, built once
   mg_context* ctx_ = nullptr;
   bool library_ = false;   // mg_init_library called (mg_exit_library in the destructor)
-  mutable std::mutex mu_;  // clients_, stats_
-  std::vector<mg_connection*> clients_;
+  mutable std::mutex mu_;  // pages_, stats_, partial_, driver_ (never held while writing to a page)
+  std::vector<std::unique_ptr<Page>> pages_;
+  /// Connections admitted whose page is not listed yet (the meshes are being written), with when:
+  /// they count toward max_pages. civetweb reuses a thread's connection object, and one whose
+  /// handshake failed never closes: an entry older than 10 s is forgotten.
+  std::map<const mg_connection*, std::int64_t> admitted_;
   struct Partial {
     int opcode = 0;
     std::string data;
