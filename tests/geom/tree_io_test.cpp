@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <string>
 
 #include <spheretouch/geom/collide.hpp>
@@ -94,6 +95,17 @@ TEST_CASE("tree files: forged structures are refused, each with what is wrong") 
       // Would hide collisions rather than crash: a sphere or a face box that misses its faces.
       {"a leaf sphere too small", [&](SphereTree& f) { f.nodes[leaf].radius *= 0.5f; }, "sphere does not hold face"},
       {"a face box too small", [](SphereTree& f) { f.face_boxes[3].hi[0] = f.face_boxes[3].lo[0]; }, "face box"},
+      // Would turn every query into brute force: spheres and boxes that hold everything.
+      {"a huge root sphere", [](SphereTree& f) { f.nodes[0].radius = 1e30f; },
+       "node 0 sphere (radius 1.0000000150474662e+30) is not tight"},
+      {"a huge leaf sphere", [&](SphereTree& f) { f.nodes[leaf].radius *= 3.0f; }, "is not tight"},
+      {"an infinite face box",
+       [](SphereTree& f) {
+         f.face_boxes[3].lo[1] = -std::numeric_limits<float>::infinity();
+         f.face_boxes[3].hi[2] = std::numeric_limits<float>::infinity();
+       },
+       "face box of face"},
+      {"a face box 1 mm too wide", [](SphereTree& f) { f.face_boxes[5].hi[0] += 1.0f; }, "is not tight"},
   };
   for (const Case& c : cases) {
     const std::string what = c.what;

@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <fstream>
 
 namespace st::inline SPHERETOUCH_ABI::geom {
@@ -138,7 +139,11 @@ Status check_structure(const SphereTree& t, const std::string& path) {
 }
 
 // Every vertex below a node lies in its (padded) sphere, and every face box contains its face:
-// what collide() relies on to skip a node. A forged file could otherwise hide collisions.
+// what collide() relies on to skip a node. A forged file could otherwise hide collisions. And
+// they are tight: a sphere no larger than the diagonal of its vertices' box (the builder's are
+// within half of it, the smallest enclosing sphere's radius), a face box no larger than its
+// face's box widened by the float rounding; a file of huge spheres or infinite boxes would
+// otherwise pass and turn every query into brute force.
 Status check_bounds(const SphereTree& t, const Mesh& mesh, const std::string& path) {
   const std::uint32_t N = t.num_nodes();
   for (std::uint32_t i = 0; i < N; ++i) {
@@ -146,19 +151,36 @@ Status check_bounds(const SphereTree& t, const Mesh& mesh, const std::string& pa
     const SphereNodeCold& c = t.cold[i];
     const Vec3 centre(h.centre[0], h.centre[1], h.centre[2]);
     const double r = double(h.radius) * (1 + 1e-6) + 1e-9;
+    Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
     for (std::uint32_t s = c.face_begin; s < c.face_end; ++s) {
       const std::uint32_t f = t.face_order[s];
-      for (std::uint32_t v : mesh.faces[f])
+      for (std::uint32_t v : mesh.faces[f]) {
         if (!(v < mesh.local.size()) || (mesh.local[v] - centre).norm() > r)
           return fail(path, ": corrupt: node ", i, " sphere does not hold face ", f);
+        lo = lo.cwiseMin(mesh.local[v]);
+        hi = hi.cwiseMax(mesh.local[v]);
+      }
     }
+    const double diagonal = (hi - lo).norm(), scale = std::max(lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff());
+    if (double(h.radius) > diagonal * (1 + 1e-6) + 1e-6 * scale + 1e-9)
+      return fail(path, ": corrupt: node ", i, " sphere (radius ", h.radius, ") is not tight: its faces span ", diagonal);
   }
   for (std::uint32_t s = 0; s < t.num_faces(); ++s) {
     const FaceBox& b = t.face_boxes[s];
-    for (std::uint32_t v : mesh.faces[t.face_order[s]])
-      for (int k = 0; k < 3; ++k)
-        if (!(double(b.lo[k]) <= mesh.local[v][k] && mesh.local[v][k] <= double(b.hi[k])))
+    for (int k = 0; k < 3; ++k) {
+      double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+      for (std::uint32_t v : mesh.faces[t.face_order[s]]) {
+        const double x = mesh.local[v][k];
+        if (!(double(b.lo[k]) <= x && x <= double(b.hi[k])))
           return fail(path, ": corrupt: face box of face ", t.face_order[s], " does not hold it");
+        lo = std::min(lo, x);
+        hi = std::max(hi, x);
+      }
+      // Single precision rounded outward: a few ulps of the coordinate's size.
+      const double slack = 1e-6 * std::max({std::abs(lo), std::abs(hi), 1.0});
+      if (double(b.lo[k]) < lo - slack || double(b.hi[k]) > hi + slack)
+        return fail(path, ": corrupt: face box of face ", t.face_order[s], " is not tight");
+    }
   }
   return Ok{};
 }
