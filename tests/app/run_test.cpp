@@ -2,6 +2,8 @@
 // Tests for `spheretouch run` and scene files: a short run of a generated scene asserting counts
 // (never timing precision), the force profile of the built-in script, the outputs' formats, and
 // an error naming the field for each kind of bad scene file.
+#include <sys/stat.h>
+
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -416,6 +418,22 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
   const auto r = run_command(spheretouch_exe() + " run " + d.file("s.toml") + " --out " + d.file("o"));
   CHECK(r.exit_code == 2);
   CHECK(contains(r.output, "s.toml:6: force.peak_n: expected a value in"));
+}
+
+TEST_CASE("scene files: /dev/zero, a FIFO or an oversized file is refused before it is read") {
+  auto z = st::engine::load_scene("/dev/zero");
+  REQUIRE_FALSE(z.ok());
+  CHECK(z.error() == "/dev/zero: not a regular file (a scene file is a text file)");
+  st::test::TempDir d;
+  REQUIRE(::mkfifo(d.file("fifo.toml").c_str(), 0600) == 0);
+  auto f = st::engine::load_scene(d.file("fifo.toml"));  // would hang reading a FIFO nobody writes
+  REQUIRE_FALSE(f.ok());
+  CHECK(st::test::contains(f.error(), "not a regular file"));
+  { std::ofstream o(d.file("big.toml")); }
+  std::filesystem::resize_file(d.file("big.toml"), st::engine::kMaxSceneBytes + 1);
+  auto b = st::engine::load_scene(d.file("big.toml"));
+  REQUIRE_FALSE(b.ok());
+  CHECK(st::test::contains(b.error(), "-byte limit for a scene file"));
 }
 
 TEST_CASE("scene files: a path the system cannot look up is an error, not an exception (fuzz finding)") {

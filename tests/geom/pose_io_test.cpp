@@ -4,6 +4,8 @@
 #include <spheretouch/geom/pose_io.hpp>
 
 #include <doctest/doctest.h>
+#include <filesystem>
+#include <sys/stat.h>
 
 #include <cmath>
 #include <cstdio>
@@ -121,6 +123,25 @@ TEST_CASE("read_poses: files") {
   auto dir = read_poses("/tmp");
   REQUIRE_FALSE(dir.ok());
   CHECK(dir.error() == "/tmp: is a directory, not a pose file");
+  // /dev/zero (once read into memory until it aborted at 2.6 GB) and a FIFO nobody writes (once a
+  // hang) are refused before anything is read; so is a file over the limit.
+  auto zero = read_poses("/dev/zero");
+  REQUIRE_FALSE(zero.ok());
+  CHECK(zero.error() == "/dev/zero: not a regular file (a pose file is a text file)");
+  const std::string fifo = "/tmp/st_pose_fifo_" + std::to_string(::getpid());
+  std::remove(fifo.c_str());
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  auto f = read_poses(fifo);
+  REQUIRE_FALSE(f.ok());
+  CHECK(f.error() == fifo + ": not a regular file (a pose file is a text file)");
+  std::remove(fifo.c_str());
+  const std::string big = "/tmp/st_pose_big_" + std::to_string(::getpid());
+  { std::ofstream o(big); }
+  std::filesystem::resize_file(big, st::geom::kMaxPoseFileBytes + 1);  // sparse: nothing written
+  auto b = read_poses(big);
+  REQUIRE_FALSE(b.ok());
+  CHECK(b.error().find("-byte limit for a pose file") != std::string::npos);
+  std::remove(big.c_str());
 }
 
 TEST_CASE("format_pose: exact round trip, shortest form") {

@@ -1,5 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // Tests src/spheretouch/net/worker_config.*: TOML parsing (unknown keys named), and the safe-by-default bind policy.
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cstdio>
 #include <doctest/doctest.h>
 
 #include <filesystem>
@@ -136,4 +140,20 @@ TEST_CASE("ipc: CURVE is allowed over ipc://; ipc_allowed_uids is parsed and che
   REQUIRE_FALSE(bad.ok());
   CHECK(bad.error().find("w.toml:1: ipc_allowed_uids: expected an integer") != std::string::npos);
   CHECK_FALSE(parse_daemon_config("ipc_allowed_uids = 5\n", "w.toml").ok());
+}
+
+TEST_CASE("a worker config that is /dev/zero, a FIFO or a directory is refused before it is read") {
+  auto z = load_daemon_config("/dev/zero");
+  REQUIRE_FALSE(z.ok());
+  CHECK(z.error() == "/dev/zero: not a regular file (a worker config is a text file)");
+  const std::string fifo = "/tmp/st_worker_config_fifo_" + std::to_string(::getpid());
+  std::remove(fifo.c_str());
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  auto f = load_daemon_config(fifo);  // would hang reading a FIFO nobody writes
+  std::remove(fifo.c_str());
+  REQUIRE_FALSE(f.ok());
+  CHECK(f.error().find("not a regular file") != std::string::npos);
+  auto d = load_daemon_config("/tmp");
+  REQUIRE_FALSE(d.ok());
+  CHECK(d.error() == "/tmp: is a directory, not a worker config");
 }

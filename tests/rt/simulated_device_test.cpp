@@ -89,7 +89,7 @@ TEST_CASE("load_trajectory: /dev/zero, a directory and an oversized file are ref
   CHECK(z.error().find("not a regular file") != std::string::npos);
   auto d = st::rt::load_trajectory("/tmp");
   REQUIRE_FALSE(d.ok());
-  CHECK(d.error().find("not a regular file") != std::string::npos);
+  CHECK(d.error().find("is a directory, not a trajectory file") != std::string::npos);
   const std::string big = (std::filesystem::temp_directory_path() / "st_big_trajectory.txt").string();
   {
     std::ofstream o(big);

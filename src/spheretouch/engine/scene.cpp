@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // Scene file parsing: one TomlReader per section, defaults from the libraries' Default…().
 #include <spheretouch/engine/scene.hpp>
+#include <spheretouch/geom/text_file.hpp>
 
 #include <cmath>
 #include <cstdio>
@@ -408,12 +409,10 @@ Result<rt::UdpDeviceConfig> udp_device_config(const Scene& s, const std::string&
 }
 
 Result<Scene> load_scene(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return fail(path, ": cannot open scene file");
-  std::stringstream ss;
-  ss << in.rdbuf();
+  Result<std::string> text = geom::read_text_file(path, kMaxSceneBytes, "scene file");
+  if (!text) return Error{text.error()};
   const std::string dir = std::filesystem::path(path).parent_path().string();
-  return parse_scene(ss.str(), path, dir.empty() ? "." : dir);
+  return parse_scene(text.value(), path, dir.empty() ? "." : dir);
 }
 
 rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, const geom::Mesh& object) {

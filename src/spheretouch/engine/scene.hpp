@@ -116,7 +116,10 @@ geom::Vec3 tool_point(const Scene& s, const geom::Mesh& probe);
 /// The defaults (a capsule fingertip against an icosphere: needs no download).
 Scene DefaultScene();
 
-/// Reads and checks a scene file; errors name the file, line and field.
+/// A scene file is a text file of at most this many bytes.
+inline constexpr std::uint64_t kMaxSceneBytes = 1u << 20;
+/// Reads and checks a scene file (a regular file of at most kMaxSceneBytes); errors name the
+/// file, line and field.
 Result<Scene> load_scene(const std::string& path);
 
 /// Parses scene text; `name` is used in messages and `dir` resolves relative mesh paths.

@@ -3,6 +3,7 @@
 // rounded, locale-independent, and shortest-round-trip on output, so a written pose reads back
 // bit for bit.
 #include <spheretouch/geom/pose_io.hpp>
+#include <spheretouch/geom/text_file.hpp>
 
 #include <array>
 #include <cerrno>
@@ -128,14 +129,9 @@ Result<std::vector<Pose>> parse_poses(std::string_view text, std::string_view na
 }
 
 Result<std::vector<PoseLine>> read_pose_lines(const std::string& path) {
-  std::error_code ec;
-  if (std::filesystem::is_directory(path, ec)) return fail(path, ": is a directory, not a pose file");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return fail(path, ": cannot open pose file: ", std::strerror(errno));
-  std::ostringstream buf;
-  buf << in.rdbuf();
-  if (in.bad()) return fail(path, ": read error: ", std::strerror(errno));
-  return parse_pose_lines(buf.str(), path);
+  Result<std::string> text = read_text_file(path, kMaxPoseFileBytes, "pose file");
+  if (!text) return Error{text.error()};
+  return parse_pose_lines(text.value(), path);
 }
 
 Result<std::vector<Pose>> read_poses(const std::string& path) { return poses_only(read_pose_lines(path)); }

@@ -5,6 +5,7 @@
 /// '#' starts a comment to the end of the line, blank lines are ignored. Checked where they enter.
 #pragma once
 #include <spheretouch/abi.hpp>
+#include <cstdint>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -29,7 +30,10 @@ struct PoseLine {
   Pose pose;            ///< the pose, as read
   std::string comment;  ///< "" when there is none
 };
-/// Every pose of a pose file with its comment; errors as read_poses.
+/// A pose file is a text file of at most this many bytes (about 1.5 million poses).
+inline constexpr std::uint64_t kMaxPoseFileBytes = 512ull << 20;
+/// Every pose of a pose file with its comment; errors as read_poses (and a file that is not a
+/// regular one, or is over kMaxPoseFileBytes, is refused before it is read).
 Result<std::vector<PoseLine>> read_pose_lines(const std::string& path);
 /// parse_poses with comments.
 Result<std::vector<PoseLine>> parse_pose_lines(std::string_view text, std::string_view name);

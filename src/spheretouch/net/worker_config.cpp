@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // Worker daemon configuration (worker_config.hpp).
 #include <spheretouch/net/worker_config.hpp>
+#include <spheretouch/geom/text_file.hpp>
 
 #include <filesystem>
 #include <fstream>
@@ -43,11 +44,10 @@ Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::strin
 }
 
 Result<DaemonConfig> load_daemon_config(const std::string& path, DaemonConfig base) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return fail(path, ": cannot open");
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  Result<DaemonConfig> c = parse_daemon_config(ss.str(), path, std::move(base));
+  // A config is a small text file: a FIFO or /dev/zero named here is refused, not read forever.
+  Result<std::string> text = geom::read_text_file(path, 1u << 20, "worker config");
+  if (!text) return Error{text.error()};
+  Result<DaemonConfig> c = parse_daemon_config(text.value(), path, std::move(base));
   if (!c) return c;
   // Key files named relative to the config (not to whatever directory the daemon starts in).
   const std::filesystem::path dir = std::filesystem::path(path).parent_path();

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: BSD-3-Clause
 #include <spheretouch/rt/simulated_device.hpp>
+#include <spheretouch/geom/text_file.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -65,19 +66,9 @@ Result<Trajectory> parse_trajectory(const std::string& text, const std::string& 
 Result<Trajectory> load_trajectory(const std::string& path) {
   // A trajectory is a text file of at most kMaxTrajectoryBytes: /dev/zero or a FIFO must not be
   // read into memory without end.
-  std::error_code ec;
-  const auto st = std::filesystem::status(path, ec);
-  if (ec || !std::filesystem::exists(st)) return fail(path, ": cannot open");
-  if (!std::filesystem::is_regular_file(st)) return fail(path, ": not a regular file (a trajectory is a text file)");
-  const auto size = std::filesystem::file_size(path, ec);
-  if (ec) return fail(path, ": cannot read its size (", ec.message(), ")");
-  if (size > kMaxTrajectoryBytes)
-    return fail(path, ": ", size, " bytes, more than the ", kMaxTrajectoryBytes, "-byte limit for a trajectory file");
-  std::ifstream f(path);
-  if (!f) return fail(path, ": cannot open");
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return parse_trajectory(ss.str(), path);
+  Result<std::string> text = geom::read_text_file(path, kMaxTrajectoryBytes, "trajectory file");
+  if (!text) return Error{text.error()};
+  return parse_trajectory(text.value(), path);
 }
 
 Trajectory builtin_press_slide(const Eigen::Vector3d& surface, const Eigen::Vector3d& normal, double depth_mm,
