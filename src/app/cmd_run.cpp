@@ -32,7 +32,7 @@ struct RunArgs {
   std::string connect, out;
   std::string server_key, client_key;  ///< CURVE key files (override [workers] server_key, client_key)
   bool split = false;                  ///< the servo as its own process
-  std::string shm_name;                ///< segment name ("" = /spheretouch-<pid>)
+  std::string shm_name;                ///< segment name ("" = /spheretouch-<pid>-<random>)
   std::string view;                    ///< live view ADDR:PORT ("" = none)
 };
 
@@ -213,9 +213,9 @@ void add_run(CLI::App& app) {
   cmd->add_flag("--split", a->split,
                 "run the haptic servo as its own process on the shared-memory segment: it keeps the device\n"
                 "safe (force fades to zero) and finishes its run if the collision side dies");
-  cmd->add_option(
-      "--shm-name", a->shm_name,
-      "shared-memory segment of the run (default /spheretouch-<pid>); `spheretouch monitor` attaches to it");
+  cmd->add_option("--shm-name", a->shm_name,
+                  "shared-memory segment of the run (default /spheretouch-<pid>-<16 random hex digits>, which no other "
+                  "user can guess or take first); `spheretouch monitor` attaches to it");
   cmd->callback([a] { run(*a); });
 }
 

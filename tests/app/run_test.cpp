@@ -258,8 +258,8 @@ TEST_CASE("run: a full disk is an error naming the file, and the summary is prin
     const char* file;
     bool split;
   };
-  for (const Case c :
-       {Case{"ticks.csv", false}, Case{"rounds.csv", false}, Case{"summary.txt", false}, Case{"ticks.csv", true}}) {
+  for (const Case c : {Case{"ticks.csv", false}, Case{"rounds.csv", false}, Case{"summary.txt", false},
+                       Case{"ticks.csv", true}, Case{"servo.txt", true}}) {
     const std::string what = std::string(c.file) + (c.split ? " (split)" : "");
     CAPTURE(what);
     const std::string out = d.file(std::string("run-") + c.file + (c.split ? "-split" : ""));
@@ -272,10 +272,17 @@ TEST_CASE("run: a full disk is an error naming the file, and the summary is prin
     CHECK(contains(r.output, "summary\n"));  // on stdout, whatever happened to the files
     CHECK(contains(r.output, "haptic          "));
     CHECK(contains(r.output, "No space left on device"));
-    if (!c.split)
+    if (!c.split) {
       CHECK(contains(r.output, "spheretouch run: " + out + "/" + c.file + ": write failed"));
-    else
+    } else if (std::string(c.file) == "ticks.csv") {
       CHECK(contains(r.output, out + "/ticks.csv: write failed"));  // from the servo process
+    } else {
+      // The servo's own figures are lost: said so, with its last status, never printed as zeros.
+      CHECK(contains(r.output, out + "/servo.txt"));
+      CHECK(contains(r.output, "haptic          figures lost (the servo process's servo.txt); its last status: "));
+      CHECK_FALSE(contains(r.output, "haptic          0 ticks"));
+      CHECK(contains(r.output, "force           (servo figures lost)"));
+    }
     // The run directory is private to its user (poses and forces are the user's data).
     const auto perms = std::filesystem::status(out).permissions();
     CHECK((perms & (std::filesystem::perms::group_all | std::filesystem::perms::others_all)) == std::filesystem::perms::none);
@@ -289,7 +296,17 @@ TEST_CASE("run: SIGHUP (a closed terminal) ends the run like Ctrl-C: summary pri
   st::test::write_file(d.file("scene.toml"), scene);
   const std::string log = d.file("run.log");
   const pid_t pid = st::test::spawn_spheretouch({"run", d.file("scene.toml"), "--out", d.file("run")}, log);
-  const std::string seg = "/spheretouch-" + std::to_string(pid);
+  // The segment's name has a random part; the run prints it ("shm /spheretouch-PID-HEX;").
+  const std::string prefix = "shm /spheretouch-" + std::to_string(pid) + "-";
+  std::string seg;
+  for (int i = 0; i < 3000 && seg.empty(); ++i) {
+    const std::string text = st::test::slurp_file(log);
+    if (const auto at = text.find(prefix); at != std::string::npos && text.find(';', at) != std::string::npos)
+      seg = text.substr(at + 4, text.find(';', at) - at - 4);
+    else
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  REQUIRE(seg.size() == prefix.size() - 4 + 16);
   const st::rt::ServoStatus st = st::test::wait_for_ticks(seg, 200, pid, 30.0);
   REQUIRE(st.ticks >= 200);
   REQUIRE(kill(pid, SIGHUP) == 0);

@@ -235,3 +235,33 @@ TEST_CASE("ShmSegment: read-only attach sees the status area, survives its creat
   CHECK(rd.value()->unlink_if_orphaned());  // a survivor tidies up the name
   CHECK_FALSE(ShmSegment::attach_read_only(dead).ok());
 }
+
+TEST_CASE("ShmSegment: another user's segment is never attached nor replaced (a squatter, or a colleague's run)") {
+  // Making a segment another user owns needs CAP_CHOWN: CI runs the suites as root.
+  if (geteuid() != 0) {
+    MESSAGE("skipped: not root (cannot give a segment to another user)");
+    return;
+  }
+  const std::string name = "/spheretouch-test-foreign-owner-" + std::to_string(getpid());
+  auto seg = st::rt::ShmSegment::create(name);
+  REQUIRE(seg.ok());
+  const int fd = shm_open(name.c_str(), O_RDWR, 0);
+  REQUIRE(fd >= 0);
+  REQUIRE(fchown(fd, 65534, 65534) == 0);  // nobody's now, a valid segment with a live creator
+  close(fd);
+  auto rw = st::rt::ShmSegment::attach(name);
+  REQUIRE_FALSE(rw.ok());
+  CHECK(rw.error().find("belongs to uid 65534, not to this user") != std::string::npos);
+  auto ro = st::rt::ShmSegment::attach_read_only(name);
+  REQUIRE_FALSE(ro.ok());
+  CHECK(ro.error().find("refusing another user's segment") != std::string::npos);
+  seg.value().reset();  // our creator goes: the name is a squatter's now
+  const int again = shm_open(name.c_str(), O_RDWR | O_CREAT | O_EXCL, 0644);
+  REQUIRE(again >= 0);
+  REQUIRE(fchown(again, 65534, 65534) == 0);
+  close(again);
+  auto squatted = st::rt::ShmSegment::create(name);
+  REQUIRE_FALSE(squatted.ok());
+  CHECK(squatted.error().find("belongs to uid 65534 (another user's, or squatted)") != std::string::npos);
+  shm_unlink(name.c_str());
+}

@@ -2,6 +2,8 @@
 // The run engine (run_engine.hpp).
 #include <spheretouch/engine/run_engine.hpp>
 
+#include <sys/random.h>
+
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -35,6 +37,19 @@
 namespace st::inline SPHERETOUCH_ABI::engine {
 
 namespace {
+
+/// `bytes` random bytes (the kernel's CSPRNG) as hexadecimal digits.
+std::string random_hex(std::size_t bytes) {
+  std::string out;
+  for (std::size_t i = 0; i < bytes; ++i) {
+    unsigned char b = 0;
+    while (getrandom(&b, 1, 0) != 1) {}
+    char h[3];
+    std::snprintf(h, sizeof h, "%02x", b);
+    out += h;
+  }
+  return out;
+}
 
 std::string new_run_dir(const std::string& wanted) {
   if (!wanted.empty()) return wanted;
@@ -234,7 +249,9 @@ Status RunEngine::State::prepare() {
   // says at once which scene and meshes it loaded (monitor --view loads the same).
   const auto ref = std::make_unique<rt::SceneRef>(
       scene_ref(opt.scene_path.empty() ? "" : std::filesystem::absolute(opt.scene_path).string(), probe(), object()));
-  const std::string shm_name = opt.shm_name.empty() ? "/spheretouch-" + std::to_string(getpid()) : opt.shm_name;
+  // The default name has a random part: another user cannot create it first (squat) or guess it.
+  const std::string shm_name =
+      opt.shm_name.empty() ? "/spheretouch-" + std::to_string(getpid()) + "-" + random_hex(8) : opt.shm_name;
   Result<std::unique_ptr<rt::ShmSegment>> segr = rt::ShmSegment::create(shm_name);
   if (!segr) return Error{segr.error()};
   shm = std::move(segr).value();
@@ -481,6 +498,7 @@ RunReport RunEngine::finish(int signal) {
   RunReport report;
   std::vector<std::string>& failures = report.failures;
   ServoResults sres;
+  bool servo_lost = false;  // --split: the servo process's figures could not be read (never printed as zeros)
   if (e.opt.split) {
     // The summary is complete even when the servo's results cannot be read (its process failed, or
     // the disk was full when it wrote servo.txt): with the collision side's figures and a note.
@@ -488,10 +506,12 @@ RunReport RunEngine::finish(int signal) {
       failures.push_back("servo process (pid " + std::to_string(e.servo_pid) + ") ended with exit " +
                          std::to_string(e.servo_exit));
     Result<ServoResults> r = read_servo_results(e.dir + "/servo.txt");
-    if (r)
+    if (r) {
       sres = r.value();
-    else
-      failures.push_back(r.error() + " (the servo's figures below are missing)");
+    } else {
+      failures.push_back(r.error() + " (the servo's figures are lost)");
+      servo_lost = true;
+    }
   } else {
     sres.seconds = secs;
     if (e.device_clocked()) {  // the device's callback was the clock: no wake-ups of ours
@@ -522,7 +542,20 @@ RunReport RunEngine::finish(int signal) {
   const double servo_secs = sres.seconds > 0 ? sres.seconds : secs;
   appendf(summary, "summary\n");
   appendf(summary, "  duration        %.2f s\n", secs);
-  if (e.device_clocked())  // the device's callback wakes the servo: its wake-ups are not ours to time
+  if (servo_lost) {
+    // Its last published status is all there is: say so, never zeros as if measured.
+    rt::ServoStatus sv{};
+    const bool have = e.shm->status().servo.load(sv);
+    if (have)
+      appendf(summary,
+              "  haptic          figures lost (the servo process's servo.txt); its last status: %llu ticks, %llu "
+              "misses, peak force %.3f N; %s\n",
+              static_cast<unsigned long long>(sv.ticks), static_cast<unsigned long long>(sv.misses), sv.peak_force_N,
+              e.servo_where.c_str());
+    else
+      appendf(summary, "  haptic          figures lost (the servo process's servo.txt), and no status; %s\n",
+              e.servo_where.c_str());
+  } else if (e.device_clocked())  // the device's callback wakes the servo: its wake-ups are not ours to time
     appendf(summary, "  haptic          %llu ticks (%.1f Hz), %llu misses (gaps between the callback's calls); %s\n",
             static_cast<unsigned long long>(sres.ticks), double(sres.ticks) / servo_secs,
             static_cast<unsigned long long>(sres.misses), e.servo_where.c_str());
@@ -540,8 +573,12 @@ RunReport RunEngine::finish(int signal) {
     appendf(summary,
             "  silences        %llu: no contact model for the stale timeout, force faded to zero (longest %.0f ms)\n",
             static_cast<unsigned long long>(sres.silences), sres.longest_silence_ms);
-  appendf(summary, "  force           peak %.3f N (limit %.2f N), peak penetration %.3f mm\n", sres.peak_force_N,
-          s.saturation.peak_N, std::max(0.0, collision.peak_penetration_mm()));
+  if (servo_lost)
+    appendf(summary, "  force           (servo figures lost) limit %.2f N, peak penetration %.3f mm\n",
+            s.saturation.peak_N, std::max(0.0, collision.peak_penetration_mm()));
+  else
+    appendf(summary, "  force           peak %.3f N (limit %.2f N), peak penetration %.3f mm\n", sres.peak_force_N,
+            s.saturation.peak_N, std::max(0.0, collision.peak_penetration_mm()));
   {
     std::string guard = s.passivity.enabled ? "passivity guard on" : "passivity guard off";
     if (s.passivity.enabled && !e.opt.split)
@@ -562,8 +599,12 @@ RunReport RunEngine::finish(int signal) {
     appendf(summary, "  friction        static %.3g, dynamic %.3g%s\n", s.friction.static_mu, s.friction.dynamic_mu,
             counts.c_str());
   }
-  appendf(summary, "  telemetry       %llu samples, %llu dropped\n",
-          static_cast<unsigned long long>(sres.telemetry_pushed), static_cast<unsigned long long>(sres.telemetry_dropped));
+  if (servo_lost)
+    appendf(summary, "  telemetry       (servo figures lost)\n");
+  else
+    appendf(summary, "  telemetry       %llu samples, %llu dropped\n",
+            static_cast<unsigned long long>(sres.telemetry_pushed),
+            static_cast<unsigned long long>(sres.telemetry_dropped));
   if (sres.device_dropped)
     appendf(summary, "  device records  %llu dropped\n", static_cast<unsigned long long>(sres.device_dropped));
   if (e.udp)

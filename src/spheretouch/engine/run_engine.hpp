@@ -54,7 +54,7 @@ struct RunOptions {
   /// the spheretouch executable can do this). Needs `scene_path`.
   bool split = false;
   std::string scene_path;  ///< the scene file (the split servo reads its settings from it)
-  std::string shm_name;    ///< shared-memory segment ("" = /spheretouch-PID, PID this process)
+  std::string shm_name;    ///< shared-memory segment ("" = /spheretouch-PID-RANDOM: this process, 16 random hex digits)
   ClientCurve curve;       ///< CURVE keys for worker daemons (empty: plain)
   /// Progress notes during prepare() and start() ("loading probe and object ..."); may be empty.
   std::function<void(const std::string&)> note;

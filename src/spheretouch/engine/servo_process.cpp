@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // The split servo process: see servo_process.hpp.
 #include <spheretouch/engine/servo_process.hpp>
+#include <spheretouch/geom/text_file.hpp>
 
 #include <spawn.h>
 #include <unistd.h>
@@ -39,14 +40,20 @@ Status write_servo_results(const std::string& path, const ServoResults& r) {
   std::fprintf(f, "silences %llu\nlongest_silence_ms %.3f\ncollision_died %d\ncollision_died_at_s %.6f\nsignal %d\n",
                static_cast<unsigned long long>(r.silences), r.longest_silence_ms, r.collision_died,
                r.collision_died_at_s, r.signal);
-  const bool ok = std::ferror(f) == 0;
-  if (std::fclose(f) != 0 || !ok) return fail(path, ": write error");
+  bool ok = std::fflush(f) == 0 && std::ferror(f) == 0;
+  int err = ok ? 0 : errno;
+  if (std::fclose(f) != 0 && ok) {
+    ok = false;
+    err = errno;
+  }
+  if (!ok) return fail(path, ": write failed: ", std::strerror(err));
   return Ok{};
 }
 
 Result<ServoResults> read_servo_results(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return fail(path, ": cannot read (the servo process wrote no results)");
+  Result<std::string> text = geom::read_text_file(path, 1u << 20, "servo results file");
+  if (!text) return fail(text.error(), " (the servo process wrote no results)");
+  std::istringstream in(text.value());
   std::map<std::string, double> kv;
   std::string line;
   for (int n = 1; std::getline(in, line); ++n) {
@@ -57,6 +64,9 @@ Result<ServoResults> read_servo_results(const std::string& path) {
     if (!(ls >> key >> v)) return fail(path, ":", n, ": expected 'key number'");
     kv[key] = v;
   }
+  // A file cut short (a full disk) must not read as zeros measured.
+  for (const char* k : {"seconds", "ticks", "misses", "peak_force_N"})
+    if (!kv.count(k)) return fail(path, ": no '", k, "' line (the servo process's results are incomplete)");
   ServoResults r;
   auto u = [&](const char* k, std::uint64_t& x) { x = static_cast<std::uint64_t>(kv[k]); };
   r.seconds = kv["seconds"];
@@ -114,8 +124,13 @@ Status write_trajectory(const std::string& path, const rt::Trajectory& t) {
       for (int c = 0; c < 4; ++c) std::fprintf(f, " %.17g", k.pose.matrix()(r, c));
     std::fprintf(f, "\n");
   }
-  const bool ok = std::ferror(f) == 0;
-  if (std::fclose(f) != 0 || !ok) return fail(path, ": write error");
+  bool ok = std::fflush(f) == 0 && std::ferror(f) == 0;
+  int err = ok ? 0 : errno;
+  if (std::fclose(f) != 0 && ok) {
+    ok = false;
+    err = errno;
+  }
+  if (!ok) return fail(path, ": write failed: ", std::strerror(err));
   return Ok{};
 }
 

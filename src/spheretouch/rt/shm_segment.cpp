@@ -113,6 +113,9 @@ Result<std::unique_ptr<ShmSegment>> ShmSegment::create(const std::string& name) 
       const bool have_stat = fstat(fd, &st) == 0;
       close(fd);
       if (size < 0) return Error{sys_error("shm " + n + ": exists but its header cannot be read")};
+      if (have_stat && st.st_uid != geteuid())
+        return Error{"shm " + n + ": exists and belongs to uid " + std::to_string(st.st_uid) +
+                     " (another user's, or squatted); refusing it: choose another name"};
       if (static_cast<std::size_t>(size) < sizeof(ShmHeader) || h.magic != kShmMagic) {
         const bool empty_and_old = size == 0 && have_stat && time(nullptr) - st.st_ctime > 2;
         if (!empty_and_old) {
@@ -165,11 +168,18 @@ namespace {
 Result<int> open_checked(const std::string& n, int oflag, bool need_live_creator, ShmHeader& h) {
   const int fd = shm_open(n.c_str(), oflag, 0);
   if (fd < 0) return Error{sys_error("shm " + n + ": cannot attach")};
-  const long size = read_header(fd, h);
   auto refuse = [&](const std::string& why) -> Result<int> {
     close(fd);
     return Error{"shm " + n + ": " + why};
   };
+  // Only our own segments: another user's (a squatter's, or a colleague's run) is never read,
+  // and its scene never loaded.
+  struct stat st {};
+  if (fstat(fd, &st) != 0) return refuse(sys_error("cannot stat"));
+  if (st.st_uid != geteuid())
+    return refuse("belongs to uid " + std::to_string(st.st_uid) + ", not to this user (uid " +
+                  std::to_string(geteuid()) + "): refusing another user's segment");
+  const long size = read_header(fd, h);
   if (size < 0) return refuse(sys_error("header unreadable"));
   if (static_cast<std::size_t>(size) < sizeof(ShmHeader))
     return refuse("size " + std::to_string(size) + " bytes, smaller than the header (" +
