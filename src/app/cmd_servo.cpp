@@ -49,6 +49,7 @@ void run_servo(const ServoArgs& a) {
   Result<std::unique_ptr<rt::ShmSegment>> seg = rt::ShmSegment::attach(a.shm);
   if (!seg) servo_die(2, seg.error());
   rt::ShmSegment& shm = *seg.value();
+  shm.guard_truncation();  // another process truncating the segment must not kill the servo
   rt::ShmStatus& status = shm.status();
   status.servo_start_ticks.store(rt::process_start_ticks(getpid()), std::memory_order_relaxed);
   status.split.store(1, std::memory_order_relaxed);
@@ -105,6 +106,13 @@ void run_servo(const ServoArgs& a) {
     const std::int64_t now = rt::now_ns();
     const double t = double(now - t_start) * 1e-9;
     if (t >= s.duration_s) break;
+    if (rt::ShmSegment::truncated()) {
+      std::fprintf(stderr,
+                   "spheretouch servo: the shared-memory segment %s was truncated by another process at t %.2f s: "
+                   "its data is gone (zero force); stopping\n",
+                   shm.name().c_str(), t);
+      break;
+    }
     if (!parent_dead && getppid() != a.parent) {  // reparented: the collision process is gone
       parent_dead = true;
       res.collision_died = 1;
@@ -178,6 +186,7 @@ void run_servo(const ServoArgs& a) {
       std::fprintf(stderr, "spheretouch servo: removed the orphaned segment %s\n", shm.name().c_str());
   }
   if (!ticks_error.empty()) servo_die(1, ticks_error);
+  if (rt::ShmSegment::truncated()) servo_die(1, "the shared-memory segment " + shm.name() + " was truncated");
 }
 
 }  // namespace

@@ -2,6 +2,8 @@
 // Tests for `spheretouch run` and scene files: a short run of a generated scene asserting counts
 // (never timing precision), the force profile of the built-in script, the outputs' formats, and
 // an error naming the field for each kind of bad scene file.
+#include <fcntl.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
 
 #include <cmath>
@@ -286,6 +288,32 @@ TEST_CASE("run: a full disk is an error naming the file, and the summary is prin
     // The run directory is private to its user (poses and forces are the user's data).
     const auto perms = std::filesystem::status(out).permissions();
     CHECK((perms & (std::filesystem::perms::group_all | std::filesystem::perms::others_all)) == std::filesystem::perms::none);
+  }
+}
+
+TEST_CASE("run: another process truncating the shared-memory segment stops the run with a clear error, not SIGBUS") {
+  for (const bool split : {false, true}) {
+    CAPTURE(split);
+    st::test::TempDir d;
+    std::string scene = kScene;
+    scene.replace(scene.find("duration_s = 5.5"), 16, "duration_s = 30.0");
+    st::test::write_file(d.file("scene.toml"), scene);
+    const std::string log = d.file("run.log");
+    const std::string seg = "/spheretouch-test-truncate-" + std::to_string(getpid()) + (split ? "-s" : "-i");
+    std::vector<std::string> args = {"run", d.file("scene.toml"), "--out", d.file("run"), "--shm-name", seg};
+    if (split) args.push_back("--split");
+    const pid_t pid = st::test::spawn_spheretouch(args, log);
+    REQUIRE(st::test::wait_for_ticks(seg, 200, pid, 30.0).ticks >= 200);
+    const int fd = shm_open(seg.c_str(), O_RDWR, 0);
+    REQUIRE(fd >= 0);
+    REQUIRE(ftruncate(fd, 0) == 0);  // what a hostile or careless process of the same user can do
+    close(fd);
+    const int code = st::test::wait_for(pid, 30.0);
+    const std::string out = st::test::slurp_file(log);
+    INFO(out);
+    CHECK(code == 1);  // an error, not 128 + SIGBUS
+    CHECK(contains(out, "was truncated by another process"));
+    CHECK(contains(out, "summary\n"));
   }
 }
 

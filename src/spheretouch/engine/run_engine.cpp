@@ -87,6 +87,7 @@ struct RunEngine::State {
   std::string dir, csv, rounds_csv;
   std::unique_ptr<rt::ForceLaw> law;
   std::unique_ptr<rt::ShmSegment> shm;
+  bool truncated_noted = false;              // the segment was truncated under us (said once; the run stops)
   std::unique_ptr<rt::SimulatedDevice> sim;  // in-process servo (no split): device, telemetry, servo
   std::unique_ptr<rt::UdpDevice> udp;        // [device] kind = "udp" (instead of sim)
   std::unique_ptr<rt::PoseFeedDevice> feed;  // [device] kind = "browser": poses from the live view's page
@@ -255,6 +256,7 @@ Status RunEngine::State::prepare() {
   Result<std::unique_ptr<rt::ShmSegment>> segr = rt::ShmSegment::create(shm_name);
   if (!segr) return Error{segr.error()};
   shm = std::move(segr).value();
+  shm->guard_truncation();  // another process truncating it must not kill the run
   rt::ShmStatus& status = shm->status();
   status.scene.store(*ref);
 
@@ -397,6 +399,12 @@ Status RunEngine::start() {
 bool RunEngine::poll(bool stop_requested, std::vector<std::string>& notes) {
   State& e = *s_;
   const std::int64_t now = rt::now_ns();
+  if (rt::ShmSegment::truncated() && !e.truncated_noted) {
+    e.truncated_noted = true;
+    notes.push_back("the shared-memory segment " + e.shm->name() +
+                    " was truncated by another process: its data is gone (zero force); stopping the run");
+  }
+  stop_requested = stop_requested || rt::ShmSegment::truncated();
   const double elapsed = double(now - e.t_start) * 1e-9;
   if (e.rss_start == 0 && elapsed >= std::min(1.0, e.s.duration_s / 2)) e.rss_start = rt::resident_bytes();
   if (e.opt.split) {
@@ -497,6 +505,8 @@ RunReport RunEngine::finish(int signal) {
   // complete; the run has then failed (a full disk must not look like a good run).
   RunReport report;
   std::vector<std::string>& failures = report.failures;
+  if (rt::ShmSegment::truncated())
+    failures.push_back("the shared-memory segment " + e.shm->name() + " was truncated by another process");
   ServoResults sres;
   bool servo_lost = false;  // --split: the servo process's figures could not be read (never printed as zeros)
   if (e.opt.split) {

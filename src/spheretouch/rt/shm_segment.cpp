@@ -7,11 +7,14 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
 #include <climits>
+#include <csignal>
 #include <cstring>
 #include <ctime>
 #include <fstream>
+#include <mutex>
 #include <new>
 #include <sstream>
 
@@ -239,6 +242,56 @@ Result<std::unique_ptr<const ShmSegment>> ShmSegment::attach_read_only(const std
   return std::unique_ptr<const ShmSegment>(new ShmSegment(n, layout, false));
 }
 
+namespace {
+
+// The guarded mappings (address, length), written before the handler can need them, and the flag.
+struct GuardedMapping {
+  std::atomic<std::uintptr_t> addr{0};
+  std::atomic<std::size_t> len{0};
+};
+GuardedMapping g_guarded[4];
+std::atomic<bool> g_truncated{false};
+
+void on_sigbus(int sig, siginfo_t* info, void*) {
+  const auto at = reinterpret_cast<std::uintptr_t>(info ? info->si_addr : nullptr);
+  for (GuardedMapping& g : g_guarded) {
+    const std::uintptr_t a = g.addr.load(std::memory_order_acquire);
+    const std::size_t n = g.len.load(std::memory_order_acquire);
+    if (a && at >= a && at < a + n) {
+      // The file behind the mapping shrank: put private zero pages in its place (mmap is a plain
+      // system call on Linux, safe here though POSIX does not list it), so the faulting access
+      // retries and reads zeros.
+      mmap(reinterpret_cast<void*>(a), n, PROT_READ | PROT_WRITE, MAP_FIXED | MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+      g_truncated.store(true, std::memory_order_release);
+      return;
+    }
+  }
+  // Not ours: the default action (the access retries and the process ends with SIGBUS, as before).
+  signal(sig, SIG_DFL);
+}
+
+}  // namespace
+
+void ShmSegment::guard_truncation() {
+  static std::once_flag installed;
+  std::call_once(installed, [] {
+    struct sigaction sa {};
+    sa.sa_sigaction = on_sigbus;
+    sa.sa_flags = SA_SIGINFO;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGBUS, &sa, nullptr);
+  });
+  for (GuardedMapping& g : g_guarded) {
+    std::uintptr_t expected = 0;
+    if (g.addr.load() == 0) {
+      g.len.store(sizeof(ShmLayout), std::memory_order_release);
+      if (g.addr.compare_exchange_strong(expected, reinterpret_cast<std::uintptr_t>(layout_))) return;
+    }
+  }
+}
+
+bool ShmSegment::truncated() noexcept { return g_truncated.load(std::memory_order_acquire); }
+
 bool ShmSegment::creator_alive() const {
   return process_alive(layout_->header.creator_pid, layout_->header.creator_start_ticks);
 }
@@ -261,6 +314,10 @@ bool ShmSegment::unlink_if_orphaned() const {
 ShmSegment::~ShmSegment() {
   // Unlink only if the name still refers to our segment (not a replacement by someone else).
   if (creator_ && names_this()) shm_unlink(name_.c_str());
+  for (GuardedMapping& g : g_guarded) {
+    std::uintptr_t mine = reinterpret_cast<std::uintptr_t>(layout_);
+    g.addr.compare_exchange_strong(mine, 0);
+  }
   munmap(layout_, sizeof(ShmLayout));
 }
 

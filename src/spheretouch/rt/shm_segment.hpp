@@ -86,6 +86,14 @@ class ShmSegment {
   bool unlink_if_orphaned() const;
   const std::string& name() const { return name_; }  ///< normalised name
   bool creator() const { return creator_; }          ///< this mapping created it
+  /// Survives another process truncating the segment (ftruncate on /dev/shm/NAME): a SIGBUS on
+  /// this mapping replaces it with private zero pages, so the process goes on (its triple buffers
+  /// then hold zeros: no contact, zero force) and truncated() turns true, instead of the process
+  /// dying. Installs a process-wide SIGBUS handler (other SIGBUS keep their default action); call
+  /// before the real-time threads start. At most four guarded mappings per process.
+  void guard_truncation();
+  /// True once a guarded mapping was found truncated (the process should stop, saying so).
+  static bool truncated() noexcept;
 
  private:
   ShmSegment(std::string name, ShmLayout* layout, bool creator)
