@@ -53,6 +53,25 @@ bool udp_wait_listening(const std::string& log, int port) {
   return false;
 }
 
+/// Writes `scene` and starts `spheretouch run` on it (with --split when asked), output to d/out,
+/// its log in d/run.log; returns once it listens on `port`.
+pid_t udp_start(const st::test::TempDir& d, int port, const std::string& scene, bool split = false) {
+  st::test::write_file(d.file("scene.toml"), scene);
+  std::vector<std::string> args = {"run", d.file("scene.toml"), "--out", d.file("out")};
+  if (split) args.push_back("--split");
+  const pid_t pid = st::test::spawn_spheretouch(args, d.file("run.log"));
+  REQUIRE(udp_wait_listening(d.file("run.log"), port));
+  return pid;
+}
+
+/// Waits for the run to end by itself; its log (checked: exit 0).
+std::string udp_finish(const st::test::TempDir& d, pid_t pid) {
+  const int rc = st::test::wait_for(pid, 60);
+  const std::string out = st::test::slurp_file(d.file("run.log"));
+  CHECK_MESSAGE(rc == 0, out);
+  return out;
+}
+
 /// The bridge's counts from the run's summary line.
 struct UdpCounts {
   unsigned long long poses = 0, gaps = 0, forces = 0, send_failed = 0, fades = 0, malformed = 9, stale = 9, foreign = 9,
@@ -79,21 +98,15 @@ TEST_CASE("run: a device behind the UDP bridge at 1 kHz: no pose lost, a force e
     CAPTURE(split);
     st::test::TempDir d;
     const int port = st::test::free_loopback_port(SOCK_DGRAM);
-    st::test::write_file(d.file("scene.toml"), udp_scene(port, "", 4.5));
-    const std::string log = d.file("run.log");
-    std::vector<std::string> args = {"run", d.file("scene.toml"), "--out", d.file("out")};
-    if (split) args.push_back("--split");
-    const pid_t pid = st::test::spawn_spheretouch(args, log);
-    REQUIRE(udp_wait_listening(log, port));
-    CHECK(st::test::contains(st::test::slurp_file(log), "this run's key is in " + d.file("out") + "/bridge.key"));
+    const pid_t pid = udp_start(d, port, udp_scene(port, "", 4.5), split);
+    CHECK(st::test::contains(st::test::slurp_file(d.file("run.log")),
+                             "this run's key is in " + d.file("out") + "/bridge.key"));
     const auto em = st::test::run_command(udp_emulator(
         port, "--key " + d.file("out") + "/bridge.key --seconds 2 --from 0,0,56 --to-point 0,0,46 --period 2 --json"));
     INFO(em.output);
     REQUIRE(em.exit_code == 0);
-    const int rc = st::test::wait_for(pid, 60);
-    const std::string out = st::test::slurp_file(log);
+    const std::string out = udp_finish(d, pid);
     INFO(out);
-    CHECK(rc == 0);
 
     // The bridge's own count: every pose the driver sent arrived; nothing was refused.
     const UdpCounts c = udp_counts(out, port);
@@ -125,11 +138,8 @@ TEST_CASE(
   st::test::TempDir d;
   const int port = st::test::free_loopback_port(SOCK_DGRAM);
   // The tool centre point 10 mm beside the capsule's axis: pressing the tip down gives a moment.
-  st::test::write_file(d.file("scene.toml"),
-                       udp_scene(port, "dof = 6\ntorque_limit_nm = 0.5\ntcp_mm = [10.0, 0.0, -20.0]\n", 6));
-  const std::string log = d.file("run.log");
-  const pid_t pid = st::test::spawn_spheretouch({"run", d.file("scene.toml"), "--out", d.file("out")}, log);
-  REQUIRE(udp_wait_listening(log, port));
+  const pid_t pid =
+      udp_start(d, port, udp_scene(port, "dof = 6\ntorque_limit_nm = 0.5\ntcp_mm = [10.0, 0.0, -20.0]\n", 6));
   const auto old = st::test::run_command(udp_emulator(port, "--protocol 1 --seconds 1 --wait 1 --json"));
   INFO(old.output);
   CHECK(old.exit_code == 3);
@@ -139,10 +149,8 @@ TEST_CASE(
                 d.file("forces.csv")));
   INFO(em.output);
   REQUIRE(em.exit_code == 0);
-  const int rc = st::test::wait_for(pid, 60);
-  const std::string out = st::test::slurp_file(log);
+  const std::string out = udp_finish(d, pid);
   INFO(out);
-  CHECK(rc == 0);
   const UdpCounts c = udp_counts(out, port);
   CHECK(c.old_version >= 1);
   CHECK(c.sessions == 1);
@@ -158,19 +166,14 @@ TEST_CASE(
 TEST_CASE("run: with auth = \"none\" a version-1 driver (an old client) still works") {
   st::test::TempDir d;
   const int port = st::test::free_loopback_port(SOCK_DGRAM);
-  st::test::write_file(d.file("scene.toml"), udp_scene(port, "auth = \"none\"\n", 4));
-  const std::string log = d.file("run.log");
-  const pid_t pid = st::test::spawn_spheretouch({"run", d.file("scene.toml"), "--out", d.file("out")}, log);
-  REQUIRE(udp_wait_listening(log, port));
-  CHECK(st::test::contains(st::test::slurp_file(log), "datagrams are not authenticated"));
+  const pid_t pid = udp_start(d, port, udp_scene(port, "auth = \"none\"\n", 4));
+  CHECK(st::test::contains(st::test::slurp_file(d.file("run.log")), "datagrams are not authenticated"));
   const auto em = st::test::run_command(
       udp_emulator(port, "--protocol 1 --seconds 2 --from 0,0,56 --to-point 0,0,46 --period 2 --json"));
   INFO(em.output);
   REQUIRE(em.exit_code == 0);
-  const int rc = st::test::wait_for(pid, 60);
-  const std::string out = st::test::slurp_file(log);
+  const std::string out = udp_finish(d, pid);
   INFO(out);
-  CHECK(rc == 0);
   const UdpCounts c = udp_counts(out, port);
   CHECK(c.poses == static_cast<unsigned long long>(udp_json_number(em.output, "last_seq")));
   CHECK(c.old_version == 0);

@@ -279,7 +279,7 @@ TEST_CASE("udp bridge keys: written 0600, read back; a bad key file is refused n
   expect_refused(std::string(64, 'g') + "\n", "64 hexadecimal digits");
   expect_refused(std::string(65, 'a') + "\n", "64 hexadecimal digits");
   expect_refused(std::string(64, 'a') + "\n", "group or others", 0644);
-  expect_refused(std::string(5000, 'a'), "too big");
+  expect_refused(std::string(5000, 'a'), "-byte limit for a bridge key");
   std::filesystem::remove(path);
   auto missing = st::rt::read_bridge_key(path);
   REQUIRE_FALSE(missing);

@@ -2,8 +2,6 @@
 // The run engine (run_engine.hpp).
 #include <spheretouch/engine/run_engine.hpp>
 
-#include <sys/random.h>
-
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -37,19 +35,6 @@
 namespace st::inline SPHERETOUCH_ABI::engine {
 
 namespace {
-
-/// `bytes` random bytes (the kernel's CSPRNG) as hexadecimal digits.
-std::string random_hex(std::size_t bytes) {
-  std::string out;
-  for (std::size_t i = 0; i < bytes; ++i) {
-    unsigned char b = 0;
-    while (getrandom(&b, 1, 0) != 1) {}
-    char h[3];
-    std::snprintf(h, sizeof h, "%02x", b);
-    out += h;
-  }
-  return out;
-}
 
 std::string new_run_dir(const std::string& wanted) {
   if (!wanted.empty()) return wanted;

@@ -27,6 +27,22 @@ extern char** environ;
 
 namespace st::inline SPHERETOUCH_ABI::engine {
 
+namespace {
+
+/// Flushes and closes a file written with stdio; the first error (a full disk) named with errno.
+Status close_written(std::FILE* f, const std::string& path) {
+  bool ok = std::fflush(f) == 0 && std::ferror(f) == 0;
+  int err = ok ? 0 : errno;
+  if (std::fclose(f) != 0 && ok) {
+    ok = false;
+    err = errno;
+  }
+  if (!ok) return fail(path, ": write failed: ", std::strerror(err));
+  return Ok{};
+}
+
+}  // namespace
+
 Status write_servo_results(const std::string& path, const ServoResults& r) {
   std::FILE* f = std::fopen(path.c_str(), "w");
   if (!f) return fail(path, ": cannot create");
@@ -40,14 +56,7 @@ Status write_servo_results(const std::string& path, const ServoResults& r) {
   std::fprintf(f, "silences %llu\nlongest_silence_ms %.3f\ncollision_died %d\ncollision_died_at_s %.6f\nsignal %d\n",
                static_cast<unsigned long long>(r.silences), r.longest_silence_ms, r.collision_died,
                r.collision_died_at_s, r.signal);
-  bool ok = std::fflush(f) == 0 && std::ferror(f) == 0;
-  int err = ok ? 0 : errno;
-  if (std::fclose(f) != 0 && ok) {
-    ok = false;
-    err = errno;
-  }
-  if (!ok) return fail(path, ": write failed: ", std::strerror(err));
-  return Ok{};
+  return close_written(f, path);
 }
 
 Result<ServoResults> read_servo_results(const std::string& path) {
@@ -124,14 +133,7 @@ Status write_trajectory(const std::string& path, const rt::Trajectory& t) {
       for (int c = 0; c < 4; ++c) std::fprintf(f, " %.17g", k.pose.matrix()(r, c));
     std::fprintf(f, "\n");
   }
-  bool ok = std::fflush(f) == 0 && std::ferror(f) == 0;
-  int err = ok ? 0 : errno;
-  if (std::fclose(f) != 0 && ok) {
-    ok = false;
-    err = errno;
-  }
-  if (!ok) return fail(path, ": write failed: ", std::strerror(err));
-  return Ok{};
+  return close_written(f, path);
 }
 
 Result<pid_t> spawn_servo(const ServoArgs& a) {

@@ -2,6 +2,8 @@
 // Text helpers of the run's summary and the command line.
 #pragma once
 #include <spheretouch/abi.hpp>
+#include <sys/random.h>
+
 #include <cstdarg>
 #include <cstdio>
 #include <string>
@@ -23,6 +25,20 @@ namespace st::inline SPHERETOUCH_ABI::engine {
     out.resize(at + std::size_t(n));
   }
   va_end(again);
+}
+
+/// `bytes` random bytes from the kernel's CSPRNG (getrandom) as hexadecimal digits: names and
+/// tokens another user must not guess.
+inline std::string random_hex(std::size_t bytes) {
+  std::string out;
+  for (std::size_t i = 0; i < bytes; ++i) {
+    unsigned char b = 0;
+    while (getrandom(&b, 1, 0) != 1) {}
+    char h[3];
+    std::snprintf(h, sizeof h, "%02x", b);
+    out += h;
+  }
+  return out;
 }
 
 }  // namespace st::engine

@@ -12,8 +12,10 @@
 
 namespace st::inline SPHERETOUCH_ABI::geom {
 
-/// The whole file at `path`: a regular file of at most `max_bytes` bytes. Errors name the path,
-/// `what` it should be ("scene file") and what is wrong (missing, a directory, a FIFO, too big).
-Result<std::string> read_text_file(const std::string& path, std::uint64_t max_bytes, const std::string& what);
+/// The whole file at `path`: a regular file of at most `max_bytes` bytes and, with `owner_only`
+/// (a secret), that group and others cannot access. Errors name the path, `what` it should be
+/// ("scene file") and what is wrong (missing, a directory, a FIFO, too big, readable by others).
+Result<std::string> read_text_file(const std::string& path, std::uint64_t max_bytes, const std::string& what,
+                                   bool owner_only = false);
 
 }  // namespace st::geom

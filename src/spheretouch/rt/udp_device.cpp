@@ -21,6 +21,7 @@
 #include <sodium.h>
 #endif
 
+#include <spheretouch/geom/text_file.hpp>
 #include <spheretouch/rt/clock.hpp>
 
 namespace st::inline SPHERETOUCH_ABI::rt {
@@ -337,26 +338,10 @@ Result<BridgeKey> random_bridge_key() {
 }
 
 Result<BridgeKey> read_bridge_key(const std::string& path) {
-  // O_NONBLOCK: a FIFO at the path must not hang us; fstat the open file (no stat-then-open race).
-  FdCloser f{::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOCTTY | O_NONBLOCK)};
-  if (f.fd < 0) return fail(path, ": cannot open the bridge key: ", std::strerror(errno));
-  struct stat st {};
-  if (::fstat(f.fd, &st) != 0) return fail(path, ": cannot stat the bridge key: ", std::strerror(errno));
-  if (!S_ISREG(st.st_mode)) return fail(path, ": the bridge key is not a regular file");
-  if (st.st_mode & 077)
-    return fail(path, ": the bridge key is accessible by group or others (mode ", std::oct, (st.st_mode & 0777),
-                "); refusing to use it (chmod 600 ", path, ")");
-  char buf[4096];
-  if (std::size_t(st.st_size) > sizeof buf)
-    return fail(path, ": ", st.st_size, " bytes: too big for a bridge key (64 hexadecimal digits on one line)");
-  std::size_t n = 0;
-  while (n < sizeof buf) {
-    const ssize_t r = ::read(f.fd, buf + n, sizeof buf - n);
-    if (r < 0 && errno == EINTR) continue;
-    if (r < 0) return fail(path, ": cannot read the bridge key: ", std::strerror(errno));
-    if (r == 0) break;
-    n += std::size_t(r);
-  }
+  Result<std::string> text = geom::read_text_file(path, 4096, "bridge key", /*owner_only=*/true);
+  if (!text) return Error{text.error()};
+  std::string& buf = text.value();
+  const std::size_t n = buf.size();
   std::size_t end = 0;
   while (end < n && buf[end] != '\n') ++end;
   while (end > 0 && std::isspace(static_cast<unsigned char>(buf[end - 1]))) --end;
@@ -370,7 +355,7 @@ Result<BridgeKey> read_bridge_key(const std::string& path) {
     else
       k[i / 2] = std::uint8_t(k[i / 2] << 4 | v);
   }
-  std::memset(buf, 0, sizeof buf);
+  std::memset(buf.data(), 0, buf.size());  // no copy of the key left behind
   if (!ok) {
     k.fill(0);
     return fail(path,

@@ -4,7 +4,6 @@
 
 #include <civetweb.h>
 #include <nlohmann/json.hpp>
-#include <sys/random.h>
 
 #include <algorithm>
 #include <chrono>
@@ -15,6 +14,7 @@
 #include <sstream>
 #include <string_view>
 
+#include <spheretouch/engine/text.hpp>
 #include <spheretouch/net/wire.hpp>
 #include <spheretouch/rt/clock.hpp>
 
@@ -58,22 +58,6 @@ int send_text(mg_connection* conn, int code, const char* type, std::string_view 
             code, reason_of(code), type, body.size());
   mg_write(conn, body.data(), body.size());
   return code;
-}
-
-/// A random token: 16 bytes as 32 hex digits (getrandom: the kernel's CSPRNG).
-std::string random_token() {
-  unsigned char b[16];
-  for (std::size_t got = 0; got < sizeof b;) {
-    const ssize_t n = getrandom(b + got, sizeof b - got, 0);
-    if (n > 0) got += std::size_t(n);
-  }
-  std::string t;
-  char hex[3];
-  for (unsigned char c : b) {
-    std::snprintf(hex, sizeof hex, "%02x", c);
-    t += hex;
-  }
-  return t;
 }
 
 /// The host part of a Host header or an Origin's authority ("[::1]:8080" -> "[::1]", "a:80" -> "a").
@@ -157,7 +141,7 @@ Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& c,
       for (std::uint32_t v : t) m.u32(v);
   }
 
-  if (s->config_.token.empty()) s->config_.token = random_token();
+  if (s->config_.token.empty()) s->config_.token = engine::random_hex(16);
   mg_init_library(0);
   s->library_ = true;
   const std::string port_opt = c.listen;
