@@ -652,7 +652,7 @@ Replay replay(const ForceScene& s, const Model& model, bool closed, int C, engin
   const int n = int(std::ceil(s.script.duration_s() * 1000.0)) + 1;
   rt::SimulatedDevice dev(s.script, user, std::size_t(n) + 1);
   auto poses = std::make_unique<rt::TripleBuffer<rt::PoseSample>>();
-  auto models = std::make_unique<rt::TripleBuffer<geom::ContactModel>>();
+  auto models = std::make_unique<rt::TripleBuffer<geom::ContactSet>>();
   // Against the analytic truth the force is the contact model's: only the peak clamp, not the
   // thermal guard that pulls a sustained push down to the continuous force over seconds.
   rt::SaturationConfig sat = rt::DefaultSaturationConfig();
@@ -676,7 +676,7 @@ Replay replay(const ForceScene& s, const Model& model, bool closed, int C, engin
   for (int k = 0; k < n; ++k) {
     const std::int64_t t = 1'000'000'000 + std::int64_t(k) * kTickNs;
     if (have_pending && k % C == 0) {
-      models->write(pending);
+      models->write(geom::ContactSet::of(pending));
       have_pending = false;
     }
     rt::TickInfo info;
@@ -709,7 +709,7 @@ Replay replay(const ForceScene& s, const Model& model, bool closed, int C, engin
       const geom::Pose pose = geom::to_eigen(ps.pose);
       const auto t0 = std::chrono::steady_clock::now();
       if (fleet) {
-        fleet->client->round(seq + 1, pose, net::Clock::now() + std::chrono::seconds(10), round);
+        fleet->client().round(seq + 1, pose, net::Clock::now() + std::chrono::seconds(10), round);
         if (!round.complete) die(s.name + ": a scatter-gather round came back incomplete");
         r.pairs.assign(round.pairs.begin(), round.pairs.end());
       } else {

@@ -243,7 +243,7 @@ geom::Mesh bench_tip() {
 
 // Stand-in collision thread: tip faces with a vertex at or below the wall collide with both
 // wall faces; ContactBuilder makes the model; ~100 Hz like a slow distributed round.
-void stand_in_collision(rt::TripleBuffer<rt::PoseSample>& poses, rt::TripleBuffer<geom::ContactModel>& models,
+void stand_in_collision(rt::TripleBuffer<rt::PoseSample>& poses, rt::TripleBuffer<geom::ContactSet>& models,
                         std::atomic<bool>& stop) {
   const geom::Mesh w = bench_wall(), t = bench_tip();
   geom::ContactBuilder builder;
@@ -268,7 +268,7 @@ void stand_in_collision(rt::TripleBuffer<rt::PoseSample>& poses, rt::TripleBuffe
       m.pose_seq = ps.seq;
       m.pose_sampled_ns = ps.sampled_ns;
       m.published_ns = now_ns();
-      models.write(m);
+      models.write(geom::ContactSet::of(m));
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
@@ -340,7 +340,7 @@ void add_haptic_impl(CLI::App& app) {
 
     // The servo's world: device, buffers, collision stand-in, telemetry drained in-process.
     auto poses = std::make_unique<rt::TripleBuffer<rt::PoseSample>>();
-    auto models = std::make_unique<rt::TripleBuffer<geom::ContactModel>>();
+    auto models = std::make_unique<rt::TripleBuffer<geom::ContactSet>>();
     rt::SimulatedDevice device(rt::builtin_press_slide({0, 0, 0}, {0, 0, 1}, 3.0, 20.0), rt::VirtualUser{}, 0);
     device.set_repeat(true);
     rt::Telemetry telemetry(rt::kDefaultTelemetryCapacity);

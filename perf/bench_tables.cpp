@@ -250,7 +250,7 @@ void add_rounds(CLI::App& app, const char* name, const char* what) {
           Cell& cell = cells[p][k];
           const auto t0 = std::chrono::steady_clock::now();
           if (c.fleet)
-            c.fleet->client->round(++c.seq, poses[p].pose, net::Clock::now() + std::chrono::seconds(10), c.round);
+            c.fleet->client().round(++c.seq, poses[p].pose, net::Clock::now() + std::chrono::seconds(10), c.round);
           else
             geom::collide(probe.mesh, probe.tree, object.mesh, object.tree, poses[p].pose, {}, c.scratch, c.result);
           const auto t1 = std::chrono::steady_clock::now();
@@ -386,10 +386,10 @@ RateResult spheretouch(const Body& probe, const Body& object, const rt::Trajecto
   }
   geom::CollideScratch sc;
   geom::CollideResult r;
-  engine::CollideFn fn = [&](std::uint64_t seq, const geom::Pose& pose, engine::RoundOutput& out) {
+  engine::CollideFn fn = [&](std::uint64_t seq, std::uint32_t, const geom::Pose& pose, engine::RoundOutput& out) {
     if (fleet) {
       static thread_local net::RoundResult rr;
-      fleet->client->round(seq, pose, net::Clock::now() + std::chrono::milliseconds(50), rr);
+      fleet->client().round(seq, pose, net::Clock::now() + std::chrono::milliseconds(50), rr);
       out.pairs.resize(rr.pairs.size());
       for (std::size_t i = 0; i < rr.pairs.size(); ++i) out.pairs[i] = {rr.pairs[i].probe, rr.pairs[i].object};
       out.complete = rr.complete;
@@ -401,7 +401,7 @@ RateResult spheretouch(const Body& probe, const Body& object, const rt::Trajecto
   rt::SimulatedDevice sim(script, {}, 1 << 16);
   PeakDevice dev(sim);
   auto poses = std::make_unique<rt::TripleBuffer<rt::PoseSample>>();
-  auto models = std::make_unique<rt::TripleBuffer<geom::ContactModel>>();
+  auto models = std::make_unique<rt::TripleBuffer<geom::ContactSet>>();
   rt::HapticServo servo(dev, *poses, *models, rt::ForceLaw{}, rt::DefaultInterpolatorConfig(),
                         rt::DefaultSaturationConfig(), nullptr);
   engine::CollisionLoop collision(probe.mesh, object.mesh, *poses, *models, fn, 0, std::size_t(seconds * 20000) + 1000,

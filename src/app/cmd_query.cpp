@@ -140,8 +140,8 @@ void run_query(const QueryArgs& a) {
       stats = {};
       if (fleet) {
         // Exactness needs every block: a generous deadline, and an incomplete round is an error.
-        fleet->client->round(i * std::uint64_t(a.repeat) + std::uint64_t(r) + 1, pose,
-                             net::Clock::now() + std::chrono::seconds(30), round);
+        fleet->client().round(i * std::uint64_t(a.repeat) + std::uint64_t(r) + 1, pose,
+                              net::Clock::now() + std::chrono::seconds(30), round);
         if (!round.complete) {
           std::fprintf(stderr, "spheretouch: pose %zu: only %u of %u workers answered (%u of %u blocks)\n", i,
                        round.workers_replied, round.workers_asked, round.blocks_covered, round.blocks_total);

@@ -84,7 +84,7 @@ void run_servo(const ServoArgs& a) {
   rt::WrenchConfig wrench = s.device.wrench;
   wrench.tcp_mm = a.tcp_mm;  // resolved by the run (the tip needs the probe mesh)
   servo.set_wrench(wrench);
-  servo.set_friction(s.friction);
+  if (Status m = engine::set_servo_materials(servo, s); !m) servo_die(2, m.error());
 
   on_stop_signals(on_servo_signal);
 

@@ -281,3 +281,69 @@ TEST_CASE("scene: [device] dof, torque_limit_nm and tcp_mm; the tool point defau
     CHECK(st::test::contains(bad.error(), "bad.toml"));
   }
 }
+
+TEST_CASE("run engine: a scene of two objects; the probe presses on both at once, in the thread and over workers") {
+  // Two boxes side by side along y with a 1 mm gap; the capsule presses down over the gap and
+  // slides along it (x), touching both the whole time.
+  for (const int workers : {0, 2}) {
+    CAPTURE(workers);
+    st::test::TempDir dir;
+    const std::string out = dir.file("run");
+    auto scene = st::engine::parse_scene(
+        "[probe]\nbuiltin = \"capsule\"\nradius_mm = 6.0\nlength_mm = 30.0\n"
+        "[[object]]\nname = \"left\"\nbuiltin = \"box\"\nsize_mm = 40\nposition_mm = [0, -20.5, 0]\n"
+        "[[object]]\nname = \"right\"\nbuiltin = \"box\"\nsize_mm = 40\nposition_mm = [0, 20.5, 0]\n"
+        "[[object]]\nname = \"far\"\nbuiltin = \"icosphere\"\nradius_mm = 10\nposition_mm = [0, 0, -500]\n"
+        "[object.material]\nstatic_friction = 0.4\ndynamic_friction = 0.3\n"
+        // leaf_faces = 2: the 12-face boxes have 6 leaves, so 2 workers get blocks of them.
+        "[device]\ntarget = [-10, 0, 20]\nslide_mm = 20\n[tree]\ncache = false\nleaf_faces = 2\n[workers]\ncount = " +
+            std::to_string(workers) + "\n[run]\nduration_s = 4.5\n[output]\ndir = \"" + out + "\"\nstatus = \"off\"\n",
+        "two.toml", ".");
+    REQUIRE_MESSAGE(scene.ok(), scene.error());
+    std::vector<std::string> notes;
+    st::engine::RunOptions opt;
+    opt.note = [&](const std::string& m) { notes.push_back(m); };
+    auto made = st::engine::RunEngine::prepare(scene.value(), opt);
+    REQUIRE_MESSAGE(made.ok(), made.error());
+    st::engine::RunEngine& run = *made.value();
+    CHECK(std::any_of(notes.begin(), notes.end(),
+                      [](const std::string& n) { return n.find("3 objects") != std::string::npos; }));
+    REQUIRE(run.start().ok());
+    std::vector<std::string> events;
+    while (run.poll(false, events)) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    st::engine::RunReport report = run.finish(0);
+    INFO(report.summary);
+    CHECK(report.failures.empty());
+    // Per object: rounds the top level let the probe reach it, rounds it was touched.
+    auto object_line = [&](const std::string& name, unsigned long long& reached, unsigned long long& touching) {
+      const std::size_t at = report.summary.find("    " + name + " ");
+      REQUIRE(at != std::string::npos);
+      const std::string line = report.summary.substr(at, report.summary.find('\n', at) - at);
+      std::size_t faces = 0;
+      REQUIRE(std::sscanf(line.c_str() + 4 + name.size(), " %zu faces, %llu / %llu rounds", &faces, &reached, &touching) ==
+              3);
+      CHECK(faces > 0);
+    };
+    unsigned long long lr = 0, lt = 0, rr = 0, rt = 0, fr = 1, ft = 1;
+    object_line("left", lr, lt);
+    object_line("right", rr, rt);
+    object_line("far", fr, ft);
+    CHECK(lt > 10);  // both touched, for many rounds
+    CHECK(rt > 10);
+    CHECK(fr == 0);  // the far sphere never reached: it cost one sphere test a round
+    CHECK(ft == 0);
+    CHECK(st::test::contains(report.summary, " 0 incomplete"));
+    // The two boxes' forces add: the peak is well above zero and within the limit.
+    double peak = 0, limit = 0;
+    const std::size_t f = report.summary.find("force           peak ");
+    REQUIRE(f != std::string::npos);
+    REQUIRE(std::sscanf(report.summary.c_str() + f, "force           peak %lf N (limit %lf N)", &peak, &limit) == 2);
+    CHECK(peak > 0.1);
+    CHECK(peak <= limit + 1e-9);
+    CHECK(st::test::contains(report.summary, "friction        per object's material"));
+    if (workers > 0) {  // every object dealt over the workers, none left to the collision thread
+      CHECK(st::test::contains(report.summary, "3 objects"));
+      CHECK_FALSE(st::test::contains(report.summary, "too small to split"));
+    }
+  }
+}

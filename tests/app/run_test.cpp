@@ -409,6 +409,33 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
        "= 0.4\n"
        "[object.material]\nstatic_friction = 0.2\n",
        "object.material.static_friction: dynamic_friction must not exceed static_friction"},
+      // Scenes of several objects ([[object]]): each field's error names the object by its place.
+      {"object = 3\n[probe]\nbuiltin = \"capsule\"\n", "object: expected an [object] table or [[object]] tables"},
+      {"object = []\n[probe]\nbuiltin = \"capsule\"\n", "object: expected at least one [[object]] table"},
+      {"object = [1, 2]\n[probe]\nbuiltin = \"capsule\"\n", "object[1]: expected a table ([[object]])"},
+      {"[probe]\nbuiltin = \"capsule\"\n[[object]]\nbuiltin = \"box\"\n[[object]]\nsize_mm = 3\n",
+       "object[2].mesh: expected a mesh path"},
+      {"[probe]\nbuiltin = \"capsule\"\n[[object]]\nbuiltin = \"box\"\nname = \"a\"\n[[object]]\nbuiltin = "
+       "\"box\"\nname = \"a\"\n",
+       "object[2].name: 'a' names an earlier object too"},
+      {"[probe]\nbuiltin = \"capsule\"\n[[object]]\nbuiltin = \"box\"\nposition_mm = [1, 2]\n",
+       "object[1].position_mm: expected an array of 3 numbers"},
+      {"[probe]\nbuiltin = \"capsule\"\n[[object]]\nbuiltin = \"box\"\nposition_mm = [1e10, 0, 0]\n",
+       "object[1].position_mm: expected coordinates within 1e9 mm"},
+      {"[probe]\nbuiltin = \"capsule\"\n[[object]]\nbuiltin = \"box\"\nrotation_deg = [\"x\", 0, 0]\n",
+       "object[1].rotation_deg: expected finite numbers in the array"},
+      {"[probe]\nbuiltin = \"capsule\"\n[[object]]\nbuiltin = \"box\"\ncolour = \"red\"\n",
+       "unknown key 'object[1].colour'"},
+      {"[probe]\nbuiltin = \"capsule\"\n[[object]]\nbuiltin = \"box\"\n[[object]]\nbuiltin = "
+       "\"box\"\n[object.material]\nstatic_friction = 11\n",
+       "object[2].material.static_friction: expected a value in [0, 10]"},
+      {"[probe]\nbuiltin = \"capsule\"\n[[object]]\nbuiltin = \"box\"\n[object.material]\nlaw = \"linear\"\n"
+       "spring_n_per_mm = 0\n",
+       "object[1].material.spring_n_per_mm: expected a value in"},
+      {"[probe]\nbuiltin = \"capsule\"\n[[object]]\nbuiltin = \"box\"\nmaterial = 3\n",
+       "object[1].material: expected a [object[1].material] table"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\nposition_mm = [0, 0]\n",
+       "object.position_mm: expected an array of 3 numbers"},
       {"[probe]\nbuiltin = \"capsule\"\n[object\n", "TOML syntax"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[contact]\nmodel = \"nearest\"\n",
        "contact.model: expected one of patch, paper"},
@@ -463,6 +490,49 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
   const auto r = run_command(spheretouch_exe() + " run " + d.file("s.toml") + " --out " + d.file("o"));
   CHECK(r.exit_code == 2);
   CHECK(contains(r.output, "s.toml:6: force.peak_n: expected a value in"));
+}
+
+TEST_CASE("scene files: [[object]] gives each object its body, placement and material ([force] the default)") {
+  const std::string text =
+      "[probe]\nbuiltin = \"capsule\"\n"
+      "[[object]]\nname = \"left\"\nbuiltin = \"box\"\nsize_mm = 20\nposition_mm = [-15, 0, 0]\n"
+      "[[object]]\nbuiltin = \"icosphere\"\nradius_mm = 5\nrotation_deg = [0, 0, 90]\n"
+      "[object.material]\nlaw = \"linear\"\nspring_n_per_mm = 0.4\nstatic_friction = 0.5\ndynamic_friction = 0.3\n"
+      "[force]\nstatic_friction = 0.2\ndynamic_friction = 0.1\npeak_n = 4\n";
+  auto r = st::engine::parse_scene(text, "two.toml", ".");
+  REQUIRE_MESSAGE(r.ok(), r.error());
+  const st::engine::Scene& s = r.value();
+  REQUIRE(s.objects.size() == 2);
+  CHECK(s.objects[0].name == "left");
+  CHECK(s.objects[1].name == "object 2");
+  CHECK(s.objects[0].body.builtin == "box");
+  CHECK(s.objects[0].body.size_mm == 20);
+  CHECK(s.objects[1].body.radius_mm == 5);
+  CHECK(s.objects[0].placement.position_mm.isApprox(Eigen::Vector3d(-15, 0, 0)));
+  // A placement maps the object's file coordinates into the world: 90 degrees about z takes +x to +y.
+  const st::geom::Pose p1 = s.objects[1].placement.pose();
+  CHECK((p1 * Eigen::Vector3d(1, 0, 0) - Eigen::Vector3d(0, 1, 0)).norm() < 1e-12);
+  CHECK((s.objects[0].placement.pose() * Eigen::Vector3d(1, 2, 3) - Eigen::Vector3d(-14, 2, 3)).norm() < 1e-12);
+  // The first object has [force]'s material; the second overrides law and friction, keeping the peak.
+  CHECK(s.objects[0].material.law.kind == st::rt::LawKind::log);
+  CHECK(s.objects[0].material.friction.static_mu == 0.2);
+  CHECK(s.objects[1].material.law.kind == st::rt::LawKind::linear);
+  CHECK(s.objects[1].material.law.spring_N_per_mm == 0.4);
+  CHECK(s.objects[1].material.law.max_force_N == 4);
+  CHECK(s.objects[1].material.friction.static_mu == 0.5);
+  CHECK(s.objects[1].material.friction.dynamic_mu == 0.3);
+  // Code that knows one object sees the first.
+  CHECK(s.object.builtin == "box");
+  CHECK(s.friction.static_mu == 0.2);
+  CHECK(st::engine::scene_objects(s).size() == 2);
+  // A scene of one [object] keeps `objects` empty; scene_objects() gives that object at the origin.
+  auto one = st::engine::parse_scene("[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n", "one.toml", ".");
+  REQUIRE(one.ok());
+  CHECK(one.value().objects.empty());
+  const auto objs = st::engine::scene_objects(one.value());
+  REQUIRE(objs.size() == 1);
+  CHECK(objs[0].body.builtin == "box");
+  CHECK(objs[0].placement.pose().isApprox(st::geom::Pose::Identity()));
 }
 
 TEST_CASE("scene files: /dev/zero, a FIFO or an oversized file is refused before it is read") {

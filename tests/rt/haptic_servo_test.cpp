@@ -40,7 +40,7 @@ Mesh tip() {
 // is at or below z = 0 (the wall is far larger than the probe).
 struct FakeCollision {
   TripleBuffer<PoseSample>& poses;
-  TripleBuffer<ContactModel>& models;
+  TripleBuffer<ContactSet>& models;
   std::atomic<bool> stop{false};
   std::atomic<std::uint64_t> published{0};
   void run() {
@@ -69,7 +69,7 @@ struct FakeCollision {
       m.pose_seq = ps.seq;
       m.pose_sampled_ns = ps.sampled_ns;
       m.published_ns = now_ns();
-      models.write(m);
+      models.write(ContactSet::of(m));
       std::this_thread::sleep_for(std::chrono::milliseconds(10));  // a slow collision side
     }
   }
@@ -87,7 +87,7 @@ Trajectory press() {
 
 TEST_CASE("HapticServo: renders contact from a slow collision side, finite, saturated, no allocation") {
   auto poses = std::make_unique<TripleBuffer<PoseSample>>();
-  auto models = std::make_unique<TripleBuffer<ContactModel>>();
+  auto models = std::make_unique<TripleBuffer<ContactSet>>();
   SimulatedDevice dev(press(), VirtualUser{}, 4000);
   Telemetry tele(4000);
   HapticServo servo(dev, *poses, *models, ForceLaw{}, DefaultInterpolatorConfig(), DefaultSaturationConfig(), &tele);
@@ -158,7 +158,7 @@ TEST_CASE("HapticServo: renders contact from a slow collision side, finite, satu
 
 TEST_CASE("HapticServo: when the collision side stops, the force fades to zero") {
   auto poses = std::make_unique<TripleBuffer<PoseSample>>();
-  auto models = std::make_unique<TripleBuffer<ContactModel>>();
+  auto models = std::make_unique<TripleBuffer<ContactSet>>();
   TimedPose k;
   k.pose.translation() = Eigen::Vector3d(0, 0, -3);
   Trajectory tr;
@@ -176,7 +176,7 @@ TEST_CASE("HapticServo: when the collision side stops, the force fades to zero")
   pose.translation() = Eigen::Vector3d(0, 0, -3);
   ContactModel m = b.build(t, w, pose, pairs);
   m.seq = 1;
-  models->write(m);
+  models->write(ContactSet::of(m));
   TickInfo info;
   info.period_ns = 1'000'000;
   for (std::uint64_t i = 0; i < 400; ++i) {
@@ -226,14 +226,14 @@ TEST_CASE(
   for (const int dof : {3, 6}) {
     CAPTURE(dof);
     auto poses = std::make_unique<TripleBuffer<PoseSample>>();
-    auto models = std::make_unique<TripleBuffer<ContactModel>>();
+    auto models = std::make_unique<TripleBuffer<ContactSet>>();
     WrenchDevice dev;
     dev.pose.translation() = Eigen::Vector3d(0, 0, -2);  // 2 mm into the wall z < 0
     HapticServo servo(dev, *poses, *models, ForceLaw{}, DefaultInterpolatorConfig(), DefaultSaturationConfig(), nullptr);
     // The tool point 40 mm above the probe's origin: a lever of 40 mm over a 10 mm offset.
     servo.set_wrench({.dof = dof, .torque_limit_Nm = 0.02, .tcp_mm = Eigen::Vector3d(0, 0, 40)});
     // The patch's centre 10 mm off the tool's axis.
-    models->write(wall_contact(dev.pose, 2, Eigen::Vector3d(10, 0, 0)));
+    models->write(ContactSet::of(wall_contact(dev.pose, 2, Eigen::Vector3d(10, 0, 0))));
     TickInfo info;
     info.period_ns = 1'000'000;
     for (int k = 0; k < 20; ++k) {
@@ -276,7 +276,7 @@ TEST_CASE("HapticServo: the rotational guard keeps the torque's work on a turnin
   for (const bool guarded : {false, true}) {
     CAPTURE(guarded);
     auto poses = std::make_unique<TripleBuffer<PoseSample>>();
-    auto models = std::make_unique<TripleBuffer<ContactModel>>();
+    auto models = std::make_unique<TripleBuffer<ContactSet>>();
     WrenchDevice dev;
     dev.torque_max = 1.0;
     dev.pose.translation() = Eigen::Vector3d(0, 0, -2);
@@ -284,7 +284,7 @@ TEST_CASE("HapticServo: the rotational guard keeps the torque's work on a turnin
     pc.enabled = guarded;
     HapticServo servo(dev, *poses, *models, ForceLaw{}, DefaultInterpolatorConfig(), DefaultSaturationConfig(), nullptr, pc);
     servo.set_wrench({.dof = 6, .torque_limit_Nm = 1.0, .tcp_mm = Eigen::Vector3d(0, 0, 40)});
-    models->write(wall_contact(dev.pose, 2, Eigen::Vector3d(10, 0, -2)));
+    models->write(ContactSet::of(wall_contact(dev.pose, 2, Eigen::Vector3d(10, 0, -2))));
     TickInfo info;
     info.period_ns = 1'000'000;
     Eigen::Vector3d last_tau = Eigen::Vector3d::Zero();
@@ -310,4 +310,112 @@ TEST_CASE("HapticServo: the rotational guard keeps the torque's work on a turnin
   MESSAGE("torque's work on the turning hand: unguarded " << work_mJ[0] << " mJ, guarded " << work_mJ[1] << " mJ");
   CHECK(work_mJ[0] > 0.05);   // the contact feeds the rotation
   CHECK(work_mJ[1] <= 1e-3);  // the guard keeps it at zero, within one tick's work
+}
+
+TEST_CASE("HapticServo: several objects: each rendered with its own material, the forces add, a release fades") {
+  // A corner: object 0 is the wall z <= 0 (FD +z), object 1 the same wall in its own frame placed
+  // turned 90 degrees about y (so it fills x <= 0 in the world, FD +x). The probe sits 2 mm into
+  // the first and 1 mm into the second.
+  const Eigen::Isometry3d pose(Eigen::Translation3d(-1, 0, -2));
+  Eigen::Isometry3d placement = Eigen::Isometry3d::Identity();
+  placement.rotate(Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitY()));
+  const ContactModel a = wall_contact(pose, 2, Eigen::Vector3d(-1, 0, 0));
+  const ContactModel b = place(wall_contact(placement.inverse() * pose, 1, Eigen::Vector3d(0, 0, -1)), placement);
+  CHECK((to_eigen(b.force_dir) - Eigen::Vector3d(1, 0, 0)).norm() < 1e-12);
+  CHECK((to_eigen(b.pressure_point) - Eigen::Vector3d(-1, 0, 0)).norm() < 1e-12);
+  CHECK((to_eigen(b.pose).matrix() - pose.matrix()).norm() < 1e-12);  // placed: the probe's world pose again
+
+  auto linear = [](double k) {
+    ForceLawConfig c = DefaultForceLawConfig();
+    c.kind = LawKind::linear;
+    c.spring_N_per_mm = k;
+    return ForceLaw::make(c).value();
+  };
+  struct Run {
+    Eigen::Vector3d force;
+    std::uint64_t bad;
+  };
+  // Ticks `n` times with the probe still at `pose` after writing `set`; the force commanded last.
+  auto run = [&](const std::vector<ObjectMaterial>& materials, const ContactSet& set, int n) {
+    auto poses = std::make_unique<TripleBuffer<PoseSample>>();
+    auto models = std::make_unique<TripleBuffer<ContactSet>>();
+    WrenchDevice dev;
+    dev.pose = pose;
+    HapticServo servo(dev, *poses, *models, ForceLaw{}, DefaultInterpolatorConfig(), DefaultSaturationConfig(), nullptr);
+    servo.set_objects(materials);
+    models->write(set);
+    TickInfo info;
+    info.period_ns = 1'000'000;
+    for (int k = 0; k < n; ++k) {
+      info.tick = info.deadline_index = std::uint64_t(k);
+      info.woke_ns = info.deadline_ns = 1'000'000'000 + k * 1'000'000;
+      servo.tick(info);
+    }
+    return Run{dev.force, servo.stats().bad_objects};
+  };
+  const std::vector<ObjectMaterial> two = {{linear(0.2), 0, {}}, {linear(0.3), 0, {}}};
+  ContactSet both;
+  both.seq = 1;
+  both.count = 2;
+  both.object[0] = 0;
+  both.models[0] = a;
+  both.object[1] = 1;
+  both.models[1] = b;
+  const Run sum = run(two, both, 20);
+  CHECK(sum.force.x() == doctest::Approx(0.3 * 1).epsilon(1e-9));
+  CHECK(sum.force.y() == doctest::Approx(0).epsilon(1e-12));
+  CHECK(sum.force.z() == doctest::Approx(0.2 * 2).epsilon(1e-9));
+  // Each alone gives its own part: the sum is exactly their sum.
+  ContactSet only_a = both, only_b = both;
+  only_a.count = 1;
+  only_b.count = 1;
+  only_b.object[0] = 1;
+  only_b.models[0] = b;
+  const Run ra = run(two, only_a, 20), rb = run(two, only_b, 20);
+  CHECK((ra.force + rb.force - sum.force).norm() < 1e-12);
+  CHECK(ra.force.x() == doctest::Approx(0).epsilon(1e-12));
+  CHECK(rb.force.z() == doctest::Approx(0).epsilon(1e-12));
+  // The saturator acts on the sum: stiff materials give a sum capped at the device's 3.3 N.
+  const Run capped = run({{linear(5), 0, {}}, {linear(5), 0, {}}}, both, 20);
+  CHECK(capped.force.norm() == doctest::Approx(3.3).epsilon(1e-6));
+  // A model naming an object the servo has no material for is ignored and counted.
+  ContactSet stray = only_a;
+  stray.object[0] = 7;
+  const Run rs = run(two, stray, 5);
+  CHECK(rs.bad == 1);
+  CHECK(rs.force.norm() == 0);
+
+  // A release: object 1 says "no contact" while object 0 holds; object 1's share fades out (never
+  // rising) and object 0's stays.
+  auto poses = std::make_unique<TripleBuffer<PoseSample>>();
+  auto models = std::make_unique<TripleBuffer<ContactSet>>();
+  WrenchDevice dev;
+  dev.pose = pose;
+  HapticServo servo(dev, *poses, *models, ForceLaw{}, DefaultInterpolatorConfig(), DefaultSaturationConfig(), nullptr);
+  servo.set_objects(two);
+  models->write(both);
+  TickInfo info;
+  info.period_ns = 1'000'000;
+  std::int64_t t = 1'000'000'000;
+  auto tick = [&] {
+    info.woke_ns = info.deadline_ns = t;
+    servo.tick(info);
+    ++info.tick;
+    ++info.deadline_index;
+    t += 1'000'000;
+  };
+  for (int k = 0; k < 20; ++k) tick();
+  ContactSet release = both;
+  release.seq = 2;
+  release.models[1].flags = 0;  // object 1: no contact
+  release.models[1].penetration_mm = 0;
+  models->write(release);
+  double last_x = dev.force.x();
+  for (int k = 0; k < 200; ++k) {
+    tick();
+    CHECK(dev.force.x() <= last_x + 1e-12);
+    last_x = dev.force.x();
+    CHECK(dev.force.z() == doctest::Approx(0.4).epsilon(1e-9));
+  }
+  CHECK(dev.force.x() == doctest::Approx(0).epsilon(1e-12));
 }

@@ -106,7 +106,7 @@ TEST_CASE("passivity: closed loop with the hand, the servo and the patch model: 
   const int ticks = 2700;
   SimulatedDevice device(script, user, ticks + 10);
   TripleBuffer<PoseSample> poses;
-  TripleBuffer<ContactModel> models;
+  TripleBuffer<ContactSet> models;
   HapticServo servo(device, poses, models, ForceLaw{}, DefaultInterpolatorConfig(), DefaultSaturationConfig(), nullptr,
                     DefaultPassivityConfig(), 1e-3);
   ContactBuilder builder;
@@ -120,7 +120,7 @@ TEST_CASE("passivity: closed loop with the hand, the servo and the patch model: 
   for (int k = 0; k < ticks; ++k) {
     const std::int64_t t = 1'000'000'000 + std::int64_t(k) * 1'000'000;
     if (have_pending && k % kRoundTicks == 0) {
-      models.write(pending);
+      models.write(ContactSet::of(pending));
       have_pending = false;
     }
     TickInfo info;

@@ -48,7 +48,9 @@ TEST_CASE("ShmSegment: create, attach in a forked child, exchange both ways") {
     ShmSegment& s = *att.value();
     std::uint64_t last_pose = 0;
     for (std::uint64_t i = 1; i <= kModels; ++i) {
-      st::geom::ContactModel& m = s.models().input();
+      st::geom::ContactSet& set = s.models().input();
+      set.count = 1;
+      st::geom::ContactModel& m = set.models[0];
       m = st::geom::ContactModel{};
       m.seq = i;
       m.penetration_mm = static_cast<double>(i);
@@ -69,7 +71,7 @@ TEST_CASE("ShmSegment: create, attach in a forked child, exchange both ways") {
   int child_status = -1;
   auto take = [&] {
     if (s.models().update()) {
-      const auto& m = s.models().output();
+      const auto& m = s.models().output().models[0];
       if (m.penetration_mm != static_cast<double>(m.seq) || m.pairs != static_cast<std::uint32_t>(m.seq)) ++torn;
       if (m.seq <= last) ++backwards;
       last = m.seq;

@@ -2,28 +2,38 @@
 // Collision thread: see collision_loop.hpp.
 #include <spheretouch/engine/collision_loop.hpp>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
 
+#include <spheretouch/geom/check.hpp>
 #include <spheretouch/geom/pod.hpp>
 #include <spheretouch/rt/clock.hpp>
 
 namespace st::inline SPHERETOUCH_ABI::engine {
 
-CollisionLoop::CollisionLoop(const geom::Mesh& probe, const geom::Mesh& object, rt::TripleBuffer<rt::PoseSample>& poses,
-                             rt::TripleBuffer<geom::ContactModel>& models, CollideFn collide, double rate_hz,
+CollisionLoop::CollisionLoop(const geom::Mesh& probe, geom::Vec3 probe_center, double probe_radius,
+                             std::vector<WorldObject> objects, rt::TripleBuffer<rt::PoseSample>& poses,
+                             rt::TripleBuffer<geom::ContactSet>& models, CollideFn collide, double rate_hz,
                              std::size_t max_rounds, const geom::ContactConfig& contact)
     : probe_(probe),
-      object_(object),
+      probe_center_(probe_center),
+      probe_radius_(probe_radius),
+      objects_(std::move(objects)),
       poses_(poses),
       models_(models),
       collide_(std::move(collide)),
-      builder_(contact),
+      object_stats_(objects_.size()),
       rate_hz_(rate_hz),
       max_rounds_(max_rounds) {
+  ST_ASSERT(!objects_.empty(), "a world of at least one object");
   records_.reserve(max_rounds_);
-  builder_.prepare(probe_, object_);
+  builders_.reserve(objects_.size());
+  for (const WorldObject& o : objects_) {
+    builders_.emplace_back(contact);
+    builders_.back().prepare(probe_, *o.mesh);
+  }
 }
 
 CollisionLoop::~CollisionLoop() { stop(); }
@@ -54,9 +64,28 @@ void CollisionLoop::stop() {
 }
 
 void CollisionLoop::run() {
-  geom::ContactBuilder& builder = builder_;
-  RoundOutput out;
-  std::uint64_t last_pose_seq = 0, model_seq = 0;
+  const std::size_t n = objects_.size();
+  const bool single = n == 1;  // one object: never culled, its model sent every round
+  // Per object: the inverse placement, whether it is placed at all (an unplaced object's model is
+  // already in the world), its round's pairs, and how long a release is still sent.
+  std::vector<geom::Pose> to_object(n);
+  std::vector<char> placed(n), was_contact(n, 0);
+  std::vector<geom::Vec3> world_center(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    to_object[k] = objects_[k].placement.inverse();
+    placed[k] = !objects_[k].placement.isApprox(geom::Pose::Identity(), 0.0);
+    world_center[k] = objects_[k].placement * objects_[k].center;
+  }
+  std::vector<RoundOutput> outs(n);
+  std::vector<std::int64_t> linger_until(n, 0);
+  // This round's models, in the objects' frames, before the set is chosen (at most one per object).
+  struct Made {
+    std::uint32_t object;
+    geom::ContactModel model;
+  };
+  std::vector<Made> made;
+  made.reserve(n);
+  std::uint64_t last_pose_seq = 0, set_seq = 0;
   const std::int64_t min_period_ns = rate_hz_ > 0 ? std::int64_t(1e9 / rate_hz_) : 0;
   std::int64_t next_ns = rt::now_ns();
   while (!stop_.load(std::memory_order_acquire)) {
@@ -78,46 +107,117 @@ void CollisionLoop::run() {
     last_pose_seq = sample.seq;
     const geom::Pose pose = geom::to_eigen(sample.pose);
     const std::int64_t t0 = rt::now_ns();
-    out.pairs.clear();
-    out.complete = true;
-    collide_(sample.seq, pose, out);
-    geom::ContactModel m = builder.build(probe_, object_, pose, out.pairs);
-    m.seq = ++model_seq;
-    m.pose_seq = sample.seq;
-    m.pose_sampled_ns = sample.sampled_ns;
-    m.published_ns = rt::now_ns();
-    models_.write(m);
-    const std::int64_t t1 = m.published_ns;
+    ++set_seq;
+    // The top level: the probe's bounding sphere against each object's (a sphere test each;
+    // touching counts, and a relative slack keeps rounding from culling a grazing contact).
+    const geom::Vec3 probe_center = pose * probe_center_;
+    bool complete = true;
+    made.clear();
+    std::uint32_t pairs_total = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+      const WorldObject& o = objects_[k];
+      const double reach = o.radius + probe_radius_;
+      const bool near = single || (world_center[k] - probe_center).norm() <= reach * (1 + 1e-9) + 1e-9;
+      geom::ContactBuilder& builder = builders_[k];
+      // An object out of reach still gets a build while its builder keeps history (a held
+      // contact) or its release is still being sent.
+      if (!near && !builder.has_first_face() && !was_contact[k] && linger_until[k] <= t0) continue;
+      const geom::Pose rel = placed[k] ? geom::Pose(to_object[k] * pose) : pose;
+      RoundOutput& out = outs[k];
+      out.pairs.clear();
+      out.complete = true;
+      if (near) {
+        collide_(sample.seq, std::uint32_t(k), rel, out);
+        ++object_stats_[k].reached;
+        complete = complete && out.complete;
+      }
+      geom::ContactModel m = builder.build(probe_, *o.mesh, rel, out.pairs);
+      m.seq = set_seq;
+      m.pose_seq = sample.seq;
+      m.pose_sampled_ns = sample.sampled_ns;
+      pairs_total += m.pairs;
+      ObjectRoundStats& os = object_stats_[k];
+      os.peak_pairs = std::max(os.peak_pairs, m.pairs);
+      if (m.in_contact()) {
+        ++os.touching;
+        os.peak_penetration_mm = std::max(os.peak_penetration_mm, m.penetration_mm);
+        if (m.penetration_mm > peak_pd_) {
+          peak_pd_ = m.penetration_mm;
+          peak_pose_ = rel;
+          peak_pairs_ = out.pairs;
+          peak_object_ = std::uint32_t(k);
+        }
+      } else if (was_contact[k]) {
+        linger_until[k] = t0 + kLingerNs;  // it left this round: its release is sent for a while
+      }
+      const bool send = single || m.in_contact() || linger_until[k] > t0;
+      was_contact[k] = m.in_contact();
+      if (send) made.push_back({std::uint32_t(k), m});
+    }
+    // The set: every object sent, the deepest first when there are more than it carries.
+    geom::ContactSet& set = models_.input();
+    set.count = 0;
+    set.overflow = 0;
+    set.contacts = 0;
+    if (made.size() > geom::kMaxContactObjects) {
+      std::partial_sort(made.begin(), made.begin() + geom::kMaxContactObjects, made.end(), [](const Made& a, const Made& b) {
+        if (a.model.in_contact() != b.model.in_contact()) return a.model.in_contact();
+        if (a.model.penetration_mm != b.model.penetration_mm) return a.model.penetration_mm > b.model.penetration_mm;
+        return a.object < b.object;
+      });
+      for (std::size_t i = geom::kMaxContactObjects; i < made.size(); ++i) set.overflow += made[i].model.in_contact();
+      if (set.overflow) ++overflow_rounds_;
+      made.resize(geom::kMaxContactObjects);
+    }
+    double pd = 0;
+    const geom::ContactModel* primary = nullptr;
+    const std::int64_t published = rt::now_ns();
+    for (Made& mk : made) {
+      mk.model.published_ns = published;
+      set.object[set.count] = mk.object;
+      set.models[set.count] = placed[mk.object] ? geom::place(mk.model, objects_[mk.object].placement) : mk.model;
+      ++set.count;
+      set.contacts += mk.model.contacts;
+      if (!primary || (mk.model.in_contact() && mk.model.penetration_mm > pd)) {
+        primary = &mk.model;
+        pd = mk.model.in_contact() ? mk.model.penetration_mm : 0.0;
+      }
+    }
+    set.seq = set_seq;
+    set.pose_seq = sample.seq;
+    set.pose_sampled_ns = sample.sampled_ns;
+    set.published_ns = published;
+    models_.publish();
+    const std::int64_t t1 = published;
+    const std::uint32_t contacts = set.contacts;
     rounds_.fetch_add(1, std::memory_order_relaxed);
-    if (view_) view_->offer(m.seq, sample.seq, pose, out.pairs, m, t1 - t0);
-    if (!out.complete) incomplete_.fetch_add(1, std::memory_order_relaxed);
+    // The live view shows object 0 (its frame, its faces).
+    if (view_ && !made.empty() && made.front().object == 0)
+      view_->offer(set_seq, sample.seq, placed[0] ? geom::Pose(to_object[0] * pose) : pose, outs[0].pairs,
+                   made.front().model, t1 - t0);
+    if (!complete) incomplete_.fetch_add(1, std::memory_order_relaxed);
     last_latency_ns_.store(t1 - t0, std::memory_order_relaxed);
-    last_contacts_.store(m.contacts, std::memory_order_relaxed);
+    last_contacts_.store(contacts, std::memory_order_relaxed);
     if (status_) {
       rt::CollisionStatus st;
       st.updated_ns = t1;
       st.rounds = rounds_.load(std::memory_order_relaxed);
-      st.model_seq = m.seq;
+      st.model_seq = set_seq;
       st.pose_seq = sample.seq;
       st.latency_ns = t1 - t0;
-      st.penetration_mm = m.penetration_mm;
-      st.contacts = m.contacts;
+      st.penetration_mm = pd;
+      st.contacts = contacts;
       st.incomplete = static_cast<std::uint32_t>(incomplete_.load(std::memory_order_relaxed));
       status_->store(st);
     }
     latency_.record(t1 - t0);
-    const RoundRecord rec{t0, t1, sample.seq, m.pairs, m.contacts, m.penetration_mm, out.complete};
+    const RoundRecord rec{t0, t1, sample.seq, pairs_total, contacts, pd, complete};
     if (records_.size() < max_rounds_) records_.push_back(rec);
     if (rounds_csv_ && rounds_error_.empty() &&
         std::fprintf(rounds_csv_, "%lld,%lld,%llu,%u,%u,%.6g,%d\n", static_cast<long long>(rec.start_ns),
                      static_cast<long long>(rec.end_ns), static_cast<unsigned long long>(rec.pose_seq), rec.pairs,
                      rec.contacts, rec.penetration_mm, rec.complete ? 1 : 0) < 0)
       rounds_error_ = rounds_path_ + ": write failed: " + std::strerror(errno);  // a full disk: once, then stop
-    if (m.in_contact() && m.penetration_mm > peak_pd_) {
-      peak_pd_ = m.penetration_mm;
-      peak_pose_ = pose;
-      peak_pairs_ = out.pairs;
-    }
   }
 }
 

@@ -16,7 +16,11 @@ namespace st::inline SPHERETOUCH_ABI::engine {
 
 int Fleet::up() const {
   int n = 0;
-  for (const net::WorkerStatus& w : client->workers()) n += w.up;
+  for (const auto& c : clients)
+    if (c) {
+      for (const net::WorkerStatus& w : c->workers()) n += w.up;
+      break;
+    }
   return n;
 }
 
@@ -63,19 +67,26 @@ Result<ClientCurve> load_client_curve(const std::string& server_key_file, const 
 }
 
 Status wait_for_fleet(Fleet& fleet, const FleetSpec& spec, const net::ScatterConfig& cfg) {
+  for (const std::unique_ptr<net::ScatterGather>& c : fleet.clients)
+    if (c)
+      if (Status st = wait_for_client(fleet, *c, spec, cfg); !st) return st;
+  return Ok{};
+}
+
+Status wait_for_client(Fleet& fleet, net::ScatterGather& client, const FleetSpec& spec, const net::ScatterConfig& cfg) {
   const auto start = net::Clock::now();
   const auto until = start + spec.ready_timeout;
   // First wait briefly: a daemon that has not said Hello by then is probed, and a refused key or
   // a security mismatch ends the start now instead of after ready_timeout.
-  if (fleet.client->wait_ready(std::min(until, start + spec.hello_timeout))) return Ok{};
+  if (client.wait_ready(std::min(until, start + spec.hello_timeout))) return Ok{};
   // A daemon whose messages this client cannot read (another protocol version): waiting cannot help.
-  for (const net::WorkerStatus& w : fleet.client->workers())
+  for (const net::WorkerStatus& w : client.workers())
     if (w.epoch == 0 && !w.unreadable.empty())
       return fail("worker ", w.endpoint, " answers with messages this client cannot read (", w.unreadable,
                   "): a spheretouch-worker of another version? Upgrade the daemons and the clients together");
   std::map<std::string, net::ProbeResult> probed;
   auto probe_silent = [&] {
-    for (const net::WorkerStatus& w : fleet.client->workers())
+    for (const net::WorkerStatus& w : client.workers())
       if (w.epoch == 0 && !fleet.local)
         probed[w.endpoint] = net::probe_endpoint(fleet.ctx, w.endpoint, cfg.curve_server_public, cfg.curve_public,
                                                  cfg.curve_secret, std::chrono::milliseconds(2000));
@@ -89,11 +100,11 @@ Status wait_for_fleet(Fleet& fleet, const FleetSpec& spec, const net::ScatterCon
     for (const auto& [ep, p] : probed)
       spec.note("worker " + ep + " has not answered Hello after " + seconds(spec.hello_timeout) + " (" + p.detail +
                 "); waiting up to " + seconds(spec.ready_timeout));
-  if (fleet.client->wait_ready(until)) return Ok{};
+  if (client.wait_ready(until)) return Ok{};
   probed.clear();
   probe_silent();
   std::string who;
-  for (const net::WorkerStatus& w : fleet.client->workers()) {
+  for (const net::WorkerStatus& w : client.workers()) {
     if (w.holds_target) continue;
     who += (who.empty() ? "" : "; ") + w.endpoint;
     if (auto it = probed.find(w.endpoint); it != probed.end())
@@ -106,30 +117,61 @@ Status wait_for_fleet(Fleet& fleet, const FleetSpec& spec, const net::ScatterCon
 
 Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Mesh& probe, const geom::Mesh& object,
                                            const geom::SphereTree& object_tree) {
+  const FleetObject one[] = {FleetObject{&object, &object_tree}};
+  return start_fleet(spec, probe, one);
+}
+
+Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Mesh& probe,
+                                           std::span<const FleetObject> objects) {
+  if (objects.empty()) return fail("distribution: no objects");
   auto fleet = std::make_unique<Fleet>();
   const std::size_t nworkers = spec.endpoints.empty() ? std::size_t(std::max(spec.workers, 0)) : spec.endpoints.size();
-  std::uint32_t layer = spec.layer, block_size = spec.block_size;
-  if (nworkers > 0 && (layer == geom::kFree || block_size == 0)) {
-    // The automatic split: the model's pick for this object and worker count (either knob may be
-    // pinned by the scene; the other is chosen).
-    geom::SplitModelConfig model;
-    model.contact_radius = spec.contact_radius;
-    Result<geom::SplitChoice> pick =
-        geom::choose_split(object_tree, std::uint32_t(nworkers), spec.mapping, model, layer, block_size);
-    if (!pick) return fail("distribution: ", pick.error());
-    layer = pick.value().layer;
-    block_size = pick.value().block_size;
-    fleet->split = pick.value().why + " (automatic; set [tree] layer and block_size to override)";
+  // Each object's split: the automatic pick for that object and worker count (either knob may be
+  // pinned by the scene; the other is chosen).
+  std::vector<net::Blocks> object_blocks;
+  for (std::size_t k = 0; k < objects.size(); ++k) {
+    const std::string who = objects.size() > 1 ? "object " + std::to_string(k + 1) + ": " : std::string();
+    std::uint32_t layer = spec.layer, block_size = spec.block_size;
+    std::string split;
+    if (nworkers > 0 && (layer == geom::kFree || block_size == 0)) {
+      geom::SplitModelConfig model;
+      model.contact_radius = spec.contact_radius;
+      Result<geom::SplitChoice> pick =
+          geom::choose_split(*objects[k].tree, std::uint32_t(nworkers), spec.mapping, model, layer, block_size);
+      if (!pick && objects.size() > 1 && objects[k].tree->num_leaves() < nworkers) {
+        // An object of fewer leaves than workers (a box of 12 faces) is not worth a round trip:
+        // the collision thread answers it (clients[k] stays null).
+        object_blocks.emplace_back();
+        ++fleet->local_objects;
+        continue;
+      }
+      if (!pick) return fail("distribution: ", who, pick.error());
+      layer = pick.value().layer;
+      block_size = pick.value().block_size;
+      split = pick.value().why + " (automatic; set [tree] layer and block_size to override)";
+    }
+    if (layer == geom::kFree) layer = 2;  // no workers: nothing is dealt
+    if (block_size == 0) block_size = 1;
+    Result<net::Blocks> blocks = net::tree_blocks(*objects[k].tree, layer, block_size);
+    if (!blocks) return fail("distribution: ", who, blocks.error());
+    const auto nblocks = static_cast<std::uint32_t>(blocks.value().size());
+    if (split.empty())
+      split = "layer " + std::to_string(layer) + ", block size " + std::to_string(block_size) + ": " +
+              std::to_string(nblocks) + " blocks, " + geom::to_string(spec.mapping) + " over " +
+              std::to_string(nworkers) + " workers (set in the scene)";
+    if (nblocks < nworkers)
+      return fail("distribution: ", who, "layer ", layer, " gives ", nblocks, " blocks for ", nworkers,
+                  " workers (choose a deeper layer or a smaller block size)");
+    fleet->blocks += nblocks;
+    if (k == 0) fleet->split = split;
+    object_blocks.push_back(std::move(blocks).value());
   }
-  if (layer == geom::kFree) layer = 2;  // no workers: nothing is dealt
-  if (block_size == 0) block_size = 1;
-  Result<net::Blocks> blocks = net::tree_blocks(object_tree, layer, block_size);
-  if (!blocks) return fail("distribution: ", blocks.error());
-  fleet->blocks = static_cast<std::uint32_t>(blocks.value().size());
-  if (fleet->split.empty())
-    fleet->split = "layer " + std::to_string(layer) + ", block size " + std::to_string(block_size) + ": " +
-                   std::to_string(fleet->blocks) + " blocks, " + geom::to_string(spec.mapping) + " over " +
-                   std::to_string(nworkers) + " workers (set in the scene)";
+  if (objects.size() > 1)
+    fleet->split += "; " + std::to_string(objects.size()) + " objects, " + std::to_string(fleet->blocks) +
+                    " blocks in all, each object's own block set over the same workers" +
+                    (fleet->local_objects ? " (" + std::to_string(fleet->local_objects) +
+                                                " too small to split, answered by the collision thread)"
+                                          : std::string());
   net::ScatterConfig cfg;
   cfg.mapping = spec.mapping;
   cfg.miss_limit = spec.miss_limit;
@@ -161,8 +203,13 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
     // A tag unique to this fleet keeps inproc names apart when several fleets share a process.
     static std::atomic<int> fleets{0};
     const std::string tag = std::to_string(::getpid()) + "-" + std::to_string(fleets++);
+    // Every object's set stays in memory (its own share and a reassigned variant), however long
+    // the probe stays away from it.
+    net::WorkerConfig base;
+    base.max_sets = std::max<std::uint32_t>(base.max_sets, std::uint32_t(2 * objects.size() + 1));
+    if (objects.size() > 1) base.idle_set_ttl = std::chrono::milliseconds(0);
     Result<std::unique_ptr<net::LocalWorkers>> lw = net::LocalWorkers::start(
-        fleet->ctx, spec.workers, net::tree_backend_factory(), [&](int i) { return net::inproc_endpoint(i, tag); });
+        fleet->ctx, spec.workers, net::tree_backend_factory(), [&](int i) { return net::inproc_endpoint(i, tag); }, base);
     if (!lw) return fail("in-process workers: ", lw.error());
     fleet->local = std::move(lw).value();
     cfg.endpoints = fleet->local->endpoints();
@@ -170,16 +217,19 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
   }
   if (spec.assist_blocks > 0)
     fleet->description += " + client assist (" + std::to_string(spec.assist_blocks) + " blocks)";
-  if (fleet->blocks < cfg.endpoints.size())
-    return fail("distribution: layer ", layer, " gives ", fleet->blocks, " blocks for ", cfg.endpoints.size(),
-                " workers (choose a deeper layer or a smaller block size)");
-  Result<std::unique_ptr<net::ScatterGather>> sg =
-      net::ScatterGather::create(fleet->ctx, cfg, probe, object, std::move(blocks).value());
-  if (!sg) {
-    net::wipe_secret(cfg.curve_secret);
-    return fail("scatter-gather: ", sg.error());
+  for (std::size_t k = 0; k < objects.size(); ++k) {
+    if (object_blocks[k].empty()) {  // answered by the collision thread
+      fleet->clients.emplace_back();
+      continue;
+    }
+    Result<std::unique_ptr<net::ScatterGather>> sg =
+        net::ScatterGather::create(fleet->ctx, cfg, probe, *objects[k].mesh, std::move(object_blocks[k]));
+    if (!sg) {
+      net::wipe_secret(cfg.curve_secret);
+      return fail("scatter-gather: ", sg.error());
+    }
+    fleet->clients.push_back(std::move(sg).value());
   }
-  fleet->client = std::move(sg).value();
   const Status ready = wait_for_fleet(*fleet, spec, cfg);  // probes silent workers with the key
   net::wipe_secret(cfg.curve_secret);                      // the client keeps its own copy
   if (!ready) return Error{ready.error()};

@@ -10,6 +10,7 @@
 #include <chrono>
 #include <functional>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 #include <zmq.hpp>
@@ -57,26 +58,47 @@ struct FleetSpec {
   std::function<void(const std::string&)> note;
 };
 
-/// A running fleet: its context, the in-process workers (if any) and the client.
+/// One object to deal over the fleet.
+struct FleetObject {
+  const geom::Mesh* mesh = nullptr;        ///< its mesh (file coordinates)
+  const geom::SphereTree* tree = nullptr;  ///< its sphere tree
+};
+
+/// A running fleet: its context, the in-process workers (if any) and one client per object.
+/// Every object's blocks are dealt over the same workers, each object's as its own block set
+/// (content-addressed, so a worker holds the objects' sets side by side): clients[k] answers for
+/// object k.
 struct Fleet {
-  zmq::context_t ctx{1};                       ///< the fleet's ZeroMQ context (inproc:// needs one shared)
-  std::unique_ptr<net::LocalWorkers> local;    ///< the in-process workers; null with daemons
-  std::unique_ptr<net::ScatterGather> client;  ///< the scatter-gather client: round() per pose
-  std::uint32_t blocks = 0;                    ///< blocks dealt
-  std::string description;                     ///< "2 in-process workers" / "3 daemons"
-  std::string split;                           ///< how the object was split and why ("layer 3, block size 1: ...")
+  zmq::context_t ctx{1};                     ///< the fleet's ZeroMQ context (inproc:// needs one shared)
+  std::unique_ptr<net::LocalWorkers> local;  ///< the in-process workers; null with daemons
+  std::vector<std::unique_ptr<net::ScatterGather>> clients;  ///< per object: round() per pose
+  net::ScatterGather& client() { return *clients.front(); }  ///< the first object's client
+  /// Objects of fewer sphere-tree leaves than workers (several objects only): not dealt, their
+  /// clients[k] is null and the collision thread answers them.
+  std::uint32_t local_objects = 0;
+  std::uint32_t blocks = 0;  ///< blocks dealt (summed over objects)
+  std::string description;   ///< "2 in-process workers" / "3 daemons"
+  std::string split;  ///< how the object was split and why ("layer 3, block size 1: ..."; of several: the first's)
   /// Workers currently up (not marked down).
   int up() const;
 };
 
-/// Waits until every worker of a started fleet holds its blocks. A daemon silent after
+/// Waits until every worker of a started fleet holds its blocks (every object's). A daemon silent after
 /// hello_timeout is probed (net::probe_endpoint); a refused CURVE key or a security mismatch
 /// fails at once, naming the endpoint and what to fix; otherwise it waits out ready_timeout and
 /// says, per worker, what went wrong.
 Status wait_for_fleet(Fleet& fleet, const FleetSpec& spec, const net::ScatterConfig& cfg);
+/// The same for one client of it.
+Status wait_for_client(Fleet& fleet, net::ScatterGather& client, const FleetSpec& spec, const net::ScatterConfig& cfg);
 
 /// Starts the fleet and waits until every worker holds its blocks; errors say which step failed.
 Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Mesh& probe, const geom::Mesh& object,
                                            const geom::SphereTree& object_tree);
+/// The same for a scene of several objects: each object split (automatic or the spec's layer and
+/// block size) and dealt over the same workers. In-process workers keep every object's sets
+/// (max_sets grows with the objects, no idle expiry); daemons need [worker] max_sets of at least
+/// objects + 2 and an idle_set_ttl longer than the time between touches of an object.
+Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Mesh& probe,
+                                           std::span<const FleetObject> objects);
 
 }  // namespace st::engine

@@ -46,6 +46,14 @@ std::string new_run_dir(const std::string& wanted) {
   return dir;
 }
 
+/// A body's bounding sphere (its tree's root; the padded radius covers the float centre's
+/// rounding), file coordinates.
+geom::Vec3 bound_centre(const Body& b) {
+  const geom::SphereNode& r = b.tree().nodes[0];
+  return b.mesh().origin + geom::Vec3(r.centre[0], r.centre[1], r.centre[2]);
+}
+double bound_radius(const Body& b) { return double(b.tree().nodes[0].radius); }
+
 }  // namespace
 
 /// Everything a run holds, in construction order (the collision loop refers to the meshes, the
@@ -55,12 +63,14 @@ struct RunEngine::State {
   RunOptions opt;
   // The meshes and their trees, loaded once and shared (the collider, the fleet's set-up, the
   // collision loop and the outputs use them).
-  std::optional<Body> probe_body, object_body;
+  std::optional<Body> probe_body;
+  std::vector<ObjectSpec> specs;    // the scene's objects (scene_objects)
+  std::vector<Body> object_bodies;  // their meshes and trees, in the same order
   const geom::Mesh& probe() const { return probe_body->mesh(); }
-  const geom::Mesh& object() const { return object_body->mesh(); }
+  const geom::Mesh& object() const { return object_bodies.front().mesh(); }
   rt::Trajectory script;
   // Collision backend: a ComputeCollision in the collision thread, or a fleet of workers.
-  std::optional<ComputeCollision> collider;
+  std::vector<std::optional<ComputeCollision>> colliders;  // per object, made in the collision thread
   CollisionRequest request;
   CollisionResult result;
   std::string backend = "in the collision thread";
@@ -107,6 +117,19 @@ struct RunEngine::State {
   }
   Status prepare();
   void stop_all();
+  std::vector<const geom::Mesh*> object_meshes() const {
+    std::vector<const geom::Mesh*> m;
+    for (const Body& b : object_bodies) m.push_back(&b.mesh());
+    return m;
+  }
+  /// The collision loop's world: every object with its placement and bounding sphere.
+  std::vector<WorldObject> world() const {
+    std::vector<WorldObject> w;
+    for (std::size_t k = 0; k < object_bodies.size(); ++k)
+      w.push_back({&object_bodies[k].mesh(), specs[k].placement.pose(), bound_centre(object_bodies[k]),
+                   bound_radius(object_bodies[k])});
+    return w;
+  }
 };
 
 Status RunEngine::State::prepare() {
@@ -120,29 +143,47 @@ Status RunEngine::State::prepare() {
   if (opt.device_clocked && !opt.device) return fail("run: RunOptions::device_clocked needs RunOptions::device");
 
   // Only the bodies the scene names are loaded; trees come from the cache when valid.
-  note("loading probe and object ...");
+  specs = scene_objects(s);
+  note(specs.size() == 1 ? "loading probe and object ..."
+                         : "loading probe and " + std::to_string(specs.size()) + " objects ...");
   Result<geom::Mesh> pm = load_body(s.probe, "probe");
   if (!pm) return fail(s.file, ": ", pm.error());
-  Result<geom::Mesh> om = load_body(s.object, "object");
-  if (!om) return fail(s.file, ": ", om.error());
   const std::string cache = s.tree_cache ? default_tree_cache_dir() : "";
-  Result<CachedTree> pt = tree_for(pm.value(), s.tree, cache);
-  if (!pt) return Error{pt.error()};
-  Result<CachedTree> ot = tree_for(om.value(), s.tree, cache);
-  if (!ot) return Error{ot.error()};
-  for (const CachedTree* t : {&pt.value(), &ot.value()})
-    if (!t->note.empty()) note("tree cache: " + t->note);
-  const bool cached = ot.value().source == TreeSource::cached;
-  for (auto [mesh, tree, body] : {std::tuple{&pm, &pt, &probe_body}, std::tuple{&om, &ot, &object_body}}) {
-    Result<Body> b = Body::make(std::make_shared<const geom::Mesh>(std::move(*mesh).value()),
-                                std::make_shared<const geom::SphereTree>(std::move(tree->value().tree)));
-    if (!b) return fail(s.file, ": ", b.error());
-    body->emplace(std::move(b).value());
-  }
+  bool cached = true;
+  std::size_t object_faces = 0;
+  auto make_body = [&](Result<geom::Mesh>& mesh, const std::string& field) -> Result<Body> {
+    Result<CachedTree> t = tree_for(mesh.value(), s.tree, cache);
+    if (!t) return Error{t.error()};
+    if (!t.value().note.empty()) note("tree cache: " + t.value().note);
+    if (&mesh != &pm) cached = cached && t.value().source == TreeSource::cached;
+    Result<Body> b = Body::make(std::make_shared<const geom::Mesh>(std::move(mesh).value()),
+                                std::make_shared<const geom::SphereTree>(std::move(t.value().tree)));
+    if (!b) return fail(s.file, ": ", field, ": ", b.error());
+    return b;
+  };
   {
-    char line[160];
-    std::snprintf(line, sizeof line, "probe %zu faces, object %zu faces; trees %s", probe().num_faces(),
-                  object().num_faces(), cached ? "from the cache" : "built");
+    Result<Body> b = make_body(pm, "probe");
+    if (!b) return Error{b.error()};
+    probe_body.emplace(std::move(b).value());
+  }
+  for (std::size_t k = 0; k < specs.size(); ++k) {
+    const std::string field = s.objects.empty() ? "object" : "object[" + std::to_string(k + 1) + "]";
+    Result<geom::Mesh> om = load_body(specs[k].body, field);
+    if (!om) return fail(s.file, ": ", om.error());
+    Result<Body> b = make_body(om, field);
+    if (!b) return Error{b.error()};
+    object_faces += b.value().mesh().num_faces();
+    object_bodies.push_back(std::move(b).value());
+  }
+  colliders.resize(specs.size());
+  {
+    char line[200];
+    if (specs.size() == 1)
+      std::snprintf(line, sizeof line, "probe %zu faces, object %zu faces; trees %s", probe().num_faces(),
+                    object().num_faces(), cached ? "from the cache" : "built");
+    else
+      std::snprintf(line, sizeof line, "probe %zu faces, %zu objects of %zu faces in all; trees %s",
+                    probe().num_faces(), specs.size(), object_faces, cached ? "from the cache" : "built");
     note(line);
   }
 
@@ -152,7 +193,7 @@ Status RunEngine::State::prepare() {
     // A device drives the probe; the script is the grip (for the split servo, as a one-pose trajectory).
     script.keys = {rt::TimedPose{0.0, probe_grip(s, probe())}};
   } else if (s.device.script == "builtin") {
-    script = builtin_script(s, probe(), object());
+    script = builtin_script(s, probe(), object_meshes());
   } else {
     Result<rt::Trajectory> t = rt::load_trajectory(s.device.script);
     if (!t) return Error{t.error()};
@@ -164,8 +205,9 @@ Status RunEngine::State::prepare() {
   // Pairs in (probe, object) order, as the workers' merge gives them: the contact model is then
   // the same at every worker count, and the builder need not sort them.
   request.sort_pairs = true;
-  collide_fn = [this](std::uint64_t, const geom::Pose& pose, RoundOutput& out) {
-    if (!collider) collider.emplace(*probe_body, *object_body);  // in the collision thread: its caches
+  collide_fn = [this](std::uint64_t, std::uint32_t k, const geom::Pose& pose, RoundOutput& out) {
+    std::optional<ComputeCollision>& collider = colliders[k];
+    if (!collider) collider.emplace(*probe_body, object_bodies[k]);  // in the collision thread: its caches
     collider->at_relative(pose, request, result);
     out.pairs.assign(result.pairs.begin(), result.pairs.end());
   };
@@ -190,13 +232,17 @@ Status RunEngine::State::prepare() {
     spec.curve = opt.curve;
     spec.note = opt.note;
     note("starting workers and loading their blocks ...");
-    Result<std::unique_ptr<Fleet>> f = start_fleet(spec, probe(), object(), object_body->tree());
+    std::vector<FleetObject> fobjects;
+    for (const Body& b : object_bodies) fobjects.push_back({&b.mesh(), &b.tree()});
+    Result<std::unique_ptr<Fleet>> f = start_fleet(spec, probe(), fobjects);
     if (!f) return Error{f.error()};
     fleet = std::move(f).value();
     backend = fleet->description;
     const auto deadline = std::chrono::microseconds(std::int64_t(s.deadline_ms * 1000));
-    collide_fn = [this, deadline](std::uint64_t seq, const geom::Pose& pose, RoundOutput& out) {
-      fleet->client->round(seq, pose, net::Clock::now() + deadline, round);
+    collide_fn = [this, deadline, local = collide_fn](std::uint64_t seq, std::uint32_t k, const geom::Pose& pose,
+                                                      RoundOutput& out) {
+      if (!fleet->clients[k]) return local(seq, k, pose, out);  // too small to deal: this thread answers it
+      fleet->clients[k]->round(seq, pose, net::Clock::now() + deadline, round);
       out.pairs.resize(round.pairs.size());
       for (std::size_t i = 0; i < round.pairs.size(); ++i) out.pairs[i] = {round.pairs[i].probe, round.pairs[i].object};
       out.complete = round.complete;
@@ -262,7 +308,8 @@ Status RunEngine::State::prepare() {
     } else if (s.device.kind == "browser") {
       // The page starts the tip where the built-in script starts: above the target, off the surface.
       const geom::Pose grip = script.keys.front().pose;
-      const geom::Vec3 home = (builtin_script(s, probe(), object()).keys.front().pose * grip.inverse()).translation();
+      const geom::Vec3 home =
+          (builtin_script(s, probe(), object_meshes()).keys.front().pose * grip.inverse()).translation();
       feed = std::make_unique<rt::PoseFeedDevice>(grip, home, s.saturation.peak_N);
       device = feed.get();
     } else {
@@ -281,14 +328,14 @@ Status RunEngine::State::prepare() {
     rt::WrenchConfig wrench = s.device.wrench;
     wrench.tcp_mm = tool_point(s, probe());
     servo->set_wrench(wrench);
-    servo->set_friction(s.friction);
+    if (Status m = set_servo_materials(*servo, s); !m) return m;
   } else {
     // The servo gets the trajectory as a file (it loads no meshes) and the scene for its settings.
     script_file = dir + "/script.txt";
     if (Status w = write_trajectory(script_file, script); !w) return w;
   }
-  collision = std::make_unique<CollisionLoop>(probe(), object(), shm->poses(), shm->models(), collide_fn,
-                                              s.collision_rate_hz, 0, s.contact);
+  collision = std::make_unique<CollisionLoop>(probe(), bound_centre(*probe_body), bound_radius(*probe_body), world(),
+                                              shm->poses(), shm->models(), collide_fn, s.collision_rate_hz, 0, s.contact);
   collision->publish_status_to(&status.collision);
   // Every run publishes view frames, so that a live view (run --view, or monitor --view
   // attached at any time) can show it.
@@ -578,21 +625,47 @@ RunReport RunEngine::finish(int signal) {
     std::string guard = s.passivity.enabled ? "passivity guard on" : "passivity guard off";
     if (s.passivity.enabled && !e.opt.split)
       appendf(guard, " (controller acted on %llu ticks)",
-              static_cast<unsigned long long>(e.servo->passivity().active_ticks()));
+              static_cast<unsigned long long>(e.servo->passivity_active_ticks()));
     appendf(summary, "  contact         model %s, interpolation %s, %s\n", geom::to_string(s.contact.model),
             rt::to_string(s.interp.mode), guard.c_str());
   }
-  if (s.friction.static_mu > 0 || s.friction.dynamic_mu > 0) {
-    std::string counts = " (the servo process counts)";
-    if (!e.opt.split && e.servo) {
-      const rt::FrictionStats& fs = e.servo->friction().stats();
-      counts = "";
-      appendf(counts, ", stick spring %.3f N/mm: %llu ticks stuck, %llu sliding, %llu break-aways",
-              e.servo->friction().stiffness_N_per_mm(), static_cast<unsigned long long>(fs.stuck_ticks),
-              static_cast<unsigned long long>(fs.sliding_ticks), static_cast<unsigned long long>(fs.breakaways));
+  {
+    bool any_friction = false;
+    for (const ObjectSpec& o : e.specs)
+      any_friction = any_friction || o.material.friction.static_mu > 0 || o.material.friction.dynamic_mu > 0;
+    if (any_friction) {
+      std::string counts = " (the servo process counts)";
+      if (!e.opt.split && e.servo) {
+        const rt::FrictionStats fs = e.servo->friction_stats();
+        counts = "";
+        if (e.specs.size() == 1) appendf(counts, ", stick spring %.3f N/mm", e.servo->friction().stiffness_N_per_mm());
+        appendf(counts, ": %llu ticks stuck, %llu sliding, %llu break-aways",
+                static_cast<unsigned long long>(fs.stuck_ticks), static_cast<unsigned long long>(fs.sliding_ticks),
+                static_cast<unsigned long long>(fs.breakaways));
+      }
+      if (e.specs.size() == 1)
+        appendf(summary, "  friction        static %.3g, dynamic %.3g%s\n", s.friction.static_mu, s.friction.dynamic_mu,
+                counts.c_str());
+      else
+        appendf(summary, "  friction        per object's material (below)%s\n", counts.c_str());
     }
-    appendf(summary, "  friction        static %.3g, dynamic %.3g%s\n", s.friction.static_mu, s.friction.dynamic_mu,
-            counts.c_str());
+  }
+  if (e.specs.size() > 1) {
+    // Per object: how often the top level let the probe reach it, how often it was touched, and how deep.
+    const std::vector<ObjectRoundStats>& os = collision.object_stats();
+    appendf(summary, "  objects         %zu; per object: rounds reached (collided) / touching, peak pairs, peak PD\n",
+            e.specs.size());
+    for (std::size_t k = 0; k < e.specs.size() && k < os.size(); ++k) {
+      const ObjectSpec& o = e.specs[k];
+      appendf(summary, "    %-14s %zu faces, %llu / %llu rounds, %u pairs, %.3f mm; mu %.3g/%.3g\n", o.name.c_str(),
+              e.object_bodies[k].mesh().num_faces(), static_cast<unsigned long long>(os[k].reached),
+              static_cast<unsigned long long>(os[k].touching), os[k].peak_pairs, os[k].peak_penetration_mm,
+              o.material.friction.static_mu, o.material.friction.dynamic_mu);
+    }
+    if (collision.overflow_rounds())
+      appendf(summary, "    %llu rounds touched more than %u objects at once (the deepest %u rendered)\n",
+              static_cast<unsigned long long>(collision.overflow_rounds()), geom::kMaxContactObjects,
+              geom::kMaxContactObjects);
   }
   if (servo_lost)
     appendf(summary, "  telemetry       (servo figures lost)\n");
@@ -631,8 +704,9 @@ RunReport RunEngine::finish(int signal) {
   if (s.write_ply) {
     if (collision.peak_pairs().empty()) {
       appendf(summary, "    contact.ply   not written: the probe never touched the object\n");
-    } else if (Status st = write_contact_ply(e.dir + "/contact.ply", e.probe(), e.object(), collision.peak_pose(),
-                                             collision.peak_pairs());
+    } else if (Status st =
+                   write_contact_ply(e.dir + "/contact.ply", e.probe(), e.object_bodies[collision.peak_object()].mesh(),
+                                     collision.peak_pose(), collision.peak_pairs());
                !st) {
       appendf(summary, "    contact.ply: %s\n", st.error().c_str());
       failures.push_back(st.error());

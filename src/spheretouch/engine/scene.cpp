@@ -35,24 +35,48 @@ std::string lookup(const std::string& path) {
 }
 
 /// A material's fields, in [force] (the default material) and in [object.material]: the force
-/// law and its constants, the damping, the friction. Fields not given keep what `s` holds.
-void read_material(TomlReader& r, Scene& s) {
-  std::string law = s.law.kind == rt::LawKind::log ? "log" : "linear";
+/// law and its constants, the damping, the friction. Fields not given keep what `m` holds.
+void read_material(TomlReader& r, Material& m) {
+  std::string law = m.law.kind == rt::LawKind::log ? "log" : "linear";
   r.string("law", law, {"log", "linear"});
-  s.law.kind = law == "log" ? rt::LawKind::log : rt::LawKind::linear;
-  r.number("a", s.law.a, -1e6, 1e6);
-  r.number("b_n", s.law.b_N, 1e-9, 1e6);
-  r.number("log_base", s.law.log_base, 1.000001, 1e6);
-  r.number("pd_unit_mm", s.law.pd_unit_mm, 1e-9, 1e9);
-  r.number("spring_n_per_mm", s.law.spring_N_per_mm, 1e-9, 1e6);
-  r.number("damping_n_s_per_mm", s.interp.damping_N_s_per_mm, 0, 1e3);
-  r.number("static_friction", s.friction.static_mu, 0, 10);
-  r.number("dynamic_friction", s.friction.dynamic_mu, 0, 10);
-  r.number("friction_stiffness_n_per_mm", s.friction.stiffness_N_per_mm, 0, 1e6);
-  if (s.friction.dynamic_mu > s.friction.static_mu)
+  m.law.kind = law == "log" ? rt::LawKind::log : rt::LawKind::linear;
+  r.number("a", m.law.a, -1e6, 1e6);
+  r.number("b_n", m.law.b_N, 1e-9, 1e6);
+  r.number("log_base", m.law.log_base, 1.000001, 1e6);
+  r.number("pd_unit_mm", m.law.pd_unit_mm, 1e-9, 1e9);
+  r.number("spring_n_per_mm", m.law.spring_N_per_mm, 1e-9, 1e6);
+  r.number("damping_n_s_per_mm", m.damping_N_s_per_mm, 0, 1e3);
+  r.number("static_friction", m.friction.static_mu, 0, 10);
+  r.number("dynamic_friction", m.friction.dynamic_mu, 0, 10);
+  r.number("friction_stiffness_n_per_mm", m.friction.stiffness_N_per_mm, 0, 1e6);
+  if (m.friction.dynamic_mu > m.friction.static_mu)
     r.error(
         r.has("dynamic_friction") ? "dynamic_friction" : "static_friction",
         "dynamic_friction must not exceed static_friction (a contact that slides harder than it sticks never sticks)");
+}
+
+/// The scene's default material ([force]) as its fields hold it.
+Material scene_material(const Scene& s) { return Material{s.law, s.interp.damping_N_s_per_mm, s.friction}; }
+
+/// Sets the scene's material fields (the single object's, or the first of several).
+void set_material(Scene& s, const Material& m) {
+  s.law = m.law;
+  s.interp.damping_N_s_per_mm = m.damping_N_s_per_mm;
+  s.friction = m.friction;
+}
+
+/// An object's name, placement and material table (the body is read by read_body).
+const toml::table* read_object_extras(TomlReader& r, ObjectSpec& o, bool& placed) {
+  r.string("name", o.name);
+  std::vector<double> pos, rot;
+  r.numbers("position_mm", pos, 3);
+  r.numbers("rotation_deg", rot, 3);
+  placed = !pos.empty() || !rot.empty() || !o.name.empty();
+  if (!pos.empty()) o.placement.position_mm = geom::Vec3(pos[0], pos[1], pos[2]);
+  if (!rot.empty()) o.placement.rotation_deg = geom::Vec3(rot[0], rot[1], rot[2]);
+  if (!pos.empty() && o.placement.position_mm.cwiseAbs().maxCoeff() > 1e9)
+    r.error("position_mm", "expected coordinates within 1e9 mm");
+  return r.table("material");
 }
 
 void read_body(TomlReader& r, BodySpec& b, const std::string& dir, const std::string& field) {
@@ -125,15 +149,16 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
       return fail(name, ": missing section [", sec, "] (every scene names its probe and object)");
 
   auto section = [&](const char* key) { return root.get_as<toml::table>(key); };
-  const toml::table* object_material = nullptr;  // [object.material], read after [force] (its default)
   auto check_table = [&](const char* key) -> Status {
     if (root.contains(key) && !root.get_as<toml::table>(key))
       return fail(name, ": ", key, ": expected a [", key, "] table");
     return Ok{};
   };
-  for (const char* sec : {"probe", "object", "tree", "workers", "collision", "haptic", "force", "interpolation",
-                          "contact", "passivity", "device", "output", "run"})
+  for (const char* sec : {"probe", "tree", "workers", "collision", "haptic", "force", "interpolation", "contact",
+                          "passivity", "device", "output", "run"})
     if (Status st = check_table(sec); !st) return Error{st.error()};
+  if (root.contains("object") && !root.get_as<toml::table>("object") && !root.get_as<toml::array>("object"))
+    return fail(name, ": object: expected an [object] table or [[object]] tables");
 
   {
     s.probe = {};
@@ -149,12 +174,45 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     if (!rot.empty()) s.probe_rotation_deg = vec3(rot);
     if (Status st = r.finish(); !st) return Error{st.error()};
   }
-  {
+  // [object] (one object) or [[object]] (several): bodies and placements now, materials after
+  // [force] (their default).
+  std::vector<const toml::table*> object_materials;
+  bool several = false;
+  if (const toml::array* arr = root.get_as<toml::array>("object")) {
+    several = true;
+    if (arr->empty()) return fail(name, ": object: expected at least one [[object]] table");
+    if (arr->size() > kMaxSceneObjects)
+      return fail(name, ": object: ", arr->size(), " objects, at most ", kMaxSceneObjects, " are supported");
+    for (std::size_t i = 0; i < arr->size(); ++i) {
+      const std::string path = "object[" + std::to_string(i + 1) + "]";
+      const toml::table* t = (*arr)[i].as_table();
+      if (!t) return fail(name, ": ", path, ": expected a table ([[object]])");
+      ObjectSpec o;
+      TomlReader r(t, path, name);
+      read_body(r, o.body, dir, path);
+      bool placed = false;
+      object_materials.push_back(read_object_extras(r, o, placed));
+      if (o.name.empty()) o.name = "object " + std::to_string(i + 1);
+      for (const ObjectSpec& other : s.objects)
+        if (other.name == o.name) r.error("name", "'" + o.name + "' names an earlier object too (names are unique)");
+      if (Status st = r.finish(); !st) return Error{st.error()};
+      s.objects.push_back(std::move(o));
+    }
+    s.object = s.objects.front().body;
+  } else {
     s.object = {};
     TomlReader r(section("object"), "object", name);
     read_body(r, s.object, dir, "object");
-    object_material = r.table("material");
+    ObjectSpec o;
+    bool placed = false;
+    object_materials.push_back(read_object_extras(r, o, placed));
     if (Status st = r.finish(); !st) return Error{st.error()};
+    if (placed) {  // a placed single object is a world of one
+      several = true;
+      o.body = s.object;
+      if (o.name.empty()) o.name = "object 1";
+      s.objects.push_back(std::move(o));
+    }
   }
   {
     TomlReader r(section("tree"), "tree", name);
@@ -234,7 +292,9 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
   }
   {
     TomlReader r(section("force"), "force", name);
-    read_material(r, s);
+    Material m = scene_material(s);
+    read_material(r, m);
+    set_material(s, m);
     r.number("peak_n", s.saturation.peak_N, 1e-9, 1e4);
     s.law.max_force_N = s.saturation.peak_N;
     r.boolean("sustained_limit", s.saturation.sustained);
@@ -245,12 +305,26 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     if (Result<rt::ForceLaw> l = rt::ForceLaw::make(s.law); !l) return fail(name, ": [force] ", l.error());
     if (std::string e = rt::Saturator::check(s.saturation); !e.empty()) return fail(name, ": [force] ", e);
   }
-  if (object_material) {
-    // The object's material: [force]'s material fields (the default) overridden where it says.
-    TomlReader r(object_material, "object.material", name);
-    read_material(r, s);
-    if (Status st = r.finish(); !st) return Error{st.error()};
-    if (Result<rt::ForceLaw> l = rt::ForceLaw::make(s.law); !l) return fail(name, ": [object.material] ", l.error());
+  {
+    // Each object's material: [force]'s material fields (the default) overridden where it says.
+    const Material def = scene_material(s);
+    for (std::size_t i = 0; i < object_materials.size(); ++i) {
+      Material m = def;
+      const std::string path = several && root.get_as<toml::array>("object")
+                                   ? "object[" + std::to_string(i + 1) + "].material"
+                                   : std::string("object.material");
+      if (object_materials[i]) {
+        TomlReader r(object_materials[i], path, name);
+        read_material(r, m);
+        if (Status st = r.finish(); !st) return Error{st.error()};
+        if (Result<rt::ForceLaw> l = rt::ForceLaw::make(m.law); !l) return fail(name, ": [", path, "] ", l.error());
+      }
+      if (several)
+        s.objects[i].material = m;
+      else
+        set_material(s, m);
+    }
+    if (several) set_material(s, s.objects.front().material);  // the first object's, for code that knows one
   }
   {
     TomlReader r(section("interpolation"), "interpolation", name);
@@ -381,6 +455,35 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
   return s;
 }
 
+geom::Pose Placement::pose() const {
+  const geom::Vec3 r = rotation_deg * (M_PI / 180.0);
+  geom::Pose p = geom::Pose::Identity();
+  p.translate(position_mm);
+  p.rotate(Eigen::AngleAxisd(r.x(), geom::Vec3::UnitX()) * Eigen::AngleAxisd(r.y(), geom::Vec3::UnitY()) *
+           Eigen::AngleAxisd(r.z(), geom::Vec3::UnitZ()));
+  return p;
+}
+
+std::vector<ObjectSpec> scene_objects(const Scene& s) {
+  if (!s.objects.empty()) return s.objects;
+  ObjectSpec o;
+  o.name = "object";
+  o.body = s.object;
+  o.material = scene_material(s);
+  return {o};
+}
+
+Status set_servo_materials(rt::HapticServo& servo, const Scene& s) {
+  std::vector<rt::ObjectMaterial> materials;
+  for (const ObjectSpec& o : scene_objects(s)) {
+    Result<rt::ForceLaw> law = rt::ForceLaw::make(o.material.law);
+    if (!law) return fail(s.file, ": ", o.name, ": ", law.error());
+    materials.push_back({law.value(), o.material.damping_N_s_per_mm, o.material.friction});
+  }
+  servo.set_objects(materials);
+  return Ok{};
+}
+
 std::string bridge_key_path(const std::string& run_dir) { return run_dir + "/bridge.key"; }
 
 Result<rt::UdpDeviceConfig> udp_device_config(const Scene& s, const std::string& run_dir, bool make_key) {
@@ -415,16 +518,23 @@ Result<Scene> load_scene(const std::string& path) {
   return parse_scene(text.value(), path, dir.empty() ? "." : dir);
 }
 
-rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, const geom::Mesh& object) {
+rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, std::span<const geom::Mesh* const> objects) {
   const geom::Vec3 n = s.device.normal;
   geom::Vec3 target = s.device.target;
-  if (s.device.target_top) {  // the object's extreme vertex along the normal
+  if (s.device.target_top) {  // the extreme vertex along the normal over every object, in the world
+    const std::vector<ObjectSpec> specs = scene_objects(s);
     double best = -std::numeric_limits<double>::infinity();
-    for (std::uint32_t i = 0; i < object.num_vertices(); ++i)
-      if (const double d = object.vertex(i).dot(n); d > best) {
-        best = d;
-        target = object.vertex(i);
+    for (std::size_t k = 0; k < objects.size(); ++k) {
+      const geom::Pose place = k < specs.size() ? specs[k].placement.pose() : geom::Pose::Identity();
+      const geom::Mesh& object = *objects[k];
+      for (std::uint32_t i = 0; i < object.num_vertices(); ++i) {
+        const geom::Vec3 v = place * object.vertex(i);
+        if (const double d = v.dot(n); d > best) {
+          best = d;
+          target = v;
+        }
       }
+    }
   }
   const geom::Pose grip = probe_grip(s, probe);
   rt::Trajectory t = rt::builtin_press_slide(target, n, s.device.press_mm, s.device.slide_mm);
@@ -434,6 +544,11 @@ rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, const geo
     k.pose = p * grip;
   }
   return t;
+}
+
+rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, const geom::Mesh& object) {
+  const geom::Mesh* one[] = {&object};
+  return builtin_script(s, probe, one);
 }
 
 geom::Pose probe_grip(const Scene& s, const geom::Mesh& probe) {

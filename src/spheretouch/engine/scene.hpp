@@ -5,6 +5,7 @@
 /// are rejected, and only the bodies named are loaded. configs/demo.toml documents every field.
 #pragma once
 #include <spheretouch/abi.hpp>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -44,6 +45,35 @@ struct BodySpec {
   double scale = 1;          ///< extra factor
 };
 
+/// Where an object sits in the world: its file coordinates are turned by rotation_deg (XYZ Euler,
+/// degrees, about the file's origin) and then moved by position_mm. The world is the frame device
+/// poses are in; an object with no placement has world = its file coordinates (a single-object
+/// scene's world is its object's frame). Objects are static; a placement is a plain pose, so a
+/// later version can change it between rounds.
+struct Placement {
+  geom::Vec3 position_mm{geom::Vec3::Zero()};   ///< translation, mm
+  geom::Vec3 rotation_deg{geom::Vec3::Zero()};  ///< XYZ Euler angles, degrees
+  geom::Pose pose() const;                      ///< object file coordinates → world
+};
+
+/// A material ([force] is the default one, [object.material] overrides it per object).
+struct Material {
+  rt::ForceLawConfig law = rt::DefaultForceLawConfig();  ///< eq. (1) or a spring
+  double damping_N_s_per_mm = 0;                         ///< damping along the contact normal
+  rt::FrictionConfig friction;                           ///< static and dynamic friction (none by default)
+};
+
+/// One touchable object of a scene: a body, its placement and its material.
+struct ObjectSpec {
+  std::string name;     ///< [[object]] name (default: "object N", N from 1 in file order)
+  BodySpec body;        ///< its mesh or generated shape
+  Placement placement;  ///< where it sits in the world
+  Material material;    ///< how it feels
+};
+
+/// Objects a scene may hold ([[object]] entries).
+inline constexpr std::size_t kMaxSceneObjects = 1024;
+
 /// The device: a simulated one (a script) or a real one behind the UDP bridge.
 struct DeviceSpec {
   std::string kind = "simulated";                          ///< "simulated" or "udp"
@@ -67,9 +97,14 @@ struct DeviceSpec {
 
 /// Everything a run needs, with defaults from the libraries' Default…() functions.
 struct Scene {
-  std::string file;                                   ///< the scene file (for messages)
-  BodySpec probe;                                     ///< the hand (or tool) the device moves
-  BodySpec object;                                    ///< the touched object
+  std::string file;  ///< the scene file (for messages)
+  BodySpec probe;    ///< the hand (or tool) the device moves
+  BodySpec object;   ///< the touched object (of several: the first)
+  /// [[object]]: every object with its placement and material, in file order (empty for a scene
+  /// with one [object]: then `object`, `law`, `friction` and `interp.damping_N_s_per_mm` are it, at
+  /// the world's origin). The parser also sets `object` and the material fields to the first
+  /// object's, for code that knows one object. Use scene_objects() to read either form.
+  std::vector<ObjectSpec> objects;
   bool probe_tip_auto = true;                         ///< fingertip = probe's lowest vertex along the approach
   geom::Vec3 probe_tip{geom::Vec3::Zero()};           ///< fingertip, probe file coordinates, mm
   geom::Vec3 probe_rotation_deg{geom::Vec3::Zero()};  ///< probe orientation (XYZ Euler, about the tip)
@@ -109,6 +144,14 @@ struct Scene {
   std::string status = "auto";  ///< status line: auto, tty, plain, off
 };
 
+/// The scene's objects: `objects`, or (a scene of one [object]) that object at the world's origin
+/// with the scene's [force] material.
+std::vector<ObjectSpec> scene_objects(const Scene& s);
+
+/// Gives the servo the scene's objects' materials (HapticServo::set_objects, in scene_objects()
+/// order); errors name the object.
+Status set_servo_materials(rt::HapticServo& servo, const Scene& s);
+
 /// The tool centre point torques are taken about, probe file coordinates, mm: `[device] tcp_mm`,
 /// or the probe's tip (the grip's origin, probe_grip()).
 geom::Vec3 tool_point(const Scene& s, const geom::Mesh& probe);
@@ -133,6 +176,10 @@ std::string model_dir();
 /// approaches the object's surface point (scene target, or its extreme vertex along the normal)
 /// against the normal, presses, slides and releases (rt::builtin_press_slide moves the fingertip).
 rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, const geom::Mesh& object);
+/// The same over a scene of several objects (scene_objects(s) order, meshes as loaded): the
+/// target is a world point (the extreme vertex along the normal over every placed object, or the
+/// scene's target, read in the world frame).
+rt::Trajectory builtin_script(const Scene& s, const geom::Mesh& probe, std::span<const geom::Mesh* const> objects);
 /// The probe as the device holds it: probe file coordinates to the tool frame (the fingertip at
 /// the origin, the scene's probe rotation). A device pose is Trans(tip position) · Rot · grip.
 geom::Pose probe_grip(const Scene& s, const geom::Mesh& probe);

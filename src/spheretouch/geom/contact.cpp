@@ -29,6 +29,16 @@ const char* to_string(ContactModelKind kind) {
   return "?";
 }
 
+ContactModel place(const ContactModel& m, const Pose& placement) {
+  ContactModel w = m;
+  const Eigen::Matrix3d R = placement.linear();
+  w.pose = to_pod(Pose(placement * to_eigen(m.pose)));
+  w.force_dir = to_pod(Vec3(R * to_eigen(m.force_dir)));
+  for (PodVec3 ContactModel::*p : {&ContactModel::contact_point, &ContactModel::plane_point, &ContactModel::pressure_point})
+    w.*p = to_pod(Vec3(placement * to_eigen(m.*p)));
+  return w;
+}
+
 ContactConfig DefaultContactConfig() { return ContactConfig{}; }
 
 std::string check(const ContactConfig& c) {

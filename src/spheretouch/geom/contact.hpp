@@ -177,6 +177,46 @@ struct ContactModel {
 static_assert(std::is_trivially_copyable_v<ContactModel>);
 static_assert(sizeof(ContactModel) == 312, "ContactModel layout is pinned (shared memory, telemetry)");
 
+/// Objects a ContactSet carries at most: the probe touching (or just leaving) more objects than
+/// this at once renders the kMaxContactObjects deepest, and the set counts the rest (overflow).
+inline constexpr std::uint32_t kMaxContactObjects = 8;
+
+/// The contact models of one collision round over a scene of one or more objects, for the
+/// haptic side: one model per object the probe touches, and a "no contact" model for an object it
+/// left this round (it ends that object's contact). Every vector of the models is in the world
+/// frame (the objects' placements applied), `pose` maps the probe into the world, so the servo
+/// needs no placement. A single-object scene sends its one model every round. Plain data, fixed
+/// size (a TripleBuffer in shared memory carries it).
+struct ContactSet {
+  std::uint64_t seq = 0;             ///< 1, 2, 3... per collision loop; 0 = none yet
+  std::uint64_t pose_seq = 0;        ///< the pose the round answered
+  std::int64_t pose_sampled_ns = 0;  ///< when that pose was sampled, CLOCK_MONOTONIC ns
+  std::int64_t published_ns = 0;     ///< when the set was published, CLOCK_MONOTONIC ns
+  std::uint32_t count = 0;           ///< models in use (<= kMaxContactObjects)
+  std::uint32_t overflow = 0;        ///< objects in contact this round left out (beyond kMaxContactObjects)
+  std::uint32_t contacts = 0;        ///< paper §3.5 contacts summed over the models
+  std::uint32_t reserved = 0;        ///< zero
+  std::uint32_t object[kMaxContactObjects] = {};  ///< scene object index of models[i]
+  ContactModel models[kMaxContactObjects];        ///< models[0 .. count)
+  /// A set of one model for object 0 (a single-object scene), with the model's sequence numbers and times.
+  static ContactSet of(const ContactModel& m) {
+    ContactSet s;
+    s.seq = m.seq;
+    s.pose_seq = m.pose_seq;
+    s.pose_sampled_ns = m.pose_sampled_ns;
+    s.published_ns = m.published_ns;
+    s.count = 1;
+    s.contacts = m.contacts;
+    s.models[0] = m;
+    return s;
+  }
+};
+static_assert(std::is_trivially_copyable_v<ContactSet>);
+
+/// `m` (built in an object's own frame) moved into the world by the object's placement
+/// (object frame → world): the pose, FD and every point but probe_point (a probe-frame point).
+ContactModel place(const ContactModel& m, const Pose& placement);
+
 /// Builder knobs; DefaultContactConfig() gives the documented defaults.
 struct ContactConfig {
   ContactModelKind model = ContactModelKind::patch;  ///< which model

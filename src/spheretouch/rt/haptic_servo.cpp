@@ -29,30 +29,72 @@ std::string check(const WrenchConfig& c) {
 void HapticServo::set_wrench(const WrenchConfig& config) {
   ST_ASSERT(check(config).empty(), "the wrench config passed check()");
   wrench_ = config;
-  interp_.set_tool_point(config.tcp_mm);
+  for (Channel& c : channels_) c.interp.set_tool_point(config.tcp_mm);
   const double dev = device_.max_torque_Nm();
   torque_ceiling_Nm_ = config.dof == 6 ? std::min(config.torque_limit_Nm, std::isfinite(dev) && dev > 0 ? dev : 0.0) : 0.0;
 }
 
-HapticServo::HapticServo(Device& device, TripleBuffer<PoseSample>& poses, TripleBuffer<geom::ContactModel>& models,
+HapticServo::Channel HapticServo::make_channel(const ForceLaw& law, double damping_N_s_per_mm,
+                                               const FrictionConfig& friction) const {
+  InterpolatorConfig ic = interp_config_;
+  ic.damping_N_s_per_mm = damping_N_s_per_mm;
+  const double k = law.max_stiffness_N_per_mm();
+  return Channel{Interpolator(law, ic), PassivityGuard(passivity_config_, k, period_s_),
+                 Friction(friction, k, period_s_), k};
+}
+
+HapticServo::HapticServo(Device& device, TripleBuffer<PoseSample>& poses, TripleBuffer<geom::ContactSet>& models,
                          const ForceLaw& law, const InterpolatorConfig& interp, SaturationConfig saturation,
                          Telemetry* telemetry, const PassivityConfig& passivity, double period_s)
     : device_(device),
       poses_(poses),
       models_(models),
-      interp_(law, interp),
+      interp_config_(interp),
+      passivity_config_(passivity),
       sat_(capped(saturation, device)),
-      guard_(passivity, law.max_stiffness_N_per_mm(), period_s),
-      friction_(FrictionConfig{}, law.max_stiffness_N_per_mm(), period_s),
       telemetry_(telemetry),
       passivity_on_(passivity.enabled),
       margin_(passivity.colgate_margin),
-      period_s_(period_s),
-      stiffness_N_per_mm_(law.max_stiffness_N_per_mm()) {}
+      period_s_(period_s) {
+  channels_.push_back(make_channel(law, interp.damping_N_s_per_mm, FrictionConfig{}));
+  channels_[0].live = true;  // one object: ticked from the start, as it always was
+}
 
 void HapticServo::set_friction(const FrictionConfig& config) {
   ST_ASSERT(check(config).empty(), "the friction config passed check()");
-  friction_ = Friction(config, stiffness_N_per_mm_, period_s_);
+  channels_[0].friction = Friction(config, channels_[0].k_N_per_mm, period_s_);
+}
+
+void HapticServo::set_objects(const std::vector<ObjectMaterial>& materials) {
+  ST_ASSERT(!materials.empty(), "at least one object");
+  std::vector<Channel> ch;
+  ch.reserve(materials.size());
+  for (const ObjectMaterial& m : materials) {
+    ST_ASSERT(check(m.friction).empty(), "the friction config passed check()");
+    ch.push_back(make_channel(m.law, m.damping_N_s_per_mm, m.friction));
+  }
+  // One object renders as it always did (ticked from the start); of several, each from its first model.
+  if (ch.size() == 1) ch[0].live = true;
+  channels_ = std::move(ch);
+  for (Channel& c : channels_) c.interp.set_tool_point(wrench_.tcp_mm);
+}
+
+FrictionStats HapticServo::friction_stats() const {
+  FrictionStats s;
+  for (const Channel& c : channels_) {
+    const FrictionStats& f = c.friction.stats();
+    s.stuck_ticks += f.stuck_ticks;
+    s.sliding_ticks += f.sliding_ticks;
+    s.breakaways += f.breakaways;
+    s.sticks += f.sticks;
+  }
+  return s;
+}
+
+std::uint64_t HapticServo::passivity_active_ticks() const {
+  std::uint64_t n = 0;
+  for (const Channel& c : channels_) n += c.guard.active_ticks();
+  return n;
 }
 
 Eigen::Vector3d HapticServo::guard_torque(const Eigen::Vector3d& tau, const Eigen::Matrix3d& R, bool in_contact,
@@ -82,9 +124,10 @@ Eigen::Vector3d HapticServo::guard_torque(const Eigen::Vector3d& tau, const Eige
   if (dt_s > 0 && dt_s < 0.1) omega_ += 0.3 * (dtheta / dt_s - omega_);  // one-pole low-pass, as the interpolator's
   Eigen::Vector3d out = tau;
   if (passivity_on_ && in_contact) {
-    const double lever_m = 1e-3 * interp_.lever_mm().norm();
-    const double T = std::max(period_s_, interp_.model_interval_ns() * 1e-9);
-    const double k_rot = 1e3 * stiffness_N_per_mm_ * lever_m * lever_m;  // N·m/rad (k in N/m)
+    const Channel& c = channels_[primary_];
+    const double lever_m = 1e-3 * c.interp.lever_mm().norm();
+    const double T = std::max(period_s_, c.interp.model_interval_ns() * 1e-9);
+    const double k_rot = 1e3 * c.k_N_per_mm * lever_m * lever_m;  // N·m/rad (k in N/m)
     Eigen::Vector3d damp = -(margin_ * k_rot * T / 2) * omega_;
     const double tn = tau.norm(), dn = damp.norm();
     if (dn > tn && dn > 0) damp *= tn / dn;
@@ -118,41 +161,86 @@ void HapticServo::tick(const TickInfo& info) noexcept {
     ++stats_.pose_failures;
   }
   if (models_.update()) {
-    const geom::ContactModel& m = models_.output();
-    interp_.on_model(m, now);
-    model_pose_ns_ = m.pose_sampled_ns;
+    const geom::ContactSet& set = models_.output();
+    const std::uint32_t n = std::min(set.count, geom::kMaxContactObjects);
+    for (std::uint32_t i = 0; i < n; ++i) {
+      if (set.object[i] >= channels_.size()) {
+        ++stats_.bad_objects;
+        continue;
+      }
+      Channel& c = channels_[set.object[i]];
+      c.interp.on_model(set.models[i], now);
+      c.live = true;
+    }
+    set_seq_ = set.seq;
+    model_pose_ns_ = set.pose_sampled_ns;
     model_received_ns_ = now;
-    model_contacts_ = m.contacts;
+    model_contacts_ = set.contacts;
     ++stats_.models;
   }
-  const Eigen::Vector3d raw = have_pose ? interp_.force(pose, now) : Eigen::Vector3d::Zero();
   const double dt_s = last_ns_ ? static_cast<double>(now - last_ns_) * 1e-9 : 0.0;
   last_ns_ = now;
-  // The passivity guard acts while the surface pushes (a contact cycle = force above zero).
-  const Eigen::Vector3d n = raw.squaredNorm() > 0 ? interp_.normal() : Eigen::Vector3d::Zero();
-  const Eigen::Vector3d guarded = have_pose ? guard_.apply(raw, pose.translation(), n, dt_s) : raw;
-  // Friction at the tool point, under the surface's normal force after the guard.
-  Eigen::Vector3d ft = Eigen::Vector3d::Zero();
-  if (friction_.enabled()) {
-    const double fn = have_pose && interp_.state().in_contact ? std::max(0.0, guarded.dot(n)) : 0.0;
-    ft = friction_.apply(have_pose ? Eigen::Vector3d(pose * wrench_.tcp_mm) : Eigen::Vector3d::Zero(), n, fn, dt_s);
+  // Each object's force: interpolated, guarded (the guard acts while that surface pushes: a
+  // contact cycle = its force above zero), plus its friction at the tool point under its normal
+  // force after the guard. The deepest touching object is the primary one (telemetry).
+  Eigen::Vector3d total = Eigen::Vector3d::Zero(), surface = Eigen::Vector3d::Zero();
+  bool in_contact = false, stuck = false, sliding = false;
+  std::size_t live = 0;
+  double deepest = -1;
+  std::size_t first_live = 0;
+  for (std::size_t i = 0; i < channels_.size(); ++i) {
+    Channel& c = channels_[i];
+    if (!c.live) continue;
+    if (live++ == 0) first_live = i;
+    const Eigen::Vector3d raw = have_pose ? c.interp.force(pose, now) : Eigen::Vector3d::Zero();
+    const Eigen::Vector3d n = raw.squaredNorm() > 0 ? c.interp.normal() : Eigen::Vector3d::Zero();
+    c.guarded = have_pose ? c.guard.apply(raw, pose.translation(), n, dt_s) : raw;
+    c.ft.setZero();
+    const bool touching = c.interp.state().in_contact;
+    if (c.friction.enabled()) {
+      const double fn = have_pose && touching ? std::max(0.0, c.guarded.dot(n)) : 0.0;
+      c.ft = c.friction.apply(have_pose ? Eigen::Vector3d(pose * wrench_.tcp_mm) : Eigen::Vector3d::Zero(), n, fn, dt_s);
+    }
+    total += c.guarded + c.ft;
+    surface += c.guarded;
+    in_contact |= touching;
+    stuck |= c.friction.stuck();
+    sliding |= c.friction.sliding();
+    if (touching && c.interp.state().penetration_mm > deepest) {
+      deepest = c.interp.state().penetration_mm;
+      primary_ = i;
+    }
   }
-  const Eigen::Vector3d total = guarded + ft;
+  if (deepest < 0) primary_ = first_live;  // none touching: the first live object's (releasing) force
+  const Channel& primary = channels_[primary_];
   const Eigen::Vector3d f = sat_.apply(total, dt_s);
-  // The guard observes the surface's part of what was commanded (the saturator scales the sum).
+  // Each guard observes its own surface's part of what was commanded (the saturator scales the sum).
   const double tn = total.norm();
-  guard_.commanded(ft.isZero() ? f : Eigen::Vector3d(f - (tn > 0 ? f.norm() / tn : 0.0) * ft));
+  const double scale = tn > 0 ? f.norm() / tn : 0.0;
+  for (Channel& c : channels_) {
+    if (!c.live) continue;
+    if (live == 1)
+      c.guard.commanded(c.ft.isZero() ? f : Eigen::Vector3d(f - scale * c.ft));
+    else
+      c.guard.commanded(scale * c.guarded);
+  }
   if (sat_.limited()) ++stats_.saturated;
-  // The torque: the commanded force's moment about the tool point (its lever arm from the
-  // interpolator), within the torque ceiling; commanded to 6-DOF devices only.
-  Eigen::Vector3d tau = 1e-3 * interp_.lever_mm().cross(f);
+  // The torque: the commanded force's moment about the tool point (each object's force at its
+  // lever arm from its interpolator), within the torque ceiling; commanded to 6-DOF devices only.
+  Eigen::Vector3d tau = Eigen::Vector3d::Zero();
+  if (live == 1) {
+    tau = 1e-3 * primary.interp.lever_mm().cross(f);
+  } else {
+    for (const Channel& c : channels_)
+      if (c.live) tau += 1e-3 * c.interp.lever_mm().cross(Eigen::Vector3d(scale * (c.guarded + c.ft)));
+  }
   if (!tau.allFinite()) tau.setZero();
   const double tau_norm = tau.norm();
   if (tau_norm > peak_torque_Nm_) peak_torque_Nm_ = tau_norm;
   if (wrench_.dof == 6) {
-    tau = have_pose ? guard_torque(tau, pose.linear(), interp_.state().in_contact, dt_s) : Eigen::Vector3d::Zero();
-    const double tn = tau.norm();
-    if (tn > torque_ceiling_Nm_) tau *= torque_ceiling_Nm_ > 0 ? torque_ceiling_Nm_ / tn : 0.0;
+    tau = have_pose ? guard_torque(tau, pose.linear(), in_contact, dt_s) : Eigen::Vector3d::Zero();
+    const double tq = tau.norm();
+    if (tq > torque_ceiling_Nm_) tau *= torque_ceiling_Nm_ > 0 ? torque_ceiling_Nm_ / tq : 0.0;
     last_tau_ = tau;
     device_.command_wrench(now, f, tau);
   } else {
@@ -161,9 +249,9 @@ void HapticServo::tick(const TickInfo& info) noexcept {
   ++stats_.ticks;
   const double f_norm = f.norm();
   if (f_norm > peak_force_N_) peak_force_N_ = f_norm;
-  const std::uint32_t flags = (interp_.state().in_contact ? kTickInContact : 0u) |
-                              (sat_.limited() ? kTickSaturated : 0u) | (have_pose ? 0u : kTickNoPose) |
-                              (friction_.stuck() ? kTickStuck : 0u) | (friction_.sliding() ? kTickSliding : 0u);
+  const std::uint32_t flags = (in_contact ? kTickInContact : 0u) | (sat_.limited() ? kTickSaturated : 0u) |
+                              (have_pose ? 0u : kTickNoPose) | (stuck ? kTickStuck : 0u) | (sliding ? kTickSliding : 0u);
+  const InterpState& ps = primary.interp.state();
   if (status_ && info.tick % kStatusEveryTicks == 0) {
     ServoStatus st;
     st.updated_ns = now;
@@ -171,14 +259,14 @@ void HapticServo::tick(const TickInfo& info) noexcept {
     st.misses = info.deadline_index - info.tick;
     st.pose_seq = pose_seq_;
     st.pose_sampled_ns = pose_ns_;
-    st.model_seq = interp_.model_seq();
+    st.model_seq = set_seq_;
     st.model_received_ns = model_received_ns_;
     st.model_pose_ns = model_pose_ns_;
     st.models = stats_.models;
     for (int i = 0; i < 3; ++i) st.force_N[i] = f(i);
     st.peak_force_N = peak_force_N_;
-    st.penetration_mm = interp_.state().penetration_mm;
-    st.fade = interp_.state().fade;
+    st.penetration_mm = ps.penetration_mm;
+    st.fade = ps.fade;
     st.contacts = model_contacts_;
     st.flags = flags;
     for (int i = 0; i < 3; ++i) st.torque_Nm[i] = tau(i);
@@ -190,12 +278,12 @@ void HapticServo::tick(const TickInfo& info) noexcept {
     s.t_ns = now;
     s.latency_ns = now - info.deadline_ns;
     s.pose_seq = have_pose ? pose_seq_ : 0;
-    s.model_seq = interp_.model_seq();
+    s.model_seq = set_seq_;
     s.model_age_ns = model_pose_ns_ ? now - model_pose_ns_ : -1;
     if (have_pose) {
       // The proxy: the probe moved out of the object by the depth along the contact normal.
-      const double pd = interp_.state().in_contact ? std::max(0.0, interp_.state().penetration_mm) : 0.0;
-      const Eigen::Vector3d proxy = pose.translation() + pd * interp_.normal();
+      const double pd = ps.in_contact ? std::max(0.0, ps.penetration_mm) : 0.0;
+      const Eigen::Vector3d proxy = pose.translation() + pd * primary.interp.normal();
       for (int i = 0; i < 3; ++i) {
         s.position_mm[i] = pose.translation()(i);
         s.proxy_mm[i] = proxy(i);
@@ -205,8 +293,8 @@ void HapticServo::tick(const TickInfo& info) noexcept {
       s.force_N[i] = f(i);
       s.torque_Nm[i] = tau(i);
     }
-    s.penetration_mm = interp_.state().penetration_mm;
-    s.fade = interp_.state().fade;
+    s.penetration_mm = ps.penetration_mm;
+    s.fade = ps.fade;
     s.ceiling_N = sat_.ceiling_N();
     s.flags = flags;
     s.misses = static_cast<std::uint32_t>(info.deadline_index - info.tick);

@@ -154,7 +154,7 @@ Result<std::unique_ptr<ShmSegment>> ShmSegment::create(const std::string& name) 
     h.header_size = sizeof(ShmHeader);
     h.total_size = sizeof(ShmLayout);
     h.pose_size = sizeof(PoseSample);
-    h.model_size = sizeof(geom::ContactModel);
+    h.model_size = sizeof(geom::ContactSet);
     h.creator_pid = getpid();
     h.creator_start_ticks = process_start_ticks(getpid());
     h.created_ns = now_ns();
@@ -193,12 +193,12 @@ Result<int> open_checked(const std::string& n, int oflag, bool need_live_creator
                   std::to_string(kShmLayoutVersion) + " (created by " + describe_creator(h) + ")");
   if (h.header_size != sizeof(ShmHeader) || h.total_size != sizeof(ShmLayout) ||
       static_cast<std::size_t>(size) != sizeof(ShmLayout) || h.pose_size != sizeof(PoseSample) ||
-      h.model_size != sizeof(geom::ContactModel))
+      h.model_size != sizeof(geom::ContactSet))
     return refuse("layout mismatch: header/total/pose/model sizes " + std::to_string(h.header_size) + "/" +
                   std::to_string(h.total_size) + "/" + std::to_string(h.pose_size) + "/" +
                   std::to_string(h.model_size) + " (file " + std::to_string(size) + "), expected " +
                   std::to_string(sizeof(ShmHeader)) + "/" + std::to_string(sizeof(ShmLayout)) + "/" +
-                  std::to_string(sizeof(PoseSample)) + "/" + std::to_string(sizeof(geom::ContactModel)));
+                  std::to_string(sizeof(PoseSample)) + "/" + std::to_string(sizeof(geom::ContactSet)));
   if (need_live_creator && !process_alive(h.creator_pid, h.creator_start_ticks))
     return refuse("stale: its creator " + describe_creator(h) + " is dead; the creator must create it anew");
   return fd;

@@ -29,7 +29,7 @@ struct alignas(kCacheLine) ShmHeader {
   std::uint32_t header_size;          ///< sizeof(ShmHeader)
   std::uint64_t total_size;           ///< sizeof(ShmLayout), bytes
   std::uint32_t pose_size;            ///< sizeof(PoseSample)
-  std::uint32_t model_size;           ///< sizeof(geom::ContactModel)
+  std::uint32_t model_size;           ///< sizeof(geom::ContactSet)
   std::int32_t creator_pid;           ///< process that created the segment
   std::uint32_t reserved;             ///< zero
   std::uint64_t creator_start_ticks;  ///< its start time, clock ticks after boot (/proc/pid/stat 22)
@@ -39,19 +39,20 @@ struct alignas(kCacheLine) ShmHeader {
 
 /// "STSHMRT1" little-endian: identifies a spheretouch real-time segment.
 inline constexpr std::uint64_t kShmMagic = 0x3154524D48535453ull;
-/// Bump on any change of ShmHeader, ShmLayout, PoseSample, ContactModel or ShmStatus.
+/// Bump on any change of ShmHeader, ShmLayout, PoseSample, ContactModel, ContactSet or ShmStatus.
 /// 2: the status area (ShmStatus) after the triple buffers. 3: ContactModel 288 B (contact model
 /// kind, inside vertex counts). 4: ShmStatus ends with the scene reference and the view frame
 /// (SceneRef, ViewFrame: the live view reads the segment). 5: ContactModel 312 B (pressure_point,
-/// the wrench's point of application), ServoStatus 152 B (torque_Nm).
-inline constexpr std::uint32_t kShmLayoutVersion = 5;
+/// the wrench's point of application), ServoStatus 152 B (torque_Nm). 6: the collision side sends
+/// a ContactSet (the models of every touched object of a scene of several).
+inline constexpr std::uint32_t kShmLayoutVersion = 6;
 
 /// The whole segment.
 struct ShmLayout {
-  ShmHeader header;                         ///< guard
-  TripleBuffer<PoseSample> poses;           ///< haptic → collision
-  TripleBuffer<geom::ContactModel> models;  ///< collision → haptic
-  ShmStatus status;                         ///< live status, any number of readers
+  ShmHeader header;                       ///< guard
+  TripleBuffer<PoseSample> poses;         ///< haptic → collision
+  TripleBuffer<geom::ContactSet> models;  ///< collision → haptic
+  ShmStatus status;                       ///< live status, any number of readers
 };
 
 /// A mapping of the segment. The creator unlinks the name when destroyed.
@@ -74,11 +75,11 @@ class ShmSegment {
   ShmSegment(const ShmSegment&) = delete;
   ShmSegment& operator=(const ShmSegment&) = delete;
 
-  TripleBuffer<PoseSample>& poses() { return layout_->poses; }            ///< haptic → collision
-  TripleBuffer<geom::ContactModel>& models() { return layout_->models; }  ///< collision → haptic
-  ShmStatus& status() { return layout_->status; }                         ///< live status (writers)
-  const ShmStatus& status() const { return layout_->status; }             ///< live status (readers)
-  const ShmHeader& header() const { return layout_->header; }             ///< the guard
+  TripleBuffer<PoseSample>& poses() { return layout_->poses; }          ///< haptic → collision
+  TripleBuffer<geom::ContactSet>& models() { return layout_->models; }  ///< collision → haptic
+  ShmStatus& status() { return layout_->status; }                       ///< live status (writers)
+  const ShmStatus& status() const { return layout_->status; }           ///< live status (readers)
+  const ShmHeader& header() const { return layout_->header; }           ///< the guard
   /// True when the creator recorded in the header is alive.
   bool creator_alive() const;
   /// Unlinks the name if it still refers to this segment and its creator is dead (an attacher
