@@ -19,5 +19,6 @@ void add_tables(CLI::App& app);  ///< the paper's tables: table1, table2, table3
 void add_force(CLI::App& app);    ///< force rendering quality per contact model, simulated time (bench_force.cpp)
 void add_hostile(CLI::App& app);  ///< security reproducers against a live worker (bench_hostile.cpp)
 void add_scale(CLI::App& app);    ///< scale-out model: worker shares timed alone per W and mapping (bench_scale.cpp)
+void add_scene(CLI::App& app);    ///< a round's cost against the number of objects in a scene (bench_scene.cpp)
 
 }  // namespace st::bench

@@ -17,6 +17,7 @@ int main(int argc, char** argv) {
   st::bench::add_force(app);
   st::bench::add_hostile(app);
   st::bench::add_scale(app);
+  st::bench::add_scene(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) { return app.exit(e); }

@@ -13,6 +13,80 @@
 
 namespace st::inline SPHERETOUCH_ABI::engine {
 
+namespace {
+
+/// The top level over many objects: a static tree of bounding spheres (objects are static), built
+/// top-down by splitting the objects at the median of their centres along the widest axis. A
+/// probe far from every object costs the root's test; one near an object, about 2·log2(n) tests.
+/// Conservative: each node's sphere encloses its children's (radius rounded up by a relative
+/// 1e-9), so no object the probe's sphere reaches is missed.
+class ObjectTree {
+ public:
+  ObjectTree(const std::vector<geom::Vec3>& centres, const std::vector<double>& radii) {
+    std::vector<std::uint32_t> ids(centres.size());
+    for (std::uint32_t i = 0; i < ids.size(); ++i) ids[i] = i;
+    nodes_.reserve(2 * ids.size());
+    if (!ids.empty()) build(ids, 0, ids.size(), centres, radii);
+  }
+  /// Appends to `out` every object whose sphere meets the sphere (c, r) (touching counts), in no
+  /// particular order. `stack` is scratch.
+  void query(const geom::Vec3& c, double r, std::vector<std::uint32_t>& out, std::vector<std::uint32_t>& stack) const {
+    if (nodes_.empty()) return;
+    stack.clear();
+    stack.push_back(0);
+    while (!stack.empty()) {
+      const Node& n = nodes_[stack.back()];
+      stack.pop_back();
+      const double reach = n.radius + r;
+      if ((n.centre - c).squaredNorm() > reach * reach * (1 + 1e-9) + 1e-9) continue;
+      if (n.object != UINT32_MAX) {
+        out.push_back(n.object);
+      } else {
+        stack.push_back(n.left);
+        stack.push_back(n.right);
+      }
+    }
+  }
+
+ private:
+  struct Node {
+    geom::Vec3 centre{geom::Vec3::Zero()};
+    double radius = 0;
+    std::uint32_t left = 0, right = 0;  ///< inner: the children
+    std::uint32_t object = UINT32_MAX;  ///< leaf: the object
+  };
+  std::uint32_t build(std::vector<std::uint32_t>& ids, std::size_t lo, std::size_t hi, const std::vector<geom::Vec3>& c,
+                      const std::vector<double>& r) {
+    const auto at = std::uint32_t(nodes_.size());
+    nodes_.emplace_back();
+    if (hi - lo == 1) {
+      nodes_[at].centre = c[ids[lo]];
+      nodes_[at].radius = r[ids[lo]];
+      nodes_[at].object = ids[lo];
+      return at;
+    }
+    Eigen::AlignedBox3d box;
+    for (std::size_t i = lo; i < hi; ++i) box.extend(c[ids[i]]);
+    int axis = 0;
+    box.sizes().maxCoeff(&axis);
+    const std::size_t mid = (lo + hi) / 2;
+    std::nth_element(ids.begin() + std::ptrdiff_t(lo), ids.begin() + std::ptrdiff_t(mid), ids.begin() + std::ptrdiff_t(hi),
+                     [&](std::uint32_t a, std::uint32_t b) { return c[a](axis) < c[b](axis); });
+    const std::uint32_t left = build(ids, lo, mid, c, r), right = build(ids, mid, hi, c, r);
+    const geom::Vec3 centre = box.center();
+    double radius = 0;
+    for (std::size_t i = lo; i < hi; ++i) radius = std::max(radius, (c[ids[i]] - centre).norm() + r[ids[i]]);
+    nodes_[at].centre = centre;
+    nodes_[at].radius = radius * (1 + 1e-12);
+    nodes_[at].left = left;
+    nodes_[at].right = right;
+    return at;
+  }
+  std::vector<Node> nodes_;
+};
+
+}  // namespace
+
 CollisionLoop::CollisionLoop(const geom::Mesh& probe, geom::Vec3 probe_center, double probe_radius,
                              std::vector<WorldObject> objects, rt::TripleBuffer<rt::PoseSample>& poses,
                              rt::TripleBuffer<geom::ContactSet>& models, CollideFn collide, double rate_hz,
@@ -78,6 +152,15 @@ void CollisionLoop::run() {
   }
   std::vector<RoundOutput> outs(n);
   std::vector<std::int64_t> linger_until(n, 0);
+  // The top level: a tree over the objects' placed bounding spheres.
+  std::vector<double> radii(n);
+  for (std::size_t k = 0; k < n; ++k) radii[k] = objects_[k].radius;
+  const ObjectTree tree(world_center, radii);
+  std::vector<std::uint32_t> work, stack, active_list, next_active;
+  std::vector<char> near(n, 0);
+  work.reserve(n);
+  active_list.reserve(n);
+  next_active.reserve(n);
   // This round's models, in the objects' frames, before the set is chosen (at most one per object).
   struct Made {
     std::uint32_t object;
@@ -114,23 +197,32 @@ void CollisionLoop::run() {
     bool complete = true;
     made.clear();
     std::uint32_t pairs_total = 0;
-    for (std::size_t k = 0; k < n; ++k) {
+    // This round's objects: those the probe's sphere reaches, and those still active (a builder
+    // with history, a contact last round, a release still being sent), each once, in index order.
+    work.clear();
+    if (single) {
+      work.push_back(0);
+    } else {
+      tree.query(probe_center, probe_radius_, work, stack);
+      for (std::uint32_t k : work) near[k] = 1;
+      for (std::uint32_t k : active_list)
+        if (!near[k]) work.push_back(k);
+      std::sort(work.begin(), work.end());
+    }
+    next_active.clear();
+    for (const std::uint32_t k : work) {
       const WorldObject& o = objects_[k];
-      const double reach = o.radius + probe_radius_;
-      const bool near = single || (world_center[k] - probe_center).norm() <= reach * (1 + 1e-9) + 1e-9;
       geom::ContactBuilder& builder = builders_[k];
-      // An object out of reach still gets a build while its builder keeps history (a held
-      // contact) or its release is still being sent.
-      if (!near && !builder.has_first_face() && !was_contact[k] && linger_until[k] <= t0) continue;
       const geom::Pose rel = placed[k] ? geom::Pose(to_object[k] * pose) : pose;
       RoundOutput& out = outs[k];
       out.pairs.clear();
       out.complete = true;
-      if (near) {
-        collide_(sample.seq, std::uint32_t(k), rel, out);
+      if (single || near[k]) {
+        collide_(sample.seq, k, rel, out);
         ++object_stats_[k].reached;
         complete = complete && out.complete;
       }
+      near[k] = 0;
       geom::ContactModel m = builder.build(probe_, *o.mesh, rel, out.pairs);
       m.seq = set_seq;
       m.pose_seq = sample.seq;
@@ -145,15 +237,17 @@ void CollisionLoop::run() {
           peak_pd_ = m.penetration_mm;
           peak_pose_ = rel;
           peak_pairs_ = out.pairs;
-          peak_object_ = std::uint32_t(k);
+          peak_object_ = k;
         }
       } else if (was_contact[k]) {
         linger_until[k] = t0 + kLingerNs;  // it left this round: its release is sent for a while
       }
       const bool send = single || m.in_contact() || linger_until[k] > t0;
       was_contact[k] = m.in_contact();
-      if (send) made.push_back({std::uint32_t(k), m});
+      if (m.in_contact() || linger_until[k] > t0 || builder.has_first_face()) next_active.push_back(k);
+      if (send) made.push_back({k, m});
     }
+    active_list.swap(next_active);
     // The set: every object sent, the deepest first when there are more than it carries.
     geom::ContactSet& set = models_.input();
     set.count = 0;
