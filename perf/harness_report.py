@@ -665,6 +665,7 @@ CMD_SPREAD = ("build/perf/spheretouch-bench scale --probe .cache/models/hand_L2.
               "--object .cache/models/<object>.off --poses perf/poses/scale_hand_<object>_1000x12.txt "
               "--max-workers 16 --no-validate --json > {out}/spread_<object>.json")
 CMD_SCALE_PLOT = "python3 perf/scale_plot.py {out}/scale.png {out}/scale_*.json"
+CMD_SCENE = "build/perf/spheretouch-bench scene --json > {out}/scene.json"
 CMD_VIEW = "perf/view_bench.sh 12 3 > {out}/view.txt"
 CMD_DEVICE = "perf/device_bench.sh 5 {out} > {out}/device.txt"
 
@@ -1155,6 +1156,30 @@ def device_doc(doc, md):
               "gaps).\n")
 
 
+# The issue's target for scenes of many objects: a round touching none of 100 objects <= 1.2x a round
+# of 1 object without contact, and touching one of 100 <= 1.2x touching it alone (same run).
+SCENE_TARGET = 1.2
+
+
+def scene_doc(doc, md):
+    d = jload(doc.path("scene.json"))
+    if not isinstance(d, dict) or not isinstance(d.get("scenes"), list):
+        md.append("_`scene.json` unreadable_\n")
+        return
+    body = []
+    for sc in d["scenes"]:
+        for ph in sc.get("phases", []):
+            body.append([f_count(sc.get("objects")), cell(ph.get("phase")), f_fixed(ph.get("median_us"), 1),
+                         f_fixed(ph.get("p90_us"), 1), f_ratio(ph.get("ratio_vs_one_object")),
+                         f_count(ph.get("pairs")), "yes" if ph.get("pairs_equal_one_object") else "**no**"])
+    md.append(f"Probe {cell(d.get('probe'))}, object {cell(d.get('object'))} ({f_count(d.get('object_faces'))} faces) "
+              f"copied on a grid {f_fixed(d.get('spacing_mm'), 0)} mm apart; object 0 at the poses, the others out of "
+              "the probe's reach. A round is the collision loop's own time (pose taken to ContactSet published), in "
+              "the collision thread; medians over interleaved blocks, ratios against the 1-object scene in the same "
+              f"run (target ≤ {SCENE_TARGET}× for 100 objects).\n")
+    md += md_table(["objects", "probe", "round median µs", "p90 µs", "× 1 object", "pairs", "pairs = 1 object"], body)
+
+
 # title, inputs (any present: render), the file and command of the missing note, commands, renderer.
 def results_sections(doc, harness):
     """The sections of RESULTS.md in order: (title, [(label, command)], note, inputs, render(md) or None)."""
@@ -1184,6 +1209,8 @@ def results_sections(doc, harness):
         ("Scale-out: when distribution pays",
          [("Command", CMD_SCALE), ("Spread", CMD_SPREAD), ("Plot", CMD_SCALE_PLOT)],
          "`<object>`: elephant, armadillo_L1, armadillo_L2.", None, lambda md: scale_doc(doc, md)),
+        ("Scenes of many objects (issue 28)", [("Command", CMD_SCENE)], None, ["scene.json"],
+         lambda md: scene_doc(doc, md)),
         ("Live view and UDP bridge", [("Command", CMD_VIEW)], None, ["view.json"], lambda md: view_doc(doc, md)),
         ("In-process devices", [("Command", CMD_DEVICE)], None, ["device.json"], lambda md: device_doc(doc, md)),
     ]

@@ -171,6 +171,9 @@ hostile_args=(--json)
 [ $quick = 1 ] && hostile_args+=(--quick --quiet-rounds 50)
 "$bench" hostile "${hostile_args[@]}" > "$out/hostile.json"
 
+log "scenes of many objects: a round's cost at 1, 10, 100 objects, touching none or one"
+"$bench" scene --json > "$out/scene.json"
+
 echo "load_end=$(cut -d' ' -f1-3 /proc/loadavg)" >> "$out/machine.txt"
 echo "elapsed_s=$(( $(date +%s) - t_start ))" >> "$out/machine.txt"
 log "scale-out model: worker shares timed alone per W and mapping, gather measured, 10/100 GbE predicted"

@@ -330,7 +330,12 @@ TEST_CASE("run engine: a scene of two objects; the probe presses on both at once
     object_line("far", fr, ft);
     CHECK(lt > 10);  // both touched, for many rounds
     CHECK(rt > 10);
-    CHECK(fr == 0);  // the far sphere never reached: it cost one sphere test a round
+    CHECK(fr == 0);  // the far sphere never reached: the top level kept it out of every round
+    unsigned long long both = 0;
+    const std::size_t ob = report.summary.find("  objects         3; ");
+    REQUIRE(ob != std::string::npos);
+    REQUIRE(std::sscanf(report.summary.c_str() + ob, "  objects         3; %llu rounds touched", &both) == 1);
+    CHECK(both > 10);  // pressed on both boxes at once
     CHECK(ft == 0);
     CHECK(st::test::contains(report.summary, " 0 incomplete"));
     // The two boxes' forces add: the peak is well above zero and within the limit.

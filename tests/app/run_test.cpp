@@ -619,6 +619,14 @@ TEST_CASE("scene files: configs/demo.toml and configs/small.toml parse, with the
   auto small = st::engine::load_scene(root + "/configs/small.toml");
   REQUIRE_MESSAGE(small.ok(), small.error());
   CHECK(small.value().object.builtin == "icosphere");
+  // The scene of several objects: three placed meshes, the second with its own material.
+  auto objects = st::engine::load_scene(root + "/configs/objects.toml");
+  REQUIRE_MESSAGE(objects.ok(), objects.error());
+  REQUIRE(objects.value().objects.size() == 3);
+  CHECK(objects.value().objects[1].name == "bunny");
+  CHECK(objects.value().objects[1].material.law.kind == st::rt::LawKind::linear);
+  CHECK(objects.value().objects[0].material.friction.static_mu == 0.3);
+  CHECK(objects.value().objects[2].placement.position_mm.x() == 200.0);
 }
 
 TEST_CASE("appendf: appends formatted text of any length") {

@@ -210,6 +210,7 @@ void CollisionLoop::run() {
       std::sort(work.begin(), work.end());
     }
     next_active.clear();
+    std::uint32_t touched = 0;
     for (const std::uint32_t k : work) {
       const WorldObject& o = objects_[k];
       geom::ContactBuilder& builder = builders_[k];
@@ -232,6 +233,7 @@ void CollisionLoop::run() {
       os.peak_pairs = std::max(os.peak_pairs, m.pairs);
       if (m.in_contact()) {
         ++os.touching;
+        ++touched;
         os.peak_penetration_mm = std::max(os.peak_penetration_mm, m.penetration_mm);
         if (m.penetration_mm > peak_pd_) {
           peak_pd_ = m.penetration_mm;
@@ -248,6 +250,7 @@ void CollisionLoop::run() {
       if (send) made.push_back({k, m});
     }
     active_list.swap(next_active);
+    if (touched >= 2) ++multi_touch_rounds_;
     // The set: every object sent, the deepest first when there are more than it carries.
     geom::ContactSet& set = models_.input();
     set.count = 0;

@@ -123,6 +123,8 @@ class CollisionLoop {
   std::uint32_t peak_object() const { return peak_object_; }                     ///< after stop()
   /// Per object (the constructor's order), after stop().
   const std::vector<ObjectRoundStats>& object_stats() const { return object_stats_; }
+  /// Rounds in which the probe touched two or more objects at once (their forces add), after stop().
+  std::uint64_t multi_touch_rounds() const { return multi_touch_rounds_; }
   /// Rounds that touched more objects than a ContactSet carries (the deepest were rendered).
   std::uint64_t overflow_rounds() const { return overflow_rounds_; }
   double peak_penetration_mm() const { return peak_pd_; }  ///< after stop()
@@ -138,7 +140,7 @@ class CollisionLoop {
   CollideFn collide_;
   std::vector<geom::ContactBuilder> builders_;  ///< one per object (its history)
   std::vector<ObjectRoundStats> object_stats_;
-  std::uint64_t overflow_rounds_ = 0;
+  std::uint64_t overflow_rounds_ = 0, multi_touch_rounds_ = 0;
   std::uint32_t peak_object_ = 0;
   rt::SeqLock<rt::CollisionStatus>* status_ = nullptr;
   ViewFeed* view_ = nullptr;

@@ -653,8 +653,10 @@ RunReport RunEngine::finish(int signal) {
   if (e.specs.size() > 1) {
     // Per object: how often the top level let the probe reach it, how often it was touched, and how deep.
     const std::vector<ObjectRoundStats>& os = collision.object_stats();
-    appendf(summary, "  objects         %zu; per object: rounds reached (collided) / touching, peak pairs, peak PD\n",
-            e.specs.size());
+    appendf(summary,
+            "  objects         %zu; %llu rounds touched two or more at once; per object: rounds reached (collided) / "
+            "touching, peak pairs, peak PD\n",
+            e.specs.size(), static_cast<unsigned long long>(collision.multi_touch_rounds()));
     for (std::size_t k = 0; k < e.specs.size() && k < os.size(); ++k) {
       const ObjectSpec& o = e.specs[k];
       appendf(summary, "    %-14s %zu faces, %llu / %llu rounds, %u pairs, %.3f mm; mu %.3g/%.3g\n", o.name.c_str(),
