@@ -3,13 +3,20 @@
 // pose, exactly. Output, per pose:
 //   pose <i> pairs <n> contacts <c>
 //   <probe_face> <object_face>        (n lines, sorted by probe face then object face)
+// spheretouch query --scene SCENE --poses FILE: the scene's probe against every one of its objects
+// (placed; poses in the world frame). Per pose the totals, then for each object in scene order
+//   pose <i> pairs <n> contacts <c>
+//   object <k> pairs <n> contacts <c> <name>
+//   <probe_face> <object_face>        (that object's pairs, sorted, faces in its own file's order)
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <memory>
+#include <optional>
 
 #include "app/commands.hpp"
 #include <spheretouch/engine/distributed.hpp>
+#include <spheretouch/engine/scene.hpp>
 #include "app/mesh_options.hpp"
 #include <spheretouch/engine/tree_cache.hpp>
 #include <spheretouch/collide.hpp>
@@ -30,6 +37,7 @@ namespace {
 
 struct QueryArgs {
   std::string probe, object, poses, cache_dir = default_tree_cache_dir();
+  std::string scene;  ///< --scene: the probe and the objects from a scene file
   geom::LoadConfig load;
   std::uint32_t leaf_faces = geom::DefaultTreeConfig().leaf_faces;
   std::uint32_t blocks = 0, layer = 2, block_size = 1;
@@ -58,6 +66,127 @@ Body body_or_exit(geom::Mesh mesh, const geom::TreeConfig& params, const std::st
   return std::move(body).value();
 }
 
+/// One object of a --scene query: its body, placement and (with workers) its client.
+struct SceneObject {
+  std::string name;
+  Body body;
+  geom::Pose placement, to_object;
+  geom::Vec3 centre;  ///< bounding sphere, world
+  double radius;
+};
+
+[[noreturn]] void query_die(int code, const std::string& msg) {
+  std::fprintf(stderr, "spheretouch: %s\n", msg.c_str());
+  throw CLI::RuntimeError(code);
+}
+
+/// query --scene: every object of the scene, each pose in the world frame.
+void run_scene_query(const QueryArgs& a, const ClientCurve& curve) {
+  Result<engine::Scene> scene = engine::load_scene(a.scene);
+  if (!scene) query_die(2, scene.error());
+  const engine::Scene& s = scene.value();
+  Result<std::vector<geom::Pose>> poses = geom::read_poses(a.poses);
+  if (!poses) query_die(2, poses.error());
+  geom::TreeConfig params = geom::DefaultTreeConfig();
+  params.leaf_faces = a.leaf_faces;
+  const std::string cache = a.no_cache ? "" : a.cache_dir;
+  Result<geom::Mesh> pm = engine::load_body(s.probe, "probe");
+  if (!pm) query_die(2, s.file + ": " + pm.error());
+  const Body probe = body_or_exit(std::move(pm).value(), params, cache);
+  std::vector<SceneObject> objects;
+  const std::vector<engine::ObjectSpec> specs = engine::scene_objects(s);
+  for (std::size_t k = 0; k < specs.size(); ++k) {
+    Result<geom::Mesh> om =
+        engine::load_body(specs[k].body, s.objects.empty() ? "object" : "object[" + std::to_string(k + 1) + "]");
+    if (!om) query_die(2, s.file + ": " + om.error());
+    Body b = body_or_exit(std::move(om).value(), params, cache);
+    const geom::SphereNode& r = b.tree().nodes[0];
+    const geom::Pose place = specs[k].placement.pose();
+    const geom::Vec3 centre = place * (b.mesh().origin + geom::Vec3(r.centre[0], r.centre[1], r.centre[2]));
+    objects.push_back({specs[k].name, std::move(b), place, place.inverse(), centre, double(r.radius)});
+  }
+  const geom::SphereNode& pr = probe.tree().nodes[0];
+  const geom::Vec3 probe_centre = probe.mesh().origin + geom::Vec3(pr.centre[0], pr.centre[1], pr.centre[2]);
+
+  std::unique_ptr<Fleet> fleet;
+  if (a.workers > 0 || !a.connect.empty()) {
+    FleetSpec spec;
+    spec.workers = a.workers;
+    for (std::string rest = a.connect; !rest.empty();) {
+      const auto comma = rest.find(',');
+      spec.endpoints.push_back(rest.substr(0, comma));
+      rest = comma == std::string::npos ? "" : rest.substr(comma + 1);
+    }
+    spec.layer = a.layer;
+    spec.block_size = a.block_size;
+    spec.leaf_faces = a.leaf_faces;
+    spec.curve = curve;
+    spec.note = [](const std::string& m) { std::fprintf(stderr, "spheretouch: %s\n", m.c_str()); };
+    std::vector<engine::FleetObject> fo;
+    for (const SceneObject& o : objects) fo.push_back({&o.body.mesh(), &o.body.tree()});
+    Result<std::unique_ptr<Fleet>> f = start_fleet(spec, probe.mesh(), fo);
+    if (!f) query_die(2, f.error());
+    fleet = std::move(f).value();
+  }
+  std::vector<std::optional<ComputeCollision>> colliders(objects.size());
+  CollisionRequest request;
+  request.approximate_layer = a.approx_layer;
+  request.sort_pairs = true;
+  if (const std::string bad = check(request); !bad.empty()) query_die(2, "--approx-layer: " + bad);
+  CollisionResult result;
+  net::RoundResult round;
+  std::vector<std::vector<geom::FacePair>> pairs(objects.size());
+  std::vector<std::uint32_t> tmp;
+  std::string out;
+  char line[160];
+  std::uint64_t seq = 0;
+  for (std::size_t i = 0; i < poses.value().size(); ++i) {
+    const geom::Pose& pose = poses.value()[i];
+    std::size_t total_pairs = 0;
+    std::uint32_t total_contacts = 0;
+    for (std::size_t k = 0; k < objects.size(); ++k) {
+      SceneObject& o = objects[k];
+      pairs[k].clear();
+      // The top level: an object out of the probe's sphere's reach has no pairs.
+      const double reach = o.radius + double(pr.radius);
+      if ((pose * probe_centre - o.centre).norm() > reach * (1 + 1e-9) + 1e-9) continue;
+      const geom::Pose rel = o.to_object * pose;
+      if (fleet && fleet->clients[k]) {
+        fleet->clients[k]->round(++seq, rel, net::Clock::now() + std::chrono::seconds(30), round);
+        if (!round.complete)
+          query_die(1, "pose " + std::to_string(i) + ", " + o.name + ": only " + std::to_string(round.workers_replied) +
+                           " of " + std::to_string(round.workers_asked) + " workers answered");
+        pairs[k].assign(round.pairs.begin(), round.pairs.end());
+      } else {
+        if (!colliders[k]) colliders[k].emplace(probe, o.body);
+        colliders[k]->at_relative(rel, request, result);
+        pairs[k].assign(result.pairs.begin(), result.pairs.end());
+      }
+      std::sort(pairs[k].begin(), pairs[k].end());
+      total_pairs += pairs[k].size();
+      total_contacts += geom::count_faces(pairs[k], tmp).contacts();
+    }
+    std::snprintf(line, sizeof line, "pose %zu pairs %zu contacts %u\n", i, total_pairs, total_contacts);
+    out += line;
+    for (std::size_t k = 0; k < objects.size(); ++k) {
+      std::snprintf(line, sizeof line, "object %zu pairs %zu contacts %u ", k, pairs[k].size(),
+                    geom::count_faces(pairs[k], tmp).contacts());
+      out += line;
+      out += objects[k].name + "\n";
+      if (!a.count_only)
+        for (const geom::FacePair& p : pairs[k]) {
+          std::snprintf(line, sizeof line, "%u %u\n", p.probe, p.object);
+          out += line;
+        }
+    }
+    if (out.size() > (1 << 20)) {
+      std::fputs(out.c_str(), stdout);
+      out.clear();
+    }
+  }
+  std::fputs(out.c_str(), stdout);
+}
+
 void run_query(const QueryArgs& a) {
   // CURVE keys first: a bad key file fails before any mesh is loaded.
   Result<ClientCurve> curve = load_client_curve(a.server_key, a.client_key, "--server-key", "--client-key");
@@ -65,6 +194,13 @@ void run_query(const QueryArgs& a) {
     std::fprintf(stderr, "spheretouch: %s\n", curve.error().c_str());
     throw CLI::RuntimeError(2);
   }
+  if (!a.scene.empty()) {
+    if (!a.probe.empty() || !a.object.empty())
+      query_die(2, "--scene names the probe and the objects: give no PROBE OBJECT");
+    if (a.blocks > 0) query_die(2, "--blocks is for a PROBE OBJECT query (with --scene use --workers)");
+    return run_scene_query(a, curve.value());
+  }
+  if (a.probe.empty() || a.object.empty()) query_die(2, "give PROBE and OBJECT mesh files, or --scene SCENE");
   geom::LoadedMesh probe_file = load_or_exit(a.probe, a.load);
   geom::LoadedMesh object_file = load_or_exit(a.object, a.load);
   Result<std::vector<geom::Pose>> poses = geom::read_poses(a.poses);
@@ -196,8 +332,13 @@ void add_query(CLI::App& app) {
       app.add_subcommand("query",
                          "Every colliding (probe face, object face) pair for each pose, exactly. Prints per pose\n"
                          "'pose <i> pairs <n> contacts <c>' then n lines '<probe_face> <object_face>' sorted.");
-  cmd->add_option("probe", a->probe, "probe mesh (the hand)")->required()->check(CLI::ExistingFile);
-  cmd->add_option("object", a->object, "object mesh")->required()->check(CLI::ExistingFile);
+  cmd->add_option("probe", a->probe, "probe mesh (the hand)")->check(CLI::ExistingFile);
+  cmd->add_option("object", a->object, "object mesh")->check(CLI::ExistingFile);
+  cmd->add_option("--scene", a->scene,
+                  "instead of PROBE OBJECT: the scene's probe against each of its objects ([object] or [[object]], "
+                  "placed; poses in the world frame). Per pose the totals, then 'object <k> pairs <n> contacts <c> "
+                  "<name>' and that object's pairs, for every object")
+      ->check(CLI::ExistingFile);
   cmd->add_option("--poses", a->poses,
                   "pose file: one pose per line, 16 numbers (row-major 4x4 rigid transform mapping probe to object "
                   "coordinates, last row 0 0 0 1); '#' starts a comment")

@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <sstream>
 
+#include <spheretouch/engine/scene.hpp>
 #include <spheretouch/geom/collide.hpp>
 #include <spheretouch/geom/mesh_io.hpp>
 #include <spheretouch/geom/pose_io.hpp>
@@ -170,4 +171,106 @@ TEST_CASE("query over in-process workers and over worker daemons gives the singl
   INFO(r.output.substr(0, 400));
   CHECK(r.exit_code == 0);
   CHECK(r.output == single.output);
+}
+
+TEST_CASE(
+    "query --scene: each object's pairs equal a single-object query at its relative poses, in one process, over "
+    "in-process workers and over worker daemons") {
+  const std::string root = std::getenv("ST_SOURCE_ROOT") ? std::getenv("ST_SOURCE_ROOT") : ".";
+  st::test::TempDir d;
+  // The elephant at the origin (the perf poses press the hand into it) and the bunny placed, turned,
+  // overlapping it: most poses touch both.
+  const std::string scene = d.file("two.toml");
+  st::test::write_file(scene, "[probe]\nmesh = \"" + st::test::model("hand_L2.off") +
+                                  "\"\n[[object]]\nname = \"elephant\"\nmesh = \"" + st::test::model("elephant.off") +
+                                  "\"\n[[object]]\nname = \"bunny\"\nmesh = \"" + st::test::model("bunny.off") +
+                                  "\"\nposition_mm = [5.0, -3.0, 2.0]\nrotation_deg = [10.0, 20.0, 30.0]\n");
+  const std::string world_poses = root + "/perf/poses/hand_elephant.txt";
+  const auto poses = geom::read_poses(world_poses).value();
+  REQUIRE(poses.size() >= 3);
+  const auto parsed = st::engine::load_scene(scene);
+  REQUIRE_MESSAGE(parsed.ok(), parsed.error());
+  const std::vector<st::engine::ObjectSpec> objects = st::engine::scene_objects(parsed.value());
+  REQUIRE(objects.size() == 2);
+
+  // The single-object answers: each object alone at P_k^-1 · pose, as its own query.
+  std::vector<std::vector<std::string>> single(objects.size());  // [object][pose]: its pair lines
+  for (std::size_t k = 0; k < objects.size(); ++k) {
+    const std::string rel = d.file("rel" + std::to_string(k) + ".txt");
+    std::ostringstream text;
+    text.precision(17);
+    for (const geom::Pose& p : poses) {
+      const Eigen::Matrix4d m = (objects[k].placement.pose().inverse() * p).matrix();
+      for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c) text << m(r, c) << (r == 3 && c == 3 ? "\n" : " ");
+    }
+    st::test::write_file(rel, text.str());
+    const auto r = run_command(spheretouch_exe() + " query " + st::test::model("hand_L2.off") + " " +
+                               objects[k].body.mesh + " --poses " + rel + " --no-cache");
+    REQUIRE(r.exit_code == 0);
+    std::istringstream in(r.output);
+    std::string line;
+    while (std::getline(in, line)) {
+      if (line.rfind("pose ", 0) == 0)
+        single[k].push_back("");
+      else
+        single[k].back() += line + "\n";
+    }
+    REQUIRE(single[k].size() == poses.size());
+  }
+  // A scene query's output split into [object][pose] pair lines, checking the counts and totals.
+  auto split = [&](const std::string& output) {
+    std::vector<std::vector<std::string>> got(objects.size(), std::vector<std::string>(poses.size()));
+    std::istringstream in(output);
+    std::string line;
+    long pose = -1, object = -1;
+    std::size_t total = 0, sum = 0;
+    while (std::getline(in, line)) {
+      std::size_t n = 0, c = 0;
+      if (std::sscanf(line.c_str(), "pose %ld pairs %zu contacts %zu", &pose, &total, &c) == 3) {
+        object = -1;
+        sum = 0;
+      } else if (std::sscanf(line.c_str(), "object %ld pairs %zu contacts %zu", &object, &n, &c) == 3) {
+        sum += n;
+        if (object == long(objects.size()) - 1) CHECK(sum == total);
+      } else {
+        REQUIRE(object >= 0);
+        got[std::size_t(object)][std::size_t(pose)] += line + "\n";
+      }
+    }
+    return got;
+  };
+  const std::string base = spheretouch_exe() + " query --scene " + scene + " --poses " + world_poses + " --no-cache";
+  auto check_same = [&](const std::string& how, const std::string& extra) {
+    const auto r = run_command(base + extra);
+    INFO(how);
+    INFO(r.output.substr(0, 300));
+    REQUIRE(r.exit_code == 0);
+    const auto got = split(r.output);
+    int both = 0;
+    for (std::size_t i = 0; i < poses.size(); ++i) {
+      for (std::size_t k = 0; k < objects.size(); ++k) CHECK(got[k][i] == single[k][i]);
+      both += !got[0][i].empty() && !got[1][i].empty();
+    }
+    CHECK(both >= 2);  // the poses touch both objects at once
+  };
+  check_same("one process", "");
+  check_same("2 in-process workers", " --workers 2");
+  std::vector<std::unique_ptr<st::test::Process>> daemons;
+  std::string endpoints;
+  for (int i = 0; i < 2; ++i) {
+    const std::string ep = "tcp://127.0.0.1:" + std::to_string(st::test::free_port());
+    daemons.push_back(std::make_unique<st::test::Process>(
+        std::vector<std::string>{st::test::worker_binary(), "--bind", ep, "--id", std::to_string(i)}, d.file("w.log")));
+    endpoints += (i ? "," : "") + ep;
+  }
+  check_same("2 worker daemons", " --connect " + endpoints);
+  // PROBE OBJECT and --scene together, or neither: a clear error.
+  const auto both =
+      run_command(base + " " + st::test::model("hand_L2.off") + " " + st::test::model("bunny.off") + " 2>&1");
+  CHECK(both.exit_code == 2);
+  CHECK(contains(both.output, "--scene names the probe and the objects"));
+  const auto none = run_command(spheretouch_exe() + " query --poses " + world_poses + " 2>&1");
+  CHECK(none.exit_code == 2);
+  CHECK(contains(none.output, "give PROBE and OBJECT mesh files, or --scene SCENE"));
 }
