@@ -191,6 +191,20 @@ struct PyContactBuilder {
   geom::ContactBuilder b;
   std::mutex mu;
 };
+// A probe among several objects: one collider per object (made on its first reach), each object's
+// bounding sphere in the world tested first. Serialised like the others.
+struct PyWorld {
+  Body probe;
+  std::vector<Body> objects;
+  std::vector<std::optional<ComputeCollision>> colliders;
+  std::vector<std::uint32_t> reached;  ///< the last query's objects within reach
+  std::mutex mu;
+};
+/// A body's bounding sphere in the world (its tree's root at its frame).
+std::pair<Vec3, double> world_sphere(const Body& b) {
+  const geom::SphereNode& r = b.tree().nodes[0];
+  return {b.frame() * (b.mesh().origin + Vec3(r.centre[0], r.centre[1], r.centre[2])), double(r.radius)};
+}
 
 }  // namespace
 
@@ -364,6 +378,54 @@ PYBIND11_MODULE(_core, m) {
           "object", [](PyComputeCollision& c) { return c.c.object(); }, "a copy of the object body");
   // The name of earlier releases, kept so existing scripts run: the same class.
   m.attr("Collider") = m.attr("ComputeCollision");
+
+  py::class_<PyWorld>(
+      m, "World",
+      "A probe among several objects, each placed by its Body frame (object -> world): one query answers for "
+      "every object, testing each object's bounding sphere first so objects out of reach cost one test. "
+      "Calls from several threads take turns.")
+      .def(py::init([](Body probe, std::vector<Body> objects) {
+             if (objects.empty()) throw py::value_error("objects: expected at least one Body");
+             auto w = std::unique_ptr<PyWorld>(new PyWorld{std::move(probe), std::move(objects), {}, {}, {}});
+             w->colliders.resize(w->objects.size());
+             return w;
+           }),
+           py::arg("probe"), py::arg("objects"), "The probe and the objects (their frames place them in the world).")
+      .def(
+          "query",
+          [](PyWorld& w, const std::optional<Array3d>& pose, std::optional<std::size_t> max_pairs, bool sort) {
+            const CollisionRequest req = make_request(max_pairs, std::nullopt, sort);
+            const Pose p = pose ? to_pose(*pose, "pose") : w.probe.frame();
+            std::vector<CollisionResult> out(w.objects.size());
+            {
+              py::gil_scoped_release unlock;
+              std::lock_guard<std::mutex> lock(w.mu);
+              w.reached.clear();
+              const auto [pc, pr] = world_sphere(w.probe);
+              const Vec3 probe_centre = p * w.probe.frame().inverse() * pc;
+              for (std::size_t k = 0; k < w.objects.size(); ++k) {
+                const auto [oc, orad] = world_sphere(w.objects[k]);
+                const double reach = orad + pr;
+                if ((probe_centre - oc).norm() > reach * (1 + 1e-9) + 1e-9) continue;
+                w.reached.push_back(std::uint32_t(k));
+                if (!w.colliders[k]) w.colliders[k].emplace(w.probe, w.objects[k]);
+                w.colliders[k]->at_relative(w.objects[k].frame().inverse() * p, req, out[k]);
+              }
+            }
+            return out;
+          },
+          py::arg("pose") = py::none(), py::arg("max_pairs") = py::none(), py::arg("sort") = true,
+          "One CollisionResult per object (object face indices in its own file's order) for the probe at `pose` "
+          "(probe frame -> world, 4x4; None: the probe body's frame). An object out of reach gets an empty result.")
+      .def_property_readonly(
+          "reached",
+          [](PyWorld& w) {
+            std::lock_guard<std::mutex> lock(w.mu);
+            return w.reached;
+          },
+          "indices of the objects the last query's probe could reach (collided)")
+      .def(
+          "__len__", [](const PyWorld& w) { return w.objects.size(); }, "the number of objects");
 
   py::class_<geom::ContactModel>(m, "ContactModel", "FD, PD and the local contact plane of one round (object frame).")
       .def_property_readonly("in_contact", &geom::ContactModel::in_contact, "FD, PD and the plane are meaningful")

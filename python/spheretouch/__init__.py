@@ -34,6 +34,7 @@ from ._core import (
     ForceLaw,
     Mesh,
     SphereTree,
+    World,
     __version__,
     load_mesh,
 )
@@ -41,6 +42,6 @@ from ._core import (
 __all__ = [
     "BAD_INPUT", "DEGENERATE_SKIPPED", "EXACT", "HELD", "IN_CONTACT", "INSIDE_CAPPED", "LEAF_SPHERES",
     "NORMAL_FALLBACK", "NORMALS_DISAGREE", "PLANES", "REPLANED", "Body", "Collider", "CollisionResult",
-    "ComputeCollision", "ContactBuilder", "ContactModel", "ForceLaw", "Mesh", "SphereTree", "__version__",
+    "ComputeCollision", "ContactBuilder", "ContactModel", "ForceLaw", "Mesh", "SphereTree", "World", "__version__",
     "load_mesh",
 ]

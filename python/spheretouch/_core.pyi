@@ -90,6 +90,15 @@ class ComputeCollision:
 
 Collider = ComputeCollision
 
+class World:
+    """A probe among several objects, each placed by its Body frame (object -> world)."""
+    def __init__(self, probe: Body, objects: List[Body]) -> None: ...
+    def query(self, pose: Optional[_Floats] = None, max_pairs: Optional[int] = None,
+              sort: bool = True) -> List[CollisionResult]: ...
+    @property
+    def reached(self) -> List[int]: ...
+    def __len__(self) -> int: ...
+
 class ContactModel:
     """FD, PD and the local contact plane of one round (object frame)."""
     @property

@@ -280,6 +280,29 @@ def test_one_object_from_two_threads_takes_turns():
     assert not wrong, f"{len(wrong)} wrong answers from a shared ComputeCollision/ContactBuilder"
 
 
+def test_a_world_of_several_objects_answers_per_object_as_single_colliders_do():
+    # Three boxes placed by their frames; the probe box overlaps the first two at once, never the third.
+    probe = st.Body(st.Mesh(*box((6, 6, 6)), name="probe"))
+    objs = [st.Body(st.Mesh(*box((10, 10, 10)), name=f"o{k}"), frame=f)
+            for k, f in enumerate([translation(-4, 0, 0), translation(4, 0, 0) @ rot_z(30), translation(500, 0, 0)])]
+    w = st.World(probe, objs)
+    assert len(w) == 3
+    pose = translation(0, 0, 0)
+    results = w.query(pose)
+    assert len(results) == 3
+    assert results[0].colliding and results[1].colliding and not results[2].colliding
+    assert w.reached == [0, 1]  # the far box is out of the probe's reach: not collided at all
+    # Each object's pairs are a single collider's at the relative pose (object frame^-1 . pose).
+    for k, o in enumerate(objs):
+        single = st.ComputeCollision(probe, st.Body(o.mesh)).pairs(np.linalg.inv(o.frame) @ pose)
+        assert np.array_equal(results[k].pairs, single), k
+    # The probe body's own frame when no pose is given.
+    w2 = st.World(st.Body(probe.mesh, frame=translation(505, 0, 0)), objs)  # across the far box's face
+    r2 = w2.query()
+    assert [r.colliding for r in r2] == [False, False, True]
+    expect_error(lambda: st.World(probe, []), "objects")
+
+
 def test_a_clear_message_when_numpy_is_missing():
     code = "import sys; sys.modules['numpy'] = None\ntry:\n    import spheretouch\nexcept ImportError as e:\n    print(e)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=dict(os.environ))
