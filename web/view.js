@@ -170,8 +170,10 @@
   let last = null, fresh = false, prevTicks = 0, prevRounds = 0, prevT = 0, hapticHz = 0, collisionHz = 0;
   let startedAt = performance.now(), textAt = 0, drawn = 0, fps = 0, fpsFrames = 0, fpsSince = performance.now(), snapshotSent = false, meshAt = 0;
 
+  let others = [];  // a scene's other objects: meshes placed in the page's frame, drawn grey, no overlay
   function onMesh(buf) {
     const d = new DataView(buf);
+    const version = d.getUint32(4, true);
     let o = 8;
     const f64 = () => { const x = d.getFloat64(o, true); o += 8; return x; };
     const u32 = () => { const x = d.getUint32(o, true); o += 4; return x; };
@@ -181,6 +183,27 @@
     const take = (Type, n) => { const a = new Type(buf.slice(o, o + 4 * n)); o += 4 * n; return a; };
     const pv = take(Float32Array, 3 * pnv), pf = take(Uint32Array, 3 * pnf);
     const ov = take(Float32Array, 3 * onv), of = take(Uint32Array, 3 * onf);
+    // Version 2: the object's rotation in the world, and the scene's other objects, placed.
+    let rot = null;
+    const more = [];
+    if (version >= 2) {
+      rot = Array.from({ length: 9 }, f64);
+      const n = u32();
+      for (let i = 0; i < n; ++i) {
+        const place = Array.from({ length: 12 }, f64);
+        const nv = u32(), nf = u32();
+        more.push({ place, v: take(Float32Array, 3 * nv), f: take(Uint32Array, 3 * nf) });
+      }
+    }
+    for (const b of others) stillScene.remove(b.mesh);
+    others = more.map((x) => {
+      const b = makeBody(x.v, x.f, grey, [0.62, 0.66, 0.60]);
+      const p = x.place;
+      b.mesh.matrixAutoUpdate = false;
+      b.mesh.matrix.set(p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7], p[8], p[9], p[10], p[11], 0, 0, 0, 1);
+      stillScene.add(b.mesh);
+      return b;
+    });
     if (object) stillScene.remove(object.mesh), scene.remove(object.overlay);
     if (probe) scene.remove(probe.group), scene.remove(proxy);
     object = makeBody(ov, of, grey, [0.72, 0.70, 0.65]);
@@ -190,6 +213,12 @@
     proxy.matrixAutoUpdate = false;
     proxy.visible = false;
     scene.add(proxy);
+    if (rot) {  // the object turned by its placement (its origin is the page's origin)
+      for (const part of [object.mesh, object.overlay]) {
+        part.matrixAutoUpdate = false;
+        part.matrix.set(rot[0], rot[1], rot[2], 0, rot[3], rot[4], rot[5], 0, rot[6], rot[7], rot[8], 0, 0, 0, 0, 1);
+      }
+    }
     stillScene.add(object.mesh);
     scene.add(object.overlay);
     still.key = '';  // a new object: drawn again whatever the camera does

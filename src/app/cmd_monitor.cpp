@@ -155,6 +155,8 @@ bool read_status(const rt::ShmSegment& seg, Reading& rd) {
 struct ViewMeshes {
   std::string scene;
   geom::Mesh probe, object;
+  std::vector<geom::Mesh> more;        ///< a scene's other objects (the run checked only the first)
+  std::vector<geom::Pose> placements;  ///< every object's, the first's first
 };
 
 // The scene reference the run wrote (it writes it right after creating the segment: a monitor
@@ -186,6 +188,15 @@ ViewMeshes load_view_meshes(const rt::ShmSegment& seg, bool tty) {
   if (!om) fail_command("spheretouch monitor", 2, s.file + ": " + om.error());
   m.probe = std::move(pm).value();
   m.object = std::move(om).value();
+  // A scene of several objects: the others too, to draw them where the run has them.
+  const std::vector<engine::ObjectSpec> objs = engine::scene_objects(s);
+  for (std::size_t k = 0; k < objs.size(); ++k) {
+    m.placements.push_back(objs[k].placement.pose());
+    if (k == 0) continue;
+    Result<geom::Mesh> more = engine::load_body(objs[k].body, "object[" + std::to_string(k + 1) + "]");
+    if (!more) fail_command("spheretouch monitor", 2, s.file + ": " + more.error());
+    m.more.push_back(std::move(more).value());
+  }
   if (const std::string diff = engine::compare_scene_ref(*ref, m.probe, m.object); !diff.empty())
     fail_command("spheretouch monitor", 2,
                  m.scene + ": " + diff +
@@ -239,6 +250,11 @@ void monitor(const MonitorArgs& a) {
     frame = std::make_unique<rt::ViewFrame>();
     view::ViewServerConfig vc;
     vc.listen = a.view;
+    if (!meshes.placements.empty()) {
+      vc.objects.push_back({&meshes.object, meshes.placements[0]});
+      for (std::size_t k = 0; k < meshes.more.size(); ++k)
+        vc.objects.push_back({&meshes.more[k], meshes.placements[k + 1]});
+    }
     Result<std::unique_ptr<view::ViewServer>> v =
         view::ViewServer::start(vc, meshes.probe, meshes.object, local->view, *local, nullptr);
     if (!v) fail_command("spheretouch monitor", 2, v.error());

@@ -110,6 +110,7 @@ void run(const RunArgs& given) {
     view::ViewServerConfig vc;
     vc.listen = a.view;
     vc.out_dir = run.run_dir();
+    for (const auto& [mesh, placement] : run.placed_objects()) vc.objects.push_back({mesh, placement});
     Result<std::unique_ptr<view::ViewServer>> v =
         view::ViewServer::start(vc, run.probe(), run.object(), run.shm_status().view, run.shm_status(), run.pose_feed());
     if (!v) die(2, v.error());

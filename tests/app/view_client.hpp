@@ -114,13 +114,37 @@ T view_at(const std::string& s, std::size_t off) {
 /// The counts in a "STVM" message (the meshes), checked against its size.
 struct ViewMeshCounts {
   std::uint32_t probe_vertices = 0, probe_faces = 0, object_vertices = 0, object_faces = 0;
+  double rotation[9] = {};  ///< the first object's placement's rotation (version 2)
+  /// The scene's other objects: placement in the page's frame (rows of [R | t]), vertices, faces.
+  struct More {
+    double place[12];
+    std::uint32_t vertices, faces;
+  };
+  std::vector<More> more;
 };
+/// Parses an "STVM" message (version 2), checking its size against its counts.
 inline ViewMeshCounts view_mesh_counts(const std::string& mesh) {
   REQUIRE(mesh.size() >= 72);
   CHECK(mesh.compare(0, 4, "STVM") == 0);
-  const ViewMeshCounts c{view_at<std::uint32_t>(mesh, 56), view_at<std::uint32_t>(mesh, 60),
-                         view_at<std::uint32_t>(mesh, 64), view_at<std::uint32_t>(mesh, 68)};
-  CHECK(mesh.size() == 72 + 12 * (std::size_t(c.probe_vertices) + c.probe_faces + c.object_vertices + c.object_faces));
+  CHECK(view_at<std::uint32_t>(mesh, 4) == 2);
+  ViewMeshCounts c{view_at<std::uint32_t>(mesh, 56), view_at<std::uint32_t>(mesh, 60), view_at<std::uint32_t>(mesh, 64),
+                   view_at<std::uint32_t>(mesh, 68)};
+  std::size_t at = 72 + 12 * (std::size_t(c.probe_vertices) + c.probe_faces + c.object_vertices + c.object_faces);
+  REQUIRE(mesh.size() >= at + 76);
+  for (int i = 0; i < 9; ++i) c.rotation[i] = view_at<double>(mesh, at + 8 * std::size_t(i));
+  at += 72;
+  const std::uint32_t n = view_at<std::uint32_t>(mesh, at);
+  at += 4;
+  for (std::uint32_t k = 0; k < n; ++k) {
+    REQUIRE(mesh.size() >= at + 104);
+    ViewMeshCounts::More m{};
+    for (int i = 0; i < 12; ++i) m.place[i] = view_at<double>(mesh, at + 8 * std::size_t(i));
+    m.vertices = view_at<std::uint32_t>(mesh, at + 96);
+    m.faces = view_at<std::uint32_t>(mesh, at + 100);
+    at += 104 + 12 * (std::size_t(m.vertices) + m.faces);
+    c.more.push_back(m);
+  }
+  CHECK(mesh.size() == at);
   return c;
 }
 

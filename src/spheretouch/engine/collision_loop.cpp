@@ -288,10 +288,25 @@ void CollisionLoop::run() {
     const std::int64_t t1 = published;
     const std::uint32_t contacts = set.contacts;
     rounds_.fetch_add(1, std::memory_order_relaxed);
-    // The live view shows object 0 (its frame, its faces).
-    if (view_ && !made.empty() && made.front().object == 0)
-      view_->offer(set_seq, sample.seq, placed[0] ? geom::Pose(to_object[0] * pose) : pose, outs[0].pairs,
-                   made.front().model, t1 - t0);
+    // The live view: the probe in the world, the first object's colliding faces, the deepest
+    // touched object's model (world frame) with the round's contacts.
+    if (view_ && set.count > 0) {
+      std::uint32_t show = 0;
+      for (std::uint32_t i = 1; i < set.count; ++i)
+        if (set.models[i].in_contact() &&
+            (!set.models[show].in_contact() || set.models[i].penetration_mm > set.models[show].penetration_mm))
+          show = i;
+      const bool first_in_round = single || std::binary_search(work.begin(), work.end(), 0u);
+      const std::span<const geom::FacePair> faces =
+          first_in_round ? std::span<const geom::FacePair>(outs[0].pairs) : std::span<const geom::FacePair>();
+      if (single) {
+        view_->offer(set_seq, sample.seq, pose, faces, set.models[0], t1 - t0);
+      } else {
+        geom::ContactModel shown = set.models[show];
+        shown.contacts = set.contacts;
+        view_->offer(set_seq, sample.seq, pose, faces, shown, t1 - t0);
+      }
+    }
     if (!complete) incomplete_.fetch_add(1, std::memory_order_relaxed);
     last_latency_ns_.store(t1 - t0, std::memory_order_relaxed);
     last_contacts_.store(contacts, std::memory_order_relaxed);

@@ -745,6 +745,12 @@ rt::PoseFeedDevice* RunEngine::pose_feed() const { return s_->feed.get(); }
 const rt::Trajectory& RunEngine::trajectory() const { return s_->script; }
 const geom::Mesh& RunEngine::probe() const { return s_->probe(); }
 const geom::Mesh& RunEngine::object() const { return s_->object(); }
+std::vector<std::pair<const geom::Mesh*, geom::Pose>> RunEngine::placed_objects() const {
+  std::vector<std::pair<const geom::Mesh*, geom::Pose>> out;
+  for (std::size_t k = 0; k < s_->object_bodies.size(); ++k)
+    out.emplace_back(&s_->object_bodies[k].mesh(), s_->specs[k].placement.pose());
+  return out;
+}
 const rt::ShmStatus& RunEngine::shm_status() const { return s_->shm->status(); }
 const Scene& RunEngine::scene() const { return s_->s; }
 const std::string& RunEngine::backend() const { return s_->backend; }

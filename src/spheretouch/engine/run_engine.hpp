@@ -134,7 +134,9 @@ class RunEngine {
   /// [device] kind = "browser": the device the live view's page drives (null otherwise).
   rt::PoseFeedDevice* pose_feed() const;
   const geom::Mesh& probe() const;   ///< the probe as loaded
-  const geom::Mesh& object() const;  ///< the object as loaded
+  const geom::Mesh& object() const;  ///< the object as loaded (of several: the first)
+  /// Every object as loaded with its placement (object file coordinates → world), scene order.
+  std::vector<std::pair<const geom::Mesh*, geom::Pose>> placed_objects() const;
   /// The run's status area: servo and collision status, the scene reference and the view frames.
   const rt::ShmStatus& shm_status() const;
   const Scene& scene() const;              ///< the scene run

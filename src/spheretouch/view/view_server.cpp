@@ -122,11 +122,15 @@ Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& c,
   s->controls_js_ = std::move(controls).value();
 
   // The meshes, once: local coordinates (f32 is exact enough near each body's origin) and origins.
+  if (!c.objects.empty() && c.objects.front().mesh != &object)
+    return fail("view: ViewServerConfig::objects must start with the object given to start()");
+  const geom::Pose place0 = c.objects.empty() ? geom::Pose::Identity() : c.objects.front().placement;
+  const geom::Vec3 scene_origin = place0 * object.origin;  // the page draws world minus this
   net::Writer m(s->mesh_msg_);
   m.raw("STVM", 4);
-  m.u32(1);
-  for (const geom::Mesh* b : {&object, &probe})
-    for (int i = 0; i < 3; ++i) m.f64(b->origin[i]);
+  m.u32(2);
+  for (int i = 0; i < 3; ++i) m.f64(scene_origin[i]);
+  for (int i = 0; i < 3; ++i) m.f64(probe.origin[i]);
   m.u32(std::uint32_t(probe.local.size()));
   m.u32(std::uint32_t(probe.faces.size()));
   m.u32(std::uint32_t(object.local.size()));
@@ -139,6 +143,28 @@ Result<std::unique_ptr<ViewServer>> ViewServer::start(const ViewServerConfig& c,
       }
     for (const geom::Tri& t : b->faces)
       for (std::uint32_t v : t) m.u32(v);
+  }
+  // Version 2: the first object's rotation, then every other object placed in the page's frame.
+  for (int r = 0; r < 3; ++r)
+    for (int k = 0; k < 3; ++k) m.f64(place0.linear()(r, k));
+  m.u32(c.objects.empty() ? 0u : std::uint32_t(c.objects.size() - 1));
+  for (std::size_t i = 1; i < c.objects.size(); ++i) {
+    const geom::Mesh& b = *c.objects[i].mesh;
+    const geom::Pose& p = c.objects[i].placement;
+    const geom::Vec3 t = p * b.origin - scene_origin;  // its local coordinates → the page's frame
+    for (int r = 0; r < 3; ++r) {
+      for (int k = 0; k < 3; ++k) m.f64(p.linear()(r, k));
+      m.f64(t[r]);
+    }
+    m.u32(std::uint32_t(b.local.size()));
+    m.u32(std::uint32_t(b.faces.size()));
+    for (const geom::Vec3& v : b.local)
+      for (int k = 0; k < 3; ++k) {
+        const float f = float(v[k]);
+        m.raw(&f, 4);
+      }
+    for (const geom::Tri& tri : b.faces)
+      for (std::uint32_t v : tri) m.u32(v);
   }
 
   if (s->config_.token.empty()) s->config_.token = engine::random_hex(16);

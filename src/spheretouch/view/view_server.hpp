@@ -15,9 +15,15 @@
 // ids within the meshes, numbers finite): one that fails is not sent and is counted.
 //
 // WebSocket /ws, binary messages, little-endian (web/view.js reads them):
-//   server -> page, once: "STVM" u32 version, f64 object origin[3], f64 probe origin[3],
+//   server -> page, once: "STVM" u32 version (2), f64 scene origin[3], f64 probe origin[3],
 //     u32 probe vertices, u32 probe faces, u32 object vertices, u32 object faces,
-//     f32 probe local vertices (x y z), u32 probe faces (a b c), f32 object local vertices, u32 object faces
+//     f32 probe local vertices (x y z), u32 probe faces (a b c), f32 object local vertices, u32 object faces,
+//     then (version 2) f64 the object's rotation (3x3, rows), u32 more objects, and for each: f64 its
+//     placement in the page's frame (rows of [R | t], 12), u32 vertices, u32 faces, f32 local
+//     vertices, u32 faces. The page draws in world coordinates minus the scene origin (the first
+//     object's placed origin: f32 stays exact near it); frames' poses and points are world
+//     coordinates (a scene of one unplaced object: its file coordinates, as in version 1); the
+//     colliding faces are the first object's.
 //   server -> page, every frame: "STVF" (layout in view_server.cpp, write_frame)
 //   page -> server: text {"fps": F, "frames": N, "seconds": S, "red": R} once a second; binary "STVS" + a PNG
 //     of the canvas (saved as view.png in the run directory) when the page was opened with
@@ -58,6 +64,12 @@ struct mg_connection;
 
 namespace st::inline SPHERETOUCH_ABI::view {
 
+/// A mesh placed in the world (a scene's object and its placement).
+struct PlacedMesh {
+  const geom::Mesh* mesh = nullptr;               ///< outlives the server
+  geom::Pose placement = geom::Pose::Identity();  ///< its file coordinates → world
+};
+
 struct ViewServerConfig {
   std::string listen = "127.0.0.1:8080";                  ///< ADDR:PORT (port 0: any free port)
   double rate_hz = 60;                                    ///< frames per second sent to each page
@@ -65,6 +77,9 @@ struct ViewServerConfig {
   std::string out_dir;                                    ///< where snapshots go (view.png); "" = none
   std::size_t max_pages = 4;                              ///< pages at once; one more gets a 503
   std::string token;  ///< the WebSocket's token ("" = a random one per server: the URL carries it)
+  /// A scene of several objects: every object with its placement, the first being start()'s
+  /// `object` (empty: that object alone, unplaced).
+  std::vector<PlacedMesh> objects;
 };
 
 struct ViewStats {
