@@ -1,5 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // Tests for src/app: the command line as a user runs it (the real binary, through a shell).
+#include <spheretouch/geom/mesh_io.hpp>
+#include <spheretouch/geom/primitives.hpp>
+
 #include "test_util.hpp"
 
 using st::test::contains;
@@ -66,6 +69,30 @@ TEST_CASE("run --view SCENE takes SCENE as the scene (the view on its default ad
   r = run_command(spheretouch_exe() + " run --view not-an-address");
   CHECK(r.exit_code == 2);
   CHECK(contains(r.output, "a scene file is required"));
+}
+
+TEST_CASE("info --scene describes the probe and every object with its placement and material") {
+  st::test::TempDir d;
+  REQUIRE(st::geom::write_off(st::geom::make_icosphere(10, 4), d.file("ball.off")).ok());
+  st::test::write_file(
+      d.file("s.toml"),
+      "[probe]\nbuiltin = \"capsule\"\n[[object]]\nname = \"ball\"\nmesh = \"ball.off\"\nposition_mm = "
+      "[1, 2, 3]\n[[object]]\nbuiltin = \"box\"\nrotation_deg = [0, 0, 45]\n[object.material]\nlaw = "
+      "\"linear\"\nspring_n_per_mm = 0.7\nstatic_friction = 0.5\ndynamic_friction = 0.25\n");
+  const auto r = st::test::run_command(st::test::spheretouch_exe() + " info --scene " + d.file("s.toml"));
+  INFO(r.output);
+  CHECK(r.exit_code == 0);
+  CHECK(st::test::contains(r.output, "probe:\ncapsule (generated)"));
+  CHECK(st::test::contains(r.output, "object 1 \"ball\":"));
+  CHECK(st::test::contains(r.output, "faces       320"));  // icosphere, frequency 4: 20 * 4^2
+  CHECK(st::test::contains(r.output, "placement   position [1, 2, 3] mm"));
+  CHECK(st::test::contains(r.output, "object 2 \"object 2\":\nbox (generated)"));
+  CHECK(st::test::contains(r.output, "rotation [0, 0, 45] deg"));
+  CHECK(st::test::contains(r.output,
+                           "material    linear law 0.7 N/mm, damping 0 N s/mm, friction static 0.5 dynamic 0.25"));
+  const auto bad = st::test::run_command(st::test::spheretouch_exe() + " info 2>&1");
+  CHECK(bad.exit_code == 2);
+  CHECK(st::test::contains(bad.output, "give mesh files, or --scene SCENE"));
 }
 
 TEST_CASE("info and export fail with the file named, exit code 2") {
