@@ -280,6 +280,6 @@ TEST_CASE("query --connect to a worker of another protocol version: the error sa
   INFO(r.output);
   CHECK(r.exit_code == 2);
   CHECK(contains(r.output, "worker " + ep + " answers with messages this client cannot read"));
-  CHECK(contains(r.output, "version: 1 not supported (this build speaks 2)"));
+  CHECK(contains(r.output, "version: 1 not supported (this build speaks " + std::to_string(st::net::kVersion) + ")"));
   CHECK(contains(r.output, "Upgrade the daemons and the clients together"));
 }

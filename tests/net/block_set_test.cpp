@@ -84,6 +84,21 @@ TEST_CASE("encoding is canonical: round trip, equal sets hash equal, different s
   REQUIRE_MESSAGE(d.ok(), d.error());
   CHECK(encode_block_set(d.value()) == e1);
   CHECK(d.value().blocks == std::vector<std::uint32_t>{0, 3, 5});
+  // The scene object it is a share of is part of its content: the same share as object 3 is
+  // another set, and decodes naming object 3; an id at or above max_objects is refused at byte 6.
+  const auto e5 = encode_block_set(make_block_set(s.probe, s.object, s.blocks, ids, 8, 3).value());
+  CHECK(block_set_hash(e5) != block_set_hash(e1));
+  auto d5 = decode_block_set(e5, DefaultLimits());
+  REQUIRE_MESSAGE(d5.ok(), d5.error());
+  CHECK(d5.value().object_id == 3);
+  CHECK(d.value().object_id == 0);
+  Limits few = DefaultLimits();
+  few.max_objects = 3;
+  auto bad = decode_block_set(e5, few);
+  REQUIRE_FALSE(bad.ok());
+  CHECK(bad.error().find("byte 6") != std::string::npos);
+  CHECK(bad.error().find("object: 3 is not below max_objects = 3") != std::string::npos);
+  CHECK_FALSE(make_block_set(s.probe, s.object, s.blocks, ids, 8, 70000).ok());
 }
 
 TEST_CASE("make_block_set refuses bad block ids") {

@@ -159,6 +159,7 @@ TEST_CASE("a worker of another protocol version: the client says why it cannot r
   CHECK_FALSE(c.value()->wait_ready(Clock::now() + 300ms));
   const auto w = c.value()->workers();
   CHECK(w[0].epoch == 0);  // never heard
-  CHECK_MESSAGE(w[0].unreadable.find("version: 1 not supported (this build speaks 2)") != std::string::npos,
+  CHECK_MESSAGE(w[0].unreadable.find(("version: 1 not supported (this build speaks " + std::to_string(kVersion) + ")")) !=
+                    std::string::npos,
                 w[0].unreadable);
 }

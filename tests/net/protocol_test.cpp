@@ -59,7 +59,7 @@ TEST_CASE("every message survives encode/decode unchanged") {
 TEST_CASE("header layout is pinned: magic, version, type, flags, body length, little-endian") {
   const auto b = encode(HeartbeatMsg{0x0102030405060708ull});
   REQUIRE(b.size() == kHeaderBytes + 8);
-  const std::vector<std::uint8_t> want{'S', 'T', 'N', 'P', 2, 0, 5, 0, 8, 0, 0, 0, 8, 7, 6, 5, 4, 3, 2, 1};
+  const std::vector<std::uint8_t> want{'S', 'T', 'N', 'P', 3, 0, 5, 0, 8, 0, 0, 0, 8, 7, 6, 5, 4, 3, 2, 1};
   CHECK(b == want);
 }
 
@@ -103,7 +103,7 @@ TEST_CASE("wrong magic, version, type and flags are rejected, naming the field")
     std::uint8_t v;
     const char* word;
   };
-  for (Case c : {Case{0, 'X', "magic"}, Case{4, 1, "version"}, Case{4, 3, "version"}, Case{5, 1, "version"},
+  for (Case c : {Case{0, 'X', "magic"}, Case{4, 2, "version"}, Case{4, 4, "version"}, Case{5, 1, "version"},
                  Case{6, 0, "type"}, Case{6, 7, "type"}, Case{7, 1, "flags"}}) {
     auto b = good;
     b[c.at] = c.v;
@@ -166,9 +166,31 @@ TEST_CASE("oversized counts are refused before allocating") {
   }
 }
 
+TEST_CASE("Query and Result name the scene object (protocol 3); one at or above max_objects is refused at its byte") {
+  QueryMsg q{7, 0xabcull, some_pose(), {1, 4}};
+  q.object = 5;
+  auto dq = decode(encode(q), DefaultLimits());
+  REQUIRE(dq.ok());
+  CHECK(std::get<QueryMsg>(dq.value()) == q);
+  ResultMsg r{7, 2, 0xabcull, {}, {{1, 2}}};
+  r.object = 5;
+  auto dr = decode(encode(r), DefaultLimits());
+  REQUIRE(dr.ok());
+  CHECK(std::get<ResultMsg>(dr.value()).object == 5);
+  Limits small = DefaultLimits();
+  small.max_objects = 5;
+  const auto bq = decode(encode(q), small);
+  REQUIRE_FALSE(bq.ok());
+  CHECK(bq.error().find("byte 28") != std::string::npos);  // header 12, seq 8, hash 8
+  CHECK(bq.error().find("object: 5 is not below max_objects = 5") != std::string::npos);
+  const auto br = decode(encode(r), small);
+  REQUIRE_FALSE(br.ok());
+  CHECK(br.error().find("byte 32") != std::string::npos);  // header 12, seq 8, worker_id 4, hash 8
+}
+
 TEST_CASE("non-finite and non-rigid poses are refused") {
   auto b = encode(QueryMsg{1, 2, some_pose(), {}});
-  const std::size_t pose_at = kHeaderBytes + 16;
+  const std::size_t pose_at = kHeaderBytes + 20;  // after seq, hash and object
   SUBCASE("NaN") {
     const double nan = std::numeric_limits<double>::quiet_NaN();
     std::memcpy(b.data() + pose_at + 8 * 3, &nan, 8);
@@ -192,7 +214,7 @@ TEST_CASE("non-finite and non-rigid poses are refused") {
 
 TEST_CASE("a Query's skip list must be ascending, below max_blocks and within max_skip; the error says where") {
   const Limits L = DefaultLimits();
-  const std::size_t list_at = kHeaderBytes + 16 + 96 + 4;  // seq, hash, pose, count
+  const std::size_t list_at = kHeaderBytes + 20 + 96 + 4;  // seq, hash, object, pose, count
   auto refused = [&](std::vector<std::uint32_t> skip, const char* what, const Limits& lim) {
     const auto d = decode(encode(QueryMsg{1, 2, some_pose(), std::move(skip)}), lim);
     REQUIRE_FALSE(d.ok());

@@ -181,6 +181,16 @@ TEST_CASE("two clients: each sees and queries only the sets it sent; neither can
   REQUIRE(std::holds_alternative<ResultMsg>(r));
   CHECK(std::get<ResultMsg>(r).seq == 10);
 
+  CHECK(std::get<ResultMsg>(r).object == 0);  // the set's object, echoed
+  // A Query naming another scene object than the set's is refused: its pairs would be read as
+  // another object's faces.
+  QueryMsg other{12, set.hash, geom::Pose::Identity(), {}};
+  other.object = 1;
+  const ErrorMsg eo = error_of(a.ask(encode(other)));
+  CHECK(eo.code == ErrorCode::BadMessage);
+  CHECK(eo.ref == 12);
+  CHECK(eo.text.find("Query names object 1 but block set") != std::string::npos);
+
   // b sends the same bytes: now it may query them too (one backend serves both).
   b.upload(set.bytes, set.hash, chunk);
   CHECK(holds(hello_of(b.recv()), set.hash));

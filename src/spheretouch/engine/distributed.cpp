@@ -222,6 +222,7 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
       fleet->clients.emplace_back();
       continue;
     }
+    cfg.object = std::uint32_t(k);  // its block sets, Queries and Results name it
     Result<std::unique_ptr<net::ScatterGather>> sg =
         net::ScatterGather::create(fleet->ctx, cfg, probe, *objects[k].mesh, std::move(object_blocks[k]));
     if (!sg) {

@@ -14,7 +14,7 @@ namespace st::inline SPHERETOUCH_ABI::net {
 namespace {
 
 constexpr std::uint32_t kBlockSetMagic = 0x53425453;  // "STBS" read as a little-endian u32
-constexpr std::uint16_t kBlockSetVersion = 2;         // 2: faces grouped by block, block_faces
+constexpr std::uint16_t kBlockSetVersion = 3;  // 2: faces grouped by block, block_faces; 3: the object id (was reserved)
 
 void put_mesh(Writer& w, const geom::Mesh& m) {
   for (int k = 0; k < 3; ++k) w.f64(m.origin[k]);
@@ -84,9 +84,12 @@ std::uint64_t spread3(std::uint64_t x) {  // 21 bits → every third bit (Morton
 }  // namespace
 
 Result<BlockSet> make_block_set(const geom::Mesh& probe, const geom::Mesh& object, const Blocks& blocks,
-                                std::span<const std::uint32_t> block_ids, std::uint32_t leaf_faces) {
+                                std::span<const std::uint32_t> block_ids, std::uint32_t leaf_faces,
+                                std::uint32_t object_id) {
   if (leaf_faces == 0) return fail("block set: leaf_faces must be at least 1");
+  if (object_id > 0xffff) return fail("block set: object ", object_id, " above 65535");
   BlockSet s;
+  s.object_id = object_id;
   s.leaf_faces = leaf_faces;
   s.object_faces_total = static_cast<std::uint32_t>(object.faces.size());
   s.blocks_total = static_cast<std::uint32_t>(blocks.size());
@@ -141,7 +144,7 @@ std::vector<std::uint8_t> encode_block_set(const BlockSet& s) {
   Writer w(out);
   w.u32(kBlockSetMagic);
   w.u16(kBlockSetVersion);
-  w.u16(0);
+  w.u16(static_cast<std::uint16_t>(s.object_id));
   w.u32(s.leaf_faces);
   w.u32(s.object_faces_total);
   w.u32(s.blocks_total);
@@ -179,7 +182,9 @@ Result<BlockSet> decode_block_set(std::span<const std::uint8_t> encoded, const L
   const std::uint16_t version = r.u16("version");
   if (r.ok() && version != kBlockSetVersion)
     r.fail_at(4, "version", ": ", version, " not supported (this build reads ", kBlockSetVersion, ")");
-  if (r.u16("reserved") != 0) r.fail_at(6, "reserved", ": must be 0");
+  s.object_id = r.u16("object");
+  if (r.ok() && s.object_id >= L.max_objects)
+    r.fail_at(6, "object", ": ", s.object_id, " is not below max_objects = ", L.max_objects);
   s.leaf_faces = r.u32("leaf_faces");
   if (r.ok() && (s.leaf_faces == 0 || s.leaf_faces > L.max_leaf_faces))
     r.fail_at(8, "leaf_faces", ": ", s.leaf_faces, " outside [1, ", L.max_leaf_faces, "]");

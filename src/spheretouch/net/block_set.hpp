@@ -23,6 +23,9 @@ namespace st::inline SPHERETOUCH_ABI::net {
 
 /// One worker's share of the work, as geometry.
 struct BlockSet {
+  /// The scene object it is a share of (0: the first, or only, object); < Limits::max_objects.
+  /// Part of the content: the same geometry as two objects makes two sets.
+  std::uint32_t object_id = 0;
   std::uint32_t leaf_faces = geom::DefaultTreeConfig().leaf_faces;  ///< sphere-tree leaf size the worker builds with
   std::uint32_t object_faces_total = 0;        ///< faces of the whole object (global ids are below it)
   std::uint32_t blocks_total = 0;              ///< blocks in the whole partition
@@ -42,10 +45,11 @@ using Blocks = std::vector<std::vector<std::uint32_t>>;
 /// block too is kept there only), the object vertices they use in ascending original order, the
 /// whole probe. The worker builds one subtree per block (SphereTree::build's groups).
 Result<BlockSet> make_block_set(const geom::Mesh& probe, const geom::Mesh& object, const Blocks& blocks,
-                                std::span<const std::uint32_t> block_ids, std::uint32_t leaf_faces);
+                                std::span<const std::uint32_t> block_ids, std::uint32_t leaf_faces,
+                                std::uint32_t object_id = 0);
 
-/// Canonical little-endian encoding ("STBS" v2: v1 plus the faces per block, the share's faces
-/// grouped by block); equal block sets give equal bytes.
+/// Canonical little-endian encoding ("STBS" v3: v1 plus the faces per block, the share's faces
+/// grouped by block; v3 the object id in v2's reserved u16); equal block sets give equal bytes.
 std::vector<std::uint8_t> encode_block_set(const BlockSet& s);
 /// Content digest of an encoding: BLAKE2b-256 (libsodium's crypto_generichash) over every byte.
 using Digest = std::array<std::uint8_t, 32>;

@@ -63,6 +63,7 @@ struct BodyEncoder {
   void operator()(const QueryMsg& m) {
     w.u64(m.seq);
     w.u64(m.hash);
+    w.u32(m.object);
     put_pose(w, m.pose);
     w.u32(static_cast<std::uint32_t>(m.skip.size()));
     for (std::uint32_t b : m.skip) w.u32(b);
@@ -71,6 +72,7 @@ struct BodyEncoder {
     w.u64(m.seq);
     w.u32(m.worker_id);
     w.u64(m.hash);
+    w.u32(m.object);
     w.u64(m.stats.sphere_tests);
     w.u64(m.stats.tri_tests);
     w.u64(m.stats.compute_ns);
@@ -133,6 +135,12 @@ Result<Message> decode_body(MsgType type, Reader& r, const Limits& L) {
       QueryMsg m;
       m.seq = r.u64("seq");
       m.hash = r.u64("hash");
+      {
+        const std::size_t at = r.offset();
+        m.object = r.u32("object");
+        if (r.ok() && m.object >= L.max_objects)
+          r.fail_at(at, "object", ": ", m.object, " is not below max_objects = ", L.max_objects);
+      }
       m.pose = get_pose(r);
       const std::uint32_t n = r.u32("skip count");
       if (r.count_ok(n, L.max_skip, 4, "skip count")) {
@@ -154,6 +162,12 @@ Result<Message> decode_body(MsgType type, Reader& r, const Limits& L) {
       m.seq = r.u64("seq");
       m.worker_id = r.u32("worker_id");
       m.hash = r.u64("hash");
+      {
+        const std::size_t at = r.offset();
+        m.object = r.u32("object");
+        if (r.ok() && m.object >= L.max_objects)
+          r.fail_at(at, "object", ": ", m.object, " is not below max_objects = ", L.max_objects);
+      }
       m.stats.sphere_tests = r.u64("sphere_tests");
       m.stats.tri_tests = r.u64("tri_tests");
       m.stats.compute_ns = r.u64("compute_ns");

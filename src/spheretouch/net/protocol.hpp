@@ -22,8 +22,10 @@
 namespace st::inline SPHERETOUCH_ABI::net {
 
 inline constexpr std::uint32_t kMagic = 0x504E5453;  ///< "STNP" read as a little-endian u32
-inline constexpr std::uint16_t kVersion = 2;         ///< bumped on any incompatible change (2: Query skip list)
-inline constexpr std::size_t kHeaderBytes = 12;      ///< magic, version, type, flags, body length
+/// Bumped on any incompatible change (2: Query skip list; 3: Query and Result name the scene
+/// object, block sets carry it).
+inline constexpr std::uint16_t kVersion = 3;
+inline constexpr std::size_t kHeaderBytes = 12;  ///< magic, version, type, flags, body length
 
 /// Upper bounds applied while decoding; a message over any of them is rejected, not truncated.
 struct Limits {
@@ -41,6 +43,7 @@ struct Limits {
   std::uint32_t max_blocks = 1u << 20;      ///< blocks in a partition
   std::uint32_t max_skip = 256;             ///< blocks a Query may ask the worker to leave out
   std::uint32_t max_leaf_faces = 1u << 16;  ///< sphere-tree leaf size parameter
+  std::uint32_t max_objects = 1024;         ///< scene objects a block set, Query or Result may name
 };
 
 /// Default limits (sized for multi-million-face meshes; workers may lower max_blockset_bytes).
@@ -101,9 +104,12 @@ struct QueryMsg {
   /// Global block ids to leave out, strictly ascending, at most Limits::max_skip; ids the set
   /// does not hold are ignored.
   std::vector<std::uint32_t> skip;
+  /// The scene object the set is a share of (checked by the worker; on the wire after `hash`).
+  std::uint32_t object = 0;
   /// Field by field (the pose's matrices exactly).
   friend bool operator==(const QueryMsg& a, const QueryMsg& b) {
-    return a.seq == b.seq && a.hash == b.hash && a.pose.matrix() == b.pose.matrix() && a.skip == b.skip;
+    return a.seq == b.seq && a.hash == b.hash && a.object == b.object && a.pose.matrix() == b.pose.matrix() &&
+           a.skip == b.skip;
   }
 };
 
@@ -114,11 +120,12 @@ struct ResultMsg {
   std::uint64_t hash = 0;       ///< the block set used
   QueryStats stats;             ///< work counters
   std::vector<FacePair> pairs;  ///< colliding (probe, global object) face pairs
+  std::uint32_t object = 0;     ///< the scene object whose faces `pairs` name (on the wire after `hash`)
   /// Field by field; of the stats, the sphere and triangle tests and compute_ns.
   friend bool operator==(const ResultMsg& a, const ResultMsg& b) {
-    return a.seq == b.seq && a.worker_id == b.worker_id && a.hash == b.hash && a.pairs == b.pairs &&
-           a.stats.sphere_tests == b.stats.sphere_tests && a.stats.tri_tests == b.stats.tri_tests &&
-           a.stats.compute_ns == b.stats.compute_ns;
+    return a.seq == b.seq && a.worker_id == b.worker_id && a.hash == b.hash && a.object == b.object &&
+           a.pairs == b.pairs && a.stats.sphere_tests == b.stats.sphere_tests &&
+           a.stats.tri_tests == b.stats.tri_tests && a.stats.compute_ns == b.stats.compute_ns;
   }
 };
 

@@ -37,10 +37,11 @@ struct SceneData {
   geom::Mesh probe, object;
   Blocks blocks;
   std::uint32_t leaf_faces;
+  std::uint32_t object_id = 0;  // ScatterConfig::object
 };
 
 Result<SetPtr> encode_set(const SceneData& s, std::vector<std::uint32_t> blocks) {
-  auto bs = make_block_set(s.probe, s.object, s.blocks, blocks, s.leaf_faces);
+  auto bs = make_block_set(s.probe, s.object, s.blocks, blocks, s.leaf_faces, s.object_id);
   if (!bs) return Error{bs.error()};
   auto e = std::make_shared<EncodedSet>();
   e->blocks = std::move(blocks);
@@ -432,7 +433,7 @@ struct ScatterGather::Impl {
       ++out->stale_dropped;
       return;
     }
-    if (p.turn != Turn::Queried || r.hash != p.asked->hash) {
+    if (p.turn != Turn::Queried || r.hash != p.asked->hash || r.object != cfg.object) {
       ++out->bad_messages;
       return;
     }
@@ -606,7 +607,7 @@ struct ScatterGather::Impl {
       if (p.asked) {
         ++out->workers_asked;
         p.asked_at = now;
-        if (send(p, QueryMsg{cur_seq, p.asked->hash, pose, p.skip})) {
+        if (send(p, QueryMsg{cur_seq, p.asked->hash, pose, p.skip, cfg.object})) {
           step(p, TurnEvent::QuerySent);
         } else {
           p.asked = nullptr;
@@ -762,6 +763,8 @@ struct ScatterGather::Impl {
 
 Result<std::unique_ptr<ScatterGather>> ScatterGather::create(zmq::context_t& ctx, ScatterConfig config,
                                                              geom::Mesh probe, geom::Mesh object, Blocks blocks) {
+  if (config.object >= config.limits.max_objects)
+    return fail("scatter-gather: object ", config.object, " is not below max_objects = ", config.limits.max_objects);
   if (config.endpoints.empty()) return fail("scatter-gather: no worker endpoints");
   if (config.miss_limit == 0) return fail("scatter-gather: miss_limit must be at least 1");
   if (!config.curve_server_public.empty() || !config.curve_public.empty() || !config.curve_secret.empty()) {
@@ -785,7 +788,7 @@ Result<std::unique_ptr<ScatterGather>> ScatterGather::create(zmq::context_t& ctx
   impl->object_faces = static_cast<std::uint32_t>(object.faces.size());
   const auto nblocks = static_cast<std::uint32_t>(blocks.size());
   impl->scene = std::make_shared<const SceneData>(
-      SceneData{std::move(probe), std::move(object), std::move(blocks), config.leaf_faces});
+      SceneData{std::move(probe), std::move(object), std::move(blocks), config.leaf_faces, config.object});
   if (config.assist_blocks > config.limits.max_skip)
     return fail("scatter-gather: assist_blocks = ", config.assist_blocks, " exceeds the skip list limit ",
                 config.limits.max_skip);

@@ -118,6 +118,10 @@ struct ScatterConfig {
   /// Costs a sphere tree of the probe and of each block it has answered (cached, at most
   /// 8 × assist_blocks + 64 blocks) and 4 bytes per object face. 0 = off (the default).
   std::uint32_t assist_blocks = 0;
+  /// The scene object this client answers for (a scene of several objects has one client per
+  /// object over the same workers): its block sets carry it, its Queries name it, and a Result
+  /// naming another is refused. < Limits::max_objects.
+  std::uint32_t object = 0;
 };
 
 /// What the collision thread gets back from one round.

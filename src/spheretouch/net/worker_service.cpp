@@ -36,7 +36,7 @@ struct WorkerService::LoadJob {
   bool reuse = false;  // the digest was known: a held backend serves these bytes
   std::unique_ptr<CollisionBackend> backend;
   std::string error;  // non-empty: refused
-  std::uint32_t faces = 0, probe_faces = 0, blocks = 0;
+  std::uint32_t faces = 0, probe_faces = 0, blocks = 0, object = 0;
   double ms = 0;
   ~LoadJob() {
     if (fd >= 0) ::close(fd);
@@ -55,6 +55,7 @@ struct WorkerService::LoadJob {
       } else {
         std::vector<std::uint8_t>().swap(up.bytes);  // free the encoding before building
         faces = static_cast<std::uint32_t>(set.value().object.faces.size());
+        object = set.value().object_id;
         probe_faces = static_cast<std::uint32_t>(set.value().probe.faces.size());
         blocks = static_cast<std::uint32_t>(set.value().blocks.size());
         if (!cancel.load()) {
@@ -452,6 +453,13 @@ void WorkerService::on_query(const zmq::message_t& peer, const std::string& owne
     send(peer, hello(owner, 0));  // tell the client what is held so it can load the right set
     return;
   }
+  if (it->object != q.object) {  // the client named another object than the set's: its pairs would be misread
+    send_error(peer, ErrorCode::BadMessage, q.seq,
+               st::fail("Query names object ", q.object, " but block set ", std::hex, q.hash, std::dec,
+                        " is a share of object ", it->object)
+                   .message);
+    return;
+  }
   sets_.splice(sets_.begin(), sets_, it);  // most recently used first
   it->last_used = std::chrono::steady_clock::now();
   pairs_.clear();
@@ -469,7 +477,7 @@ void WorkerService::on_query(const zmq::message_t& peer, const std::string& owne
   std::sort(pairs_.begin(), pairs_.end());
   pairs_.erase(std::unique(pairs_.begin(), pairs_.end()), pairs_.end());
   ++counters_.queries;
-  ResultMsg r{q.seq, cfg_.worker_id, q.hash, st, {}};
+  ResultMsg r{q.seq, cfg_.worker_id, q.hash, st, {}, q.object};
   r.pairs.swap(pairs_);
   send(peer, r);
   pairs_.swap(r.pairs);  // keep the capacity for the next query
@@ -577,10 +585,13 @@ void WorkerService::finish_job() {
   const bool is_new = std::none_of(sets_.begin(), sets_.end(), [&](const Loaded& l) { return l.backend == backend; });
   while (is_new && !sets_.empty() && distinct_backends() >= std::max<std::uint32_t>(cfg_.max_sets, 1)) sets_.pop_back();
   const std::uint32_t faces = job->reuse ? 0 : job->faces;
-  sets_.push_front(Loaded{u.owner, u.hash, job->digest, faces, backend, std::chrono::steady_clock::now()});
-  if (job->reuse)
+  sets_.push_front(Loaded{u.owner, u.hash, job->digest, faces, job->object, backend, std::chrono::steady_clock::now()});
+  if (job->reuse)  // the same bytes as a held set: its face count and object
     for (const Loaded& l : sets_)
-      if (l.backend == backend && l.faces) sets_.front().faces = l.faces;
+      if (l.backend == backend && l.faces) {
+        sets_.front().faces = l.faces;
+        sets_.front().object = l.object;
+      }
   ++counters_.loads;
   log(6, st::fail("loaded block set ", std::hex, u.hash, std::dec, job->reuse ? " (same bytes as a held set)" : "",
                   ": ", job->blocks, " blocks, ", sets_.front().faces, " object faces, ", job->probe_faces,

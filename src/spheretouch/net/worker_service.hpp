@@ -142,6 +142,7 @@ class WorkerService {
     std::uint64_t hash;
     Digest digest;
     std::uint32_t faces;
+    std::uint32_t object;  // the scene object it is a share of (BlockSet::object)
     std::shared_ptr<CollisionBackend> backend;
     std::chrono::steady_clock::time_point last_used;
   };
