@@ -266,8 +266,7 @@ void CollisionLoop::run() {
       if (set.overflow) ++overflow_rounds_;
       made.resize(geom::kMaxContactObjects);
     }
-    double pd = 0;
-    const geom::ContactModel* primary = nullptr;
+    double pd = 0;  // the deepest touched object's PD
     const std::int64_t published = rt::now_ns();
     for (Made& mk : made) {
       mk.model.published_ns = published;
@@ -275,10 +274,7 @@ void CollisionLoop::run() {
       set.models[set.count] = placed[mk.object] ? geom::place(mk.model, objects_[mk.object].placement) : mk.model;
       ++set.count;
       set.contacts += mk.model.contacts;
-      if (!primary || (mk.model.in_contact() && mk.model.penetration_mm > pd)) {
-        primary = &mk.model;
-        pd = mk.model.in_contact() ? mk.model.penetration_mm : 0.0;
-      }
+      if (mk.model.in_contact()) pd = std::max(pd, mk.model.penetration_mm);
     }
     set.seq = set_seq;
     set.pose_seq = sample.seq;

@@ -183,7 +183,7 @@ void HapticServo::tick(const TickInfo& info) noexcept {
   // Each object's force: interpolated, guarded (the guard acts while that surface pushes: a
   // contact cycle = its force above zero), plus its friction at the tool point under its normal
   // force after the guard. The deepest touching object is the primary one (telemetry).
-  Eigen::Vector3d total = Eigen::Vector3d::Zero(), surface = Eigen::Vector3d::Zero();
+  Eigen::Vector3d total = Eigen::Vector3d::Zero();
   bool in_contact = false, stuck = false, sliding = false;
   std::size_t live = 0;
   double deepest = -1;
@@ -202,7 +202,6 @@ void HapticServo::tick(const TickInfo& info) noexcept {
       c.ft = c.friction.apply(have_pose ? Eigen::Vector3d(pose * wrench_.tcp_mm) : Eigen::Vector3d::Zero(), n, fn, dt_s);
     }
     total += c.guarded + c.ft;
-    surface += c.guarded;
     in_contact |= touching;
     stuck |= c.friction.stuck();
     sliding |= c.friction.sliding();
