@@ -66,6 +66,23 @@ Body body_or_exit(geom::Mesh mesh, const geom::TreeConfig& params, const std::st
   return std::move(body).value();
 }
 
+/// --workers N / --connect EP,... as a fleet: the split knobs and CURVE keys of the query.
+FleetSpec fleet_spec(const QueryArgs& a, const ClientCurve& curve) {
+  FleetSpec spec;
+  spec.workers = a.workers;
+  for (std::string rest = a.connect; !rest.empty();) {
+    const auto comma = rest.find(',');
+    spec.endpoints.push_back(rest.substr(0, comma));
+    rest = comma == std::string::npos ? "" : rest.substr(comma + 1);
+  }
+  spec.layer = a.layer;
+  spec.block_size = a.block_size;
+  spec.leaf_faces = a.leaf_faces;
+  spec.curve = curve;
+  spec.note = [](const std::string& m) { std::fprintf(stderr, "spheretouch: %s\n", m.c_str()); };
+  return spec;
+}
+
 /// One object of a --scene query: its body, placement and (with workers) its client.
 struct SceneObject {
   std::string name;
@@ -110,18 +127,7 @@ void run_scene_query(const QueryArgs& a, const ClientCurve& curve) {
 
   std::unique_ptr<Fleet> fleet;
   if (a.workers > 0 || !a.connect.empty()) {
-    FleetSpec spec;
-    spec.workers = a.workers;
-    for (std::string rest = a.connect; !rest.empty();) {
-      const auto comma = rest.find(',');
-      spec.endpoints.push_back(rest.substr(0, comma));
-      rest = comma == std::string::npos ? "" : rest.substr(comma + 1);
-    }
-    spec.layer = a.layer;
-    spec.block_size = a.block_size;
-    spec.leaf_faces = a.leaf_faces;
-    spec.curve = curve;
-    spec.note = [](const std::string& m) { std::fprintf(stderr, "spheretouch: %s\n", m.c_str()); };
+    const FleetSpec spec = fleet_spec(a, curve);
     std::vector<engine::FleetObject> fo;
     for (const SceneObject& o : objects) fo.push_back({&o.body.mesh(), &o.body.tree()});
     Result<std::unique_ptr<Fleet>> f = start_fleet(spec, probe.mesh(), fo);
@@ -220,18 +226,7 @@ void run_query(const QueryArgs& a) {
   // --workers N / --connect: the same query through scatter-gather over workers.
   std::unique_ptr<Fleet> fleet;
   if (a.workers > 0 || !a.connect.empty()) {
-    FleetSpec spec;
-    spec.workers = a.workers;
-    for (std::string rest = a.connect; !rest.empty();) {
-      const auto comma = rest.find(',');
-      spec.endpoints.push_back(rest.substr(0, comma));
-      rest = comma == std::string::npos ? "" : rest.substr(comma + 1);
-    }
-    spec.layer = a.layer;
-    spec.block_size = a.block_size;
-    spec.leaf_faces = a.leaf_faces;
-    spec.curve = curve.value();
-    spec.note = [](const std::string& m) { std::fprintf(stderr, "spheretouch: %s\n", m.c_str()); };
+    const FleetSpec spec = fleet_spec(a, curve.value());
     Result<std::unique_ptr<Fleet>> f = start_fleet(spec, probe, object, otree);
     if (!f) {
       std::fprintf(stderr, "spheretouch: %s\n", f.error().c_str());

@@ -44,6 +44,17 @@ std::string expected_output(const Fixture& f) {
   }
   return out.str();
 }
+/// `n` real worker daemons on free loopback ports (kept in `keep`); their endpoints, comma-separated.
+std::string start_daemons(const st::test::TempDir& d, int n, std::vector<std::unique_ptr<st::test::Process>>& keep) {
+  std::string endpoints;
+  for (int i = 0; i < n; ++i) {
+    const std::string ep = "tcp://127.0.0.1:" + std::to_string(st::test::free_port());
+    keep.push_back(std::make_unique<st::test::Process>(
+        std::vector<std::string>{st::test::worker_binary(), "--bind", ep, "--id", std::to_string(i)}, d.file("w.log")));
+    endpoints += (i ? "," : "") + ep;
+  }
+  return endpoints;
+}
 }  // namespace
 
 TEST_CASE("query prints the sorted exact pair set per pose") {
@@ -160,14 +171,7 @@ TEST_CASE("query over in-process workers and over worker daemons gives the singl
   // Two real daemons on loopback.
   st::test::TempDir d;
   std::vector<std::unique_ptr<st::test::Process>> daemons;
-  std::string endpoints;
-  for (int i = 0; i < 2; ++i) {
-    const std::string ep = "tcp://127.0.0.1:" + std::to_string(st::test::free_port());
-    daemons.push_back(std::make_unique<st::test::Process>(
-        std::vector<std::string>{st::test::worker_binary(), "--bind", ep, "--id", std::to_string(i)}, d.file("w.log")));
-    endpoints += (i ? "," : "") + ep;
-  }
-  const auto r = run_command(base + " --connect " + endpoints);
+  const auto r = run_command(base + " --connect " + start_daemons(d, 2, daemons));
   INFO(r.output.substr(0, 400));
   CHECK(r.exit_code == 0);
   CHECK(r.output == single.output);
@@ -257,14 +261,7 @@ TEST_CASE(
   check_same("one process", "");
   check_same("2 in-process workers", " --workers 2");
   std::vector<std::unique_ptr<st::test::Process>> daemons;
-  std::string endpoints;
-  for (int i = 0; i < 2; ++i) {
-    const std::string ep = "tcp://127.0.0.1:" + std::to_string(st::test::free_port());
-    daemons.push_back(std::make_unique<st::test::Process>(
-        std::vector<std::string>{st::test::worker_binary(), "--bind", ep, "--id", std::to_string(i)}, d.file("w.log")));
-    endpoints += (i ? "," : "") + ep;
-  }
-  check_same("2 worker daemons", " --connect " + endpoints);
+  check_same("2 worker daemons", " --connect " + start_daemons(d, 2, daemons));
   // PROBE OBJECT and --scene together, or neither: a clear error.
   const auto both =
       run_command(base + " " + st::test::model("hand_L2.off") + " " + st::test::model("bunny.off") + " 2>&1");

@@ -331,27 +331,38 @@ TEST_CASE("HapticServo: several objects: each rendered with its own material, th
     c.spring_N_per_mm = k;
     return ForceLaw::make(c).value();
   };
+  // A servo over `materials` with the probe held still at `pose`, ticked one period at a time.
+  struct Rig {
+    std::unique_ptr<TripleBuffer<PoseSample>> poses = std::make_unique<TripleBuffer<PoseSample>>();
+    std::unique_ptr<TripleBuffer<ContactSet>> models = std::make_unique<TripleBuffer<ContactSet>>();
+    WrenchDevice dev;
+    HapticServo servo;
+    TickInfo info;
+    Rig(const Eigen::Isometry3d& at, const std::vector<ObjectMaterial>& materials)
+        : servo(dev, *poses, *models, ForceLaw{}, DefaultInterpolatorConfig(), DefaultSaturationConfig(), nullptr) {
+      dev.pose = at;
+      servo.set_objects(materials);
+      info.period_ns = 1'000'000;
+    }
+    void tick(int n) {
+      for (int k = 0; k < n; ++k) {
+        info.woke_ns = info.deadline_ns = 1'000'000'000 + std::int64_t(info.tick) * 1'000'000;
+        servo.tick(info);
+        ++info.tick;
+        ++info.deadline_index;
+      }
+    }
+  };
   struct Run {
     Eigen::Vector3d force;
     std::uint64_t bad;
   };
-  // Ticks `n` times with the probe still at `pose` after writing `set`; the force commanded last.
+  // The force commanded after `n` ticks with `set` written first.
   auto run = [&](const std::vector<ObjectMaterial>& materials, const ContactSet& set, int n) {
-    auto poses = std::make_unique<TripleBuffer<PoseSample>>();
-    auto models = std::make_unique<TripleBuffer<ContactSet>>();
-    WrenchDevice dev;
-    dev.pose = pose;
-    HapticServo servo(dev, *poses, *models, ForceLaw{}, DefaultInterpolatorConfig(), DefaultSaturationConfig(), nullptr);
-    servo.set_objects(materials);
-    models->write(set);
-    TickInfo info;
-    info.period_ns = 1'000'000;
-    for (int k = 0; k < n; ++k) {
-      info.tick = info.deadline_index = std::uint64_t(k);
-      info.woke_ns = info.deadline_ns = 1'000'000'000 + k * 1'000'000;
-      servo.tick(info);
-    }
-    return Run{dev.force, servo.stats().bad_objects};
+    Rig r(pose, materials);
+    r.models->write(set);
+    r.tick(n);
+    return Run{r.dev.force, r.servo.stats().bad_objects};
   };
   const std::vector<ObjectMaterial> two = {{linear(0.2), 0, {}}, {linear(0.3), 0, {}}};
   ContactSet both;
@@ -387,35 +398,20 @@ TEST_CASE("HapticServo: several objects: each rendered with its own material, th
 
   // A release: object 1 says "no contact" while object 0 holds; object 1's share fades out (never
   // rising) and object 0's stays.
-  auto poses = std::make_unique<TripleBuffer<PoseSample>>();
-  auto models = std::make_unique<TripleBuffer<ContactSet>>();
-  WrenchDevice dev;
-  dev.pose = pose;
-  HapticServo servo(dev, *poses, *models, ForceLaw{}, DefaultInterpolatorConfig(), DefaultSaturationConfig(), nullptr);
-  servo.set_objects(two);
-  models->write(both);
-  TickInfo info;
-  info.period_ns = 1'000'000;
-  std::int64_t t = 1'000'000'000;
-  auto tick = [&] {
-    info.woke_ns = info.deadline_ns = t;
-    servo.tick(info);
-    ++info.tick;
-    ++info.deadline_index;
-    t += 1'000'000;
-  };
-  for (int k = 0; k < 20; ++k) tick();
+  Rig r(pose, two);
+  r.models->write(both);
+  r.tick(20);
   ContactSet release = both;
   release.seq = 2;
   release.models[1].flags = 0;  // object 1: no contact
   release.models[1].penetration_mm = 0;
-  models->write(release);
-  double last_x = dev.force.x();
+  r.models->write(release);
+  double last_x = r.dev.force.x();
   for (int k = 0; k < 200; ++k) {
-    tick();
-    CHECK(dev.force.x() <= last_x + 1e-12);
-    last_x = dev.force.x();
-    CHECK(dev.force.z() == doctest::Approx(0.4).epsilon(1e-9));
+    r.tick(1);
+    CHECK(r.dev.force.x() <= last_x + 1e-12);
+    last_x = r.dev.force.x();
+    CHECK(r.dev.force.z() == doctest::Approx(0.4).epsilon(1e-9));
   }
-  CHECK(dev.force.x() == doctest::Approx(0).epsilon(1e-12));
+  CHECK(r.dev.force.x() == doctest::Approx(0).epsilon(1e-12));
 }
