@@ -195,13 +195,16 @@
         more.push({ place, v: take(Float32Array, 3 * nv), f: take(Uint32Array, 3 * nf) });
       }
     }
-    for (const b of others) stillScene.remove(b.mesh);
+    for (const b of others) stillScene.remove(b.mesh), scene.remove(b.overlay);
     others = more.map((x) => {
       const b = makeBody(x.v, x.f, grey, [0.62, 0.66, 0.60]);
       const p = x.place;
-      b.mesh.matrixAutoUpdate = false;
-      b.mesh.matrix.set(p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7], p[8], p[9], p[10], p[11], 0, 0, 0, 1);
+      for (const part of [b.mesh, b.overlay]) {
+        part.matrixAutoUpdate = false;
+        part.matrix.set(p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7], p[8], p[9], p[10], p[11], 0, 0, 0, 1);
+      }
       stillScene.add(b.mesh);
+      scene.add(b.overlay);
       return b;
     });
     if (object) stillScene.remove(object.mesh), scene.remove(object.overlay);
@@ -283,7 +286,17 @@
       proxy.matrix.copy(out.multiply(probe.group.matrix));
       proxy.matrixWorldNeedsUpdate = true;
     }
-    highlight(object, fr.objectFaces);
+    // Object faces: the first object's ids, then each other object's offset by the faces before it.
+    let from = 0, offset = 0;
+    for (const b of [object, ...others]) {
+      const n = b.faces.length / 3;
+      let to = from;
+      while (to < fr.objectFaces.length && fr.objectFaces[to] < offset + n) ++to;
+      const ids = fr.objectFaces.subarray(from, to);
+      if (ids.length || b.count) highlight(b, offset ? ids.map((id) => id - offset) : ids);  // idle bodies cost nothing
+      from = to;
+      offset += n;
+    }
     highlight(probe, fr.probeFaces);
     const fmag = Math.hypot(fr.force[0], fr.force[1], fr.force[2]);
     if (follow && (fr.flags & 1)) {  // keep the camera's direction, centre the contact, 0.7 radii away

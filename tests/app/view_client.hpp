@@ -127,8 +127,11 @@ inline ViewMeshCounts view_mesh_counts(const std::string& mesh) {
   REQUIRE(mesh.size() >= 72);
   CHECK(mesh.compare(0, 4, "STVM") == 0);
   CHECK(view_at<std::uint32_t>(mesh, 4) == 2);
-  ViewMeshCounts c{view_at<std::uint32_t>(mesh, 56), view_at<std::uint32_t>(mesh, 60), view_at<std::uint32_t>(mesh, 64),
-                   view_at<std::uint32_t>(mesh, 68)};
+  ViewMeshCounts c;
+  c.probe_vertices = view_at<std::uint32_t>(mesh, 56);
+  c.probe_faces = view_at<std::uint32_t>(mesh, 60);
+  c.object_vertices = view_at<std::uint32_t>(mesh, 64);
+  c.object_faces = view_at<std::uint32_t>(mesh, 68);
   std::size_t at = 72 + 12 * (std::size_t(c.probe_vertices) + c.probe_faces + c.object_vertices + c.object_faces);
   REQUIRE(mesh.size() >= at + 76);
   for (int i = 0; i < 9; ++i) c.rotation[i] = view_at<double>(mesh, at + 8 * std::size_t(i));

@@ -239,16 +239,21 @@ TEST_CASE(
   mg_exit_library();
 }
 
-TEST_CASE("run --view with a scene of several objects: the stream carries every object, placed, and world poses") {
+TEST_CASE(
+    "run --view with a scene of several objects: the stream carries every object, placed, and each one's "
+    "colliding faces") {
   mg_init_library(0);
   st::test::TempDir d;
   const int port = st::test::free_loopback_port(SOCK_STREAM);
-  // The ball at the origin (the press lands on its top, the highest point of the scene) and a box
-  // 200 mm away, turned 90 degrees about z.
+  // The ball at the origin (the press lands on its top, the highest point of the scene), a box
+  // whose top is level with it just beside the press (the capsule touches both), and a box far
+  // away, turned 90 degrees about z.
   const pid_t pid =
       view_start_run(d, port, 4.0,
                      "[[object]]\nbuiltin = \"icosphere\"\nradius_mm = 50.0\nfrequency = 12\n"
-                     "[[object]]\nname = \"box\"\nbuiltin = \"box\"\nsize_mm = 20\nposition_mm = [200, 0, "
+                     "[[object]]\nname = \"beside\"\nbuiltin = \"box\"\nsize_mm = 20\nposition_mm = [12, "
+                     "0, 40]\n"
+                     "[[object]]\nname = \"far\"\nbuiltin = \"box\"\nsize_mm = 20\nposition_mm = [200, 0, "
                      "0]\nrotation_deg = [0, 0, 90]\n");
   ViewMessages msgs;
   char err[256] = "";
@@ -267,15 +272,37 @@ TEST_CASE("run --view with a scene of several objects: the stream carries every 
   // The first object unplaced: no rotation.
   const double identity[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
   for (int i = 0; i < 9; ++i) CHECK(m.rotation[i] == identity[i]);
-  REQUIRE(m.more.size() == 1);
+  REQUIRE(m.more.size() == 2);
   CHECK(m.more[0].faces == 12);
-  // Rows of [R | t]: Rz(90) = [[0, -1, 0], [1, 0, 0], [0, 0, 1]], its centre 200 mm along x.
-  const double want[12] = {0, -1, 0, 200, 1, 0, 0, 0, 0, 0, 1, 0};
-  for (int i = 0; i < 12; ++i) CHECK(m.more[0].place[i] == doctest::Approx(want[i]).epsilon(1e-9));
-  // Frames: the first object's faces, in range; contact seen.
-  const st::test::ViewFrameCounts counts = st::test::view_check_frames(msgs.binary, 1, m.probe_faces, m.object_faces);
-  CHECK(counts.frames > 20);
-  CHECK(counts.with_faces > 5);
+  CHECK(m.more[1].faces == 12);
+  // Rows of [R | t]: the box beside, not turned; the far one Rz(90) = [[0, -1, 0], [1, 0, 0], [0, 0, 1]].
+  const double beside[12] = {1, 0, 0, 12, 0, 1, 0, 0, 0, 0, 1, 40};
+  const double far[12] = {0, -1, 0, 200, 1, 0, 0, 0, 0, 0, 1, 0};
+  for (int i = 0; i < 12; ++i) {
+    CHECK(m.more[0].place[i] == doctest::Approx(beside[i]).epsilon(1e-9));
+    CHECK(m.more[1].place[i] == doctest::Approx(far[i]).epsilon(1e-9));
+  }
+  // Frames: object ids distinct and ascending below every object's faces; the ball's ids first,
+  // then the box beside it offset by the ball's 2,880; the far box never touched.
+  std::size_t frames = 0, both = 0;
+  for (std::size_t i = 1; i < msgs.binary.size(); ++i) {
+    const std::string& f = msgs.binary[i];
+    REQUIRE(f.size() >= st::test::kFacesAt);
+    ++frames;
+    const std::uint32_t np = view_at<std::uint32_t>(f, 236), no = view_at<std::uint32_t>(f, 240);
+    REQUIRE(f.size() == st::test::kFacesAt + 4 * std::size_t(np + no));
+    bool ball = false, box = false;
+    for (std::uint32_t k = 0; k < no; ++k) {
+      const std::uint32_t id = view_at<std::uint32_t>(f, st::test::kFacesAt + 4 * (np + k));
+      if (k > 0) CHECK(view_at<std::uint32_t>(f, st::test::kFacesAt + 4 * (np + k - 1)) < id);
+      CHECK(id < 2880 + 12);  // the far box's ids (2,892 and up) never appear
+      ball = ball || id < 2880;
+      box = box || id >= 2880;
+    }
+    both += ball && box;
+  }
+  CHECK(frames > 20);
+  CHECK(both > 5);  // pressed on the ball and the box beside it at once, both shown
   mg_exit_library();
 }
 

@@ -152,6 +152,10 @@ void CollisionLoop::run() {
   }
   std::vector<RoundOutput> outs(n);
   std::vector<std::int64_t> linger_until(n, 0);
+  // The live view's face ids: object k's offset by the faces of the objects before it.
+  std::vector<std::uint32_t> face_offset(n, 0);
+  for (std::size_t k = 1; k < n; ++k)
+    face_offset[k] = face_offset[k - 1] + std::uint32_t(objects_[k - 1].mesh->num_faces());
   // The top level: a tree over the objects' placed bounding spheres.
   std::vector<double> radii(n);
   for (std::size_t k = 0; k < n; ++k) radii[k] = objects_[k].radius;
@@ -284,23 +288,24 @@ void CollisionLoop::run() {
     const std::int64_t t1 = published;
     const std::uint32_t contacts = set.contacts;
     rounds_.fetch_add(1, std::memory_order_relaxed);
-    // The live view: the probe in the world, the first object's colliding faces, the deepest
-    // touched object's model (world frame) with the round's contacts.
+    // The live view: the probe in the world, every touched object's colliding faces (object k's
+    // offset by the faces of the objects before it), the deepest touched object's model (world
+    // frame) with the round's contacts.
     if (view_ && set.count > 0) {
-      std::uint32_t show = 0;
-      for (std::uint32_t i = 1; i < set.count; ++i)
-        if (set.models[i].in_contact() &&
-            (!set.models[show].in_contact() || set.models[i].penetration_mm > set.models[show].penetration_mm))
-          show = i;
-      const bool first_in_round = single || std::binary_search(work.begin(), work.end(), 0u);
-      const std::span<const geom::FacePair> faces =
-          first_in_round ? std::span<const geom::FacePair>(outs[0].pairs) : std::span<const geom::FacePair>();
       if (single) {
-        view_->offer(set_seq, sample.seq, pose, faces, set.models[0], t1 - t0);
-      } else {
+        view_->offer(set_seq, sample.seq, pose, outs[0].pairs, set.models[0], t1 - t0);
+      } else if (view_->due()) {
+        std::uint32_t show = 0;
+        for (std::uint32_t i = 1; i < set.count; ++i)
+          if (set.models[i].in_contact() &&
+              (!set.models[show].in_contact() || set.models[i].penetration_mm > set.models[show].penetration_mm))
+            show = i;
+        view_pairs_.clear();
+        for (const std::uint32_t k : work)
+          for (const geom::FacePair& p : outs[k].pairs) view_pairs_.push_back({p.probe, face_offset[k] + p.object});
         geom::ContactModel shown = set.models[show];
         shown.contacts = set.contacts;
-        view_->offer(set_seq, sample.seq, pose, faces, shown, t1 - t0);
+        view_->offer(set_seq, sample.seq, pose, view_pairs_, shown, t1 - t0);
       }
     }
     if (!complete) incomplete_.fetch_add(1, std::memory_order_relaxed);

@@ -142,6 +142,7 @@ class CollisionLoop {
   std::vector<ObjectRoundStats> object_stats_;
   std::uint64_t overflow_rounds_ = 0, multi_touch_rounds_ = 0;
   std::uint32_t peak_object_ = 0;
+  std::vector<geom::FacePair> view_pairs_;  ///< a frame's pairs over every object (offset face ids)
   rt::SeqLock<rt::CollisionStatus>* status_ = nullptr;
   ViewFeed* view_ = nullptr;
   double rate_hz_;

@@ -26,6 +26,8 @@ class ViewFeed {
   /// Frames go to `out` (the run's ShmStatus::view), at most `rate_hz` a second.
   explicit ViewFeed(rt::SeqLock<rt::ViewFrame>& out, double rate_hz = rt::kViewRateHz)
       : out_(out), period_ns_(std::int64_t(1e9 / std::max(1.0, rate_hz))), frame_(std::make_unique<rt::ViewFrame>()) {}
+  /// True when offer() would publish a frame now (at most rate_hz a second).
+  bool due() const noexcept { return rt::now_ns() - last_ns_ >= period_ns_; }
   /// Collision thread, after each round: fills and publishes a frame when one is due. No
   /// allocation, no lock; the store is one pass over the frame's used words.
   void offer(std::uint64_t round, std::uint64_t pose_seq, const geom::Pose& pose, std::span<const geom::FacePair> pairs,

@@ -491,7 +491,12 @@ void ViewServer::push() {
   // The frame sent (the newest good one) and the one being read; 128 KiB each, not on the stack.
   auto frame = std::make_unique<rt::ViewFrame>(), next = std::make_unique<rt::ViewFrame>();
   frame->n_probe = frame->n_object = 0;
-  const auto probe_faces = std::uint32_t(probe_.faces.size()), object_faces = std::uint32_t(object_.faces.size());
+  // A scene of several objects lists every object's colliding faces, object k's offset by the
+  // faces of the objects before it: ids below the faces of all of them.
+  std::uint64_t all_faces = object_.faces.size();
+  for (std::size_t k = 1; k < config_.objects.size(); ++k) all_faces += config_.objects[k].mesh->faces.size();
+  const auto probe_faces = std::uint32_t(probe_.faces.size());
+  const auto object_faces = std::uint32_t(std::min<std::uint64_t>(all_faces, UINT32_MAX));
   std::uint64_t seen = 0;  // the frames' SeqLock version last read
   const std::int64_t t0 = rt::now_ns();
   const auto period = std::chrono::nanoseconds(std::int64_t(1e9 / config_.rate_hz));

@@ -22,8 +22,9 @@
 //     placement in the page's frame (rows of [R | t], 12), u32 vertices, u32 faces, f32 local
 //     vertices, u32 faces. The page draws in world coordinates minus the scene origin (the first
 //     object's placed origin: f32 stays exact near it); frames' poses and points are world
-//     coordinates (a scene of one unplaced object: its file coordinates, as in version 1); the
-//     colliding faces are the first object's.
+//     coordinates (a scene of one unplaced object: its file coordinates, as in version 1); a
+//     frame's object faces are every object's, object k's ids offset by the faces of the objects
+//     before it (in the order above: the first object, then the others).
 //   server -> page, every frame: "STVF" (layout in view_server.cpp, write_frame)
 //   page -> server: text {"fps": F, "frames": N, "seconds": S, "red": R} once a second; binary "STVS" + a PNG
 //     of the canvas (saved as view.png in the run directory) when the page was opened with
