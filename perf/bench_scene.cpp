@@ -48,9 +48,8 @@ struct Phase {
 /// `spacing` apart (each object's bounding sphere clear of the others' and of the probe near object 0).
 std::vector<engine::WorldObject> grid(const st::Body& object, int n, double spacing) {
   std::vector<engine::WorldObject> w;
-  const geom::SphereNode& root = object.tree().nodes[0];
-  const geom::Vec3 centre = object.mesh().origin + geom::Vec3(root.centre[0], root.centre[1], root.centre[2]);
-  w.push_back({&object.mesh(), geom::Pose::Identity(), centre, double(root.radius)});
+  const BoundingSphere bound = object.bounding_sphere();
+  w.push_back({&object.mesh(), geom::Pose::Identity(), bound});
   int side = 1;
   while (side * side < n) side += 2;  // odd: object 0 sits in the middle cell
   for (int cell = 0; cell < side * side && int(w.size()) < n; ++cell) {
@@ -58,7 +57,7 @@ std::vector<engine::WorldObject> grid(const st::Body& object, int n, double spac
     if (i == 0 && j == 0) continue;  // object 0's
     geom::Pose p = geom::Pose::Identity();
     p.translate(geom::Vec3(spacing * i, spacing * j, 0));
-    w.push_back({&object.mesh(), p, centre, double(root.radius)});
+    w.push_back({&object.mesh(), p, bound});
   }
   return w;
 }
@@ -80,7 +79,8 @@ void run_scene(const SceneArgs& a) {
     std::fprintf(stderr, "spheretouch-bench scene: %s has no poses\n", a.poses.c_str());
     std::exit(2);
   }
-  const double r_obj = object.tree().nodes[0].radius, r_probe = probe.tree().nodes[0].radius;
+  const BoundingSphere probe_bound = probe.bounding_sphere();
+  const double r_obj = object.bounding_sphere().radius, r_probe = probe_bound.radius;
   const double spacing = 2 * r_obj + 2 * r_probe + 10;  // probe at object 0 reaches no other
   // The phases: the probe far above every object (touching none), then at each contact pose.
   std::vector<Phase> proto;
@@ -92,8 +92,6 @@ void run_scene(const SceneArgs& a) {
       if (t.target >= 500)  // ~500, ~1000, ~1500 contacts: the collide bench's buckets
         proto.push_back({"touch " + std::to_string(t.target), t.pose, t.target, {}, {}});
   }
-  const geom::SphereNode& pr = probe.tree().nodes[0];
-  const geom::Vec3 probe_centre = probe.mesh().origin + geom::Vec3(pr.centre[0], pr.centre[1], pr.centre[2]);
   CollisionRequest request;
   request.sort_pairs = true;
 
@@ -131,8 +129,8 @@ void run_scene(const SceneArgs& a) {
       o.pairs.assign(r.result.pairs.begin(), r.result.pairs.end());
     };
     const std::size_t total = std::size_t(a.blocks + 1) * proto.size() * std::size_t(a.rounds) + 16;
-    r.loop = std::make_unique<engine::CollisionLoop>(probe.mesh(), probe_centre, r_probe, grid(object, n, spacing),
-                                                     *r.poses, *r.sets, fn, 0, total);
+    r.loop = std::make_unique<engine::CollisionLoop>(probe.mesh(), probe_bound, grid(object, n, spacing), *r.poses,
+                                                     *r.sets, fn, 0, total);
     r.loop->start();
     runs.push_back(std::move(sc));
   }

@@ -200,11 +200,6 @@ struct PyWorld {
   std::vector<std::uint32_t> reached;  ///< the last query's objects within reach
   std::mutex mu;
 };
-/// A body's bounding sphere in the world (its tree's root at its frame).
-std::pair<Vec3, double> world_sphere(const Body& b) {
-  const geom::SphereNode& r = b.tree().nodes[0];
-  return {b.frame() * (b.mesh().origin + Vec3(r.centre[0], r.centre[1], r.centre[2])), double(r.radius)};
-}
 
 }  // namespace
 
@@ -401,12 +396,9 @@ PYBIND11_MODULE(_core, m) {
               py::gil_scoped_release unlock;
               std::lock_guard<std::mutex> lock(w.mu);
               w.reached.clear();
-              const auto [pc, pr] = world_sphere(w.probe);
-              const Vec3 probe_centre = p * w.probe.frame().inverse() * pc;
+              const BoundingSphere probe = w.probe.bounding_sphere().moved(p);
               for (std::size_t k = 0; k < w.objects.size(); ++k) {
-                const auto [oc, orad] = world_sphere(w.objects[k]);
-                const double reach = orad + pr;
-                if ((probe_centre - oc).norm() > reach * (1 + 1e-9) + 1e-9) continue;
+                if (!probe.meets(w.objects[k].bounding_sphere().moved(w.objects[k].frame()))) continue;
                 w.reached.push_back(std::uint32_t(k));
                 if (!w.colliders[k]) w.colliders[k].emplace(w.probe, w.objects[k]);
                 w.colliders[k]->at_relative(w.objects[k].frame().inverse() * p, req, out[k]);

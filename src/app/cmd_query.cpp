@@ -88,8 +88,7 @@ struct SceneObject {
   std::string name;
   Body body;
   geom::Pose placement, to_object;
-  geom::Vec3 centre;  ///< bounding sphere, world
-  double radius;
+  BoundingSphere bound;  ///< placed in the world
 };
 
 [[noreturn]] void query_die(int code, const std::string& msg) {
@@ -117,13 +116,11 @@ void run_scene_query(const QueryArgs& a, const ClientCurve& curve) {
         engine::load_body(specs[k].body, s.objects.empty() ? "object" : "object[" + std::to_string(k + 1) + "]");
     if (!om) query_die(2, s.file + ": " + om.error());
     Body b = body_or_exit(std::move(om).value(), params, cache);
-    const geom::SphereNode& r = b.tree().nodes[0];
     const geom::Pose place = specs[k].placement.pose();
-    const geom::Vec3 centre = place * (b.mesh().origin + geom::Vec3(r.centre[0], r.centre[1], r.centre[2]));
-    objects.push_back({specs[k].name, std::move(b), place, place.inverse(), centre, double(r.radius)});
+    const BoundingSphere bound = b.bounding_sphere().moved(place);
+    objects.push_back({specs[k].name, std::move(b), place, place.inverse(), bound});
   }
-  const geom::SphereNode& pr = probe.tree().nodes[0];
-  const geom::Vec3 probe_centre = probe.mesh().origin + geom::Vec3(pr.centre[0], pr.centre[1], pr.centre[2]);
+  const BoundingSphere probe_bound = probe.bounding_sphere();
 
   std::unique_ptr<Fleet> fleet;
   if (a.workers > 0 || !a.connect.empty()) {
@@ -153,9 +150,7 @@ void run_scene_query(const QueryArgs& a, const ClientCurve& curve) {
     for (std::size_t k = 0; k < objects.size(); ++k) {
       SceneObject& o = objects[k];
       pairs[k].clear();
-      // The top level: an object out of the probe's sphere's reach has no pairs.
-      const double reach = o.radius + double(pr.radius);
-      if ((pose * probe_centre - o.centre).norm() > reach * (1 + 1e-9) + 1e-9) continue;
+      if (!probe_bound.moved(pose).meets(o.bound)) continue;  // out of the probe's reach: no pairs
       const geom::Pose rel = o.to_object * pose;
       if (fleet && fleet->clients[k]) {
         fleet->clients[k]->round(++seq, rel, net::Clock::now() + std::chrono::seconds(30), round);

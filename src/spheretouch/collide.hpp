@@ -41,6 +41,20 @@ using geom::SphereTree;
 using geom::TreeConfig;
 using geom::Vec3;
 
+/// A sphere bounding a body (its tree's root, padded so that it covers the float centre's rounding).
+struct BoundingSphere {
+  Vec3 centre{Vec3::Zero()};  ///< mm
+  double radius = 0;          ///< mm
+  /// True when the two spheres meet (touching counts; a relative slack of 1e-9 keeps rounding
+  /// from separating a grazing pair): the test that lets a scene skip an object out of reach.
+  bool meets(const BoundingSphere& o) const {
+    const double reach = radius + o.radius;
+    return (centre - o.centre).squaredNorm() <= reach * reach * (1 + 1e-9) + 1e-9;
+  }
+  /// The sphere moved by a rigid pose.
+  BoundingSphere moved(const Pose& p) const { return {p * centre, radius}; }
+};
+
 /// A collidable body: a mesh, the sphere tree built for it, and its frame (object or probe frame
 /// -> world frame). Mesh and tree are shared, immutable and may back many bodies.
 class Body {
@@ -61,6 +75,11 @@ class Body {
   void set_frame(const Pose& frame) { frame_ = frame; }                     ///< moves the body
   const std::shared_ptr<const Mesh>& shared_mesh() const { return mesh_; }  ///< for sharing
   const std::shared_ptr<const SphereTree>& shared_tree() const { return tree_; }  ///< for sharing
+  /// Bounds the mesh, in its file coordinates (body frame): the tree's root sphere.
+  BoundingSphere bounding_sphere() const {
+    const geom::SphereNode& r = tree_->nodes[0];
+    return {mesh_->origin + Vec3(r.centre[0], r.centre[1], r.centre[2]), double(r.radius)};
+  }
 
  private:
   Body(std::shared_ptr<const Mesh> mesh, std::shared_ptr<const SphereTree> tree, const Pose& frame)

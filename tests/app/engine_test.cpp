@@ -27,6 +27,17 @@ std::string engine_scene_text(const std::string& extra) {
          extra;
 }
 
+/// A run engine prepared from scene `text`, its progress notes into `notes`.
+std::unique_ptr<st::engine::RunEngine> engine_prepare(const std::string& text, std::vector<std::string>& notes) {
+  auto scene = st::engine::parse_scene(text, "e.toml", ".");
+  REQUIRE_MESSAGE(scene.ok(), scene.error());
+  st::engine::RunOptions opt;
+  opt.note = [&notes](const std::string& m) { notes.push_back(m); };
+  auto made = st::engine::RunEngine::prepare(scene.value(), opt);
+  REQUIRE_MESSAGE(made.ok(), made.error());
+  return std::move(made).value();
+}
+
 std::string engine_read(const std::string& path) {
   std::ifstream in(path);
   std::stringstream ss;
@@ -39,16 +50,11 @@ std::string engine_read(const std::string& path) {
 TEST_CASE("run engine: prepare, start, poll, finish and save without the command line") {
   st::test::TempDir dir;
   const std::string out = dir.file("run");
-  auto scene = st::engine::parse_scene(
-      engine_scene_text("[workers]\ncount = 0\n[run]\nduration_s = 2.5\n[output]\ndir = \"" + out + "\"\nstatus = \"off\"\n"),
-      "e.toml", ".");
-  REQUIRE_MESSAGE(scene.ok(), scene.error());
   std::vector<std::string> notes;
-  st::engine::RunOptions opt;
-  opt.note = [&](const std::string& m) { notes.push_back(m); };
-  auto made = st::engine::RunEngine::prepare(scene.value(), opt);
-  REQUIRE_MESSAGE(made.ok(), made.error());
-  st::engine::RunEngine& run = *made.value();
+  const auto made = engine_prepare(
+      engine_scene_text("[workers]\ncount = 0\n[run]\nduration_s = 2.5\n[output]\ndir = \"" + out + "\"\nstatus = \"off\"\n"),
+      notes);
+  st::engine::RunEngine& run = *made;
   CHECK(run.run_dir() == out);
   CHECK(run.backend() == "in the collision thread");
   CHECK_FALSE(run.has_fleet());
@@ -95,7 +101,7 @@ TEST_CASE("run engine: prepare, start, poll, finish and save without the command
 TEST_CASE("run engine: with workers the split is chosen automatically and said in the summary; a pinned one is kept") {
   st::test::TempDir dir;
   // The scene text ends in [tree]: these keys land there.
-  for (const std::string tree : {std::string(), std::string("layer = 1\nblock_size = 2\nmapping = \"random\"\n")}) {
+  for (const std::string& tree : {std::string(), std::string("layer = 1\nblock_size = 2\nmapping = \"random\"\n")}) {
     CAPTURE(tree);
     auto scene = st::engine::parse_scene(
         engine_scene_text(tree + "[workers]\ncount = 3\n[run]\nduration_s = 0.3\n[output]\ndir = \"" +
@@ -289,7 +295,8 @@ TEST_CASE("run engine: a scene of two objects; the probe presses on both at once
     CAPTURE(workers);
     st::test::TempDir dir;
     const std::string out = dir.file("run");
-    auto scene = st::engine::parse_scene(
+    std::vector<std::string> notes;
+    const auto made = engine_prepare(
         "[probe]\nbuiltin = \"capsule\"\nradius_mm = 6.0\nlength_mm = 30.0\n"
         "[[object]]\nname = \"left\"\nbuiltin = \"box\"\nsize_mm = 40\nposition_mm = [0, -20.5, 0]\n"
         "[[object]]\nname = \"right\"\nbuiltin = \"box\"\nsize_mm = 40\nposition_mm = [0, 20.5, 0]\n"
@@ -298,14 +305,8 @@ TEST_CASE("run engine: a scene of two objects; the probe presses on both at once
         // leaf_faces = 2: the 12-face boxes have 6 leaves, so 2 workers get blocks of them.
         "[device]\ntarget = [-10, 0, 20]\nslide_mm = 20\n[tree]\ncache = false\nleaf_faces = 2\n[workers]\ncount = " +
             std::to_string(workers) + "\n[run]\nduration_s = 4.5\n[output]\ndir = \"" + out + "\"\nstatus = \"off\"\n",
-        "two.toml", ".");
-    REQUIRE_MESSAGE(scene.ok(), scene.error());
-    std::vector<std::string> notes;
-    st::engine::RunOptions opt;
-    opt.note = [&](const std::string& m) { notes.push_back(m); };
-    auto made = st::engine::RunEngine::prepare(scene.value(), opt);
-    REQUIRE_MESSAGE(made.ok(), made.error());
-    st::engine::RunEngine& run = *made.value();
+        notes);
+    st::engine::RunEngine& run = *made;
     CHECK(std::any_of(notes.begin(), notes.end(),
                       [](const std::string& n) { return n.find("3 objects") != std::string::npos; }));
     REQUIRE(run.start().ok());

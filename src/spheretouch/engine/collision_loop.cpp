@@ -19,26 +19,25 @@ namespace {
 /// top-down by splitting the objects at the median of their centres along the widest axis. A
 /// probe far from every object costs the root's test; one near an object, about 2·log2(n) tests.
 /// Conservative: each node's sphere encloses its children's (radius rounded up by a relative
-/// 1e-9), so no object the probe's sphere reaches is missed.
+/// 1e-12), so no object the probe's sphere reaches is missed.
 class ObjectTree {
  public:
-  ObjectTree(const std::vector<geom::Vec3>& centres, const std::vector<double>& radii) {
-    std::vector<std::uint32_t> ids(centres.size());
+  explicit ObjectTree(const std::vector<BoundingSphere>& spheres) {
+    std::vector<std::uint32_t> ids(spheres.size());
     for (std::uint32_t i = 0; i < ids.size(); ++i) ids[i] = i;
     nodes_.reserve(2 * ids.size());
-    if (!ids.empty()) build(ids, 0, ids.size(), centres, radii);
+    if (!ids.empty()) build(ids, 0, ids.size(), spheres);
   }
-  /// Appends to `out` every object whose sphere meets the sphere (c, r) (touching counts), in no
+  /// Appends to `out` every object whose sphere meets `probe` (BoundingSphere::meets), in no
   /// particular order. `stack` is scratch.
-  void query(const geom::Vec3& c, double r, std::vector<std::uint32_t>& out, std::vector<std::uint32_t>& stack) const {
+  void query(const BoundingSphere& probe, std::vector<std::uint32_t>& out, std::vector<std::uint32_t>& stack) const {
     if (nodes_.empty()) return;
     stack.clear();
     stack.push_back(0);
     while (!stack.empty()) {
       const Node& n = nodes_[stack.back()];
       stack.pop_back();
-      const double reach = n.radius + r;
-      if ((n.centre - c).squaredNorm() > reach * reach * (1 + 1e-9) + 1e-9) continue;
+      if (!n.sphere.meets(probe)) continue;
       if (n.object != UINT32_MAX) {
         out.push_back(n.object);
       } else {
@@ -50,34 +49,31 @@ class ObjectTree {
 
  private:
   struct Node {
-    geom::Vec3 centre{geom::Vec3::Zero()};
-    double radius = 0;
+    BoundingSphere sphere;
     std::uint32_t left = 0, right = 0;  ///< inner: the children
     std::uint32_t object = UINT32_MAX;  ///< leaf: the object
   };
-  std::uint32_t build(std::vector<std::uint32_t>& ids, std::size_t lo, std::size_t hi, const std::vector<geom::Vec3>& c,
-                      const std::vector<double>& r) {
+  std::uint32_t build(std::vector<std::uint32_t>& ids, std::size_t lo, std::size_t hi, const std::vector<BoundingSphere>& s) {
     const auto at = std::uint32_t(nodes_.size());
     nodes_.emplace_back();
     if (hi - lo == 1) {
-      nodes_[at].centre = c[ids[lo]];
-      nodes_[at].radius = r[ids[lo]];
+      nodes_[at].sphere = s[ids[lo]];
       nodes_[at].object = ids[lo];
       return at;
     }
     Eigen::AlignedBox3d box;
-    for (std::size_t i = lo; i < hi; ++i) box.extend(c[ids[i]]);
+    for (std::size_t i = lo; i < hi; ++i) box.extend(s[ids[i]].centre);
     int axis = 0;
     box.sizes().maxCoeff(&axis);
     const std::size_t mid = (lo + hi) / 2;
     std::nth_element(ids.begin() + std::ptrdiff_t(lo), ids.begin() + std::ptrdiff_t(mid), ids.begin() + std::ptrdiff_t(hi),
-                     [&](std::uint32_t a, std::uint32_t b) { return c[a](axis) < c[b](axis); });
-    const std::uint32_t left = build(ids, lo, mid, c, r), right = build(ids, mid, hi, c, r);
+                     [&](std::uint32_t a, std::uint32_t b) { return s[a].centre(axis) < s[b].centre(axis); });
+    const std::uint32_t left = build(ids, lo, mid, s), right = build(ids, mid, hi, s);
     const geom::Vec3 centre = box.center();
     double radius = 0;
-    for (std::size_t i = lo; i < hi; ++i) radius = std::max(radius, (c[ids[i]] - centre).norm() + r[ids[i]]);
-    nodes_[at].centre = centre;
-    nodes_[at].radius = radius * (1 + 1e-12);
+    for (std::size_t i = lo; i < hi; ++i)
+      radius = std::max(radius, (s[ids[i]].centre - centre).norm() + s[ids[i]].radius);
+    nodes_[at].sphere = {centre, radius * (1 + 1e-12)};
     nodes_[at].left = left;
     nodes_[at].right = right;
     return at;
@@ -87,13 +83,11 @@ class ObjectTree {
 
 }  // namespace
 
-CollisionLoop::CollisionLoop(const geom::Mesh& probe, geom::Vec3 probe_center, double probe_radius,
-                             std::vector<WorldObject> objects, rt::TripleBuffer<rt::PoseSample>& poses,
-                             rt::TripleBuffer<geom::ContactSet>& models, CollideFn collide, double rate_hz,
-                             std::size_t max_rounds, const geom::ContactConfig& contact)
+CollisionLoop::CollisionLoop(const geom::Mesh& probe, const BoundingSphere& probe_bound, std::vector<WorldObject> objects,
+                             rt::TripleBuffer<rt::PoseSample>& poses, rt::TripleBuffer<geom::ContactSet>& models,
+                             CollideFn collide, double rate_hz, std::size_t max_rounds, const geom::ContactConfig& contact)
     : probe_(probe),
-      probe_center_(probe_center),
-      probe_radius_(probe_radius),
+      probe_bound_(probe_bound),
       objects_(std::move(objects)),
       poses_(poses),
       models_(models),
@@ -144,11 +138,11 @@ void CollisionLoop::run() {
   // already in the world), its round's pairs, and how long a release is still sent.
   std::vector<geom::Pose> to_object(n);
   std::vector<char> placed(n), was_contact(n, 0);
-  std::vector<geom::Vec3> world_center(n);
+  std::vector<BoundingSphere> world_bound(n);  // each object's sphere, placed
   for (std::size_t k = 0; k < n; ++k) {
     to_object[k] = objects_[k].placement.inverse();
     placed[k] = !objects_[k].placement.isApprox(geom::Pose::Identity(), 0.0);
-    world_center[k] = objects_[k].placement * objects_[k].center;
+    world_bound[k] = objects_[k].bound.moved(objects_[k].placement);
   }
   std::vector<RoundOutput> outs(n);
   std::vector<std::int64_t> linger_until(n, 0);
@@ -157,9 +151,7 @@ void CollisionLoop::run() {
   for (std::size_t k = 1; k < n; ++k)
     face_offset[k] = face_offset[k - 1] + std::uint32_t(objects_[k - 1].mesh->num_faces());
   // The top level: a tree over the objects' placed bounding spheres.
-  std::vector<double> radii(n);
-  for (std::size_t k = 0; k < n; ++k) radii[k] = objects_[k].radius;
-  const ObjectTree tree(world_center, radii);
+  const ObjectTree tree(world_bound);
   std::vector<std::uint32_t> work, stack, active_list, next_active;
   std::vector<char> near(n, 0);
   work.reserve(n);
@@ -195,9 +187,6 @@ void CollisionLoop::run() {
     const geom::Pose pose = geom::to_eigen(sample.pose);
     const std::int64_t t0 = rt::now_ns();
     ++set_seq;
-    // The top level: the probe's bounding sphere against each object's (a sphere test each;
-    // touching counts, and a relative slack keeps rounding from culling a grazing contact).
-    const geom::Vec3 probe_center = pose * probe_center_;
     bool complete = true;
     made.clear();
     std::uint32_t pairs_total = 0;
@@ -207,7 +196,7 @@ void CollisionLoop::run() {
     if (single) {
       work.push_back(0);
     } else {
-      tree.query(probe_center, probe_radius_, work, stack);
+      tree.query(probe_bound_.moved(pose), work, stack);  // the top level
       for (std::uint32_t k : work) near[k] = 1;
       for (std::uint32_t k : active_list)
         if (!near[k]) work.push_back(k);

@@ -20,6 +20,7 @@
 #include <thread>
 #include <vector>
 
+#include <spheretouch/collide.hpp>
 #include <spheretouch/geom/contact.hpp>
 #include <spheretouch/geom/result.hpp>
 #include <spheretouch/rt/histogram.hpp>
@@ -36,10 +37,10 @@ inline constexpr std::int64_t kLingerNs = 50'000'000;
 
 /// One object of the world as the collision thread sees it.
 struct WorldObject {
-  const geom::Mesh* mesh = nullptr;                         ///< in its file coordinates; outlives the loop
-  geom::Pose placement = geom::Pose::Identity();            ///< object file coordinates → world
-  geom::Vec3 center{geom::Vec3::Zero()};                    ///< bounding sphere, object file coordinates, mm
-  double radius = std::numeric_limits<double>::infinity();  ///< its radius (infinite: never culled)
+  const geom::Mesh* mesh = nullptr;               ///< in its file coordinates; outlives the loop
+  geom::Pose placement = geom::Pose::Identity();  ///< object file coordinates → world
+  /// Its bounding sphere, object file coordinates (radius infinite: never culled).
+  BoundingSphere bound{geom::Vec3::Zero(), std::numeric_limits<double>::infinity()};
 };
 
 /// Per object, over a run (the summary's per-object lines).
@@ -79,19 +80,17 @@ class CollisionLoop {
   /// `contact` selects the contact model (the builder is prepared for the meshes here, not in
   /// the first round).
   /// `objects` is the world (one object: never culled, its model sent every round, as a
-  /// single-object run always did); `probe_center`/`probe_radius` bound the probe (its file
+  /// single-object run always did); `probe_bound` bounds the probe (its file
   /// coordinates).
-  CollisionLoop(const geom::Mesh& probe, geom::Vec3 probe_center, double probe_radius, std::vector<WorldObject> objects,
+  CollisionLoop(const geom::Mesh& probe, const BoundingSphere& probe_bound, std::vector<WorldObject> objects,
                 rt::TripleBuffer<rt::PoseSample>& poses, rt::TripleBuffer<geom::ContactSet>& models, CollideFn collide,
                 double rate_hz, std::size_t max_rounds, const geom::ContactConfig& contact = geom::DefaultContactConfig());
   /// One object at the world's origin.
   CollisionLoop(const geom::Mesh& probe, const geom::Mesh& object, rt::TripleBuffer<rt::PoseSample>& poses,
                 rt::TripleBuffer<geom::ContactSet>& models, CollideFn collide, double rate_hz, std::size_t max_rounds,
                 const geom::ContactConfig& contact = geom::DefaultContactConfig())
-      : CollisionLoop(
-            probe, geom::Vec3::Zero(), std::numeric_limits<double>::infinity(),
-            {WorldObject{&object, geom::Pose::Identity(), geom::Vec3::Zero(), std::numeric_limits<double>::infinity()}},
-            poses, models, std::move(collide), rate_hz, max_rounds, contact) {}
+      : CollisionLoop(probe, BoundingSphere{geom::Vec3::Zero(), std::numeric_limits<double>::infinity()},
+                      {WorldObject{&object}}, poses, models, std::move(collide), rate_hz, max_rounds, contact) {}
   ~CollisionLoop();
   /// Offer every round to a live viewer's feed (null = off); before start().
   void show_to(ViewFeed* feed) { view_ = feed; }
@@ -132,8 +131,7 @@ class CollisionLoop {
  private:
   void run();
   const geom::Mesh& probe_;
-  geom::Vec3 probe_center_;
-  double probe_radius_;
+  BoundingSphere probe_bound_;
   std::vector<WorldObject> objects_;
   rt::TripleBuffer<rt::PoseSample>& poses_;
   rt::TripleBuffer<geom::ContactSet>& models_;

@@ -46,14 +46,6 @@ std::string new_run_dir(const std::string& wanted) {
   return dir;
 }
 
-/// A body's bounding sphere (its tree's root; the padded radius covers the float centre's
-/// rounding), file coordinates.
-geom::Vec3 bound_centre(const Body& b) {
-  const geom::SphereNode& r = b.tree().nodes[0];
-  return b.mesh().origin + geom::Vec3(r.centre[0], r.centre[1], r.centre[2]);
-}
-double bound_radius(const Body& b) { return double(b.tree().nodes[0].radius); }
-
 }  // namespace
 
 /// Everything a run holds, in construction order (the collision loop refers to the meshes, the
@@ -126,8 +118,7 @@ struct RunEngine::State {
   std::vector<WorldObject> world() const {
     std::vector<WorldObject> w;
     for (std::size_t k = 0; k < object_bodies.size(); ++k)
-      w.push_back({&object_bodies[k].mesh(), specs[k].placement.pose(), bound_centre(object_bodies[k]),
-                   bound_radius(object_bodies[k])});
+      w.push_back({&object_bodies[k].mesh(), specs[k].placement.pose(), object_bodies[k].bounding_sphere()});
     return w;
   }
 };
@@ -222,7 +213,7 @@ Status RunEngine::State::prepare() {
     spec.mapping = s.mapping;
     // A contact region for the automatic split: a quarter of the probe's bounding sphere (the
     // patch a hand or tool presses into a surface), in object millimetres.
-    spec.contact_radius = 0.25 * double(probe_body->tree().nodes[0].radius);
+    spec.contact_radius = 0.25 * probe_body->bounding_sphere().radius;
     spec.leaf_faces = s.tree.leaf_faces;
     spec.miss_limit = std::uint32_t(s.down_after);
     // "auto": daemons run on other machines, whose collision thread waits idle for their replies;
@@ -334,8 +325,8 @@ Status RunEngine::State::prepare() {
     script_file = dir + "/script.txt";
     if (Status w = write_trajectory(script_file, script); !w) return w;
   }
-  collision = std::make_unique<CollisionLoop>(probe(), bound_centre(*probe_body), bound_radius(*probe_body), world(),
-                                              shm->poses(), shm->models(), collide_fn, s.collision_rate_hz, 0, s.contact);
+  collision = std::make_unique<CollisionLoop>(probe(), probe_body->bounding_sphere(), world(), shm->poses(),
+                                              shm->models(), collide_fn, s.collision_rate_hz, 0, s.contact);
   collision->publish_status_to(&status.collision);
   // Every run publishes view frames, so that a live view (run --view, or monitor --view
   // attached at any time) can show it.
