@@ -605,7 +605,7 @@ TEST_CASE(
   st::rt::UdpDeviceConfig c = udp_test_config();
   c.silence_ms = 10000;
   c.session_timeout_ms = 10000;
-  c.fade_ms = 1e-3;  // the gain is 1 after the first tick: the slew limit alone shapes the force
+  c.fade_ms = 1e-6;  // the gain is 1 from the second tick on: the slew limit alone shapes the force
   c.max_pose_step_mm = 2;
   c.max_rotation_step_deg = 5;
   c.max_force_step_N = 0.5;
@@ -663,6 +663,9 @@ TEST_CASE(
   UdpDriver drv3(three.value()->address());
   drv3.send_pose(1, {0, 0, 0});
   REQUIRE(udp_wait_pose(*three.value(), Eigen::Vector3d::Zero(), pose));
+  // The pose may have arrived before the first tick (whose gain starts the fade at 0): one more.
+  std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  REQUIRE(three.value()->read_pose(st::rt::now_ns(), pose));
   three.value()->command_wrench(st::rt::now_ns(), Eigen::Vector3d(0, 0, 0.1), Eigen::Vector3d(0, 0.04, 0));
   REQUIRE(drv3.recv_force(f));
   CHECK(f.force[2] == doctest::Approx(0.1));
