@@ -7,6 +7,7 @@
 #include <malloc.h>
 
 #include <atomic>
+#include <fstream>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
@@ -38,6 +39,20 @@ void log_line(int priority, const std::string& text) {
     std::fprintf(stderr, "<%d>worker %u: %s\n", priority, g_id, text.c_str());
   else
     std::fprintf(stderr, "spheretouch-worker %u: %s: %s\n", g_id, names[priority & 7], text.c_str());
+}
+
+/// memory.max of this process's cgroup (v2) in bytes, 0 when unlimited or unknown.
+std::uint64_t cgroup_memory_max() {
+  std::ifstream cg("/proc/self/cgroup");
+  std::string line;
+  while (std::getline(cg, line)) {
+    if (line.rfind("0::", 0) != 0) continue;
+    std::ifstream f("/sys/fs/cgroup" + line.substr(3) + "/memory.max");
+    std::string v;
+    if (!(f >> v) || v == "max") return 0;
+    return std::strtoull(v.c_str(), nullptr, 10);
+  }
+  return 0;
 }
 
 void notify(const char* state) {
@@ -134,17 +149,24 @@ int main(int argc, char** argv) {
   wc.max_upload_bytes = wc.limits.max_blockset_bytes;  // one largest set in transit (or several smaller)
   wc.ipc_allowed_uids = cfg.ipc_allowed_uids;
   wc.log = log_line;
+  wc.max_sets_per_client = cfg.max_sets_per_client;
+  wc.max_client_bytes = cfg.max_client_mb << 20;
   {
-    // What the limits cost: held sets, one being built, uploads, libzmq's queues.
-    const double held_mb = st::net::kSetMemoryFactor * double(cfg.max_blockset_mb) * cfg.max_sets;
-    const double build_mb = st::net::kBuildMemoryFactor * double(cfg.max_blockset_mb);
-    const double queue_mb = double(wc.max_connections) * wc.rcvhwm * double(wc.limits.max_chunk_bytes) / double(1 << 20);
-    const double upload_mb = double(wc.max_upload_bytes >> 20);
-    log_line(6, "memory bound: " + std::to_string(long(held_mb + build_mb + queue_mb + upload_mb)) + " MiB (" +
-                    std::to_string(cfg.max_sets) + " held sets " + std::to_string(long(held_mb)) +
-                    " + one being built " + std::to_string(long(build_mb)) + " + uploads " +
-                    std::to_string(long(upload_mb)) + " + queues " + std::to_string(long(queue_mb)) +
-                    "); lower max_blockset_mb or max_sets to fit MemoryMax");
+    // What the limits cost (held sets, one being built, uploads, libzmq's queues) against what
+    // the service's cgroup allows (systemd's MemoryMax).
+    const st::net::MemoryBound b = st::net::memory_bound(wc);
+    const std::string terms = std::to_string(cfg.max_sets) + " held sets " + std::to_string(long(b.held_mib)) +
+                              " + one being built " + std::to_string(long(b.build_mib)) + " + uploads " +
+                              std::to_string(long(b.upload_mib)) + " + queues " + std::to_string(long(b.queue_mib));
+    const std::uint64_t max = cgroup_memory_max();
+    const double max_mib = double(max) / double(1 << 20);
+    if (max && b.total() > max_mib)
+      log_line(4, "memory bound " + std::to_string(long(b.total())) + " MiB (" + terms + ") exceeds this cgroup's " +
+                      "memory.max of " + std::to_string(long(max_mib)) +
+                      " MiB (MemoryMax): lower max_blockset_mb or max_sets, or raise MemoryMax");
+    else
+      log_line(6, "memory bound: " + std::to_string(long(b.total())) + " MiB (" + terms + ")" +
+                      (max ? "; memory.max " + std::to_string(long(max_mib)) + " MiB" : ""));
   }
   if (!cfg.curve_secret_key_file.empty()) {
     auto key = st::net::read_secret_key(cfg.curve_secret_key_file);
@@ -166,8 +188,13 @@ int main(int argc, char** argv) {
   int rc = 0;
   {
     // Sphere trees + collide() (exact); the SAT reference backend stays for tests.
-    st::net::WorkerService svc(ctx, wc, st::net::tree_backend_factory());
+    auto made = st::net::WorkerService::create(ctx, wc, st::net::tree_backend_factory());
     if (wc.curve) st::net::wipe_secret(wc.curve->secret_z85);  // the service has handed it to libzmq
+    if (!made) {
+      log_line(3, made.error());
+      return 1;
+    }
+    st::net::WorkerService& svc = *made.value();
     if (auto s = svc.bind(cfg.bind); !s) {
       log_line(3, s.error());
       return 1;

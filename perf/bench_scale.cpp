@@ -347,7 +347,7 @@ double corun_us(std::vector<std::unique_ptr<net::CollisionBackend>>& shares, con
         ready.fetch_add(1);
         while (ready.load() < shares.size()) {}
         const auto t0 = Clock::now();
-        shares[w]->query(pose, {}, out, max_pairs);
+        shares[w]->query(pose, {}, out, {.max_pairs = max_pairs});
         took[w] = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
       });
     for (std::thread& t : threads) t.join();
@@ -623,7 +623,7 @@ void run_scale(const ScaleArgs& a) {
           net::QueryStats counted;
           const double q = time_median_us(a.runs, [&] {
             out.clear();
-            counted = be->query(poses[i], {}, out, limits.max_pairs);
+            counted = be->query(poses[i], {}, out, {.max_pairs = limits.max_pairs});
           });
           net::ResultMsg msg;
           msg.seq = 1;
@@ -915,7 +915,7 @@ void run_scale(const ScaleArgs& a) {
               for (auto& sh : shares) {
                 const auto t0 = Clock::now();
                 scratch_pairs.clear();
-                sh->query(poses[i], {}, scratch_pairs, limits.max_pairs);
+                sh->query(poses[i], {}, scratch_pairs, {.max_pairs = limits.max_pairs});
                 slowest = std::max(slowest, std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
               }
               alone.push_back(slowest);

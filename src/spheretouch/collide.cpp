@@ -66,6 +66,7 @@ void run(const Body& probe, const Body& object, const Pose& relative, const Coll
   options.object_roots = request.object_roots;
   options.restrict_object = request.restrict_object;
   options.tri_filter = request.tri_filter;
+  options.max_work = request.max_work;
   // geom::collide stops once more than options.max_pairs are found: stop at the first max_pairs.
   const bool capped = request.max_pairs != SIZE_MAX;
   options.max_pairs = capped ? request.max_pairs - 1 : SIZE_MAX;
@@ -78,6 +79,7 @@ void run(const Body& probe, const Body& object, const Pose& relative, const Coll
   result.pairs.swap(inner.pairs);
   result.probe_faces = inner.probe_faces;
   result.object_faces = inner.object_faces;
+  if (inner.stats.work_limit_hit) result.complete = false;
   if (inner.stats.pair_limit_hit) {
     result.complete = false;
     if (result.pairs.size() > request.max_pairs) {

@@ -106,6 +106,10 @@ struct CollisionRequest {
   /// Decide candidate triangle pairs with the certified float filter before the exact test (the
   /// same pairs either way; false measures the exact test alone).
   bool tri_filter = true;
+  /// Stop once the traversal's work (geom::CollideStats::work()) exceeds this: complete == false
+  /// and stats.work_limit_hit. UINT64_MAX: no budget. A service answering requests it does not
+  /// trust sets one (a worker's Limits::work_base + work_per_pair × pairs).
+  std::uint64_t max_work = UINT64_MAX;
 
   static CollisionRequest all_pairs() { return {}; }                                       ///< every colliding pair
   static CollisionRequest first_pair() { return {.max_pairs = 1}; }                        ///< "do they touch?"
@@ -126,7 +130,7 @@ struct CollisionResult {
   std::vector<FacePair> pairs;     ///< (probe face, object face), file indices
   std::uint32_t probe_faces = 0;   ///< distinct probe faces in `pairs`
   std::uint32_t object_faces = 0;  ///< distinct object faces in `pairs`
-  bool complete = true;            ///< false when the query stopped at max_pairs (more pairs may exist)
+  bool complete = true;            ///< false when the query stopped at max_pairs or max_work (more pairs may exist)
   bool bad_request = false;        ///< the request failed check(): nothing was computed
   CollideStats stats;              ///< traversal counters
 

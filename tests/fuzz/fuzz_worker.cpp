@@ -43,7 +43,9 @@ WorkerConfig fuzz_config() {
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   static zmq::context_t ctx;
   const WorkerConfig cfg = fuzz_config();
-  WorkerService svc(ctx, cfg, reference_backend_factory());
+  auto made = WorkerService::create(ctx, cfg, reference_backend_factory());
+  if (!made) __builtin_trap();  // a valid configuration: creation cannot fail
+  WorkerService& svc = *made.value();
   WorkerCounters before{};
   std::size_t pos = 0;
   for (int records = 0; pos + 3 <= size && records < 256; ++records) {

@@ -245,11 +245,12 @@ TEST_CASE("daemon: hostile messages get an Error reply or a drop, never a crash,
     REQUIRE(e);
     CHECK((e->code == ErrorCode::BadMessage || e->code == ErrorCode::Unexpected));
   }
-  // Claims of a 1 GiB block set, restarted over and over: memory follows the bytes actually sent.
+  // Claims of a 256 MiB block set (the daemon's max_blockset_mb), restarted over and over: memory
+  // follows the bytes actually sent.
   const long rss0 = f.procs[0]->rss_kib();
   std::vector<std::uint8_t> chunk(1u << 20, 0x5a);
   for (int i = 0; i < 200; ++i)
-    d.send(zmq::buffer(encode(LoadBlocksMsg{42, 1ull << 30, 0, chunk})), zmq::send_flags::none);
+    d.send(zmq::buffer(encode(LoadBlocksMsg{42, 256ull << 20, 0, chunk})), zmq::send_flags::none);
   Message m = decoded(request(d, encode(HeartbeatMsg{2})));  // processed in order: all 200 are in
   CHECK(std::get<HelloMsg>(m).echo == 2);
   const long rss1 = f.procs[0]->rss_kib();

@@ -12,6 +12,7 @@
 #include <spheretouch/net/endpoint_probe.hpp>
 #include <spheretouch/net/tree_backend.hpp>
 #include <spheretouch/net/worker_service.hpp>
+#include "net_test_util.hpp"
 #include "process_util.hpp"
 
 using namespace st;
@@ -38,7 +39,7 @@ struct ServedWorker {
       std::lock_guard lk(log_mutex);
       log_lines.push_back(line);
     };
-    svc = std::make_unique<WorkerService>(ctx, wc, tree_backend_factory());
+    svc = test::make_worker(ctx, wc, tree_backend_factory());
     endpoint = "tcp://127.0.0.1:" + std::to_string(test::free_port());
     Status s = svc->bind(endpoint);
     REQUIRE_MESSAGE(s.ok(), s.error());

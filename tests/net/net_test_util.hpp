@@ -7,9 +7,18 @@
 #include <spheretouch/geom/mesh_io.hpp>
 #include <spheretouch/geom/primitives.hpp>
 #include <spheretouch/net/block_set.hpp>
+#include <spheretouch/net/worker_service.hpp>
 #include "test_util.hpp"
 
 namespace st::test {
+
+/// A worker service (WorkerService::create), or the test stops with its error.
+inline std::unique_ptr<net::WorkerService> make_worker(zmq::context_t& ctx, net::WorkerConfig cfg,
+                                                       net::BackendFactory factory) {
+  auto w = net::WorkerService::create(ctx, std::move(cfg), std::move(factory));
+  REQUIRE_MESSAGE(w.ok(), w.error());
+  return std::move(w).value();
+}
 
 /// Probe, object and the object's blocks.
 struct NetScene {

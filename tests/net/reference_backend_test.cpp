@@ -51,7 +51,7 @@ TEST_CASE("the union of the shares' pairs equals the whole object's, for any num
     }
     for (const geom::Pose& pose : poses) {
       std::vector<FacePair> u;
-      for (auto& b : bk) b->query(pose, {}, u, SIZE_MAX);
+      for (auto& b : bk) b->query(pose, {}, u, {});
       std::sort(u.begin(), u.end());
       CHECK(u == reference_collide(s.probe, s.object, pose));
       total += u.size();

@@ -413,6 +413,7 @@ TEST_CASE("a block set of faces piled on each other: the worker refuses the quer
     CAPTURE(tree);
     WorkerConfig base;
     base.limits.max_pairs = 50'000;
+    base.query_work_base = base.max_query_work = 1ull << 40;  // the pair cap alone (the budget: next case)
     const std::string t = tag();
     auto w = LocalWorkers::start(
         ctx, 1, tree ? tree_backend_factory() : reference_backend_factory(),
@@ -458,6 +459,128 @@ TEST_CASE("a block set of faces piled on each other: the worker refuses the quer
     REQUIRE(res);
     CHECK(res->pairs.empty());
   }
+}
+
+namespace {
+/// n copies of a triangle in the plane z = 0 (probe) and n of an upright one (object) whose boxes
+/// overlap that one's but which never touch it: n² candidate pairs, no pair.
+std::pair<geom::Mesh, geom::Mesh> crossing_piles(std::uint32_t n) {
+  geom::Mesh flat, upright;
+  flat.name = "flat pile";
+  flat.local = {{0, 0, 0}, {10, 0, 0}, {0, 10, 0}};
+  flat.faces.assign(n, geom::Tri{0, 1, 2});
+  upright.name = "upright pile";
+  // Crosses z = 0 on the segment (9, 9) → (12, 6), where x + y = 18 > 10: outside the flat one.
+  upright.local = {{9, 9, -1}, {9, 9, 1}, {12, 6, 0}};
+  upright.faces.assign(n, geom::Tri{0, 1, 2});
+  return {flat, upright};
+}
+}  // namespace
+
+TEST_CASE("faces piled so their boxes overlap but they never touch: the worker refuses the query at its work budget") {
+  // The N² attack with no pair: 700 × 700 candidate tests, none colliding, so the pair cap never
+  // acts. The budget (sized from the set: base + per face) stops the query and the worker says so.
+  zmq::context_t ctx;
+  const auto [flat, upright] = crossing_piles(700);
+  for (const bool tree : {true, false}) {
+    CAPTURE(tree);
+    WorkerConfig base;
+    base.query_work_base = 100'000;
+    base.query_work_per_face = 16;  // 122,400 units for the 1,400 faces: under the 490,000 tests
+    const std::string t = tag();
+    auto w = LocalWorkers::start(
+        ctx, 1, tree ? tree_backend_factory() : reference_backend_factory(),
+        [&](int i) { return inproc_endpoint(i, t); }, base);
+    REQUIRE(w.ok());
+    Blocks one(1);
+    for (std::uint32_t f = 0; f < 700; ++f) one[0].push_back(f);
+    auto set = make_block_set(flat, upright, one, std::vector<std::uint32_t>{0}, 24);
+    REQUIRE(set.ok());
+    const std::vector<std::uint8_t> bytes = encode_block_set(set.value());
+    const std::uint64_t hash = block_set_hash(bytes);
+    zmq::socket_t d(ctx, zmq::socket_type::dealer);
+    d.set(zmq::sockopt::linger, 0);
+    d.set(zmq::sockopt::rcvtimeo, 10000);
+    d.connect(w.value()->endpoints()[0]);
+    auto reply = [&](const std::vector<std::uint8_t>& msg) {
+      d.send(zmq::buffer(msg), zmq::send_flags::none);
+      zmq::message_t m;
+      REQUIRE(d.recv(m));
+      auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, DefaultLimits());
+      REQUIRE(r.ok());
+      return r.value();
+    };
+    REQUIRE(std::holds_alternative<HelloMsg>(reply(encode(LoadBlocksMsg{hash, bytes.size(), 0, bytes}))));
+    Message refused = reply(encode(QueryMsg{5, hash, geom::Pose::Identity(), {}}));
+    auto* e = std::get_if<ErrorMsg>(&refused);
+    REQUIRE(e);
+    CHECK(e->code == ErrorCode::TooLarge);
+    CHECK(e->ref == 5);
+    CHECK(e->text.find("work budget") != std::string::npos);
+    geom::Pose apart = geom::Pose::Identity();
+    apart.translation() = geom::Vec3(0, 0, 50);
+    Message answered = reply(encode(QueryMsg{6, hash, apart, {}}));
+    REQUIRE(std::holds_alternative<ResultMsg>(answered));
+    CHECK(std::get<ResultMsg>(answered).pairs.empty());
+  }
+}
+
+TEST_CASE("collide() stops its traversal at max_work; without a budget the same query finds the same pairs") {
+  const auto [flat, upright] = crossing_piles(1500);
+  const geom::SphereTree tf = geom::SphereTree::build(flat).value(), tu = geom::SphereTree::build(upright).value();
+  geom::CollideScratch sc;
+  geom::CollideResult r;
+  geom::CollideConfig opt;
+  geom::collide(flat, tf, upright, tu, geom::Pose::Identity(), opt, sc, r);
+  CHECK_FALSE(r.stats.work_limit_hit);
+  CHECK(r.pairs.empty());
+  CHECK(r.stats.tri_pairs == 1500u * 1500u);  // every candidate tested: the cost the budget bounds
+  opt.max_work = 200'000;
+  geom::collide(flat, tf, upright, tu, geom::Pose::Identity(), opt, sc, r);
+  CHECK(r.stats.work_limit_hit);
+  // Checked once per popped sphere pair: past the budget by at most one leaf pair's tests.
+  CHECK(r.stats.work() <= opt.max_work +
+                              std::uint64_t{geom::kMaxLeafFaces} * geom::kMaxLeafFaces * (1 + geom::kExactTestWork) +
+                              geom::kMaxChildren);
+  // An honest contact under a generous budget: the same pairs as without one.
+  const test::NetScene s = test::small_scene(12);
+  const geom::SphereTree tp = geom::SphereTree::build(s.probe).value(), to = geom::SphereTree::build(s.object).value();
+  geom::Pose touch = geom::Pose::Identity();
+  touch.translation() = geom::Vec3(30, 0, 0);
+  geom::CollideConfig plain;
+  plain.sort_pairs = true;
+  geom::collide(s.probe, tp, s.object, to, touch, plain, sc, r);
+  const std::vector<FacePair> want = r.pairs;
+  REQUIRE_FALSE(want.empty());
+  plain.max_work = r.stats.work() + 1;
+  geom::collide(s.probe, tp, s.object, to, touch, plain, sc, r);
+  CHECK_FALSE(r.stats.work_limit_hit);
+  CHECK(r.pairs == want);
+  plain.max_work = r.stats.work() / 2;  // half of it: stopped, and said so
+  geom::collide(s.probe, tp, s.object, to, touch, plain, sc, r);
+  CHECK(r.stats.work_limit_hit);
+}
+
+TEST_CASE("a block set of faces piled on one spot is refused at load (tree backend), naming where") {
+  geom::Mesh pile;
+  pile.name = "pile";
+  pile.local = {{0, 0, 0}, {10, 0, 0}, {0, 10, 0}};
+  pile.faces.assign(24 * 300, geom::Tri{0, 1, 2});  // 300 leaves of 24 faces, all at one spot
+  const test::NetScene s = test::small_scene(6);
+  Blocks one(1);
+  for (std::uint32_t f = 0; f < pile.faces.size(); ++f) one[0].push_back(f);
+  std::unique_ptr<CollisionBackend> be = tree_backend_factory()();
+  Status st = be->load(make_block_set(s.probe, pile, one, std::vector<std::uint32_t>{0}, 24).value());
+  REQUIRE_FALSE(st.ok());
+  CHECK(st.error().find("object share: more than 256 leaves of 24 faces piled around (") != std::string::npos);
+  // The probe is checked the same way; a surface (the model set: 22-34 at most) passes.
+  Blocks sphere_blocks(1);
+  for (std::uint32_t f = 0; f < s.object.faces.size(); ++f) sphere_blocks[0].push_back(f);
+  st = be->load(make_block_set(pile, s.object, sphere_blocks, std::vector<std::uint32_t>{0}, 24).value());
+  REQUIRE_FALSE(st.ok());
+  CHECK(st.error().find("probe: more than 256 leaves") != std::string::npos);
+  CHECK(be->load(make_block_set(s.probe, s.object, sphere_blocks, std::vector<std::uint32_t>{0}, 24).value()).ok());
+  CHECK(geom::crowding(geom::SphereTree::build(s.object).value(), 1000).leaves < 64);
 }
 
 TEST_CASE("collide() stops its traversal at max_pairs") {
@@ -510,7 +633,7 @@ TEST_CASE("a backend leaves out the blocks a Query skips, and only those (tree a
     int checked = 0;
     for (const geom::Pose& pose : test::contact_poses(s, 6)) {
       std::vector<FacePair> full;
-      be->query(pose, {}, full, SIZE_MAX);
+      be->query(pose, {}, full, {});
       std::sort(full.begin(), full.end());
       REQUIRE(full == reference_collide(s.probe, s.object, pose));
       // Skip every block that has pairs but one, plus a block id no set holds.
@@ -522,7 +645,7 @@ TEST_CASE("a backend leaves out the blocks a Query skips, and only those (tree a
       skip.erase(skip.begin());
       skip.push_back(std::uint32_t(blocks.value().size()) + 5);
       std::vector<FacePair> part;
-      const QueryStats st = be->query(pose, skip, part, SIZE_MAX);
+      const QueryStats st = be->query(pose, skip, part, {});
       std::sort(part.begin(), part.end());
       std::vector<FacePair> expect;
       for (const FacePair& p : full)

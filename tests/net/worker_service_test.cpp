@@ -123,8 +123,8 @@ class GatedBackend final : public CollisionBackend {
     return inner_->load(set);
   }
   QueryStats query(const geom::Pose& pose, std::span<const std::uint32_t> skip, std::vector<FacePair>& out,
-                   std::size_t max_pairs) override {
-    return inner_->query(pose, skip, out, max_pairs);
+                   const QueryBudget& budget) override {
+    return inner_->query(pose, skip, out, budget);
   }
 
  private:
@@ -191,7 +191,7 @@ TEST_CASE("two clients: each sees and queries only the sets it sent; neither can
   CHECK(eo.ref == 12);
   CHECK(eo.text.find("Query names object 1 but block set") != std::string::npos);
 
-  // b sends the same bytes: now it may query them too (one backend serves both).
+  // b sends the same bytes: now it may query them too (built again for b: see the quota case).
   b.upload(set.bytes, set.hash, chunk);
   CHECK(holds(hello_of(b.recv()), set.hash));
   const Message rb = b.ask(encode(QueryMsg{11, set.hash, geom::Pose::Identity(), {}}));
@@ -300,6 +300,132 @@ TEST_CASE("upload bounds: total buffered bytes, concurrent uploads, and abandone
   }
 }
 
+TEST_CASE("upload slots: an upload stalled for upload_stall gives its slot to a new one; its next chunk is refused") {
+  // Four identities trickling a byte every few seconds used to hold every slot: a stalled upload
+  // now loses its slot when another client needs one.
+  zmq::context_t ctx;
+  const Encoded set = encoded_scene(6);
+  const std::size_t chunk = 1024;
+  WorkerConfig wc;
+  wc.max_uploads = 1;
+  wc.upload_stall = 100ms;
+  const std::string t = ws_tag();
+  auto w = LocalWorkers::start(
+      ctx, 1, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, wc);
+  REQUIRE(w.ok());
+  const std::string ep = w.value()->endpoints()[0];
+  RawClient trickler(ctx, ep, "trickler"), honest(ctx, ep, "honest");
+  trickler.upload(set.bytes, set.hash, chunk, 0, chunk);
+  trickler.sync();
+  std::this_thread::sleep_for(400ms);  // well past upload_stall
+  honest.upload(set.bytes, set.hash, chunk);
+  CHECK(holds(hello_of(honest.recv()), set.hash));
+  const ErrorMsg e = error_of(trickler.ask(encode(
+      LoadBlocksMsg{set.hash, set.bytes.size(), chunk, {set.bytes.begin() + chunk, set.bytes.begin() + 2 * chunk}})));
+  CHECK(e.code == ErrorCode::LoadFailed);
+  CHECK(e.text.find("out of order") != std::string::npos);
+}
+
+TEST_CASE("set quotas: a client's load evicts its own sets first; a set another client queries is never evicted") {
+  zmq::context_t ctx;
+  WorkerConfig wc;
+  wc.max_sets = 2;
+  wc.max_sets_per_client = 1;
+  wc.active_set = 60s;  // every set queried in this test counts as in use
+  int built = 0;
+  BackendFactory counting = [&built]() {
+    ++built;
+    return reference_backend_factory()();
+  };
+  const std::string t = ws_tag();
+  auto w = LocalWorkers::start(
+      ctx, 1, counting, [&](int i) { return inproc_endpoint(i, t); }, wc);
+  REQUIRE(w.ok());
+  const std::string ep = w.value()->endpoints()[0];
+  RawClient a(ctx, ep, "client-a"), b(ctx, ep, "client-b"), c(ctx, ep, "client-c");
+  const Encoded s1 = encoded_scene(4), s2 = encoded_scene(5), s3 = encoded_scene(6), s4 = encoded_scene(7);
+  auto load = [](RawClient& cl, const Encoded& e) {
+    cl.upload(e.bytes, e.hash, 1 << 20);
+    return cl.recv();
+  };
+  auto query = [](RawClient& cl, const Encoded& e, std::uint64_t seq) {
+    return cl.ask(encode(QueryMsg{seq, e.hash, geom::Pose::Identity(), {}}));
+  };
+  REQUIRE(holds(hello_of(load(a, s1)), s1.hash));
+  REQUIRE(holds(hello_of(load(b, s2)), s2.hash));
+  REQUIRE(std::holds_alternative<ResultMsg>(query(a, s1, 1)));
+  REQUIRE(std::holds_alternative<ResultMsg>(query(b, s2, 2)));
+  // a's second set: over a's quota of one, so a's own first set goes, not b's.
+  const HelloMsg ha = hello_of(load(a, s3));
+  CHECK(holds(ha, s3.hash));
+  CHECK_FALSE(holds(ha, s1.hash));
+  CHECK(std::holds_alternative<ResultMsg>(query(b, s2, 3)));
+  CHECK(error_of(query(a, s1, 4)).code == ErrorCode::NotLoaded);
+  (void)a.recv();  // the Hello after NotLoaded
+  REQUIRE(std::holds_alternative<ResultMsg>(query(a, s3, 5)));
+  // c: both slots hold sets their clients use; c's load is refused, and nothing of theirs is lost.
+  const ErrorMsg full = error_of(load(c, s4));
+  CHECK(full.code == ErrorCode::TooLarge);
+  CHECK(full.text.find("worker full") != std::string::npos);
+  CHECK(std::holds_alternative<ResultMsg>(query(a, s3, 6)));
+  CHECK(std::holds_alternative<ResultMsg>(query(b, s2, 7)));
+  // Another client's copy of the same bytes is built again (what others hold is not revealed by
+  // a load that is quicker); the same client sending its bytes again shares its backend.
+  const int before = built;
+  REQUIRE(holds(hello_of(load(a, s2)), s2.hash));  // evicts a's s3 (a's quota)
+  CHECK(built == before + 1);
+  REQUIRE(holds(hello_of(load(a, s2)), s2.hash));
+  CHECK(built == before + 1);
+}
+
+TEST_CASE("a build that runs out of memory is refused with its reason; the worker keeps every other set") {
+  zmq::context_t ctx;
+  struct Starved final : CollisionBackend {
+    Status load(const BlockSet&) override { throw std::bad_alloc(); }
+    QueryStats query(const geom::Pose&, std::span<const std::uint32_t>, std::vector<FacePair>&, const QueryBudget&) override {
+      return {};
+    }
+  };
+  int built = 0;
+  BackendFactory factory = [&built]() -> std::unique_ptr<CollisionBackend> {
+    if (built++ == 0) return reference_backend_factory()();
+    return std::make_unique<Starved>();
+  };
+  const std::string t = ws_tag();
+  auto w = LocalWorkers::start(ctx, 1, factory, [&](int i) { return inproc_endpoint(i, t); });
+  REQUIRE(w.ok());
+  const std::string ep = w.value()->endpoints()[0];
+  RawClient a(ctx, ep, "client-a"), b(ctx, ep, "client-b");
+  const Encoded s1 = encoded_scene(4), s2 = encoded_scene(5);
+  a.upload(s1.bytes, s1.hash, 1 << 20);
+  REQUIRE(holds(hello_of(a.recv()), s1.hash));
+  b.upload(s2.bytes, s2.hash, 1 << 20);
+  const ErrorMsg e = error_of(b.recv());
+  CHECK(e.code == ErrorCode::LoadFailed);
+  CHECK(e.text.find("out of memory while building the block set") != std::string::npos);
+  CHECK(std::holds_alternative<ResultMsg>(a.ask(encode(QueryMsg{1, s1.hash, geom::Pose::Identity(), {}}))));
+}
+
+TEST_CASE("of a burst of Queries from one client only the newest is answered") {
+  // A haptic client wants the newest pose; a backlog would only let a client queue work for the
+  // worker. Driven on this thread: the three Queries are queued before the worker reads them.
+  zmq::context_t ctx;
+  auto svc = test::make_worker(ctx, WorkerConfig{}, reference_backend_factory());
+  const std::string ep = "inproc://" + ws_tag();
+  REQUIRE(svc->bind(ep).ok());
+  RawClient a(ctx, ep, "client-a");
+  a.d.set(zmq::sockopt::rcvtimeo, 300);
+  for (std::uint64_t seq = 1; seq <= 3; ++seq) a.send(encode(QueryMsg{seq, 0x1234, geom::Pose::Identity(), {}}));
+  for (int i = 0; i < 20 && svc->counters().superseded + svc->counters().errors_sent < 3; ++i) svc->poll_once(50ms);
+  const ErrorMsg e = error_of(a.recv());  // the set is not held: NotLoaded, for the newest Query only
+  CHECK(e.code == ErrorCode::NotLoaded);
+  CHECK(e.ref == 3);
+  (void)hello_of(a.recv());
+  zmq::message_t more;
+  CHECK_FALSE(a.d.recv(more));  // nothing for Queries 1 and 2
+  CHECK(svc->counters().superseded == 2);
+}
+
 namespace {
 /// A Heartbeat from another process (fork, then exec of tests/net/zmq_ping), optionally as another
 /// user: 0 when a Hello came back within 1.5 s, 1 when none did, 2 when switching user failed.
@@ -323,7 +449,8 @@ TEST_CASE("ipc://: missing directories are made 0700, the socket 0600; other use
   const std::string path = d.file("run/spheretouch/w.sock");
   {
     zmq::context_t ctx;
-    WorkerService svc(ctx, WorkerConfig{}, reference_backend_factory());
+    auto svc_made = test::make_worker(ctx, WorkerConfig{}, reference_backend_factory());
+    WorkerService& svc = *svc_made;
     Status s = svc.bind("ipc://" + path);
     REQUIRE_MESSAGE(s.ok(), s.error());
     struct stat st {};
@@ -338,7 +465,8 @@ TEST_CASE("ipc://: missing directories are made 0700, the socket 0600; other use
   // another is not. Switching user needs root (CI runs as root); otherwise only the first half runs.
   zmq::context_t ctx;
   std::atomic<bool> stop{false};
-  WorkerService svc(ctx, WorkerConfig{}, reference_backend_factory());
+  auto svc_made = test::make_worker(ctx, WorkerConfig{}, reference_backend_factory());
+  WorkerService& svc = *svc_made;
   const std::string ep = "ipc://@spheretouch-test-" + std::to_string(::getpid());
   REQUIRE(svc.bind(ep).ok());
   std::thread t([&] { svc.run(stop, 10ms); });
@@ -355,7 +483,8 @@ TEST_CASE("connections past max_connections are shut down as they are accepted; 
   zmq::context_t ctx;
   WorkerConfig wc;
   wc.max_connections = 2;
-  WorkerService svc(ctx, wc, reference_backend_factory());
+  auto svc_made = test::make_worker(ctx, wc, reference_backend_factory());
+  WorkerService& svc = *svc_made;
   REQUIRE(svc.bind("tcp://127.0.0.1:*").ok());
   const std::string ep = svc.last_endpoint();
   std::atomic<bool> stop{false};
@@ -386,7 +515,8 @@ TEST_CASE("CURVE over ipc://: an admitted key is answered, a client without keys
   zmq::context_t ctx;
   WorkerConfig wc;
   wc.curve = CurveServer{server.secret_z85, {client.public_z85}};
-  WorkerService svc(ctx, wc, reference_backend_factory());
+  auto svc_made = test::make_worker(ctx, wc, reference_backend_factory());
+  WorkerService& svc = *svc_made;
   const std::string ep = "ipc://@spheretouch-curve-test-" + std::to_string(::getpid());
   REQUIRE(svc.bind(ep).ok());
   std::atomic<bool> stop{false};

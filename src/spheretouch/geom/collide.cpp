@@ -29,6 +29,7 @@
 #include <limits>
 
 #include <spheretouch/geom/check.hpp>
+#include <spheretouch/geom/predicates.hpp>
 #include <spheretouch/geom/simd.hpp>
 #include <spheretouch/geom/tri_tri.hpp>
 
@@ -242,8 +243,9 @@ void run_query(const Mesh& probe, const SphereTree& probe_tree, const Mesh& obje
     q.descend(0, 0);
   } else {
     for (const std::uint32_t r : options.object_roots)
-      if (r < object_tree.num_nodes() && !result.stats.pair_limit_hit) q.descend(0, r);
+      if (r < object_tree.num_nodes() && !result.stats.pair_limit_hit && !result.stats.work_limit_hit) q.descend(0, r);
   }
+  result.stats.exact_evals = detail::exact_evaluations - q.evals0;
 }
 
 }  // namespace

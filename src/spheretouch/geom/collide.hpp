@@ -78,6 +78,11 @@ struct CollideConfig {
   /// then holds at most max_pairs plus one leaf pair's worth (64 × 64). A worker answering a
   /// hostile block set (every face on top of every other) must not compute N² pairs first.
   std::size_t max_pairs = SIZE_MAX;
+  /// Stop the traversal once its work (CollideStats::work(): sphere tests, candidate triangle
+  /// pairs and exact tests, weighted by their cost) exceeds this (stats.work_limit_hit). Pairs
+  /// bound what a query returns, not what it costs: faces piled so that their boxes overlap but
+  /// they never touch give N² tests and no pair. A worker sizes it from the request (Limits).
+  std::uint64_t max_work = UINT64_MAX;
   /// Decide triangle pairs with the certified float filter first (collide_traversal.inl, up to 16
   /// pairs per instruction on AVX-512), the exact test only for those it leaves undecided. Exact
   /// either way (the same pairs); false runs the exact test on every candidate (for measuring).
@@ -88,16 +93,31 @@ inline CollideConfig DefaultCollideConfig() { return {}; }  ///< exact, unsorted
 /// Candidate triangle pairs the leaf stage gathers before its filter runs (one AVX-512 step).
 inline constexpr std::uint32_t kTriBatch = 16;
 
+/// Work units (CollideStats::work()) of one exact triangle test: a sphere test or a candidate
+/// pair through the float filter is one unit (a few ns), an exact test 40–80 ns.
+inline constexpr std::uint64_t kExactTestWork = 16;
+/// Work units of one exact-arithmetic predicate evaluation (predicates.hpp), which a vertex in
+/// the other triangle's plane forces: ~0.1–0.5 µs each, a test making up to a dozen.
+inline constexpr std::uint64_t kExpansionWork = 64;
+
 /// Counters of one query (Box2D-style, for tests and benchmarks).
 struct CollideStats {
   std::uint64_t node_pairs = 0;    ///< sphere pairs tested
   std::uint64_t leaf_pairs = 0;    ///< leaf-leaf pairs reached (exact mode)
   std::uint64_t tri_pairs = 0;     ///< candidate triangle pairs (face boxes overlapping) tested
   std::uint64_t tri_exact = 0;     ///< of those, decided by tri_tri_overlap (the filter's undecided)
+  std::uint64_t exact_evals = 0;   ///< exact-arithmetic predicate evaluations (inputs on a plane or line)
   std::uint64_t sphere_pairs = 0;  ///< approximate mode: overlapping sphere pairs reported
   /// traversals stopped: a tree deeper than its num_depths (or > kMaxTreeDepth); 0 for valid trees
   std::uint64_t truncated = 0;
   bool pair_limit_hit = false;  ///< the traversal stopped at CollideConfig::max_pairs
+  bool work_limit_hit = false;  ///< the traversal stopped at CollideConfig::max_work
+  /// The work the budget counts, in units of about 3 ns on this project's reference machine:
+  /// sphere tests + candidate triangle pairs + kExactTestWork × exact tests + kExpansionWork ×
+  /// exact-arithmetic evaluations.
+  std::uint64_t work() const {
+    return node_pairs + tri_pairs + kExactTestWork * tri_exact + kExpansionWork * exact_evals;
+  }
 };
 
 /// Output of a query; caller-owned, reused across queries (clear() keeps capacity).

@@ -189,6 +189,7 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
   double s = 1;     // >= ||R||_2
   float slack = 0;  // absolute slack of the float sphere tests, mm (see sphere_mask)
   std::uint32_t gen = 0;
+  std::uint64_t evals0 = detail::exact_evaluations;  // this thread's exact evaluations before the query
   bool exact = true;
   std::uint32_t stop = 0;  // approximate mode: layer at which nodes become terminal
   // Candidate triangle pairs waiting for the filter (probe slot, object face), flushed when full
@@ -461,6 +462,13 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
     if (sphere_mask(os + oroot, so, 1, ps[proot], ps[sp + proot], ps[2 * sp + proot], ps[3 * sp + proot]) == 0) return;
     stack[n++] = {proot, oroot};
     while (n > 0 && !res.stats.pair_limit_hit) {
+      // The budget is checked once per popped pair: between two checks a leaf pair adds at most
+      // kMaxLeafFaces² candidates, a split at most kMaxChildren sphere tests.
+      res.stats.exact_evals = detail::exact_evaluations - evals0;
+      if (res.stats.work() > opt.max_work) [[unlikely]] {
+        res.stats.work_limit_hit = true;
+        return;
+      }
       const auto [p, o] = stack[--n];
       const SphereNode& hp = PT.nodes[p];
       const SphereNode& ho = OT.nodes[o];

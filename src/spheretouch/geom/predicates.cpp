@@ -148,6 +148,7 @@ bool normalise(double (&v)[K]) noexcept {
 namespace detail {
 
 int orient2d_exact(double ax, double ay, double bx, double by, double cx, double cy) noexcept {
+  ++exact_evaluations;
   double v[6] = {ax, ay, bx, by, cx, cy};
   if (!normalise(v)) return 0;
   const Diff e1x = diff(v[2], v[0]), e1y = diff(v[3], v[1]);
@@ -159,6 +160,7 @@ int orient2d_exact(double ax, double ay, double bx, double by, double cx, double
 }
 
 int orient3d_exact(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) noexcept {
+  ++exact_evaluations;
   double v[12] = {a.x(), a.y(), a.z(), b.x(), b.y(), b.z(), c.x(), c.y(), c.z(), d.x(), d.y(), d.z()};
   if (!normalise(v)) return 0;
   Diff e1[3], e2[3], e3[3];

@@ -25,6 +25,10 @@ int orient3d(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) noexcep
 
 namespace detail {
 
+/// Exact (expansion) evaluations on this thread so far: the costly path (~0.1–0.5 µs each) that
+/// inputs on a plane or a line force; collide() counts them against its work budget.
+inline thread_local std::uint64_t exact_evaluations = 0;
+
 /// orient2d without the filter: always the exact expansion evaluation (tests compare both paths).
 int orient2d_exact(double ax, double ay, double bx, double by, double cx, double cy) noexcept;
 /// orient3d without the filter: always the exact expansion evaluation.

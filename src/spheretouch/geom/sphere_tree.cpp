@@ -504,6 +504,32 @@ std::uint32_t SphereTree::num_leaves() const {
   return n;
 }
 
+Crowding crowding(const SphereTree& tree, std::uint32_t stop) {
+  Crowding c;
+  std::vector<std::uint32_t> stack;
+  for (std::uint32_t l = 0; l < tree.num_nodes() && c.leaves < stop; ++l) {
+    const SphereNode& a = tree.nodes[l];
+    if (!a.leaf) continue;
+    const float half = 0.5f * a.radius;
+    std::uint32_t n = 0;
+    stack.assign(1, 0);
+    while (!stack.empty() && n < stop) {
+      const SphereNode& b = tree.nodes[stack.back()];
+      stack.pop_back();
+      const float dx = b.centre[0] - a.centre[0], dy = b.centre[1] - a.centre[1], dz = b.centre[2] - a.centre[2];
+      const float r = a.radius + b.radius;
+      if (!(dx * dx + dy * dy + dz * dz <= r * r)) continue;  // apart (a NaN sphere counts as apart)
+      if (b.leaf) {
+        n += b.radius >= half;
+      } else {
+        for (std::uint32_t k = 0; k < b.count; ++k) stack.push_back(b.first + k);
+      }
+    }
+    if (n > c.leaves) c = {n, l};
+  }
+  return c;
+}
+
 std::vector<std::uint32_t> SphereTree::layer(std::uint32_t n) const {
   std::vector<std::uint32_t> out;
   if (nodes.empty()) return out;

@@ -105,6 +105,16 @@ struct SphereTree {
 std::vector<std::vector<std::uint32_t>> group_roots(const SphereTree& tree, std::size_t num_faces,
                                                     std::span<const std::uint32_t> groups);
 
+/// How crowded the tree's densest spot is: the most leaves of at least half a leaf's radius whose
+/// spheres meet that leaf's sphere (`leaf` names it), counted up to `stop` (the count stops
+/// there). A surface has a few dozen at most (the neighbours around a point); faces piled on
+/// each other (a block set made to cost N² triangle tests) have as many as the pile's leaves.
+struct Crowding {
+  std::uint32_t leaves = 0;      ///< the largest count found (≤ stop)
+  std::uint32_t leaf = kNoNode;  ///< a leaf with that count
+};
+Crowding crowding(const SphereTree& tree, std::uint32_t stop);
+
 /// 64-bit hash of the mesh's vertex bytes (local + origin), faces, the build parameters and the
 /// face groups (if any).
 std::uint64_t tree_hash(const Mesh& mesh, const TreeConfig& params, std::span<const std::uint32_t> groups = {});

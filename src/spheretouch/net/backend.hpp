@@ -17,6 +17,13 @@
 
 namespace st::inline SPHERETOUCH_ABI::net {
 
+/// What one query may cost: the pairs it may append and the work it may do (sphere tests,
+/// candidate and exact triangle tests: geom::CollideStats::work()).
+struct QueryBudget {
+  std::size_t max_pairs = SIZE_MAX;     ///< stop once more than this many pairs were appended
+  std::uint64_t max_work = UINT64_MAX;  ///< stop once the work passes this (stats.work_limit_hit)
+};
+
 /// Collides the probe against one worker's share of the object.
 class CollisionBackend {
  public:
@@ -26,11 +33,11 @@ class CollisionBackend {
   /// Appends every colliding (probe face, GLOBAL object face) pair at `pose` (probe file coords →
   /// object file coords) to `out`, in any order, each pair once, leaving out the faces of the
   /// blocks in `skip` (global block ids, ascending; ids not held are ignored); returns the work
-  /// counters. Stops as soon as more than `max_pairs` pairs were appended (then out holds more
-  /// than max_pairs, at most a few thousand more): the caller answers "too many pairs" without
-  /// computing them all.
+  /// counters. Stops as soon as more than `budget.max_pairs` pairs were appended (then out holds
+  /// more than max_pairs, at most a few thousand more) or the work passed `budget.max_work`
+  /// (stats.work_limit_hit): the caller answers "too large" without computing everything.
   virtual QueryStats query(const geom::Pose& pose, std::span<const std::uint32_t> skip, std::vector<FacePair>& out,
-                           std::size_t max_pairs) = 0;
+                           const QueryBudget& budget) = 0;
 };
 
 /// Makes an empty backend; a worker calls it once per block set it loads.

@@ -29,7 +29,12 @@ Status LocalWorkers::launch(int i, const std::string& endpoint) {
   cfg.worker_id = static_cast<std::uint32_t>(i);
   const std::atomic<bool>* stop = slot.stop.get();
   slot.thread = std::thread([this, cfg, endpoint, stop, &bound] {
-    WorkerService svc(ctx_, cfg, factory_);
+    Result<std::unique_ptr<WorkerService>> made = WorkerService::create(ctx_, cfg, factory_);
+    if (!made) {
+      bound.set_value(Error{made.error()});
+      return;
+    }
+    WorkerService& svc = *made.value();
     // A restarted worker's old socket closes its listening fd asynchronously (libzmq's I/O
     // thread): retry the bind briefly instead of failing on EADDRINUSE.
     Status s = svc.bind(endpoint);

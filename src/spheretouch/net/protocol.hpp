@@ -60,6 +60,9 @@ struct QueryStats {
   std::uint64_t sphere_tests = 0;  ///< bounding-volume tests
   std::uint64_t tri_tests = 0;     ///< triangle-triangle tests
   std::uint64_t compute_ns = 0;    ///< worker time inside the backend query, ns
+  /// Not on the wire: the backend stopped at its work budget (QueryBudget::max_work); the worker
+  /// answers TooLarge.
+  bool work_limit_hit = false;
 };
 
 /// Message type codes (the header's type byte).

@@ -80,7 +80,7 @@ class GridBackend final : public CollisionBackend {
   }
 
   QueryStats query(const geom::Pose& pose, std::span<const std::uint32_t> skip, std::vector<FacePair>& out,
-                   std::size_t max_pairs) override {
+                   const QueryBudget& budget) override {
     const std::size_t start = out.size();
     const auto t0 = std::chrono::steady_clock::now();
     QueryStats st;
@@ -125,7 +125,11 @@ class GridBackend final : public CollisionBackend {
               ++st.tri_tests;
               if (sat_tri_overlap(p0, p1, p2, object_.local[u[0]], object_.local[u[1]], object_.local[u[2]]))
                 out.push_back({pf, ids_[of]});
-              if (out.size() - start > max_pairs) return st;  // the caller refuses the query
+              if (out.size() - start > budget.max_pairs) return st;  // the caller refuses the query
+              if (st.sphere_tests + geom::kExactTestWork * st.tri_tests > budget.max_work) {
+                st.work_limit_hit = true;  // the same refusal: every test here is an exact one
+                return st;
+              }
             }
           }
     }
@@ -201,7 +205,7 @@ std::vector<FacePair> reference_collide(const geom::Mesh& probe, const geom::Mes
   if (!set) return out;
   GridBackend b;
   (void)b.load(set.value());
-  b.query(pose, {}, out, SIZE_MAX);
+  b.query(pose, {}, out, {});
   std::sort(out.begin(), out.end());
   return out;
 }

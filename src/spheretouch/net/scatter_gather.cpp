@@ -19,7 +19,7 @@
 #include <unordered_map>
 #include <utility>
 
-#include <spheretouch/net/worker_service.hpp>
+#include <spheretouch/net/socket_options.hpp>
 
 namespace st::inline SPHERETOUCH_ABI::net {
 

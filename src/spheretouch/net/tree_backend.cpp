@@ -14,9 +14,20 @@
 namespace st::inline SPHERETOUCH_ABI::net {
 namespace {
 
+/// A tree whose densest spot piles more than `max` leaves (geom::crowding) is refused.
+Status check_crowding(const geom::SphereTree& tree, const geom::Mesh& mesh, std::uint32_t max, const char* what) {
+  if (max == 0) return Ok{};
+  const geom::Crowding c = geom::crowding(tree, max + 1);
+  if (c.leaves <= max) return Ok{};
+  const geom::SphereNode& n = tree.nodes[c.leaf];
+  const geom::Vec3 at = mesh.origin + geom::Vec3(n.centre[0], n.centre[1], n.centre[2]);
+  return fail(what, ": more than ", max, " leaves of ", tree.params.leaf_faces, " faces piled around (", at.x(), ", ",
+              at.y(), ", ", at.z(), ") mm: faces on top of each other, refused (a surface has a few dozen at one spot)");
+}
+
 class TreeBackend final : public CollisionBackend {
  public:
-  explicit TreeBackend(bool per_block) : per_block_(per_block) {}
+  TreeBackend(bool per_block, std::uint32_t max_crowding) : per_block_(per_block), max_crowding_(max_crowding) {}
   Status load(const BlockSet& set) override {
     geom::TreeConfig params = geom::DefaultTreeConfig();
     params.leaf_faces = std::clamp<std::uint32_t>(set.leaf_faces, 1, geom::kMaxLeafFaces);
@@ -27,6 +38,7 @@ class TreeBackend final : public CollisionBackend {
     auto object = std::make_shared<const geom::Mesh>(std::exchange(set_.object, {}));
     Result<geom::SphereTree> pt = geom::SphereTree::build(*probe, params);
     if (!pt) return fail("probe tree: ", pt.error());
+    if (Status st = check_crowding(pt.value(), *probe, max_crowding_, "probe"); !st) return st;
     empty_ = object->faces.empty();
     if (empty_) return Ok{};
     // One subtree per block: the blocks of a share lie apart (block-cyclic, random), and one
@@ -35,6 +47,7 @@ class TreeBackend final : public CollisionBackend {
         per_block_ ? std::span<const std::uint32_t>(set_.block_faces) : std::span<const std::uint32_t>();
     Result<geom::SphereTree> ot = geom::SphereTree::build(*object, params, groups);
     if (!ot) return fail("object share tree: ", ot.error());
+    if (Status st = check_crowding(ot.value(), *object, max_crowding_, "object share"); !st) return st;
     object_tree_ = std::make_shared<const geom::SphereTree>(std::move(ot).value());
     const geom::SphereTree& tree = *object_tree_;
     // One tree over the whole share (per_block_ false) mixes blocks in its leaves: no roots,
@@ -91,14 +104,15 @@ class TreeBackend final : public CollisionBackend {
   }
 
   QueryStats query(const geom::Pose& pose, std::span<const std::uint32_t> skip, std::vector<FacePair>& out,
-                   std::size_t max_pairs) override {
+                   const QueryBudget& budget) override {
     QueryStats st;
     if (empty_) return st;
     const auto t0 = std::chrono::steady_clock::now();
     // The share keeps the object's origin and local coordinates bit for bit, so the query
     // computes the same transformed doubles as a single-process query.
     // The service refuses more than max_pairs: the query stops one past it.
-    CollisionRequest request = CollisionRequest::past_limit(max_pairs);
+    CollisionRequest request = CollisionRequest::past_limit(budget.max_pairs);
+    request.max_work = budget.max_work;
     request.sort_pairs = false;  // the client's merge sorts
     if (!skip.empty() && !block_roots_.empty() && cover_without(skip)) {
       request.restrict_object = true;
@@ -109,6 +123,7 @@ class TreeBackend final : public CollisionBackend {
     for (const geom::FacePair& p : result_.pairs) out.push_back({p.probe, set_.object_face_ids[p.object]});
     st.sphere_tests = result_.stats.node_pairs;
     st.tri_tests = result_.stats.tri_pairs;
+    st.work_limit_hit = result_.stats.work_limit_hit;
     st.compute_ns =
         std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count());
     return st;
@@ -127,12 +142,13 @@ class TreeBackend final : public CollisionBackend {
   bool is_block_root(std::uint32_t i) const { return i < is_root_.size() && is_root_[i]; }
   bool empty_ = true;
   bool per_block_ = true;
+  std::uint32_t max_crowding_ = kDefaultMaxCrowding;
 };
 
 }  // namespace
 
-BackendFactory tree_backend_factory(bool per_block) {
-  return [per_block] { return std::make_unique<TreeBackend>(per_block); };
+BackendFactory tree_backend_factory(bool per_block, std::uint32_t max_crowding) {
+  return [per_block, max_crowding] { return std::make_unique<TreeBackend>(per_block, max_crowding); };
 }
 
 Result<Blocks> tree_blocks(const geom::SphereTree& tree, std::uint32_t layer, std::uint32_t block_size) {

@@ -17,13 +17,17 @@ namespace st::inline SPHERETOUCH_ABI::net {
 
 /// Everything a worker daemon is configured with; defaults are safe.
 struct DaemonConfig {
-  std::string bind = "tcp://127.0.0.1:5555";       ///< endpoint: tcp://HOST:PORT or ipc://PATH
-  std::uint32_t worker_id = 0;                     ///< reported in Hello and Result
-  std::string log_level = "info";                  ///< error, warning, info or debug
-  bool insecure = false;                           ///< allow a non-loopback bind without CURVE
-  std::uint32_t max_sets = 3;                      ///< block sets kept in memory (LRU)
-  std::uint32_t idle_set_s = 30;                   ///< drop a set not queried for this long (0 = never; not the newest)
-  std::uint64_t max_blockset_mb = 1024;            ///< largest block set accepted, MiB (memory bound)
+  std::string bind = "tcp://127.0.0.1:5555";  ///< endpoint: tcp://HOST:PORT or ipc://PATH
+  std::uint32_t worker_id = 0;                ///< reported in Hello and Result
+  std::string log_level = "info";             ///< error, warning, info or debug
+  bool insecure = false;                      ///< allow a non-loopback bind without CURVE
+  std::uint32_t max_sets = 3;                 ///< block sets kept in memory (LRU)
+  std::uint32_t idle_set_s = 30;              ///< drop a set not queried for this long (0 = never; not the newest)
+  /// Largest block set accepted, MiB (memory bound: about 6.5x this for the build, 6x per held
+  /// set; 256 MiB is ~9 M faces and fits the unit's MemoryMax=8G with the other defaults).
+  std::uint64_t max_blockset_mb = 256;
+  std::uint32_t max_sets_per_client = 0;           ///< block sets one client may hold (0: max_sets)
+  std::uint64_t max_client_mb = 0;                 ///< encoded MiB one client may hold (0: max_sets x max_blockset_mb)
   std::vector<std::uint32_t> ipc_allowed_uids;     ///< ipc://: users besides the worker's own that may connect
   std::string curve_secret_key_file;               ///< [curve] secret_key_file (Z85), empty: no CURVE
   std::vector<std::string> curve_allowed_clients;  ///< [curve] allowed_clients (Z85 public keys)

@@ -25,7 +25,7 @@ namespace st::inline SPHERETOUCH_ABI::net {
 /// reference, so a service destroyed mid-build leaves it to finish on its own.
 struct WorkerService::LoadJob {
   Upload up;
-  std::vector<Digest> known;  // digests held when the job started: those are not rebuilt
+  std::vector<Digest> known;  // digests the same client held when the job started: not rebuilt
   Limits limits;
   BackendFactory factory;
   int fd = -1;                // eventfd written once when done
@@ -36,6 +36,7 @@ struct WorkerService::LoadJob {
   bool reuse = false;  // the digest was known: a held backend serves these bytes
   std::unique_ptr<CollisionBackend> backend;
   std::string error;  // non-empty: refused
+  bool oom = false;   // the error is an allocation failure
   std::uint32_t faces = 0, probe_faces = 0, blocks = 0, object = 0;
   double ms = 0;
   ~LoadJob() {
@@ -43,6 +44,29 @@ struct WorkerService::LoadJob {
   }
   void run() {
     const auto t0 = std::chrono::steady_clock::now();
+    try {
+      build();
+    } catch (const std::bad_alloc&) {
+      // Out of memory while decoding or building: this set is refused, the worker and every
+      // other client's sets carry on (what the build allocated is freed with the backend).
+      backend.reset();
+      reuse = false;
+      oom = true;
+      error = st::fail("out of memory while building the block set (", up.total, " bytes encoded)").message;
+    } catch (const std::exception& e) {
+      backend.reset();
+      reuse = false;
+      error = std::string("building the block set failed: ") + e.what();
+    }
+    // The encoding, the decoded set and the build's scratch are gone: give the pages back, so a
+    // worker's resident memory is what it holds (its share), not its peak during the load.
+    if (!reuse) ::malloc_trim(0);
+    ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    done.store(true, std::memory_order_release);
+    const std::uint64_t one = 1;
+    if (fd >= 0) (void)!::write(fd, &one, sizeof one);
+  }
+  void build() {
     digest = block_set_digest(up.bytes);
     if (digest_key(digest) != up.hash) {
       error = "block set bytes do not match their hash";
@@ -68,21 +92,28 @@ struct WorkerService::LoadJob {
       }
     }
     if (cancel.load() && error.empty() && !reuse && !backend) error = "worker stopping";
-    // The encoding, the decoded set and the build's scratch are gone: give the pages back, so a
-    // worker's resident memory is what it holds (its share), not its peak during the load.
-    if (!reuse) ::malloc_trim(0);
-    ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-    done.store(true, std::memory_order_release);
-    const std::uint64_t one = 1;
-    if (fd >= 0) (void)!::write(fd, &one, sizeof one);
   }
 };
 
-void set_common_options(zmq::socket_t& s, int sndhwm, int rcvhwm, std::int64_t max_message_bytes) {
-  s.set(zmq::sockopt::linger, 0);
-  s.set(zmq::sockopt::sndhwm, sndhwm);
-  s.set(zmq::sockopt::rcvhwm, rcvhwm);
-  s.set(zmq::sockopt::maxmsgsize, max_message_bytes);
+MemoryBound memory_bound(const WorkerConfig& cfg) {
+  const double set_mib = double(cfg.limits.max_blockset_bytes) / double(1 << 20);
+  MemoryBound b;
+  b.held_mib = kSetMemoryFactor * set_mib * cfg.max_sets;
+  b.build_mib = kBuildMemoryFactor * set_mib;
+  b.upload_mib = double(cfg.max_upload_bytes) / double(1 << 20);
+  b.queue_mib = double(cfg.max_connections) * cfg.rcvhwm * double(cfg.limits.max_chunk_bytes) / double(1 << 20);
+  return b;
+}
+
+Result<std::unique_ptr<WorkerService>> WorkerService::create(zmq::context_t& ctx, WorkerConfig config,
+                                                             BackendFactory factory) {
+  if (!factory) return fail("worker: no backend factory");
+  std::unique_ptr<WorkerService> w;
+  try {
+    w.reset(new WorkerService(ctx, std::move(config), std::move(factory)));
+  } catch (const zmq::error_t& e) { return fail("worker: cannot create its socket: ", e.what()); }
+  if (Status s = w->init(ctx); !s) return Error{s.error()};
+  return w;
 }
 
 WorkerService::WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFactory factory)
@@ -90,21 +121,27 @@ WorkerService::WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFa
   std::random_device rd;
   do epoch_ = (std::uint64_t{rd()} << 32) ^ rd();
   while (epoch_ == 0);
+}
+
+Status WorkerService::init(zmq::context_t& ctx) {
   // The largest legitimate frame a worker receives is a LoadBlocks chunk; anything bigger is cut
   // off by libzmq before it is buffered.
   const std::int64_t max_in = std::int64_t(kHeaderBytes) + 64 + cfg_.limits.max_chunk_bytes;
-  set_common_options(sock_, cfg_.sndhwm, cfg_.rcvhwm, std::min<std::int64_t>(max_in, cfg_.limits.max_message_bytes));
+  try {
+    set_common_options(sock_, cfg_.sndhwm, cfg_.rcvhwm, std::min<std::int64_t>(max_in, cfg_.limits.max_message_bytes));
+  } catch (const zmq::error_t& e) { return fail("worker: socket options: ", e.what()); }
   if (cfg_.curve) {
     // ZAP (RFC 27): libzmq asks the handler bound at this inproc address about every CURVE
     // handshake; it must exist before the ROUTER accepts connections.
+    if (Status s = check_z85_key(cfg_.curve->secret_z85, "CURVE secret key"); !s)
+      return fail("CURVE set-up: ", s.error());
+    for (const std::string& k : cfg_.curve->allowed_clients_z85) {
+      if (Status s = check_z85_key(k, "allowed client key " + k); !s) return fail("CURVE set-up: ", s.error());
+      std::string raw(32, '\0');
+      zmq_z85_decode(reinterpret_cast<std::uint8_t*>(raw.data()), k.c_str());
+      allowed_.push_back(raw);
+    }
     try {
-      if (Status s = check_z85_key(cfg_.curve->secret_z85, "CURVE secret key"); !s) throw std::runtime_error(s.error());
-      for (const std::string& k : cfg_.curve->allowed_clients_z85) {
-        if (Status s = check_z85_key(k, "allowed client key " + k); !s) throw std::runtime_error(s.error());
-        std::string raw(32, '\0');
-        zmq_z85_decode(reinterpret_cast<std::uint8_t*>(raw.data()), k.c_str());
-        allowed_.push_back(raw);
-      }
       zap_ = zmq::socket_t(ctx, zmq::socket_type::rep);
       zap_.set(zmq::sockopt::linger, 0);
       zap_.bind("inproc://zeromq.zap.01");
@@ -112,7 +149,7 @@ WorkerService::WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFa
       sock_.set(zmq::sockopt::curve_secretkey, cfg_.curve->secret_z85);
       wipe_secret(cfg_.curve->secret_z85);  // libzmq holds it now
       sock_.set(zmq::sockopt::zap_domain, "spheretouch");
-    } catch (const std::exception& e) { init_error_ = std::string("CURVE set-up: ") + e.what(); }
+    } catch (const zmq::error_t& e) { return fail("CURVE set-up: ", e.what()); }
   }
   // Connection events: libzmq has no limit on the connections a ROUTER accepts, so the service
   // counts them and shuts down those past max_connections (what each may queue is bounded by
@@ -128,12 +165,15 @@ WorkerService::WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFa
       monitor_.connect(addr);
     }
   }
-  // A client that reconnects with its routing id takes it over at once (a half-open old
-  // connection would otherwise hold it until the heartbeat drops it).
-  sock_.set(zmq::sockopt::router_handover, 1);
-  // ZMTP heartbeats drop half-open TCP connections of vanished clients.
-  sock_.set(zmq::sockopt::heartbeat_ivl, 1000);
-  sock_.set(zmq::sockopt::heartbeat_timeout, 3000);
+  try {
+    // A client that reconnects with its routing id takes it over at once (a half-open old
+    // connection would otherwise hold it until the heartbeat drops it).
+    sock_.set(zmq::sockopt::router_handover, 1);
+    // ZMTP heartbeats drop half-open TCP connections of vanished clients.
+    sock_.set(zmq::sockopt::heartbeat_ivl, 1000);
+    sock_.set(zmq::sockopt::heartbeat_timeout, 3000);
+  } catch (const zmq::error_t& e) { return fail("worker: socket options: ", e.what()); }
+  return Ok{};
 }
 
 WorkerService::~WorkerService() {
@@ -146,7 +186,6 @@ WorkerService::~WorkerService() {
 }
 
 Status WorkerService::bind(const std::string& endpoint) {
-  if (!init_error_.empty()) return Error{init_error_};
   const bool ipc = endpoint.rfind("ipc://", 0) == 0;
   const std::string path = ipc ? endpoint.substr(6) : std::string();
   const bool file = ipc && !path.empty() && path[0] != '@';  // "@name": Linux abstract namespace
@@ -372,8 +411,12 @@ bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
         continue;
       }
       handle(peer, owner_of(peer, frame), {static_cast<const std::uint8_t*>(frame.data()), frame.size()});
-    } catch (const zmq::error_t& e) { return e.num() != ETERM; }
+    } catch (const zmq::error_t& e) { return e.num() != ETERM; } catch (const std::bad_alloc&) {
+      ++counters_.out_of_memory;  // this message is lost (its client retries); nothing held is
+      log(3, "out of memory handling a message: dropped");
+    }
   }
+  serve_queries();
   return true;
 }
 
@@ -425,6 +468,7 @@ void WorkerService::run(const std::atomic<bool>& stop, std::chrono::milliseconds
 void WorkerService::handle_message(const std::string& peer, std::span<const std::uint8_t> frame) {
   const zmq::message_t id(peer.data(), peer.size());
   handle(id, "id:" + peer, frame);
+  serve_queries();
 }
 
 void WorkerService::handle(const zmq::message_t& peer, const std::string& owner, std::span<const std::uint8_t> frame) {
@@ -435,7 +479,20 @@ void WorkerService::handle(const zmq::message_t& peer, const std::string& owner,
     return;
   }
   Message& msg = m.value();
-  if (auto* q = std::get_if<QueryMsg>(&msg)) return on_query(peer, owner, *q);
+  if (auto* q = std::get_if<QueryMsg>(&msg)) {
+    // Answered at the end of the batch (serve_queries); a newer Query of the same client takes
+    // the place of one still waiting.
+    const std::string id(static_cast<const char*>(peer.data()), peer.size());
+    for (Pending& p : pending_)
+      if (p.owner == owner) {
+        ++counters_.superseded;
+        p.peer = id;
+        p.q = std::move(*q);
+        return;
+      }
+    pending_.push_back({id, owner, std::move(*q)});
+    return;
+  }
   if (auto* l = std::get_if<LoadBlocksMsg>(&msg)) return on_load(peer, owner, *l);
   if (auto* h = std::get_if<HeartbeatMsg>(&msg)) {
     ++counters_.heartbeats;
@@ -445,12 +502,50 @@ void WorkerService::handle(const zmq::message_t& peer, const std::string& owner,
   send_error(peer, ErrorCode::Unexpected, 0, std::string("a worker does not accept ") + type_name(msg));
 }
 
-void WorkerService::on_query(const zmq::message_t& peer, const std::string& owner, const QueryMsg& q) {
+WorkerService::Client& WorkerService::client(const std::string& owner) {
+  // Bounded: a flood of identities (free without CURVE) clears the map; what is lost is only
+  // the fairness history, re-learnt within a second.
+  constexpr std::size_t kMaxClients = 4096;
+  if (clients_.size() >= kMaxClients && !clients_.count(owner)) clients_.clear();
+  return clients_[owner];
+}
+
+void WorkerService::serve_queries() {
+  if (pending_.empty()) return;
+  // Cheapest clients first: a client whose queries kept the worker busy waits behind those
+  // whose queries are cheap (an unknown client counts as 1 ms), so an honest haptic client waits
+  // for at most the one budget-bounded query in progress.
+  constexpr double kUnknownCostNs = 1e6;
+  const auto now = std::chrono::steady_clock::now();
+  auto recent = [&](const std::string& owner) {
+    const auto it = clients_.find(owner);
+    return it == clients_.end() ? kUnknownCostNs : it->second.cost_at(now);
+  };
+  std::vector<Pending> batch;
+  batch.swap(pending_);
+  std::stable_sort(batch.begin(), batch.end(),
+                   [&](const Pending& a, const Pending& b) { return recent(a.owner) < recent(b.owner); });
+  for (const Pending& p : batch) {
+    try {
+      answer(p);
+    } catch (const std::bad_alloc&) {
+      ++counters_.out_of_memory;
+      pairs_ = {};
+      send_error(p.peer, ErrorCode::TooLarge, p.q.seq, "worker out of memory answering the query");
+    }
+  }
+  batch.clear();
+  if (pending_.empty()) pending_.swap(batch);  // keep the capacity
+}
+
+void WorkerService::answer(const Pending& p) {
+  const QueryMsg& q = p.q;
+  const zmq::message_t peer(p.peer.data(), p.peer.size());
   auto it =
-      std::find_if(sets_.begin(), sets_.end(), [&](const Loaded& l) { return l.hash == q.hash && l.owner == owner; });
+      std::find_if(sets_.begin(), sets_.end(), [&](const Loaded& l) { return l.hash == q.hash && l.owner == p.owner; });
   if (it == sets_.end()) {
     send_error(peer, ErrorCode::NotLoaded, q.seq, st::fail("block set ", std::hex, q.hash, " is not held").message);
-    send(peer, hello(owner, 0));  // tell the client what is held so it can load the right set
+    send(peer, hello(p.owner, 0));  // tell the client what is held so it can load the right set
     return;
   }
   if (it->object != q.object) {  // the client named another object than the set's: its pairs would be misread
@@ -463,13 +558,24 @@ void WorkerService::on_query(const zmq::message_t& peer, const std::string& owne
   sets_.splice(sets_.begin(), sets_, it);  // most recently used first
   it->last_used = std::chrono::steady_clock::now();
   pairs_.clear();
-  // The backend stops past max_pairs: a block set of faces piled on each other cannot make the
-  // worker compute (and hold) N² pairs before refusing.
-  const QueryStats st = it->backend->query(q.pose, q.skip, pairs_, cfg_.limits.max_pairs);
-  if (pairs_.size() > cfg_.limits.max_pairs) {
-    ++counters_.too_many_pairs;
-    send_error(peer, ErrorCode::TooLarge, q.seq,
-               st::fail("more than max_pairs = ", cfg_.limits.max_pairs, " colliding pairs: query refused").message);
+  // The backend stops past max_pairs (a block set of faces piled on each other cannot make the
+  // worker compute and hold N² pairs before refusing) and past the set's work budget (nor N²
+  // tests that find no pair).
+  const QueryStats st = it->backend->query(q.pose, q.skip, pairs_, {cfg_.limits.max_pairs, it->work});
+  Client& c = client(p.owner);
+  const auto now = std::chrono::steady_clock::now();
+  c.cost_ns = std::max(c.cost_at(now), double(st.compute_ns));
+  c.seen = now;
+  const bool too_many = pairs_.size() > cfg_.limits.max_pairs;
+  if (too_many || st.work_limit_hit) {
+    const std::string why =
+        too_many ? st::fail("more than max_pairs = ", cfg_.limits.max_pairs, " colliding pairs: query refused").message
+                 : st::fail("query over its work budget (", it->work, " units for a set of ", it->faces,
+                            " faces): refused; are the set's faces piled on each other?")
+                       .message;
+    ++(too_many ? counters_.too_many_pairs : counters_.over_budget);
+    log(5, why);
+    send_error(peer, ErrorCode::TooLarge, q.seq, why);
     pairs_.clear();
     if (pairs_.capacity() > (std::size_t{1} << 20)) pairs_.shrink_to_fit();  // do not keep an attacker's peak
     return;
@@ -488,9 +594,21 @@ void WorkerService::on_load(const zmq::message_t& peer, const std::string& owner
   auto it = uploads_.find(owner);
   if (m.offset == 0) {
     if (it != uploads_.end()) drop_upload(it);  // this client starts over (its own upload only)
-    const std::size_t busy = uploads_.size() + waiting_.size() + (job_ ? 1 : 0);
+    const std::uint64_t quota =
+        cfg_.max_client_bytes ? cfg_.max_client_bytes : std::uint64_t(cfg_.max_sets) * cfg_.limits.max_blockset_bytes;
+    if (m.total_bytes > quota) {
+      ++counters_.uploads_refused;
+      log(5, st::fail("upload of ", m.total_bytes, " bytes refused: over the client's quota of ", quota, " bytes").message);
+      return send_error(
+          peer, ErrorCode::TooLarge, m.hash,
+          st::fail("block set of ", m.total_bytes, " bytes is over this client's quota (max_client_bytes = ", quota, ")")
+              .message);
+    }
+    std::size_t busy = uploads_.size() + waiting_.size() + (job_ ? 1 : 0);
+    if (busy >= cfg_.max_uploads && free_upload_slot()) --busy;
     if (busy >= cfg_.max_uploads) {
       ++counters_.uploads_refused;
+      log(5, st::fail("upload refused: ", busy, " uploads in progress (max_uploads = ", cfg_.max_uploads, ")").message);
       return send_error(peer, ErrorCode::TooLarge, m.hash,
                         st::fail("worker busy: ", busy, " block-set uploads in progress (max_uploads = ", cfg_.max_uploads,
                                  "); send again later")
@@ -524,17 +642,52 @@ void WorkerService::on_load(const zmq::message_t& peer, const std::string& owner
                                  " bytes; load refused, send again later")
                             .message);
     }
-    u.bytes.reserve(grown);
+    try {
+      u.bytes.reserve(grown);
+    } catch (const std::bad_alloc&) {
+      ++counters_.out_of_memory;
+      const std::uint64_t hash = u.hash;
+      drop_upload(it);
+      log(3, st::fail("out of memory buffering an upload of ", grown, " bytes: refused").message);
+      return send_error(peer, ErrorCode::TooLarge, hash, "worker out of memory: load refused, send again later");
+    }
     buffered_ += u.bytes.capacity() - cap;
   }
   ++counters_.chunks;
   u.bytes.insert(u.bytes.end(), m.data.begin(), m.data.end());
   u.last_chunk = std::chrono::steady_clock::now();
+  if (m.offset == 0) u.started = u.last_chunk;
   u.peer.assign(static_cast<const char*>(peer.data()), peer.size());  // answer where the last chunk came from
   if (u.bytes.size() < u.total) return;
   waiting_.push_back(std::move(u));
   uploads_.erase(it);  // its bytes stay counted in buffered_ until the loader is done with them
   start_job();
+}
+
+bool WorkerService::free_upload_slot() {
+  // The upload that has waited longest for a chunk, if it has waited upload_stall, else the
+  // slowest one under min_upload_rate: a client trickling bytes to hold a slot loses it.
+  const auto now = std::chrono::steady_clock::now();
+  auto victim = uploads_.end();
+  double worst = 0;
+  for (auto it = uploads_.begin(); it != uploads_.end(); ++it) {
+    const Upload& u = it->second;
+    const double idle = std::chrono::duration<double>(now - u.last_chunk).count();
+    const double age = std::chrono::duration<double>(now - u.started).count();
+    const double stall = std::chrono::duration<double>(cfg_.upload_stall).count();
+    const bool stalled = idle >= stall;
+    const bool slow = age >= stall && double(u.bytes.size()) < double(cfg_.min_upload_rate) * age;
+    if (!stalled && !slow) continue;
+    const double badness = stalled ? 1e9 + idle : 1.0 / (1.0 + double(u.bytes.size()) / age);
+    if (badness > worst) worst = badness, victim = it;
+  }
+  if (victim == uploads_.end()) return false;
+  ++counters_.uploads_displaced;
+  log(5, st::fail("upload of block set ", std::hex, victim->second.hash, std::dec, " (", victim->second.bytes.size(),
+                  " of ", victim->second.total, " bytes) gave its slot to another: stalled or under min_upload_rate")
+             .message);
+  drop_upload(victim);
+  return true;
 }
 
 void WorkerService::start_job() {
@@ -543,7 +696,8 @@ void WorkerService::start_job() {
   job->up = std::move(waiting_.front());
   waiting_.pop_front();
   job->counted = job->up.bytes.capacity();
-  for (const Loaded& l : sets_) job->known.push_back(l.digest);
+  for (const Loaded& l : sets_)
+    if (l.owner == job->up.owner) job->known.push_back(l.digest);  // shared within a client only
   job->limits = cfg_.limits;
   job->factory = factory_;
   job->fd = ::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);  // −1: poll_once polls every 5 ms instead
@@ -557,44 +711,95 @@ std::size_t WorkerService::distinct_backends() const {
   return d.size();
 }
 
+bool WorkerService::make_room(const std::string& owner, std::uint64_t bytes) {
+  const std::uint32_t max_sets = std::max<std::uint32_t>(cfg_.max_sets, 1);
+  const std::uint32_t per_client = cfg_.max_sets_per_client ? std::min(cfg_.max_sets_per_client, max_sets) : max_sets;
+  const std::uint64_t quota =
+      cfg_.max_client_bytes ? cfg_.max_client_bytes : std::uint64_t(max_sets) * cfg_.limits.max_blockset_bytes;
+  // The client's own quota first: its least recently used sets make room for its new one.
+  std::uint32_t own = 0;
+  std::uint64_t own_bytes = 0;
+  for (const Loaded& l : sets_)
+    if (l.owner == owner) ++own, own_bytes += l.bytes;
+  for (auto it = sets_.end(); it != sets_.begin() && (own >= per_client || own_bytes + bytes > quota);) {
+    if ((--it)->owner != owner) continue;
+    --own;
+    own_bytes -= it->bytes;
+    it = sets_.erase(it);
+  }
+  // Then the worker's: the client's own sets, else sets nobody has queried for active_set; a set
+  // another client uses is never evicted for this one.
+  const auto now = std::chrono::steady_clock::now();
+  while (distinct_backends() >= max_sets) {
+    auto victim = sets_.end();
+    for (auto it = sets_.end(); it != sets_.begin();) {
+      --it;
+      if (it->owner == owner) {
+        victim = it;
+        break;
+      }
+      if (victim == sets_.end() && now - it->last_used >= cfg_.active_set) victim = it;
+    }
+    if (victim == sets_.end()) return false;
+    sets_.erase(victim);
+  }
+  return true;
+}
+
 void WorkerService::finish_job() {
   loader_.join();
   std::shared_ptr<LoadJob> job = std::move(job_);
   job_ = nullptr;
   Upload& u = job->up;
   std::shared_ptr<CollisionBackend> backend;
+  const Loaded* same = nullptr;  // the client's held set with these bytes (job->reuse)
   if (job->error.empty() && job->reuse) {
     for (const Loaded& l : sets_)
-      if (l.digest == job->digest) backend = l.backend;
-    if (!backend) {  // evicted while this job ran: build it after all
+      if (l.digest == job->digest && l.owner == u.owner) same = &l;
+    if (!same) {  // evicted while this job ran: build it after all
       waiting_.push_front(std::move(u));
       start_job();
       return;
     }
+    backend = same->backend;
     ++counters_.loads_shared;
   }
   buffered_ -= job->counted;  // the upload's bytes are gone now
   if (!job->error.empty()) {
-    log(4, "load refused: " + job->error);
+    counters_.out_of_memory += job->oom;
+    log(job->oom ? 3 : 4, "load refused: " + job->error);
     send_error(u.peer, ErrorCode::LoadFailed, u.hash, job->error);
     start_job();
     return;
   }
-  if (!backend) backend = std::move(job->backend);
+  Loaded entry{
+      u.owner, u.hash, job->digest, job->faces, job->object, u.total, 0, backend, std::chrono::steady_clock::now()};
+  if (same) {  // the same bytes as a held set: its face count, object and budget
+    entry.faces = same->faces;
+    entry.object = same->object;
+    entry.work = same->work;
+  } else {
+    entry.backend = std::move(job->backend);
+    entry.work = std::min(cfg_.max_query_work, cfg_.query_work_base + std::uint64_t(cfg_.query_work_per_face) *
+                                                                          (job->faces + job->probe_faces));
+  }
   sets_.remove_if([&](const Loaded& l) { return l.hash == u.hash && l.owner == u.owner; });
-  const bool is_new = std::none_of(sets_.begin(), sets_.end(), [&](const Loaded& l) { return l.backend == backend; });
-  while (is_new && !sets_.empty() && distinct_backends() >= std::max<std::uint32_t>(cfg_.max_sets, 1)) sets_.pop_back();
-  const std::uint32_t faces = job->reuse ? 0 : job->faces;
-  sets_.push_front(Loaded{u.owner, u.hash, job->digest, faces, job->object, backend, std::chrono::steady_clock::now()});
-  if (job->reuse)  // the same bytes as a held set: its face count and object
-    for (const Loaded& l : sets_)
-      if (l.backend == backend && l.faces) {
-        sets_.front().faces = l.faces;
-        sets_.front().object = l.object;
-      }
+  if (!same && !make_room(u.owner, u.total)) {
+    ++counters_.loads_refused_full;
+    const std::string why =
+        st::fail("worker full: its ", cfg_.max_sets,
+                 " set slots hold sets other clients queried within active_set = ", cfg_.active_set.count(),
+                 " ms; load refused, send again later")
+            .message;
+    log(5, why);
+    send_error(u.peer, ErrorCode::TooLarge, u.hash, why);
+    start_job();
+    return;
+  }
+  sets_.push_front(std::move(entry));
   ++counters_.loads;
-  log(6, st::fail("loaded block set ", std::hex, u.hash, std::dec, job->reuse ? " (same bytes as a held set)" : "",
-                  ": ", job->blocks, " blocks, ", sets_.front().faces, " object faces, ", job->probe_faces,
+  log(6, st::fail("loaded block set ", std::hex, u.hash, std::dec, same ? " (same bytes as a held set)" : "", ": ",
+                  job->blocks, " blocks, ", sets_.front().faces, " object faces, ", job->probe_faces,
                   " probe faces, in ", job->ms, " ms; holding ", sets_.size(), " set(s)")
              .message);
   send(u.peer, hello(u.owner, 0));

@@ -8,16 +8,25 @@
 /// dropped by the ROUTER, and every malformed message gets an Error reply or is dropped.
 //
 // Clients are kept apart: each has its own upload in progress, and a block set is visible (in
-// Hello, to Query) only to the clients that sent its bytes. A client is its CURVE public key when
-// CURVE is on, else its ZeroMQ routing id (ScatterGather sets a random 16-byte one). Two clients
-// that send the same bytes share one backend in memory. Hashing, decoding and building a set run
-// on a loader thread, so the worker keeps answering heartbeats, queries and its watchdog while a
-// large set is built.
+// Hello, to Query) only to the client that sent its bytes. A client is its CURVE public key when
+// CURVE is on, else its ZeroMQ routing id (ScatterGather sets a random 16-byte one). A backend is
+// shared only between a client's own sets (the same bytes sent twice): another client's load of
+// the same bytes is built again, so its load time reveals nothing about what others hold.
+// Hashing, decoding and building a set run on a loader thread, so the worker keeps answering
+// heartbeats, queries and its watchdog while a large set is built.
+//
+// One client cannot starve another: each Query has a work budget sized from its set (refused
+// TooLarge past it); of a burst of Queries from one client only the newest is answered (a haptic
+// client wants the newest pose, never a backlog); and the Queries waiting at once are answered
+// in the order of their clients' recent work, least first, so an honest client waits for at most
+// one budget-bounded query of another. Quotas per client bound its uploads, sets and bytes; a set
+// another client queried recently is never evicted for a load.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <atomic>
 #include <deque>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <list>
@@ -33,6 +42,7 @@
 #include <spheretouch/net/block_set.hpp>
 #include <spheretouch/net/curve_keys.hpp>
 #include <spheretouch/net/protocol.hpp>
+#include <spheretouch/net/socket_options.hpp>
 
 namespace st::inline SPHERETOUCH_ABI::net {
 
@@ -57,9 +67,31 @@ struct WorkerConfig {
   /// waiting for the loader; and, queued inside libzmq, at most rcvhwm frames of at most
   /// max_chunk_bytes per connection, max_connections connections.
   Limits limits = DefaultLimits();
-  /// Uploads in progress or waiting for the loader, over all clients; a client over the limit is
+  /// Uploads in progress or waiting for the loader, over all clients (a client has at most one);
+  /// when all are taken, an upload stalled for upload_stall or slower than min_upload_rate gives
+  /// its slot to the new one (a client trickling bytes cannot hold a slot), else the new one is
   /// told TooLarge ("busy") and may retry.
   std::uint32_t max_uploads = 4;
+  /// See max_uploads: no chunk for this long makes an upload's slot free for another.
+  std::chrono::milliseconds upload_stall{1000};
+  /// See max_uploads: bytes per second an upload must average (after upload_stall) to keep its
+  /// slot when another client needs one.
+  std::uint64_t min_upload_rate = 1u << 20;
+  /// Block sets one client may hold (0: max_sets) and their encoded bytes (0: max_sets ×
+  /// limits.max_blockset_bytes); a load past either evicts the client's own least recently used
+  /// sets first.
+  std::uint32_t max_sets_per_client = 0;
+  std::uint64_t max_client_bytes = 0;
+  /// A set queried within this long is never evicted for another client's load: that load is
+  /// refused ("worker full") instead.
+  std::chrono::milliseconds active_set{2000};
+  /// Work one Query may cost (geom::CollideStats::work(), about 3 ns a unit): query_work_base
+  /// plus query_work_per_face per face of its set (probe and share), at most max_query_work. A
+  /// Query past it is answered TooLarge: faces piled so their boxes overlap but never touch cost
+  /// N² triangle tests and give no pair, so the pair cap alone does not bound a query.
+  std::uint64_t query_work_base = 1u << 20;
+  std::uint32_t query_work_per_face = 16;
+  std::uint64_t max_query_work = 1u << 24;
   /// Bytes buffered for uploads (in progress and waiting), over all clients.
   std::uint64_t max_upload_bytes = 2ull << 30;
   /// An upload with no chunk for this long is abandoned and its bytes freed.
@@ -95,21 +127,36 @@ struct WorkerCounters {
   std::uint64_t uploads_abandoned = 0;    ///< uploads dropped after upload_timeout without a chunk
   std::uint64_t loads_shared = 0;         ///< loads served by a backend already built for the same bytes
   std::uint64_t connections_refused = 0;  ///< connections shut down at max_connections
+  std::uint64_t over_budget = 0;          ///< queries refused at their work budget
+  std::uint64_t superseded = 0;           ///< queries not answered: a newer one of the same client was waiting
+  std::uint64_t uploads_displaced = 0;    ///< stalled or trickling uploads that lost their slot to another
+  std::uint64_t loads_refused_full = 0;   ///< loads refused: every set slot held by sets other clients use
+  std::uint64_t out_of_memory = 0;        ///< allocations that failed (answered, nothing lost)
 };
 
 /// Resident memory of a held block set (tree backend) per byte of its encoding, rounded up from
-/// `spheretouch-bench hostile`: 2.7 for a 48 MiB set of 1.8 M faces, 4.8 for a 7.7 MiB one
+/// `spheretouch-bench hostile`: 2.7 for a 48 MiB set of 1.8 M faces, 4.8–5.3 for 7.7 MiB ones
 /// (perf/RESULTS.md).
-inline constexpr double kSetMemoryFactor = 5.0;
+inline constexpr double kSetMemoryFactor = 6.0;
 /// Peak while a set is being built (encoding, decoded set and tree together): 4.8 measured for
 /// the 48 MiB set.
-inline constexpr double kBuildMemoryFactor = 6.0;
+inline constexpr double kBuildMemoryFactor = 6.5;
 
-/// One worker; not thread-safe: construct, bind and run it on one thread.
+/// What a worker with `cfg` may hold at most, MiB: max_sets held sets, one being built, uploads
+/// and libzmq's queues (the terms of WorkerConfig::limits' comment), for the daemon's log and
+/// its check against its cgroup's memory.max.
+struct MemoryBound {
+  double held_mib = 0, build_mib = 0, upload_mib = 0, queue_mib = 0;
+  double total() const { return held_mib + build_mib + upload_mib + queue_mib; }  ///< the sum
+};
+MemoryBound memory_bound(const WorkerConfig& cfg);
+
+/// One worker; not thread-safe: create, bind and run it on one thread.
 class WorkerService {
  public:
-  /// A service in `ctx` that makes one backend per loaded block set with `factory`.
-  WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFactory factory);
+  /// A service in `ctx` that makes one backend per loaded block set with `factory`; an error
+  /// names what is wrong in `config` (a CURVE key) or what libzmq refused.
+  static Result<std::unique_ptr<WorkerService>> create(zmq::context_t& ctx, WorkerConfig config, BackendFactory factory);
   /// Binds the ROUTER to `endpoint` (tcp://, ipc://, inproc://); error names the endpoint.
   Status bind(const std::string& endpoint);
   /// The endpoint last bound, resolved (a tcp wildcard port becomes the real one).
@@ -132,33 +179,60 @@ class WorkerService {
   std::uint64_t epoch() const { return epoch_; }                ///< random per instance
   const WorkerCounters& counters() const { return counters_; }  ///< counters so far
   std::vector<Held> held() const;                               ///< block sets in memory (all clients), MRU first
+  std::size_t clients() const { return clients_.size(); }       ///< clients with state (bounded: kMaxClients)
   std::uint64_t upload_bytes() const { return buffered_; }      ///< bytes buffered for uploads now
   bool loading() const { return job_ != nullptr; }              ///< a set is being hashed, decoded or built
 
  private:
-  /// One client's view of a loaded set; clients that sent the same bytes share the backend.
+  WorkerService(zmq::context_t& ctx, WorkerConfig config, BackendFactory factory);  // create()'s first step
+  Status init(zmq::context_t& ctx);                                                 // CURVE, monitor, options
+
+  /// A client's loaded set; a client that sent the same bytes twice shares the backend.
   struct Loaded {
     std::string owner;  // the client that loaded it (owner_of)
     std::uint64_t hash;
     Digest digest;
     std::uint32_t faces;
     std::uint32_t object;  // the scene object it is a share of (BlockSet::object)
+    std::uint64_t bytes;   // its encoded size (the client's byte quota)
+    std::uint64_t work;    // a Query's work budget (WorkerConfig::query_work_*)
     std::shared_ptr<CollisionBackend> backend;
     std::chrono::steady_clock::time_point last_used;
+  };
+  /// What the service knows of a client between its messages.
+  struct Client {
+    // What its queries cost: the most compute ns of one, decaying by e each second, from `seen`.
+    // A client that sends cheap queries (a haptic loop) keeps a small cost whatever its rate.
+    double cost_ns = 0;
+    std::chrono::steady_clock::time_point seen;
+    double cost_at(std::chrono::steady_clock::time_point now) const {  ///< cost_ns decayed to now
+      return cost_ns * std::exp(-std::chrono::duration<double>(now - seen).count());
+    }
+  };
+  /// A Query waiting for the end of the batch it arrived in (serve_queries()).
+  struct Pending {
+    std::string peer, owner;
+    QueryMsg q;
   };
   /// A block set arriving in chunks from one client.
   struct Upload {
     std::string owner, peer;  // who sends it, and the routing id to answer
     std::uint64_t hash = 0, total = 0;
     std::vector<std::uint8_t> bytes;
-    std::chrono::steady_clock::time_point last_chunk;
+    std::chrono::steady_clock::time_point started, last_chunk;
   };
   struct LoadJob;  // a complete upload on the loader thread (worker_service.cpp)
   void handle(const zmq::message_t& peer, const std::string& owner, std::span<const std::uint8_t> frame);
+  void serve_queries();  ///< the batch's waiting Queries, cheapest clients first
+  void answer(const Pending& p);
+  Client& client(const std::string& owner);
+  bool free_upload_slot();  ///< displaces a stalled or trickling upload; false if none is
+  /// Makes room for `owner`'s new backend of `bytes` (its own LRU sets first, then sets no one
+  /// used for active_set); false when the worker is full of sets others use.
+  bool make_room(const std::string& owner, std::uint64_t bytes);
   void handle_zap();
   void handle_monitor();  ///< connection accepted / closed: counts, enforces max_connections
   void on_load(const zmq::message_t& peer, const std::string& owner, const LoadBlocksMsg& m);
-  void on_query(const zmq::message_t& peer, const std::string& owner, const QueryMsg& m);
   void send(const zmq::message_t& peer, const Message& m);
   void send(const std::string& peer, const Message& m);
   void send_error(const zmq::message_t& peer, ErrorCode code, std::uint64_t ref, std::string text);
@@ -182,7 +256,6 @@ class WorkerService {
   zmq::socket_t monitor_;             // events of sock_ (accepted, disconnected), or empty
   std::uint32_t connections_ = 0;     // TCP/ipc connections open now
   std::vector<std::string> allowed_;  // admitted client public keys, 32 raw bytes each
-  std::string init_error_;            // a CURVE set-up failure, reported by bind()
   std::uint64_t epoch_;
   std::list<Loaded> sets_;                           // MRU first
   std::unordered_map<std::string, Upload> uploads_;  // in progress, by owner
@@ -191,8 +264,10 @@ class WorkerService {
   std::shared_ptr<LoadJob> job_;                     // on the loader thread, or null
   std::thread loader_;
   WorkerCounters counters_;
-  std::vector<FacePair> pairs_;    // reused per query
-  std::vector<std::uint8_t> out_;  // reused encode buffer
+  std::unordered_map<std::string, Client> clients_;  // by owner; bounded (kMaxClients)
+  std::vector<Pending> pending_;                     // this batch's Queries, one per client
+  std::vector<FacePair> pairs_;                      // reused per query
+  std::vector<std::uint8_t> out_;                    // reused encode buffer
   std::chrono::steady_clock::time_point bad_logged_{};
   std::chrono::steady_clock::time_point next_idle_check_{};
   std::uint64_t bad_unlogged_ = 0;
@@ -205,9 +280,5 @@ class WorkerService {
   };
   std::unordered_map<std::string, Refusal> refusals_;
 };
-
-/// Sets the socket options every spheretouch socket uses: LINGER 0, the given high-water marks,
-/// ZMQ_MAXMSGSIZE = max_message_bytes (libzmq drops a peer that sends more).
-void set_common_options(zmq::socket_t& s, int sndhwm, int rcvhwm, std::int64_t max_message_bytes);
 
 }  // namespace st::net
