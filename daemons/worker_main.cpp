@@ -79,6 +79,7 @@ int main(int argc, char** argv) {
   bool insecure = false, keygen = false, force = false;
   app.add_option("--config", config_file,
                  "TOML config (bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb, "
+                 "max_sets_per_client, max_client_mb, "
                  "ipc_allowed_uids, [curve])")
       ->check(CLI::ExistingFile);
   app.add_option(

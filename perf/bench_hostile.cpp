@@ -141,9 +141,24 @@ void add_hostile(CLI::App& app) {
       throw CLI::RuntimeError(2);
     }
     const std::string ep = "tcp://127.0.0.1:" + std::to_string(free_tcp_port());
+    // Room for every case's sets (each attacker identity holds its own), so each case's attack
+    // runs instead of being refused for want of a slot; cross_client_eviction fills them all.
+    constexpr int kMaxSets = 12;
+    char cfg_path[] = "/tmp/spheretouch-hostile-XXXXXX";
+    const int cfg_fd = ::mkstemp(cfg_path);
+    if (cfg_fd < 0) throw CLI::RuntimeError(2);
+    const std::string cfg_text = "max_sets = " + std::to_string(kMaxSets) + "\n";
+    const bool cfg_ok = ::write(cfg_fd, cfg_text.data(), cfg_text.size()) == ssize_t(cfg_text.size());
+    ::close(cfg_fd);
+    struct Unlink {
+      const char* p;
+      ~Unlink() { ::unlink(p); }
+    } unlink_cfg{cfg_path};
+    if (!cfg_ok) throw CLI::RuntimeError(2);
     const pid_t pid = ::fork();
     if (pid == 0) {
-      ::execl(worker.c_str(), worker.c_str(), "--bind", ep.c_str(), "--log-level", "error", (char*)nullptr);
+      ::execl(worker.c_str(), worker.c_str(), "--config", cfg_path, "--bind", ep.c_str(), "--log-level", "error",
+              (char*)nullptr);
       ::_exit(127);
     }
     struct Reaper {
@@ -280,150 +295,133 @@ void add_hostile(CLI::App& app) {
       };
     };
     run_case("pile_n2_pairs",
-             std::to_string(pile_faces) + " identical triangles on each side: queries of " + std::to_string(pile_faces) +
-                 "^2 pairs, one at a time (item 1)",
+             std::to_string(pile_faces) + " identical triangles on each side: queries of " +
+                 std::to_string(pile_faces) + "^2 pairs, one at a time (item 1)",
              pile_attack("attacker-pile", pairs_pile, shifted, 1), false);
     run_case("pile_no_pairs",
              std::to_string(pile_faces) + " triangles on each side whose boxes overlap but never touch: " +
                  std::to_string(pile_faces) + "^2 tests and no pair (item 1)",
              pile_attack("attacker-nopairs", no_pairs_pile, geom::Pose::Identity(), 1), false);
-    run_case("pipelined_piles",
-             "4 identities, each sending bursts of 32 pile queries without waiting (both piles; item 1)",
-             [&] {
-               std::vector<std::thread> ts;
-               std::vector<Outcome> outs(4, Outcome::refused);
-               for (int k = 0; k < 4; ++k)
-                 ts.emplace_back([&, k] {
-                   outs[std::size_t(k)] = pile_attack("attacker-pipe-" + std::to_string(k),
-                                                      k % 2 ? no_pairs_pile : pairs_pile,
-                                                      k % 2 ? geom::Pose::Identity() : shifted, 32)();
-                 });
-               for (auto& t : ts) t.join();
-               return *std::max_element(outs.begin(), outs.end(),
-                                        [](Outcome x, Outcome y) { return int(x) < int(y); });
-             },
-             false);
-    run_case("upload_trickle",
-             "4 identities each holding an upload slot with a byte every 400 ms while another client loads a set "
-             "(item 4)",
-             [&] {
-               zmq::context_t c(1);
-               std::vector<std::unique_ptr<Attacker>> xs;
-               for (int k = 0; k < 4; ++k) {
-                 xs.push_back(std::make_unique<Attacker>(c, ep, "trickler-" + std::to_string(k), 3000));
-                 xs.back()->send(net::encode(net::LoadBlocksMsg{900u + unsigned(k), 1u << 20, 0, {1}}));
-               }
-               std::this_thread::sleep_for(400ms);
-               for (int k = 0; k < 4; ++k)  // one more byte each: every slot looks alive
-                 xs[std::size_t(k)]->send(net::encode(net::LoadBlocksMsg{900u + unsigned(k), 1u << 20, 1, {2}}));
-               std::this_thread::sleep_for(800ms);  // past upload_stall (1 s) since their first byte
-               Attacker loader(c, ep, "second-honest", 20000);
-               const Set s2 = encode_set(geom::make_capsule(3, 8, 10), geom::make_icosphere(25, 10), 32);
-               if (!loader.upload(s2.bytes, s2.hash)) return Outcome::stalled;
-               for (int i = 0; i < 4; ++i) {  // its Hello (the tricklers' errors go to them)
-                 const auto r = loader.recv();
-                 if (!r) return Outcome::stalled;
-                 if (auto* hm = std::get_if<net::HelloMsg>(&*r))
-                   if (std::any_of(hm->held.begin(), hm->held.end(), [&](const net::Held& h) { return h.hash == s2.hash; }))
-                     return Outcome::refused;  // the slots were not held: the honest load went through
-                 if (is_error(r)) return Outcome::answered;  // told busy: the trickling worked
-               }
-               return Outcome::stalled;
-             },
-             false);
-    run_case("cross_client_eviction",
-             "6 identities each loading a small set of their own to push the honest client's set out (item 4)",
-             [&] {
-               zmq::context_t c(1);
-               int loaded = 0, refused = 0;
-               for (int k = 0; k < 6; ++k) {
-                 Attacker x(c, ep, "evictor-" + std::to_string(k), 20000);
-                 const Set sk = encode_set(geom::make_capsule(3, 8, 10), geom::make_icosphere(20, 4 + k), 32);
-                 if (!x.upload(sk.bytes, sk.hash)) return Outcome::stalled;
-                 const auto r = x.recv();
-                 if (!r) return Outcome::stalled;
-                 loaded += is_hello(r);
-                 refused += is_error(r);
-               }
-               // The honest set must survive: its rounds are counted (incomplete ones make this case
-               // "stalled"); the evictors fill the free slots, then are told the worker is full.
-               return refused > 0 ? Outcome::refused : Outcome::answered;
-             },
-             false);
-
+    run_case(
+        "pipelined_piles", "4 identities, each sending bursts of 32 pile queries without waiting (both piles; item 1)",
+        [&] {
+          std::vector<std::thread> ts;
+          std::vector<Outcome> outs(4, Outcome::refused);
+          for (int k = 0; k < 4; ++k)
+            ts.emplace_back([&, k] {
+              outs[std::size_t(k)] = pile_attack("attacker-pipe-" + std::to_string(k), k % 2 ? no_pairs_pile : pairs_pile,
+                                                 k % 2 ? geom::Pose::Identity() : shifted, 32)();
+            });
+          for (auto& t : ts) t.join();
+          return *std::max_element(outs.begin(), outs.end(), [](Outcome x, Outcome y) { return int(x) < int(y); });
+        },
+        false);
+    run_case(
+        "upload_trickle",
+        "4 identities each holding an upload slot with a byte every 400 ms while another client loads a set "
+        "(item 4)",
+        [&] {
+          zmq::context_t c(1);
+          std::vector<std::unique_ptr<Attacker>> xs;
+          for (int k = 0; k < 4; ++k) {
+            xs.push_back(std::make_unique<Attacker>(c, ep, "trickler-" + std::to_string(k), 3000));
+            xs.back()->send(net::encode(net::LoadBlocksMsg{900u + unsigned(k), 1u << 20, 0, {1}}));
+          }
+          std::this_thread::sleep_for(400ms);
+          for (int k = 0; k < 4; ++k)  // one more byte each: every slot looks alive
+            xs[std::size_t(k)]->send(net::encode(net::LoadBlocksMsg{900u + unsigned(k), 1u << 20, 1, {2}}));
+          std::this_thread::sleep_for(800ms);  // past upload_stall (1 s) since their first byte
+          Attacker loader(c, ep, "second-honest", 20000);
+          const Set s2 = encode_set(geom::make_capsule(3, 8, 10), geom::make_icosphere(25, 10), 32);
+          if (!loader.upload(s2.bytes, s2.hash)) return Outcome::stalled;
+          for (int i = 0; i < 4; ++i) {  // its Hello (the tricklers' errors go to them)
+            const auto r = loader.recv();
+            if (!r) return Outcome::stalled;
+            if (auto* hm = std::get_if<net::HelloMsg>(&*r))
+              if (std::any_of(hm->held.begin(), hm->held.end(), [&](const net::Held& h) { return h.hash == s2.hash; }))
+                return Outcome::refused;                // the slots were not held: the honest load went through
+            if (is_error(r)) return Outcome::answered;  // told busy: the trickling worked
+          }
+          return Outcome::stalled;
+        },
+        false);
     const int freq = a->quick ? 120 : 300;
     double set_factor = 0, set_mb = 0;
-    run_case("large_legal_load",
-             "a legal block set of " + std::to_string(20 * freq * freq) + " faces built while others query (item 3)", [&] {
-               zmq::context_t c(1);
-               Attacker x(c, ep, "big-loader", 120000);
-               const Set s = encode_set(geom::make_capsule(4, 10, 12), geom::make_icosphere(40, freq), 64);
-               const double before = rss_mb();
-               if (!x.upload(s.bytes, s.hash)) return Outcome::stalled;
-               // Heartbeats are answered during the build: the first Hello echoes the nonce, the last
-               // reports the set.
-               x.send(net::encode(net::HeartbeatMsg{77}));
-               bool echoed = false, loaded = false;
-               for (int i = 0; i < 4 && !loaded; ++i) {
-                 const auto r = x.recv();
-                 if (!r) break;
-                 if (auto* hm = std::get_if<net::HelloMsg>(&*r)) {
-                   echoed |= hm->echo == 77;
-                   loaded |= std::any_of(hm->held.begin(), hm->held.end(),
-                                         [&](const net::Held& h) { return h.hash == s.hash; });
-                 }
-               }
-               // What a held set costs: the worker's growth per byte of the encoding (the upload buffer
-               // is freed before the build; what malloc keeps of it counts too).
-               std::this_thread::sleep_for(200ms);
-               set_factor = (rss_mb() - before) / (double(s.bytes.size()) / double(1 << 20));
-               set_mb = double(s.bytes.size()) / double(1 << 20);
-               return echoed && loaded ? Outcome::answered : Outcome::stalled;
-             },
-             false);
+    run_case(
+        "large_legal_load",
+        "a legal block set of " + std::to_string(20 * freq * freq) + " faces built while others query (item 3)",
+        [&] {
+          zmq::context_t c(1);
+          Attacker x(c, ep, "big-loader", 120000);
+          const Set s = encode_set(geom::make_capsule(4, 10, 12), geom::make_icosphere(40, freq), 64);
+          const double before = rss_mb();
+          if (!x.upload(s.bytes, s.hash)) return Outcome::stalled;
+          // Heartbeats are answered during the build: the first Hello echoes the nonce, the last
+          // reports the set.
+          x.send(net::encode(net::HeartbeatMsg{77}));
+          bool echoed = false, loaded = false;
+          for (int i = 0; i < 4 && !loaded; ++i) {
+            const auto r = x.recv();
+            if (!r) break;
+            if (is_error(r)) return Outcome::refused;
+            if (auto* hm = std::get_if<net::HelloMsg>(&*r)) {
+              echoed |= hm->echo == 77;
+              loaded |=
+                  std::any_of(hm->held.begin(), hm->held.end(), [&](const net::Held& h) { return h.hash == s.hash; });
+            }
+          }
+          // What a held set costs: the worker's growth per byte of the encoding (the upload buffer
+          // is freed before the build; what malloc keeps of it counts too).
+          std::this_thread::sleep_for(200ms);
+          set_factor = (rss_mb() - before) / (double(s.bytes.size()) / double(1 << 20));
+          set_mb = double(s.bytes.size()) / double(1 << 20);
+          return echoed && loaded ? Outcome::answered : Outcome::stalled;
+        },
+        false);
     results.back().note += (results.back().note.empty() ? "" : "; ") + std::string("set of ") +
                            std::to_string(set_mb).substr(0, 5) + " MiB encoded: worker grew " +
                            std::to_string(set_factor).substr(0, 4) + "x that";
 
     if (!a->quick) {  // 12 s of waiting; the upload timeout has its own test (worker_service_test)
-      run_case("abandoned_load",
-               "first 1 MiB chunk of a 1 GiB set, then silence; continued after the upload timeout "
-               "(item 4)",
-               [&] {
-                 zmq::context_t c(1);
-                 Attacker x(c, ep, "abandoner");
-                 std::vector<std::uint8_t> chunk(1u << 20, 0x5a);
-                 x.send(net::encode(net::LoadBlocksMsg{42, 1ull << 30, 0, chunk}));
-                 std::this_thread::sleep_for(12s);  // the worker's upload_timeout is 10 s
-                 x.send(net::encode(net::LoadBlocksMsg{42, 1ull << 30, 1u << 20, chunk}));
-                 const auto r = x.recv();
-                 return is_error(r) ? Outcome::refused : Outcome::stalled;
-               },
-               false);
+      run_case(
+          "abandoned_load",
+          "first 1 MiB chunk of a 1 GiB set, then silence; continued after the upload timeout "
+          "(item 4)",
+          [&] {
+            zmq::context_t c(1);
+            Attacker x(c, ep, "abandoner");
+            std::vector<std::uint8_t> chunk(1u << 20, 0x5a);
+            x.send(net::encode(net::LoadBlocksMsg{42, 1ull << 30, 0, chunk}));
+            std::this_thread::sleep_for(12s);  // the worker's upload_timeout is 10 s
+            x.send(net::encode(net::LoadBlocksMsg{42, 1ull << 30, 1u << 20, chunk}));
+            const auto r = x.recv();
+            return is_error(r) ? Outcome::refused : Outcome::stalled;
+          },
+          false);
     }
 
     const int conns = 20, per_conn = a->quick ? 8 : 32;
-    run_case("connection_flood",
-             std::to_string(conns) + " connections x " + std::to_string(per_conn) +
-                 " chunks of 1 MiB claiming 1 GiB sets (item 4)",
-             [&] {
-               zmq::context_t c(1);
-               std::vector<std::unique_ptr<Attacker>> xs;
-               for (int i = 0; i < conns; ++i)
-                 xs.push_back(std::make_unique<Attacker>(c, ep, "flood-" + std::to_string(i)));
-               std::vector<std::uint8_t> chunk(1u << 20, 0x33);
-               for (int k = 0; k < per_conn; ++k)
-                 for (int i = 0; i < conns; ++i)
-                   xs[std::size_t(i)]->send(
-                       net::encode(net::LoadBlocksMsg{100u + unsigned(i), 1ull << 30, std::uint64_t(k) << 20, chunk}));
-               int refused = 0;
-               for (auto& x : xs) {
-                 x->d.set(zmq::sockopt::rcvtimeo, 3000);
-                 refused += is_error(x->recv());
-               }
-               return refused > 0 ? Outcome::refused : Outcome::answered;
-             },
-             false);
+    run_case(
+        "connection_flood",
+        std::to_string(conns) + " connections x " + std::to_string(per_conn) +
+            " chunks of 1 MiB claiming 1 GiB sets (item 4)",
+        [&] {
+          zmq::context_t c(1);
+          std::vector<std::unique_ptr<Attacker>> xs;
+          for (int i = 0; i < conns; ++i) xs.push_back(std::make_unique<Attacker>(c, ep, "flood-" + std::to_string(i)));
+          std::vector<std::uint8_t> chunk(1u << 20, 0x33);
+          for (int k = 0; k < per_conn; ++k)
+            for (int i = 0; i < conns; ++i)
+              xs[std::size_t(i)]->send(
+                  net::encode(net::LoadBlocksMsg{100u + unsigned(i), 1ull << 30, std::uint64_t(k) << 20, chunk}));
+          int refused = 0;
+          for (auto& x : xs) {
+            x->d.set(zmq::sockopt::rcvtimeo, 3000);
+            refused += is_error(x->recv());
+          }
+          return refused > 0 ? Outcome::refused : Outcome::answered;
+        },
+        false);
 
     run_case("foreign_set",
              "another client queries the honest client's set and sends chunks of it out of order "
@@ -468,6 +466,36 @@ void add_hostile(CLI::App& app) {
       x.send(big);
       return x.recv() ? Outcome::answered : Outcome::refused;  // dropped with the connection
     });
+
+    // Last: it fills every set slot, so a later case could not load.
+    run_case(
+        "cross_client_eviction",
+        std::to_string(kMaxSets + 2) +
+            " identities each loading a small set of their own and querying it, to push the honest client's "
+            "set out (item 4)",
+        [&] {
+          zmq::context_t c(1);
+          int loaded = 0, refused = 0;
+          std::vector<std::unique_ptr<Attacker>> xs;
+          for (int k = 0; k < kMaxSets + 2; ++k) {
+            xs.push_back(std::make_unique<Attacker>(c, ep, "evictor-" + std::to_string(k), 20000));
+            Attacker& x = *xs.back();
+            const Set sk = encode_set(geom::make_capsule(3, 8, 10), geom::make_icosphere(20, 4 + k), 32);
+            if (!x.upload(sk.bytes, sk.hash)) return Outcome::stalled;
+            const auto r = x.recv();
+            if (!r) return Outcome::stalled;
+            loaded += is_hello(r);
+            refused += is_error(r);
+            if (is_hello(r)) {  // in use: a set only loaded would be fair game for others
+              x.send(net::encode(net::QueryMsg{1, sk.hash, geom::Pose::Identity(), {}}));
+              if (!x.recv()) return Outcome::stalled;
+            }
+          }
+          // The honest set must survive: its rounds are counted (incomplete ones make this case
+          // "stalled"); the evictors fill the free slots, then are told the worker is full.
+          return refused > 0 ? Outcome::refused : Outcome::answered;
+        },
+        false);
 
     // The target (#32): every case refused or answered, and the honest client inside every attack
     // window at p50 < 2x its quiet p50 and p99 < 50 ms.

@@ -414,6 +414,7 @@ TEST_CASE("a block set of faces piled on each other: the worker refuses the quer
     WorkerConfig base;
     base.limits.max_pairs = 50'000;
     base.query_work_base = base.max_query_work = 1ull << 40;  // the pair cap alone (the budget: next case)
+    base.penalty_factor = 0;                                  // (the penalty: next case)
     const std::string t = tag();
     auto w = LocalWorkers::start(
         ctx, 1, tree ? tree_backend_factory() : reference_backend_factory(),
@@ -517,9 +518,18 @@ TEST_CASE("faces piled so their boxes overlap but they never touch: the worker r
     CHECK(e->code == ErrorCode::TooLarge);
     CHECK(e->ref == 5);
     CHECK(e->text.find("work budget") != std::string::npos);
+    // Its next query, sent at once, is refused unanswered (penalty_factor × the refused query's
+    // compute time); once that has passed, the client is served again.
     geom::Pose apart = geom::Pose::Identity();
     apart.translation() = geom::Vec3(0, 0, 50);
-    Message answered = reply(encode(QueryMsg{6, hash, apart, {}}));
+    Message penalised = reply(encode(QueryMsg{6, hash, apart, {}}));
+    REQUIRE(std::holds_alternative<ErrorMsg>(penalised));
+    CHECK(std::get<ErrorMsg>(penalised).text.find("refused unanswered") != std::string::npos);
+    Message answered = penalised;
+    for (std::uint64_t seq = 7; seq < 400 && !std::holds_alternative<ResultMsg>(answered); ++seq) {
+      std::this_thread::sleep_for(50ms);
+      answered = reply(encode(QueryMsg{seq, hash, apart, {}}));
+    }
     REQUIRE(std::holds_alternative<ResultMsg>(answered));
     CHECK(std::get<ResultMsg>(answered).pairs.empty());
   }

@@ -125,20 +125,24 @@ class GridBackend final : public CollisionBackend {
               ++st.tri_tests;
               if (sat_tri_overlap(p0, p1, p2, object_.local[u[0]], object_.local[u[1]], object_.local[u[2]]))
                 out.push_back({pf, ids_[of]});
-              if (out.size() - start > budget.max_pairs) return st;  // the caller refuses the query
+              if (out.size() - start > budget.max_pairs) return timed(st, t0);  // the caller refuses the query
               if (st.sphere_tests + geom::kExactTestWork * st.tri_tests > budget.max_work) {
                 st.work_limit_hit = true;  // the same refusal: every test here is an exact one
-                return st;
+                return timed(st, t0);
               }
             }
           }
     }
+    return timed(st, t0);
+  }
+
+ private:
+  // `st` with its compute time since t0 (the worker weighs clients by it).
+  static QueryStats timed(QueryStats st, std::chrono::steady_clock::time_point t0) {
     st.compute_ns = static_cast<std::uint64_t>(
         std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count());
     return st;
   }
-
- private:
   static std::uint64_t key(std::int64_t x, std::int64_t y, std::int64_t z) {
     return std::uint64_t(x) | std::uint64_t(y) << 21 | std::uint64_t(z) << 42;
   }

@@ -388,8 +388,11 @@ bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
   if (job_ && job_->done.load(std::memory_order_acquire)) finish_job();
   drop_idle();
   if (!(items[0].revents & ZMQ_POLLIN)) return true;
-  // Handle what is queued now, then return so the caller can tick (watchdog, stop flag).
-  for (int budget = 0; budget < 1024; ++budget) {
+  // Handle what is queued now (at most 1024 messages or 4 MiB: the Queries among them are answered
+  // after the batch, so a flood of large frames must not hold them up), then return so the caller
+  // can tick (watchdog, stop flag).
+  std::size_t batch_bytes = 0;
+  for (int budget = 0; budget < 1024 && batch_bytes < (std::size_t{4} << 20); ++budget) {
     zmq::message_t peer, frame;
     try {
       if (!sock_.recv(peer, zmq::recv_flags::dontwait)) break;
@@ -410,6 +413,7 @@ bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
         send_error(peer, ErrorCode::BadMessage, 0, "expected exactly one non-empty frame per message");
         continue;
       }
+      batch_bytes += frame.size();
       handle(peer, owner_of(peer, frame), {static_cast<const std::uint8_t*>(frame.data()), frame.size()});
     } catch (const zmq::error_t& e) { return e.num() != ETERM; } catch (const std::bad_alloc&) {
       ++counters_.out_of_memory;  // this message is lost (its client retries); nothing held is
@@ -555,19 +559,29 @@ void WorkerService::answer(const Pending& p) {
                    .message);
     return;
   }
+  Client& c = client(p.owner);
+  const auto now = std::chrono::steady_clock::now();
+  if (now < c.penalty_until) {  // its last query was refused as too large: no work for it yet
+    ++counters_.penalised;
+    send_error(peer, ErrorCode::TooLarge, q.seq,
+               st::fail("refused unanswered for ",
+                        std::chrono::duration_cast<std::chrono::milliseconds>(c.penalty_until - now).count(),
+                        " ms more: this client's last query was over its limits")
+                   .message);
+    return;
+  }
   sets_.splice(sets_.begin(), sets_, it);  // most recently used first
-  it->last_used = std::chrono::steady_clock::now();
+  it->last_used = it->queried = now;
   pairs_.clear();
   // The backend stops past max_pairs (a block set of faces piled on each other cannot make the
   // worker compute and hold N² pairs before refusing) and past the set's work budget (nor N²
   // tests that find no pair).
   const QueryStats st = it->backend->query(q.pose, q.skip, pairs_, {cfg_.limits.max_pairs, it->work});
-  Client& c = client(p.owner);
-  const auto now = std::chrono::steady_clock::now();
   c.cost_ns = std::max(c.cost_at(now), double(st.compute_ns));
   c.seen = now;
   const bool too_many = pairs_.size() > cfg_.limits.max_pairs;
   if (too_many || st.work_limit_hit) {
+    c.penalty_until = now + std::chrono::nanoseconds(std::int64_t(cfg_.penalty_factor * double(st.compute_ns)));
     const std::string why =
         too_many ? st::fail("more than max_pairs = ", cfg_.limits.max_pairs, " colliding pairs: query refused").message
                  : st::fail("query over its work budget (", it->work, " units for a set of ", it->faces,
@@ -738,7 +752,7 @@ bool WorkerService::make_room(const std::string& owner, std::uint64_t bytes) {
         victim = it;
         break;
       }
-      if (victim == sets_.end() && now - it->last_used >= cfg_.active_set) victim = it;
+      if (victim == sets_.end() && now - it->queried >= cfg_.active_set) victim = it;
     }
     if (victim == sets_.end()) return false;
     sets_.erase(victim);

@@ -83,7 +83,7 @@ struct WorkerConfig {
   std::uint32_t max_sets_per_client = 0;
   std::uint64_t max_client_bytes = 0;
   /// A set queried within this long is never evicted for another client's load: that load is
-  /// refused ("worker full") instead.
+  /// refused ("worker full") instead. A set only loaded, never queried, does not count.
   std::chrono::milliseconds active_set{2000};
   /// Work one Query may cost (geom::CollideStats::work(), about 3 ns a unit): query_work_base
   /// plus query_work_per_face per face of its set (probe and share), at most max_query_work. A
@@ -92,6 +92,10 @@ struct WorkerConfig {
   std::uint64_t query_work_base = 1u << 20;
   std::uint32_t query_work_per_face = 16;
   std::uint64_t max_query_work = 1u << 24;
+  /// After a query refused as too large (pairs or work), the client's next queries are refused
+  /// unanswered for penalty_factor × that query's compute time, so a client sending such queries
+  /// back to back holds the worker at most 1 / (1 + penalty_factor) of the time. 0: no penalty.
+  double penalty_factor = 20;
   /// Bytes buffered for uploads (in progress and waiting), over all clients.
   std::uint64_t max_upload_bytes = 2ull << 30;
   /// An upload with no chunk for this long is abandoned and its bytes freed.
@@ -129,6 +133,7 @@ struct WorkerCounters {
   std::uint64_t connections_refused = 0;  ///< connections shut down at max_connections
   std::uint64_t over_budget = 0;          ///< queries refused at their work budget
   std::uint64_t superseded = 0;           ///< queries not answered: a newer one of the same client was waiting
+  std::uint64_t penalised = 0;            ///< queries refused unanswered after the client's too-large one
   std::uint64_t uploads_displaced = 0;    ///< stalled or trickling uploads that lost their slot to another
   std::uint64_t loads_refused_full = 0;   ///< loads refused: every set slot held by sets other clients use
   std::uint64_t out_of_memory = 0;        ///< allocations that failed (answered, nothing lost)
@@ -197,7 +202,8 @@ class WorkerService {
     std::uint64_t bytes;   // its encoded size (the client's byte quota)
     std::uint64_t work;    // a Query's work budget (WorkerConfig::query_work_*)
     std::shared_ptr<CollisionBackend> backend;
-    std::chrono::steady_clock::time_point last_used;
+    std::chrono::steady_clock::time_point last_used;  // loaded or last queried (LRU, idle_set_ttl)
+    std::chrono::steady_clock::time_point queried{};  // last queried (active_set): never, for a set only loaded
   };
   /// What the service knows of a client between its messages.
   struct Client {
@@ -205,6 +211,9 @@ class WorkerService {
     // A client that sends cheap queries (a haptic loop) keeps a small cost whatever its rate.
     double cost_ns = 0;
     std::chrono::steady_clock::time_point seen;
+    // After a query refused as too large, its queries are refused unanswered until then
+    // (WorkerConfig::penalty_factor).
+    std::chrono::steady_clock::time_point penalty_until{};
     double cost_at(std::chrono::steady_clock::time_point now) const {  ///< cost_ns decayed to now
       return cost_ns * std::exp(-std::chrono::duration<double>(now - seen).count());
     }
