@@ -917,10 +917,14 @@ def hostile_doc(doc, md):
         md.append("_no cases in hostile.json_\n")
     md.append(f"All refused or answered: {f_auto('', h.get('all_refused_or_answered'))}. Worker memory per byte of "
               f"an encoded block set (large_legal_load): {f_auto('', h.get('set_memory_factor'))}×.\n")
-    md.append("Each case attacks a live `spheretouch-worker` from another connection while the honest client keeps "
-              "making rounds; \"answer ms\" is the honest client's round time during the attack and \"p50 / quiet p50\" "
-              "its median against the quiet median of the same run; worker RSS is the worker's peak resident memory "
-              "during the case (memory kept from an earlier case shows as a floor).\n")
+    md.append(f"Honest client within the target (p50 < 2× its quiet p50 and p99 < 50 ms) in every case: "
+              f"{f_auto('', h.get('honest_within_target'))}.\n")
+    md.append("Each case attacks a live `spheretouch-worker` (12 set slots) from other connections, repeating the attack "
+              f"until its window ({f_auto('', h.get('attack_window_ms'))} ms) closes (a longer attack runs once, to its "
+              "end); the honest client makes rounds only while the attack runs, so \"answer ms\" is its round time "
+              "inside the attack window and \"p50 / quiet p50\" its median against the quiet median of the same run; "
+              "worker RSS is the worker's peak resident memory during the case (memory kept from an earlier case shows "
+              "as a floor).\n")
 
 
 def scale_inputs(d):
