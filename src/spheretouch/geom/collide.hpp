@@ -112,7 +112,8 @@ struct CollideStats {
   std::uint64_t truncated = 0;
   bool pair_limit_hit = false;  ///< the traversal stopped at CollideConfig::max_pairs
   bool work_limit_hit = false;  ///< the traversal stopped at CollideConfig::max_work
-  /// The work the budget counts, in units of about 3 ns on this project's reference machine:
+  /// The work the budget counts, in units of 3-15 ns on this VM (a sphere test ~3 ns, a candidate
+  /// triangle pair through the filter ~10-15 ns in a pile):
   /// sphere tests + candidate triangle pairs + kExactTestWork × exact tests + kExpansionWork ×
   /// exact-arithmetic evaluations.
   std::uint64_t work() const {

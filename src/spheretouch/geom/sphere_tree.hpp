@@ -113,7 +113,7 @@ struct Crowding {
   std::uint32_t leaves = 0;      ///< the largest count found (≤ stop)
   std::uint32_t leaf = kNoNode;  ///< a leaf with that count
 };
-Crowding crowding(const SphereTree& tree, std::uint32_t stop);
+Crowding crowding(const SphereTree& tree, std::uint32_t stop);  ///< see Crowding
 
 /// 64-bit hash of the mesh's vertex bytes (local + origin), faces, the build parameters and the
 /// face groups (if any).

@@ -80,28 +80,29 @@ struct WorkerConfig {
   /// Block sets one client may hold (0: max_sets) and their encoded bytes (0: max_sets ×
   /// limits.max_blockset_bytes); a load past either evicts the client's own least recently used
   /// sets first.
+  ///@{
   std::uint32_t max_sets_per_client = 0;
   std::uint64_t max_client_bytes = 0;
+  ///@}
   /// A set queried within this long is never evicted for another client's load: that load is
   /// refused ("worker full") instead. A set only loaded, never queried, does not count.
   std::chrono::milliseconds active_set{2000};
-  /// Work one Query may cost (geom::CollideStats::work(), about 3 ns a unit): query_work_base
+  /// Work one Query may cost (geom::CollideStats::work(), 3-15 ns a unit): query_work_base
   /// plus query_work_per_face per face of its set (probe and share), at most max_query_work. A
   /// Query past it is answered TooLarge: faces piled so their boxes overlap but never touch cost
   /// N² triangle tests and give no pair, so the pair cap alone does not bound a query.
+  ///@{
   std::uint64_t query_work_base = 1u << 20;
   std::uint32_t query_work_per_face = 16;
   std::uint64_t max_query_work = 1u << 24;
-  /// After a query refused as too large (pairs or work), the client's next queries are refused
-  /// unanswered for penalty_factor × that query's compute time, so a client sending such queries
-  /// back to back holds the worker at most 1 / (1 + penalty_factor) of the time. 0: no penalty.
-  double penalty_factor = 20;
+  ///@}
   /// Bytes buffered for uploads (in progress and waiting), over all clients.
   std::uint64_t max_upload_bytes = 2ull << 30;
   /// An upload with no chunk for this long is abandoned and its bytes freed.
   std::chrono::milliseconds upload_timeout{10'000};
   int sndhwm = 64;  ///< messages queued per client before replies are dropped
   int rcvhwm = 4;   ///< messages queued inside libzmq per connection (4 × 1 MiB chunks at most)
+
   /// TCP and ipc connections held at once; one more is shut down as it is accepted, so what
   /// libzmq may queue is bounded by max_connections × rcvhwm frames in total.
   std::uint32_t max_connections = 64;
@@ -115,6 +116,10 @@ struct WorkerConfig {
   /// Encrypt and authenticate with CURVE (any transport, ipc:// too); the service then owns its
   /// context's ZAP endpoint, so only one CURVE service per context (the daemon's case).
   std::optional<CurveServer> curve;
+  /// After a query refused as too large (pairs or work), the client's next queries are refused
+  /// unanswered for penalty_factor × that query's compute time, so a client sending such queries
+  /// back to back holds the worker at most 1/(1 + penalty_factor) of the time; 0: no penalty.
+  double penalty_factor = 20;
 };
 
 /// Counters since start (read on the service's thread, or after it stopped).
@@ -151,10 +156,12 @@ inline constexpr double kBuildMemoryFactor = 6.5;
 /// and libzmq's queues (the terms of WorkerConfig::limits' comment), for the daemon's log and
 /// its check against its cgroup's memory.max.
 struct MemoryBound {
-  double held_mib = 0, build_mib = 0, upload_mib = 0, queue_mib = 0;
+  ///@{
+  double held_mib = 0, build_mib = 0, upload_mib = 0, queue_mib = 0;  ///< the terms, in that order
+  ///@}
   double total() const { return held_mib + build_mib + upload_mib + queue_mib; }  ///< the sum
 };
-MemoryBound memory_bound(const WorkerConfig& cfg);
+MemoryBound memory_bound(const WorkerConfig& cfg);  ///< see MemoryBound
 
 /// One worker; not thread-safe: create, bind and run it on one thread.
 class WorkerService {
