@@ -20,6 +20,7 @@
 
 #include "bench.hpp"
 #include "bench_json.hpp"
+#include "hostile_surfaces.hpp"
 #include <spheretouch/geom/primitives.hpp>
 #include <spheretouch/net/block_set.hpp>
 #include <spheretouch/net/protocol.hpp>
@@ -32,9 +33,12 @@ namespace {
 using Clock = std::chrono::steady_clock;
 using namespace std::chrono_literals;
 
-enum class Outcome { refused, answered, crashed, stalled };
+// Worst last: `breached` is an attack that got through (a forged pose taken, a foreign page served).
+enum class Outcome { refused, answered, crashed, stalled, breached };
 const char* outcome_name(Outcome o) {
   switch (o) {
+    case Outcome::breached:
+      return "breached";
     case Outcome::refused:
       return "refused";
     case Outcome::answered:
@@ -441,7 +445,7 @@ void add_hostile(CLI::App& app) {
                return is_error(r) && hidden && is_error(r2) ? Outcome::refused : Outcome::answered;
              });
 
-    run_case("garbage_flood", "20,000 random frames of 1-300 bytes", [&] {
+    run_case("garbage_flood", "20,000 random frames of 1-300 bytes on one connection", [&] {
       zmq::context_t c(1);
       Attacker x(c, ep, "garbage");
       std::mt19937_64 rng(7);
@@ -450,13 +454,14 @@ void add_hostile(CLI::App& app) {
         for (auto& b : g) b = static_cast<std::uint8_t>(rng());
         (void)x.d.send(zmq::buffer(g), zmq::send_flags::dontwait);
       }
-      x.send(net::encode(net::HeartbeatMsg{9}));
-      for (int i = 0; i < 40000; ++i) {  // errors for the garbage, then the Hello
-        const auto r = x.recv();
-        if (!r) return Outcome::stalled;
-        if (auto* hm = std::get_if<net::HelloMsg>(&*r); hm && hm->echo == 9) return Outcome::refused;
-      }
-      return Outcome::stalled;
+      // The worker answers the first bad frames and shuts the connection down at the 8th
+      // (kMaxBadPerConnection); a new connection is served.
+      const bool told = is_error(x.recv());
+      Attacker y(c, ep, "garbage-check");
+      y.send(net::encode(net::HeartbeatMsg{9}));
+      const auto r = y.recv();
+      const auto* hm = r ? std::get_if<net::HelloMsg>(&*r) : nullptr;
+      return told && hm && hm->echo == 9 ? Outcome::refused : Outcome::stalled;
     });
 
     run_case("oversized_frame", "one 80 MiB frame (over ZMQ_MAXMSGSIZE)", [&] {
@@ -466,6 +471,30 @@ void add_hostile(CLI::App& app) {
       x.send(big);
       return x.recv() ? Outcome::answered : Outcome::refused;  // dropped with the connection
     });
+
+    // The run's other surfaces (items 2, 3), while the honest worker client keeps querying.
+    auto surface = [&](const std::string& name, const std::string& what, const std::function<SurfaceOutcome()>& f) {
+      SurfaceOutcome so;
+      run_case(
+          name, what,
+          [&] {
+            so = f();
+            return so.refused ? Outcome::refused : Outcome::breached;
+          },
+          false);
+      results.back().note += (results.back().note.empty() ? "" : "; ") + so.note;
+    };
+    surface("forged_udp",
+            "forged pose datagrams from the UDP driver's own socket (unsigned v1, wrong key, seq 2^64-1) while it "
+            "drives at 1 kHz (item 2)",
+            [&] { return forged_udp(window); });
+    {
+      ViewFixture view;
+      surface("foreign_origin_ws", "WebSocket handshakes from another site, a rebound host name, no token (item 3)",
+              [&] { return view.foreign_origin(window); });
+      surface("stalled_page", "one page stops reading the largest frames while another reads (item 3)",
+              [&] { return view.stalled_page(window); });
+    }
 
     // Last: it fills every set slot, so a later case could not load.
     run_case(
@@ -516,6 +545,7 @@ void add_hostile(CLI::App& app) {
                          {"vs_quiet_p50", round_to(c.answer_ms_p50 / quiet_p50, 2)},
                          {"honest_rounds", c.honest_rounds},
                          {"honest_within_target", within(c)},
+                         {"note", c.note},
                          {"honest_incomplete", c.honest_incomplete}});
       print_json({{"worker", ep},
                   {"quiet_ms_p50", round_to(quiet_p50, 4)},

@@ -238,13 +238,32 @@ TEST_CASE("daemon: hostile messages get an Error reply or a drop, never a crash,
     for (auto& c : g) c = static_cast<std::uint8_t>(rng());
     hostile.push_back(g);
   }
+  // A connection is shut down at its kMaxBadPerConnection-th bad message: each connection here
+  // sends one fewer, so every message is answered.
+  std::size_t sent = 0;
   for (const auto& h : hostile) {
     if (h.empty()) continue;  // ZeroMQ delivers an empty frame too; covered by the in-process test
+    if (++sent % (kMaxBadPerConnection - 1) == 0) d = dealer_to(ctx, f.endpoint(0), 60000);
     Message m = decoded(request(d, h));
     auto* e = std::get_if<ErrorMsg>(&m);
     REQUIRE(e);
     CHECK((e->code == ErrorCode::BadMessage || e->code == ErrorCode::Unexpected));
   }
+  CHECK(f.procs[0]->log().find("shut down a connection") == std::string::npos);
+  // One connection sending garbage past the limit is shut down (the worker logs it); a new
+  // connection is served.
+  {
+    zmq::socket_t g = dealer_to(ctx, f.endpoint(0), 60000);
+    for (std::uint32_t i = 0; i < kMaxBadPerConnection + 4; ++i)
+      (void)g.send(zmq::buffer(hostile.back()), zmq::send_flags::dontwait);
+    bool logged = false;
+    for (int i = 0; i < 200 && !logged; ++i) {
+      std::this_thread::sleep_for(25ms);
+      logged = f.procs[0]->log().find("shut down a connection after 8 bad messages") != std::string::npos;
+    }
+    CHECK(logged);
+  }
+  d = dealer_to(ctx, f.endpoint(0), 60000);
   // Claims of a 256 MiB block set (the daemon's max_blockset_mb), restarted over and over: memory
   // follows the bytes actually sent.
   const long rss0 = f.procs[0]->rss_kib();

@@ -350,6 +350,7 @@ void WorkerService::handle_monitor() {
     std::uint32_t value = 0;
     std::memcpy(&event, ev.data(), 2);
     std::memcpy(&value, static_cast<const char*>(ev.data()) + 2, 4);
+    bad_by_fd_.erase(static_cast<int>(value));  // a new connection, or the end of one, on this descriptor
     if (event == ZMQ_EVENT_ACCEPTED) {
       if (++connections_ > cfg_.max_connections) {
         ::shutdown(static_cast<int>(value), SHUT_RDWR);  // libzmq sees the end of the stream and closes it
@@ -408,13 +409,15 @@ bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
         (void)sock_.recv(junk, zmq::recv_flags::none);
         more = junk.more();
       }
+      const std::uint64_t bad_before = counters_.bad_messages;
       if (extra || frame.size() == 0) {
         note_bad(extra ? "more than one frame" : "empty frame");
         send_error(peer, ErrorCode::BadMessage, 0, "expected exactly one non-empty frame per message");
-        continue;
+      } else {
+        batch_bytes += frame.size();
+        handle(peer, owner_of(peer, frame), {static_cast<const std::uint8_t*>(frame.data()), frame.size()});
       }
-      batch_bytes += frame.size();
-      handle(peer, owner_of(peer, frame), {static_cast<const std::uint8_t*>(frame.data()), frame.size()});
+      if (counters_.bad_messages != bad_before) cut_if_bad(frame);
     } catch (const zmq::error_t& e) { return e.num() != ETERM; } catch (const std::bad_alloc&) {
       ++counters_.out_of_memory;  // this message is lost (its client retries); nothing held is
       log(3, "out of memory handling a message: dropped");
@@ -422,6 +425,22 @@ bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
   }
   serve_queries();
   return true;
+}
+
+void WorkerService::cut_if_bad(const zmq::message_t& frame) {
+  // The descriptor the message came in on (-1 over inproc://, which has none to cut).
+  const int fd = zmq_msg_get(const_cast<zmq_msg_t*>(frame.handle()), ZMQ_SRCFD);
+  if (fd < 0) return;
+  constexpr std::size_t kMaxTracked = 4096;  // bounded; a DISCONNECTED event clears an entry
+  if (bad_by_fd_.size() >= kMaxTracked && !bad_by_fd_.count(fd)) bad_by_fd_.clear();
+  if (++bad_by_fd_[fd] < kMaxBadPerConnection) return;
+  bad_by_fd_.erase(fd);
+  ::shutdown(fd, SHUT_RDWR);  // libzmq sees the end of the stream and closes it (as for max_connections)
+  ++counters_.connections_cut;
+  if (counters_.connections_cut == 1 || counters_.connections_cut % 1000 == 0)
+    log(4, st::fail("shut down a connection after ", kMaxBadPerConnection, " bad messages (", counters_.connections_cut,
+                    " so far)")
+               .message);
 }
 
 void WorkerService::drop_upload(std::unordered_map<std::string, Upload>::iterator it) {

@@ -142,6 +142,7 @@ struct WorkerCounters {
   std::uint64_t uploads_displaced = 0;    ///< stalled or trickling uploads that lost their slot to another
   std::uint64_t loads_refused_full = 0;   ///< loads refused: every set slot held by sets other clients use
   std::uint64_t out_of_memory = 0;        ///< allocations that failed (answered, nothing lost)
+  std::uint64_t connections_cut = 0;      ///< connections shut down after kMaxBadPerConnection bad messages
 };
 
 /// Resident memory of a held block set (tree backend) per byte of its encoding, rounded up from
@@ -162,6 +163,11 @@ struct MemoryBound {
   double total() const { return held_mib + build_mib + upload_mib + queue_mib; }  ///< the sum
 };
 MemoryBound memory_bound(const WorkerConfig& cfg);  ///< see MemoryBound
+
+/// Bad messages (undecodable, misframed) a TCP or ipc connection may send before the worker shuts
+/// it down: a client speaking the protocol sends none (one of another version is told so first),
+/// and a connection flooding refused frames stops costing the worker its reading.
+inline constexpr std::uint32_t kMaxBadPerConnection = 8;
 
 /// One worker; not thread-safe: create, bind and run it on one thread.
 class WorkerService {
@@ -259,7 +265,8 @@ class WorkerService {
     if (cfg_.log) cfg_.log(priority, text);
   }
   void note_bad(const std::string& why);
-  void drop_idle();  ///< at most once a second: idle_set_ttl, upload_timeout
+  void cut_if_bad(const zmq::message_t& frame);  ///< counts a bad message against its connection
+  void drop_idle();                              ///< at most once a second: idle_set_ttl, upload_timeout
   void drop_upload(std::unordered_map<std::string, Upload>::iterator it);
   void start_job();   ///< hands the next waiting upload to the loader thread
   void finish_job();  ///< installs (or refuses) the loader's result
@@ -268,10 +275,11 @@ class WorkerService {
   WorkerConfig cfg_;
   BackendFactory factory_;
   zmq::socket_t sock_;
-  zmq::socket_t zap_;                 // ZAP handler (CURVE client allow-list), or empty
-  zmq::socket_t monitor_;             // events of sock_ (accepted, disconnected), or empty
-  std::uint32_t connections_ = 0;     // TCP/ipc connections open now
-  std::vector<std::string> allowed_;  // admitted client public keys, 32 raw bytes each
+  zmq::socket_t zap_;                                 // ZAP handler (CURVE client allow-list), or empty
+  zmq::socket_t monitor_;                             // events of sock_ (accepted, disconnected), or empty
+  std::uint32_t connections_ = 0;                     // TCP/ipc connections open now
+  std::unordered_map<int, std::uint32_t> bad_by_fd_;  // bad messages per open connection (its descriptor)
+  std::vector<std::string> allowed_;                  // admitted client public keys, 32 raw bytes each
   std::uint64_t epoch_;
   std::list<Loaded> sets_;                           // MRU first
   std::unordered_map<std::string, Upload> uploads_;  // in progress, by owner
