@@ -288,8 +288,8 @@ void add_hostile(CLI::App& app) {
         if (!is_hello(loaded)) return Outcome::stalled;
         Outcome worst = Outcome::refused;
         const auto until = Clock::now() + window;
-        for (std::uint64_t seq = 1; Clock::now() < until;) {
-          for (int k = 0; k < pipeline; ++k) x.send(net::encode(net::QueryMsg{seq++, set.hash, pose, {}}));
+        for (std::uint64_t aseq = 1; Clock::now() < until;) {
+          for (int k = 0; k < pipeline; ++k) x.send(net::encode(net::QueryMsg{aseq++, set.hash, pose, {}}));
           // Only the newest of a burst is answered (the others are superseded): one reply a burst.
           const auto r = x.recv();
           if (!r) return Outcome::stalled;

@@ -119,8 +119,7 @@ SurfaceOutcome forged_udp(std::chrono::milliseconds window) {
   out.note = std::to_string(forged.load()) + " forged datagrams, " + std::to_string(refused) +
              " refused (unauthenticated " + std::to_string(s.unauthenticated.load()) + ", version 1 " +
              std::to_string(s.old_version.load()) + "); the tip handed to the servo stayed within " +
-             std::to_string(farthest) + " mm of the driver's; " + std::to_string(s.poses.load()) +
-             " driver poses taken";
+             std::to_string(farthest) + " mm of the driver's; " + std::to_string(s.poses.load()) + " driver poses taken";
   return out;
 }
 
@@ -239,9 +238,8 @@ SurfaceOutcome ViewFixture::stalled_page(std::chrono::milliseconds window) {
   if (stalled >= 0) ::close(stalled);
   out.refused = code == 101 && fps > 30;
   out.note = "stalled page handshake " + std::to_string(code) + "; the honest page drew " + std::to_string(fps) +
-             " frames/s (60 published) while it stalled; " +
-             std::to_string(vs.dropped) + " frames dropped for slow pages, " + std::to_string(vs.write_failures) +
-             " writes failed";
+             " frames/s (60 published) while it stalled; " + std::to_string(vs.dropped) +
+             " frames dropped for slow pages, " + std::to_string(vs.write_failures) + " writes failed";
   return out;
 }
 

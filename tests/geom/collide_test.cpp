@@ -468,6 +468,31 @@ TEST_CASE("scratch reuse: no reallocation once warm; non-finite pose gives nothi
   CHECK(res.pairs.empty());
 }
 
+TEST_CASE("SortedRuns merges sorted runs (and unsorted ones it sorts) into what std::sort gives, for 0 to 33 runs") {
+  std::mt19937_64 rng(5);
+  st::geom::SortedRuns runs;
+  std::vector<FacePair> pairs;
+  for (std::size_t k : {0, 1, 2, 3, 7, 8, 33})
+    for (int unsorted : {0, 1}) {
+      pairs.clear();
+      runs.clear();
+      for (std::size_t r = 0; r < k; ++r) {
+        runs.begin(pairs.size());
+        const std::size_t n = rng() % 50;  // empty runs too
+        for (std::size_t i = 0; i < n; ++i) pairs.push_back({std::uint32_t(rng() % 40), std::uint32_t(rng() % 400)});
+        // A worker's run is sorted; the last one (the assist's, or a worker that did not sort) may not be.
+        if (!(unsorted && r + 1 == k)) std::sort(pairs.end() - std::ptrdiff_t(n), pairs.end());
+        runs.end(pairs);
+      }
+      std::vector<FacePair> expect = pairs;
+      std::sort(expect.begin(), expect.end());
+      runs.merge(pairs);
+      CAPTURE(k);
+      CAPTURE(unsorted);
+      CHECK(pairs == expect);
+    }
+}
+
 TEST_CASE("sort_face_pairs orders pairs as std::sort does, at every size and index range") {
   std::mt19937_64 rng(11);
   std::vector<std::uint64_t> scratch;

@@ -4,6 +4,7 @@
 // bounds on buffered upload bytes, concurrent uploads and abandoned uploads.
 #include <doctest/doctest.h>
 
+#include <atomic>
 #include <condition_variable>
 #include <filesystem>
 #include <sys/stat.h>
@@ -125,6 +126,10 @@ class GatedBackend final : public CollisionBackend {
   QueryStats query(const geom::Pose& pose, std::span<const std::uint32_t> skip, std::vector<FacePair>& out,
                    const QueryBudget& budget) override {
     return inner_->query(pose, skip, out, budget);
+  }
+  QueryStats query_only(const geom::Pose& pose, std::span<const std::uint32_t> only, std::vector<FacePair>& out,
+                        const QueryBudget& budget) override {
+    return inner_->query_only(pose, only, out, budget);
   }
 
  private:
@@ -331,8 +336,8 @@ TEST_CASE("set quotas: a client's load evicts its own sets first; a set another 
   WorkerConfig wc;
   wc.max_sets = 2;
   wc.max_sets_per_client = 1;
-  wc.active_set = 60s;  // every set queried in this test counts as in use
-  int built = 0;
+  wc.active_set = 60s;        // every set queried in this test counts as in use
+  std::atomic<int> built{0};  // counted on the loader thread, read here
   BackendFactory counting = [&built]() {
     ++built;
     return reference_backend_factory()();
@@ -371,7 +376,7 @@ TEST_CASE("set quotas: a client's load evicts its own sets first; a set another 
   CHECK(std::holds_alternative<ResultMsg>(query(b, s2, 7)));
   // Another client's copy of the same bytes is built again (what others hold is not revealed by
   // a load that is quicker); the same client sending its bytes again shares its backend.
-  const int before = built;
+  const int before = built.load();
   REQUIRE(holds(hello_of(load(a, s2)), s2.hash));  // evicts a's s3 (a's quota)
   CHECK(built == before + 1);
   REQUIRE(holds(hello_of(load(a, s2)), s2.hash));
@@ -385,8 +390,12 @@ TEST_CASE("a build that runs out of memory is refused with its reason; the worke
     QueryStats query(const geom::Pose&, std::span<const std::uint32_t>, std::vector<FacePair>&, const QueryBudget&) override {
       return {};
     }
+    QueryStats query_only(const geom::Pose&, std::span<const std::uint32_t>, std::vector<FacePair>&,
+                          const QueryBudget&) override {
+      return {};
+    }
   };
-  int built = 0;
+  std::atomic<int> built{0};
   BackendFactory factory = [&built]() -> std::unique_ptr<CollisionBackend> {
     if (built++ == 0) return reference_backend_factory()();
     return std::make_unique<Starved>();

@@ -250,6 +250,32 @@ void run_query(const Mesh& probe, const SphereTree& probe_tree, const Mesh& obje
 
 }  // namespace
 
+void SortedRuns::end(std::vector<FacePair>& pairs) {
+  const auto first = pairs.begin() + std::ptrdiff_t(starts_.empty() ? 0 : starts_.back());
+  if (!std::is_sorted(first, pairs.end())) std::sort(first, pairs.end());
+}
+
+void SortedRuns::merge(std::vector<FacePair>& pairs) {
+  starts_.push_back(pairs.size());
+  while (starts_.size() > 2) {
+    merged_.resize(pairs.size());
+    next_.clear();
+    for (std::size_t j = 0; j + 1 < starts_.size(); j += 2) {
+      const auto a = std::ptrdiff_t(starts_[j]), b = std::ptrdiff_t(starts_[j + 1]);
+      if (j + 2 < starts_.size())
+        std::merge(pairs.begin() + a, pairs.begin() + b, pairs.begin() + b,
+                   pairs.begin() + std::ptrdiff_t(starts_[j + 2]), merged_.begin() + a);
+      else
+        std::copy(pairs.begin() + a, pairs.begin() + b, merged_.begin() + a);
+      next_.push_back(starts_[j]);
+    }
+    next_.push_back(pairs.size());
+    pairs.swap(merged_);
+    starts_.swap(next_);
+  }
+  starts_.clear();
+}
+
 void sort_face_pairs(std::span<FacePair> pairs, std::vector<std::uint64_t>& scratch) {
   const std::size_t n = pairs.size();
   if (n < 64) {  // a handful: the comparison sort is quicker than clearing the counts

@@ -59,6 +59,24 @@ FaceCounts count_faces(std::span<const FacePair> pairs, std::vector<std::uint32_
 /// `scratch` is reused (no allocation once warm).
 void sort_face_pairs(std::span<FacePair> pairs, std::vector<std::uint64_t>& scratch);
 
+/// Face pairs gathered in sorted runs (each worker's answer, sorted where it was computed),
+/// merged in the end without sorting them again: a k-way merge in log2(k) passes of std::merge.
+/// Its scratch is kept: no allocation once warm.
+class SortedRuns {
+ public:
+  void clear() { starts_.clear(); }                      ///< no runs
+  void begin(std::size_t at) { starts_.push_back(at); }  ///< a run starts at index `at`
+  /// Ends the run begun last, at the end of `pairs`, sorting it if it is not sorted.
+  void end(std::vector<FacePair>& pairs);
+  /// Merges the runs of `pairs` (the first starting at 0, each ending where the next begins, the
+  /// last at the end) into one sorted sequence; then no runs.
+  void merge(std::vector<FacePair>& pairs);
+
+ private:
+  std::vector<std::size_t> starts_, next_;
+  std::vector<FacePair> merged_;
+};
+
 /// Approximate-mode stop layers (CollideConfig::stop_layer).
 inline constexpr int kExact = -2;        ///< full exact descent (default)
 inline constexpr int kLeafSpheres = -1;  ///< stop at leaf spheres, no triangle tests

@@ -145,7 +145,7 @@ inline void sum_rows(const FaceRec* const* object, const FaceRec* const* probe, 
     s[7] += len * (half * m[2]);
     const D4 a[3] = {g.px, g.py, g.pz};  // zero where there is no segment
     for (int j = 0; j < 3; ++j)
-      for (int k = 0; k < 3; ++k) s[8 + 3 * j + k] += a[j] * m[k];
+      for (int c = 0; c < 3; ++c) s[8 + 3 * j + c] += a[j] * m[c];
   }
   for (int i = 0; i < 17; ++i) std::memcpy(sum[i], &s[i], sizeof(D4));
 }

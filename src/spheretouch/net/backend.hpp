@@ -38,6 +38,10 @@ class CollisionBackend {
   /// (stats.work_limit_hit): the caller answers "too large" without computing everything.
   virtual QueryStats query(const geom::Pose& pose, std::span<const std::uint32_t> skip, std::vector<FacePair>& out,
                            const QueryBudget& budget) = 0;
+  /// As query(), but only the faces of the held blocks in `only` (global block ids, ascending;
+  /// ids not held are ignored): the client assist answers a few blocks from a set of them all.
+  virtual QueryStats query_only(const geom::Pose& pose, std::span<const std::uint32_t> only, std::vector<FacePair>& out,
+                                const QueryBudget& budget) = 0;
 };
 
 /// Makes an empty backend; a worker calls it once per block set it loads.

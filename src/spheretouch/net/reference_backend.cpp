@@ -81,9 +81,6 @@ class GridBackend final : public CollisionBackend {
 
   QueryStats query(const geom::Pose& pose, std::span<const std::uint32_t> skip, std::vector<FacePair>& out,
                    const QueryBudget& budget) override {
-    const std::size_t start = out.size();
-    const auto t0 = std::chrono::steady_clock::now();
-    QueryStats st;
     for (std::size_t i : skipped_list_) skipped_[i] = 0;  // last query's marks
     skipped_list_.clear();
     for (std::uint32_t b : skip)
@@ -91,6 +88,25 @@ class GridBackend final : public CollisionBackend {
         skipped_[std::size_t(it - blocks_.begin())] = 1;
         skipped_list_.push_back(std::size_t(it - blocks_.begin()));
       }
+    return run(pose, out, budget);
+  }
+
+  QueryStats query_only(const geom::Pose& pose, std::span<const std::uint32_t> only, std::vector<FacePair>& out,
+                        const QueryBudget& budget) override {
+    skipped_list_.clear();
+    for (std::size_t i = 0; i < blocks_.size(); ++i) {
+      skipped_[i] = !std::binary_search(only.begin(), only.end(), blocks_[i]);
+      if (skipped_[i]) skipped_list_.push_back(i);
+    }
+    return run(pose, out, budget);
+  }
+
+ private:
+  // One query, leaving out the blocks marked in skipped_.
+  QueryStats run(const geom::Pose& pose, std::vector<FacePair>& out, const QueryBudget& budget) {
+    const std::size_t start = out.size();
+    const auto t0 = std::chrono::steady_clock::now();
+    QueryStats st;
     const bool any_skipped = !skipped_list_.empty();
     // Relative transform probe-local → object-local, composed once in double (large
     // offsets live only in poses and origins; never transform through the far-away file frame per vertex).
@@ -136,7 +152,6 @@ class GridBackend final : public CollisionBackend {
     return timed(st, t0);
   }
 
- private:
   // `st` with its compute time since t0 (the worker weighs clients by it).
   static QueryStats timed(QueryStats st, std::chrono::steady_clock::time_point t0) {
     st.compute_ns = static_cast<std::uint64_t>(

@@ -115,8 +115,9 @@ struct ScatterConfig {
   /// the Queries are out (their workers skip them, QueryMsg::skip): the heaviest blocks of the
   /// busiest workers by the pairs each block gave the round before (choose_assist()). The
   /// collision thread waits for the gather anyway; this is work it takes off the slowest worker.
-  /// Costs a sphere tree of the probe and of each block it has answered (cached, at most
-  /// 8 × assist_blocks + 64 blocks) and 4 bytes per object face. 0 = off (the default).
+  /// It answers them with a worker's own backend (tree_backend.hpp) holding a block set of every
+  /// block: costs that set's trees (the probe's and the object's, one subtree per block, as a
+  /// worker builds them), built once by create(), and 4 bytes per object face. 0 = off (the default).
   std::uint32_t assist_blocks = 0;
   /// The scene object this client answers for (a scene of several objects has one client per
   /// object over the same workers): its block sets carry it, its Queries name it, and a Result

@@ -105,8 +105,29 @@ class TreeBackend final : public CollisionBackend {
 
   QueryStats query(const geom::Pose& pose, std::span<const std::uint32_t> skip, std::vector<FacePair>& out,
                    const QueryBudget& budget) override {
+    if (empty_) return {};
+    const bool restrict = !skip.empty() && !block_roots_.empty() && cover_without(skip);
+    return run(pose, restrict, out, budget);
+  }
+
+  QueryStats query_only(const geom::Pose& pose, std::span<const std::uint32_t> only, std::vector<FacePair>& out,
+                        const QueryBudget& budget) override {
+    if (empty_) return {};
+    // A tree over the whole share (per_block_ false) cannot leave blocks out: it answers them all.
+    roots_.clear();
+    for (std::uint32_t id : only)
+      if (const auto it = std::lower_bound(set_.blocks.begin(), set_.blocks.end(), id);
+          it != set_.blocks.end() && *it == id) {
+        const auto& r = block_roots_[std::size_t(it - set_.blocks.begin())];
+        roots_.insert(roots_.end(), r.begin(), r.end());
+      }
+    return run(pose, !block_roots_.empty(), out, budget);
+  }
+
+ private:
+  // One query, over roots_ when `restrict`.
+  QueryStats run(const geom::Pose& pose, bool restrict, std::vector<FacePair>& out, const QueryBudget& budget) {
     QueryStats st;
-    if (empty_) return st;
     const auto t0 = std::chrono::steady_clock::now();
     // The share keeps the object's origin and local coordinates bit for bit, so the query
     // computes the same transformed doubles as a single-process query.
@@ -114,7 +135,7 @@ class TreeBackend final : public CollisionBackend {
     CollisionRequest request = CollisionRequest::past_limit(budget.max_pairs);
     request.max_work = budget.max_work;
     request.sort_pairs = false;  // the client's merge sorts
-    if (!skip.empty() && !block_roots_.empty() && cover_without(skip)) {
+    if (restrict) {
       request.restrict_object = true;
       request.object_roots = roots_;
     }
@@ -129,7 +150,6 @@ class TreeBackend final : public CollisionBackend {
     return st;
   }
 
- private:
   BlockSet set_;  // the ids and blocks (its meshes are moved into the collider's bodies)
   std::shared_ptr<const geom::SphereTree> object_tree_;  // the share's tree (shared with the collider)
   std::optional<ComputeCollision> collider_;             // empty for an empty share

@@ -1,0 +1,162 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Peer (peer.hpp).
+#include <spheretouch/net/peer.hpp>
+
+#include <unordered_map>
+
+#include <spheretouch/geom/check.hpp>
+#include <spheretouch/net/socket_options.hpp>
+#include <spheretouch/net/worker_config.hpp>
+
+namespace st::inline SPHERETOUCH_ABI::net::client {
+
+Status Peer::open(zmq::context_t& ctx, const ScatterConfig& cfg, const std::string& routing_id) {
+  silent_since = std::max(silent_since, Clock::now());
+  sock = zmq::socket_t(ctx, zmq::socket_type::dealer);
+  set_common_options(sock, cfg.sndhwm, cfg.rcvhwm, cfg.limits.max_message_bytes);
+  sock.set(zmq::sockopt::routing_id, zmq::buffer(routing_id));
+  sock.set(zmq::sockopt::immediate, 1);        // no queueing to a worker that is not connected
+  sock.set(zmq::sockopt::reconnect_ivl, 100);  // a restarted worker is found within 0.1 s
+  sock.set(zmq::sockopt::reconnect_ivl_max, 1000);
+  sock.set(zmq::sockopt::heartbeat_ivl, 500);  // ZMTP heartbeats drop half-open connections
+  sock.set(zmq::sockopt::heartbeat_timeout, 1500);
+  if (!cfg.curve_server_public.empty()) {
+    sock.set(zmq::sockopt::curve_serverkey, cfg.curve_server_public);
+    sock.set(zmq::sockopt::curve_publickey, cfg.curve_public);
+    sock.set(zmq::sockopt::curve_secretkey, cfg.curve_secret);
+  }
+  try {
+    if (needs_ipv6(endpoint)) sock.set(zmq::sockopt::ipv6, 1);
+    sock.connect(zmq_endpoint(endpoint));
+  } catch (const zmq::error_t& e) { return fail("scatter-gather: connect ", endpoint, ": ", e.what()); }
+  return Ok{};
+}
+
+bool Peer::send(const Message& m, std::vector<std::uint8_t>& buf) {
+  encode(m, buf);
+  try {
+    return sock.send(zmq::buffer(buf), zmq::send_flags::dontwait).has_value();
+  } catch (const zmq::error_t&) { return false; }
+}
+
+bool Peer::step(LinkEvent e) {
+  const Link next = link_after(link, e);
+  ST_ASSERT(next != kNoLink, "a worker's link state changes only as the table says");
+  if (next == kNoLink) return false;
+  if (link == Link::Loading && next != Link::Loading) upload = nullptr;
+  const bool down_changed = (link == Link::Down) != (next == Link::Down);
+  if (down_changed) misses = 0;
+  link = next;
+  ST_ASSERT((link == Link::Loading) == (upload != nullptr), "a set is being sent exactly while Loading");
+  return down_changed;
+}
+
+void Peer::step(TurnEvent e) {
+  const Turn next = turn_after(turn, e);
+  ST_ASSERT(next != kNoTurn, "a worker's turn changes only as the table says");
+  if (next != kNoTurn) turn = next;
+  ST_ASSERT(turn != Turn::Queried || asked, "a Query is out only with the set it named");
+}
+
+void Peer::heartbeat(const ScatterConfig& cfg, Clock::time_point now, std::vector<std::uint8_t>& buf) {
+  heartbeat_due = now + cfg.heartbeat_period;
+  asked_at = now;
+  send(HeartbeatMsg{++nonce}, buf);
+}
+
+void Peer::maybe_start_upload(const ScatterConfig& cfg, const BlockSetCache& sets, Clock::time_point now) {
+  if (!heard(link) || !target_hash || holds(target_hash)) return;
+  if (link == Link::Loading && upload->hash == target_hash) return;
+  if (refused_hash == target_hash && now - refused_at < cfg.load_timeout) return;
+  upload = sets.find(target_hash);
+  upload_off = 0;
+  load_progress_at = now;
+  ++loads_sent;
+  (void)step(LinkEvent::LoadStart);  // never into or out of Down
+}
+
+void Peer::pump_upload(const ScatterConfig& cfg, Clock::time_point now, std::vector<std::uint8_t>& buf) {
+  if (link != Link::Loading || upload_off >= upload->bytes.size()) return;
+  const auto& bytes = upload->bytes;
+  const std::size_t chunk = std::max<std::size_t>(1, std::min(cfg.chunk_bytes, cfg.limits.max_chunk_bytes));
+  LoadBlocksMsg m{upload->hash, bytes.size(), 0, {}};
+  while (upload_off < bytes.size()) {
+    const std::size_t n = std::min(chunk, bytes.size() - upload_off);
+    m.offset = upload_off;
+    m.data.assign(bytes.begin() + static_cast<std::ptrdiff_t>(upload_off),
+                  bytes.begin() + static_cast<std::ptrdiff_t>(upload_off + n));
+    if (!send(m, buf)) break;  // queue full or not connected: resume on POLLOUT / next round
+    upload_off += n;
+    bytes_sent += n;
+    load_progress_at = now;
+  }
+}
+
+Peer::Received Peer::receive(const Limits& limits, Clock::time_point now, Message& m) {
+  zmq::message_t msg;
+  try {
+    if (!sock.recv(msg, zmq::recv_flags::dontwait)) return Received::none;
+  } catch (const zmq::error_t&) { return Received::none; }
+  if (msg.more()) {  // a worker sends one frame per message; drop the rest
+    for (bool more = true; more;) {
+      zmq::message_t junk;
+      try {
+        (void)sock.recv(junk, zmq::recv_flags::dontwait);
+      } catch (const zmq::error_t&) { return Received::bad; }
+      more = junk.more();
+    }
+    unreadable = "more than one frame";
+    return Received::bad;
+  }
+  Result<Message> r = decode({static_cast<const std::uint8_t*>(msg.data()), msg.size()}, limits);
+  if (!r) {
+    unreadable = r.error();
+    return Received::bad;
+  }
+  silent_since = std::max(silent_since, now);
+  m = std::move(r).value();
+  return Received::message;
+}
+
+void refresh_targets(std::vector<Peer>& peers, BlockSetCache& sets) {
+  for (Peer& p : peers)
+    if (p.link != Link::Down && !p.target_hash && !p.target.empty())
+      if (SetPtr s = sets.get(p.target)) p.target_hash = s->hash;
+}
+
+void reassign(std::vector<Peer>& peers, BlockSetCache& sets) {
+  std::vector<std::size_t> alive;
+  std::vector<std::uint32_t> orphans;
+  for (std::size_t i = 0; i < peers.size(); ++i) {
+    if (peers[i].link != Link::Down)
+      alive.push_back(i);
+    else
+      orphans.insert(orphans.end(), peers[i].original.begin(), peers[i].original.end());
+  }
+  std::sort(orphans.begin(), orphans.end());
+  for (Peer& p : peers) p.target = p.link != Link::Down ? p.original : std::vector<std::uint32_t>{};
+  if (!alive.empty())
+    for (std::size_t j = 0; j < orphans.size(); ++j) peers[alive[j % alive.size()]].target.push_back(orphans[j]);
+  for (Peer& p : peers) {
+    std::sort(p.target.begin(), p.target.end());
+    SetPtr s = p.target.empty() ? nullptr : sets.get(p.target);
+    p.target_hash = s ? s->hash : 0;
+  }
+  prune_sets(peers, sets);
+}
+
+void prune_sets(const std::vector<Peer>& peers, BlockSetCache& sets) {
+  std::unordered_map<std::uint64_t, bool> keep;
+  for (const Peer& p : peers) {
+    for (std::uint64_t h : p.held) keep[h] = true;
+    if (p.target_hash) keep[p.target_hash] = true;
+    if (p.link == Link::Loading) keep[p.upload->hash] = true;
+  }
+  sets.prune([&](const EncodedSet& s) {
+    return keep.count(s.hash) || std::any_of(peers.begin(), peers.end(), [&](const Peer& p) {
+             return p.original == s.blocks || p.target == s.blocks;
+           });
+  });
+}
+
+}  // namespace st::net::client

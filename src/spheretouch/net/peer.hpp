@@ -1,0 +1,140 @@
+// SPDX-License-Identifier: BSD-3-Clause
+/// \file
+/// One worker as ScatterGather sees it (not installed): its socket, its two state machines (the
+/// tables in scatter_gather.hpp) and what the client knows of its memory.
+#pragma once
+#include <spheretouch/abi.hpp>
+#include <algorithm>
+#include <chrono>
+#include <cstdint>
+#include <string>
+#include <vector>
+#include <zmq.hpp>
+
+#include <spheretouch/net/block_set_cache.hpp>
+#include <spheretouch/net/scatter_gather.hpp>
+
+namespace st::inline SPHERETOUCH_ABI::net::client {
+
+using Clock = std::chrono::steady_clock;
+
+// A worker's two state machines. link_after() and turn_after() are the tables in
+// scatter_gather.hpp, which also says what each state and event means; kNoLink / kNoTurn marks a
+// cell that is not a transition.
+enum class Link : std::uint8_t { Unknown, Live, Loading, Down };
+enum class LinkEvent : std::uint8_t { Hello, BlankHello, LoadStart, LoadEnd, MarkDown };
+enum class Turn : std::uint8_t { Idle, Queried, Unsent, Pinged, Answered, Greeted };
+enum class TurnEvent : std::uint8_t { NewRound, QuerySent, QueryUnsent, Ping, Result, NotLoaded, Hello };
+
+inline constexpr Link kNoLink = static_cast<Link>(0xff);
+inline constexpr Turn kNoTurn = static_cast<Turn>(0xff);
+
+constexpr Link link_after(Link from, LinkEvent e) {
+  using enum Link;
+  constexpr Link x = kNoLink;
+  // clang-format off
+  constexpr Link table[4][5] = {
+      // Hello    BlankHello  LoadStart  LoadEnd  MarkDown
+      {Live,      Unknown,    x,         x,       Down},  // Unknown
+      {Live,      Unknown,    Loading,   x,       Down},  // Live
+      {Loading,   x,          Loading,   Live,    Down},  // Loading
+      {Live,      Unknown,    x,         x,       x   },  // Down
+  };
+  // clang-format on
+  return table[static_cast<int>(from)][static_cast<int>(e)];
+}
+
+constexpr Turn turn_after(Turn from, TurnEvent e) {
+  using enum Turn;
+  constexpr Turn x = kNoTurn;
+  // clang-format off
+  constexpr Turn table[6][7] = {
+      // NewRound  QuerySent  QueryUnsent  Ping    Result    NotLoaded  Hello
+      {Idle,       Queried,   Unsent,      Pinged, x,        x,         Idle    },  // Idle
+      {Idle,       x,         x,           x,      Answered, Answered,  Queried },  // Queried
+      {Idle,       x,         x,           x,      x,        Answered,  Unsent  },  // Unsent
+      {Idle,       x,         x,           x,      x,        x,         Greeted },  // Pinged
+      {Idle,       x,         x,           x,      x,        Answered,  Answered},  // Answered
+      {Idle,       x,         x,           x,      x,        x,         Greeted },  // Greeted
+  };
+  // clang-format on
+  return table[static_cast<int>(from)][static_cast<int>(e)];
+}
+
+/// Up and heard from: it may be queried and sent block sets.
+constexpr bool heard(Link l) { return l == Link::Live || l == Link::Loading; }
+/// At the round's end: asked and not answered, a miss.
+constexpr bool missed(Turn t) { return t == Turn::Queried || t == Turn::Unsent || t == Turn::Pinged; }
+
+struct Peer {
+  std::string endpoint;
+  zmq::socket_t sock;
+  Link link = Link::Unknown;
+  Turn turn = Turn::Idle;
+  std::uint32_t worker_id = 0;
+  std::uint64_t epoch = 0;               // from its last Hello (0: none with an epoch yet)
+  std::uint32_t misses = 0;              // rounds missed in a row (0 while Down)
+  std::vector<std::uint64_t> held;       // hashes from its last Hello, MRU first
+  std::vector<std::uint32_t> original;   // its own blocks (ScatterConfig::mapping)
+  std::vector<std::uint32_t> target;     // blocks it should hold now
+  std::uint64_t target_hash = 0;         // 0 while the target is being encoded
+  SetPtr upload;                         // the block set being sent: non-null exactly while Loading
+  std::size_t upload_off = 0;            // bytes of `upload` handed to ZeroMQ
+  Clock::time_point load_progress_at{};  // upload started or last chunk queued: load_timeout runs from here
+  std::uint64_t refused_hash = 0;        // a set it refused to load: not sent again for load_timeout
+  Clock::time_point refused_at{};        // when it refused `refused_hash`
+  Clock::time_point heartbeat_due{};     // next Heartbeat while it is not queried (heartbeat_period)
+  Clock::time_point held_refresh_due{};  // next Heartbeat to a queried worker (held_refresh_period)
+  // revive_silent(): asked after silent_since and nothing heard for reconnect_after.
+  Clock::time_point silent_since{};  // last message received from it, or its socket opened if later
+  Clock::time_point asked_at{};      // last Query or Heartbeat that wants an answer
+  std::uint64_t nonce = 0;
+  std::string unreadable;           // why its last undecodable message was refused
+  SetPtr asked;                     // the block set this round's Query named; null if no Query was queued
+  std::vector<std::uint32_t> skip;  // blocks of `asked` the client answers this round (assist)
+  // Totals.
+  std::uint64_t bytes_sent = 0;
+  std::uint32_t loads_sent = 0;
+
+  bool holds(std::uint64_t h) const { return h && std::find(held.begin(), held.end(), h) != held.end(); }
+  /// A fresh socket to `endpoint` (whatever was queued for the old one is dropped; libzmq
+  /// reconnects tcp:// and ipc:// by itself, but not inproc:// once its binder is gone).
+  Status open(zmq::context_t& ctx, const ScatterConfig& cfg, const std::string& routing_id);
+  /// Queues `m` without blocking (encoded into `buf`); false when it could not be queued.
+  bool send(const Message& m, std::vector<std::uint8_t>& buf);
+  /// The one place its link state changes; true when it entered or left Down (its blocks must
+  /// be dealt anew).
+  bool step(LinkEvent e);
+  /// The one place its turn in the round changes. Replies that fit no transition are counted and
+  /// dropped by the caller before they get here.
+  void step(TurnEvent e);
+
+  /// A Heartbeat now; the next one due heartbeat_period later.
+  void heartbeat(const ScatterConfig& cfg, Clock::time_point now, std::vector<std::uint8_t>& buf);
+  /// Starts sending its target set if it is heard from, does not hold it, is not being sent it
+  /// and did not refuse it within load_timeout (a newer target replaces a set still being sent).
+  void maybe_start_upload(const ScatterConfig& cfg, const BlockSetCache& sets, Clock::time_point now);
+  /// Queues the chunks of the set being sent until ZeroMQ's queue is full.
+  void pump_upload(const ScatterConfig& cfg, Clock::time_point now, std::vector<std::uint8_t>& buf);
+  /// Loading, and nothing sent or acknowledged for load_timeout.
+  bool load_stuck(const ScatterConfig& cfg, Clock::time_point now) const {
+    return link == Link::Loading && now - load_progress_at > cfg.load_timeout;
+  }
+
+  /// What receive() found.
+  enum class Received : std::uint8_t { none, message, bad };
+  /// The next message waiting on its socket, decoded into `m` (none: nothing waiting; bad: a
+  /// misframed or undecodable one, `unreadable` says why).
+  Received receive(const Limits& limits, Clock::time_point now, Message& m);
+};
+
+/// Each live worker's target hash, once its target set is encoded (BlockSetCache::get starts
+/// the encoding).
+void refresh_targets(std::vector<Peer>& peers, BlockSetCache& sets);
+/// Deals the blocks of down workers block-cyclically over the live ones (paper §3.4): each
+/// worker's target is its own blocks plus its deal; then prune_sets().
+void reassign(std::vector<Peer>& peers, BlockSetCache& sets);
+/// Drops encoded sets no worker is meant to hold, holds, is being sent or owns originally.
+void prune_sets(const std::vector<Peer>& peers, BlockSetCache& sets);
+
+}  // namespace st::net::client
