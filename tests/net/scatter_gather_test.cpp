@@ -404,6 +404,41 @@ TEST_CASE("after a fault, idle reassigned sets are dropped by workers and client
   for (int i : {0, 1, 3}) CHECK(c.workers()[std::size_t(i)].loads_sent == loads[std::size_t(i)] + 1);
 }
 
+namespace {
+/// One in-process worker (tree or reference backend) holding the set of `probe` against
+/// `object` (every face one block), loaded by `d`, a DEALER that then asks it.
+struct OneSetWorker {
+  Result<std::unique_ptr<LocalWorkers>> w;
+  zmq::socket_t d;
+  std::uint64_t hash = 0;
+  OneSetWorker(zmq::context_t& ctx, bool tree, const WorkerConfig& base, const geom::Mesh& probe, const geom::Mesh& object)
+      : w(LocalWorkers::start(
+            ctx, 1, tree ? tree_backend_factory() : reference_backend_factory(),
+            [t = tag()](int i) { return inproc_endpoint(i, t); }, base)),
+        d(ctx, zmq::socket_type::dealer) {
+    REQUIRE(w.ok());
+    Blocks one(1);
+    for (std::uint32_t f = 0; f < object.faces.size(); ++f) one[0].push_back(f);
+    auto set = make_block_set(probe, object, one, std::vector<std::uint32_t>{0}, 24);
+    REQUIRE(set.ok());
+    const std::vector<std::uint8_t> bytes = encode_block_set(set.value());
+    hash = block_set_hash(bytes);
+    d.set(zmq::sockopt::linger, 0);
+    d.set(zmq::sockopt::rcvtimeo, 10000);
+    d.connect(w.value()->endpoints()[0]);
+    REQUIRE(std::holds_alternative<HelloMsg>(reply(encode(LoadBlocksMsg{hash, bytes.size(), 0, bytes}))));
+  }
+  Message reply(const std::vector<std::uint8_t>& msg) {
+    d.send(zmq::buffer(msg), zmq::send_flags::none);
+    zmq::message_t m;
+    REQUIRE(d.recv(m));
+    auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, DefaultLimits());
+    REQUIRE(r.ok());
+    return r.value();
+  }
+};
+}  // namespace
+
 TEST_CASE("a block set of faces piled on each other: the worker refuses the query at max_pairs, then serves") {
   // The N² attack: every probe face overlaps every object face (1,000 identical triangles
   // on each side: 10^6 pairs). With max_pairs = 50,000 the traversal must stop near the cap and
@@ -415,35 +450,13 @@ TEST_CASE("a block set of faces piled on each other: the worker refuses the quer
     base.limits.max_pairs = 50'000;
     base.query_work_base = base.max_query_work = 1ull << 40;  // the pair cap alone (the budget: next case)
     base.penalty_factor = 0;                                  // (the penalty: next case)
-    const std::string t = tag();
-    auto w = LocalWorkers::start(
-        ctx, 1, tree ? tree_backend_factory() : reference_backend_factory(),
-        [&](int i) { return inproc_endpoint(i, t); }, base);
-    REQUIRE(w.ok());
     geom::Mesh pile;
     pile.name = "pile";
     pile.local = {{0, 0, 0}, {10, 0, 0}, {0, 10, 0}};
     pile.faces.assign(1000, geom::Tri{0, 1, 2});
-    Blocks one_block(1);
-    for (std::uint32_t f = 0; f < 1000; ++f) one_block[0].push_back(f);
-    auto set = make_block_set(pile, pile, one_block, std::vector<std::uint32_t>{0}, 24);
-    REQUIRE(set.ok());
-    const std::vector<std::uint8_t> bytes = encode_block_set(set.value());
-    const std::uint64_t hash = block_set_hash(bytes);
-    zmq::socket_t d(ctx, zmq::socket_type::dealer);
-    d.set(zmq::sockopt::linger, 0);
-    d.set(zmq::sockopt::rcvtimeo, 10000);
-    d.connect(w.value()->endpoints()[0]);
-    auto reply = [&](const std::vector<std::uint8_t>& msg) {
-      d.send(zmq::buffer(msg), zmq::send_flags::none);
-      zmq::message_t m;
-      REQUIRE(d.recv(m));
-      auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, DefaultLimits());
-      REQUIRE(r.ok());
-      return r.value();
-    };
-    Message loaded = reply(encode(LoadBlocksMsg{hash, bytes.size(), 0, bytes}));
-    REQUIRE(std::holds_alternative<HelloMsg>(loaded));
+    OneSetWorker one(ctx, tree, base, pile, pile);
+    const std::uint64_t hash = one.hash;
+    auto reply = [&](const std::vector<std::uint8_t>& msg) { return one.reply(msg); };
     geom::Pose shifted = geom::Pose::Identity();
     shifted.translation() = geom::Vec3(1, 1, 0);  // coplanar and overlapping: every pair collides
     Message refused = reply(encode(QueryMsg{5, hash, shifted, {}}));
@@ -488,30 +501,9 @@ TEST_CASE("faces piled so their boxes overlap but they never touch: the worker r
     WorkerConfig base;
     base.query_work_base = 100'000;
     base.query_work_per_face = 16;  // 122,400 units for the 1,400 faces: under the 490,000 tests
-    const std::string t = tag();
-    auto w = LocalWorkers::start(
-        ctx, 1, tree ? tree_backend_factory() : reference_backend_factory(),
-        [&](int i) { return inproc_endpoint(i, t); }, base);
-    REQUIRE(w.ok());
-    Blocks one(1);
-    for (std::uint32_t f = 0; f < 700; ++f) one[0].push_back(f);
-    auto set = make_block_set(flat, upright, one, std::vector<std::uint32_t>{0}, 24);
-    REQUIRE(set.ok());
-    const std::vector<std::uint8_t> bytes = encode_block_set(set.value());
-    const std::uint64_t hash = block_set_hash(bytes);
-    zmq::socket_t d(ctx, zmq::socket_type::dealer);
-    d.set(zmq::sockopt::linger, 0);
-    d.set(zmq::sockopt::rcvtimeo, 10000);
-    d.connect(w.value()->endpoints()[0]);
-    auto reply = [&](const std::vector<std::uint8_t>& msg) {
-      d.send(zmq::buffer(msg), zmq::send_flags::none);
-      zmq::message_t m;
-      REQUIRE(d.recv(m));
-      auto r = decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, DefaultLimits());
-      REQUIRE(r.ok());
-      return r.value();
-    };
-    REQUIRE(std::holds_alternative<HelloMsg>(reply(encode(LoadBlocksMsg{hash, bytes.size(), 0, bytes}))));
+    OneSetWorker one(ctx, tree, base, flat, upright);
+    const std::uint64_t hash = one.hash;
+    auto reply = [&](const std::vector<std::uint8_t>& msg) { return one.reply(msg); };
     Message refused = reply(encode(QueryMsg{5, hash, geom::Pose::Identity(), {}}));
     auto* e = std::get_if<ErrorMsg>(&refused);
     REQUIRE(e);

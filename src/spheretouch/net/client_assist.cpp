@@ -64,8 +64,8 @@ void ClientAssist::answer(const geom::Pose& pose, RoundResult& out, std::vector<
   }
   out.stats.sphere_tests += out.assist.sphere_tests;
   out.stats.tri_tests += out.assist.tri_tests;
-  out.assist.compute_ns = std::uint64_t(
-      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count());
+  out.assist.compute_ns =
+      std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count());
 }
 
 void ClientAssist::note_work(const std::vector<FacePair>& pairs) {

@@ -34,13 +34,13 @@ class ClientAssist {
  private:
   ClientAssist() = default;
   std::uint32_t max_blocks_ = 0, max_pairs_ = 0;
-  std::unique_ptr<CollisionBackend> backend_;   // a worker's backend over every block
-  std::vector<std::uint32_t> face_block_;       // object face -> its block
-  std::vector<double> block_work_;              // per block: pairs it gave last round (0 where none)
-  std::vector<std::uint32_t> worked_;           // blocks with block_work_ > 0
-  std::vector<std::uint32_t> taken_;            // blocks answered this round, ascending
-  std::vector<BlockWork> candidates_;           // scratch for choose_assist
-  std::vector<FacePair> pairs_;                 // scratch: one block's pairs
+  std::unique_ptr<CollisionBackend> backend_;  // a worker's backend over every block
+  std::vector<std::uint32_t> face_block_;      // object face -> its block
+  std::vector<double> block_work_;             // per block: pairs it gave last round (0 where none)
+  std::vector<std::uint32_t> worked_;          // blocks with block_work_ > 0
+  std::vector<std::uint32_t> taken_;           // blocks answered this round, ascending
+  std::vector<BlockWork> candidates_;          // scratch for choose_assist
+  std::vector<FacePair> pairs_;                // scratch: one block's pairs
 };
 
 }  // namespace st::net::client
