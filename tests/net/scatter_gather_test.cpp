@@ -439,6 +439,27 @@ struct OneSetWorker {
 };
 }  // namespace
 
+TEST_CASE("a worker that refuses the client's block set says why (WorkerStatus::refused)") {
+  zmq::context_t ctx;
+  WorkerConfig base;
+  base.limits.max_blockset_bytes = 4096;  // the scene's set is larger
+  const std::string t = tag();
+  auto w = LocalWorkers::start(
+      ctx, 1, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, base);
+  REQUIRE(w.ok());
+  const test::NetScene s = test::small_scene(8);
+  ScatterConfig cfg;
+  cfg.endpoints = w.value()->endpoints();
+  cfg.heartbeat_period = 50ms;
+  auto c = ScatterGather::create(ctx, cfg, s.probe, s.object, s.blocks);
+  REQUIRE(c.ok());
+  CHECK_FALSE(c.value()->wait_ready(Clock::now() + 2s));  // refused: it never holds its target
+  const std::vector<WorkerStatus> ws = c.value()->workers();
+  REQUIRE(ws.size() == 1);
+  CHECK_FALSE(ws[0].holds_target);
+  CHECK(ws[0].refused.find("over this worker's max_blockset_bytes = 4096") != std::string::npos);
+}
+
 TEST_CASE("a block set of faces piled on each other: the worker refuses the query at max_pairs, then serves") {
   // The N² attack: every probe face overlaps every object face (1,000 identical triangles
   // on each side: 10^6 pairs). With max_pairs = 50,000 the traversal must stop near the cap and

@@ -331,6 +331,22 @@ TEST_CASE("upload slots: an upload stalled for upload_stall gives its slot to a 
   CHECK(e.text.find("out of order") != std::string::npos);
 }
 
+TEST_CASE("a block set over the worker's max_blockset_bytes is refused as TooLarge naming the limit") {
+  zmq::context_t ctx;
+  WorkerConfig wc;
+  wc.limits.max_blockset_bytes = 4096;
+  const std::string t = ws_tag();
+  auto w = LocalWorkers::start(
+      ctx, 1, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, wc);
+  REQUIRE(w.ok());
+  RawClient a(ctx, w.value()->endpoints()[0], "client-a");
+  const std::vector<std::uint8_t> chunk(1024, 7);
+  const ErrorMsg e = error_of(a.ask(encode(LoadBlocksMsg{0xb16, 8192, 0, chunk})));
+  CHECK(e.code == ErrorCode::TooLarge);
+  CHECK(e.ref == 0xb16);
+  CHECK(e.text.find("block set of 8192 bytes is over this worker's max_blockset_bytes = 4096") != std::string::npos);
+}
+
 TEST_CASE("set quotas: a client's load evicts its own sets first; a set another client queries is never evicted") {
   zmq::context_t ctx;
   WorkerConfig wc;

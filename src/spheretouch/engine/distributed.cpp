@@ -109,6 +109,8 @@ Status wait_for_client(Fleet& fleet, net::ScatterGather& client, const FleetSpec
     who += (who.empty() ? "" : "; ") + w.endpoint;
     if (auto it = probed.find(w.endpoint); it != probed.end())
       who += " never answered Hello: " + it->second.detail + advice(it->second, spec);
+    else if (!w.refused.empty())
+      who += " refused its block set: " + w.refused;
     else
       who += " answered but did not acknowledge its block set";
   }

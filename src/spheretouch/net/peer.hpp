@@ -90,6 +90,7 @@ struct Peer {
   Clock::time_point asked_at{};      // last Query or Heartbeat that wants an answer
   std::uint64_t nonce = 0;
   std::string unreadable;           // why its last undecodable message was refused
+  std::string refused;              // why it last refused a set we sent (its Error text)
   SetPtr asked;                     // the block set this round's Query named; null if no Query was queued
   std::vector<std::uint32_t> skip;  // blocks of `asked` the client answers this round (assist)
   // Totals.

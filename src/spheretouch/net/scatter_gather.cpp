@@ -115,6 +115,7 @@ struct ScatterGather::Impl {
     } else if (e.code == ErrorCode::LoadFailed || e.code == ErrorCode::TooLarge) {
       if (p.link == Link::Loading && (e.ref == p.upload->hash || e.ref == 0)) {
         p.refused_hash = p.upload->hash;
+        p.refused = e.text;
         p.refused_at = now;
         link(p, LinkEvent::LoadEnd);
       }
@@ -451,7 +452,7 @@ std::vector<WorkerStatus> ScatterGather::workers() const {
   std::vector<WorkerStatus> v;
   for (const Peer& p : impl_->peers)
     v.push_back({p.endpoint, p.link != Link::Down, p.worker_id, p.epoch, p.misses, p.target, p.holds(p.target_hash),
-                 p.bytes_sent, p.loads_sent, p.held.size(), p.unreadable});
+                 p.bytes_sent, p.loads_sent, p.held.size(), p.unreadable, p.refused});
   return v;
 }
 

@@ -161,6 +161,9 @@ struct WorkerStatus {
   /// Why the last message from it this client could not read was refused (empty: none), such as
   /// "header at byte 4: version: 1 not supported (this build speaks 2)": a daemon of another version.
   std::string unreadable;
+  /// Why it last refused a block set this client sent (its LoadFailed or TooLarge text, such as a
+  /// set over its max_blockset_bytes or "worker full"); empty: none refused.
+  std::string refused;
 };
 
 /// The collision thread's client to the worker fleet.

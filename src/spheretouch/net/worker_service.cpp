@@ -498,6 +498,16 @@ void WorkerService::handle(const zmq::message_t& peer, const std::string& owner,
   Result<Message> m = decode(frame, cfg_.limits);
   if (!m) {
     note_bad(m.error());
+    // A chunk of a block set larger than this worker takes is well-formed otherwise: refuse the
+    // load as TooLarge with the limit, so the client stops sending it and can say why.
+    Limits any_size = cfg_.limits;
+    any_size.max_blockset_bytes = UINT64_MAX;
+    if (Result<Message> big = decode(frame, any_size); big)
+      if (const auto* l = std::get_if<LoadBlocksMsg>(&big.value()))
+        return send_error(peer, ErrorCode::TooLarge, l->hash,
+                          st::fail("block set of ", l->total_bytes, " bytes is over this worker's max_blockset_bytes = ",
+                                   cfg_.limits.max_blockset_bytes, " (the daemon's max_blockset_mb): load refused")
+                              .message);
     send_error(peer, ErrorCode::BadMessage, 0, m.error());
     return;
   }
