@@ -269,6 +269,18 @@ void WorkerService::send(const zmq::message_t& peer, const Message& m) {
   } catch (const zmq::error_t&) {}
 }
 
+void WorkerService::log_refusal(const std::string& what) {
+  // At most one line a second, with how many were not logged: refusals are what an attacker
+  // causes, and must not flood the journal.
+  ++refusals_unlogged_;
+  const auto now = std::chrono::steady_clock::now();
+  if (now - refusal_logged_ < std::chrono::seconds(1)) return;
+  log(5, refusals_unlogged_ > 1 ? st::fail(what, " (", refusals_unlogged_ - 1, " more refusals since the last report)").message
+                                : what);
+  refusal_logged_ = now;
+  refusals_unlogged_ = 0;
+}
+
 void WorkerService::note_bad(const std::string& why) {
   ++counters_.bad_messages;
   ++bad_unlogged_;
@@ -617,7 +629,7 @@ void WorkerService::answer(const Pending& p) {
                             " faces): refused; are the set's faces piled on each other?")
                        .message;
     ++(too_many ? counters_.too_many_pairs : counters_.over_budget);
-    log(5, why);
+    log_refusal(why);
     send_error(peer, ErrorCode::TooLarge, q.seq, why);
     pairs_.clear();
     if (pairs_.capacity() > (std::size_t{1} << 20)) pairs_.shrink_to_fit();  // do not keep an attacker's peak
@@ -641,7 +653,8 @@ void WorkerService::on_load(const zmq::message_t& peer, const std::string& owner
         cfg_.max_client_bytes ? cfg_.max_client_bytes : std::uint64_t(cfg_.max_sets) * cfg_.limits.max_blockset_bytes;
     if (m.total_bytes > quota) {
       ++counters_.uploads_refused;
-      log(5, st::fail("upload of ", m.total_bytes, " bytes refused: over the client's quota of ", quota, " bytes").message);
+      log_refusal(
+          st::fail("upload of ", m.total_bytes, " bytes refused: over the client's quota of ", quota, " bytes").message);
       return send_error(
           peer, ErrorCode::TooLarge, m.hash,
           st::fail("block set of ", m.total_bytes, " bytes is over this client's quota (max_client_bytes = ", quota, ")")
@@ -651,7 +664,7 @@ void WorkerService::on_load(const zmq::message_t& peer, const std::string& owner
     if (busy >= cfg_.max_uploads && free_upload_slot()) --busy;
     if (busy >= cfg_.max_uploads) {
       ++counters_.uploads_refused;
-      log(5, st::fail("upload refused: ", busy, " uploads in progress (max_uploads = ", cfg_.max_uploads, ")").message);
+      log_refusal(st::fail("upload refused: ", busy, " uploads in progress (max_uploads = ", cfg_.max_uploads, ")").message);
       return send_error(peer, ErrorCode::TooLarge, m.hash,
                         st::fail("worker busy: ", busy, " block-set uploads in progress (max_uploads = ", cfg_.max_uploads,
                                  "); send again later")
@@ -726,9 +739,10 @@ bool WorkerService::free_upload_slot() {
   }
   if (victim == uploads_.end()) return false;
   ++counters_.uploads_displaced;
-  log(5, st::fail("upload of block set ", std::hex, victim->second.hash, std::dec, " (", victim->second.bytes.size(),
-                  " of ", victim->second.total, " bytes) gave its slot to another: stalled or under min_upload_rate")
-             .message);
+  log_refusal(st::fail("upload of block set ", std::hex, victim->second.hash, std::dec, " (",
+                       victim->second.bytes.size(), " of ", victim->second.total,
+                       " bytes) gave its slot to another: stalled or under min_upload_rate")
+                  .message);
   drop_upload(victim);
   return true;
 }
@@ -834,7 +848,7 @@ void WorkerService::finish_job() {
                  " set slots hold sets other clients queried within active_set = ", cfg_.active_set.count(),
                  " ms; load refused, send again later")
             .message;
-    log(5, why);
+    log_refusal(why);
     send_error(u.peer, ErrorCode::TooLarge, u.hash, why);
     start_job();
     return;

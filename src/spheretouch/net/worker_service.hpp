@@ -265,6 +265,7 @@ class WorkerService {
     if (cfg_.log) cfg_.log(priority, text);
   }
   void note_bad(const std::string& why);
+  void log_refusal(const std::string& what);     ///< a refused upload, load or query (rate-limited)
   void cut_if_bad(const zmq::message_t& frame);  ///< counts a bad message against its connection
   void drop_idle();                              ///< at most once a second: idle_set_ttl, upload_timeout
   void drop_upload(std::unordered_map<std::string, Upload>::iterator it);
@@ -295,6 +296,8 @@ class WorkerService {
   std::chrono::steady_clock::time_point bad_logged_{};
   std::chrono::steady_clock::time_point next_idle_check_{};
   std::uint64_t bad_unlogged_ = 0;
+  std::chrono::steady_clock::time_point refusal_logged_{};
+  std::uint64_t refusals_unlogged_ = 0;
   // Refused CURVE handshakes by source address: the first is logged, then at most one line a
   // minute with a count, so a client retrying or rotating keys cannot flood the log. Bounded:
   // cleared when full.
