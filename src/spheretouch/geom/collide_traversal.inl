@@ -463,11 +463,14 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
     stack[n++] = {proot, oroot};
     while (n > 0 && !res.stats.pair_limit_hit) {
       // The budget is checked once per popped pair: between two checks a leaf pair adds at most
-      // kMaxLeafFaces² candidates, a split at most kMaxChildren sphere tests.
-      res.stats.exact_evals = detail::exact_evaluations - evals0;
-      if (res.stats.work() > opt.max_work) [[unlikely]] {
-        res.stats.work_limit_hit = true;
-        return;
+      // kMaxLeafFaces² candidates, a split at most kMaxChildren sphere tests. Without a budget
+      // (the default) nothing is read here: collide() fills exact_evals once at the end.
+      if (opt.max_work != UINT64_MAX) [[unlikely]] {
+        res.stats.exact_evals = detail::exact_evaluations - evals0;
+        if (res.stats.work() > opt.max_work) {
+          res.stats.work_limit_hit = true;
+          return;
+        }
       }
       const auto [p, o] = stack[--n];
       const SphereNode& hp = PT.nodes[p];
