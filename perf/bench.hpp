@@ -9,9 +9,10 @@ namespace st::bench {
 /// A TCP port on 127.0.0.1 that was free a moment ago (for workers the benchmarks start).
 int free_tcp_port();
 
-void add_load(CLI::App& app);      ///< mesh loading time (the 832k-face armadillo)
-void add_tree(CLI::App& app);      ///< sphere-tree build time and bytes/face
-void add_collide(CLI::App& app);   ///< collide() query time at contact buckets, pose finder
+void add_load(CLI::App& app);     ///< mesh loading time (the 832k-face armadillo)
+void add_tree(CLI::App& app);     ///< sphere-tree build time and bytes/face
+void add_collide(CLI::App& app);  ///< collide() query time at contact buckets, pose finder
+void add_slides(CLI::App& app);  ///< the coherent collider against collide() along slides and a jerk (bench_slides.cpp)
 void add_exchange(CLI::App& app);  ///< TripleBuffer vs mutex take-newest latency
 void add_haptic(CLI::App& app);    ///< HapticLoop vs bare clock_nanosleep wake-up latency
 void add_scatter(CLI::App& app);   ///< scatter-gather round trip of an empty query, N workers × transport

@@ -10,6 +10,7 @@ int main(int argc, char** argv) {
   st::bench::add_load(app);
   st::bench::add_tree(app);
   st::bench::add_collide(app);
+  st::bench::add_slides(app);
   st::bench::add_exchange(app);
   st::bench::add_haptic(app);
   st::bench::add_scatter(app);

@@ -55,7 +55,8 @@ namespace {
 
 // The inner query, then the request's cap and order applied to its result.
 void run(const Body& probe, const Body& object, const Pose& relative, const CollisionRequest& request,
-         geom::CollideScratch& scratch, geom::CollideResult& inner, CollisionResult& result) {
+         geom::CollideScratch& scratch, geom::CollideResult& inner, CollisionResult& result,
+         geom::CoherentCollider* coherent = nullptr) {
   result.clear();
   if (!check(request).empty()) {
     result.bad_request = true;
@@ -73,7 +74,10 @@ void run(const Body& probe, const Body& object, const Pose& relative, const Coll
   // Uncapped, the inner query sorts (a radix sort); capped, the first max_pairs found are kept,
   // then sorted below.
   options.sort_pairs = request.sort_pairs && !capped;
-  geom::collide(probe.mesh(), probe.tree(), object.mesh(), object.tree(), relative, options, scratch, inner);
+  if (coherent)
+    coherent->collide(probe.mesh(), probe.tree(), object.mesh(), object.tree(), relative, options, inner);
+  else
+    geom::collide(probe.mesh(), probe.tree(), object.mesh(), object.tree(), relative, options, scratch, inner);
   result.stats = inner.stats;
   // Swapped, not copied: both vectors keep their capacity, so later queries allocate nothing.
   result.pairs.swap(inner.pairs);
@@ -100,19 +104,29 @@ ComputeCollision::ComputeCollision(Body probe, Body object) : probe_(std::move(p
   scratch_.prepare(probe_.mesh(), probe_.tree(), object_.mesh(), object_.tree());
 }
 
-void ComputeCollision::set_object(Body object) { object_ = std::move(object); }
+void ComputeCollision::set_object(Body object) {
+  object_ = std::move(object);
+  if (coherent_) coherent_->reset();
+}
+
+void ComputeCollision::set_coherent(bool on, const geom::CoherentConfig& config) {
+  if (on)
+    coherent_ = std::make_unique<geom::CoherentCollider>(config);
+  else
+    coherent_.reset();
+}
 
 void ComputeCollision::operator()(const CollisionRequest& request, CollisionResult& result) {
-  run(probe_, object_, relative_pose(probe_, object_), request, scratch_, inner_, result);
+  run(probe_, object_, relative_pose(probe_, object_), request, scratch_, inner_, result, coherent_.get());
 }
 
 void ComputeCollision::operator()(const Pose& probe_frame, const Pose& object_frame, const CollisionRequest& request,
                                   CollisionResult& result) {
-  run(probe_, object_, relative_pose(probe_frame, object_frame), request, scratch_, inner_, result);
+  run(probe_, object_, relative_pose(probe_frame, object_frame), request, scratch_, inner_, result, coherent_.get());
 }
 
 void ComputeCollision::at_relative(const Pose& relative, const CollisionRequest& request, CollisionResult& result) {
-  run(probe_, object_, relative, request, scratch_, inner_, result);
+  run(probe_, object_, relative, request, scratch_, inner_, result, coherent_.get());
 }
 
 void collide(const Body& probe, const Body& object, const CollisionRequest& request, CollisionResult& result) {

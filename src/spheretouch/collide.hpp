@@ -25,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include <spheretouch/geom/coherent.hpp>
 #include <spheretouch/geom/collide.hpp>
 #include <spheretouch/geom/mesh.hpp>
 #include <spheretouch/geom/result.hpp>
@@ -161,14 +162,23 @@ class ComputeCollision {
   /// in turn. The object's caches are derived again on the next query.
   void set_object(Body object);
 
-  Body& probe() { return probe_; }                                ///< the first body
-  Body& object() { return object_; }                              ///< the second body
-  std::size_t scratch_bytes() const { return scratch_.bytes(); }  ///< heap held between queries
+  /// Carries certificates between exact queries (geom::CoherentCollider, coherent.hpp): the same
+  /// pairs, in less time when the probe moves little between queries (the haptic loop: a few
+  /// hundredths of a millimetre a round). Off by default; turning it on or off forgets them.
+  void set_coherent(bool on, const geom::CoherentConfig& config = {});
+  /// The coherent collider when set_coherent(true) (its stats(), bytes()), else null.
+  const geom::CoherentCollider* coherent() const { return coherent_.get(); }
+
+  Body& probe() { return probe_; }    ///< the first body
+  Body& object() { return object_; }  ///< the second body
+  /// Heap held between queries (with the coherent collider's cache when on).
+  std::size_t scratch_bytes() const { return scratch_.bytes() + (coherent_ ? coherent_->bytes() : 0); }
 
  private:
   Body probe_, object_;
   geom::CollideScratch scratch_;
   geom::CollideResult inner_;
+  std::unique_ptr<geom::CoherentCollider> coherent_;
 };
 
 /// One query, with its own scratch (allocates; use ComputeCollision for repeated queries).

@@ -366,6 +366,8 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
        "workers.endpoints"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\ncount = 1.5\n",
        "workers.count: expected an integer"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[collision]\ncoherent = \"yes\"\n",
+       "collision.coherent: expected true or false"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[device]\ntarget = [1, 2]\n",
        "device.target: expected an array of 3 numbers"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\ncontinuous_n = 5\n",

@@ -198,7 +198,10 @@ Status RunEngine::State::prepare() {
   request.sort_pairs = true;
   collide_fn = [this](std::uint64_t, std::uint32_t k, const geom::Pose& pose, RoundOutput& out) {
     std::optional<ComputeCollision>& collider = colliders[k];
-    if (!collider) collider.emplace(*probe_body, object_bodies[k]);  // in the collision thread: its caches
+    if (!collider) {  // in the collision thread: its caches
+      collider.emplace(*probe_body, object_bodies[k]);
+      collider->set_coherent(s.coherent);
+    }
     collider->at_relative(pose, request, result);
     out.pairs.assign(result.pairs.begin(), result.pairs.end());
   };

@@ -267,6 +267,7 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
       s.approx_layer = layer;
     else if (r.has("approx_layer"))
       r.error("approx_layer", "only meaningful with mode = \"approximate\"");
+    r.boolean("coherent", s.coherent);
     if (Status st = r.finish(); !st) return Error{st.error()};
   }
   {

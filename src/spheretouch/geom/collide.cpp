@@ -26,9 +26,11 @@
 
 #include <algorithm>
 #include <bit>
+#include <cstring>
 #include <limits>
 
 #include <spheretouch/geom/check.hpp>
+#include <spheretouch/geom/coherent.hpp>
 #include <spheretouch/geom/predicates.hpp>
 #include <spheretouch/geom/simd.hpp>
 #include <spheretouch/geom/tri_tri.hpp>
@@ -198,22 +200,27 @@ std::size_t CollideScratch::bytes() const {
 // template is never defined). Every ISA gives the same masks, so the same pairs and counters.
 template <class Lanes>
 struct CollideQuery;
+template <class Lanes>
+struct CoherentQuery;
 
 #define ST_COLLIDE_SIMD simd::scalar
 #define ST_COLLIDE_WIDE_SIMD simd::scalar
 #include "collide_traversal.inl"
+#include "coherent_traversal.inl"
 #undef ST_COLLIDE_SIMD
 #undef ST_COLLIDE_WIDE_SIMD
 #if defined(ST_SIMD_X86)
 #define ST_COLLIDE_SIMD simd::sse2
 #define ST_COLLIDE_WIDE_SIMD simd::sse2
 #include "collide_traversal.inl"
+#include "coherent_traversal.inl"
 #undef ST_COLLIDE_SIMD
 #undef ST_COLLIDE_WIDE_SIMD
 ST_TARGET_AVX2_BEGIN
 #define ST_COLLIDE_SIMD simd::avx2
 #define ST_COLLIDE_WIDE_SIMD simd::avx2
 #include "collide_traversal.inl"
+#include "coherent_traversal.inl"
 #undef ST_COLLIDE_SIMD
 #undef ST_COLLIDE_WIDE_SIMD
 ST_TARGET_END
@@ -221,6 +228,7 @@ ST_TARGET_AVX512_BEGIN
 #define ST_COLLIDE_SIMD simd::avx2
 #define ST_COLLIDE_WIDE_SIMD simd::avx512
 #include "collide_traversal.inl"
+#include "coherent_traversal.inl"
 #undef ST_COLLIDE_SIMD
 #undef ST_COLLIDE_WIDE_SIMD
 ST_TARGET_END
@@ -228,17 +236,43 @@ ST_TARGET_END
 
 namespace {
 
+// What every query on a pose needs besides the trees: the transform, the bound s >= ||R||_2,
+// the float tests' slack and the magnitude of the coordinates, and the scratch's generation.
+struct QueryFrame {
+  RelTransform rt;
+  double s = 1;
+  float slack = 0;
+  double mag = 0;
+  std::uint32_t gen = 0;
+};
+
+// Calls f(std::type_identity<Lanes>{}) with the lanes of the ISA simd::active_isa() names.
+template <class F>
+auto on_active_isa(F&& f) {
+  switch (simd::active_isa()) {
+#if defined(ST_SIMD_X86)
+    case simd::Isa::avx512:
+      return f(std::type_identity<simd::avx512::Lanes>{});
+    case simd::Isa::avx2:
+      return f(std::type_identity<simd::avx2::Lanes>{});
+    case simd::Isa::sse2:
+      return f(std::type_identity<simd::sse2::Lanes>{});
+#endif
+    default:
+      return f(std::type_identity<simd::scalar::Lanes>{});
+  }
+}
+
 // The query on one ISA's kernels: everything but the set-up, which is the same for all.
 template <class Lanes>
 void run_query(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree,
-               const CollideConfig& options, CollideScratch& scratch, CollideResult& result, const RelTransform& rt,
-               double s, float slack, std::uint32_t gen) {
-  CollideQuery<Lanes> q{probe, probe_tree, object, object_tree, options, scratch, result, rt};
-  q.gen = gen;
+               const CollideConfig& options, CollideScratch& scratch, CollideResult& result, const QueryFrame& f) {
+  CollideQuery<Lanes> q{probe, probe_tree, object, object_tree, options, scratch, result, f.rt};
+  q.gen = f.gen;
   q.exact = options.stop_layer == kExact;
   q.stop = options.stop_layer >= 0 ? static_cast<std::uint32_t>(options.stop_layer) : 0xffffffffu;
-  q.s = s;
-  q.slack = slack;
+  q.s = f.s;
+  q.slack = f.slack;
   if (!options.restrict_object) {
     q.descend(0, 0);
   } else {
@@ -246,6 +280,54 @@ void run_query(const Mesh& probe, const SphereTree& probe_tree, const Mesh& obje
       if (r < object_tree.num_nodes() && !result.stats.pair_limit_hit && !result.stats.work_limit_hit) q.descend(0, r);
   }
   result.stats.exact_evals = detail::exact_evaluations - q.evals0;
+}
+
+// The query on the active ISA, sorted if asked.
+void query(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree,
+           const CollideConfig& options, CollideScratch& scratch, CollideResult& result, const QueryFrame& f) {
+  on_active_isa([&](auto isa) {
+    run_query<typename decltype(isa)::type>(probe, probe_tree, object, object_tree, options, scratch, result, f);
+  });
+  if (options.sort_pairs) scratch.sort(result.pairs);
+}
+
+// The coherent collider's round on one ISA's kernels (coherent_traversal.inl).
+template <class Lanes>
+bool run_coherent(CoherentCollider& cc, const Mesh& probe, const SphereTree& probe_tree, const Mesh& object,
+                  const SphereTree& object_tree, const CollideConfig& options, CollideScratch& scratch,
+                  CollideResult& result, const QueryFrame& f, std::uint32_t round, double reach) {
+  CoherentQuery<Lanes> q{{probe, probe_tree, object, object_tree, options, scratch, result, f.rt}, cc};
+  q.gen = f.gen;
+  q.s = f.s;
+  q.slack = f.slack;
+  q.round = round;
+  q.reach = reach;
+  q.reach_f = static_cast<float>(reach * (1 - 1e-6));
+  return q.run();
+}
+
+// Checks the inputs, readies the scratch and fills `f`; false when there is nothing to collide
+// (result then says why, as collide() documents).
+bool frame_query(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree,
+                 const Pose& pose, CollideScratch& scratch, CollideResult& result, QueryFrame& f) {
+  if (probe_tree.nodes.empty() || object_tree.nodes.empty()) return false;
+  if (!pose.matrix().allFinite()) return false;  // boundaries validate poses; never crash here
+  if (probe_tree.num_depths > kMaxTreeDepth || object_tree.num_depths > kMaxTreeDepth) {
+    result.stats.truncated = 1;  // the stack is sized from num_depths: never from an unchecked value
+    return false;
+  }
+  scratch.prepare_for(probe, probe_tree, object, object_tree);
+  f.rt = transform_to_object(pose, probe, object);
+  // s >= ||R||_2: sqrt of the largest row sum of |R^T R| (Gershgorin), widened for its rounding.
+  const Eigen::Matrix3d G = f.rt.R.transpose() * f.rt.R;
+  const double g = G.cwiseAbs().rowwise().sum().maxCoeff();
+  f.s = std::sqrt(g) * (1 + 1e-12);
+  const SphereNode& rp = probe_tree.nodes[0];
+  const SphereNode& ro = object_tree.nodes[0];
+  f.mag = f.rt.t.norm() + f.s * (centre_of(rp).norm() + rp.radius) + centre_of(ro).norm() + ro.radius;
+  f.slack = static_cast<float>(1e-5 * f.mag) + 1e-30f;
+  f.gen = scratch.next_generation();
+  return true;
 }
 
 }  // namespace
@@ -318,50 +400,90 @@ FaceCounts count_faces(std::span<const FacePair> pairs, std::vector<std::uint32_
   return {distinct(&FacePair::probe), distinct(&FacePair::object)};
 }
 
+void CollideScratch::prepare_for(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object,
+                                 const SphereTree& object_tree) {
+  if (pkey_ != probe_tree.nodes.data() || phash_ != probe_tree.mesh_hash ||
+      lidx_.size() != probe_tree.face_order.size() || omark_.size() != object.faces.size() ||
+      cstamp_.size() != probe_tree.nodes.size() || osph_key_ != object_tree.nodes.data() ||
+      osph_hash_ != object_tree.mesh_hash || nstride_o_ != object_tree.nodes.size() + kMaxChildren ||
+      stack_cap_ < 8 * (probe_tree.num_depths + object_tree.num_depths) + 8)
+    prepare(probe, probe_tree, object, object_tree);
+}
+
 void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree,
              const Pose& pose, const CollideConfig& options, CollideScratch& scratch, CollideResult& result) {
   result.clear();
-  if (probe_tree.nodes.empty() || object_tree.nodes.empty()) return;
-  if (!pose.matrix().allFinite()) return;  // boundaries validate poses; never crash here
-  if (probe_tree.num_depths > kMaxTreeDepth || object_tree.num_depths > kMaxTreeDepth) {
-    result.stats.truncated = 1;  // the stack is sized from num_depths: never from an unchecked value
+  QueryFrame f;
+  if (frame_query(probe, probe_tree, object, object_tree, pose, scratch, result, f))
+    query(probe, probe_tree, object, object_tree, options, scratch, result, f);
+}
+
+void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object,
+                               const SphereTree& object_tree, const Pose& pose, const CollideConfig& options,
+                               CollideResult& result) {
+  ++stats_.rounds;
+  if (options.stop_layer != kExact || !options.tri_filter) {  // nothing to cache: the plain query
+    ++stats_.plain_rounds;
+    geom::collide(probe, probe_tree, object, object_tree, pose, options, scratch_, result);
     return;
   }
-  if (scratch.pkey_ != probe_tree.nodes.data() || scratch.phash_ != probe_tree.mesh_hash ||
-      scratch.lidx_.size() != probe_tree.face_order.size() || scratch.omark_.size() != object.faces.size() ||
-      scratch.cstamp_.size() != probe_tree.nodes.size() || scratch.osph_key_ != object_tree.nodes.data() ||
-      scratch.osph_hash_ != object_tree.mesh_hash || scratch.nstride_o_ != object_tree.nodes.size() + kMaxChildren ||
-      scratch.stack_cap_ < 8 * (probe_tree.num_depths + object_tree.num_depths) + 8)
-    scratch.prepare(probe, probe_tree, object, object_tree);
-
-  const RelTransform rt = transform_to_object(pose, probe, object);
-  // s >= ||R||_2: sqrt of the largest row sum of |R^T R| (Gershgorin), widened for its rounding.
-  const Eigen::Matrix3d G = rt.R.transpose() * rt.R;
-  const double g = G.cwiseAbs().rowwise().sum().maxCoeff();
-  const double s = std::sqrt(g) * (1 + 1e-12);
-  const SphereNode& rp = probe_tree.nodes[0];
-  const SphereNode& ro = object_tree.nodes[0];
-  const double mag = rt.t.norm() + s * (centre_of(rp).norm() + rp.radius) + centre_of(ro).norm() + ro.radius;
-  const float slack = static_cast<float>(1e-5 * mag) + 1e-30f;
-  const std::uint32_t gen = scratch.next_generation();
-
-  switch (simd::active_isa()) {
-#if defined(ST_SIMD_X86)
-    case simd::Isa::avx512:
-      run_query<simd::avx512::Lanes>(probe, probe_tree, object, object_tree, options, scratch, result, rt, s, slack, gen);
-      break;
-    case simd::Isa::avx2:
-      run_query<simd::avx2::Lanes>(probe, probe_tree, object, object_tree, options, scratch, result, rt, s, slack, gen);
-      break;
-    case simd::Isa::sse2:
-      run_query<simd::sse2::Lanes>(probe, probe_tree, object, object_tree, options, scratch, result, rt, s, slack, gen);
-      break;
-#endif
-    default:
-      run_query<simd::scalar::Lanes>(probe, probe_tree, object, object_tree, options, scratch, result, rt, s, slack, gen);
-      break;
+  if (!same_setup(probe_tree, object_tree, options)) adopt(probe_tree, object_tree, options);
+  if (round_ >= 0xfffffff0u) reset();
+  result.clear();
+  QueryFrame f;
+  if (!frame_query(probe, probe_tree, object, object_tree, pose, scratch_, result, f)) {
+    drop();
+    return;
   }
-  if (options.sort_pairs) sort_face_pairs(result.pairs, scratch.sort_keys_);
+  // The step: of the probe leaves near the object when there are any (what the certificates
+  // care about), else of the whole probe.
+  const SphereNode& root = probe_tree.nodes[0];
+  const bool near = near_.radius >= 0;
+  const double step =
+      !have_last_
+          ? 0.0
+          : moved_since(last_rt_, f.rt, near ? near_.centre : Vec3(root.centre[0], root.centre[1], root.centre[2]),
+                        near ? near_.radius : double(root.radius));
+  last_rt_ = f.rt;
+  have_last_ = true;
+  const std::uint32_t round = round_++;
+  if (step > max_step_ || round < plain_until_) {  // a jump: every certificate would fail
+    drop();
+    ++stats_.plain_rounds;
+    query(probe, probe_tree, object, object_tree, options, scratch_, result, f);
+    note_contact(probe, result);
+    return;
+  }
+  step_ = std::max(step, step_ * 0.9);
+  poses_[round % kPoses] = {f.rt, f.mag, round};
+  reach_ = choose_reach();
+  const bool ok = on_active_isa([&](auto isa) {
+    return run_coherent<typename decltype(isa)::type>(*this, probe, probe_tree, object, object_tree, options, scratch_,
+                                                      result, f, round, reach_);
+  });
+  if (!ok) {  // the pool is full: this round, and the next 64, by collide()
+    ++stats_.overflows;
+    ++stats_.plain_rounds;
+    drop();
+    plain_until_ = round_ + 63;
+    result.clear();
+    f.gen = scratch_.next_generation();
+    query(probe, probe_tree, object, object_tree, options, scratch_, result, f);
+    return;
+  }
+  if (result.stats.pair_limit_hit || result.stats.work_limit_hit || result.stats.truncated != 0) {
+    drop();  // a front cut short proves nothing about what it did not reach
+  } else {
+    front_.swap(next_front_);
+    cands_.swap(next_cands_);
+    have_front_ = true;
+  }
+  note_contact(probe, result);
+  stats_.entries = front_.size();
+  stats_.candidates = cands_.size();
+  stats_.peak_bytes =
+      std::max(stats_.peak_bytes, front_.size() * sizeof(detail::FrontEntry) + cands_.size() * sizeof(detail::Candidate));
+  if (options.sort_pairs) scratch_.sort(result.pairs);
 }
 
 }  // namespace st::geom

@@ -162,13 +162,22 @@ class CollideScratch {
  public:
   /// Sizes everything for these meshes/trees (also done lazily by collide()).
   void prepare(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree);
+  /// prepare() unless it was done for these meshes and trees already (what collide() does first).
+  void prepare_for(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree);
   /// Heap bytes held (the per-query caches and what is derived from the two trees).
   std::size_t bytes() const;
+  /// Sorts pairs by (probe, object) with the scratch's keys (sort_face_pairs).
+  void sort(std::span<FacePair> pairs) { sort_face_pairs(pairs, sort_keys_); }
+  /// A new query's generation: what each query stamps its per-node caches with.
+  std::uint32_t next_generation();
 
  private:
   void prepare_probe(const Mesh& probe, const SphereTree& probe_tree);  // prepare()'s probe part
   template <class Lanes>
   friend struct CollideQuery;  // collide.cpp: one per instruction set
+  template <class Lanes>
+  friend struct CoherentQuery;  // coherent_traversal.inl: the coherent collider's round
+  friend class CoherentCollider;
   friend void collide(const Mesh&, const SphereTree&, const Mesh&, const SphereTree&, const Pose&, const CollideConfig&,
                       CollideScratch&, CollideResult&);
   std::uint32_t gen_ = 0;
@@ -197,7 +206,6 @@ class CollideScratch {
   std::vector<std::uint32_t> omark_;        // object face -> generation it was counted
   std::vector<std::pair<std::uint32_t, std::uint32_t>> stack_;
   std::uint32_t stack_cap_ = 0;
-  std::uint32_t next_generation();
 };
 
 /// Collides probe (posed by `pose`: probe frame -> object frame) with object. The pair

@@ -92,7 +92,7 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
   // The lanes of one step of a batch (v as for tri_filter, from column j): the 15 coordinates, the
   // bound, the edges and the lanes the analysis covers (live, finite, M in range).
   struct TriStep {
-    WideLanes p[9], o[6], bound, ex[3], ey[3], ez[3], fx[3], fy[3], fz[3];
+    WideLanes p[9], o[6], scale, bound, ex[3], ey[3], ez[3], fx[3], fy[3], fz[3];
     std::uint32_t ok;  ///< bit l: lane l may be decided
   };
   [[gnu::always_inline]] static void tri_step(const float (*v)[kTriBatch], std::uint32_t n, std::uint32_t j, TriStep& t) {
@@ -105,6 +105,7 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
     t.ok = (WideMask::first(n - j) & ((sum - sum) <= WideLanes::broadcast(0.0f)) &
             (m >= WideLanes::broadcast(0x1p-30f)) & (m <= WideLanes::broadcast(0x1p36f)))
                .bits();
+    t.scale = m;
     t.bound = WideLanes::broadcast(0x1p-14f) * m * m * m;
     // Edges: P's e0 = p1 - p0, e1 = p2 - p1, e2 = p0 - p2; O's f0 = o1, f1 = o2 - o1, f2 = -o2.
     for (int k = 0; k < 3; ++k) {

@@ -103,6 +103,8 @@ inline Lanes operator*(Lanes a, Lanes b) { return {a.v * b.v}; }        ///< a �
 inline Lanes min(Lanes a, Lanes b) { return {a.v < b.v ? a.v : b.v}; }  ///< as minps (b if NaN)
 inline Lanes max(Lanes a, Lanes b) { return {a.v > b.v ? a.v : b.v}; }  ///< as maxps (b if NaN)
 inline Lanes abs(Lanes a) { return {__builtin_fabsf(a.v)}; }            ///< |a|
+inline Lanes operator/(Lanes a, Lanes b) { return {a.v / b.v}; }        ///< a / b, correctly rounded
+inline Lanes sqrt(Lanes a) { return {__builtin_sqrtf(a.v)}; }           ///< √a, correctly rounded
 inline Mask operator<=(Lanes a, Lanes b) { return {a.v <= b.v}; }       ///< a <= b (false for NaN)
 inline Mask operator>=(Lanes a, Lanes b) { return {a.v >= b.v}; }       ///< a >= b (false for NaN)
 inline Mask operator>(Lanes a, Lanes b) { return {a.v > b.v}; }         ///< a > b (false for NaN)
@@ -150,6 +152,8 @@ inline Lanes operator*(Lanes a, Lanes b) { return {_mm_mul_ps(a.v, b.v)}; }     
 inline Lanes min(Lanes a, Lanes b) { return {_mm_min_ps(a.v, b.v)}; }           ///< lane-wise min (b if NaN)
 inline Lanes max(Lanes a, Lanes b) { return {_mm_max_ps(a.v, b.v)}; }           ///< lane-wise max (b if NaN)
 inline Lanes abs(Lanes a) { return {_mm_andnot_ps(_mm_set1_ps(-0.0f), a.v)}; }  ///< lane-wise |a|
+inline Lanes operator/(Lanes a, Lanes b) { return {_mm_div_ps(a.v, b.v)}; }     ///< lane-wise a / b, correctly rounded
+inline Lanes sqrt(Lanes a) { return {_mm_sqrt_ps(a.v)}; }                       ///< lane-wise √a, correctly rounded
 /// a <= b per lane; false where either is NaN, as in scalar float.
 inline Mask operator<=(Lanes a, Lanes b) { return {_mm_cmple_ps(a.v, b.v)}; }
 /// a >= b per lane; false where either is NaN, as in scalar float.
@@ -200,6 +204,8 @@ inline Lanes operator*(Lanes a, Lanes b) { return {_mm256_mul_ps(a.v, b.v)}; }  
 inline Lanes min(Lanes a, Lanes b) { return {_mm256_min_ps(a.v, b.v)}; }              ///< lane-wise min (b if NaN)
 inline Lanes max(Lanes a, Lanes b) { return {_mm256_max_ps(a.v, b.v)}; }              ///< lane-wise max (b if NaN)
 inline Lanes abs(Lanes a) { return {_mm256_andnot_ps(_mm256_set1_ps(-0.0f), a.v)}; }  ///< lane-wise |a|
+inline Lanes operator/(Lanes a, Lanes b) { return {_mm256_div_ps(a.v, b.v)}; }  ///< lane-wise a / b, correctly rounded
+inline Lanes sqrt(Lanes a) { return {_mm256_sqrt_ps(a.v)}; }                    ///< lane-wise √a, correctly rounded
 /// a <= b per lane; false where either is NaN, as in scalar float.
 inline Mask operator<=(Lanes a, Lanes b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_LE_OQ)}; }
 /// a >= b per lane; false where either is NaN, as in scalar float.
@@ -246,6 +252,8 @@ inline Lanes operator*(Lanes a, Lanes b) { return {_mm512_mul_ps(a.v, b.v)}; }  
 inline Lanes min(Lanes a, Lanes b) { return {_mm512_min_ps(a.v, b.v)}; }        ///< lane-wise min (b if NaN)
 inline Lanes max(Lanes a, Lanes b) { return {_mm512_max_ps(a.v, b.v)}; }        ///< lane-wise max (b if NaN)
 inline Lanes abs(Lanes a) { return {_mm512_abs_ps(a.v)}; }                      ///< lane-wise |a|
+inline Lanes operator/(Lanes a, Lanes b) { return {_mm512_div_ps(a.v, b.v)}; }  ///< lane-wise a / b, correctly rounded
+inline Lanes sqrt(Lanes a) { return {_mm512_sqrt_ps(a.v)}; }                    ///< lane-wise √a, correctly rounded
 /// a <= b per lane; false where either is NaN, as in scalar float.
 inline Mask operator<=(Lanes a, Lanes b) { return {_mm512_cmp_ps_mask(a.v, b.v, _CMP_LE_OQ)}; }
 /// a >= b per lane; false where either is NaN, as in scalar float.

@@ -1,0 +1,345 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// spheretouch-bench slides: the coherent collider (geom::CoherentCollider) against collide() along
+// haptic motion. From each pose of a pose file the probe slides along the touched surface and
+// turns about the contact, a fixed step per round, forth and back (a triangle wave); a jerk series
+// slides at 0.01 mm and jumps 1 mm + 1° in one round half-way. Every round is timed on three
+// paths: "today" (collide() with every candidate through the exact test, the path before the
+// float filter), the filter (collide()'s default) and the coherent collider; each series is run
+// --reps times (the collider reset each time) and a round's time is its median over the reps.
+// The pair sets of the coherent collider and of collide() are compared on every round.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <iterator>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "bench.hpp"
+#include "bench_json.hpp"
+#include <spheretouch/geom/coherent.hpp>
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/mesh_io.hpp>
+#include <spheretouch/geom/pose_io.hpp>
+#include <spheretouch/geom/simd.hpp>
+#include <spheretouch/geom/sphere_tree.hpp>
+
+namespace st::bench {
+namespace {
+
+using geom::Mesh;
+using geom::Pose;
+using geom::Vec3;
+
+constexpr double kPi = 3.14159265358979323846;
+
+/// The motion of one series: from `start`, a slide of `step_mm` along `dir` and a turn of
+/// `step_deg` about `axis` through `pivot` per round, forth for `half` rounds then back; a jerk
+/// of 1 mm + 1° added from round `jerk_at` on (never when jerk_at < 0).
+struct Series {
+  Pose start;
+  Vec3 pivot, dir, axis;
+  double step_mm = 0, step_deg = 0;
+  int half = 100, jerk_at = -1;
+
+  Pose at(int k) const {
+    const int period = 2 * half;
+    const int phase = k % period;
+    const double s = phase <= half ? phase : period - phase;  // forth, then back
+    double along = s * step_mm, turn = s * step_deg;
+    if (jerk_at >= 0 && k >= jerk_at) along += 1.0, turn += 1.0;
+    Pose p = Pose::Identity();
+    p.linear() = Eigen::AngleAxisd(turn * kPi / 180, axis).toRotationMatrix();
+    p.translation() = pivot - p.linear() * pivot + along * dir;
+    return p * start;
+  }
+};
+
+/// Pivot, slide direction and turn axis at a pose: the contact's centre (mean of the touched
+/// object faces' centroids), a direction in the touched surface, and an axis between its normal
+/// and that direction's perpendicular (a turn that twists and rolls).
+bool series_at(const Mesh& object, const std::vector<geom::FacePair>& pairs, Series& s) {
+  if (pairs.empty()) return false;
+  Vec3 c = Vec3::Zero(), n = Vec3::Zero();
+  for (const geom::FacePair& fp : pairs) {
+    const auto& t = object.faces[fp.object];
+    const Vec3 a = object.vertex(t[0]), b = object.vertex(t[1]), d = object.vertex(t[2]);
+    c += (a + b + d) / 3;
+    n += (b - a).cross(d - a);
+  }
+  c /= double(pairs.size());
+  if (n.norm() == 0) n = Vec3::UnitZ();
+  n.normalize();
+  Vec3 dir = n.cross(Vec3::UnitX());
+  if (dir.norm() < 0.1) dir = n.cross(Vec3::UnitY());
+  dir.normalize();
+  s.pivot = c;
+  s.dir = dir;
+  s.axis = (n + n.cross(dir)).normalized();
+  return true;
+}
+
+double percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size())))];
+}
+
+double mean(const std::vector<double>& v) {
+  double s = 0;
+  for (double x : v) s += x;
+  return v.empty() ? 0 : s / double(v.size());
+}
+
+/// One series' figures.
+struct SeriesRow {
+  std::string name;
+  std::uint32_t contacts0 = 0;
+  double step_mm = 0, step_deg = 0;
+  bool jerk = false;
+  int rounds = 0;
+  double today_us = 0, filter_us = 0, coherent_us = 0;  // mean per round
+  double ratio_mean = 0, ratio_p90 = 0, ratio_max = 0;  // coherent / today, per round
+  int ratio_max_round = 0;
+  double vs_filter_mean = 0, vs_filter_p90 = 0, vs_filter_max = 0;  // coherent / filter
+  double filter_ratio_mean = 0;                                     // filter / today
+  double rebuild_ratio = 0;  // jerk series: the rebuild round after the jump, coherent / today
+  double max_ratio_except_rebuild = 0;
+  std::size_t mismatched_rounds = 0;
+  geom::CoherentStats stats;
+  std::size_t bytes = 0;
+};
+
+double us_since(std::chrono::steady_clock::time_point t0) {
+  return 1e6 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+}  // namespace
+
+void add_slides(CLI::App& app) {
+  struct Args {
+    std::string probe, object, poses, steps = "0.001,0.01,0.05,0.1", isa;
+    int rounds = 200, reps = 5;
+    double turn = 0.01;
+    geom::CoherentConfig coherent;
+    bool jerk = true, json = false;
+  };
+  auto a = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand(
+      "slides",
+      "The coherent collider against collide() along slides from each pose of a pose file (per-round ratios)");
+  cmd->add_option("--probe", a->probe, "probe mesh (the hand)")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--object", a->object, "object mesh")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--poses", a->poses, "pose file: the start of the series (16 numbers a line)")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--steps", a->steps, "slide per round, mm (one series each)")->capture_default_str();
+  cmd->add_option("--turn", a->turn, "turn per round, degrees (every series)")->capture_default_str();
+  cmd->add_option("--rounds", a->rounds, "rounds per series (forth half of them, back the other)")
+      ->check(CLI::Range(4, 100000))
+      ->capture_default_str();
+  cmd->add_option("--reps", a->reps, "runs of each series; a round's time is its median over them")
+      ->check(CLI::Range(1, 101))
+      ->capture_default_str();
+  cmd->add_option("--jerk", a->jerk, "also a 0.01 mm series with a 1 mm + 1° jump half-way")->capture_default_str();
+  cmd->add_option("--reach", a->coherent.reach, "the coherent collider's reach δ, mm (0: adapted to the motion)")
+      ->capture_default_str();
+  cmd->add_option("--max-step", a->coherent.max_step,
+                  "motion per round above which the coherent collider runs collide(), mm (0: its default)")
+      ->capture_default_str();
+  cmd->add_option("--isa", a->isa, "run the SIMD kernels on this instruction set (default: the best the CPU has)");
+  cmd->add_flag("--json", a->json, "print one JSON object instead of the table");
+  cmd->callback([a] {
+    if (!a->isa.empty()) {
+      geom::simd::Isa isa;
+      if (!geom::simd::parse_isa(a->isa, isa) || !geom::simd::set_isa(isa)) {
+        std::fprintf(stderr, "--isa %s: expected one of scalar, sse2, avx2, avx512 that this CPU has (best: %s)\n",
+                     a->isa.c_str(), geom::simd::isa_name(geom::simd::best_isa()));
+        throw CLI::RuntimeError(2);
+      }
+    }
+    Mesh probe, object;
+    for (auto [path, mesh] : {std::pair{&a->probe, &probe}, std::pair{&a->object, &object}}) {
+      auto m = geom::load_mesh(*path);
+      if (!m) {
+        std::fprintf(stderr, "%s\n", m.error().c_str());
+        throw CLI::RuntimeError(2);
+      }
+      *mesh = std::move(m.value().mesh);
+    }
+    const geom::SphereTree pt = geom::SphereTree::build(probe, {}).value();
+    const geom::SphereTree ot = geom::SphereTree::build(object, {}).value();
+    auto lines = geom::read_pose_lines(a->poses);
+    if (!lines) {
+      std::fprintf(stderr, "%s\n", lines.error().c_str());
+      throw CLI::RuntimeError(2);
+    }
+    std::vector<double> steps;
+    {
+      std::stringstream ss(a->steps);
+      std::string tok;
+      while (std::getline(ss, tok, ',')) steps.push_back(std::stod(tok));
+    }
+
+    geom::CollideScratch sc;
+    geom::CollideResult r_today, r_filter, r_coh, sorted_plain, sorted_coh;
+    geom::CollideConfig today;
+    today.tri_filter = false;
+    const geom::CollideConfig filter;
+    geom::CollideConfig sorted;
+    sorted.sort_pairs = true;
+    std::vector<SeriesRow> rows;
+    int done = 0;
+    const int total = int(lines.value().size()) * (int(steps.size()) + (a->jerk ? 1 : 0));
+    for (const geom::PoseLine& line : lines.value()) {
+      geom::collide(probe, pt, object, ot, line.pose, sorted, sc, sorted_plain);
+      Series base;
+      base.start = line.pose;
+      base.half = a->rounds / 2;
+      if (!series_at(object, sorted_plain.pairs, base)) continue;
+      const std::uint32_t contacts0 = sorted_plain.contacts();
+      std::vector<Series> series;
+      for (double st : steps) {
+        Series s = base;
+        s.step_mm = st, s.step_deg = a->turn;
+        series.push_back(s);
+      }
+      if (a->jerk) {
+        Series s = base;
+        s.step_mm = 0.01, s.step_deg = a->turn, s.jerk_at = a->rounds / 2;
+        series.push_back(s);
+      }
+      for (const Series& s : series) {
+        SeriesRow row;
+        row.contacts0 = contacts0;
+        row.step_mm = s.step_mm, row.step_deg = s.step_deg, row.jerk = s.jerk_at >= 0, row.rounds = a->rounds;
+        std::vector<std::vector<double>> t_today(a->rounds), t_filter(a->rounds), t_coh(a->rounds);
+        geom::CoherentCollider coh(a->coherent);
+        for (int rep = 0; rep < a->reps; ++rep) {
+          coh.reset();
+          coh.reset_stats();
+          for (int k = 0; k < a->rounds; ++k) {
+            const Pose pose = s.at(k);
+            auto t0 = std::chrono::steady_clock::now();
+            geom::collide(probe, pt, object, ot, pose, today, sc, r_today);
+            t_today[k].push_back(us_since(t0));
+            t0 = std::chrono::steady_clock::now();
+            geom::collide(probe, pt, object, ot, pose, filter, sc, r_filter);
+            t_filter[k].push_back(us_since(t0));
+            t0 = std::chrono::steady_clock::now();
+            coh.collide(probe, pt, object, ot, pose, filter, r_coh);
+            t_coh[k].push_back(us_since(t0));
+            if (rep == 0) {  // the pair sets, every round (untimed)
+              geom::collide(probe, pt, object, ot, pose, sorted, sc, sorted_plain);
+              sorted_coh.pairs = r_coh.pairs;
+              std::sort(sorted_coh.pairs.begin(), sorted_coh.pairs.end());
+              if (sorted_coh.pairs != sorted_plain.pairs || r_coh.contacts() != sorted_plain.contacts()) {
+                if (row.mismatched_rounds == 0) {  // the first disagreement of the series, for the record
+                  std::vector<geom::FacePair> only_c, only_p;
+                  std::set_difference(sorted_coh.pairs.begin(), sorted_coh.pairs.end(), sorted_plain.pairs.begin(),
+                                      sorted_plain.pairs.end(), std::back_inserter(only_c));
+                  std::set_difference(sorted_plain.pairs.begin(), sorted_plain.pairs.end(), sorted_coh.pairs.begin(),
+                                      sorted_coh.pairs.end(), std::back_inserter(only_p));
+                  std::fprintf(
+                      stderr, "round %d: %zu vs %zu pairs, only coherent %zu, only plain %zu, dup %d\n", k,
+                      r_coh.pairs.size(), sorted_plain.pairs.size(), only_c.size(), only_p.size(),
+                      int(std::adjacent_find(sorted_coh.pairs.begin(), sorted_coh.pairs.end()) != sorted_coh.pairs.end()));
+                  for (std::size_t i = 0; i < std::min<std::size_t>(3, only_p.size()); ++i)
+                    std::fprintf(stderr, "  only plain: %u %u\n", only_p[i].probe, only_p[i].object);
+                  for (std::size_t i = 0; i < std::min<std::size_t>(3, only_c.size()); ++i)
+                    std::fprintf(stderr, "  only coherent: %u %u\n", only_c[i].probe, only_c[i].object);
+                }
+                ++row.mismatched_rounds;
+              }
+            }
+          }
+        }
+        row.stats = coh.stats();
+        std::vector<double> ratio, vs_filter, filter_ratio;
+        double sum_today = 0, sum_filter = 0, sum_coh = 0;
+        for (int k = 0; k < a->rounds; ++k) {
+          const double td = percentile(t_today[k], 0.5), tf = percentile(t_filter[k], 0.5), tc = percentile(t_coh[k], 0.5);
+          sum_today += td, sum_filter += tf, sum_coh += tc;
+          ratio.push_back(tc / td);
+          vs_filter.push_back(tc / tf);
+          filter_ratio.push_back(tf / td);
+        }
+        row.today_us = sum_today / a->rounds, row.filter_us = sum_filter / a->rounds, row.coherent_us = sum_coh / a->rounds;
+        row.ratio_mean = mean(ratio), row.ratio_p90 = percentile(ratio, 0.9);
+        row.ratio_max_round = int(std::max_element(ratio.begin(), ratio.end()) - ratio.begin());
+        row.ratio_max = ratio[row.ratio_max_round];
+        row.vs_filter_mean = mean(vs_filter), row.vs_filter_p90 = percentile(vs_filter, 0.9);
+        row.vs_filter_max = *std::max_element(vs_filter.begin(), vs_filter.end());
+        row.filter_ratio_mean = mean(filter_ratio);
+        // The first round builds the front (a rebuild, as after a jerk); a jerk's rebuild is the
+        // round after the jump (the jump itself runs collide()).
+        const int rebuild = s.jerk_at >= 0 ? s.jerk_at + 1 : 0;
+        row.rebuild_ratio = ratio[rebuild];
+        for (int k = 0; k < a->rounds; ++k)
+          if (k != rebuild && k != 0) row.max_ratio_except_rebuild = std::max(row.max_ratio_except_rebuild, ratio[k]);
+        char name[96];
+        std::snprintf(name, sizeof name, "%s%.3g mm + %.3g°/round", row.jerk ? "jerk at " : "", s.step_mm, s.step_deg);
+        row.name = name;
+        rows.push_back(row);
+        ++done;
+        if (!a->json) std::fprintf(stderr, "  [%d/%d] %u contacts, %s\n", done, total, contacts0, name);
+      }
+    }
+
+    if (a->json) {
+      Json out = Json::array();
+      for (const SeriesRow& w : rows)
+        out.push_back({{"contacts", w.contacts0},
+                       {"step_mm", w.step_mm},
+                       {"step_deg", w.step_deg},
+                       {"jerk", w.jerk},
+                       {"rounds", w.rounds},
+                       {"today_us", round_to(w.today_us, 2)},
+                       {"filter_us", round_to(w.filter_us, 2)},
+                       {"coherent_us", round_to(w.coherent_us, 2)},
+                       {"ratio_mean", round_to(w.ratio_mean, 4)},
+                       {"ratio_p90", round_to(w.ratio_p90, 4)},
+                       {"ratio_max", round_to(w.ratio_max, 4)},
+                       {"ratio_max_round", w.ratio_max_round},
+                       {"max_ratio_except_rebuild", round_to(w.max_ratio_except_rebuild, 4)},
+                       {"rebuild_ratio", round_to(w.rebuild_ratio, 4)},
+                       {"vs_filter_mean", round_to(w.vs_filter_mean, 4)},
+                       {"vs_filter_p90", round_to(w.vs_filter_p90, 4)},
+                       {"vs_filter_max", round_to(w.vs_filter_max, 4)},
+                       {"filter_ratio_mean", round_to(w.filter_ratio_mean, 4)},
+                       {"mismatched_rounds", w.mismatched_rounds},
+                       {"plain_rounds", w.stats.plain_rounds},
+                       {"rebuilds", w.stats.rebuilds},
+                       {"refreshes", w.stats.refreshes},
+                       {"expansions", w.stats.expansions},
+                       {"reused", w.stats.reused},
+                       {"retested", w.stats.retested},
+                       {"overflows", w.stats.overflows},
+                       {"peak_pool_bytes", w.stats.peak_bytes},
+                       {"bytes", w.bytes}});
+      print_json({{"probe", a->probe},
+                  {"object", a->object},
+                  {"probe_faces", probe.num_faces()},
+                  {"object_faces", object.num_faces()},
+                  {"rounds", a->rounds},
+                  {"reps", a->reps},
+                  {"isa", geom::simd::isa_name(geom::simd::active_isa())},
+                  {"series", std::move(out)}});
+      return;
+    }
+    std::printf("%s x %s, %d rounds per series, median of %d reps per round, SIMD %s\n", a->probe.c_str(),
+                a->object.c_str(), a->rounds, a->reps, geom::simd::isa_name(geom::simd::active_isa()));
+    std::printf("%8s %-32s %9s %9s %9s %7s %7s %7s %9s %9s %8s %8s %9s %5s\n", "contacts", "series", "today_us",
+                "filter_us", "coh_us", "mean", "p90", "max", "max_ex_rb", "rebuild", "vs_filt", "refresh", "pool_MB",
+                "same");
+    for (const SeriesRow& w : rows)
+      std::printf("%8u %-32s %9.1f %9.1f %9.1f %7.3f %7.3f %7.3f %9.3f %9.3f %8.3f %8llu %9.2f %5s\n", w.contacts0,
+                  w.name.c_str(), w.today_us, w.filter_us, w.coherent_us, w.ratio_mean, w.ratio_p90, w.ratio_max,
+                  w.max_ratio_except_rebuild, w.rebuild_ratio, w.vs_filter_mean,
+                  static_cast<unsigned long long>(w.stats.refreshes), double(w.stats.peak_bytes) / 1e6,
+                  w.mismatched_rounds == 0 ? "yes" : "NO");
+  });
+}
+
+}  // namespace st::bench

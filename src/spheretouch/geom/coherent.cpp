@@ -1,0 +1,87 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// The coherent collider's bookkeeping (coherent.hpp). Its round, which needs the per-ISA kernels,
+// is CoherentCollider::collide in collide.cpp (coherent_traversal.inl).
+#include <spheretouch/geom/coherent.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace st::inline SPHERETOUCH_ABI::geom {
+
+bool CoherentCollider::same_setup(const SphereTree& probe_tree, const SphereTree& object_tree,
+                                  const CollideConfig& options) const {
+  if (probe_key_ != probe_tree.nodes.data() || probe_hash_ != probe_tree.mesh_hash ||
+      object_key_ != object_tree.nodes.data() || object_hash_ != object_tree.mesh_hash ||
+      restrict_ != options.restrict_object)
+    return false;
+  return !restrict_ || std::equal(roots_.begin(), roots_.end(), options.object_roots.begin(), options.object_roots.end());
+}
+
+void CoherentCollider::adopt(const SphereTree& probe_tree, const SphereTree& object_tree, const CollideConfig& options) {
+  reset();
+  probe_key_ = probe_tree.nodes.data();
+  probe_hash_ = probe_tree.mesh_hash;
+  object_key_ = object_tree.nodes.data();
+  object_hash_ = object_tree.mesh_hash;
+  restrict_ = options.restrict_object;
+  roots_.assign(options.object_roots.begin(), options.object_roots.end());
+  double sum = 0;
+  std::size_t leaves = 0;
+  for (const SphereNode& n : probe_tree.nodes)
+    if (n.leaf) sum += n.radius, ++leaves;
+  leaf_radius_ = leaves > 0 ? sum / double(leaves) : 0.0;
+  max_step_ = config_.max_step > 0 ? config_.max_step : leaf_radius_ / 64;
+  motion_key_.assign(probe_tree.nodes.size(), ~std::uint64_t{0});
+  motion_.assign(probe_tree.nodes.size(), 0.0);
+}
+
+void CoherentCollider::drop() {
+  have_front_ = false;
+  near_.radius = -1;
+  front_.clear();
+  cands_.clear();
+}
+
+void CoherentCollider::reset() {
+  drop();
+  round_ = 0;
+  plain_until_ = 0;
+  have_last_ = false;
+  step_ = 0;
+  for (detail::CertPose& p : poses_) p.round = ~0u;
+  for (detail::PoseDelta& d : deltas_) d.key = ~std::uint64_t{0};  // rounds count from 0 again
+  std::fill(motion_key_.begin(), motion_key_.end(), ~std::uint64_t{0});
+}
+
+double CoherentCollider::moved_since(const RelTransform& a, const RelTransform& b, const Vec3& c, double r) {
+  const Eigen::Matrix3d D = b.R - a.R;
+  return (D * c + (b.t - a.t)).norm() + D.norm() * r;
+}
+
+void CoherentCollider::note_contact(const Mesh& probe, const CollideResult& result) {
+  near_.radius = -1;
+  const std::size_t n = result.pairs.size();
+  if (n == 0) return;
+  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  const std::size_t stride = std::max<std::size_t>(1, n / 64);  // a sample: this only steers the policy
+  for (std::size_t i = 0; i < n; i += stride) {
+    const Vec3& v = probe.local[probe.faces[result.pairs[i].probe][0]];
+    lo = lo.cwiseMin(v), hi = hi.cwiseMax(v);
+  }
+  near_.centre = 0.5 * (lo + hi);
+  near_.radius = 0.5 * (hi - lo).norm() + leaf_radius_;
+}
+
+double CoherentCollider::choose_reach() const {
+  if (config_.reach > 0) return config_.reach;
+  return std::clamp(8 * step_, leaf_radius_ / 256, leaf_radius_ / 8);
+}
+
+std::size_t CoherentCollider::bytes() const {
+  auto b = [](const auto& v) { return v.capacity() * sizeof(v[0]); };
+  return b(front_) + b(next_front_) + b(cands_) + b(next_cands_) + b(motion_key_) + b(motion_) + b(roots_) +
+         scratch_.bytes();
+}
+
+}  // namespace st::geom

@@ -1,0 +1,183 @@
+// SPDX-License-Identifier: BSD-3-Clause
+/// \file
+/// CoherentCollider: collide() for a probe that moves a little between rounds (the haptic loop:
+/// 0.01–0.1 mm a millisecond). It returns exactly collide()'s pair set, and skips the tests whose
+/// outcome a certificate proves unchanged since the pose it was made at.
+//
+// What it keeps (the front of the last traversal, each entry with the pose it was proved at):
+//  * a group of sphere pairs found apart: the children of one node (or the pair itself) against
+//    the other node, with their smallest gap g. Valid while the probe node has moved less than g.
+//  * a leaf pair, with its candidate triangle pairs gathered with face boxes widened by the
+//    reach δ: every other face pair of the leaf pair is more than δ apart. Each candidate keeps
+//    its answer and its margin (the separation, or the depth of the origin inside P − O, proved
+//    by the certified float filter, or 0 when the exact test decided). Valid while the probe leaf
+//    has moved less than δ; a candidate's answer holds while the leaf moved less than its margin,
+//    else it is tested again at this pose.
+// "Moved" is a bound on |apply(T, v) - apply(T_i, v)| over the node's sphere, T_i the pose the
+// certificate was made at (never a sum of steps: jitter back and forth uses no margin up):
+// |(R - R_i) c + (t - t_i)| + ||R - R_i||_F r, widened for the rounding of both apply()s.
+// Why that is enough: a probe point moves by at most that bound, so a gap larger than it stays
+// open, and the support function of P − O changes by at most it in any direction, so a depth
+// larger than it keeps the origin inside (coherent_traversal.inl proves the margins).
+// A leaf pair's certificate is refreshed before it runs out, at a fraction of δ that differs
+// between leaf pairs (staggered), so refreshes spread over rounds instead of falling on one.
+// A round whose probe moved more than max_step since the last one runs collide() and drops
+// the cache (the next round rebuilds it): a jerk costs one plain round and one rebuild.
+#pragma once
+#include <spheretouch/abi.hpp>
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include <spheretouch/geom/collide.hpp>
+
+namespace st::inline SPHERETOUCH_ABI::geom {
+
+/// The coherent collider's knobs (every distance in the meshes' units).
+struct CoherentConfig {
+  /// Reach δ of a leaf pair's candidates (face pairs farther apart than δ are not kept).
+  /// 0 = adapt to the motion: 8 steps of the recent motion per round, within
+  /// [leaf radius / 256, leaf radius / 8] (the probe tree's mean leaf radius).
+  double reach = 0;
+  /// Motion of the probe in one round (bound over the whole probe) above which the round runs
+  /// plain collide() and the cache is dropped. 0 = the probe tree's mean leaf radius / 64 (faster
+  /// than that, certificates last too few rounds to pay for themselves).
+  double max_step = 0;
+  /// Bound on the cache (entries + candidates), bytes. A round that would exceed it runs plain
+  /// collide(), and so do the next 64 rounds.
+  std::size_t max_bytes = std::size_t(64) << 20;
+};
+
+/// What the coherent collider did (totals since construction or reset_stats()).
+struct CoherentStats {
+  std::uint64_t rounds = 0;        ///< rounds answered
+  std::uint64_t plain_rounds = 0;  ///< of those, by plain collide() (a jump, the pool full, a mode it does not cache)
+  std::uint64_t rebuilds = 0;      ///< rounds that started from the roots (first round, after a drop)
+  std::uint64_t expansions = 0;    ///< groups of apart sphere pairs tested again (their gap used up)
+  std::uint64_t refreshes = 0;     ///< leaf pairs whose candidates were gathered again
+  std::uint64_t reused = 0;        ///< candidate answers taken from their certificate
+  std::uint64_t retested = 0;      ///< candidates tested again (margin used up)
+  std::uint64_t overflows = 0;     ///< rounds that found the pool over max_bytes
+  std::size_t entries = 0;         ///< front entries after the last round
+  std::size_t candidates = 0;      ///< candidate pairs after the last round
+  std::size_t peak_bytes = 0;      ///< most pool bytes held after a round
+};
+
+namespace detail {
+/// One entry of the front (coherent.hpp, top): apart sphere pairs, or a leaf pair.
+struct FrontEntry {
+  std::uint32_t p = 0, o = 0;  ///< probe node, object node
+  std::uint32_t pose = 0;      ///< round the certificate was made at
+  float margin = 0;            ///< group: smallest gap; leaf pair: the reach δ its candidates were gathered with
+  std::uint32_t arg = 0;       ///< group: bit k = child k is in the group; leaf pair: first candidate
+  std::uint16_t count = 0;     ///< leaf pair: candidates
+  std::uint8_t kind = 0;       ///< FrontKind
+  std::uint8_t theta = 0;      ///< leaf pair: refreshed once it moved (256 + theta) / 512 of δ
+};
+/// The kinds of FrontEntry.
+enum FrontKind : std::uint8_t {
+  kPairApart = 0,       ///< the pair (p, o) itself is apart
+  kObjectChildren = 1,  ///< the children of o in `arg` are apart from p
+  kProbeChildren = 2,   ///< the children of p in `arg` are apart from o
+  kLeafPair = 3,        ///< leaf pair with candidates
+};
+/// A candidate triangle pair of a leaf pair and its certificate.
+struct Candidate {
+  std::uint32_t slot = 0;  ///< probe slot (tree order)
+  std::uint32_t face = 0;  ///< object face
+  float margin = 0;        ///< the answer holds while the probe leaf moved less than this from `pose`
+  std::uint32_t pose = 0;  ///< round of the certificate (a candidate tested again gets a new one)
+  std::uint8_t hit = 0;    ///< 1 when the faces intersect at the certificate's pose
+  std::uint8_t j = 0;      ///< the object face's place in its leaf (candidates are in (j, slot) order)
+};
+/// A round's change since a certificate pose (coherent_traversal.inl), kept per ring slot.
+struct PoseDelta {
+  Eigen::Matrix3d D;          ///< R - R_i
+  Vec3 dt;                    ///< t - t_i
+  double norm = 0;            ///< ||D||_F
+  double rnd = 0;             ///< rounding allowance of the bound
+  double whole = 0;           ///< the motion bound of the whole probe (its root sphere)
+  std::uint64_t key = ~0ull;  ///< (round << 32) | pose it was computed for
+};
+/// A pose certificates were made at.
+struct CertPose {
+  RelTransform rt;
+  double mag = 0;             ///< magnitude of the coordinates (for the rounding allowance)
+  std::uint32_t round = ~0u;  ///< the round it belongs to (a ring slot holds one of many)
+};
+}  // namespace detail
+
+/// collide() with certificates carried between rounds (coherent.hpp, top). One per (probe, object)
+/// pair and per caller thread, like CollideScratch; not thread-safe.
+class CoherentCollider {
+ public:
+  explicit CoherentCollider(const CoherentConfig& config = {}) : config_(config) {}
+
+  /// The pair set collide() gives for the same arguments (same pairs, same counts; the order may
+  /// differ unless options.sort_pairs). Approximate modes (stop_layer != kExact) and a round of
+  /// tri_filter = false run collide() itself. A round stopped by max_pairs or max_work drops the cache.
+  void collide(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, const SphereTree& object_tree,
+               const Pose& pose, const CollideConfig& options, CollideResult& result);
+  /// Forgets every certificate: the next round starts from the roots.
+  void reset();
+  /// Zeroes the counters.
+  void reset_stats() { stats_ = {}; }
+  const CoherentStats& stats() const { return stats_; }     ///< what it did
+  const CoherentConfig& config() const { return config_; }  ///< its knobs
+  /// Heap bytes held: the cache (at most config().max_bytes, plus one round's growth) and the scratch.
+  std::size_t bytes() const;
+  /// The reach δ the next rebuilt entries use (after the first round: resolved from config().reach).
+  double reach() const { return reach_; }
+
+ private:
+  template <class Lanes>
+  friend struct CoherentQuery;                  // coherent_traversal.inl: one per instruction set
+  static constexpr std::uint32_t kPoses = 256;  // certificate poses kept; older entries are redone
+
+  // The front was built for these trees and object roots.
+  bool same_setup(const SphereTree& probe_tree, const SphereTree& object_tree, const CollideConfig& options) const;
+  // Drops the front and remembers what the next is built for (the probe's leaf radius too).
+  void adopt(const SphereTree& probe_tree, const SphereTree& object_tree, const CollideConfig& options);
+  // Forgets the front (the next cached round rebuilds from the roots).
+  void drop();
+  // Bound on how far the points of the sphere (c, r) moved from pose `a` to pose `b`.
+  static double moved_since(const RelTransform& a, const RelTransform& b, const Vec3& c, double r);
+  // near_ from a round's pairs (a sample of their probe faces), or none.
+  void note_contact(const Mesh& probe, const CollideResult& result);
+  // δ for this round's new entries (config_.reach, or adapted to step_).
+  double choose_reach() const;
+
+  CoherentConfig config_;
+  CoherentStats stats_;
+  CollideScratch scratch_;
+  std::vector<detail::FrontEntry> front_, next_front_;
+  std::vector<detail::Candidate> cands_, next_cands_;
+  std::array<detail::CertPose, kPoses> poses_{};
+  std::array<detail::PoseDelta, kPoses> deltas_{};  // this round's change since each kept pose (lazily)
+  std::uint32_t round_ = 0;                         // rounds since reset (the current pose's id)
+  bool have_front_ = false;
+  std::uint32_t plain_until_ = 0;  // after an overflow: plain rounds until this round
+  // What the front was built for.
+  const void* probe_key_ = nullptr;
+  const void* object_key_ = nullptr;
+  std::uint64_t probe_hash_ = 0, object_hash_ = 0;
+  std::vector<std::uint32_t> roots_;
+  bool restrict_ = false;
+  // Motion.
+  RelTransform last_rt_{};
+  bool have_last_ = false;
+  double leaf_radius_ = 0;  // the probe tree's mean leaf radius
+  double step_ = 0;         // recent motion per round (decaying maximum)
+  struct {
+    Vec3 centre{Vec3::Zero()};  // probe-local
+    double radius = -1;         // < 0: none
+  } near_;                      // the probe's part in contact last round, where the step is measured
+  double reach_ = 0;
+  double max_step_ = 0;  // config_.max_step resolved
+  // Per probe node: the motion bound of this round against one certificate pose (memo).
+  std::vector<std::uint64_t> motion_key_;
+  std::vector<double> motion_;
+};
+
+}  // namespace st::geom

@@ -1,0 +1,497 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// One round of the coherent collider (coherent.hpp), compiled once per instruction set like
+// collide_traversal.inl, after it and inside the same region: it is a CollideQuery (the same
+// kernels, probe transforms, batches and counters) that walks the front instead of the trees.
+// No #include here: everything is defined inside the region, for its ISA.
+//
+// The margins. Every certificate is a distance d (mm, object frame) such that the answer cannot
+// change while every probe point of the node moved less than d from where the certificate put it:
+//  * a sphere gap sqrt(d2) - (r + q): the radii carry the slack that covers the float centres'
+//    error (collide.cpp, top), so the true gap is at least the computed one;
+//  * a box gap (face boxes, or the probe leaf's box): the boxes contain the very doubles exactly,
+//    so their separation along an axis is a distance between the triangles;
+//  * a separating axis a of the float filter (tri_filter's analysis): along the fixed float
+//    vector a the exact projections are within the bound of the computed ones, so the exact gap
+//    along a is at least gap - bound, and the distance at least (gap - bound) / |a|;
+//  * intersecting: the distance from the origin to the boundary of P - O is the least h(n)/|n|
+//    over its facet normals n, all among the 11 axes; h(n_exact) >= gap - bound (tri_filter), and
+//    |n_exact| <= |a| + 84 u M^2 (the axis error), so min over the axes of (gap - bound) /
+//    (|a| + 2^-17 M^2) is a depth: a motion smaller than it moves P - O's support by less, so the
+//    origin stays inside.
+// Each quotient is rounded (sqrt, division: u each), hence the final factor 1 - 2^-20.
+
+template <>
+struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
+  using Base = CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes>;
+
+  // Gap of sphere k (k < n <= 8) of a float SoA block to the sphere (qx, qy, qz; qr), as
+  // sphere_mask computes its test: sqrt(|c_k - q|^2) - (r_k + qr); NaN stays NaN.
+  static void sphere_gaps(const float* c, std::size_t st, std::uint32_t n, float qx, float qy, float qz, float qr,
+                          float* gap) {
+    const Lanes x = Lanes::broadcast(qx), y = Lanes::broadcast(qy), z = Lanes::broadcast(qz), r = Lanes::broadcast(qr);
+    for (std::uint32_t k = 0; k < n; k += Lanes::width) {
+      const Lanes dx = Lanes::load(c + k) - x;
+      const Lanes dy = Lanes::load(c + st + k) - y;
+      const Lanes dz = Lanes::load(c + 2 * st + k) - z;
+      const Lanes g = sqrt(dx * dx + dy * dy + dz * dz) - (Lanes::load(c + 3 * st + k) + r);
+      alignas(64) float out[Lanes::width];
+      store(out, g);
+      for (int l = 0; l < Lanes::width && k + l < n; ++l) gap[k + l] = out[l];
+    }
+  }
+  template <class L>
+  static void store(float* out, L v) {
+    std::memcpy(out, &v.v, sizeof(float) * L::width);
+  }
+
+  // One axis for the margins (see the top of this file): `sepm` gains the best proved
+  // separation, `inm` keeps the least proved depth.
+  [[gnu::always_inline]] static void margin_axis(WideLanes ax, WideLanes ay, WideLanes az, const TriStep& t,
+                                                 WideLanes m2, WideLanes& sepm, WideLanes& inm) {
+    const WideLanes* p = t.p;
+    const WideLanes* o = t.o;
+    const WideLanes d0 = ax * p[0] + ay * p[1] + az * p[2];
+    const WideLanes d1 = ax * p[3] + ay * p[4] + az * p[5];
+    const WideLanes d2 = ax * p[6] + ay * p[7] + az * p[8];
+    const WideLanes e1 = ax * o[0] + ay * o[1] + az * o[2];
+    const WideLanes e2 = ax * o[3] + ay * o[4] + az * o[5];
+    const WideLanes zero = WideLanes::broadcast(0.0f);
+    const WideLanes pmin = min(d0, min(d1, d2)), pmax = max(d0, max(d1, d2));
+    const WideLanes omin = min(zero, min(e1, e2)), omax = max(zero, max(e1, e2));
+    const WideLanes len = sqrt(ax * ax + ay * ay + az * az) * WideLanes::broadcast(1.0f + 0x1p-20f);
+    const WideLanes sep = max(omin - pmax, pmin - omax) - t.bound;
+    const WideLanes dep = min(pmax - omin, omax - pmin) - t.bound;
+    sepm = max(sep / len, sepm);  // a zero axis: sep < 0, -inf or NaN, and max keeps sepm
+    inm = min(dep / (len + WideLanes::broadcast(0x1p-17f) * m2), inm);
+  }
+
+  // tri_filter with margins: for the n <= kTriBatch pairs of v (as tri_filter reads them), bit i
+  // of `decided` when pair i is proved apart or intersecting, of `overlap` when intersecting, and
+  // margin[i] the distance it stays so (0 when undecided). `full` false: the two normals only (a
+  // first pass that proves most candidates apart; it decides no intersection).
+  static void tri_margins(const float (*v)[kTriBatch], std::uint32_t n, bool full, float* margin,
+                          std::uint32_t& decided, std::uint32_t& overlap) {
+    decided = overlap = 0;
+    for (std::uint32_t j = 0; j < n; j += WideLanes::width) {
+      TriStep t;
+      tri_step(v, n, j, t);
+      const WideLanes m2 = t.scale * t.scale;
+      const WideLanes zero = WideLanes::broadcast(0.0f);
+      WideLanes sepm = zero, inm = WideLanes::broadcast(std::numeric_limits<float>::infinity());
+      margin_axis(t.ey[0] * t.ez[1] - t.ez[0] * t.ey[1], t.ez[0] * t.ex[1] - t.ex[0] * t.ez[1],
+                  t.ex[0] * t.ey[1] - t.ey[0] * t.ex[1], t, m2, sepm, inm);
+      margin_axis(t.fy[0] * t.fz[1] - t.fz[0] * t.fy[1], t.fz[0] * t.fx[1] - t.fx[0] * t.fz[1],
+                  t.fx[0] * t.fy[1] - t.fy[0] * t.fx[1], t, m2, sepm, inm);
+      if (full && ((sepm > zero).bits() & t.ok) != t.ok)
+        for (int a = 0; a < 3; ++a)
+          for (int b = 0; b < 3; ++b)
+            margin_axis(t.ey[a] * t.fz[b] - t.ez[a] * t.fy[b], t.ez[a] * t.fx[b] - t.ex[a] * t.fz[b],
+                        t.ex[a] * t.fy[b] - t.ey[a] * t.fx[b], t, m2, sepm, inm);
+      // Lanes whose edge axes were skipped (all lanes apart by a normal) have inm <= -sepm < 0;
+      // without `full` no lane is proved intersecting.
+      const std::uint32_t sp = (sepm > zero).bits() & t.ok, in = full ? (inm > zero).bits() & t.ok : 0u;
+      alignas(64) float s[WideLanes::width], d[WideLanes::width];
+      store(s, sepm);
+      store(d, inm);
+      const std::uint32_t one = sp ^ in;
+      decided |= one << j;
+      overlap |= (in & ~sp) << j;
+      for (int l = 0; l < WideLanes::width && j + l < n; ++l) {
+        const float x = (one >> l) & 1u ? ((sp >> l) & 1u ? s[l] : d[l]) : 0.0f;
+        margin[j + l] = x * (1.0f - 0x1p-20f);
+      }
+    }
+  }
+
+  CoherentCollider& cc;
+  double reach = 0;         // δ of the entries made this round
+  float reach_f = 0;        // δ rounded down to float (what entries record)
+  std::uint32_t round = 0;  // this round's id
+  bool overflow = false;    // the pool went over max_bytes: this round is abandoned
+  using Delta = detail::PoseDelta;
+  // The filter-with-margins batch: candidates (by index in next_cands_) waiting for tri_margins.
+  std::uint32_t m_index[kTriBatch] = {}, m_slot[kTriBatch] = {}, m_face[kTriBatch] = {};
+  std::uint32_t m_n = 0;
+  // ... and those the normals did not prove apart, with their coordinates, for all 11 axes.
+  std::uint32_t h_index[kTriBatch] = {}, h_slot[kTriBatch] = {}, h_face[kTriBatch] = {};
+  std::uint32_t h_n = 0;
+  alignas(64) float h_v[15][kTriBatch] = {};
+
+  // Bound on how far any point of probe node p's sphere moved between the certificate pose
+  // `pose` and this round (coherent.hpp, top); infinity when that pose is no longer kept.
+  // `memo`: keep it per probe node for the next entry of the same node and pose.
+  // Below `margin`, the motion of probe node p since `pose`? The whole probe's bound first (one
+  // per pose and round), the node's own only when that is not enough.
+  bool still(std::uint32_t p, std::uint32_t pose, float margin) {
+    if (round - pose >= CoherentCollider::kPoses) return false;
+    return double(margin) > delta(pose).whole || double(margin) > motion(p, pose);
+  }
+  // This round's change since `pose` (kept no more than kPoses rounds).
+  const Delta& delta(std::uint32_t pose) {
+    const std::uint64_t key = (std::uint64_t{round} << 32) | pose;
+    const Delta& hot = cc.deltas_[pose % CoherentCollider::kPoses];
+    if (hot.key == key && round - pose < CoherentCollider::kPoses) [[likely]]
+      return hot;
+    return delta_slow(pose);
+  }
+  [[gnu::noinline]] const Delta& delta_slow(std::uint32_t pose) {
+    static const Delta expired = [] {
+      Delta d;
+      d.whole = std::numeric_limits<double>::infinity();
+      return d;
+    }();
+    if (round - pose >= CoherentCollider::kPoses) return expired;  // its ring slot holds a newer pose
+    Delta& d = cc.deltas_[pose % CoherentCollider::kPoses];
+    const detail::CertPose& cp = cc.poses_[pose % CoherentCollider::kPoses];
+    ST_ASSERT(cp.round == pose, "a pose younger than kPoses rounds is still in its ring slot");
+    d.D = rt.R - cp.rt.R;
+    d.dt = rt.t - cp.rt.t;
+    d.norm = d.D.norm();  // Frobenius >= spectral
+    // apply() rounds each coordinate within ~4e-16 of the magnitude, the bound's own few
+    // operations a few 1e-16 relative: 1e-12 of both magnitudes covers both poses' and it.
+    d.rnd = 1e-12 * (cc.poses_[round % CoherentCollider::kPoses].mag + cp.mag) + 1e-300;
+    d.key = (std::uint64_t{round} << 32) | pose;
+    d.whole = node_motion(d, PT.nodes[0]);
+    return d;
+  }
+  static double node_motion(const Delta& d, const SphereNode& h) {
+    const Vec3 c(h.centre[0], h.centre[1], h.centre[2]);
+    return ((d.D * c + d.dt).norm() + d.norm * double(h.radius)) * (1 + 1e-9) + d.rnd;
+  }
+  // `memo`: keep it per probe node for the next entry of the same node and pose.
+  double motion(std::uint32_t p, std::uint32_t pose, bool memo = true) {
+    if (round - pose >= CoherentCollider::kPoses) return std::numeric_limits<double>::infinity();
+    const std::uint64_t key = (std::uint64_t{round} << 32) | pose;
+    if (memo && cc.motion_key_[p] == key) return cc.motion_[p];
+    const double m = node_motion(delta(pose), PT.nodes[p]);
+    if (memo) cc.motion_key_[p] = key, cc.motion_[p] = m;
+    return m;
+  }
+
+  // The pool in bytes (what max_bytes bounds).
+  std::size_t pool_bytes() const {
+    return cc.next_front_.size() * sizeof(detail::FrontEntry) + cc.next_cands_.size() * sizeof(detail::Candidate);
+  }
+  void add_group(std::uint8_t kind, std::uint32_t p, std::uint32_t o, std::uint32_t mask, float gap) {
+    detail::FrontEntry e;
+    e.p = p, e.o = o, e.pose = round, e.kind = kind, e.arg = mask;
+    e.margin = gap * (1.0f - 0x1p-20f);
+    cc.next_front_.push_back(e);
+  }
+
+  // A leaf pair's refresh point: a fraction of δ in [1/2, 1) that differs between leaf pairs.
+  static std::uint8_t stagger(std::uint32_t p, std::uint32_t o) {
+    return static_cast<std::uint8_t>((p * 0x9e3779b1u ^ o * 0x85ebca77u) >> 24);
+  }
+  static float widen_below(float x, double by) { return float_below(double(x) - by); }
+  static float widen_above(float x, double by) { return float_above(double(x) + by); }
+
+  // Leaf pair (p, o) at this pose: its candidates within δ with their certificates (or the pair
+  // apart, with its gap, when its boxes are farther than δ). Emits the intersecting pairs. `old`:
+  // the entry this refreshes, whose candidates keep their certificates where these still hold.
+  void build_leaf(std::uint32_t p, std::uint32_t o, const detail::FrontEntry* old = nullptr) {
+    const SphereNode& hp = PT.nodes[p];
+    const SphereNode& ho = OT.nodes[o];
+    ++res.stats.leaf_pairs;
+    const std::array<float, 8>& u = probe_leaf(p);
+    {  // the probe leaf's box against the object leaf's sphere: apart by more than δ?
+      const float* os = sc.osph_.data();
+      const std::size_t so = sc.nstride_o_;
+      float d2 = 0;
+      for (int k = 0; k < 3; ++k) {
+        const float c = os[k * so + o];
+        const float d = std::max(0.0f, std::max(u[k] - c, c - u[3 + k]));
+        d2 += d * d;
+      }
+      const float gap = std::sqrt(d2) - (os[3 * so + o] + slack);
+      if (gap >= reach_f) return add_group(detail::kPairApart, p, o, 0, gap);
+    }
+    {  // the probe leaf's box against the object leaf's box
+      const std::array<float, 8>& v = sc.obox_[o];
+      float gap = 0;
+      for (int k = 0; k < 3; ++k) gap = std::max(gap, std::max(v[k] - u[3 + k], u[k] - v[3 + k]));
+      if (gap >= reach_f) return add_group(detail::kPairApart, p, o, 0, gap);
+    }
+    detail::FrontEntry e;
+    e.p = p, e.o = o, e.pose = round, e.kind = detail::kLeafPair, e.margin = reach_f;
+    e.arg = static_cast<std::uint32_t>(cc.next_cands_.size());
+    e.theta = stagger(p, o);
+    float w[6];
+    for (int k = 0; k < 3; ++k) w[k] = widen_below(u[k], reach), w[3 + k] = widen_above(u[3 + k], reach);
+    const detail::Candidate* prev = old ? cc.cands_.data() + old->arg : nullptr;
+    const detail::Candidate* prev_end = old ? prev + old->count : nullptr;
+    const FaceBox* ob = OT.face_boxes.data() + ho.first;
+    const std::uint64_t mo = face_box_mask(ob, ho.count, w);
+    if (mo != 0) {
+      const float inf = std::numeric_limits<float>::infinity();
+      float ou[6] = {inf, inf, inf, -inf, -inf, -inf};
+      for (std::uint64_t m = mo; m != 0; m &= m - 1) {
+        const FaceBox& fb = ob[std::countr_zero(m)];
+        for (int k = 0; k < 3; ++k) ou[k] = std::min(ou[k], fb.lo[k]), ou[3 + k] = std::max(ou[3 + k], fb.hi[k]);
+      }
+      for (int k = 0; k < 3; ++k) ou[k] = widen_below(ou[k], reach), ou[3 + k] = widen_above(ou[3 + k], reach);
+      const std::uint64_t mp = probe_mask(hp.first, hp.count, ou);
+      const float* pb = sc.pbox_.data();
+      const std::size_t st = sc.pstride_;
+      for (std::uint64_t m = mo; mp != 0 && m != 0; m &= m - 1) {
+        const unsigned j = static_cast<unsigned>(std::countr_zero(m));
+        const FaceBox& fb = ob[j];
+        const float b[6] = {widen_below(fb.lo[0], reach), widen_below(fb.lo[1], reach), widen_below(fb.lo[2], reach),
+                            widen_above(fb.hi[0], reach), widen_above(fb.hi[1], reach), widen_above(fb.hi[2], reach)};
+        const std::uint32_t of = OT.face_order[ho.first + j];
+        for (std::uint64_t mf = probe_mask(hp.first, hp.count, b) & mp; mf != 0; mf &= mf - 1) {
+          const std::uint32_t slot = hp.first + static_cast<unsigned>(std::countr_zero(mf));
+          // Apart boxes: their gap is the certificate, no test needed.
+          float gap = 0;
+          for (int k = 0; k < 3; ++k)
+            gap = std::max(gap, std::max(fb.lo[k] - pb[(3 + k) * st + slot], pb[k * st + slot] - fb.hi[k]));
+          const auto at = static_cast<std::uint32_t>(cc.next_cands_.size());
+          cc.next_cands_.push_back({slot, of, gap * (1.0f - 0x1p-20f), round, 0, static_cast<std::uint8_t>(j)});
+          if (gap > 0) continue;
+          // The same pair in the entry refreshed, its certificate still good: kept.
+          while (prev != prev_end && (prev->j < j || (prev->j == j && prev->slot < slot))) ++prev;
+          if (prev != prev_end && prev->j == j && prev->slot == slot && still(p, prev->pose, prev->margin)) {
+            cc.next_cands_.back() = *prev;
+            ++cc.stats_.reused;
+            check_decision(slot, of, prev->hit != 0);
+            if (prev->hit) emit(PT.face_order[slot], of);
+            continue;
+          }
+          ++res.stats.tri_pairs;
+          m_index[m_n] = at, m_slot[m_n] = slot, m_face[m_n] = of;
+          if (++m_n == kTriBatch) flush_margins();
+        }
+      }
+    }
+    e.count = static_cast<std::uint16_t>(cc.next_cands_.size() - e.arg);
+    cc.next_front_.push_back(e);
+  }
+
+  // The candidates waiting for their margins: the filter with margins, the exact test for the
+  // undecided (margin 0: tested again every round).
+  void flush_margins() {
+    if (m_n == 0) return;
+    alignas(64) float v[15][kTriBatch];
+    prep_tris(m_slot, m_face, m_n, v);
+    float margin[kTriBatch];
+    std::uint32_t apart = 0, overlap = 0;
+    tri_margins(v, m_n, false, margin, apart, overlap);
+    for (std::uint32_t i = 0; i < m_n; ++i) {
+      if ((apart >> i) & 1u) {
+        check_decision(m_slot[i], m_face[i], false);
+        certify(m_index[i], margin[i], false);
+        continue;
+      }
+      h_index[h_n] = m_index[i], h_slot[h_n] = m_slot[i], h_face[h_n] = m_face[i];
+      for (int r = 0; r < 15; ++r) h_v[r][h_n] = v[r][i];
+      if (++h_n == kTriBatch) flush_hard();
+    }
+    m_n = 0;
+  }
+  // The hard candidates through all 11 axes; the undecided through the exact test (margin 0).
+  void flush_hard() {
+    if (h_n == 0) return;
+    pad_lanes(h_v, h_n);
+    float margin[kTriBatch];
+    std::uint32_t decided = 0, overlap = 0;
+    tri_margins(h_v, h_n, true, margin, decided, overlap);
+    for (std::uint32_t i = 0; i < h_n; ++i) {
+      bool hit;
+      if ((decided >> i) & 1u) {
+        hit = (overlap >> i) & 1u;
+        check_decision(h_slot[i], h_face[i], hit);
+      } else {
+        hit = exact_pair(h_slot[i], h_face[i]);
+        margin[i] = 0;
+      }
+      certify(h_index[i], margin[i], hit);
+      if (hit) emit(PT.face_order[h_slot[i]], h_face[i]);
+    }
+    h_n = 0;
+  }
+  void certify(std::uint32_t at, float margin, bool hit) {
+    detail::Candidate& c = cc.next_cands_[at];
+    c.margin = margin;
+    c.pose = round;
+    c.hit = hit;
+  }
+
+  // A cached leaf pair: the candidates whose certificate holds give their answer, the others
+  // are tested at this pose and certified anew (the leaf pair's own certificate, for the face
+  // pairs that are not candidates, stays the entry's).
+  void reuse_leaf(const detail::FrontEntry& e) {
+    detail::FrontEntry n = e;
+    n.arg = static_cast<std::uint32_t>(cc.next_cands_.size());
+    cc.next_front_.push_back(n);
+    const detail::Candidate* c = cc.cands_.data() + e.arg;
+    bool prepared = false;
+    // The bound for the candidates' poses: the whole probe's, then the leaf's when that is not enough.
+    std::uint32_t last_pose = ~0u;
+    double whole = 0, leaf = 0;
+    bool have_leaf = false;
+    for (std::uint32_t i = 0; i < e.count; ++i) {
+      const auto at = static_cast<std::uint32_t>(cc.next_cands_.size());
+      cc.next_cands_.push_back(c[i]);
+      if (c[i].pose != last_pose) last_pose = c[i].pose, whole = delta(last_pose).whole, have_leaf = false;
+      if (double(c[i].margin) <= whole && !have_leaf) leaf = motion(e.p, last_pose, false), have_leaf = true;
+      if (double(c[i].margin) > whole || double(c[i].margin) > leaf) {
+        ++cc.stats_.reused;
+        if (c[i].hit) emit(PT.face_order[c[i].slot], c[i].face);
+        check_decision(c[i].slot, c[i].face, c[i].hit != 0, prepared, e.p);
+        continue;
+      }
+      ++cc.stats_.retested;
+      if (!prepared) probe_leaf(e.p), prepared = true;
+      ++res.stats.tri_pairs;
+      m_index[m_n] = at, m_slot[m_n] = c[i].slot, m_face[m_n] = c[i].face;
+      if (++m_n == kTriBatch) flush_margins();
+    }
+  }
+  // Checking mode: a reused answer against the exact test at this pose (the leaf transformed first).
+  void check_decision([[maybe_unused]] std::uint32_t slot, [[maybe_unused]] std::uint32_t of, [[maybe_unused]] bool hit,
+                      [[maybe_unused]] bool& prepared, [[maybe_unused]] std::uint32_t p) {
+#if defined(ST_CHECKS)
+    if (!prepared) probe_leaf(p), prepared = true;
+    ST_ASSERT(hit == overlaps(slot, of), "a certified answer is the exact test's at this pose");
+#endif
+  }
+  using Base::check_decision;
+
+  // Children of (p, o) on one side, those in `mask`, tested at this pose: those nearer than δ are
+  // pushed for the walk, the others make one group with their least gap.
+  void split(std::uint32_t p, std::uint32_t o, bool probe_side, std::uint32_t mask,
+             std::pair<std::uint32_t, std::uint32_t>* stack, std::uint32_t& n) {
+    const float* ps = sc.psph_.data();
+    const float* os = sc.osph_.data();
+    const std::size_t sp = sc.nstride_p_, so = sc.nstride_o_;
+    const SphereNode& h = probe_side ? PT.nodes[p] : OT.nodes[o];
+    float gap[kMaxChildren];
+    if (probe_side) {
+      probe_children(p);
+      sphere_gaps(ps + h.first, sp, h.count, os[o], os[so + o], os[2 * so + o], os[3 * so + o], gap);
+    } else {
+      sphere_gaps(os + h.first, so, h.count, ps[p], ps[sp + p], ps[2 * sp + p], ps[3 * sp + p], gap);
+    }
+    res.stats.node_pairs += static_cast<std::uint32_t>(std::popcount(mask));
+    std::uint32_t near = 0, apart = 0;
+    float least = std::numeric_limits<float>::infinity();
+    for (std::uint32_t m = mask; m != 0; m &= m - 1) {
+      const unsigned k = static_cast<unsigned>(std::countr_zero(m));
+      if (gap[k] >= reach_f) {  // NaN is near: never certified
+        apart |= 1u << k;
+        least = std::min(least, gap[k]);
+      } else {
+        near |= 1u << k;
+      }
+    }
+    if (apart != 0) add_group(probe_side ? detail::kProbeChildren : detail::kObjectChildren, p, o, apart, least);
+    push_children(near, h.first, probe_side ? o : p, probe_side, stack, n);
+  }
+
+  // The walk of collide() from the pairs on the stack, recording the front as it goes.
+  void walk_front(std::pair<std::uint32_t, std::uint32_t>* stack, std::uint32_t n) {
+    while (n > 0 && !res.stats.pair_limit_hit && !overflow) {
+      if (opt.max_work != UINT64_MAX) [[unlikely]] {
+        res.stats.exact_evals = detail::exact_evaluations - evals0;
+        if (res.stats.work() > opt.max_work) {
+          res.stats.work_limit_hit = true;
+          return;
+        }
+      }
+      const auto [p, o] = stack[--n];
+      const SphereNode& hp = PT.nodes[p];
+      const SphereNode& ho = OT.nodes[o];
+      const bool tp = hp.leaf, to = ho.leaf;
+      if (tp && to) {
+        build_leaf(p, o);
+        continue;
+      }
+      if (n + kMaxChildren > sc.stack_cap_) [[unlikely]] {
+        ++res.stats.truncated;
+        return;
+      }
+      const bool object_side = !to && (tp || ho.radius >= s * hp.radius);
+      split(p, o, !object_side, (1u << (object_side ? ho.count : hp.count)) - 1u, stack, n);
+    }
+  }
+
+  // A group whose gap the motion used up: its pairs tested again at this pose.
+  void expand(const detail::FrontEntry& e) {
+    ++cc.stats_.expansions;
+    auto* stack = sc.stack_.data();
+    std::uint32_t n = 0;
+    if (e.kind == detail::kPairApart) {
+      put_probe_sphere(e.p);
+      const float* ps = sc.psph_.data();
+      const std::size_t sp = sc.nstride_p_;
+      float gap;
+      sphere_gaps(sc.osph_.data() + e.o, sc.nstride_o_, 1, ps[e.p], ps[sp + e.p], ps[2 * sp + e.p], ps[3 * sp + e.p], &gap);
+      res.stats.node_pairs += 1;
+      if (gap >= reach_f) return add_group(detail::kPairApart, e.p, e.o, 0, gap);
+      stack[n++] = {e.p, e.o};
+    } else {
+      if (e.kind == detail::kObjectChildren) put_probe_sphere(e.p);
+      split(e.p, e.o, e.kind == detail::kProbeChildren, e.arg, stack, n);
+    }
+    walk_front(stack, n);
+  }
+
+  // The round: every entry of the front kept, refreshed or expanded (or, the first round, the
+  // roots expanded). False when the pool went over max_bytes (the caller runs collide()).
+  bool run() {
+    std::uint64_t scanned = 0;
+    cc.next_front_.clear();
+    cc.next_cands_.clear();
+    const std::size_t limit = cc.config_.max_bytes;
+    auto expand_root = [&](std::uint32_t r) {
+      detail::FrontEntry e;
+      e.p = 0, e.o = r, e.kind = detail::kPairApart;
+      expand(e);
+    };
+    if (!cc.have_front_) {
+      ++cc.stats_.rebuilds;
+      if (!opt.restrict_object) {
+        expand_root(0);
+      } else {
+        for (const std::uint32_t r : opt.object_roots)
+          if (r < OT.num_nodes()) expand_root(r);
+      }
+    } else {
+      for (const detail::FrontEntry& e : cc.front_) {
+        if (res.stats.pair_limit_hit || res.stats.work_limit_hit || res.stats.truncated != 0) break;
+        // The budget counts what this round does: each entry looked at and each answer taken
+        // from a certificate is a unit, besides the tests it runs (CollideStats::work()).
+        scanned += 1 + e.count;
+        if (opt.max_work != UINT64_MAX) [[unlikely]] {
+          res.stats.exact_evals = detail::exact_evaluations - evals0;
+          if (res.stats.work() + scanned > opt.max_work) {
+            res.stats.work_limit_hit = true;
+            break;
+          }
+        }
+        if (pool_bytes() > limit) {
+          overflow = true;
+          break;
+        }
+        if (e.kind != detail::kLeafPair) {
+          if (still(e.p, e.pose, e.margin))
+            cc.next_front_.push_back(e);
+          else
+            expand(e);
+        } else if (!still(e.p, e.pose, e.margin * float(256 + e.theta) / 512.0f)) {
+          ++cc.stats_.refreshes;
+          build_leaf(e.p, e.o, &e);
+        } else {
+          reuse_leaf(e);
+        }
+      }
+    }
+    flush_margins();
+    flush_hard();
+    flush_tris();
+    flush_full();
+    if (pool_bytes() > limit) overflow = true;
+    res.stats.exact_evals = detail::exact_evaluations - evals0;
+    return !overflow;
+  }
+};

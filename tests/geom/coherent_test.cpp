@@ -1,0 +1,273 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Tests src/spheretouch/geom/coherent.*: the coherent collider returns collide()'s pair set on
+// every round of slides, jitter and jerks (real meshes, every ISA, far from the origin, tiny and
+// huge scales, coplanar and degenerate faces), reuses its certificates where the motion allows,
+// and falls back to collide() on jumps, budgets and a full pool.
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+#include <spheretouch/geom/coherent.hpp>
+#include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/geom/simd.hpp>
+#include <spheretouch/geom/sphere_tree.hpp>
+#include "test_models.hpp"
+#include "test_util.hpp"
+
+using namespace st::geom;
+
+namespace {
+
+struct Body {
+  Mesh mesh;
+  SphereTree tree;
+  explicit Body(Mesh m) : mesh(std::move(m)), tree(SphereTree::build(mesh, DefaultTreeConfig()).value()) {}
+};
+
+constexpr double kPi = 3.14159265358979323846;
+
+// A pose moved from `start` by `along` (object frame) and turned by `deg` about `axis` through `pivot`.
+Pose moved(const Pose& start, const Vec3& pivot, const Vec3& dir, double along, const Vec3& axis, double deg) {
+  Pose p = Pose::Identity();
+  p.linear() = Eigen::AngleAxisd(deg * kPi / 180, axis).toRotationMatrix();
+  p.translation() = pivot - p.linear() * pivot + along * dir;
+  return p * start;
+}
+
+// Runs both paths at each pose and compares them; returns the rounds compared.
+struct Compare {
+  CollideScratch scratch;
+  CollideResult plain, coh;
+  int rounds = 0;
+  void at(CoherentCollider& cc, const Body& probe, const Body& object, const Pose& pose, CollideConfig opt = {}) {
+    opt.sort_pairs = true;
+    collide(probe.mesh, probe.tree, object.mesh, object.tree, pose, opt, scratch, plain);
+    cc.collide(probe.mesh, probe.tree, object.mesh, object.tree, pose, opt, coh);
+    CAPTURE(rounds);
+    REQUIRE(coh.pairs == plain.pairs);
+    CHECK(coh.probe_faces == plain.probe_faces);
+    CHECK(coh.object_faces == plain.object_faces);
+    CHECK(coh.stats.pair_limit_hit == plain.stats.pair_limit_hit);
+    ++rounds;
+  }
+};
+
+// The pivot and slide direction at a pose in contact: the touched object faces' centre and a
+// direction in their mean plane.
+void slide_frame(const Mesh& object, const std::vector<FacePair>& pairs, Vec3& pivot, Vec3& dir, Vec3& axis) {
+  REQUIRE(!pairs.empty());
+  Vec3 c = Vec3::Zero(), n = Vec3::Zero();
+  for (const FacePair& fp : pairs) {
+    const auto& t = object.faces[fp.object];
+    const Vec3 a = object.vertex(t[0]), b = object.vertex(t[1]), d = object.vertex(t[2]);
+    c += (a + b + d) / 3;
+    n += (b - a).cross(d - a);
+  }
+  pivot = c / double(pairs.size());
+  n.normalize();
+  dir = n.cross(Vec3::UnitX());
+  if (dir.norm() < 0.1) dir = n.cross(Vec3::UnitY());
+  dir.normalize();
+  axis = (n + n.cross(dir)).normalized();
+}
+
+}  // namespace
+
+TEST_CASE(
+    "the coherent collider gives collide()'s pairs on every round of slides, jitter and a jerk (hand_L2 x elephant)") {
+  const Body probe(*st::test::model_mesh("hand_L2.off"));
+  const Body object(*st::test::model_mesh("elephant.off"));
+  const auto normals = st::test::vertex_normals(object.mesh);
+  std::mt19937_64 rng(20261127);
+  Compare cmp;
+  const int starts = st::test::kSanitizerBuild ? 1 : 3;
+  const int per_series = st::test::kSanitizerBuild ? 30 : 80;
+  std::uint64_t reused = 0, refreshes = 0, retested = 0;
+  int found = 0;
+  for (int attempt = 0; attempt < 200 && found < starts; ++attempt) {
+    std::uniform_int_distribution<std::uint32_t> vo(0, object.mesh.num_vertices() - 1),
+        vp(0, probe.mesh.num_vertices() - 1);
+    const std::uint32_t o = vo(rng);
+    const Pose start =
+        st::test::pose_near(probe.mesh, vp(rng), object.mesh, o, normals[o], 1.5, st::test::random_rotation(rng));
+    collide(probe.mesh, probe.tree, object.mesh, object.tree, start, {}, cmp.scratch, cmp.plain);
+    if (cmp.plain.pairs.size() < 20) continue;
+    ++found;
+    CAPTURE(attempt);
+    Vec3 pivot, dir, axis;
+    slide_frame(object.mesh, cmp.plain.pairs, pivot, dir, axis);
+    for (const double step : {0.001, 0.01, 0.03}) {
+      CAPTURE(step);
+      CoherentCollider cc;
+      for (int k = 0; k < per_series; ++k) {  // forth, then back over the same poses
+        const int s = k < per_series / 2 ? k : per_series - k;
+        cmp.at(cc, probe, object, moved(start, pivot, dir, s * step, axis, s * 0.01));
+      }
+      reused += cc.stats().reused, refreshes += cc.stats().refreshes, retested += cc.stats().retested;
+      CHECK(cc.stats().rounds == std::uint64_t(per_series));
+      CHECK(cc.stats().peak_bytes > 0);
+      CHECK(cc.stats().peak_bytes <= cc.config().max_bytes);
+    }
+    {  // jitter between three poses: certificates are checked against their own pose, so no refresh wears out
+      CoherentCollider cc;
+      for (int k = 0; k < per_series; ++k)
+        cmp.at(cc, probe, object, moved(start, pivot, dir, 0.01 * (k % 3), axis, 0.0));
+      const std::uint64_t before = cc.stats().refreshes;
+      for (int k = 0; k < per_series; ++k)
+        cmp.at(cc, probe, object, moved(start, pivot, dir, 0.01 * (k % 3), axis, 0.0));
+      CHECK(cc.stats().refreshes == before);
+      CHECK(cc.stats().plain_rounds == 0);
+    }
+    {  // a jerk of 1 mm + 1 degree: one plain round, then a rebuild, every round exact
+      CoherentCollider cc;
+      for (int k = 0; k < 40; ++k)
+        cmp.at(cc, probe, object, moved(start, pivot, dir, 0.005 * k + (k >= 20 ? 1.0 : 0.0), axis, k >= 20 ? 1.0 : 0.0));
+      CHECK(cc.stats().plain_rounds >= 1);
+      CHECK(cc.stats().rebuilds >= 2);
+    }
+  }
+  REQUIRE(found == starts);
+  // The certificates did their job: most answers came from them, a few were tested again.
+  CHECK(reused > 10 * retested);
+  CHECK(refreshes > 0);
+}
+
+TEST_CASE("the coherent collider is exact on every ISA, far from the origin, at tiny and huge scales") {
+  using simd::Isa;
+  const Isa before = simd::active_isa();
+  const Mesh& hand = *st::test::model_mesh("hand.off");
+  const Mesh& bunny = *st::test::model_mesh("bunny.off");
+  const auto normals = st::test::vertex_normals(bunny);
+  for (const double scale : {1e-3, 1.0, 1e4}) {
+    for (const double offset : {0.0, 1e6}) {
+      CAPTURE(scale);
+      CAPTURE(offset);
+      Mesh p = hand, o = bunny;
+      for (Mesh* m : {&p, &o}) {
+        for (Vec3& v : m->local) v *= scale;
+        m->origin = m->origin * scale + Vec3(offset, -offset, 0.5 * offset);
+      }
+      const Body probe(p), object(o);
+      std::mt19937_64 rng(7);
+      const Pose start =
+          st::test::pose_near(probe.mesh, 0, object.mesh, 10, normals[10], 2.0 * scale, st::test::random_rotation(rng));
+      for (int i = 0; i <= static_cast<int>(simd::best_isa()); ++i) {
+        REQUIRE(simd::set_isa(static_cast<Isa>(i)));
+        const std::string isa = simd::isa_name(static_cast<Isa>(i));
+        CAPTURE(isa);
+        CoherentCollider cc;
+        Compare cmp;
+        for (int k = 0; k < 24; ++k)
+          cmp.at(cc, probe, object,
+                 moved(start, object.mesh.vertex(10), Vec3::UnitX(), 0.004 * scale * (k % 12), Vec3::UnitZ(),
+                       0.02 * (k % 12)));
+        CHECK(cc.stats().plain_rounds < cc.stats().rounds);  // the scale-free defaults kept it coherent
+      }
+    }
+  }
+  REQUIRE(simd::set_isa(before));
+}
+
+TEST_CASE("the coherent collider is exact on coplanar, touching and degenerate faces sliding over each other") {
+  // Two grids in one plane (every face pair coplanar), one turned a hair: the filter decides
+  // none of the touching pairs, so the exact test and margin 0 carry them.
+  Mesh floor = st::test::grid(12), tile = st::test::grid(4);
+  tile.faces.push_back({0, 0, 1});  // a degenerate face (a segment)
+  const Body object(floor), probe(tile);
+  CoherentCollider cc;
+  Compare cmp;
+  for (int k = 0; k < 60; ++k) {
+    Pose pose = Pose::Identity();
+    pose.translation() = Vec3(2.0 + 0.01 * k, 2.0 + 0.003 * k, (k % 5 == 0) ? 1e-12 : 0.0);
+    pose.linear() = Eigen::AngleAxisd(1e-7 * (k % 3), Vec3::UnitZ()).toRotationMatrix();
+    cmp.at(cc, probe, object, pose);
+  }
+  CHECK(!cmp.plain.pairs.empty());
+}
+
+TEST_CASE("the coherent collider keeps collide()'s limits and falls back on jumps, a full pool and non-finite poses") {
+  const Body probe(*st::test::model_mesh("hand_L2.off"));
+  const Body object(*st::test::model_mesh("elephant.off"));
+  const auto normals = st::test::vertex_normals(object.mesh);
+  std::mt19937_64 rng(3);
+  Pose start;
+  Compare cmp;
+  do {
+    std::uniform_int_distribution<std::uint32_t> vo(0, object.mesh.num_vertices() - 1);
+    const std::uint32_t o = vo(rng);
+    start = st::test::pose_near(probe.mesh, 0, object.mesh, o, normals[o], 3.0, st::test::random_rotation(rng));
+    collide(probe.mesh, probe.tree, object.mesh, object.tree, start, {}, cmp.scratch, cmp.plain);
+  } while (cmp.plain.pairs.size() < 50);
+  const Vec3 x = Vec3::UnitX();
+
+  SUBCASE("max_pairs stops it as it stops collide(); max_work bounds its own work; both drop the cache") {
+    CoherentCollider cc;
+    CollideConfig capped;
+    capped.max_pairs = 10;
+    CollideConfig budget;
+    budget.max_work = 200;
+    CollideConfig sorted;
+    sorted.sort_pairs = true;
+    for (int k = 0; k < 6; ++k) {
+      const Pose pose = moved(start, Vec3::Zero(), x, 0.001 * k, x, 0.0);
+      cmp.at(cc, probe, object, pose);
+      CollideResult a, b, full;
+      const std::uint64_t rebuilds = cc.stats().rebuilds;
+      cc.collide(probe.mesh, probe.tree, object.mesh, object.tree, pose, capped, a);
+      collide(probe.mesh, probe.tree, object.mesh, object.tree, pose, capped, cmp.scratch, b);
+      CHECK(a.stats.pair_limit_hit);
+      CHECK(b.stats.pair_limit_hit);
+      CHECK(a.pairs.size() <= capped.max_pairs + kMaxLeafFaces * kMaxLeafFaces);
+      // The budget counts the work a round does: a round from certificates may finish within it
+      // (then it is complete and exact); one that runs out says so and drops the cache.
+      cc.collide(probe.mesh, probe.tree, object.mesh, object.tree, pose, budget, a);
+      collide(probe.mesh, probe.tree, object.mesh, object.tree, pose, sorted, cmp.scratch, full);
+      if (!a.stats.work_limit_hit) {
+        std::sort(a.pairs.begin(), a.pairs.end());
+        CHECK(a.pairs == full.pairs);
+      }
+      cc.collide(probe.mesh, probe.tree, object.mesh, object.tree, pose, budget, a);  // from the roots: cut short
+      CHECK(a.stats.work_limit_hit);
+      CHECK(cc.stats().rebuilds > rebuilds);
+    }
+  }
+  SUBCASE("a pool over max_bytes runs collide() (the pairs are the same) and says so") {
+    CoherentConfig tiny;
+    tiny.max_bytes = 4096;
+    CoherentCollider cc(tiny);
+    for (int k = 0; k < 10; ++k) cmp.at(cc, probe, object, moved(start, Vec3::Zero(), x, 0.001 * k, x, 0.0));
+    CHECK(cc.stats().overflows == 1);  // then 63 rounds of collide() before it tries again
+    CHECK(cc.stats().plain_rounds == 10);
+    CHECK(cc.bytes() < 64 * 1024 * 1024);
+  }
+  SUBCASE("a jump runs collide() and drops the cache; a non-finite pose gives nothing") {
+    CoherentCollider cc;
+    cmp.at(cc, probe, object, start);
+    cmp.at(cc, probe, object, moved(start, Vec3::Zero(), x, 5.0, x, 0.0));
+    CHECK(cc.stats().plain_rounds == 1);
+    Pose bad = start;
+    bad(0, 3) = std::nan("");
+    CollideResult r;
+    cc.collide(probe.mesh, probe.tree, object.mesh, object.tree, bad, {}, r);
+    CHECK(r.pairs.empty());
+    cmp.at(cc, probe, object, start);
+  }
+  SUBCASE("object roots (a worker's blocks): the same pairs as collide() with them; new roots start over") {
+    CoherentCollider cc;
+    std::vector<std::uint32_t> roots;
+    for (std::uint32_t i = 0; i < object.tree.num_nodes() && roots.size() < 6; ++i)
+      if (object.tree.nodes[i].depth == 2) roots.push_back(i);
+    REQUIRE(roots.size() >= 2);
+    CollideConfig opt;
+    opt.restrict_object = true;
+    opt.object_roots = roots;
+    for (int k = 0; k < 8; ++k) cmp.at(cc, probe, object, moved(start, Vec3::Zero(), x, 0.002 * k, x, 0.0), opt);
+    const std::uint64_t rebuilds = cc.stats().rebuilds;
+    opt.object_roots = std::span<const std::uint32_t>(roots).first(1);
+    cmp.at(cc, probe, object, start, opt);
+    CHECK(cc.stats().rebuilds == rebuilds + 1);
+  }
+}
