@@ -125,7 +125,7 @@ void add_slides(CLI::App& app) {
     int rounds = 200, reps = 5;
     double turn = 0.01;
     geom::CoherentConfig coherent;
-    bool jerk = true, json = false;
+    bool jerk = true, json = false, only_coherent = false;
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
@@ -150,6 +150,8 @@ void add_slides(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--isa", a->isa, "run the SIMD kernels on this instruction set (default: the best the CPU has)");
   cmd->add_flag("--json", a->json, "print one JSON object instead of the table");
+  cmd->add_flag("--only-coherent", a->only_coherent,
+                "run the coherent collider alone, untimed and unchecked (to profile it with perf)");
   cmd->callback([a] {
     if (!a->isa.empty()) {
       geom::simd::Isa isa;
@@ -221,6 +223,10 @@ void add_slides(CLI::App& app) {
           coh.reset_stats();
           for (int k = 0; k < a->rounds; ++k) {
             const Pose pose = s.at(k);
+            if (a->only_coherent) {
+              coh.collide(probe, pt, object, ot, pose, filter, r_coh);
+              continue;
+            }
             auto t0 = std::chrono::steady_clock::now();
             geom::collide(probe, pt, object, ot, pose, today, sc, r_today);
             t_today[k].push_back(us_since(t0));
@@ -256,6 +262,7 @@ void add_slides(CLI::App& app) {
           }
         }
         row.stats = coh.stats();
+        if (a->only_coherent) continue;
         std::vector<double> ratio, vs_filter, filter_ratio;
         double sum_today = 0, sum_filter = 0, sum_coh = 0;
         for (int k = 0; k < a->rounds; ++k) {

@@ -38,9 +38,22 @@ void CoherentCollider::adopt(const SphereTree& probe_tree, const SphereTree& obj
 
 void CoherentCollider::drop() {
   have_front_ = false;
+  garbage_ = 0;
   near_.radius = -1;
   front_.clear();
   cands_.clear();
+}
+
+void CoherentCollider::compact() {
+  next_cands_.clear();
+  for (detail::FrontEntry& e : front_) {
+    if (e.kind != detail::kLeafPair) continue;
+    const auto at = static_cast<std::uint32_t>(next_cands_.size());
+    next_cands_.insert(next_cands_.end(), cands_.begin() + e.arg, cands_.begin() + e.arg + e.count);
+    e.arg = at;
+  }
+  cands_.swap(next_cands_);
+  garbage_ = 0;
 }
 
 void CoherentCollider::reset() {

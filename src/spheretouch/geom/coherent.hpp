@@ -141,6 +141,8 @@ class CoherentCollider {
   void adopt(const SphereTree& probe_tree, const SphereTree& object_tree, const CollideConfig& options);
   // Forgets the front (the next cached round rebuilds from the roots).
   void drop();
+  // Copies the live candidates to the front of the pool (in front order), dropping the garbage.
+  void compact();
   // Bound on how far the points of the sphere (c, r) moved from pose `a` to pose `b`.
   static double moved_since(const RelTransform& a, const RelTransform& b, const Vec3& c, double r);
   // near_ from a round's pairs (a sample of their probe faces), or none.
@@ -152,7 +154,8 @@ class CoherentCollider {
   CoherentStats stats_;
   CollideScratch scratch_;
   std::vector<detail::FrontEntry> front_, next_front_;
-  std::vector<detail::Candidate> cands_, next_cands_;
+  std::vector<detail::Candidate> cands_, next_cands_;  // leaf pairs' candidates (in place); compact()'s scratch
+  std::size_t garbage_ = 0;                            // candidates of refreshed leaf pairs still in cands_
   std::array<detail::CertPose, kPoses> poses_{};
   std::array<detail::PoseDelta, kPoses> deltas_{};  // this round's change since each kept pose (lazily)
   std::uint32_t round_ = 0;                         // rounds since reset (the current pose's id)

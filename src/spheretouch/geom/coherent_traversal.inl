@@ -109,7 +109,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   std::uint32_t round = 0;  // this round's id
   bool overflow = false;    // the pool went over max_bytes: this round is abandoned
   using Delta = detail::PoseDelta;
-  // The filter-with-margins batch: candidates (by index in next_cands_) waiting for tri_margins.
+  // The filter-with-margins batch: candidates (by index in cands_) waiting for tri_margins.
   std::uint32_t m_index[kTriBatch] = {}, m_slot[kTriBatch] = {}, m_face[kTriBatch] = {};
   std::uint32_t m_n = 0;
   // ... and those the normals did not prove apart, with their coordinates, for all 11 axes.
@@ -170,7 +170,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
 
   // The pool in bytes (what max_bytes bounds).
   std::size_t pool_bytes() const {
-    return cc.next_front_.size() * sizeof(detail::FrontEntry) + cc.next_cands_.size() * sizeof(detail::Candidate);
+    return cc.next_front_.size() * sizeof(detail::FrontEntry) + cc.cands_.size() * sizeof(detail::Candidate);
   }
   void add_group(std::uint8_t kind, std::uint32_t p, std::uint32_t o, std::uint32_t mask, float gap) {
     detail::FrontEntry e;
@@ -214,12 +214,15 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     }
     detail::FrontEntry e;
     e.p = p, e.o = o, e.pose = round, e.kind = detail::kLeafPair, e.margin = reach_f;
-    e.arg = static_cast<std::uint32_t>(cc.next_cands_.size());
+    // The candidates are appended to cands_ (the old entry's, if any, become garbage: the pool is
+    // compacted at the end of a round when more than half of it is).
+    e.arg = static_cast<std::uint32_t>(cc.cands_.size());
     e.theta = stagger(p, o);
     float w[6];
     for (int k = 0; k < 3; ++k) w[k] = widen_below(u[k], reach), w[3 + k] = widen_above(u[3 + k], reach);
-    const detail::Candidate* prev = old ? cc.cands_.data() + old->arg : nullptr;
-    const detail::Candidate* prev_end = old ? prev + old->count : nullptr;
+    std::uint32_t prev = old ? old->arg : 0;  // indices: cands_ grows below
+    const std::uint32_t prev_end = old ? old->arg + old->count : 0;
+    if (old) cc.garbage_ += old->count;
     const FaceBox* ob = OT.face_boxes.data() + ho.first;
     const std::uint64_t mo = face_box_mask(ob, ho.count, w);
     if (mo != 0) {
@@ -245,16 +248,19 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
           float gap = 0;
           for (int k = 0; k < 3; ++k)
             gap = std::max(gap, std::max(fb.lo[k] - pb[(3 + k) * st + slot], pb[k * st + slot] - fb.hi[k]));
-          const auto at = static_cast<std::uint32_t>(cc.next_cands_.size());
-          cc.next_cands_.push_back({slot, of, gap * (1.0f - 0x1p-20f), round, 0, static_cast<std::uint8_t>(j)});
+          const auto at = static_cast<std::uint32_t>(cc.cands_.size());
+          cc.cands_.push_back({slot, of, gap * (1.0f - 0x1p-20f), round, 0, static_cast<std::uint8_t>(j)});
           if (gap > 0) continue;
           // The same pair in the entry refreshed, its certificate still good: kept.
-          while (prev != prev_end && (prev->j < j || (prev->j == j && prev->slot < slot))) ++prev;
-          if (prev != prev_end && prev->j == j && prev->slot == slot && still(p, prev->pose, prev->margin)) {
-            cc.next_cands_.back() = *prev;
+          auto before = [&](const detail::Candidate& c) { return c.j < j || (c.j == j && c.slot < slot); };
+          while (prev != prev_end && before(cc.cands_[prev])) ++prev;
+          if (prev != prev_end && cc.cands_[prev].j == j && cc.cands_[prev].slot == slot &&
+              still(p, cc.cands_[prev].pose, cc.cands_[prev].margin)) {
+            const detail::Candidate kept = cc.cands_[prev];
+            cc.cands_.back() = kept;
             ++cc.stats_.reused;
-            check_decision(slot, of, prev->hit != 0);
-            if (prev->hit) emit(PT.face_order[slot], of);
+            check_decision(slot, of, kept.hit != 0);
+            if (kept.hit) emit(PT.face_order[slot], of);
             continue;
           }
           ++res.stats.tri_pairs;
@@ -263,7 +269,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
         }
       }
     }
-    e.count = static_cast<std::uint16_t>(cc.next_cands_.size() - e.arg);
+    e.count = static_cast<std::uint16_t>(cc.cands_.size() - e.arg);
     cc.next_front_.push_back(e);
   }
 
@@ -310,7 +316,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     h_n = 0;
   }
   void certify(std::uint32_t at, float margin, bool hit) {
-    detail::Candidate& c = cc.next_cands_[at];
+    detail::Candidate& c = cc.cands_[at];
     c.margin = margin;
     c.pose = round;
     c.hit = hit;
@@ -320,18 +326,15 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   // are tested at this pose and certified anew (the leaf pair's own certificate, for the face
   // pairs that are not candidates, stays the entry's).
   void reuse_leaf(const detail::FrontEntry& e) {
-    detail::FrontEntry n = e;
-    n.arg = static_cast<std::uint32_t>(cc.next_cands_.size());
-    cc.next_front_.push_back(n);
-    const detail::Candidate* c = cc.cands_.data() + e.arg;
+    cc.next_front_.push_back(e);                            // its candidates stay where they are
+    const detail::Candidate* c = cc.cands_.data() + e.arg;  // nothing is appended to cands_ here
     bool prepared = false;
     // The bound for the candidates' poses: the whole probe's, then the leaf's when that is not enough.
     std::uint32_t last_pose = ~0u;
     double whole = 0, leaf = 0;
     bool have_leaf = false;
     for (std::uint32_t i = 0; i < e.count; ++i) {
-      const auto at = static_cast<std::uint32_t>(cc.next_cands_.size());
-      cc.next_cands_.push_back(c[i]);
+      const std::uint32_t at = e.arg + i;
       if (c[i].pose != last_pose) last_pose = c[i].pose, whole = delta(last_pose).whole, have_leaf = false;
       if (double(c[i].margin) <= whole && !have_leaf) leaf = motion(e.p, last_pose, false), have_leaf = true;
       if (double(c[i].margin) > whole || double(c[i].margin) > leaf) {
@@ -441,7 +444,6 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   bool run() {
     std::uint64_t scanned = 0;
     cc.next_front_.clear();
-    cc.next_cands_.clear();
     const std::size_t limit = cc.config_.max_bytes;
     auto expand_root = [&](std::uint32_t r) {
       detail::FrontEntry e;

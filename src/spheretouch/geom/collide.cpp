@@ -475,8 +475,8 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
     drop();  // a front cut short proves nothing about what it did not reach
   } else {
     front_.swap(next_front_);
-    cands_.swap(next_cands_);
     have_front_ = true;
+    if (garbage_ > 4096 && 2 * garbage_ > cands_.size()) compact();
   }
   note_contact(probe, result);
   stats_.entries = front_.size();
