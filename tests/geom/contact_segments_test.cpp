@@ -15,6 +15,7 @@
 
 #include <spheretouch/geom/contact.hpp>
 #include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/geom/simd.hpp>
 #include "test_models.hpp"
 
 using namespace st::geom;
@@ -186,5 +187,54 @@ TEST_CASE("contact segments: a ball pressed into a box's face has the disc's vec
     far.finish();
     CHECK((far.area() - a).norm() < 1e-9 * far.abs_sum());
     CHECK(far.abs_sum() > 2 * s.abs_sum());  // inflated: what FD's cancellation test must not see
+  }
+}
+
+TEST_CASE("contact segments: every instruction set gives the same bits (simd.hpp's Quad, one switch for all kernels)") {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1, 1);
+  auto rand_rec = [&](const Vec3& c) {
+    return rec(c + Vec3(u(rng), u(rng), u(rng)), c + Vec3(u(rng), u(rng), u(rng)), c + Vec3(u(rng), u(rng), u(rng)));
+  };
+  std::vector<FaceRec> objects, probes;
+  for (int i = 0; i < 61; ++i) {
+    const Vec3 c(5 * u(rng), 5 * u(rng), 5 * u(rng));
+    objects.push_back(rand_rec(c)), probes.push_back(rand_rec(c));
+  }
+  objects.push_back(kObject), probes.push_back(kObject);  // parallel planes: no segment
+  const Vec3 o(0.1, -0.2, 0.3), n(0.3, 0.9, -0.1);
+  const simd::Isa before = simd::active_isa();
+  struct Sums {
+    Vec3 area, centroid, area_centroid, first;
+    double abs_sum = 0, length = 0;
+  };
+  std::vector<Sums> by_isa;
+  for (int i = 0; i <= static_cast<int>(simd::best_isa()); ++i) {
+    REQUIRE(simd::set_isa(static_cast<simd::Isa>(i)));
+    SegmentAreaSum s(o);
+    FirstSegment f;
+    for (std::size_t k = 0; k < objects.size(); ++k) {
+      s.add(&objects[k], &probes[k]);
+      if (!f.found()) f.add(&objects[k], &probes[k]);
+    }
+    s.finish();
+    f.finish();
+    Sums r;
+    r.area = s.area(), r.centroid = s.centroid(), r.abs_sum = s.abs_sum(), r.length = s.length();
+    CHECK(s.area_centroid(n, r.area_centroid) == (n.dot(r.area) > 0));
+    REQUIRE(f.found());
+    r.first = f.midpoint();
+    by_isa.push_back(r);
+  }
+  REQUIRE(simd::set_isa(before));
+  CHECK(by_isa.front().length > 0);
+  for (const Sums& r : by_isa) {
+    for (int k = 0; k < 3; ++k) {
+      CHECK(same_bits(r.area[k], by_isa.front().area[k]));
+      CHECK(same_bits(r.centroid[k], by_isa.front().centroid[k]));
+      CHECK(same_bits(r.first[k], by_isa.front().first[k]));
+    }
+    CHECK(same_bits(r.abs_sum, by_isa.front().abs_sum));
+    CHECK(same_bits(r.length, by_isa.front().length));
   }
 }

@@ -1,45 +1,42 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // The patch contact model's segment kernel (contact_segments.hpp): per (object face, probe face)
 // row, the intersection segment along n_object × n_probe and its vector area, four rows at a time
-// in GCC/Clang vector extensions, compiled for the baseline and for AVX2 (contact_segments_kernel.inl)
-// and chosen at run time with the collision core's kernels (simd.hpp: one switch for all).
+// in simd.hpp's Quad, compiled per ISA (contact_segments_kernel.inl) and chosen at run time with
+// the collision core's kernels (simd.hpp: one vocabulary, one switch for all).
 #include <spheretouch/geom/contact_segments.hpp>
 
+#include <bit>
 #include <cmath>
-#include <cstring>
+#include <cstdint>
 #include <limits>
 
 #include <spheretouch/geom/check.hpp>
 #include <spheretouch/geom/simd.hpp>
 
-// The segment computation's 4-lane vectors (D4 below) are passed between always-inlined helpers
-// of this file only: no ABI is crossed, so GCC's note that passing them changes without AVX is moot.
-#pragma GCC diagnostic ignored "-Wpsabi"
-
 namespace st::inline SPHERETOUCH_ABI::geom {
 
 namespace {
 
-// Four rows of the segment computation at once, one per lane, in GCC/Clang vector extensions:
-// lane-wise operators, so the formulas read as scalar ones, and the compiler picks AVX, SSE or
-// plain instructions. A row is an (object face, probe face) pair; the two faces' records are read
-// straight from their FaceRec (four rows' worth of 4 fields turned into 4 columns in registers),
-// so nothing is copied into a batch first.
-typedef double D4 __attribute__((vector_size(32)));
-using M4 = decltype(D4{} < D4{});  ///< per-lane flags (all bits set or none), from comparisons
-
-namespace seg_base {
-#define ST_SEG_SQRT4(x) \
-  D4 { std::sqrt((x)[0]), std::sqrt((x)[1]), std::sqrt((x)[2]), std::sqrt((x)[3]) }
+// Four rows of the segment computation at once, one per lane, in simd.hpp's Quad (four doubles)
+// of each ISA: lane-wise operators, so the formulas read as scalar ones. A row is an (object
+// face, probe face) pair; the two faces' records are read straight from their FaceRec (four
+// rows' worth of 4 fields turned into 4 columns in registers), so nothing is copied first.
+namespace seg_scalar {
+#define ST_SEG_SIMD scalar
 #include "contact_segments_kernel.inl"
-#undef ST_SEG_SQRT4
-}  // namespace seg_base
+#undef ST_SEG_SIMD
+}  // namespace seg_scalar
 #if defined(ST_SIMD_X86)
+namespace seg_sse2 {
+#define ST_SEG_SIMD sse2
+#include "contact_segments_kernel.inl"
+#undef ST_SEG_SIMD
+}  // namespace seg_sse2
 ST_TARGET_AVX2_BEGIN
 namespace seg_avx2 {
-#define ST_SEG_SQRT4(x) D4(_mm256_sqrt_pd(x))
+#define ST_SEG_SIMD avx2
 #include "contact_segments_kernel.inl"
-#undef ST_SEG_SQRT4
+#undef ST_SEG_SIMD
 }  // namespace seg_avx2
 ST_TARGET_END
 #endif
@@ -54,8 +51,8 @@ const FaceRec& no_record() {
   }();
   return r;
 }
-/// Sum of a vector's lanes.
-inline double lanes_sum(const D4& x) { return (x[0] + x[1]) + (x[2] + x[3]); }
+/// Sum of a row of four lane sums, in the order the lanes were added before (pairs first).
+inline double lanes_sum(const double (&x)[4]) { return (x[0] + x[1]) + (x[2] + x[3]); }
 
 }  // namespace
 
@@ -63,12 +60,20 @@ SegmentAreaSum::SegmentAreaSum(const Vec3& origin) : origin_{origin.x(), origin.
 
 void SegmentAreaSum::run(int n) {
   ST_ASSERT(n % 4 == 0 && n <= kBatch, "whole groups of four rows");
+  switch (simd::active_isa()) {
 #if defined(ST_SIMD_X86)
-  if (simd::active_isa() >= simd::Isa::avx2)
-    seg_avx2::sum_rows(object_, probe_, n, origin_, sum_);
-  else
+    case simd::Isa::avx512:
+    case simd::Isa::avx2:
+      seg_avx2::sum_rows(object_, probe_, n, origin_, sum_);
+      break;
+    case simd::Isa::sse2:
+      seg_sse2::sum_rows(object_, probe_, n, origin_, sum_);
+      break;
 #endif
-    seg_base::sum_rows(object_, probe_, n, origin_, sum_);
+    default:
+      seg_scalar::sum_rows(object_, probe_, n, origin_, sum_);
+      break;
+  }
   n_ = 0;
 }
 
@@ -81,25 +86,17 @@ void SegmentAreaSum::finish() {
 
 Vec3 SegmentAreaSum::area() const {
   ST_ASSERT(n_ == 0, "finish() ran after the last add()");
-  D4 sx, sy, sz;
-  std::memcpy(&sx, sum_[0], sizeof(D4));
-  std::memcpy(&sy, sum_[1], sizeof(D4));
-  std::memcpy(&sz, sum_[2], sizeof(D4));
-  return Vec3(lanes_sum(sx), lanes_sum(sy), lanes_sum(sz));
+  return Vec3(lanes_sum(sum_[0]), lanes_sum(sum_[1]), lanes_sum(sum_[2]));
 }
 
 double SegmentAreaSum::abs_sum() const {
   ST_ASSERT(n_ == 0, "finish() ran after the last add()");
-  D4 sabs;
-  std::memcpy(&sabs, sum_[3], sizeof(D4));
-  return lanes_sum(sabs);
+  return lanes_sum(sum_[3]);
 }
 
 double SegmentAreaSum::length() const {
   ST_ASSERT(n_ == 0, "finish() ran after the last add()");
-  D4 s;
-  std::memcpy(&s, sum_[4], sizeof(D4));
-  return lanes_sum(s);
+  return lanes_sum(sum_[4]);
 }
 
 Vec3 SegmentAreaSum::centroid() const {
@@ -107,11 +104,7 @@ Vec3 SegmentAreaSum::centroid() const {
   const double len = length();
   const Vec3 o(origin_[0], origin_[1], origin_[2]);
   if (!(len > 0)) return o;
-  D4 mx, my, mz;
-  std::memcpy(&mx, sum_[5], sizeof(D4));
-  std::memcpy(&my, sum_[6], sizeof(D4));
-  std::memcpy(&mz, sum_[7], sizeof(D4));
-  return o + Vec3(lanes_sum(mx), lanes_sum(my), lanes_sum(mz)) / len;
+  return o + Vec3(lanes_sum(sum_[5]), lanes_sum(sum_[6]), lanes_sum(sum_[7])) / len;
 }
 
 bool SegmentAreaSum::area_centroid(const Vec3& n, Vec3& out) const {
@@ -120,11 +113,7 @@ bool SegmentAreaSum::area_centroid(const Vec3& n, Vec3& out) const {
   if (!(an > 0)) return false;
   Vec3 moment = Vec3::Zero();  // Σ (a·n) (s0 + s1), relative to the origin
   for (int j = 0; j < 3; ++j)
-    for (int k = 0; k < 3; ++k) {
-      D4 s;
-      std::memcpy(&s, sum_[8 + 3 * j + k], sizeof(D4));
-      moment[k] += n[j] * lanes_sum(s);
-    }
+    for (int k = 0; k < 3; ++k) moment[k] += n[j] * lanes_sum(sum_[8 + 3 * j + k]);
   out = Vec3(origin_[0], origin_[1], origin_[2]) + moment / (3 * an);
   return out.allFinite();
 }
@@ -132,12 +121,20 @@ bool SegmentAreaSum::area_centroid(const Vec3& n, Vec3& out) const {
 void FirstSegment::run() {
   Vec3 m;
   bool found = false;
+  switch (simd::active_isa()) {
 #if defined(ST_SIMD_X86)
-  if (simd::active_isa() >= simd::Isa::avx2)
-    found = seg_avx2::first_midpoint(object_, probe_, m);
-  else
+    case simd::Isa::avx512:
+    case simd::Isa::avx2:
+      found = seg_avx2::first_midpoint(object_, probe_, m);
+      break;
+    case simd::Isa::sse2:
+      found = seg_sse2::first_midpoint(object_, probe_, m);
+      break;
 #endif
-    found = seg_base::first_midpoint(object_, probe_, m);
+    default:
+      found = seg_scalar::first_midpoint(object_, probe_, m);
+      break;
+  }
   if (found && !found_) {
     midpoint_ = m;
     found_ = true;

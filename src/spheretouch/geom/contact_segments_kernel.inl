@@ -1,19 +1,20 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // The segment kernel's four-lane code (contact_segments.cpp), compiled once per instruction set:
-// contact_segments.cpp includes it at the baseline and again inside the AVX2 target region
-// (simd.hpp), each time in a namespace of its own and with ST_SEG_SQRT4 naming that ISA's
-// four-lane square root; SegmentAreaSum and FirstSegment run the one simd::active_isa() names.
+// contact_segments.cpp includes it inside a namespace per ISA (and that ISA's target region,
+// simd.hpp) with ST_SEG_SIMD naming the ISA's namespace in simd.hpp, whose Quad (four doubles)
+// and QuadMask it is written in; SegmentAreaSum and FirstSegment run the one simd::active_isa()
+// names, so simd.hpp's switch (ST_SIMD, set_isa, -Dsimd=false) turns this kernel's SIMD off too.
 // No #include here.
 
-inline D4 splat(double x) { return D4{x, x, x, x}; }
-/// m ? a : b per lane.
-[[gnu::always_inline]] inline D4 pick(const M4& m, const D4& a, const D4& b) {
-  return (D4)(((M4)a & m) | ((M4)b & ~m));
-}
+using D4 = simd::ST_SEG_SIMD::Quad;
+using M4 = simd::ST_SEG_SIMD::QuadMask;
+using simd::ST_SEG_SIMD::select;
+using simd::ST_SEG_SIMD::sqrt;
+
+inline D4 splat(double x) { return D4::broadcast(x); }
 /// b < a ? b : a and a < b ? b : a per lane (NaN as in those scalar selects).
-[[gnu::always_inline]] inline D4 min4(const D4& a, const D4& b) { return pick(b < a, b, a); }
-[[gnu::always_inline]] inline D4 max4(const D4& a, const D4& b) { return pick(a < b, b, a); }
-[[gnu::always_inline]] inline D4 sqrt4(const D4& x) { return ST_SEG_SQRT4(x); }
+[[gnu::always_inline]] inline D4 min4(const D4& a, const D4& b) { return select(b < a, b, a); }
+[[gnu::always_inline]] inline D4 max4(const D4& a, const D4& b) { return select(a < b, b, a); }
 
 /// Four records as columns: vertices, unit normal and plane offset, lane l = row l.
 struct Rec4 {
@@ -22,17 +23,8 @@ struct Rec4 {
 
 /// Fields [f, f + 4) of four records r[0..3] as four columns (a 4 × 4 transpose).
 [[gnu::always_inline]] inline void columns4(const double* const r[4], int f, D4& c0, D4& c1, D4& c2, D4& c3) {
-  D4 x0, x1, x2, x3;
-  std::memcpy(&x0, r[0] + f, sizeof(D4));
-  std::memcpy(&x1, r[1] + f, sizeof(D4));
-  std::memcpy(&x2, r[2] + f, sizeof(D4));
-  std::memcpy(&x3, r[3] + f, sizeof(D4));
-  const D4 t0 = __builtin_shufflevector(x0, x1, 0, 4, 2, 6), t1 = __builtin_shufflevector(x0, x1, 1, 5, 3, 7);
-  const D4 t2 = __builtin_shufflevector(x2, x3, 0, 4, 2, 6), t3 = __builtin_shufflevector(x2, x3, 1, 5, 3, 7);
-  c0 = __builtin_shufflevector(t0, t2, 0, 1, 4, 5);
-  c1 = __builtin_shufflevector(t1, t3, 0, 1, 4, 5);
-  c2 = __builtin_shufflevector(t0, t2, 2, 3, 6, 7);
-  c3 = __builtin_shufflevector(t1, t3, 2, 3, 6, 7);
+  const double* const at[4] = {r[0] + f, r[1] + f, r[2] + f, r[3] + f};
+  simd::ST_SEG_SIMD::transpose(at, c0, c1, c2, c3);
 }
 
 /// The records p[0..3] as columns (FaceRec: v0, v1, v2, n, c = 13 doubles).
@@ -42,7 +34,7 @@ struct Rec4 {
   columns4(r, 0, q.x[0], q.y[0], q.z[0], q.x[1]);
   columns4(r, 4, q.y[1], q.z[1], q.x[2], q.y[2]);
   columns4(r, 8, q.z[2], q.nx, q.ny, q.nz);
-  q.c = D4{r[0][12], r[1][12], r[2][12], r[3][12]};
+  q.c = D4::set(r[0][12], r[1][12], r[2][12], r[3][12]);
   return q;
 }
 
@@ -58,13 +50,14 @@ struct Rec4 {
 /// counted once instead of twice or not at all.
 [[gnu::always_inline]] inline void crossing(const D4& d0, const D4& d1, const D4& d2, const D4& t0, const D4& t1,
                                             const D4& t2, D4& lo, D4& hi, M4& ok) {
-  const D4 inf = splat(std::numeric_limits<double>::infinity()), zero = splat(0);
+  const D4 inf = splat(std::numeric_limits<double>::infinity()), ninf = splat(-std::numeric_limits<double>::infinity());
+  const D4 zero = splat(0);
   const M4 n0 = d0 < zero, n1 = d1 < zero, n2 = d2 < zero;
   const M4 c01 = n0 ^ n1, c12 = n1 ^ n2, c20 = n2 ^ n0;
   const D4 s01 = d0 / (d0 - d1), s12 = d1 / (d1 - d2), s20 = d2 / (d2 - d0);  // d_j = 0 gives vertex j
   const D4 e01 = t0 + s01 * (t1 - t0), e12 = t1 + s12 * (t2 - t1), e20 = t2 + s20 * (t0 - t2);
-  lo = min4(min4(pick(c01, e01, inf), pick(c12, e12, inf)), pick(c20, e20, inf));
-  hi = max4(max4(pick(c01, e01, -inf), pick(c12, e12, -inf)), pick(c20, e20, -inf));
+  lo = min4(min4(select(c01, e01, inf), select(c12, e12, inf)), select(c20, e20, inf));
+  hi = max4(max4(select(c01, e01, ninf), select(c12, e12, ninf)), select(c20, e20, ninf));
   ok = c01 | c12 | c20;
 }
 
@@ -107,10 +100,10 @@ struct Seg4 {
   const D4 scale = splat(0.5) * (hi - lo) * inv;
   const D4 ca = a.c - (a.nx * ox + a.ny * oy + a.nz * oz), cb = b.c - (b.nx * ox + b.ny * oy + b.nz * oz);
   const D4 vx = cb * a.nx - ca * b.nx, vy = cb * a.ny - ca * b.ny, vz = cb * a.nz - ca * b.nz;
-  s.px = pick(s.ok, scale * vx, zero);
-  s.py = pick(s.ok, scale * vy, zero);
-  s.pz = pick(s.ok, scale * vz, zero);
-  s.pabs = pick(s.ok, sqrt4(scale * scale * (vx * vx + vy * vy + vz * vz)), zero);
+  s.px = select(s.ok, scale * vx, zero);
+  s.py = select(s.ok, scale * vy, zero);
+  s.pz = select(s.ok, scale * vz, zero);
+  s.pabs = select(s.ok, sqrt(scale * scale * (vx * vx + vy * vy + vz * vz)), zero);
   const D4 x0 = (ca * (b.ny * lz - b.nz * ly) + cb * (ly * a.nz - lz * a.ny)) * inv;
   const D4 y0 = (ca * (b.nz * lx - b.nx * lz) + cb * (lz * a.nx - lx * a.nz)) * inv;
   const D4 z0 = (ca * (b.nx * ly - b.ny * lx) + cb * (lx * a.ny - ly * a.nx)) * inv;
@@ -131,23 +124,24 @@ inline void sum_rows(const FaceRec* const* object, const FaceRec* const* probe, 
                      double (*sum)[4]) {
   const D4 ox = splat(origin[0]), oy = splat(origin[1]), oz = splat(origin[2]), zero = splat(0), half = splat(0.5);
   D4 s[17];  // the sums while the batch runs (same order as row by row)
-  for (int i = 0; i < 17; ++i) std::memcpy(&s[i], sum[i], sizeof(D4));
+  for (int i = 0; i < 17; ++i) s[i] = D4::load(sum[i]);
   for (int k = 0; k < n; k += 4) {
     const Seg4 g = segments4(load4(object + k), load4(probe + k), ox, oy, oz);
-    s[0] += g.px, s[1] += g.py, s[2] += g.pz, s[3] += g.pabs;
+    s[0] = s[0] + g.px, s[1] = s[1] + g.py, s[2] = s[2] + g.pz, s[3] = s[3] + g.pabs;
     // Selects again: a row without a segment has undefined end points and adds exactly nothing.
     const D4 dx = g.s1x - g.s0x, dy = g.s1y - g.s0y, dz = g.s1z - g.s0z;
-    const D4 len = pick(g.ok, sqrt4(dx * dx + dy * dy + dz * dz), zero);
-    const D4 m[3] = {pick(g.ok, g.s0x + g.s1x, zero), pick(g.ok, g.s0y + g.s1y, zero), pick(g.ok, g.s0z + g.s1z, zero)};
-    s[4] += len;
-    s[5] += len * (half * m[0]);
-    s[6] += len * (half * m[1]);
-    s[7] += len * (half * m[2]);
+    const D4 len = select(g.ok, sqrt(dx * dx + dy * dy + dz * dz), zero);
+    const D4 m[3] = {select(g.ok, g.s0x + g.s1x, zero), select(g.ok, g.s0y + g.s1y, zero),
+                     select(g.ok, g.s0z + g.s1z, zero)};
+    s[4] = s[4] + len;
+    s[5] = s[5] + len * (half * m[0]);
+    s[6] = s[6] + len * (half * m[1]);
+    s[7] = s[7] + len * (half * m[2]);
     const D4 a[3] = {g.px, g.py, g.pz};  // zero where there is no segment
     for (int j = 0; j < 3; ++j)
-      for (int c = 0; c < 3; ++c) s[8 + 3 * j + c] += a[j] * m[c];
+      for (int c = 0; c < 3; ++c) s[8 + 3 * j + c] = s[8 + 3 * j + c] + a[j] * m[c];
   }
-  for (int i = 0; i < 17; ++i) std::memcpy(sum[i], &s[i], sizeof(D4));
+  for (int i = 0; i < 17; ++i) s[i].store(sum[i]);
 }
 
 /// FirstSegment::run's four rows: the first row (in order) with a segment, its midpoint; false if none.
@@ -156,10 +150,9 @@ inline bool first_midpoint(const FaceRec* const* object, const FaceRec* const* p
   // points is ~1e-16 of the body's size.
   const D4 zero = splat(0);
   const Seg4 g = segments4(load4(object), load4(probe), zero, zero, zero);
-  for (int l = 0; l < 4; ++l)
-    if (g.ok[l]) {
-      midpoint = 0.5 * Vec3(g.s0x[l] + g.s1x[l], g.s0y[l] + g.s1y[l], g.s0z[l] + g.s1z[l]);
-      return true;
-    }
-  return false;
+  const std::uint32_t ok = g.ok.bits();
+  if (ok == 0) return false;
+  const int l = std::countr_zero(ok);
+  midpoint = 0.5 * Vec3(g.s0x.lane(l) + g.s1x.lane(l), g.s0y.lane(l) + g.s1y.lane(l), g.s0z.lane(l) + g.s1z.lane(l));
+  return true;
 }

@@ -68,8 +68,10 @@ const char* isa_name(Isa isa);
 bool parse_isa(std::string_view name, Isa& isa);
 
 // Per ISA: Mask (one flag per lane; first(live), bits(), &, |) and Lanes (width floats: load,
-// broadcast, gather, + - *, min, max, abs, comparisons). Operators are free functions, not
-// in-class friends: GCC does not give friends defined in a class the target of their region.
+// broadcast, gather, + - * /, min, max, abs, sqrt, comparisons), the collision core's; and Quad
+// and QuadMask (four doubles, one record per lane: + - * /, sqrt, <, >, select, transpose), the
+// contact model's segment kernel's (AVX-512 runs the AVX2 Quad). Operators are free functions,
+// not in-class friends: GCC does not give friends defined in a class the target of their region.
 
 /// One float at a time: any CPU, and the only path with -Dsimd=false.
 namespace scalar {
@@ -108,6 +110,62 @@ inline Lanes sqrt(Lanes a) { return {__builtin_sqrtf(a.v)}; }           ///< √
 inline Mask operator<=(Lanes a, Lanes b) { return {a.v <= b.v}; }       ///< a <= b (false for NaN)
 inline Mask operator>=(Lanes a, Lanes b) { return {a.v >= b.v}; }       ///< a >= b (false for NaN)
 inline Mask operator>(Lanes a, Lanes b) { return {a.v > b.v}; }         ///< a > b (false for NaN)
+
+/// Four doubles, one record per lane (the contact model's segment kernel), as a loop per operation.
+struct Quad {
+  double v[4];  ///< the doubles
+
+  static Quad broadcast(double x) { return {{x, x, x, x}}; }                           ///< x in every lane
+  static Quad set(double a, double b, double c, double d) { return {{a, b, c, d}}; }   ///< lanes a, b, c, d
+  static Quad load(const double* p) { return {{p[0], p[1], p[2], p[3]}}; }             ///< p[0, 4)
+  void store(double* p) const { p[0] = v[0], p[1] = v[1], p[2] = v[2], p[3] = v[3]; }  ///< to p[0, 4)
+  double lane(int l) const { return v[l]; }                                            ///< lane l
+};
+/// One flag per lane of a Quad.
+struct QuadMask {
+  bool v[4];  ///< the flags
+
+  std::uint32_t bits() const { return v[0] | v[1] << 1 | v[2] << 2 | v[3] << 3; }  ///< bit l = lane l
+};
+#define ST_QUAD_OP(op)                                                                 \
+  inline Quad operator op(Quad a, Quad b) {                                            \
+    return {{a.v[0] op b.v[0], a.v[1] op b.v[1], a.v[2] op b.v[2], a.v[3] op b.v[3]}}; \
+  }
+ST_QUAD_OP(+)
+ST_QUAD_OP(-)
+ST_QUAD_OP(*)
+ST_QUAD_OP(/)
+#undef ST_QUAD_OP
+#define ST_QUAD_CMP(op)                                                                \
+  inline QuadMask operator op(Quad a, Quad b) {                                        \
+    return {{a.v[0] op b.v[0], a.v[1] op b.v[1], a.v[2] op b.v[2], a.v[3] op b.v[3]}}; \
+  }
+ST_QUAD_CMP(<)
+ST_QUAD_CMP(>)
+#undef ST_QUAD_CMP
+#define ST_QUADMASK_OP(op)                                                                                     \
+  inline QuadMask operator op(QuadMask a, QuadMask b) {                                                        \
+    return {{bool(a.v[0] op b.v[0]), bool(a.v[1] op b.v[1]), bool(a.v[2] op b.v[2]), bool(a.v[3] op b.v[3])}}; \
+  }
+ST_QUADMASK_OP(&)
+ST_QUADMASK_OP(|)
+ST_QUADMASK_OP(^)
+#undef ST_QUADMASK_OP
+/// m ? a : b per lane.
+inline Quad select(QuadMask m, Quad a, Quad b) {
+  return {{m.v[0] ? a.v[0] : b.v[0], m.v[1] ? a.v[1] : b.v[1], m.v[2] ? a.v[2] : b.v[2], m.v[3] ? a.v[3] : b.v[3]}};
+}
+/// √a per lane, correctly rounded.
+inline Quad sqrt(Quad a) {
+  return {{__builtin_sqrt(a.v[0]), __builtin_sqrt(a.v[1]), __builtin_sqrt(a.v[2]), __builtin_sqrt(a.v[3])}};
+}
+/// Four rows of four doubles (r[k][0, 4)) as four columns: c_j lane k = r[k][j].
+inline void transpose(const double* const r[4], Quad& c0, Quad& c1, Quad& c2, Quad& c3) {
+  c0 = Quad::set(r[0][0], r[1][0], r[2][0], r[3][0]);
+  c1 = Quad::set(r[0][1], r[1][1], r[2][1], r[3][1]);
+  c2 = Quad::set(r[0][2], r[1][2], r[2][2], r[3][2]);
+  c3 = Quad::set(r[0][3], r[1][3], r[2][3], r[3][3]);
+}
 
 }  // namespace scalar
 
@@ -161,6 +219,53 @@ inline Mask operator>=(Lanes a, Lanes b) { return {_mm_cmpge_ps(a.v, b.v)}; }
 /// a > b per lane; false where either is NaN, as in scalar float.
 inline Mask operator>(Lanes a, Lanes b) { return {_mm_cmpgt_ps(a.v, b.v)}; }
 
+/// Four doubles, one record per lane (the contact model's segment kernel), as two SSE2 halves.
+struct Quad {
+  __m128d lo, hi;  ///< lanes 0-1, 2-3
+
+  static Quad broadcast(double x) { return {_mm_set1_pd(x), _mm_set1_pd(x)}; }  ///< x in every lane
+  /// Lanes a, b, c, d.
+  static Quad set(double a, double b, double c, double d) { return {_mm_setr_pd(a, b), _mm_setr_pd(c, d)}; }
+  static Quad load(const double* p) { return {_mm_loadu_pd(p), _mm_loadu_pd(p + 2)}; }  ///< p[0, 4)
+  void store(double* p) const { _mm_storeu_pd(p, lo), _mm_storeu_pd(p + 2, hi); }       ///< to p[0, 4)
+  double lane(int l) const {                                                            ///< lane l
+    alignas(16) double t[4];
+    store(t);
+    return t[l];
+  }
+};
+/// One flag per lane of a Quad (all bits set or none).
+struct QuadMask {
+  __m128d lo, hi;  ///< lanes 0-1, 2-3
+
+  std::uint32_t bits() const {  ///< bit l = lane l
+    return static_cast<std::uint32_t>(_mm_movemask_pd(lo) | _mm_movemask_pd(hi) << 2);
+  }
+};
+inline Quad operator+(Quad a, Quad b) { return {_mm_add_pd(a.lo, b.lo), _mm_add_pd(a.hi, b.hi)}; }          ///< a + b
+inline Quad operator-(Quad a, Quad b) { return {_mm_sub_pd(a.lo, b.lo), _mm_sub_pd(a.hi, b.hi)}; }          ///< a - b
+inline Quad operator*(Quad a, Quad b) { return {_mm_mul_pd(a.lo, b.lo), _mm_mul_pd(a.hi, b.hi)}; }          ///< a · b
+inline Quad operator/(Quad a, Quad b) { return {_mm_div_pd(a.lo, b.lo), _mm_div_pd(a.hi, b.hi)}; }          ///< a / b
+inline QuadMask operator<(Quad a, Quad b) { return {_mm_cmplt_pd(a.lo, b.lo), _mm_cmplt_pd(a.hi, b.hi)}; }  ///< a < b
+inline QuadMask operator>(Quad a, Quad b) { return {_mm_cmpgt_pd(a.lo, b.lo), _mm_cmpgt_pd(a.hi, b.hi)}; }  ///< a > b
+inline QuadMask operator&(QuadMask a, QuadMask b) { return {_mm_and_pd(a.lo, b.lo), _mm_and_pd(a.hi, b.hi)}; }  ///< and
+inline QuadMask operator|(QuadMask a, QuadMask b) { return {_mm_or_pd(a.lo, b.lo), _mm_or_pd(a.hi, b.hi)}; }    ///< or
+inline QuadMask operator^(QuadMask a, QuadMask b) { return {_mm_xor_pd(a.lo, b.lo), _mm_xor_pd(a.hi, b.hi)}; }  ///< xor
+/// m ? a : b per lane.
+inline Quad select(QuadMask m, Quad a, Quad b) {
+  return {_mm_or_pd(_mm_and_pd(m.lo, a.lo), _mm_andnot_pd(m.lo, b.lo)),
+          _mm_or_pd(_mm_and_pd(m.hi, a.hi), _mm_andnot_pd(m.hi, b.hi))};
+}
+inline Quad sqrt(Quad a) { return {_mm_sqrt_pd(a.lo), _mm_sqrt_pd(a.hi)}; }  ///< √a per lane, correctly rounded
+/// Four rows of four doubles (r[k][0, 4)) as four columns: c_j lane k = r[k][j].
+inline void transpose(const double* const r[4], Quad& c0, Quad& c1, Quad& c2, Quad& c3) {
+  const Quad x0 = Quad::load(r[0]), x1 = Quad::load(r[1]), x2 = Quad::load(r[2]), x3 = Quad::load(r[3]);
+  c0 = {_mm_unpacklo_pd(x0.lo, x1.lo), _mm_unpacklo_pd(x2.lo, x3.lo)};
+  c1 = {_mm_unpackhi_pd(x0.lo, x1.lo), _mm_unpackhi_pd(x2.lo, x3.lo)};
+  c2 = {_mm_unpacklo_pd(x0.hi, x1.hi), _mm_unpacklo_pd(x2.hi, x3.hi)};
+  c3 = {_mm_unpackhi_pd(x0.hi, x1.hi), _mm_unpackhi_pd(x2.hi, x3.hi)};
+}
+
 }  // namespace sse2
 
 ST_TARGET_AVX2_BEGIN
@@ -212,6 +317,50 @@ inline Mask operator<=(Lanes a, Lanes b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_
 inline Mask operator>=(Lanes a, Lanes b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_GE_OQ)}; }
 /// a > b per lane; false where either is NaN, as in scalar float.
 inline Mask operator>(Lanes a, Lanes b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_GT_OQ)}; }
+
+/// Four doubles, one record per lane (the contact model's segment kernel).
+struct Quad {
+  __m256d v;  ///< the doubles
+
+  static Quad broadcast(double x) { return {_mm256_set1_pd(x)}; }  ///< x in every lane
+  /// Lanes a, b, c, d.
+  static Quad set(double a, double b, double c, double d) { return {_mm256_setr_pd(a, b, c, d)}; }
+  static Quad load(const double* p) { return {_mm256_loadu_pd(p)}; }  ///< p[0, 4)
+  void store(double* p) const { _mm256_storeu_pd(p, v); }             ///< to p[0, 4)
+  double lane(int l) const {                                          ///< lane l
+    alignas(32) double t[4];
+    store(t);
+    return t[l];
+  }
+};
+/// One flag per lane of a Quad (all bits set or none).
+struct QuadMask {
+  __m256d v;  ///< the flags
+
+  std::uint32_t bits() const { return static_cast<std::uint32_t>(_mm256_movemask_pd(v)); }  ///< bit l = lane l
+};
+inline Quad operator+(Quad a, Quad b) { return {_mm256_add_pd(a.v, b.v)}; }                   ///< a + b
+inline Quad operator-(Quad a, Quad b) { return {_mm256_sub_pd(a.v, b.v)}; }                   ///< a - b
+inline Quad operator*(Quad a, Quad b) { return {_mm256_mul_pd(a.v, b.v)}; }                   ///< a · b
+inline Quad operator/(Quad a, Quad b) { return {_mm256_div_pd(a.v, b.v)}; }                   ///< a / b
+inline QuadMask operator<(Quad a, Quad b) { return {_mm256_cmp_pd(a.v, b.v, _CMP_LT_OQ)}; }   ///< a < b (false for NaN)
+inline QuadMask operator>(Quad a, Quad b) { return {_mm256_cmp_pd(a.v, b.v, _CMP_GT_OQ)}; }   ///< a > b (false for NaN)
+inline QuadMask operator&(QuadMask a, QuadMask b) { return {_mm256_and_pd(a.v, b.v)}; }       ///< and
+inline QuadMask operator|(QuadMask a, QuadMask b) { return {_mm256_or_pd(a.v, b.v)}; }        ///< or
+inline QuadMask operator^(QuadMask a, QuadMask b) { return {_mm256_xor_pd(a.v, b.v)}; }       ///< xor
+inline Quad select(QuadMask m, Quad a, Quad b) { return {_mm256_blendv_pd(b.v, a.v, m.v)}; }  ///< m ? a : b per lane
+inline Quad sqrt(Quad a) { return {_mm256_sqrt_pd(a.v)}; }  ///< √a per lane, correctly rounded
+/// Four rows of four doubles (r[k][0, 4)) as four columns: c_j lane k = r[k][j].
+inline void transpose(const double* const r[4], Quad& c0, Quad& c1, Quad& c2, Quad& c3) {
+  const __m256d x0 = _mm256_loadu_pd(r[0]), x1 = _mm256_loadu_pd(r[1]), x2 = _mm256_loadu_pd(r[2]),
+                x3 = _mm256_loadu_pd(r[3]);
+  const __m256d t0 = _mm256_unpacklo_pd(x0, x1), t1 = _mm256_unpackhi_pd(x0, x1);
+  const __m256d t2 = _mm256_unpacklo_pd(x2, x3), t3 = _mm256_unpackhi_pd(x2, x3);
+  c0 = {_mm256_permute2f128_pd(t0, t2, 0x20)};
+  c1 = {_mm256_permute2f128_pd(t1, t3, 0x20)};
+  c2 = {_mm256_permute2f128_pd(t0, t2, 0x31)};
+  c3 = {_mm256_permute2f128_pd(t1, t3, 0x31)};
+}
 
 }  // namespace avx2
 ST_TARGET_END
