@@ -38,6 +38,7 @@ void CoherentCollider::adopt(const SphereTree& probe_tree, const SphereTree& obj
 
 void CoherentCollider::drop() {
   have_front_ = false;
+  leaf_entries_ = 0;
   garbage_ = 0;
   near_.radius = -1;
   front_.clear();
@@ -84,6 +85,12 @@ void CoherentCollider::note_contact(const Mesh& probe, const CollideResult& resu
   }
   near_.centre = 0.5 * (lo + hi);
   near_.radius = 0.5 * (hi - lo).norm() + leaf_radius_;
+}
+
+std::uint32_t CoherentCollider::build_budget() const {
+  if (!have_front_) return 4;
+  const double share = std::min(0.25, 0.02 * std::pow(1.5, double(std::min<std::uint32_t>(ramp_, 16))));
+  return std::max<std::uint32_t>(4, static_cast<std::uint32_t>(std::ceil(share * leaf_entries_)));
 }
 
 double CoherentCollider::choose_reach() const {

@@ -55,13 +55,15 @@ struct CoherentStats {
   std::uint64_t plain_rounds = 0;  ///< of those, by plain collide() (a jump, the pool full, a mode it does not cache)
   std::uint64_t rebuilds = 0;      ///< rounds that started from the roots (first round, after a drop)
   std::uint64_t expansions = 0;    ///< groups of apart sphere pairs tested again (their gap used up)
-  std::uint64_t refreshes = 0;     ///< leaf pairs whose candidates were gathered again
-  std::uint64_t reused = 0;        ///< candidate answers taken from their certificate
-  std::uint64_t retested = 0;      ///< candidates tested again (margin used up)
-  std::uint64_t overflows = 0;     ///< rounds that found the pool over max_bytes
-  std::size_t entries = 0;         ///< front entries after the last round
-  std::size_t candidates = 0;      ///< candidate pairs after the last round
-  std::size_t peak_bytes = 0;      ///< most pool bytes held after a round
+  std::uint64_t refreshes = 0;     ///< leaf pairs due for their candidates to be gathered again
+  /// leaf pairs answered by collide()'s leaf stage while their build waited for a round's budget
+  std::uint64_t deferred = 0;
+  std::uint64_t reused = 0;     ///< candidate answers taken from their certificate
+  std::uint64_t retested = 0;   ///< candidates tested again (margin used up)
+  std::uint64_t overflows = 0;  ///< rounds that found the pool over max_bytes
+  std::size_t entries = 0;      ///< front entries after the last round
+  std::size_t candidates = 0;   ///< candidate pairs after the last round
+  std::size_t peak_bytes = 0;   ///< most pool bytes held after a round
 };
 
 namespace detail {
@@ -81,6 +83,7 @@ enum FrontKind : std::uint8_t {
   kObjectChildren = 1,  ///< the children of o in `arg` are apart from p
   kProbeChildren = 2,   ///< the children of p in `arg` are apart from o
   kLeafPair = 3,        ///< leaf pair with candidates
+  kLeafPending = 4,     ///< leaf pair near, not built yet: answered by collide()'s leaf stage
 };
 /// A candidate triangle pair of a leaf pair and its certificate.
 struct Candidate {
@@ -147,6 +150,9 @@ class CoherentCollider {
   static double moved_since(const RelTransform& a, const RelTransform& b, const Vec3& c, double r);
   // near_ from a round's pairs (a sample of their probe faces), or none.
   void note_contact(const Mesh& probe, const CollideResult& result);
+  // Leaf pairs this round may build: a share of the front's that grows from 2 % after a rebuild
+  // to 25 % (coherent.hpp, top).
+  std::uint32_t build_budget() const;
   // δ for this round's new entries (config_.reach, or adapted to step_).
   double choose_reach() const;
 
@@ -160,7 +166,9 @@ class CoherentCollider {
   std::array<detail::PoseDelta, kPoses> deltas_{};  // this round's change since each kept pose (lazily)
   std::uint32_t round_ = 0;                         // rounds since reset (the current pose's id)
   bool have_front_ = false;
-  std::uint32_t plain_until_ = 0;  // after an overflow: plain rounds until this round
+  std::uint32_t leaf_entries_ = 0;  // leaf pairs (built or pending) in the front
+  std::uint32_t ramp_ = 0;          // rounds since the front was rebuilt (the build budget grows with it)
+  std::uint32_t plain_until_ = 0;   // after an overflow: plain rounds until this round
   // What the front was built for.
   const void* probe_key_ = nullptr;
   const void* object_key_ = nullptr;

@@ -104,10 +104,12 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   }
 
   CoherentCollider& cc;
-  double reach = 0;         // δ of the entries made this round
-  float reach_f = 0;        // δ rounded down to float (what entries record)
-  std::uint32_t round = 0;  // this round's id
-  bool overflow = false;    // the pool went over max_bytes: this round is abandoned
+  double reach = 0;               // δ of the entries made this round
+  float reach_f = 0;              // δ rounded down to float (what entries record)
+  std::uint32_t round = 0;        // this round's id
+  bool overflow = false;          // the pool went over max_bytes: this round is abandoned
+  std::uint32_t builds_left = 0;  // leaf pairs this round may still build (leaf())
+  std::uint32_t leaf_count = 0;   // leaf-pair entries of the new front
   using Delta = detail::PoseDelta;
   // The filter-with-margins batch: candidates (by index in cands_) waiting for tri_margins.
   std::uint32_t m_index[kTriBatch] = {}, m_slot[kTriBatch] = {}, m_face[kTriBatch] = {};
@@ -271,6 +273,29 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     }
     e.count = static_cast<std::uint16_t>(cc.cands_.size() - e.arg);
     cc.next_front_.push_back(e);
+    ++leaf_count;
+  }
+
+  // Leaf pair (p, o) reached this round, to be (re)built: built while this round's budget lasts;
+  // else answered by collide()'s own leaf stage and kept for a later round (`old`, an entry due
+  // for its refresh, unchanged with its candidates; a new pair as kLeafPending). So a round after
+  // a rebuild, or one where many leaf pairs fall due at once, costs little more than collide().
+  void leaf(std::uint32_t p, std::uint32_t o, const detail::FrontEntry* old) {
+    if (builds_left > 0) {
+      --builds_left;
+      build_leaf(p, o, old);
+      return;
+    }
+    if (old) {
+      cc.next_front_.push_back(*old);
+    } else {
+      detail::FrontEntry e;
+      e.p = p, e.o = o, e.pose = round, e.kind = detail::kLeafPending;
+      cc.next_front_.push_back(e);
+    }
+    ++leaf_count;
+    ++cc.stats_.deferred;
+    leaf_leaf(p, o);
   }
 
   // The candidates waiting for their margins: the filter with margins, the exact test for the
@@ -326,7 +351,8 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   // are tested at this pose and certified anew (the leaf pair's own certificate, for the face
   // pairs that are not candidates, stays the entry's).
   void reuse_leaf(const detail::FrontEntry& e) {
-    cc.next_front_.push_back(e);                            // its candidates stay where they are
+    cc.next_front_.push_back(e);  // its candidates stay where they are
+    ++leaf_count;
     const detail::Candidate* c = cc.cands_.data() + e.arg;  // nothing is appended to cands_ here
     bool prepared = false;
     // The bound for the candidates' poses: the whole probe's, then the leaf's when that is not enough.
@@ -406,7 +432,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       const SphereNode& ho = OT.nodes[o];
       const bool tp = hp.leaf, to = ho.leaf;
       if (tp && to) {
-        build_leaf(p, o);
+        leaf(p, o, nullptr);
         continue;
       }
       if (n + kMaxChildren > sc.stack_cap_) [[unlikely]] {
@@ -475,14 +501,16 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
           overflow = true;
           break;
         }
-        if (e.kind != detail::kLeafPair) {
+        if (e.kind == detail::kLeafPending) {
+          leaf(e.p, e.o, nullptr);
+        } else if (e.kind != detail::kLeafPair) {
           if (still(e.p, e.pose, e.margin))
             cc.next_front_.push_back(e);
           else
             expand(e);
         } else if (!still(e.p, e.pose, e.margin * float(256 + e.theta) / 512.0f)) {
           ++cc.stats_.refreshes;
-          build_leaf(e.p, e.o, &e);
+          leaf(e.p, e.o, &e);
         } else {
           reuse_leaf(e);
         }
@@ -494,6 +522,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     flush_full();
     if (pool_bytes() > limit) overflow = true;
     res.stats.exact_evals = detail::exact_evaluations - evals0;
+    cc.leaf_entries_ = leaf_count;
     return !overflow;
   }
 };

@@ -295,7 +295,7 @@ void query(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, 
 template <class Lanes>
 bool run_coherent(CoherentCollider& cc, const Mesh& probe, const SphereTree& probe_tree, const Mesh& object,
                   const SphereTree& object_tree, const CollideConfig& options, CollideScratch& scratch,
-                  CollideResult& result, const QueryFrame& f, std::uint32_t round, double reach) {
+                  CollideResult& result, const QueryFrame& f, std::uint32_t round, double reach, std::uint32_t builds) {
   CoherentQuery<Lanes> q{{probe, probe_tree, object, object_tree, options, scratch, result, f.rt}, cc};
   q.gen = f.gen;
   q.s = f.s;
@@ -303,6 +303,7 @@ bool run_coherent(CoherentCollider& cc, const Mesh& probe, const SphereTree& pro
   q.round = round;
   q.reach = reach;
   q.reach_f = static_cast<float>(reach * (1 - 1e-6));
+  q.builds_left = builds;
   return q.run();
 }
 
@@ -459,7 +460,7 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   reach_ = choose_reach();
   const bool ok = on_active_isa([&](auto isa) {
     return run_coherent<typename decltype(isa)::type>(*this, probe, probe_tree, object, object_tree, options, scratch_,
-                                                      result, f, round, reach_);
+                                                      result, f, round, reach_, build_budget());
   });
   if (!ok) {  // the pool is full: this round, and the next 64, by collide()
     ++stats_.overflows;
@@ -475,6 +476,7 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
     drop();  // a front cut short proves nothing about what it did not reach
   } else {
     front_.swap(next_front_);
+    ramp_ = have_front_ ? ramp_ + 1 : 0;
     have_front_ = true;
     if (garbage_ > 4096 && 2 * garbage_ > cands_.size()) compact();
   }
