@@ -54,6 +54,7 @@ struct CoherentStats {
   std::uint64_t rounds = 0;        ///< rounds answered
   std::uint64_t plain_rounds = 0;  ///< of those, by plain collide() (a jump, the pool full, a mode it does not cache)
   std::uint64_t rebuilds = 0;      ///< rounds that started from the roots (first round, after a drop)
+  std::uint64_t reroots = 0;         ///< rounds that walked again from the roots, keeping the leaf pairs' entries
   std::uint64_t expansions = 0;    ///< groups of apart sphere pairs tested again (their gap used up)
   std::uint64_t refreshes = 0;     ///< leaf pairs due for their candidates to be gathered again
   /// leaf pairs answered by collide()'s leaf stage while their build waited for a round's budget
@@ -136,7 +137,8 @@ class CoherentCollider {
  private:
   template <class Lanes>
   friend struct CoherentQuery;                  // coherent_traversal.inl: one per instruction set
-  static constexpr std::uint32_t kPoses = 256;  // certificate poses kept; older entries are redone
+  static constexpr std::uint32_t kPoses = 256;       // certificate poses kept; older entries are redone
+  static constexpr std::uint32_t kRerootEvery = 64;  // rounds between walks from the roots
 
   // The front was built for these trees and object roots.
   bool same_setup(const SphereTree& probe_tree, const SphereTree& object_tree, const CollideConfig& options) const;
@@ -162,6 +164,7 @@ class CoherentCollider {
   std::vector<detail::FrontEntry> front_, next_front_;
   std::vector<detail::Candidate> cands_, next_cands_;  // leaf pairs' candidates (in place); compact()'s scratch
   std::size_t garbage_ = 0;                            // candidates of refreshed leaf pairs still in cands_
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> leaf_index_;  // re-rooting: (p << 32 | o, front entry)
   std::array<detail::CertPose, kPoses> poses_{};
   std::array<detail::PoseDelta, kPoses> deltas_{};  // this round's change since each kept pose (lazily)
   std::uint32_t round_ = 0;                         // rounds since reset (the current pose's id)

@@ -109,6 +109,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   std::uint32_t round = 0;        // this round's id
   bool overflow = false;          // the pool went over max_bytes: this round is abandoned
   std::uint32_t builds_left = 0;  // leaf pairs this round may still build (leaf())
+  bool rerooting = false;         // this round walks from the roots, keeping the front's leaf pairs
   std::uint32_t leaf_count = 0;   // leaf-pair entries of the new front
   using Delta = detail::PoseDelta;
   // The filter-with-margins batch: candidates (by index in cands_) waiting for tri_margins.
@@ -282,8 +283,9 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   // a rebuild, or one where many leaf pairs fall due at once, costs little more than collide().
   void leaf(std::uint32_t p, std::uint32_t o, const detail::FrontEntry* old) {
     if (builds_left > 0) {
-      --builds_left;
+      const std::uint32_t before = leaf_count;
       build_leaf(p, o, old);
+      if (leaf_count != before) --builds_left;  // a pair found apart at the box level cost little
       return;
     }
     if (old) {
@@ -432,7 +434,15 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       const SphereNode& ho = OT.nodes[o];
       const bool tp = hp.leaf, to = ho.leaf;
       if (tp && to) {
-        leaf(p, o, nullptr);
+        const detail::FrontEntry* known = rerooting ? known_leaf(p, o) : nullptr;
+        if (!known)
+          leaf(p, o, nullptr);
+        else if (known->kind == detail::kLeafPair || known->kind == detail::kLeafPending)
+          visit_leaf(*known);
+        else if (still(p, known->pose, known->margin))  // a leaf pair its boxes proved apart
+          cc.next_front_.push_back(*known);
+        else
+          leaf(p, o, nullptr);
         continue;
       }
       if (n + kMaxChildren > sc.stack_cap_) [[unlikely]] {
@@ -465,8 +475,29 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     walk_front(stack, n);
   }
 
+  // A leaf-pair entry of the front: built when pending, refreshed when due, else reused.
+  void visit_leaf(const detail::FrontEntry& e) {
+    if (e.kind == detail::kLeafPending) {
+      leaf(e.p, e.o, nullptr);
+    } else if (!still(e.p, e.pose, e.margin * float(256 + e.theta) / 512.0f)) {
+      ++cc.stats_.refreshes;
+      leaf(e.p, e.o, &e);
+    } else {
+      reuse_leaf(e);
+    }
+  }
+  // Re-rooting: the old front's entry for leaf pair (p, o), if it has one.
+  const detail::FrontEntry* known_leaf(std::uint32_t p, std::uint32_t o) const {
+    const std::uint64_t key = (std::uint64_t{p} << 32) | o;
+    const auto it = std::lower_bound(cc.leaf_index_.begin(), cc.leaf_index_.end(), std::pair{key, 0u});
+    return it != cc.leaf_index_.end() && it->first == key ? &cc.front_[it->second] : nullptr;
+  }
+
   // The round: every entry of the front kept, refreshed or expanded (or, the first round, the
-  // roots expanded). False when the pool went over max_bytes (the caller runs collide()).
+  // roots expanded). Every kRerootEvery rounds the front is walked again from the roots instead
+  // (its leaf pairs' entries kept, matched by (p, o)): a front only refines as the probe moves,
+  // and the fine apart pairs it leaves behind would otherwise pile up. False when the pool went
+  // over max_bytes (the caller runs collide()).
   bool run() {
     std::uint64_t scanned = 0;
     cc.next_front_.clear();
@@ -476,8 +507,19 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       e.p = 0, e.o = r, e.kind = detail::kPairApart;
       expand(e);
     };
-    if (!cc.have_front_) {
-      ++cc.stats_.rebuilds;
+    if (rerooting) {
+      ++cc.stats_.reroots;
+      cc.leaf_index_.clear();
+      for (std::uint32_t i = 0; i < cc.front_.size(); ++i) {
+        const detail::FrontEntry& e = cc.front_[i];
+        if (e.kind == detail::kLeafPair || e.kind == detail::kLeafPending ||
+            (e.kind == detail::kPairApart && PT.nodes[e.p].leaf && OT.nodes[e.o].leaf))
+          cc.leaf_index_.emplace_back((std::uint64_t{e.p} << 32) | e.o, i);
+      }
+      std::sort(cc.leaf_index_.begin(), cc.leaf_index_.end());
+    }
+    if (!cc.have_front_ || rerooting) {
+      if (!rerooting) ++cc.stats_.rebuilds;
       if (!opt.restrict_object) {
         expand_root(0);
       } else {
@@ -501,19 +543,12 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
           overflow = true;
           break;
         }
-        if (e.kind == detail::kLeafPending) {
-          leaf(e.p, e.o, nullptr);
-        } else if (e.kind != detail::kLeafPair) {
-          if (still(e.p, e.pose, e.margin))
-            cc.next_front_.push_back(e);
-          else
-            expand(e);
-        } else if (!still(e.p, e.pose, e.margin * float(256 + e.theta) / 512.0f)) {
-          ++cc.stats_.refreshes;
-          leaf(e.p, e.o, &e);
-        } else {
-          reuse_leaf(e);
-        }
+        if (e.kind == detail::kLeafPair || e.kind == detail::kLeafPending)
+          visit_leaf(e);
+        else if (still(e.p, e.pose, e.margin))
+          cc.next_front_.push_back(e);
+        else
+          expand(e);
       }
     }
     flush_margins();
@@ -523,6 +558,11 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     if (pool_bytes() > limit) overflow = true;
     res.stats.exact_evals = detail::exact_evaluations - evals0;
     cc.leaf_entries_ = leaf_count;
+    if (rerooting) {  // the old leaf pairs not reached again left their candidates behind
+      std::size_t live = 0;
+      for (const detail::FrontEntry& e : cc.next_front_) live += e.kind == detail::kLeafPair ? e.count : 0;
+      cc.garbage_ = cc.cands_.size() - live;
+    }
     return !overflow;
   }
 };

@@ -295,7 +295,8 @@ void query(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object, 
 template <class Lanes>
 bool run_coherent(CoherentCollider& cc, const Mesh& probe, const SphereTree& probe_tree, const Mesh& object,
                   const SphereTree& object_tree, const CollideConfig& options, CollideScratch& scratch,
-                  CollideResult& result, const QueryFrame& f, std::uint32_t round, double reach, std::uint32_t builds) {
+                  CollideResult& result, const QueryFrame& f, std::uint32_t round, double reach, std::uint32_t builds,
+                  bool rerooting) {
   CoherentQuery<Lanes> q{{probe, probe_tree, object, object_tree, options, scratch, result, f.rt}, cc};
   q.gen = f.gen;
   q.s = f.s;
@@ -304,6 +305,7 @@ bool run_coherent(CoherentCollider& cc, const Mesh& probe, const SphereTree& pro
   q.reach = reach;
   q.reach_f = static_cast<float>(reach * (1 - 1e-6));
   q.builds_left = builds;
+  q.rerooting = rerooting;
   return q.run();
 }
 
@@ -460,7 +462,8 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   reach_ = choose_reach();
   const bool ok = on_active_isa([&](auto isa) {
     return run_coherent<typename decltype(isa)::type>(*this, probe, probe_tree, object, object_tree, options, scratch_,
-                                                      result, f, round, reach_, build_budget());
+                                                      result, f, round, reach_, build_budget(),
+                                                      have_front_ && ramp_ % kRerootEvery == kRerootEvery - 1);
   });
   if (!ok) {  // the pool is full: this round, and the next 64, by collide()
     ++stats_.overflows;
