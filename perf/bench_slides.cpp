@@ -184,7 +184,9 @@ void add_slides(CLI::App& app) {
       while (std::getline(ss, tok, ',')) steps.push_back(std::stod(tok));
     }
 
-    geom::CollideScratch sc;
+    // Each path has its own scratch, as each would in a collision thread of its own (the coherent
+    // collider holds one): no path runs on caches another warmed.
+    geom::CollideScratch sc, sc_today, sc_filter;
     geom::CollideResult r_today, r_filter, r_coh, sorted_plain, sorted_coh;
     geom::CollideConfig today;
     today.tri_filter = false;
@@ -228,10 +230,10 @@ void add_slides(CLI::App& app) {
               continue;
             }
             auto t0 = std::chrono::steady_clock::now();
-            geom::collide(probe, pt, object, ot, pose, today, sc, r_today);
+            geom::collide(probe, pt, object, ot, pose, today, sc_today, r_today);
             t_today[k].push_back(us_since(t0));
             t0 = std::chrono::steady_clock::now();
-            geom::collide(probe, pt, object, ot, pose, filter, sc, r_filter);
+            geom::collide(probe, pt, object, ot, pose, filter, sc_filter, r_filter);
             t_filter[k].push_back(us_since(t0));
             t0 = std::chrono::steady_clock::now();
             coh.collide(probe, pt, object, ot, pose, filter, r_coh);

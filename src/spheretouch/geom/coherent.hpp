@@ -54,7 +54,7 @@ struct CoherentStats {
   std::uint64_t rounds = 0;        ///< rounds answered
   std::uint64_t plain_rounds = 0;  ///< of those, by plain collide() (a jump, the pool full, a mode it does not cache)
   std::uint64_t rebuilds = 0;      ///< rounds that started from the roots (first round, after a drop)
-  std::uint64_t reroots = 0;         ///< rounds that walked again from the roots, keeping the leaf pairs' entries
+  std::uint64_t reroots = 0;       ///< rounds that walked again from the roots, keeping the leaf pairs' entries
   std::uint64_t expansions = 0;    ///< groups of apart sphere pairs tested again (their gap used up)
   std::uint64_t refreshes = 0;     ///< leaf pairs due for their candidates to be gathered again
   /// leaf pairs answered by collide()'s leaf stage while their build waited for a round's budget
@@ -136,7 +136,7 @@ class CoherentCollider {
 
  private:
   template <class Lanes>
-  friend struct CoherentQuery;                  // coherent_traversal.inl: one per instruction set
+  friend struct CoherentQuery;                       // coherent_traversal.inl: one per instruction set
   static constexpr std::uint32_t kPoses = 256;       // certificate poses kept; older entries are redone
   static constexpr std::uint32_t kRerootEvery = 64;  // rounds between walks from the roots
 
@@ -155,6 +155,11 @@ class CoherentCollider {
   // Leaf pairs this round may build: a share of the front's that grows from 2 % after a rebuild
   // to 25 % (coherent.hpp, top).
   std::uint32_t build_budget() const;
+  // This round walks from the roots again: the front has doubled since it last did (checked
+  // every kRerootEvery rounds).
+  bool reroot_due() const {
+    return have_front_ && ramp_ % kRerootEvery == kRerootEvery - 1 && front_.size() > 2 * rooted_size_;
+  }
   // δ for this round's new entries (config_.reach, or adapted to step_).
   double choose_reach() const;
 
@@ -170,6 +175,7 @@ class CoherentCollider {
   std::uint32_t round_ = 0;                         // rounds since reset (the current pose's id)
   bool have_front_ = false;
   std::uint32_t leaf_entries_ = 0;  // leaf pairs (built or pending) in the front
+  std::size_t rooted_size_ = 0;     // front entries after the last walk from the roots
   std::uint32_t ramp_ = 0;          // rounds since the front was rebuilt (the build budget grows with it)
   std::uint32_t plain_until_ = 0;   // after an overflow: plain rounds until this round
   // What the front was built for.

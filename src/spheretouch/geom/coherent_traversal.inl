@@ -494,10 +494,10 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   }
 
   // The round: every entry of the front kept, refreshed or expanded (or, the first round, the
-  // roots expanded). Every kRerootEvery rounds the front is walked again from the roots instead
-  // (its leaf pairs' entries kept, matched by (p, o)): a front only refines as the probe moves,
-  // and the fine apart pairs it leaves behind would otherwise pile up. False when the pool went
-  // over max_bytes (the caller runs collide()).
+  // roots expanded). When the front has doubled since it was last walked from the roots, that
+  // walk is done again instead (its leaf pairs' entries kept, matched by (p, o)): a front only
+  // refines as the probe moves, and the fine apart pairs it leaves behind would otherwise pile
+  // up. False when the pool went over max_bytes (the caller runs collide()).
   bool run() {
     std::uint64_t scanned = 0;
     cc.next_front_.clear();

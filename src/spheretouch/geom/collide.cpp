@@ -462,8 +462,7 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   reach_ = choose_reach();
   const bool ok = on_active_isa([&](auto isa) {
     return run_coherent<typename decltype(isa)::type>(*this, probe, probe_tree, object, object_tree, options, scratch_,
-                                                      result, f, round, reach_, build_budget(),
-                                                      have_front_ && ramp_ % kRerootEvery == kRerootEvery - 1);
+                                                      result, f, round, reach_, build_budget(), reroot_due());
   });
   if (!ok) {  // the pool is full: this round, and the next 64, by collide()
     ++stats_.overflows;
@@ -478,7 +477,9 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   if (result.stats.pair_limit_hit || result.stats.work_limit_hit || result.stats.truncated != 0) {
     drop();  // a front cut short proves nothing about what it did not reach
   } else {
+    const bool rerooted = reroot_due();
     front_.swap(next_front_);
+    if (!have_front_ || rerooted) rooted_size_ = front_.size();
     ramp_ = have_front_ ? ramp_ + 1 : 0;
     have_front_ = true;
     if (garbage_ > 4096 && 2 * garbage_ > cands_.size()) compact();

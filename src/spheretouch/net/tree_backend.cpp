@@ -10,6 +10,7 @@
 
 #include <spheretouch/collide.hpp>
 #include <spheretouch/geom/partition.hpp>
+#include <spheretouch/net/worker_service.hpp>
 
 namespace st::inline SPHERETOUCH_ABI::net {
 namespace {
@@ -64,6 +65,9 @@ class TreeBackend final : public CollisionBackend {
     Result<Body> ob = Body::make(std::move(object), object_tree_, geom::Pose::Identity(), groups);
     if (!ob) return fail("object share: ", ob.error());
     collider_.emplace(std::move(pb).value(), std::move(ob).value());
+    geom::CoherentConfig coherent;
+    coherent.max_bytes = kCoherentCacheBytes;
+    collider_->set_coherent(true, coherent);
     return Ok{};
   }
 

@@ -98,7 +98,7 @@ struct WorkerService::LoadJob {
 MemoryBound memory_bound(const WorkerConfig& cfg) {
   const double set_mib = double(cfg.limits.max_blockset_bytes) / double(1 << 20);
   MemoryBound b;
-  b.held_mib = kSetMemoryFactor * set_mib * cfg.max_sets;
+  b.held_mib = (kSetMemoryFactor * set_mib + double(kCoherentCacheBytes) / double(1 << 20)) * cfg.max_sets;
   b.build_mib = kBuildMemoryFactor * set_mib;
   b.upload_mib = double(cfg.max_upload_bytes) / double(1 << 20);
   b.queue_mib = double(cfg.max_connections) * cfg.rcvhwm * double(cfg.limits.max_chunk_bytes) / double(1 << 20);

@@ -153,7 +153,13 @@ inline constexpr double kSetMemoryFactor = 6.0;
 /// the 48 MiB set.
 inline constexpr double kBuildMemoryFactor = 6.5;
 
-/// What a worker with `cfg` may hold at most, MiB: max_sets held sets, one being built, uploads
+/// Bound on the coherent collider's cache (geom::CoherentConfig::max_bytes) of each held set: the
+/// tree backend carries certificates between a client's rounds (the same pairs, less work when
+/// the probe moves a little), within this.
+inline constexpr std::size_t kCoherentCacheBytes = std::size_t(8) << 20;
+
+/// What a worker with `cfg` may hold at most, MiB: max_sets held sets (each with its coherent
+/// cache), one being built, uploads
 /// and libzmq's queues (the terms of WorkerConfig::limits' comment), for the daemon's log and
 /// its check against its cgroup's memory.max.
 struct MemoryBound {
