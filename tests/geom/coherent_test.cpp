@@ -29,6 +29,14 @@ struct Body {
 
 constexpr double kPi = 3.14159265358979323846;
 
+// The path chosen by the motion alone (no timing against collide()), so the counters below are
+// the same on every machine.
+CoherentConfig fixed() {
+  CoherentConfig c;
+  c.arbitrate = false;
+  return c;
+}
+
 // A pose moved from `start` by `along` (object frame) and turned by `deg` about `axis` through `pivot`.
 Pose moved(const Pose& start, const Vec3& pivot, const Vec3& dir, double along, const Vec3& axis, double deg) {
   Pose p = Pose::Identity();
@@ -101,7 +109,7 @@ TEST_CASE(
     slide_frame(object.mesh, cmp.plain.pairs, pivot, dir, axis);
     for (const double step : {0.001, 0.01, 0.03}) {
       CAPTURE(step);
-      CoherentCollider cc;
+      CoherentCollider cc(fixed());
       for (int k = 0; k < per_series; ++k) {  // forth, then back over the same poses
         const int s = k < per_series / 2 ? k : per_series - k;
         cmp.at(cc, probe, object, moved(start, pivot, dir, s * step, axis, s * 0.01));
@@ -112,7 +120,7 @@ TEST_CASE(
       CHECK(cc.stats().peak_bytes <= cc.config().max_bytes);
     }
     {  // jitter between three poses: certificates are checked against their own pose, so no refresh wears out
-      CoherentCollider cc;
+      CoherentCollider cc(fixed());
       for (int k = 0; k < per_series; ++k)
         cmp.at(cc, probe, object, moved(start, pivot, dir, 0.01 * (k % 3), axis, 0.0));
       const std::uint64_t before = cc.stats().refreshes;
@@ -122,7 +130,7 @@ TEST_CASE(
       CHECK(cc.stats().plain_rounds == 0);
     }
     {  // a jerk of 1 mm + 1 degree: one plain round, then a rebuild, every round exact
-      CoherentCollider cc;
+      CoherentCollider cc(fixed());
       for (int k = 0; k < 40; ++k)
         cmp.at(cc, probe, object, moved(start, pivot, dir, 0.005 * k + (k >= 20 ? 1.0 : 0.0), axis, k >= 20 ? 1.0 : 0.0));
       CHECK(cc.stats().plain_rounds >= 1);
@@ -158,7 +166,7 @@ TEST_CASE("the coherent collider is exact on every ISA, far from the origin, at 
         REQUIRE(simd::set_isa(static_cast<Isa>(i)));
         const std::string isa = simd::isa_name(static_cast<Isa>(i));
         CAPTURE(isa);
-        CoherentCollider cc;
+        CoherentCollider cc(fixed());
         Compare cmp;
         for (int k = 0; k < 24; ++k)
           cmp.at(cc, probe, object,
@@ -177,7 +185,7 @@ TEST_CASE("the coherent collider is exact on coplanar, touching and degenerate f
   Mesh floor = st::test::grid(12), tile = st::test::grid(4);
   tile.faces.push_back({0, 0, 1});  // a degenerate face (a segment)
   const Body object(floor), probe(tile);
-  CoherentCollider cc;
+  CoherentCollider cc(fixed());
   Compare cmp;
   for (int k = 0; k < 60; ++k) {
     Pose pose = Pose::Identity();
@@ -204,7 +212,7 @@ TEST_CASE("the coherent collider keeps collide()'s limits and falls back on jump
   const Vec3 x = Vec3::UnitX();
 
   SUBCASE("max_pairs stops it as it stops collide(); max_work bounds its own work; both drop the cache") {
-    CoherentCollider cc;
+    CoherentCollider cc(fixed());
     CollideConfig capped;
     capped.max_pairs = 10;
     CollideConfig budget;
@@ -235,7 +243,7 @@ TEST_CASE("the coherent collider keeps collide()'s limits and falls back on jump
     }
   }
   SUBCASE("a pool over max_bytes runs collide() (the pairs are the same) and says so") {
-    CoherentConfig tiny;
+    CoherentConfig tiny = fixed();
     tiny.max_bytes = 4096;
     CoherentCollider cc(tiny);
     for (int k = 0; k < 10; ++k) cmp.at(cc, probe, object, moved(start, Vec3::Zero(), x, 0.001 * k, x, 0.0));
@@ -244,7 +252,7 @@ TEST_CASE("the coherent collider keeps collide()'s limits and falls back on jump
     CHECK(cc.bytes() < 64 * 1024 * 1024);
   }
   SUBCASE("a jump runs collide() and drops the cache; a non-finite pose gives nothing") {
-    CoherentCollider cc;
+    CoherentCollider cc(fixed());
     cmp.at(cc, probe, object, start);
     cmp.at(cc, probe, object, moved(start, Vec3::Zero(), x, 5.0, x, 0.0));
     CHECK(cc.stats().plain_rounds == 1);
@@ -256,7 +264,7 @@ TEST_CASE("the coherent collider keeps collide()'s limits and falls back on jump
     cmp.at(cc, probe, object, start);
   }
   SUBCASE("object roots (a worker's blocks): the same pairs as collide() with them; new roots start over") {
-    CoherentCollider cc;
+    CoherentCollider cc(fixed());
     std::vector<std::uint32_t> roots;
     for (std::uint32_t i = 0; i < object.tree.num_nodes() && roots.size() < 6; ++i)
       if (object.tree.nodes[i].depth == 2) roots.push_back(i);
@@ -270,4 +278,22 @@ TEST_CASE("the coherent collider keeps collide()'s limits and falls back on jump
     cmp.at(cc, probe, object, start, opt);
     CHECK(cc.stats().rebuilds == rebuilds + 1);
   }
+}
+
+TEST_CASE("arbitration against collide()'s time changes the path, never the pairs") {
+  // Light contact (a small probe grazing a grid), where collide() takes microseconds: whichever
+  // path the timing picks, round by round, the pairs are collide()'s.
+  const Body object(st::test::grid(40)), probe(st::test::grid(3));
+  CoherentCollider cc;  // arbitrate: the default
+  REQUIRE(cc.config().arbitrate);
+  Compare cmp;
+  for (int k = 0; k < 700; ++k) {
+    Pose pose = Pose::Identity();
+    pose.translation() = Vec3(10.0 + 0.002 * (k % 200), 10.0, 0.0);
+    pose.linear() = Eigen::AngleAxisd(0.3, Vec3::UnitX()).toRotationMatrix();
+    cmp.at(cc, probe, object, pose);
+  }
+  CHECK(!cmp.plain.pairs.empty());
+  CHECK(cc.stats().rounds == 700);
+  CHECK(cc.stats().plain_rounds >= 700 / 128);  // at least the timed ones
 }

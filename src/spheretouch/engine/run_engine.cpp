@@ -604,6 +604,23 @@ RunReport RunEngine::finish(int signal) {
           static_cast<unsigned long long>(collision.rounds()), double(collision.rounds()) / secs,
           double(lat.percentile_ns(0.5)) * 1e-6, double(lat.percentile_ns(0.99)) * 1e-6,
           static_cast<unsigned long long>(collision.incomplete()), e.backend.c_str());
+  {  // the collision thread's coherent colliders (after the run: that thread has ended)
+    geom::CoherentStats cs;
+    for (const std::optional<ComputeCollision>& c : e.colliders)
+      if (c && c->coherent()) {
+        const geom::CoherentStats& k = c->coherent()->stats();
+        cs.rounds += k.rounds, cs.plain_rounds += k.plain_rounds, cs.rebuilds += k.rebuilds;
+        cs.reused += k.reused, cs.retested += k.retested, cs.peak_bytes = std::max(cs.peak_bytes, k.peak_bytes);
+      }
+    if (cs.rounds > 0)
+      appendf(summary,
+              "  coherent        %llu of %llu rounds from certificates (%llu plain: a jump or no contact near; %llu "
+              "rebuilds), %llu answers reused, %llu tested again, cache peak %.1f MB\n",
+              static_cast<unsigned long long>(cs.rounds - cs.plain_rounds), static_cast<unsigned long long>(cs.rounds),
+              static_cast<unsigned long long>(cs.plain_rounds), static_cast<unsigned long long>(cs.rebuilds),
+              static_cast<unsigned long long>(cs.reused), static_cast<unsigned long long>(cs.retested),
+              double(cs.peak_bytes) / 1e6);
+  }
   if (e.fleet) appendf(summary, "  split           %s\n", e.fleet->split.c_str());
   if (sres.silences)
     appendf(summary,

@@ -61,6 +61,8 @@ void CoherentCollider::reset() {
   drop();
   round_ = 0;
   plain_until_ = 0;
+  plain_ns_ = coherent_ns_ = 0;
+  coherent_rounds_ = spells_ = 0;
   have_last_ = false;
   step_ = 0;
   for (detail::CertPose& p : poses_) p.round = ~0u;

@@ -47,6 +47,12 @@ struct CoherentConfig {
   /// Bound on the cache (entries + candidates), bytes. A round that would exceed it runs plain
   /// collide(), and so do the next 64 rounds.
   std::size_t max_bytes = std::size_t(64) << 20;
+  /// Time itself against collide() (a plain round every 128, the cache kept) and give way to it
+  /// for 256 rounds (doubling, up to 8192, while it keeps losing) when its rounds cost more than
+  /// 0.95 of collide()'s (light contact, where
+  /// collide() takes microseconds and the certificates' bookkeeping does not pay). The pairs are
+  /// the same either way; false makes the choice of path depend on the motion alone.
+  bool arbitrate = true;
 };
 
 /// What the coherent collider did (totals since construction or reset_stats()).
@@ -62,6 +68,7 @@ struct CoherentStats {
   std::uint64_t reused = 0;     ///< candidate answers taken from their certificate
   std::uint64_t retested = 0;   ///< candidates tested again (margin used up)
   std::uint64_t overflows = 0;  ///< rounds that found the pool over max_bytes
+  std::uint64_t gave_way = 0;   ///< times its rounds cost more than collide()'s and it gave way (arbitrate)
   std::size_t entries = 0;      ///< front entries after the last round
   std::size_t candidates = 0;   ///< candidate pairs after the last round
   std::size_t peak_bytes = 0;   ///< most pool bytes held after a round
@@ -139,6 +146,8 @@ class CoherentCollider {
   friend struct CoherentQuery;                       // coherent_traversal.inl: one per instruction set
   static constexpr std::uint32_t kPoses = 256;       // certificate poses kept; older entries are redone
   static constexpr std::uint32_t kRerootEvery = 64;  // rounds between walks from the roots
+  static constexpr std::uint32_t kTimeEvery = 128;   // arbitrate: a plain round timed this often
+  static constexpr std::uint32_t kPlainSpell = 256;  // arbitrate: plain rounds after giving way
 
   // The front was built for these trees and object roots.
   bool same_setup(const SphereTree& probe_tree, const SphereTree& object_tree, const CollideConfig& options) const;
@@ -174,10 +183,13 @@ class CoherentCollider {
   std::array<detail::PoseDelta, kPoses> deltas_{};  // this round's change since each kept pose (lazily)
   std::uint32_t round_ = 0;                         // rounds since reset (the current pose's id)
   bool have_front_ = false;
-  std::uint32_t leaf_entries_ = 0;  // leaf pairs (built or pending) in the front
-  std::size_t rooted_size_ = 0;     // front entries after the last walk from the roots
-  std::uint32_t ramp_ = 0;          // rounds since the front was rebuilt (the build budget grows with it)
-  std::uint32_t plain_until_ = 0;   // after an overflow: plain rounds until this round
+  std::uint32_t leaf_entries_ = 0;         // leaf pairs (built or pending) in the front
+  std::size_t rooted_size_ = 0;            // front entries after the last walk from the roots
+  std::uint32_t ramp_ = 0;                 // rounds since the front was rebuilt (the build budget grows with it)
+  std::uint32_t plain_until_ = 0;          // after an overflow or giving way: plain rounds until this round
+  double plain_ns_ = 0, coherent_ns_ = 0;  // arbitrate: recent round times (moving averages)
+  std::uint32_t coherent_rounds_ = 0;      // arbitrate: coherent rounds since it last gave way
+  std::uint32_t spells_ = 0;               // arbitrate: times in a row it gave way (the spell doubles)
   // What the front was built for.
   const void* probe_key_ = nullptr;
   const void* object_key_ = nullptr;

@@ -26,6 +26,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <chrono>
 #include <cstring>
 #include <limits>
 
@@ -450,13 +451,20 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   last_rt_ = f.rt;
   have_last_ = true;
   const std::uint32_t round = round_++;
-  if (step > max_step_ || round < plain_until_) {  // a jump: every certificate would fail
-    drop();
+  // A jump (every certificate would fail), a spell of plain rounds, or (arbitrate) the plain round
+  // that times collide() now and then, the cache kept.
+  const bool timing = config_.arbitrate && have_front_ && round % kTimeEvery == kTimeEvery - 1;
+  if (step > max_step_ || round < plain_until_ || timing) {
+    if (!timing) drop();
     ++stats_.plain_rounds;
+    const auto t0 = std::chrono::steady_clock::now();
     query(probe, probe_tree, object, object_tree, options, scratch_, result, f);
+    const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count();
+    plain_ns_ = plain_ns_ > 0 ? 0.7 * plain_ns_ + 0.3 * ns : ns;
     note_contact(probe, result);
     return;
   }
+  const auto t0 = std::chrono::steady_clock::now();
   step_ = std::max(step, step_ * 0.9);
   poses_[round % kPoses] = {f.rt, f.mag, round};
   reach_ = choose_reach();
@@ -483,6 +491,22 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
     ramp_ = have_front_ ? ramp_ + 1 : 0;
     have_front_ = true;
     if (garbage_ > 4096 && 2 * garbage_ > cands_.size()) compact();
+    // arbitrate: certificates that cost more than the plain query they save (light contact,
+    // where collide() itself takes microseconds) give way to it for kPlainSpell rounds.
+    const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count();
+    coherent_ns_ = coherent_rounds_ > 0 ? 0.95 * coherent_ns_ + 0.05 * ns : ns;
+    ++coherent_rounds_;
+    if (config_.arbitrate && coherent_rounds_ >= 64 && plain_ns_ > 0) {
+      if (coherent_ns_ > 0.95 * plain_ns_) {  // each time it gives way again, for twice as long
+        ++stats_.gave_way;
+        drop();
+        plain_until_ = round_ + (kPlainSpell << std::min<std::uint32_t>(spells_, 5));
+        spells_ += 1;
+        coherent_rounds_ = 0;
+      } else if (coherent_rounds_ >= 512) {
+        spells_ = 0;  // it has paid for a while: the next spell is short again
+      }
+    }
   }
   note_contact(probe, result);
   stats_.entries = front_.size();
