@@ -123,6 +123,14 @@ for o in "${collide_objects[@]}"; do
   done
 done
 
+# The coherent collider along slides and a jerk, against today's path and the filter (same run).
+if [ $quick = 1 ]; then slide_args=(--rounds 60 --reps 1 --steps 0.01,0.1); else slide_args=(--rounds 200 --reps 3); fi
+log "collision core: coherent collider along slides (${collide_objects[*]})"
+for o in "${collide_objects[@]}"; do
+  if [ "$o" = elephant ]; then pf="$out/poses/hand_elephant.txt"; else pf="$out/poses/hand_${o}_targets.txt"; fi
+  "$bench" slides --probe "$hand" --object "$models/$o.off" --poses "$pf" "${slide_args[@]}" --json > "$out/slides_${o}.json"
+done
+
 log "table 1: hand x elephant, contacts x workers ($workers)"
 "$bench" table1 --probe "$hand" --object "$models/elephant.off" --poses "$out/poses/hand_elephant.txt" \
   --workers "$workers" --worker-bin "$worker" --rounds "$rounds1" --csv "$out/table1.csv" > "$out/table1.txt"

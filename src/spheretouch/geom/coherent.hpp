@@ -21,8 +21,13 @@
 // larger than it keeps the origin inside (coherent_traversal.inl proves the margins).
 // A leaf pair's certificate is refreshed before it runs out, at a fraction of δ that differs
 // between leaf pairs (staggered), so refreshes spread over rounds instead of falling on one.
-// A round whose probe moved more than max_step since the last one runs collide() and drops
-// the cache (the next round rebuilds it): a jerk costs one plain round and one rebuild.
+// What bounds a round's cost: leaf pairs are (re)built within a budget per round (2 % of the
+// front's after a rebuild, growing to 25 %), the others answered by collide()'s own leaf stage
+// meanwhile, so a rebuild costs about what collide() does; a round whose probe (its part in
+// contact) moved more than max_step since the last one runs collide() and drops the cache (a jerk
+// costs one plain round and one rebuild); the front is walked again from the roots when it has
+// doubled (it only refines as the probe moves); and, with `arbitrate`, the collider times itself
+// against collide() and gives way to it where the bookkeeping costs more than it saves.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <array>
@@ -40,18 +45,19 @@ struct CoherentConfig {
   /// 0 = adapt to the motion: 8 steps of the recent motion per round, within
   /// [leaf radius / 256, leaf radius / 8] (the probe tree's mean leaf radius).
   double reach = 0;
-  /// Motion of the probe in one round (bound over the whole probe) above which the round runs
-  /// plain collide() and the cache is dropped. 0 = the probe tree's mean leaf radius / 64 (faster
-  /// than that, certificates last too few rounds to pay for themselves).
+  /// Motion in one round (a bound over the probe's faces in contact the round before, or over the
+  /// whole probe when none were) above which the round runs plain collide() and the cache is
+  /// dropped. 0 = the probe tree's mean leaf radius / 64 (faster than that, certificates last too
+  /// few rounds to pay for themselves).
   double max_step = 0;
   /// Bound on the cache (entries + candidates), bytes. A round that would exceed it runs plain
   /// collide(), and so do the next 64 rounds.
   std::size_t max_bytes = std::size_t(64) << 20;
   /// Time itself against collide() (a plain round every 128, the cache kept) and give way to it
   /// for 256 rounds (doubling, up to 8192, while it keeps losing) when its rounds cost more than
-  /// 0.95 of collide()'s (light contact, where
-  /// collide() takes microseconds and the certificates' bookkeeping does not pay). The pairs are
-  /// the same either way; false makes the choice of path depend on the motion alone.
+  /// 0.95 of collide()'s (light contact, where collide() takes microseconds and the
+  /// certificates' bookkeeping does not pay). The pairs are the same either way; false makes the
+  /// choice of path depend on the motion alone (deterministic counters, for tests).
   bool arbitrate = true;
 };
 
