@@ -219,7 +219,9 @@ void add_slides(CLI::App& app) {
         row.contacts0 = contacts0;
         row.step_mm = s.step_mm, row.step_deg = s.step_deg, row.jerk = s.jerk_at >= 0, row.rounds = a->rounds;
         std::vector<std::vector<double>> t_today(a->rounds), t_filter(a->rounds), t_coh(a->rounds);
-        geom::CoherentCollider coh(a->coherent);
+        geom::CoherentConfig ccfg = a->coherent;
+        if (a->only_coherent) ccfg.arbitrate = false;
+        geom::CoherentCollider coh(ccfg);
         for (int rep = 0; rep < a->reps; ++rep) {
           coh.reset();
           coh.reset_stats();
