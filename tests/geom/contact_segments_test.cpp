@@ -48,6 +48,19 @@ Vec3 row_area(const FaceRec& a, const FaceRec& b, const Vec3& o) {
   return s.area();
 }
 
+// n random rows: two triangles around the same point (about half of them cross).
+void random_rows(unsigned seed, int n, std::vector<FaceRec>& objects, std::vector<FaceRec>& probes) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1, 1);
+  auto rand_rec = [&](const Vec3& c) {
+    return rec(c + Vec3(u(rng), u(rng), u(rng)), c + Vec3(u(rng), u(rng), u(rng)), c + Vec3(u(rng), u(rng), u(rng)));
+  };
+  for (int i = 0; i < n; ++i) {
+    const Vec3 c(5 * u(rng), 5 * u(rng), 5 * u(rng));
+    objects.push_back(rand_rec(c)), probes.push_back(rand_rec(c));
+  }
+}
+
 }  // namespace
 
 TEST_CASE("contact segments: two crossing triangles, against the hand computation") {
@@ -113,16 +126,8 @@ TEST_CASE("contact segments: rows without a segment add nothing") {
 TEST_CASE("contact segments: the sums are the rows' areas summed lane by lane, in the order added") {
   // Random rows, two triangles around the same point (about half of them cross), more than one
   // batch and not a multiple of four.
-  std::mt19937 rng(7);
-  std::uniform_real_distribution<double> u(-1, 1);
-  auto rand_rec = [&](const Vec3& c) {
-    return rec(c + Vec3(u(rng), u(rng), u(rng)), c + Vec3(u(rng), u(rng), u(rng)), c + Vec3(u(rng), u(rng), u(rng)));
-  };
   std::vector<FaceRec> objects, probes;
-  for (int i = 0; i < 77; ++i) {
-    const Vec3 c(5 * u(rng), 5 * u(rng), 5 * u(rng));
-    objects.push_back(rand_rec(c)), probes.push_back(rand_rec(c));
-  }
+  random_rows(7, 77, objects, probes);
   const Vec3 o(0.1, -0.2, 0.3);
   SegmentAreaSum s(o);
   for (int i = 0; i < 77; ++i) s.add(&objects[i], &probes[i]);
@@ -191,16 +196,8 @@ TEST_CASE("contact segments: a ball pressed into a box's face has the disc's vec
 }
 
 TEST_CASE("contact segments: every instruction set gives the same bits (simd.hpp's Quad, one switch for all kernels)") {
-  std::mt19937 rng(11);
-  std::uniform_real_distribution<double> u(-1, 1);
-  auto rand_rec = [&](const Vec3& c) {
-    return rec(c + Vec3(u(rng), u(rng), u(rng)), c + Vec3(u(rng), u(rng), u(rng)), c + Vec3(u(rng), u(rng), u(rng)));
-  };
   std::vector<FaceRec> objects, probes;
-  for (int i = 0; i < 61; ++i) {
-    const Vec3 c(5 * u(rng), 5 * u(rng), 5 * u(rng));
-    objects.push_back(rand_rec(c)), probes.push_back(rand_rec(c));
-  }
+  random_rows(11, 61, objects, probes);
   objects.push_back(kObject), probes.push_back(kObject);  // parallel planes: no segment
   const Vec3 o(0.1, -0.2, 0.3), n(0.3, 0.9, -0.1);
   const simd::Isa before = simd::active_isa();

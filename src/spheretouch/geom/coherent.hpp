@@ -129,6 +129,7 @@ struct CertPose {
 /// pair and per caller thread, like CollideScratch; not thread-safe.
 class CoherentCollider {
  public:
+  /// A collider with these knobs; its caches are sized on the first round.
   explicit CoherentCollider(const CoherentConfig& config = {}) : config_(config) {}
 
   /// The pair set collide() gives for the same arguments (same pairs, same counts; the order may

@@ -127,30 +127,34 @@ struct QuadMask {
 
   std::uint32_t bits() const { return v[0] | v[1] << 1 | v[2] << 2 | v[3] << 3; }  ///< bit l = lane l
 };
-#define ST_QUAD_OP(op)                                                                 \
-  inline Quad operator op(Quad a, Quad b) {                                            \
-    return {{a.v[0] op b.v[0], a.v[1] op b.v[1], a.v[2] op b.v[2], a.v[3] op b.v[3]}}; \
-  }
-ST_QUAD_OP(+)
-ST_QUAD_OP(-)
-ST_QUAD_OP(*)
-ST_QUAD_OP(/)
-#undef ST_QUAD_OP
-#define ST_QUAD_CMP(op)                                                                \
-  inline QuadMask operator op(Quad a, Quad b) {                                        \
-    return {{a.v[0] op b.v[0], a.v[1] op b.v[1], a.v[2] op b.v[2], a.v[3] op b.v[3]}}; \
-  }
-ST_QUAD_CMP(<)
-ST_QUAD_CMP(>)
-#undef ST_QUAD_CMP
-#define ST_QUADMASK_OP(op)                                                                                     \
-  inline QuadMask operator op(QuadMask a, QuadMask b) {                                                        \
-    return {{bool(a.v[0] op b.v[0]), bool(a.v[1] op b.v[1]), bool(a.v[2] op b.v[2]), bool(a.v[3] op b.v[3])}}; \
-  }
-ST_QUADMASK_OP(&)
-ST_QUADMASK_OP(|)
-ST_QUADMASK_OP(^)
-#undef ST_QUADMASK_OP
+/// Lane-wise a + b.
+inline Quad operator+(Quad a, Quad b) { return {{a.v[0] + b.v[0], a.v[1] + b.v[1], a.v[2] + b.v[2], a.v[3] + b.v[3]}}; }
+/// Lane-wise a - b.
+inline Quad operator-(Quad a, Quad b) { return {{a.v[0] - b.v[0], a.v[1] - b.v[1], a.v[2] - b.v[2], a.v[3] - b.v[3]}}; }
+/// Lane-wise a · b.
+inline Quad operator*(Quad a, Quad b) { return {{a.v[0] * b.v[0], a.v[1] * b.v[1], a.v[2] * b.v[2], a.v[3] * b.v[3]}}; }
+/// Lane-wise a / b.
+inline Quad operator/(Quad a, Quad b) { return {{a.v[0] / b.v[0], a.v[1] / b.v[1], a.v[2] / b.v[2], a.v[3] / b.v[3]}}; }
+/// Lane-wise a < b (false for NaN).
+inline QuadMask operator<(Quad a, Quad b) {
+  return {{a.v[0] < b.v[0], a.v[1] < b.v[1], a.v[2] < b.v[2], a.v[3] < b.v[3]}};
+}
+/// Lane-wise a > b (false for NaN).
+inline QuadMask operator>(Quad a, Quad b) {
+  return {{a.v[0] > b.v[0], a.v[1] > b.v[1], a.v[2] > b.v[2], a.v[3] > b.v[3]}};
+}
+/// Lane-wise and.
+inline QuadMask operator&(QuadMask a, QuadMask b) {
+  return {{a.v[0] && b.v[0], a.v[1] && b.v[1], a.v[2] && b.v[2], a.v[3] && b.v[3]}};
+}
+/// Lane-wise or.
+inline QuadMask operator|(QuadMask a, QuadMask b) {
+  return {{a.v[0] || b.v[0], a.v[1] || b.v[1], a.v[2] || b.v[2], a.v[3] || b.v[3]}};
+}
+/// Lane-wise exclusive or.
+inline QuadMask operator^(QuadMask a, QuadMask b) {
+  return {{a.v[0] != b.v[0], a.v[1] != b.v[1], a.v[2] != b.v[2], a.v[3] != b.v[3]}};
+}
 /// m ? a : b per lane.
 inline Quad select(QuadMask m, Quad a, Quad b) {
   return {{m.v[0] ? a.v[0] : b.v[0], m.v[1] ? a.v[1] : b.v[1], m.v[2] ? a.v[2] : b.v[2], m.v[3] ? a.v[3] : b.v[3]}};
@@ -221,7 +225,8 @@ inline Mask operator>(Lanes a, Lanes b) { return {_mm_cmpgt_ps(a.v, b.v)}; }
 
 /// Four doubles, one record per lane (the contact model's segment kernel), as two SSE2 halves.
 struct Quad {
-  __m128d lo, hi;  ///< lanes 0-1, 2-3
+  __m128d lo;  ///< lanes 0-1
+  __m128d hi;  ///< lanes 2-3
 
   static Quad broadcast(double x) { return {_mm_set1_pd(x), _mm_set1_pd(x)}; }  ///< x in every lane
   /// Lanes a, b, c, d.
@@ -236,7 +241,8 @@ struct Quad {
 };
 /// One flag per lane of a Quad (all bits set or none).
 struct QuadMask {
-  __m128d lo, hi;  ///< lanes 0-1, 2-3
+  __m128d lo;  ///< lanes 0-1
+  __m128d hi;  ///< lanes 2-3
 
   std::uint32_t bits() const {  ///< bit l = lane l
     return static_cast<std::uint32_t>(_mm_movemask_pd(lo) | _mm_movemask_pd(hi) << 2);
