@@ -102,8 +102,8 @@ double CoherentCollider::choose_reach() const {
 
 std::size_t CoherentCollider::bytes() const {
   auto b = [](const auto& v) { return v.capacity() * sizeof(v[0]); };
-  return b(front_) + b(next_front_) + b(cands_) + b(next_cands_) + b(motion_key_) + b(motion_) + b(roots_) +
-         scratch_.bytes();
+  return b(front_) + b(next_front_) + b(cands_) + b(next_cands_) + b(leaf_index_) + b(motion_key_) + b(motion_) +
+         b(roots_) + scratch_.bytes();
 }
 
 }  // namespace st::geom
