@@ -129,6 +129,14 @@ TEST_CASE(
       CHECK(cc.stats().refreshes == before);
       CHECK(cc.stats().plain_rounds == 0);
     }
+    {  // a long creep (0.0005 mm a round): candidates carried through many refreshes outlive the
+       // poses kept (CoherentCollider::kPoses) and must then be tested again, not trusted
+      CoherentCollider cc(fixed());
+      const int rounds = st::test::kSanitizerBuild ? 300 : 600;
+      for (int k = 0; k < rounds; ++k) cmp.at(cc, probe, object, moved(start, pivot, dir, 0.0005 * k, axis, 0.0));
+      CHECK(cc.stats().plain_rounds == 0);
+      CHECK(cc.stats().reused > 0);
+    }
     {  // a jerk of 1 mm + 1 degree: one plain round, then a rebuild, every round exact
       CoherentCollider cc(fixed());
       for (int k = 0; k < 40; ++k)

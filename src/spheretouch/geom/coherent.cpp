@@ -32,8 +32,6 @@ void CoherentCollider::adopt(const SphereTree& probe_tree, const SphereTree& obj
     if (n.leaf) sum += n.radius, ++leaves;
   leaf_radius_ = leaves > 0 ? sum / double(leaves) : 0.0;
   max_step_ = config_.max_step > 0 ? config_.max_step : leaf_radius_ / 64;
-  motion_key_.assign(probe_tree.nodes.size(), ~std::uint64_t{0});
-  motion_.assign(probe_tree.nodes.size(), 0.0);
 }
 
 void CoherentCollider::drop() {
@@ -67,7 +65,6 @@ void CoherentCollider::reset() {
   step_ = 0;
   for (detail::CertPose& p : poses_) p.round = ~0u;
   for (detail::PoseDelta& d : deltas_) d.key = ~std::uint64_t{0};  // rounds count from 0 again
-  std::fill(motion_key_.begin(), motion_key_.end(), ~std::uint64_t{0});
 }
 
 double CoherentCollider::moved_since(const RelTransform& a, const RelTransform& b, const Vec3& c, double r) {
@@ -102,8 +99,7 @@ double CoherentCollider::choose_reach() const {
 
 std::size_t CoherentCollider::bytes() const {
   auto b = [](const auto& v) { return v.capacity() * sizeof(v[0]); };
-  return b(front_) + b(next_front_) + b(cands_) + b(next_cands_) + b(leaf_index_) + b(motion_key_) + b(motion_) +
-         b(roots_) + scratch_.bytes();
+  return b(front_) + b(next_front_) + b(cands_) + b(next_cands_) + b(leaf_index_) + b(roots_) + scratch_.bytes();
 }
 
 }  // namespace st::geom

@@ -90,6 +90,8 @@ struct FrontEntry {
   std::uint16_t count = 0;     ///< leaf pair: candidates
   std::uint8_t kind = 0;       ///< FrontKind
   std::uint8_t theta = 0;      ///< leaf pair: refreshed once it moved (256 + theta) / 512 of δ
+  float c[3] = {};             ///< probe node p's sphere centre (probe-local), copied: a check reads nothing else
+  float r = 0;                 ///< ... and its radius
 };
 /// The kinds of FrontEntry.
 enum FrontKind : std::uint8_t {
@@ -214,9 +216,6 @@ class CoherentCollider {
   } near_;                      // the probe's part in contact last round, where the step is measured
   double reach_ = 0;
   double max_step_ = 0;  // config_.max_step resolved
-  // Per probe node: the motion bound of this round against one certificate pose (memo).
-  std::vector<std::uint64_t> motion_key_;
-  std::vector<double> motion_;
 };
 
 }  // namespace st::geom

@@ -120,14 +120,17 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   std::uint32_t h_n = 0;
   alignas(64) float h_v[15][kTriBatch] = {};
 
-  // Bound on how far any point of probe node p's sphere moved between the certificate pose
-  // `pose` and this round (coherent.hpp, top); infinity when that pose is no longer kept.
-  // `memo`: keep it per probe node for the next entry of the same node and pose.
-  // Below `margin`, the motion of probe node p since `pose`? The whole probe's bound first (one
-  // per pose and round), the node's own only when that is not enough.
-  bool still(std::uint32_t p, std::uint32_t pose, float margin) {
+  // Below `margin`, the motion since `pose` of the probe node whose sphere is (c, r)? The whole
+  // probe's bound first (one per pose and round), the node's own only when that is not enough
+  // (coherent.hpp, top); never when that pose is no longer kept.
+  bool still(const float* c, float r, std::uint32_t pose, float margin) {
     if (round - pose >= CoherentCollider::kPoses) return false;
-    return double(margin) > delta(pose).whole || double(margin) > motion(p, pose);
+    const Delta& d = delta(pose);
+    return double(margin) > d.whole || double(margin) > sphere_motion(d, c, r);
+  }
+  bool still(const detail::FrontEntry& e, float margin) { return still(e.c, e.r, e.pose, margin); }
+  bool still(std::uint32_t p, std::uint32_t pose, float margin) {
+    return still(PT.nodes[p].centre, PT.nodes[p].radius, pose, margin);
   }
   // This round's change since `pose` (kept no more than kPoses rounds).
   const Delta& delta(std::uint32_t pose) {
@@ -138,9 +141,11 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     return delta_slow(pose);
   }
   [[gnu::noinline]] const Delta& delta_slow(std::uint32_t pose) {
-    static const Delta expired = [] {
+    static const Delta expired = [] {  // callers test the pose's age first; this only keeps it defined
       Delta d;
-      d.whole = std::numeric_limits<double>::infinity();
+      d.D.setConstant(std::numeric_limits<double>::infinity());
+      d.dt.setConstant(std::numeric_limits<double>::infinity());
+      d.norm = d.rnd = d.whole = std::numeric_limits<double>::infinity();
       return d;
     }();
     if (round - pose >= CoherentCollider::kPoses) return expired;  // its ring slot holds a newer pose
@@ -154,21 +159,22 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     // operations a few 1e-16 relative: 1e-12 of both magnitudes covers both poses' and it.
     d.rnd = 1e-12 * (cc.poses_[round % CoherentCollider::kPoses].mag + cp.mag) + 1e-300;
     d.key = (std::uint64_t{round} << 32) | pose;
-    d.whole = node_motion(d, PT.nodes[0]);
+    d.whole = sphere_motion(d, PT.nodes[0].centre, PT.nodes[0].radius);
     return d;
   }
-  static double node_motion(const Delta& d, const SphereNode& h) {
-    const Vec3 c(h.centre[0], h.centre[1], h.centre[2]);
-    return ((d.D * c + d.dt).norm() + d.norm * double(h.radius)) * (1 + 1e-9) + d.rnd;
+  // Bound on how far any point of the sphere (c, r) (probe-local) moved between the pose of `d`
+  // and this round: |D c + dt| + ||D||_F r, widened for the rounding of both apply()s and its own.
+  static double sphere_motion(const Delta& d, const float* c, float r) {
+    const Vec3 x(c[0], c[1], c[2]);
+    return ((d.D * x + d.dt).norm() + d.norm * double(r)) * (1 + 1e-9) + d.rnd;
   }
-  // `memo`: keep it per probe node for the next entry of the same node and pose.
-  double motion(std::uint32_t p, std::uint32_t pose, bool memo = true) {
-    if (round - pose >= CoherentCollider::kPoses) return std::numeric_limits<double>::infinity();
-    const std::uint64_t key = (std::uint64_t{round} << 32) | pose;
-    if (memo && cc.motion_key_[p] == key) return cc.motion_[p];
-    const double m = node_motion(delta(pose), PT.nodes[p]);
-    if (memo) cc.motion_key_[p] = key, cc.motion_[p] = m;
-    return m;
+  // A front entry for (p, o), made at this round's pose, with p's sphere.
+  detail::FrontEntry entry(std::uint8_t kind, std::uint32_t p, std::uint32_t o) const {
+    detail::FrontEntry e;
+    e.p = p, e.o = o, e.pose = round, e.kind = kind;
+    const SphereNode& h = PT.nodes[p];
+    e.c[0] = h.centre[0], e.c[1] = h.centre[1], e.c[2] = h.centre[2], e.r = h.radius;
+    return e;
   }
 
   // The pool in bytes (what max_bytes bounds).
@@ -176,8 +182,8 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     return cc.next_front_.size() * sizeof(detail::FrontEntry) + cc.cands_.size() * sizeof(detail::Candidate);
   }
   void add_group(std::uint8_t kind, std::uint32_t p, std::uint32_t o, std::uint32_t mask, float gap) {
-    detail::FrontEntry e;
-    e.p = p, e.o = o, e.pose = round, e.kind = kind, e.arg = mask;
+    detail::FrontEntry e = entry(kind, p, o);
+    e.arg = mask;
     e.margin = gap * (1.0f - 0x1p-20f);
     cc.next_front_.push_back(e);
   }
@@ -215,8 +221,8 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       for (int k = 0; k < 3; ++k) gap = std::max(gap, std::max(v[k] - u[3 + k], u[k] - v[3 + k]));
       if (gap >= reach_f) return add_group(detail::kPairApart, p, o, 0, gap);
     }
-    detail::FrontEntry e;
-    e.p = p, e.o = o, e.pose = round, e.kind = detail::kLeafPair, e.margin = reach_f;
+    detail::FrontEntry e = entry(detail::kLeafPair, p, o);
+    e.margin = reach_f;
     // The candidates are appended to cands_ (the old entry's, if any, become garbage: the pool is
     // compacted at the end of a round when more than half of it is).
     e.arg = static_cast<std::uint32_t>(cc.cands_.size());
@@ -291,9 +297,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     if (old) {
       cc.next_front_.push_back(*old);
     } else {
-      detail::FrontEntry e;
-      e.p = p, e.o = o, e.pose = round, e.kind = detail::kLeafPending;
-      cc.next_front_.push_back(e);
+      cc.next_front_.push_back(entry(detail::kLeafPending, p, o));
     }
     ++leaf_count;
     ++cc.stats_.deferred;
@@ -357,26 +361,37 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     ++leaf_count;
     const detail::Candidate* c = cc.cands_.data() + e.arg;  // nothing is appended to cands_ here
     bool prepared = false;
-    // The bound for the candidates' poses: the whole probe's, then the leaf's when that is not enough.
+    // The bound for the candidates' poses (a candidate kept through a refresh keeps its older
+    // pose): the whole probe's, then the leaf's when that is not enough; infinite for a pose no
+    // longer kept.
     std::uint32_t last_pose = ~0u;
     double whole = 0, leaf = 0;
     bool have_leaf = false;
+    std::uint64_t reused = 0, retested = 0;
     for (std::uint32_t i = 0; i < e.count; ++i) {
       const std::uint32_t at = e.arg + i;
-      if (c[i].pose != last_pose) last_pose = c[i].pose, whole = delta(last_pose).whole, have_leaf = false;
-      if (double(c[i].margin) <= whole && !have_leaf) leaf = motion(e.p, last_pose, false), have_leaf = true;
+      if (c[i].pose != last_pose) {
+        last_pose = c[i].pose;
+        const bool kept = round - last_pose < CoherentCollider::kPoses;
+        whole = kept ? delta(last_pose).whole : std::numeric_limits<double>::infinity();
+        have_leaf = !kept, leaf = whole;
+      }
+      if (double(c[i].margin) <= whole && !have_leaf)
+        leaf = sphere_motion(delta(last_pose), e.c, e.r), have_leaf = true;
       if (double(c[i].margin) > whole || double(c[i].margin) > leaf) {
-        ++cc.stats_.reused;
+        ++reused;
         if (c[i].hit) emit(PT.face_order[c[i].slot], c[i].face);
         check_decision(c[i].slot, c[i].face, c[i].hit != 0, prepared, e.p);
         continue;
       }
-      ++cc.stats_.retested;
+      ++retested;
       if (!prepared) probe_leaf(e.p), prepared = true;
       ++res.stats.tri_pairs;
       m_index[m_n] = at, m_slot[m_n] = c[i].slot, m_face[m_n] = c[i].face;
       if (++m_n == kTriBatch) flush_margins();
     }
+    cc.stats_.reused += reused;
+    cc.stats_.retested += retested;
   }
   // Checking mode: a reused answer against the exact test at this pose (the leaf transformed first).
   void check_decision([[maybe_unused]] std::uint32_t slot, [[maybe_unused]] std::uint32_t of, [[maybe_unused]] bool hit,
@@ -439,7 +454,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
           leaf(p, o, nullptr);
         else if (known->kind == detail::kLeafPair || known->kind == detail::kLeafPending)
           visit_leaf(*known);
-        else if (still(p, known->pose, known->margin))  // a leaf pair its boxes proved apart
+        else if (still(*known, known->margin))  // a leaf pair its boxes proved apart
           cc.next_front_.push_back(*known);
         else
           leaf(p, o, nullptr);
@@ -479,7 +494,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   void visit_leaf(const detail::FrontEntry& e) {
     if (e.kind == detail::kLeafPending) {
       leaf(e.p, e.o, nullptr);
-    } else if (!still(e.p, e.pose, e.margin * float(256 + e.theta) / 512.0f)) {
+    } else if (!still(e, e.margin * float(256 + e.theta) / 512.0f)) {
       ++cc.stats_.refreshes;
       leaf(e.p, e.o, &e);
     } else {
@@ -502,11 +517,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     std::uint64_t scanned = 0;
     cc.next_front_.clear();
     const std::size_t limit = cc.config_.max_bytes;
-    auto expand_root = [&](std::uint32_t r) {
-      detail::FrontEntry e;
-      e.p = 0, e.o = r, e.kind = detail::kPairApart;
-      expand(e);
-    };
+    auto expand_root = [&](std::uint32_t r) { expand(entry(detail::kPairApart, 0, r)); };
     if (rerooting) {
       ++cc.stats_.reroots;
       cc.leaf_index_.clear();
@@ -545,7 +556,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
         }
         if (e.kind == detail::kLeafPair || e.kind == detail::kLeafPending)
           visit_leaf(e);
-        else if (still(e.p, e.pose, e.margin))
+        else if (still(e, e.margin))
           cc.next_front_.push_back(e);
         else
           expand(e);
