@@ -202,6 +202,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     const SphereNode& hp = PT.nodes[p];
     const SphereNode& ho = OT.nodes[o];
     ++res.stats.leaf_pairs;
+    if (old) cc.garbage_ += old->count;  // its candidates: replaced below, or not needed (apart)
     const std::array<float, 8>& u = probe_leaf(p);
     {  // the probe leaf's box against the object leaf's sphere: apart by more than δ?
       const float* os = sc.osph_.data();
@@ -231,7 +232,6 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     for (int k = 0; k < 3; ++k) w[k] = widen_below(u[k], reach), w[3 + k] = widen_above(u[3 + k], reach);
     std::uint32_t prev = old ? old->arg : 0;  // indices: cands_ grows below
     const std::uint32_t prev_end = old ? old->arg + old->count : 0;
-    if (old) cc.garbage_ += old->count;
     const FaceBox* ob = OT.face_boxes.data() + ho.first;
     const std::uint64_t mo = face_box_mask(ob, ho.count, w);
     if (mo != 0) {
