@@ -19,15 +19,16 @@
 
 using namespace st::geom;
 
+// Names of their own: the sanitizer builds compile the test files as one unit (unity).
 namespace {
 
-struct Body {
+struct CoBody {
   Mesh mesh;
   SphereTree tree;
-  explicit Body(Mesh m) : mesh(std::move(m)), tree(SphereTree::build(mesh, DefaultTreeConfig()).value()) {}
+  explicit CoBody(Mesh m) : mesh(std::move(m)), tree(SphereTree::build(mesh, DefaultTreeConfig()).value()) {}
 };
 
-constexpr double kPi = 3.14159265358979323846;
+constexpr double kPiCoherent = 3.14159265358979323846;
 
 // The path chosen by the motion alone (no timing against collide()), so the counters below are
 // the same on every machine.
@@ -40,17 +41,17 @@ CoherentConfig fixed() {
 // A pose moved from `start` by `along` (object frame) and turned by `deg` about `axis` through `pivot`.
 Pose moved(const Pose& start, const Vec3& pivot, const Vec3& dir, double along, const Vec3& axis, double deg) {
   Pose p = Pose::Identity();
-  p.linear() = Eigen::AngleAxisd(deg * kPi / 180, axis).toRotationMatrix();
+  p.linear() = Eigen::AngleAxisd(deg * kPiCoherent / 180, axis).toRotationMatrix();
   p.translation() = pivot - p.linear() * pivot + along * dir;
   return p * start;
 }
 
 // Runs both paths at each pose and compares them; returns the rounds compared.
-struct Compare {
+struct CoherentCompare {
   CollideScratch scratch;
   CollideResult plain, coh;
   int rounds = 0;
-  void at(CoherentCollider& cc, const Body& probe, const Body& object, const Pose& pose, CollideConfig opt = {}) {
+  void at(CoherentCollider& cc, const CoBody& probe, const CoBody& object, const Pose& pose, CollideConfig opt = {}) {
     opt.sort_pairs = true;
     collide(probe.mesh, probe.tree, object.mesh, object.tree, pose, opt, scratch, plain);
     cc.collide(probe.mesh, probe.tree, object.mesh, object.tree, pose, opt, coh);
@@ -86,11 +87,11 @@ void slide_frame(const Mesh& object, const std::vector<FacePair>& pairs, Vec3& p
 
 TEST_CASE(
     "the coherent collider gives collide()'s pairs on every round of slides, jitter and a jerk (hand_L2 x elephant)") {
-  const Body probe(*st::test::model_mesh("hand_L2.off"));
-  const Body object(*st::test::model_mesh("elephant.off"));
+  const CoBody probe(*st::test::model_mesh("hand_L2.off"));
+  const CoBody object(*st::test::model_mesh("elephant.off"));
   const auto normals = st::test::vertex_normals(object.mesh);
   std::mt19937_64 rng(20261127);
-  Compare cmp;
+  CoherentCompare cmp;
   const int starts = st::test::kSanitizerBuild ? 1 : 3;
   const int per_series = st::test::kSanitizerBuild ? 30 : 80;
   std::uint64_t reused = 0, refreshes = 0, retested = 0;
@@ -166,7 +167,7 @@ TEST_CASE("the coherent collider is exact on every ISA, far from the origin, at 
         for (Vec3& v : m->local) v *= scale;
         m->origin = m->origin * scale + Vec3(offset, -offset, 0.5 * offset);
       }
-      const Body probe(p), object(o);
+      const CoBody probe(p), object(o);
       std::mt19937_64 rng(7);
       const Pose start =
           st::test::pose_near(probe.mesh, 0, object.mesh, 10, normals[10], 2.0 * scale, st::test::random_rotation(rng));
@@ -175,7 +176,7 @@ TEST_CASE("the coherent collider is exact on every ISA, far from the origin, at 
         const std::string isa = simd::isa_name(static_cast<Isa>(i));
         CAPTURE(isa);
         CoherentCollider cc(fixed());
-        Compare cmp;
+        CoherentCompare cmp;
         for (int k = 0; k < 24; ++k)
           cmp.at(cc, probe, object,
                  moved(start, object.mesh.vertex(10), Vec3::UnitX(), 0.004 * scale * (k % 12), Vec3::UnitZ(),
@@ -192,9 +193,9 @@ TEST_CASE("the coherent collider is exact on coplanar, touching and degenerate f
   // none of the touching pairs, so the exact test and margin 0 carry them.
   Mesh floor = st::test::grid(12), tile = st::test::grid(4);
   tile.faces.push_back({0, 0, 1});  // a degenerate face (a segment)
-  const Body object(floor), probe(tile);
+  const CoBody object(floor), probe(tile);
   CoherentCollider cc(fixed());
-  Compare cmp;
+  CoherentCompare cmp;
   for (int k = 0; k < 60; ++k) {
     Pose pose = Pose::Identity();
     pose.translation() = Vec3(2.0 + 0.01 * k, 2.0 + 0.003 * k, (k % 5 == 0) ? 1e-12 : 0.0);
@@ -205,12 +206,12 @@ TEST_CASE("the coherent collider is exact on coplanar, touching and degenerate f
 }
 
 TEST_CASE("the coherent collider keeps collide()'s limits and falls back on jumps, a full pool and non-finite poses") {
-  const Body probe(*st::test::model_mesh("hand_L2.off"));
-  const Body object(*st::test::model_mesh("elephant.off"));
+  const CoBody probe(*st::test::model_mesh("hand_L2.off"));
+  const CoBody object(*st::test::model_mesh("elephant.off"));
   const auto normals = st::test::vertex_normals(object.mesh);
   std::mt19937_64 rng(3);
   Pose start;
-  Compare cmp;
+  CoherentCompare cmp;
   do {
     std::uniform_int_distribution<std::uint32_t> vo(0, object.mesh.num_vertices() - 1);
     const std::uint32_t o = vo(rng);
@@ -291,10 +292,10 @@ TEST_CASE("the coherent collider keeps collide()'s limits and falls back on jump
 TEST_CASE("arbitration against collide()'s time changes the path, never the pairs") {
   // Light contact (a small probe grazing a grid), where collide() takes microseconds: whichever
   // path the timing picks, round by round, the pairs are collide()'s.
-  const Body object(st::test::grid(40)), probe(st::test::grid(3));
+  const CoBody object(st::test::grid(40)), probe(st::test::grid(3));
   CoherentCollider cc;  // arbitrate: the default
   REQUIRE(cc.config().arbitrate);
-  Compare cmp;
+  CoherentCompare cmp;
   for (int k = 0; k < 700; ++k) {
     Pose pose = Pose::Identity();
     pose.translation() = Vec3(10.0 + 0.002 * (k % 200), 10.0, 0.0);
