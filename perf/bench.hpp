@@ -4,10 +4,24 @@
 #pragma once
 #include <CLI/CLI.hpp>
 
+#include <string>
+#include <vector>
+
+#include <spheretouch/geom/mesh.hpp>
+
 namespace st::bench {
 
 /// A TCP port on 127.0.0.1 that was free a moment ago (for workers the benchmarks start).
 int free_tcp_port();
+
+// Shared by the collision benches (defined in bench_collide.cpp).
+/// The q-quantile of v (q in [0, 1]; 0 for an empty v).
+double percentile(std::vector<double> v, double q);
+/// --isa: runs the SIMD kernels on the instruction set named (empty: leaves the default); a name
+/// it does not know or the CPU lacks is an error (exit 2) that says which.
+void use_isa(const std::string& name);
+/// The mesh at path; an unreadable file is an error (exit 2) naming it.
+geom::Mesh load_mesh_or_exit(const std::string& path);
 
 void add_load(CLI::App& app);     ///< mesh loading time (the 832k-face armadillo)
 void add_tree(CLI::App& app);     ///< sphere-tree build time and bytes/face

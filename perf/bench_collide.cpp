@@ -107,11 +107,6 @@ std::vector<std::pair<Pose, std::string>> read_poses(const std::string& path) {
   return out;
 }
 
-double percentile(std::vector<double> v, double q) {
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size())))];
-}
-
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -134,6 +129,35 @@ struct PoseRow {
 };
 
 }  // namespace
+
+double percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size())))];
+}
+
+void use_isa(const std::string& name) {
+  if (name.empty()) return;
+  geom::simd::Isa isa;
+  if (!geom::simd::parse_isa(name, isa)) {
+    std::fprintf(stderr, "--isa %s: expected scalar, sse2, avx2 or avx512\n", name.c_str());
+    throw CLI::RuntimeError(2);
+  }
+  if (!geom::simd::set_isa(isa)) {
+    std::fprintf(stderr, "--isa %s: this CPU or build has at most %s\n", name.c_str(),
+                 geom::simd::isa_name(geom::simd::best_isa()));
+    throw CLI::RuntimeError(2);
+  }
+}
+
+geom::Mesh load_mesh_or_exit(const std::string& path) {
+  auto m = geom::load_mesh(path);
+  if (!m) {
+    std::fprintf(stderr, "%s\n", m.error().c_str());
+    throw CLI::RuntimeError(2);
+  }
+  return std::move(m.value().mesh);
+}
 
 void add_collide(CLI::App& app) {
   struct Args {
@@ -166,18 +190,7 @@ void add_collide(CLI::App& app) {
                   "run the SIMD kernels on this instruction set (scalar, sse2, avx2, avx512; default: the best the CPU "
                   "has, or ST_SIMD)");
   cmd->callback([a] {
-    if (!a->isa.empty()) {
-      geom::simd::Isa isa;
-      if (!geom::simd::parse_isa(a->isa, isa)) {
-        std::fprintf(stderr, "--isa %s: expected scalar, sse2, avx2 or avx512\n", a->isa.c_str());
-        throw CLI::RuntimeError(2);
-      }
-      if (!geom::simd::set_isa(isa)) {
-        std::fprintf(stderr, "--isa %s: this CPU or build has at most %s\n", a->isa.c_str(),
-                     geom::simd::isa_name(geom::simd::best_isa()));
-        throw CLI::RuntimeError(2);
-      }
-    }
+    use_isa(a->isa);
 #ifndef ST_HAVE_FCL
     if (a->fcl || !a->build_mesh.empty()) {
       std::fprintf(stderr, "--fcl/--build-mesh: this spheretouch-bench was built without FCL (libfcl-dev)\n");
@@ -185,14 +198,8 @@ void add_collide(CLI::App& app) {
     }
 #endif
     Scene s;
-    for (auto [path, mesh] : {std::pair{&a->probe, &s.probe}, std::pair{&a->object, &s.object}}) {
-      auto m = geom::load_mesh(*path);
-      if (!m) {
-        std::fprintf(stderr, "%s\n", m.error().c_str());
-        throw CLI::RuntimeError(2);
-      }
-      *mesh = std::move(m.value().mesh);
-    }
+    s.probe = load_mesh_or_exit(a->probe);
+    s.object = load_mesh_or_exit(a->object);
     auto t0 = std::chrono::steady_clock::now();
     s.pt = geom::SphereTree::build(s.probe, {a->leaf}).value();
     const double probe_build_s = seconds_since(t0);

@@ -22,7 +22,6 @@
 #include "bench_json.hpp"
 #include <spheretouch/geom/coherent.hpp>
 #include <spheretouch/geom/collide.hpp>
-#include <spheretouch/geom/mesh_io.hpp>
 #include <spheretouch/geom/pose_io.hpp>
 #include <spheretouch/geom/simd.hpp>
 #include <spheretouch/geom/sphere_tree.hpp>
@@ -80,12 +79,6 @@ bool series_at(const Mesh& object, const std::vector<geom::FacePair>& pairs, Ser
   s.dir = dir;
   s.axis = (n + n.cross(dir)).normalized();
   return true;
-}
-
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size())))];
 }
 
 double mean(const std::vector<double>& v) {
@@ -153,23 +146,8 @@ void add_slides(CLI::App& app) {
   cmd->add_flag("--only-coherent", a->only_coherent,
                 "run the coherent collider alone, untimed and unchecked (to profile it with perf)");
   cmd->callback([a] {
-    if (!a->isa.empty()) {
-      geom::simd::Isa isa;
-      if (!geom::simd::parse_isa(a->isa, isa) || !geom::simd::set_isa(isa)) {
-        std::fprintf(stderr, "--isa %s: expected one of scalar, sse2, avx2, avx512 that this CPU has (best: %s)\n",
-                     a->isa.c_str(), geom::simd::isa_name(geom::simd::best_isa()));
-        throw CLI::RuntimeError(2);
-      }
-    }
-    Mesh probe, object;
-    for (auto [path, mesh] : {std::pair{&a->probe, &probe}, std::pair{&a->object, &object}}) {
-      auto m = geom::load_mesh(*path);
-      if (!m) {
-        std::fprintf(stderr, "%s\n", m.error().c_str());
-        throw CLI::RuntimeError(2);
-      }
-      *mesh = std::move(m.value().mesh);
-    }
+    use_isa(a->isa);
+    const Mesh probe = load_mesh_or_exit(a->probe), object = load_mesh_or_exit(a->object);
     const geom::SphereTree pt = geom::SphereTree::build(probe, {}).value();
     const geom::SphereTree ot = geom::SphereTree::build(object, {}).value();
     auto lines = geom::read_pose_lines(a->poses);
