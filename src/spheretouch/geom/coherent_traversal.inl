@@ -129,9 +129,6 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     return double(margin) > d.whole || double(margin) > sphere_motion(d, c, r);
   }
   bool still(const detail::FrontEntry& e, float margin) { return still(e.c, e.r, e.pose, margin); }
-  bool still(std::uint32_t p, std::uint32_t pose, float margin) {
-    return still(PT.nodes[p].centre, PT.nodes[p].radius, pose, margin);
-  }
   // This round's change since `pose` (kept no more than kPoses rounds).
   const Delta& delta(std::uint32_t pose) {
     const std::uint64_t key = (std::uint64_t{round} << 32) | pose;
@@ -231,6 +228,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     float w[6];
     for (int k = 0; k < 3; ++k) w[k] = widen_below(u[k], reach), w[3 + k] = widen_above(u[3 + k], reach);
     std::uint32_t prev = old ? old->arg : 0;  // indices: cands_ grows below
+    LeafBounds lb;
     const std::uint32_t prev_end = old ? old->arg + old->count : 0;
     const FaceBox* ob = OT.face_boxes.data() + ho.first;
     const std::uint64_t mo = face_box_mask(ob, ho.count, w);
@@ -264,7 +262,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
           auto before = [&](const detail::Candidate& c) { return c.j < j || (c.j == j && c.slot < slot); };
           while (prev != prev_end && before(cc.cands_[prev])) ++prev;
           if (prev != prev_end && cc.cands_[prev].j == j && cc.cands_[prev].slot == slot &&
-              still(p, cc.cands_[prev].pose, cc.cands_[prev].margin)) {
+              double(cc.cands_[prev].margin) > leaf_motion(hp.centre, hp.radius, cc.cands_[prev].pose, lb)) {
             const detail::Candidate kept = cc.cands_[prev];
             cc.cands_.back() = kept;
             ++cc.stats_.reused;
@@ -353,32 +351,43 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     c.hit = hit;
   }
 
+  // How far a probe leaf's sphere (c, r) moved since `pose`: the tighter of the whole probe's
+  // bound and its own (infinite for a pose no longer kept), remembered for the last few poses
+  // asked during one visit (a leaf's candidates carry a handful of poses, interleaved).
+  struct LeafBounds {
+    std::uint32_t pose[4] = {~0u, ~0u, ~0u, ~0u};
+    double bound[4] = {};
+    unsigned next = 0;
+  };
+  double leaf_motion(const float* c, float r, std::uint32_t pose, LeafBounds& lb) {
+    for (int k = 0; k < 4; ++k)
+      if (lb.pose[k] == pose) return lb.bound[k];
+    double b = std::numeric_limits<double>::infinity();
+    if (round - pose < CoherentCollider::kPoses) {
+      const Delta& d = delta(pose);
+      b = std::min(d.whole, sphere_motion(d, c, r));
+    }
+    lb.pose[lb.next] = pose, lb.bound[lb.next] = b;
+    lb.next = (lb.next + 1) & 3u;
+    return b;
+  }
+
   // A cached leaf pair: the candidates whose certificate holds give their answer, the others
   // are tested at this pose and certified anew (the leaf pair's own certificate, for the face
-  // pairs that are not candidates, stays the entry's).
-  void reuse_leaf(const detail::FrontEntry& e) {
+  // pairs that are not candidates, stays the entry's). A candidate kept through a refresh keeps
+  // its older pose, so each is bounded against its own.
+  void reuse_leaf(const detail::FrontEntry& e, LeafBounds& lb) {
     cc.next_front_.push_back(e);  // its candidates stay where they are
     ++leaf_count;
     const detail::Candidate* c = cc.cands_.data() + e.arg;  // nothing is appended to cands_ here
     bool prepared = false;
-    // The bound for the candidates' poses (a candidate kept through a refresh keeps its older
-    // pose): the whole probe's, then the leaf's when that is not enough; infinite for a pose no
-    // longer kept.
     std::uint32_t last_pose = ~0u;
-    double whole = 0, leaf = 0;
-    bool have_leaf = false;
+    double moved = 0;
     std::uint64_t reused = 0, retested = 0;
     for (std::uint32_t i = 0; i < e.count; ++i) {
       const std::uint32_t at = e.arg + i;
-      if (c[i].pose != last_pose) {
-        last_pose = c[i].pose;
-        const bool kept = round - last_pose < CoherentCollider::kPoses;
-        whole = kept ? delta(last_pose).whole : std::numeric_limits<double>::infinity();
-        have_leaf = !kept, leaf = whole;
-      }
-      if (double(c[i].margin) <= whole && !have_leaf)
-        leaf = sphere_motion(delta(last_pose), e.c, e.r), have_leaf = true;
-      if (double(c[i].margin) > whole || double(c[i].margin) > leaf) {
+      if (c[i].pose != last_pose) last_pose = c[i].pose, moved = leaf_motion(e.c, e.r, last_pose, lb);
+      if (double(c[i].margin) > moved) {
         ++reused;
         if (c[i].hit) emit(PT.face_order[c[i].slot], c[i].face);
         check_decision(c[i].slot, c[i].face, c[i].hit != 0, prepared, e.p);
@@ -494,11 +503,14 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   void visit_leaf(const detail::FrontEntry& e) {
     if (e.kind == detail::kLeafPending) {
       leaf(e.p, e.o, nullptr);
-    } else if (!still(e, e.margin * float(256 + e.theta) / 512.0f)) {
+      return;
+    }
+    LeafBounds lb;
+    if (!(double(e.margin * float(256 + e.theta) / 512.0f) > leaf_motion(e.c, e.r, e.pose, lb))) {
       ++cc.stats_.refreshes;
       leaf(e.p, e.o, &e);
     } else {
-      reuse_leaf(e);
+      reuse_leaf(e, lb);
     }
   }
   // Re-rooting: the old front's entry for leaf pair (p, o), if it has one.
