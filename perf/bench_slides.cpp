@@ -305,6 +305,8 @@ void add_slides(CLI::App& app) {
                        {"reused", w.stats.reused},
                        {"retested", w.stats.retested},
                        {"overflows", w.stats.overflows},
+                       {"front_entries", w.stats.entries},
+                       {"candidates", w.stats.candidates},
                        {"peak_pool_bytes", w.stats.peak_bytes},
                        {"bytes", w.bytes}});
       print_json({{"probe", a->probe},

@@ -40,7 +40,16 @@ void CoherentCollider::drop() {
   garbage_ = 0;
   near_.radius = -1;
   front_.clear();
+  groups_.clear();
+  old_groups_.clear();
+  dead_ = 0;
   cands_.clear();
+}
+
+void CoherentCollider::compact_groups() {
+  if (dead_ < 1024 || 2 * dead_ < groups_.size()) return;
+  std::erase_if(groups_, [](const detail::FrontEntry& e) { return e.kind == detail::kDead; });
+  dead_ = 0;
 }
 
 void CoherentCollider::compact() {
@@ -99,7 +108,8 @@ double CoherentCollider::choose_reach() const {
 
 std::size_t CoherentCollider::bytes() const {
   auto b = [](const auto& v) { return v.capacity() * sizeof(v[0]); };
-  return b(front_) + b(next_front_) + b(cands_) + b(next_cands_) + b(leaf_index_) + b(roots_) + scratch_.bytes();
+  return b(front_) + b(next_front_) + b(groups_) + b(old_groups_) + b(cands_) + b(next_cands_) + b(leaf_index_) +
+         b(roots_) + scratch_.bytes();
 }
 
 }  // namespace st::geom

@@ -100,6 +100,7 @@ enum FrontKind : std::uint8_t {
   kProbeChildren = 2,   ///< the children of p in `arg` are apart from o
   kLeafPair = 3,        ///< leaf pair with candidates
   kLeafPending = 4,     ///< leaf pair near, not built yet: answered by collide()'s leaf stage
+  kDead = 5,            ///< a group expanded (its slot in the group store awaits compaction)
 };
 /// A candidate triangle pair of a leaf pair and its certificate.
 struct Candidate {
@@ -176,17 +177,26 @@ class CoherentCollider {
   // This round walks from the roots again: the front has doubled since it last did (checked
   // every kRerootEvery rounds).
   bool reroot_due() const {
-    return have_front_ && ramp_ % kRerootEvery == kRerootEvery - 1 && front_.size() > 2 * rooted_size_;
+    return have_front_ && ramp_ % kRerootEvery == kRerootEvery - 1 && entries() > 2 * rooted_size_;
   }
+  // Live entries of the front: leaf pairs and groups.
+  std::size_t entries() const { return front_.size() + groups_.size() - dead_; }
+  // Drops the dead groups once they are most of the store.
+  void compact_groups();
   // δ for this round's new entries (config_.reach, or adapted to step_).
   double choose_reach() const;
 
   CoherentConfig config_;
   CoherentStats stats_;
   CollideScratch scratch_;
+  // The front: its leaf pairs (front_, rewritten each round as next_front_) and its groups of
+  // apart pairs (groups_, kept in place: a round looks at each, expands the few whose gap the
+  // motion used up into new entries appended, and marks those kDead; most stay untouched).
   std::vector<detail::FrontEntry> front_, next_front_;
-  std::vector<detail::Candidate> cands_, next_cands_;  // leaf pairs' candidates (in place); compact()'s scratch
-  std::size_t garbage_ = 0;                            // candidates of refreshed leaf pairs still in cands_
+  std::vector<detail::FrontEntry> groups_, old_groups_;  // old_groups_: the groups a re-rooting round walks past
+  std::size_t dead_ = 0;                                 // kDead entries in groups_
+  std::vector<detail::Candidate> cands_, next_cands_;    // leaf pairs' candidates (in place); compact()'s scratch
+  std::size_t garbage_ = 0;                              // candidates of refreshed leaf pairs still in cands_
   std::vector<std::pair<std::uint64_t, std::uint32_t>> leaf_index_;  // re-rooting: (p << 32 | o, front entry)
   std::array<detail::CertPose, kPoses> poses_{};
   std::array<detail::PoseDelta, kPoses> deltas_{};  // this round's change since each kept pose (lazily)

@@ -176,13 +176,14 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
 
   // The pool in bytes (what max_bytes bounds).
   std::size_t pool_bytes() const {
-    return cc.next_front_.size() * sizeof(detail::FrontEntry) + cc.cands_.size() * sizeof(detail::Candidate);
+    return (cc.next_front_.size() + cc.groups_.size()) * sizeof(detail::FrontEntry) +
+           cc.cands_.size() * sizeof(detail::Candidate);
   }
   void add_group(std::uint8_t kind, std::uint32_t p, std::uint32_t o, std::uint32_t mask, float gap) {
     detail::FrontEntry e = entry(kind, p, o);
     e.arg = mask;
     e.margin = gap * (1.0f - 0x1p-20f);
-    cc.next_front_.push_back(e);
+    cc.groups_.push_back(e);
   }
 
   // A leaf pair's refresh point: a fraction of δ in [1/2, 1) that differs between leaf pairs.
@@ -464,7 +465,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
         else if (known->kind == detail::kLeafPair || known->kind == detail::kLeafPending)
           visit_leaf(*known);
         else if (still(*known, known->margin))  // a leaf pair its boxes proved apart
-          cc.next_front_.push_back(*known);
+          cc.groups_.push_back(*known);
         else
           leaf(p, o, nullptr);
         continue;
@@ -513,11 +514,14 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       reuse_leaf(e, lb);
     }
   }
-  // Re-rooting: the old front's entry for leaf pair (p, o), if it has one.
+  // Re-rooting: the old front's entry for leaf pair (p, o), if it has one (a leaf-pair entry of
+  // front_, or a group of old_groups_: kOldGroup marks those indices).
+  static constexpr std::uint32_t kOldGroup = 1u << 31;
   const detail::FrontEntry* known_leaf(std::uint32_t p, std::uint32_t o) const {
     const std::uint64_t key = (std::uint64_t{p} << 32) | o;
     const auto it = std::lower_bound(cc.leaf_index_.begin(), cc.leaf_index_.end(), std::pair{key, 0u});
-    return it != cc.leaf_index_.end() && it->first == key ? &cc.front_[it->second] : nullptr;
+    if (it == cc.leaf_index_.end() || it->first != key) return nullptr;
+    return it->second & kOldGroup ? &cc.old_groups_[it->second & ~kOldGroup] : &cc.front_[it->second];
   }
 
   // The round: every entry of the front kept, refreshed or expanded (or, the first round, the
@@ -530,14 +534,20 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     cc.next_front_.clear();
     const std::size_t limit = cc.config_.max_bytes;
     auto expand_root = [&](std::uint32_t r) { expand(entry(detail::kPairApart, 0, r)); };
-    if (rerooting) {
+    if (rerooting) {  // every group is made again by the walk; the leaf pairs' entries are looked up
       ++cc.stats_.reroots;
+      cc.old_groups_.clear();
+      cc.old_groups_.swap(cc.groups_);
+      cc.dead_ = 0;
       cc.leaf_index_.clear();
       for (std::uint32_t i = 0; i < cc.front_.size(); ++i) {
         const detail::FrontEntry& e = cc.front_[i];
-        if (e.kind == detail::kLeafPair || e.kind == detail::kLeafPending ||
-            (e.kind == detail::kPairApart && PT.nodes[e.p].leaf && OT.nodes[e.o].leaf))
-          cc.leaf_index_.emplace_back((std::uint64_t{e.p} << 32) | e.o, i);
+        cc.leaf_index_.emplace_back((std::uint64_t{e.p} << 32) | e.o, i);
+      }
+      for (std::uint32_t i = 0; i < cc.old_groups_.size(); ++i) {
+        const detail::FrontEntry& e = cc.old_groups_[i];
+        if (e.kind == detail::kPairApart && PT.nodes[e.p].leaf && OT.nodes[e.o].leaf)
+          cc.leaf_index_.emplace_back((std::uint64_t{e.p} << 32) | e.o, i | kOldGroup);
       }
       std::sort(cc.leaf_index_.begin(), cc.leaf_index_.end());
     }
@@ -550,28 +560,40 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
           if (r < OT.num_nodes()) expand_root(r);
       }
     } else {
-      for (const detail::FrontEntry& e : cc.front_) {
-        if (res.stats.pair_limit_hit || res.stats.work_limit_hit || res.stats.truncated != 0) break;
-        // The budget counts what this round does: each entry looked at and each answer taken
-        // from a certificate is a unit, besides the tests it runs (CollideStats::work()).
-        scanned += 1 + e.count;
+      // Whether the round stops here: a limit hit, the pool over max_bytes, or the work budget
+      // spent (it counts what this round does: each entry looked at and each answer taken from
+      // a certificate is a unit, besides the tests it runs: CollideStats::work()).
+      auto cut = [&](std::uint64_t units) {
+        if (res.stats.pair_limit_hit || res.stats.work_limit_hit || res.stats.truncated != 0) return true;
+        scanned += units;
         if (opt.max_work != UINT64_MAX) [[unlikely]] {
           res.stats.exact_evals = detail::exact_evaluations - evals0;
           if (res.stats.work() + scanned > opt.max_work) {
             res.stats.work_limit_hit = true;
-            break;
+            return true;
           }
         }
-        if (pool_bytes() > limit) {
-          overflow = true;
-          break;
-        }
-        if (e.kind == detail::kLeafPair || e.kind == detail::kLeafPending)
-          visit_leaf(e);
-        else if (still(e, e.margin))
-          cc.next_front_.push_back(e);
-        else
-          expand(e);
+        overflow = pool_bytes() > limit;
+        return overflow;
+      };
+      for (const detail::FrontEntry& e : cc.front_) {  // the leaf pairs
+        if (cut(1 + e.count)) break;
+        visit_leaf(e);
+      }
+      // The groups, in place: the groups the expansions append are at this pose (not looked at).
+      // Without a work budget a group still valid needs no check of the limits (nothing grew).
+      const bool budgeted = opt.max_work != UINT64_MAX;
+      const std::size_t groups = cc.groups_.size();
+      for (std::size_t i = 0; i < groups; ++i) {
+        detail::FrontEntry& g = cc.groups_[i];
+        if (g.kind == detail::kDead) continue;
+        const bool valid = still(g, g.margin);
+        if ((budgeted || !valid) && cut(1)) break;
+        if (valid) continue;
+        const detail::FrontEntry e = g;  // expand() appends to groups_
+        g.kind = detail::kDead;
+        ++cc.dead_;
+        expand(e);
       }
     }
     flush_margins();

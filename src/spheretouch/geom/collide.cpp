@@ -487,7 +487,9 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   } else {
     const bool rerooted = reroot_due();
     front_.swap(next_front_);
-    if (!have_front_ || rerooted) rooted_size_ = front_.size();
+    old_groups_.clear();
+    compact_groups();
+    if (!have_front_ || rerooted) rooted_size_ = entries();
     ramp_ = have_front_ ? ramp_ + 1 : 0;
     have_front_ = true;
     if (garbage_ > 4096 && 2 * garbage_ > cands_.size()) compact();
@@ -509,10 +511,10 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
     }
   }
   note_contact(probe, result);
-  stats_.entries = front_.size();
+  stats_.entries = entries();
   stats_.candidates = cands_.size();
-  stats_.peak_bytes =
-      std::max(stats_.peak_bytes, front_.size() * sizeof(detail::FrontEntry) + cands_.size() * sizeof(detail::Candidate));
+  stats_.peak_bytes = std::max(stats_.peak_bytes, (front_.size() + groups_.size()) * sizeof(detail::FrontEntry) +
+                                                      cands_.size() * sizeof(detail::Candidate));
   if (options.sort_pairs) scratch_.sort(result.pairs);
 }
 
