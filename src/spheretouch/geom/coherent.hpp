@@ -89,7 +89,7 @@ struct FrontEntry {
   std::uint32_t arg = 0;       ///< group: bit k = child k is in the group; leaf pair: first candidate
   std::uint16_t count = 0;     ///< leaf pair: candidates
   std::uint8_t kind = 0;       ///< FrontKind
-  std::uint8_t theta = 0;      ///< leaf pair: refreshed once it moved (256 + theta) / 512 of δ
+  std::uint8_t theta = 0;      ///< leaf pair: refreshed once it moved (768 + theta) / 1024 of δ
   float c[3] = {};             ///< probe node p's sphere centre (probe-local), copied: a check reads nothing else
   float r = 0;                 ///< ... and its radius
 };

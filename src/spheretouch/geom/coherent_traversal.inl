@@ -186,7 +186,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     cc.groups_.push_back(e);
   }
 
-  // A leaf pair's refresh point: a fraction of δ in [1/2, 1) that differs between leaf pairs.
+  // A leaf pair's refresh point: a fraction of δ in [3/4, 1) that differs between leaf pairs.
   static std::uint8_t stagger(std::uint32_t p, std::uint32_t o) {
     return static_cast<std::uint8_t>((p * 0x9e3779b1u ^ o * 0x85ebca77u) >> 24);
   }
@@ -507,7 +507,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       return;
     }
     LeafBounds lb;
-    if (!(double(e.margin * float(256 + e.theta) / 512.0f) > leaf_motion(e.c, e.r, e.pose, lb))) {
+    if (!(double(e.margin * float(768 + e.theta) / 1024.0f) > leaf_motion(e.c, e.r, e.pose, lb))) {
       ++cc.stats_.refreshes;
       leaf(e.p, e.o, &e);
     } else {
