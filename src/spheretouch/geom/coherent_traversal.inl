@@ -300,7 +300,14 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     }
     ++leaf_count;
     ++cc.stats_.deferred;
-    leaf_leaf(p, o);
+    // collide() reaches a leaf pair only when its spheres meet; the front also keeps those within
+    // δ, whose faces cannot meet: the same sphere test first spares them the leaf stage (and the
+    // probe leaf's transform).
+    put_probe_sphere(p);
+    const float* ps = sc.psph_.data();
+    const std::size_t sp = sc.nstride_p_;
+    if (sphere_mask(sc.osph_.data() + o, sc.nstride_o_, 1, ps[p], ps[sp + p], ps[2 * sp + p], ps[3 * sp + p]) != 0)
+      leaf_leaf(p, o);
   }
 
   // The candidates waiting for their margins: the filter with margins, the exact test for the
