@@ -635,7 +635,7 @@ CMD_COLLIDE = ("build/perf/spheretouch-bench collide --probe .cache/models/hand_
                "--object .cache/models/<object>.off --poses <poses> --runs 300 --isa <isa> --json "
                "> {out}/collide_<object>_<isa>.json")
 CMD_SLIDES = ("build/perf/spheretouch-bench slides --probe .cache/models/hand_L2.off "
-              "--object .cache/models/<object>.off --poses <poses> --rounds 200 --reps 3 --json "
+              "--object .cache/models/<object>.off --poses <poses> --rounds 200 --reps 5 --json "
               "> {out}/slides_<object>.json")
 CMD_ICOSPHERE = "build/perf/spheretouch-bench icosphere {out}/icosphere.off"
 CMD_POSES_TABLE3 = ("build/perf/spheretouch-bench collide --probe .cache/models/hand_L2.off --object <object> "
