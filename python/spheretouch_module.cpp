@@ -369,6 +369,46 @@ PYBIND11_MODULE(_core, m) {
           },
           py::arg("poses"), py::arg("max_pairs") = py::none(),
           "Sorted pairs for each of N poses ((N, 4, 4) array): a list of (k, 2) uint32 arrays.")
+      .def(
+          "set_coherent",
+          [](PyComputeCollision& c, bool on, double reach_mm, double max_step_mm, std::size_t max_bytes, bool arbitrate) {
+            auto distance = [](double v, const char* name) {
+              if (!std::isfinite(v) || v < 0)
+                throw py::value_error(std::string(name) + ": expected a finite distance >= 0 (0 = automatic), got " +
+                                      std::to_string(v));
+            };
+            distance(reach_mm, "reach_mm");
+            distance(max_step_mm, "max_step_mm");
+            if (max_bytes == 0) throw py::value_error("max_bytes: expected at least 1");
+            geom::CoherentConfig cfg;
+            cfg.reach = reach_mm, cfg.max_step = max_step_mm, cfg.max_bytes = max_bytes, cfg.arbitrate = arbitrate;
+            std::lock_guard<std::mutex> lock(c.mu);
+            c.c.set_coherent(on, cfg);
+          },
+          py::arg("on") = true, py::arg("reach_mm") = 0.0, py::arg("max_step_mm") = 0.0,
+          py::arg("max_bytes") = std::size_t(64) << 20, py::arg("arbitrate") = true,
+          "Carry certificates between queries (the coherent collider): the same pairs, fewer tests "
+          "while the probe moves a little between them (a haptic loop, a batch along a trajectory). "
+          "reach_mm and max_step_mm: 0 = chosen from the probe's leaf size and the motion; max_bytes "
+          "bounds its cache; arbitrate: time itself against the plain query and give way when slower.")
+      .def_property_readonly(
+          "coherent_stats",
+          [](PyComputeCollision& c) -> py::object {
+            std::lock_guard<std::mutex> lock(c.mu);
+            const geom::CoherentCollider* k = c.c.coherent();
+            if (!k) return py::none();
+            const geom::CoherentStats& s = k->stats();
+            py::dict d;
+            d["rounds"] = s.rounds, d["plain_rounds"] = s.plain_rounds, d["rebuilds"] = s.rebuilds;
+            d["reroots"] = s.reroots, d["expansions"] = s.expansions, d["refreshes"] = s.refreshes;
+            d["deferred"] = s.deferred, d["reused"] = s.reused, d["retested"] = s.retested;
+            d["overflows"] = s.overflows, d["gave_way"] = s.gave_way, d["entries"] = s.entries;
+            d["candidates"] = s.candidates, d["peak_bytes"] = s.peak_bytes, d["bytes"] = k->bytes();
+            return d;
+          },
+          "the coherent collider's counters (None when it is off): rounds, plain_rounds, rebuilds, reroots, "
+          "expansions, refreshes, deferred, reused, retested, overflows, gave_way, entries, candidates, "
+          "peak_bytes, bytes")
       .def_property_readonly(
           "probe", [](PyComputeCollision& c) { return c.c.probe(); }, "a copy of the probe body")
       .def_property_readonly(

@@ -161,6 +161,33 @@ def test_hand_elephant_pairs_match_the_command_line():
     assert touching > 0, "no perf pose touches: the check would prove nothing"
 
 
+def test_coherent_queries_give_the_plain_pairs_along_a_slide():
+    probe = st.load_mesh(os.path.join(MODELS, "hand_L2.off"))
+    obj = st.load_mesh(os.path.join(MODELS, "elephant.off"))
+    start = perf_poses()[1]
+    # 0.01 mm a query along x and back, as a haptic loop moves (80 poses).
+    steps = list(range(40)) + list(range(40, 0, -1))
+    slide = np.stack([translation(0.01 * k, 0.0, 0.0) @ start for k in steps])
+    plain = st.ComputeCollision(st.Body(probe), st.Body(obj))
+    coherent = st.ComputeCollision(st.Body(probe), st.Body(obj))
+    assert coherent.coherent_stats is None
+    coherent.set_coherent(True, arbitrate=False)
+    want, got = plain.batch(slide), coherent.batch(slide)
+    assert sum(len(w) for w in want) > 0, "the slide touches nothing: the check would prove nothing"
+    for i, (w, g) in enumerate(zip(want, got)):
+        assert w.shape == g.shape and (w == g).all(), f"pose {i}: {len(g)} pairs, the plain query gives {len(w)}"
+    stats = coherent.coherent_stats
+    assert stats is not None and stats["rounds"] == len(slide)
+    assert stats["reused"] > 0 and stats["plain_rounds"] < len(slide)
+    assert 0 < stats["peak_bytes"] <= stats["bytes"]
+    coherent.set_coherent(False)
+    assert coherent.coherent_stats is None
+    assert (coherent.pairs(slide[5]) == want[5]).all()
+    expect_error(lambda: coherent.set_coherent(True, reach_mm=-1.0), "reach_mm", ">= 0")
+    expect_error(lambda: coherent.set_coherent(True, max_step_mm=float("nan")), "max_step_mm")
+    expect_error(lambda: coherent.set_coherent(True, max_bytes=0), "max_bytes")
+
+
 def test_contact_model_and_force():
     # A 20 mm box pressed 2 mm into a 100 mm box's top face: FD = +z, PD = 2 mm (patch model).
     big = st.Mesh(*box((100, 100, 100)), name="object")
