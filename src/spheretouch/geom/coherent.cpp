@@ -69,6 +69,8 @@ void CoherentCollider::reset() {
   round_ = 0;
   plain_until_ = 0;
   plain_ns_ = coherent_ns_ = 0;
+  timed_round_ = 0;
+  timed_pairs_ = last_pairs_ = 0;
   coherent_rounds_ = spells_ = 0;
   have_last_ = false;
   step_ = 0;

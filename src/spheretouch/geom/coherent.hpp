@@ -53,7 +53,9 @@ struct CoherentConfig {
   /// Bound on the cache (entries + candidates), bytes. A round that would exceed it runs plain
   /// collide(), and so do the next 64 rounds.
   std::size_t max_bytes = std::size_t(64) << 20;
-  /// Time itself against collide() (a plain round every 128, the cache kept) and give way to it
+  /// Time itself against collide() (a plain round every 128, the cache kept; skipped while it
+  /// takes under half of collide()'s time on a contact within a factor of 2 of the one collide()
+  /// was last timed on, up to 1,024 rounds: a timed round runs cold) and give way to it
   /// for 256 rounds (doubling, up to 8192, while it keeps losing) when its rounds cost more than
   /// 0.95 of collide()'s (light contact, where collide() takes microseconds and the
   /// certificates' bookkeeping does not pay). The pairs are the same either way; false makes the
@@ -156,7 +158,7 @@ class CoherentCollider {
   friend struct CoherentQuery;                       // coherent_traversal.inl: one per instruction set
   static constexpr std::uint32_t kPoses = 256;       // certificate poses kept; older entries are redone
   static constexpr std::uint32_t kRerootEvery = 64;  // rounds between walks from the roots
-  static constexpr std::uint32_t kTimeEvery = 128;   // arbitrate: a plain round timed this often
+  static constexpr std::uint32_t kTimeEvery = 128;   // arbitrate: a plain round timed this often (unless settled())
   static constexpr std::uint32_t kPlainSpell = 256;  // arbitrate: plain rounds after giving way
 
   // The front was built for these trees and object roots.
@@ -207,8 +209,17 @@ class CoherentCollider {
   std::uint32_t ramp_ = 0;                 // rounds since the front was rebuilt (the build budget grows with it)
   std::uint32_t plain_until_ = 0;          // after an overflow or giving way: plain rounds until this round
   double plain_ns_ = 0, coherent_ns_ = 0;  // arbitrate: recent round times (moving averages)
-  std::uint32_t coherent_rounds_ = 0;      // arbitrate: coherent rounds since it last gave way
-  std::uint32_t spells_ = 0;               // arbitrate: times in a row it gave way (the spell doubles)
+  std::uint32_t timed_round_ = 0;          // arbitrate: the last plain round (its time is in plain_ns_)
+  std::size_t timed_pairs_ = 0;            // ... and its pair count
+  std::size_t last_pairs_ = 0;             // the last round's pair count
+  // arbitrate: no plain round need be timed now, the collider clearly winning (under half of
+  // collide()'s time) on a contact about as large as when collide() was last timed, not long ago.
+  bool settled(std::uint32_t round) const {
+    return plain_ns_ > 0 && coherent_ns_ < 0.5 * plain_ns_ && round - timed_round_ < 8 * kTimeEvery &&
+           last_pairs_ <= 2 * timed_pairs_ + 16 && timed_pairs_ <= 2 * last_pairs_ + 16;
+  }
+  std::uint32_t coherent_rounds_ = 0;  // arbitrate: coherent rounds since it last gave way
+  std::uint32_t spells_ = 0;           // arbitrate: times in a row it gave way (the spell doubles)
   // What the front was built for.
   const void* probe_key_ = nullptr;
   const void* object_key_ = nullptr;

@@ -453,7 +453,7 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   const std::uint32_t round = round_++;
   // A jump (every certificate would fail), a spell of plain rounds, or (arbitrate) the plain round
   // that times collide() now and then, the cache kept.
-  const bool timing = config_.arbitrate && have_front_ && round % kTimeEvery == kTimeEvery - 1;
+  const bool timing = config_.arbitrate && have_front_ && round % kTimeEvery == kTimeEvery - 1 && !settled(round);
   if (step > max_step_ || round < plain_until_ || timing) {
     if (!timing) drop();
     ++stats_.plain_rounds;
@@ -461,6 +461,8 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
     query(probe, probe_tree, object, object_tree, options, scratch_, result, f);
     const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count();
     plain_ns_ = plain_ns_ > 0 ? 0.7 * plain_ns_ + 0.3 * ns : ns;
+    timed_round_ = round;
+    timed_pairs_ = last_pairs_ = result.pairs.size();
     note_contact(probe, result);
     return;
   }
@@ -511,6 +513,7 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
     }
   }
   note_contact(probe, result);
+  last_pairs_ = result.pairs.size();
   stats_.entries = entries();
   stats_.candidates = cands_.size();
   stats_.peak_bytes = std::max(stats_.peak_bytes, (front_.size() + groups_.size()) * sizeof(detail::FrontEntry) +
