@@ -121,45 +121,104 @@ double process_cpu_us() {
   throw CLI::RuntimeError(2);
 }
 
-/// The client's CPU per round over tcp: W DEALERs here, W ROUTER echoes in a child process (so
-/// this process's CPU time is the client's alone: its thread and its ZeroMQ I/O thread). Returns
-/// microseconds per round for each W. Runs before this process starts any other thread.
-std::vector<double> client_cpu_tcp(const std::vector<std::uint32_t>& ws, std::size_t reply_bytes, int rounds) {
+/// The fan-out ZeroMQ offers besides a DEALER per worker (issue 33, "measure, then choose"): one
+/// PUB the workers subscribe to carries the query (one send for all of them), one PULL gathers
+/// their replies (no poll over W sockets).
+enum class FanOut { dealers, pub_pull };
+
+/// The client's CPU per round over tcp: W DEALERs here (or one PUB and one PULL), W ROUTER echoes
+/// (or SUB + PUSH pairs) in a child process (so this process's CPU time is the client's alone:
+/// its thread and its ZeroMQ I/O thread). Returns microseconds per round for each W. Runs before
+/// this process starts any other thread.
+std::vector<double> client_cpu_tcp(const std::vector<std::uint32_t>& ws, std::size_t reply_bytes, int rounds,
+                                   FanOut how = FanOut::dealers) {
   std::vector<double> out;
   for (std::uint32_t W : ws) {
     std::vector<int> ports;
-    for (std::uint32_t i = 0; i < W; ++i) ports.push_back(free_tcp_port());
+    const bool pub = how == FanOut::pub_pull;
+    for (std::uint32_t i = 0; i < (pub ? 2u : W); ++i) ports.push_back(free_tcp_port());
+    auto tcp = [](int port) { return "tcp://127.0.0.1:" + std::to_string(port); };
     const pid_t pid = ::fork();
     if (pid < 0) die("fork failed");
     if (pid == 0) {
-      // The echoes: one thread polling W ROUTERs, answering with reply_bytes bytes.
+      // The echoes: one thread polling W ROUTERs (or W SUBs, answering on their PUSHes), answering
+      // with reply_bytes bytes.
       zmq::context_t ctx(1);
-      std::vector<zmq::socket_t> socks;
-      for (int p : ports) {
-        socks.emplace_back(ctx, zmq::socket_type::router);
+      std::vector<zmq::socket_t> socks, pushes;
+      for (std::uint32_t i = 0; i < W; ++i) {
+        socks.emplace_back(ctx, pub ? zmq::socket_type::sub : zmq::socket_type::router);
         socks.back().set(zmq::sockopt::linger, 0);
-        socks.back().bind("tcp://127.0.0.1:" + std::to_string(p));
+        if (!pub) {
+          socks.back().bind(tcp(ports[i]));
+          continue;
+        }
+        socks.back().set(zmq::sockopt::subscribe, "");
+        socks.back().connect(tcp(ports[0]));
+        pushes.emplace_back(ctx, zmq::socket_type::push);
+        pushes.back().set(zmq::sockopt::linger, 0);
+        pushes.back().connect(tcp(ports[1]));
       }
       std::vector<std::uint8_t> reply(std::max<std::size_t>(reply_bytes, 8), 0);
       std::vector<zmq::pollitem_t> items(socks.size());
       for (;;) {
         for (std::size_t i = 0; i < socks.size(); ++i) items[i] = {socks[i].handle(), 0, ZMQ_POLLIN, 0};
         if (zmq::poll(items.data(), items.size(), std::chrono::milliseconds(5000)) <= 0) ::_exit(0);
-        for (std::size_t i = 0; i < socks.size(); ++i)
-          if (items[i].revents & ZMQ_POLLIN) echo_pending(socks[i], reply);
+        for (std::size_t i = 0; i < socks.size(); ++i) {
+          if (!(items[i].revents & ZMQ_POLLIN)) continue;
+          if (!pub) {
+            echo_pending(socks[i], reply);
+            continue;
+          }
+          zmq::message_t q;
+          while (socks[i].recv(q, zmq::recv_flags::dontwait)) {
+            std::memcpy(reply.data(), q.data(), std::min<std::size_t>(q.size(), 8));
+            (void)pushes[i].send(zmq::buffer(reply), zmq::send_flags::dontwait);
+          }
+        }
       }
     }
     double per_round = 0;
     {
       zmq::context_t ctx(1);
-      std::vector<std::string> endpoints;
-      for (int p : ports) endpoints.push_back("tcp://127.0.0.1:" + std::to_string(p));
-      FanOutGather gather(ctx, endpoints);
-      constexpr std::size_t kQueryBytes = 160;                                          // a Query's size on the wire
-      for (int r = 0; r < 50; ++r) gather.round(std::chrono::seconds(2), kQueryBytes);  // connect and warm
+      constexpr std::size_t kQueryBytes = 160;  // a Query's size on the wire
+      std::function<bool()> round;
+      std::unique_ptr<FanOutGather> gather;
+      zmq::socket_t pub_sock(ctx, zmq::socket_type::pub), pull(ctx, zmq::socket_type::pull);
+      std::vector<std::uint8_t> query(kQueryBytes, 0);
+      std::uint64_t seq = 0;
+      if (!pub) {
+        std::vector<std::string> endpoints;
+        for (int p : ports) endpoints.push_back(tcp(p));
+        gather = std::make_unique<FanOutGather>(ctx, endpoints);
+        round = [&] { return gather->round(std::chrono::seconds(2), kQueryBytes); };
+      } else {
+        pub_sock.set(zmq::sockopt::linger, 0);
+        pull.set(zmq::sockopt::linger, 0);
+        pub_sock.bind(tcp(ports[0]));
+        pull.bind(tcp(ports[1]));
+        round = [&] {  // one send for every worker; the W echoes of this round on one socket
+          std::memcpy(query.data(), &++seq, sizeof seq);
+          (void)pub_sock.send(zmq::buffer(query), zmq::send_flags::dontwait);
+          for (std::uint32_t got = 0; got < W;) {
+            zmq::pollitem_t it{pull.handle(), 0, ZMQ_POLLIN, 0};
+            if (zmq::poll(&it, 1, std::chrono::milliseconds(2000)) <= 0) return false;
+            zmq::message_t m;
+            while (pull.recv(m, zmq::recv_flags::dontwait)) {
+              std::uint64_t back = 0;
+              if (m.size() >= sizeof back) std::memcpy(&back, m.data(), sizeof back);
+              got += back == seq;
+            }
+          }
+          return true;
+        };
+        // A subscription reaches the PUB some time after the connection: until every SUB has
+        // one, a round would wait for echoes that never come.
+        std::this_thread::sleep_for(std::chrono::milliseconds(300));
+      }
+      for (int r = 0; r < 50; ++r) round();  // connect and warm
       const double c0 = process_cpu_us();
       for (int r = 0; r < rounds; ++r) {
-        gather.round(std::chrono::seconds(2), kQueryBytes);
+        round();
         std::this_thread::sleep_for(std::chrono::microseconds(200));  // spaced like a collision loop
       }
       per_round = (process_cpu_us() - c0) / rounds;
@@ -447,6 +506,9 @@ void run_scale(const ScaleArgs& a) {
   std::fprintf(stderr, "client CPU per round over tcp (echoes in another process), W = 1..16 ...\n");
   const std::vector<double> cpu_tcp = client_cpu_tcp(cpu_ws, 8 * 64, std::max(50, a.gather_rounds / 2));
   const auto [cpu_a, cpu_b] = fit_line(cpu_ws, cpu_tcp);
+  std::fprintf(stderr, "... and with one PUB for the query and one PULL for the replies ...\n");
+  const std::vector<double> cpu_pub = client_cpu_tcp(cpu_ws, 8 * 64, std::max(50, a.gather_rounds / 2), FanOut::pub_pull);
+  const auto [pub_a, pub_b] = fit_line(cpu_ws, cpu_pub);
   const double msg_work = client_message_work_us(160, 8 * 64, std::max(2000, a.gather_rounds * 10));
 
   std::fprintf(stderr, "building trees ...\n");
@@ -957,6 +1019,8 @@ void run_scale(const ScaleArgs& a) {
     auto whole = [](double v) { return static_cast<std::int64_t>(std::llround(v)); };
     Json us_per_round = Json::array();
     for (double v : cpu_tcp) us_per_round.push_back(round_to(v, 2));
+    Json pub_per_round = Json::array();
+    for (double v : cpu_pub) pub_per_round.push_back(round_to(v, 2));
     Json networks = Json::array();
     for (const Network& n : kNetworks)
       networks.push_back({{"name", n.name},
@@ -1059,6 +1123,11 @@ void run_scale(const ScaleArgs& a) {
                   {"us_per_round", std::move(us_per_round)},
                   {"fit_a_us", round_to(cpu_a, 2)},
                   {"fit_b_us_per_worker", round_to(cpu_b, 3)}}},
+                {"client_cpu_tcp_pub_pull",
+                 {{"workers", cpu_ws},
+                  {"us_per_round", std::move(pub_per_round)},
+                  {"fit_a_us", round_to(pub_a, 2)},
+                  {"fit_b_us_per_worker", round_to(pub_b, 3)}}},
                 {"client_message_work_us", round_to(msg_work, 3)},
                 {"test_cost",
                  {{"us_per_sphere_test", round_to(cost_sphere_us, 6)}, {"us_per_tri_test", round_to(cost_tri_us, 6)}}},
@@ -1078,7 +1147,10 @@ void run_scale(const ScaleArgs& a) {
       a.probe.c_str(), a.object.c_str(), object.faces.size(), a.runs, model.contact_radius, a.share_tree.c_str());
   std::printf("client CPU per round over tcp (measured): ");
   for (std::size_t i = 0; i < cpu_tcp.size(); ++i) std::printf("W=%u %.1f us  ", cpu_ws[i], cpu_tcp[i]);
-  std::printf("-> %.1f + %.2f W us\nclient work per worker message, no wake-up (measured): %.2f us\n", cpu_a, cpu_b,
+  std::printf("-> %.1f + %.2f W us\n", cpu_a, cpu_b);
+  std::printf("... one PUB + one PULL instead of a DEALER per worker: ");
+  for (std::size_t i = 0; i < cpu_pub.size(); ++i) std::printf("W=%u %.1f us  ", cpu_ws[i], cpu_pub[i]);
+  std::printf("-> %.1f + %.2f W us\nclient work per worker message, no wake-up (measured): %.2f us\n", pub_a, pub_b,
               msg_work);
   std::printf("inproc fan-out floor p50 (measured): ");
   for (auto& f : floors) std::printf("W=%u %.1f us  ", f.first, f.second);

@@ -946,6 +946,10 @@ def scale_inputs(d):
     cc = d.get("client_cpu_tcp") or {}
     if cc:
         parts.append(f"client CPU per TCP round {f_us(cc.get('fit_a_us'))} + {f_us(cc.get('fit_b_us_per_worker'))} µs × W")
+    cp = d.get("client_cpu_tcp_pub_pull") or {}
+    if cp:
+        parts.append(f"with one PUB for the query and one PULL for the replies instead of a DEALER per worker "
+                     f"{f_us(cp.get('fit_a_us'))} + {f_us(cp.get('fit_b_us_per_worker'))} µs × W")
     if finite(d.get("client_message_work_us")):
         parts.append(f"client work per message pair {f_us(d['client_message_work_us'])} µs")
     fl = [f for f in d.get("inproc_floor") or [] if isinstance(f, dict)]
