@@ -181,6 +181,11 @@ class CoherentCollider {
   bool reroot_due() const {
     return have_front_ && ramp_ % kRerootEvery == kRerootEvery - 1 && entries() > 2 * rooted_size_;
   }
+  // The pool (what max_bytes bounds) with `leaf_entries` leaf-pair entries: those, the group
+  // store (dead entries included until compacted) and the candidates.
+  std::size_t pool_bytes(std::size_t leaf_entries) const {
+    return (leaf_entries + groups_.size()) * sizeof(detail::FrontEntry) + cands_.size() * sizeof(detail::Candidate);
+  }
   // Live entries of the front: leaf pairs and groups.
   std::size_t entries() const { return front_.size() + groups_.size() - dead_; }
   // Drops the dead groups once they are most of the store.

@@ -175,10 +175,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   }
 
   // The pool in bytes (what max_bytes bounds).
-  std::size_t pool_bytes() const {
-    return (cc.next_front_.size() + cc.groups_.size()) * sizeof(detail::FrontEntry) +
-           cc.cands_.size() * sizeof(detail::Candidate);
-  }
+  std::size_t pool_bytes() const { return cc.pool_bytes(cc.next_front_.size()); }
   void add_group(std::uint8_t kind, std::uint32_t p, std::uint32_t o, std::uint32_t mask, float gap) {
     detail::FrontEntry e = entry(kind, p, o);
     e.arg = mask;

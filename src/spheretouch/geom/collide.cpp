@@ -470,9 +470,10 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   step_ = std::max(step, step_ * 0.9);
   poses_[round % kPoses] = {f.rt, f.mag, round};
   reach_ = choose_reach();
+  const bool rerooting = reroot_due();  // decided once: the round changes what it reads
   const bool ok = on_active_isa([&](auto isa) {
     return run_coherent<typename decltype(isa)::type>(*this, probe, probe_tree, object, object_tree, options, scratch_,
-                                                      result, f, round, reach_, build_budget(), reroot_due());
+                                                      result, f, round, reach_, build_budget(), rerooting);
   });
   if (!ok) {  // the pool is full: this round, and the next 64, by collide()
     ++stats_.overflows;
@@ -487,11 +488,10 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   if (result.stats.pair_limit_hit || result.stats.work_limit_hit || result.stats.truncated != 0) {
     drop();  // a front cut short proves nothing about what it did not reach
   } else {
-    const bool rerooted = reroot_due();
     front_.swap(next_front_);
     old_groups_.clear();
     compact_groups();
-    if (!have_front_ || rerooted) rooted_size_ = entries();
+    if (!have_front_ || rerooting) rooted_size_ = entries();
     ramp_ = have_front_ ? ramp_ + 1 : 0;
     have_front_ = true;
     if (garbage_ > 4096 && 2 * garbage_ > cands_.size()) compact();
@@ -516,8 +516,7 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   last_pairs_ = result.pairs.size();
   stats_.entries = entries();
   stats_.candidates = cands_.size();
-  stats_.peak_bytes = std::max(stats_.peak_bytes, (front_.size() + groups_.size()) * sizeof(detail::FrontEntry) +
-                                                      cands_.size() * sizeof(detail::Candidate));
+  stats_.peak_bytes = std::max(stats_.peak_bytes, pool_bytes(front_.size()));
   if (options.sort_pairs) scratch_.sort(result.pairs);
 }
 
