@@ -466,6 +466,13 @@ double deal_imbalance(const std::vector<double>& work, const std::vector<std::ui
   return total > 0 ? *std::max_element(load.begin(), load.end()) * workers / total : 1.0;
 }
 
+/// The shares' backends: the workers' tree backend answering every query from scratch. The model
+/// times each pose alone, repeated, and compares with one thread's plain collide(); the coherent
+/// collider (on in the workers) would reuse the repeated pose's certificates and time nothing.
+net::BackendFactory share_backends(bool per_block) {
+  return net::tree_backend_factory(per_block, net::kDefaultMaxCrowding, /*coherent=*/false);
+}
+
 /// The worker's resident bytes for a share: its object tree and its mesh (the probe is shared by all).
 double share_bytes(const geom::Mesh& m, const geom::SphereTree& t) {
   return double(t.bytes()) + double(m.faces.size() * sizeof(m.faces[0])) + double(m.local.size() * sizeof(m.local[0]));
@@ -666,7 +673,7 @@ void run_scale(const ScaleArgs& a) {
         if (share[w].empty()) continue;
         auto set = net::make_block_set(probe, object, blocks.value(), share[w], geom::DefaultTreeConfig().leaf_faces);
         if (!set) die(set.error());
-        std::unique_ptr<net::CollisionBackend> be = net::tree_backend_factory(per_block)();
+        std::unique_ptr<net::CollisionBackend> be = share_backends(per_block)();
         if (Status st = be->load(set.value()); !st) die(st.error());
         {
           // What this worker holds of the object: its share's tree (rebuilt here to size it) and mesh.
@@ -806,7 +813,7 @@ void run_scale(const ScaleArgs& a) {
     auto blocks = net::tree_blocks(part_tree, sp.layer, sp.block_size);
     if (!blocks) die(blocks.error());
     const std::string tag = "assist-" + std::to_string(::getpid());
-    auto lw = net::LocalWorkers::start(actx, int(assist_w), net::tree_backend_factory(per_block),
+    auto lw = net::LocalWorkers::start(actx, int(assist_w), share_backends(per_block),
                                        [&](int i) { return net::inproc_endpoint(i, tag); });
     if (!lw) die(lw.error());
     std::unique_ptr<net::ScatterGather> sg[2];
@@ -917,7 +924,7 @@ void run_scale(const ScaleArgs& a) {
         if (!blocks || blocks.value().size() < W) continue;
         static int fleets = 0;
         const std::string tag = "scale-" + std::to_string(::getpid()) + "-" + std::to_string(fleets++);
-        auto lw = net::LocalWorkers::start(ctx, int(W), net::tree_backend_factory(per_block),
+        auto lw = net::LocalWorkers::start(ctx, int(W), share_backends(per_block),
                                            [&](int i) { return net::inproc_endpoint(i, tag); });
         if (!lw) die(lw.error());
         net::ScatterConfig cfg;
@@ -941,7 +948,7 @@ void run_scale(const ScaleArgs& a) {
             if (ids.empty()) continue;
             auto set = net::make_block_set(probe, object, bl.value(), ids, geom::DefaultTreeConfig().leaf_faces);
             if (!set) die(set.error());
-            shares.push_back(net::tree_backend_factory(per_block)());
+            shares.push_back(share_backends(per_block)());
             if (Status st = shares.back()->load(set.value()); !st) die(st.error());
           }
         }

@@ -272,20 +272,38 @@ TEST_CASE("the coherent collider keeps collide()'s limits and falls back on jump
     CHECK(r.pairs.empty());
     cmp.at(cc, probe, object, start);
   }
-  SUBCASE("object roots (a worker's blocks): the same pairs as collide() with them; new roots start over") {
+  SUBCASE("object roots (a worker's blocks): the same pairs as collide() with them; new roots asked twice start over") {
     CoherentCollider cc(fixed());
     std::vector<std::uint32_t> roots;
-    for (std::uint32_t i = 0; i < object.tree.num_nodes() && roots.size() < 6; ++i)
+    for (std::uint32_t i = 0; i < object.tree.num_nodes(); ++i)
       if (object.tree.nodes[i].depth == 2) roots.push_back(i);
     REQUIRE(roots.size() >= 2);
     CollideConfig opt;
     opt.restrict_object = true;
     opt.object_roots = roots;
     for (int k = 0; k < 8; ++k) cmp.at(cc, probe, object, moved(start, Vec3::Zero(), x, 0.002 * k, x, 0.0), opt);
-    const std::uint64_t rebuilds = cc.stats().rebuilds;
-    opt.object_roots = std::span<const std::uint32_t>(roots).first(1);
-    cmp.at(cc, probe, object, start, opt);
-    CHECK(cc.stats().rebuilds == rebuilds + 1);
+    const CoherentStats before = cc.stats();
+    CHECK(before.reused > 0);
+    // Other roots once (a round that skips a block): collide() answers, the front is kept.
+    CollideConfig fewer = opt;
+    fewer.object_roots = std::span<const std::uint32_t>(roots).subspan(1);
+    cmp.at(cc, probe, object, moved(start, Vec3::Zero(), x, 0.016, x, 0.0), fewer);
+    CHECK(cc.stats().plain_rounds == before.plain_rounds + 1);
+    CHECK(cc.stats().rebuilds == before.rebuilds);
+    // Back to the front's roots: answered from it (reused answers, no rebuild).
+    cmp.at(cc, probe, object, moved(start, Vec3::Zero(), x, 0.018, x, 0.0), opt);
+    CHECK(cc.stats().rebuilds == before.rebuilds);
+    CHECK(cc.stats().reused > before.reused);
+    // Alternating roots round by round: every round exact, never a rebuild.
+    for (int k = 0; k < 10; ++k)
+      cmp.at(cc, probe, object, moved(start, Vec3::Zero(), x, 0.02 + 0.002 * k, x, 0.0), k % 2 ? opt : fewer);
+    CHECK(cc.stats().rebuilds == before.rebuilds);
+    CHECK(cc.stats().plain_rounds == before.plain_rounds + 6);
+    // The other roots asked twice in a row: the front starts over for them.
+    cmp.at(cc, probe, object, moved(start, Vec3::Zero(), x, 0.04, x, 0.0), fewer);
+    CHECK(cc.stats().rebuilds == before.rebuilds);
+    cmp.at(cc, probe, object, moved(start, Vec3::Zero(), x, 0.042, x, 0.0), fewer);
+    CHECK(cc.stats().rebuilds == before.rebuilds + 1);
   }
 }
 

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 
 namespace st::inline SPHERETOUCH_ABI::geom {
@@ -16,6 +17,25 @@ bool CoherentCollider::same_setup(const SphereTree& probe_tree, const SphereTree
       restrict_ != options.restrict_object)
     return false;
   return !restrict_ || std::equal(roots_.begin(), roots_.end(), options.object_roots.begin(), options.object_roots.end());
+}
+
+std::uint64_t CoherentCollider::setup_key(const SphereTree& probe_tree, const SphereTree& object_tree,
+                                          const CollideConfig& options) {
+  // FNV-1a over the words same_setup() compares.
+  std::uint64_t h = 0xcbf29ce484222325ull;
+  const auto mix = [&h](std::uint64_t v) {
+    for (int k = 0; k < 8; ++k, v >>= 8) h = (h ^ (v & 0xff)) * 0x100000001b3ull;
+  };
+  mix(reinterpret_cast<std::uintptr_t>(probe_tree.nodes.data()));
+  mix(probe_tree.mesh_hash);
+  mix(reinterpret_cast<std::uintptr_t>(object_tree.nodes.data()));
+  mix(object_tree.mesh_hash);
+  mix(options.restrict_object ? 1 : 0);
+  if (options.restrict_object) {
+    mix(options.object_roots.size());
+    for (std::uint32_t r : options.object_roots) mix(r);
+  }
+  return h | 1;  // never 0 (0: nothing pending)
 }
 
 void CoherentCollider::adopt(const SphereTree& probe_tree, const SphereTree& object_tree, const CollideConfig& options) {

@@ -28,6 +28,10 @@
 // costs one plain round and one rebuild); the front is walked again from the roots when it has
 // doubled (it only refines as the probe moves); and, with `arbitrate`, the collider times itself
 // against collide() and gives way to it where the bookkeeping costs more than it saves.
+// Other trees or other object roots (a worker asked to skip other blocks this round) start a new
+// front only when a second round in a row asks for them: a setup met once is answered by
+// collide() and the front kept for the one it was built for, so rounds that alternate (a client
+// that takes a worker's busiest block some rounds and not others) cost no rebuild each.
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <array>
@@ -65,12 +69,14 @@ struct CoherentConfig {
 
 /// What the coherent collider did (totals since construction or reset_stats()).
 struct CoherentStats {
-  std::uint64_t rounds = 0;        ///< rounds answered
-  std::uint64_t plain_rounds = 0;  ///< of those, by plain collide() (a jump, the pool full, a mode it does not cache)
-  std::uint64_t rebuilds = 0;      ///< rounds that started from the roots (first round, after a drop)
-  std::uint64_t reroots = 0;       ///< rounds that walked again from the roots, keeping the leaf pairs' entries
-  std::uint64_t expansions = 0;    ///< groups of apart sphere pairs tested again (their gap used up)
-  std::uint64_t refreshes = 0;     ///< leaf pairs due for their candidates to be gathered again
+  std::uint64_t rounds = 0;  ///< rounds answered
+  /// of those, by plain collide() (a jump, the pool full, a mode it does not cache, other trees
+  /// or object roots asked for once)
+  std::uint64_t plain_rounds = 0;
+  std::uint64_t rebuilds = 0;    ///< rounds that started from the roots (first round, after a drop)
+  std::uint64_t reroots = 0;     ///< rounds that walked again from the roots, keeping the leaf pairs' entries
+  std::uint64_t expansions = 0;  ///< groups of apart sphere pairs tested again (their gap used up)
+  std::uint64_t refreshes = 0;   ///< leaf pairs due for their candidates to be gathered again
   /// leaf pairs answered by collide()'s leaf stage while their build waited for a round's budget
   std::uint64_t deferred = 0;
   std::uint64_t reused = 0;     ///< candidate answers taken from their certificate
@@ -165,6 +171,8 @@ class CoherentCollider {
   bool same_setup(const SphereTree& probe_tree, const SphereTree& object_tree, const CollideConfig& options) const;
   // Drops the front and remembers what the next is built for (the probe's leaf radius too).
   void adopt(const SphereTree& probe_tree, const SphereTree& object_tree, const CollideConfig& options);
+  // A hash of the setup (trees and object roots): what a round that is not same_setup() asked for.
+  static std::uint64_t setup_key(const SphereTree& probe_tree, const SphereTree& object_tree, const CollideConfig& options);
   // Forgets the front (the next cached round rebuilds from the roots).
   void drop();
   // Copies the live candidates to the front of the pool (in front order), dropping the garbage.
@@ -231,6 +239,9 @@ class CoherentCollider {
   std::uint64_t probe_hash_ = 0, object_hash_ = 0;
   std::vector<std::uint32_t> roots_;
   bool restrict_ = false;
+  // The other setup the round before asked for (setup_key(); 0: none): adopted when asked again.
+  // Only decides between a rebuild and a plain round, never the pairs (a hash collision adopts).
+  std::uint64_t pending_setup_ = 0;
   // Motion.
   RelTransform last_rt_{};
   bool have_last_ = false;

@@ -431,7 +431,21 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
     geom::collide(probe, probe_tree, object, object_tree, pose, options, scratch_, result);
     return;
   }
-  if (!same_setup(probe_tree, object_tree, options)) adopt(probe_tree, object_tree, options);
+  if (same_setup(probe_tree, object_tree, options)) {
+    pending_setup_ = 0;
+  } else {
+    // Another setup: adopted (a rebuild) when the round before asked for it too, or when there is
+    // no front to keep; met once, collide() answers and the front stays (coherent.hpp, top).
+    const std::uint64_t key = setup_key(probe_tree, object_tree, options);
+    if (have_front_ && key != pending_setup_) {
+      pending_setup_ = key;
+      ++stats_.plain_rounds;
+      geom::collide(probe, probe_tree, object, object_tree, pose, options, scratch_, result);
+      return;
+    }
+    pending_setup_ = 0;
+    adopt(probe_tree, object_tree, options);
+  }
   if (round_ >= 0xfffffff0u) reset();
   result.clear();
   QueryFrame f;

@@ -28,7 +28,8 @@ Status check_crowding(const geom::SphereTree& tree, const geom::Mesh& mesh, std:
 
 class TreeBackend final : public CollisionBackend {
  public:
-  TreeBackend(bool per_block, std::uint32_t max_crowding) : per_block_(per_block), max_crowding_(max_crowding) {}
+  TreeBackend(bool per_block, std::uint32_t max_crowding, bool coherent)
+      : per_block_(per_block), coherent_(coherent), max_crowding_(max_crowding) {}
   Status load(const BlockSet& set) override {
     geom::TreeConfig params = geom::DefaultTreeConfig();
     params.leaf_faces = std::clamp<std::uint32_t>(set.leaf_faces, 1, geom::kMaxLeafFaces);
@@ -67,7 +68,7 @@ class TreeBackend final : public CollisionBackend {
     collider_.emplace(std::move(pb).value(), std::move(ob).value());
     geom::CoherentConfig coherent;
     coherent.max_bytes = kCoherentCacheBytes;
-    collider_->set_coherent(true, coherent);
+    collider_->set_coherent(coherent_, coherent);
     return Ok{};
   }
 
@@ -166,13 +167,14 @@ class TreeBackend final : public CollisionBackend {
   bool is_block_root(std::uint32_t i) const { return i < is_root_.size() && is_root_[i]; }
   bool empty_ = true;
   bool per_block_ = true;
+  bool coherent_ = true;
   std::uint32_t max_crowding_ = kDefaultMaxCrowding;
 };
 
 }  // namespace
 
-BackendFactory tree_backend_factory(bool per_block, std::uint32_t max_crowding) {
-  return [per_block, max_crowding] { return std::make_unique<TreeBackend>(per_block, max_crowding); };
+BackendFactory tree_backend_factory(bool per_block, std::uint32_t max_crowding, bool coherent) {
+  return [per_block, max_crowding, coherent] { return std::make_unique<TreeBackend>(per_block, max_crowding, coherent); };
 }
 
 Result<Blocks> tree_blocks(const geom::SphereTree& tree, std::uint32_t layer, std::uint32_t block_size) {

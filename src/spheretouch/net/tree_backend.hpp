@@ -20,7 +20,11 @@ inline constexpr std::uint32_t kDefaultMaxCrowding = 256;
 /// builds one subtree per block of its share; `per_block` false builds one tree over the whole
 /// share instead (what workers did before; kept to measure the difference, bench scale --share-tree).
 /// A set whose probe or share piles more than `max_crowding` leaves at one spot is refused (0: no check).
-BackendFactory tree_backend_factory(bool per_block = true, std::uint32_t max_crowding = kDefaultMaxCrowding);
+/// `coherent` (the default) answers through the coherent collider (geom::CoherentCollider, cache
+/// <= kCoherentCacheBytes): along a haptic slide it reuses the last round's certificates; false
+/// answers every query from scratch (what a query at an unrelated pose costs; bench scale's shares).
+BackendFactory tree_backend_factory(bool per_block = true, std::uint32_t max_crowding = kDefaultMaxCrowding,
+                                    bool coherent = true);
 
 /// The object's faces grouped by the partition of `tree`'s layer `layer` into runs of
 /// `block_size` consecutive layer spheres (geom::make_partition): blocks[b] = faces of block b.
