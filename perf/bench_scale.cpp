@@ -356,6 +356,12 @@ struct Row {
   const std::vector<std::uint32_t>* block_faces = nullptr;  // faces per block
   double block_imbalance = 0, shipped_imbalance = 0;
   std::uint32_t shipped_blocks = 0, shipped_faces = 0;
+  // The replicated deal (a model; not built): every block held by two workers (its owner and
+  // second_holder()), and each round the client gives each block that worked the round before to
+  // the less loaded of its two holders (replicated_deal()). Judged by each block's counted work
+  // the round before (which the workers would have to report per block), and by its pairs the
+  // round before (what the client knows today). Each worker holds two shares' memory.
+  double replicated_imbalance = 0, replicated_pairs_imbalance = 0;
   // Client assist (built: ScatterConfig::assist_blocks): the client answers the blocks
   // net::choose_assist() picks from the pairs each block gave at the pose of the round before,
   // their owners skip them. On this pose's work of each block alone: the workers' max / mean
@@ -453,6 +459,33 @@ std::vector<std::uint32_t> ship(const std::vector<double>& before, std::vector<s
     moved.push_back(std::uint32_t(pick));
   }
   return moved;
+}
+
+/// The second holder of block k in the replicated deal: a worker other than its owner, drawn by a
+/// hash of k, so that the blocks of one contact (neighbours in the tree's order, which
+/// block-cyclic deals to neighbouring workers) have their second copies spread over the fleet.
+std::uint32_t second_holder(std::uint32_t k, std::uint32_t owner, std::uint32_t workers) {
+  if (workers < 2) return owner;
+  const std::uint64_t h = (std::uint64_t(k) + 1) * 0x9e3779b97f4a7c15ull;
+  return std::uint32_t((owner + 1 + (h >> 33) % (workers - 1)) % workers);
+}
+
+/// The replicated deal of one round: the blocks with work predicted (by the round before), the
+/// heaviest first, each to the less loaded of its owner and second_holder() (a two-choice longest
+/// processing time first); the others stay with their owner. Returns block -> worker.
+std::vector<std::uint32_t> replicated_deal(const std::vector<double>& predicted, std::vector<std::uint32_t> owner,
+                                           std::uint32_t workers) {
+  std::vector<std::uint32_t> order;
+  for (std::uint32_t k = 0; k < predicted.size(); ++k)
+    if (predicted[k] > 0) order.push_back(k);
+  std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) { return predicted[x] > predicted[y]; });
+  std::vector<double> load(workers, 0.0);
+  for (std::uint32_t k : order) {
+    const std::uint32_t other = second_holder(k, owner[k], workers);
+    if (load[other] < load[owner[k]]) owner[k] = other;
+    load[owner[k]] += predicted[k];
+  }
+  return owner;
 }
 
 /// max / mean of the workers' loads when block k (work[k]) is dealt to owner[k].
@@ -788,6 +821,9 @@ void run_scale(const ScaleArgs& a) {
       r.assist_critical = total > 0 ? std::max(max_load, client) * r.workers / total : 1.0;
       r.assist_client = max_load > 0 ? client / max_load : 0.0;
       r.assisted_blocks = std::uint32_t(taken.size());
+      r.replicated_imbalance = deal_imbalance(work, replicated_deal(before, *r.owners, r.workers), r.workers);
+      std::vector<double> pairs_before(r.block_pairs_before->begin(), r.block_pairs_before->end());
+      r.replicated_pairs_imbalance = deal_imbalance(work, replicated_deal(pairs_before, *r.owners, r.workers), r.workers);
       r.oracle_imbalance = oracle_imbalance(std::move(work), r.workers);
     }
   }
@@ -866,12 +902,13 @@ void run_scale(const ScaleArgs& a) {
     std::uint32_t workers = 0;
     geom::Mapping mapping = geom::Mapping::block_cyclic;
     std::size_t poses = 0;
-    Spread imbalance_counted, imbalance, redundancy_counted, redundancy, oracle, block, shipped, assisted, critical;
+    Spread imbalance_counted, imbalance, redundancy_counted, redundancy, oracle, block, shipped, assisted, critical,
+        replicated, replicated_pairs;
   };
   std::vector<Summary> summaries;
   for (std::uint32_t W : ws)
     for (geom::Mapping m : mappings) {
-      std::vector<double> v[9];
+      std::vector<double> v[11];
       for (const Row& r : rows)
         if (r.workers == W && r.mapping == m) {
           v[0].push_back(r.work_imbalance());
@@ -883,6 +920,8 @@ void run_scale(const ScaleArgs& a) {
           v[6].push_back(r.shipped_imbalance);
           v[7].push_back(r.assisted_imbalance);
           v[8].push_back(r.assist_critical);
+          v[9].push_back(r.replicated_imbalance);
+          v[10].push_back(r.replicated_pairs_imbalance);
         }
       if (v[0].empty()) continue;
       const auto spread = [](const std::vector<double>& x) {
@@ -892,7 +931,7 @@ void run_scale(const ScaleArgs& a) {
         return sp;
       };
       summaries.push_back({W, m, v[0].size(), spread(v[0]), spread(v[1]), spread(v[2]), spread(v[3]), spread(v[4]),
-                           spread(v[5]), spread(v[6]), spread(v[7]), spread(v[8])});
+                           spread(v[5]), spread(v[6]), spread(v[7]), spread(v[8]), spread(v[9]), spread(v[10])});
     }
 
   // 4. The gather on this machine: raw inproc fan-out floor for small W, with a reply of the
@@ -1085,6 +1124,8 @@ void run_scale(const ScaleArgs& a) {
                 {"shipped_imbalance", round_to(r.shipped_imbalance, 3)},
                 {"shipped_blocks", r.shipped_blocks},
                 {"shipped_faces", r.shipped_faces},
+                {"replicated_imbalance", round_to(r.replicated_imbalance, 3)},
+                {"replicated_pairs_imbalance", round_to(r.replicated_pairs_imbalance, 3)},
                 {"assisted_imbalance", round_to(r.assisted_imbalance, 3)},
                 {"assist_critical", round_to(r.assist_critical, 3)},
                 {"assist_client", round_to(r.assist_client, 3)},
@@ -1109,11 +1150,13 @@ void run_scale(const ScaleArgs& a) {
     Json summary = Json::array();
     for (const Summary& u : summaries) {
       Json j = {{"workers", u.workers}, {"mapping", geom::to_string(u.mapping)}, {"poses", u.poses}};
-      for (auto [name, sp] : {std::pair{"imbalance_counted", &u.imbalance_counted}, std::pair{"imbalance", &u.imbalance},
-                              std::pair{"redundancy_counted", &u.redundancy_counted},
-                              std::pair{"redundancy", &u.redundancy}, std::pair{"oracle_imbalance", &u.oracle},
-                              std::pair{"block_imbalance", &u.block}, std::pair{"shipped_imbalance", &u.shipped},
-                              std::pair{"assisted_imbalance", &u.assisted}, std::pair{"assist_critical", &u.critical}})
+      for (auto [name, sp] :
+           {std::pair{"imbalance_counted", &u.imbalance_counted}, std::pair{"imbalance", &u.imbalance},
+            std::pair{"redundancy_counted", &u.redundancy_counted}, std::pair{"redundancy", &u.redundancy},
+            std::pair{"oracle_imbalance", &u.oracle}, std::pair{"block_imbalance", &u.block},
+            std::pair{"shipped_imbalance", &u.shipped}, std::pair{"assisted_imbalance", &u.assisted},
+            std::pair{"assist_critical", &u.critical}, std::pair{"replicated_imbalance", &u.replicated},
+            std::pair{"replicated_pairs_imbalance", &u.replicated_pairs}})
         j[name] = {{"mean", round_to(sp->mean, 3)}, {"median", round_to(sp->median, 3)}, {"max", round_to(sp->max, 3)}};
       summary.push_back(std::move(j));
     }
@@ -1190,14 +1233,17 @@ void run_scale(const ScaleArgs& a) {
       "model moved up to %u blocks judged by the round before (the probe %.3g mm away; a model, not built); "
       "assisted = the workers' max / mean when the client answers up to %u blocks itself (client assist, built: "
       "net::choose_assist on the pairs per block of the round before), critical = the slowest of them and the "
-      "client against all the work dealt evenly over W (blocks' own denominator)\n",
+      "client against all the work dealt evenly over W (blocks' own denominator); replicated = every block also "
+      "held by a second worker (drawn by a hash of the block) and each round given to the less loaded holder, "
+      "judged by the counted work of each block the round before (repl#) or by its pairs (repl pairs; a model, not "
+      "built: two shares' memory per worker)\n",
       poses.size(), a.ship_blocks, a.ship_motion_mm, a.assist_blocks);
-  std::printf("%3s %-12s %20s %20s %20s %20s %20s %20s %20s %20s %20s\n", "W", "mapping", "imbal#", "imbal", "redun#",
-              "redun", "blocks", "oracle", "shipped", "assisted", "critical");
+  std::printf("%3s %-12s %20s %20s %20s %20s %20s %20s %20s %20s %20s %20s %20s\n", "W", "mapping", "imbal#", "imbal",
+              "redun#", "redun", "blocks", "oracle", "shipped", "assisted", "critical", "repl#", "repl pairs");
   for (const Summary& u : summaries) {
     std::printf("%3u %-12s", u.workers, geom::to_string(u.mapping));
     for (const Spread* sp : {&u.imbalance_counted, &u.imbalance, &u.redundancy_counted, &u.redundancy, &u.block,
-                             &u.oracle, &u.shipped, &u.assisted, &u.critical})
+                             &u.oracle, &u.shipped, &u.assisted, &u.critical, &u.replicated, &u.replicated_pairs})
       std::printf("   %5.2f / %5.2f / %5.2f", sp->mean, sp->median, sp->max);
     std::printf("\n");
   }
