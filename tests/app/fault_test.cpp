@@ -270,6 +270,9 @@ TEST_CASE("run with 4 daemons survives kill -9, SIGSTOP, a dropped link and a re
 
   // Recovery: in the last second every round is complete again (worker 0 reloaded, worker 1
   // and worker 2 back, or their blocks reassigned), and the fleet answered throughout the end.
+  // A fleet that has not recovered (blocks nobody answers) leaves every round incomplete; under a
+  // sanitizer, where every process runs several times slower on the 2 cores, a round still misses
+  // its deadline now and then (1 of > 100 seen once), so there up to 2 % of them may.
   REQUIRE(!faulted.rounds.empty());
   const double end_ns = faulted.rounds.back()[1];
   std::size_t last_second = 0, last_incomplete = 0;
@@ -279,7 +282,7 @@ TEST_CASE("run with 4 daemons survives kill -9, SIGSTOP, a dropped link and a re
       last_incomplete += row[6] == 0;
     }
   CHECK(last_second > 100);
-  CHECK(last_incomplete == 0);
+  CHECK(last_incomplete <= (st::test::kSanitizerBuild ? last_second / 50 : 0));
   // Worker 0's second life loaded its blocks; worker 1 came back from SIGSTOP.
   CHECK(f.procs[0]->log().find("loaded block set") != std::string::npos);
 }
