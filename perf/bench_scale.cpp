@@ -358,17 +358,17 @@ struct Row {
   std::uint32_t shipped_blocks = 0, shipped_faces = 0;
   // The replicated deal (a model; not built): every block held by two workers (its owner and
   // second_holder()), and each round the client gives each block that worked the round before to
-  // the less loaded of its two holders (replicated_deal()). Judged by each block's counted work
-  // the round before (which the workers would have to report per block), and by its pairs the
-  // round before (what the client knows today). Each worker holds two shares' memory.
-  double replicated_imbalance = 0, replicated_pairs_imbalance = 0;
+  // the less loaded of its two holders (replicated_deal()), judged by the work the workers report
+  // for each block (ResultMsg::worked) at the pose of the round before. Each worker holds two
+  // shares' memory.
+  double replicated_imbalance = 0;
   // Client assist (built: ScatterConfig::assist_blocks): the client answers the blocks
-  // net::choose_assist() picks from the pairs each block gave at the pose of the round before,
-  // their owners skip them. On this pose's work of each block alone: the workers' max / mean
+  // net::choose_assist() picks from the work reported for each block at the pose of the round
+  // before, their owners skip them. On this pose's work of each block alone: the workers' max / mean
   // after it (assisted), the round's slowest part (a worker or the client) against the whole
   // work dealt evenly over the W workers (assist_critical; `block_imbalance` without assist), and
   // the client's load against the slowest worker's (assist_client: <= 1, the worker stays last).
-  const std::vector<std::uint32_t>* block_pairs_before = nullptr;
+  const std::vector<std::uint32_t>* block_reported_before = nullptr;
   double assisted_imbalance = 0, assist_critical = 0, assist_client = 0;
   std::uint32_t assisted_blocks = 0;
   double imbalance() const { return mean_us > 0 ? max_us / mean_us : 0; }
@@ -623,9 +623,10 @@ void run_scale(const ScaleArgs& a) {
   }
   using Tests = std::vector<std::array<std::uint64_t, 2>>;  // per block: sphere tests, triangle tests
   struct BlockTests {
-    std::vector<Tests> now, before;                        // per pose
-    std::vector<std::vector<std::uint32_t>> pairs_before;  // per pose, per block: pairs found at the pose before
-    std::vector<std::uint32_t> faces;                      // per block
+    std::vector<Tests> now, before;  // per pose
+    // per pose, per block: the work a worker reports for it (ResultMsg::worked) at the pose before
+    std::vector<std::vector<std::uint32_t>> reported_before;
+    std::vector<std::uint32_t> faces;               // per block
     std::deque<std::vector<std::uint32_t>> owners;  // block -> worker, one per (W, mapping) dealt (a deque: rows point in)
   };
   std::map<std::pair<std::uint32_t, std::uint32_t>, BlockTests> block_tests;
@@ -640,6 +641,8 @@ void run_scale(const ScaleArgs& a) {
       for (std::uint32_t n : part.value().block(b)) f += part_tree.cold[n].face_end - part_tree.cold[n].face_begin;
       bt.faces.push_back(f);
     }
+    geom::NodeWork node_work;
+    node_work.work.assign(part_tree.num_nodes(), 0);
     for (auto [list, out] : {std::pair{&poses, &bt.now}, std::pair{&poses_before, &bt.before}}) {
       out->resize(poses.size());
       for (std::size_t i = 0; i < poses.size(); ++i)
@@ -647,11 +650,15 @@ void run_scale(const ScaleArgs& a) {
           geom::CollideConfig c = geom::DefaultCollideConfig();
           c.restrict_object = true;
           c.object_roots = part.value().block(b);
+          if (out == &bt.before) c.node_work = &node_work;
           geom::collide(probe, pt, object, part_tree, (*list)[i], c, scratch, result);
           (*out)[i].push_back({result.stats.node_pairs, result.stats.tri_pairs});
           if (out == &bt.before) {
-            bt.pairs_before.resize(poses.size());
-            bt.pairs_before[i].push_back(std::uint32_t(result.pairs.size()));
+            std::uint64_t reported = 0;
+            for (std::uint32_t n : node_work.touched) reported += node_work.work[n];
+            node_work.clear();
+            bt.reported_before.resize(poses.size());
+            bt.reported_before[i].push_back(std::uint32_t(std::min<std::uint64_t>(reported, UINT32_MAX)));
           }
         }
     }
@@ -693,7 +700,7 @@ void run_scale(const ScaleArgs& a) {
         prow[i].single_tris = single_tris[i];
         prow[i].block_tests = &per_block_tests.now[i];
         prow[i].block_tests_before = &per_block_tests.before[i];
-        prow[i].block_pairs_before = &per_block_tests.pairs_before[i];
+        prow[i].block_reported_before = &per_block_tests.reported_before[i];
         prow[i].owners = &owners;
         prow[i].block_faces = &per_block_tests.faces;
       }
@@ -807,8 +814,9 @@ void run_scale(const ScaleArgs& a) {
       r.shipped_blocks = std::uint32_t(moved.size());
       for (std::uint32_t k : moved) r.shipped_faces += r.block_faces->at(k);
       std::vector<net::BlockWork> worked;
-      for (std::uint32_t k = 0; k < r.block_pairs_before->size(); ++k)
-        if ((*r.block_pairs_before)[k] > 0) worked.push_back({k, (*r.owners)[k], double((*r.block_pairs_before)[k])});
+      std::vector<double> reported(r.block_reported_before->begin(), r.block_reported_before->end());
+      for (std::uint32_t k = 0; k < reported.size(); ++k)
+        if (reported[k] > 0) worked.push_back({k, (*r.owners)[k], reported[k]});
       const std::vector<std::uint32_t> taken = net::choose_assist(worked, r.workers, a.assist_blocks);
       std::vector<double> load(r.workers, 0.0);
       double client = 0, total = 0;
@@ -821,9 +829,7 @@ void run_scale(const ScaleArgs& a) {
       r.assist_critical = total > 0 ? std::max(max_load, client) * r.workers / total : 1.0;
       r.assist_client = max_load > 0 ? client / max_load : 0.0;
       r.assisted_blocks = std::uint32_t(taken.size());
-      r.replicated_imbalance = deal_imbalance(work, replicated_deal(before, *r.owners, r.workers), r.workers);
-      std::vector<double> pairs_before(r.block_pairs_before->begin(), r.block_pairs_before->end());
-      r.replicated_pairs_imbalance = deal_imbalance(work, replicated_deal(pairs_before, *r.owners, r.workers), r.workers);
+      r.replicated_imbalance = deal_imbalance(work, replicated_deal(reported, *r.owners, r.workers), r.workers);
       r.oracle_imbalance = oracle_imbalance(std::move(work), r.workers);
     }
   }
@@ -903,12 +909,12 @@ void run_scale(const ScaleArgs& a) {
     geom::Mapping mapping = geom::Mapping::block_cyclic;
     std::size_t poses = 0;
     Spread imbalance_counted, imbalance, redundancy_counted, redundancy, oracle, block, shipped, assisted, critical,
-        replicated, replicated_pairs;
+        replicated;
   };
   std::vector<Summary> summaries;
   for (std::uint32_t W : ws)
     for (geom::Mapping m : mappings) {
-      std::vector<double> v[11];
+      std::vector<double> v[10];
       for (const Row& r : rows)
         if (r.workers == W && r.mapping == m) {
           v[0].push_back(r.work_imbalance());
@@ -921,7 +927,6 @@ void run_scale(const ScaleArgs& a) {
           v[7].push_back(r.assisted_imbalance);
           v[8].push_back(r.assist_critical);
           v[9].push_back(r.replicated_imbalance);
-          v[10].push_back(r.replicated_pairs_imbalance);
         }
       if (v[0].empty()) continue;
       const auto spread = [](const std::vector<double>& x) {
@@ -931,7 +936,7 @@ void run_scale(const ScaleArgs& a) {
         return sp;
       };
       summaries.push_back({W, m, v[0].size(), spread(v[0]), spread(v[1]), spread(v[2]), spread(v[3]), spread(v[4]),
-                           spread(v[5]), spread(v[6]), spread(v[7]), spread(v[8]), spread(v[9]), spread(v[10])});
+                           spread(v[5]), spread(v[6]), spread(v[7]), spread(v[8]), spread(v[9])});
     }
 
   // 4. The gather on this machine: raw inproc fan-out floor for small W, with a reply of the
@@ -1125,7 +1130,6 @@ void run_scale(const ScaleArgs& a) {
                 {"shipped_blocks", r.shipped_blocks},
                 {"shipped_faces", r.shipped_faces},
                 {"replicated_imbalance", round_to(r.replicated_imbalance, 3)},
-                {"replicated_pairs_imbalance", round_to(r.replicated_pairs_imbalance, 3)},
                 {"assisted_imbalance", round_to(r.assisted_imbalance, 3)},
                 {"assist_critical", round_to(r.assist_critical, 3)},
                 {"assist_client", round_to(r.assist_client, 3)},
@@ -1155,8 +1159,7 @@ void run_scale(const ScaleArgs& a) {
             std::pair{"redundancy_counted", &u.redundancy_counted}, std::pair{"redundancy", &u.redundancy},
             std::pair{"oracle_imbalance", &u.oracle}, std::pair{"block_imbalance", &u.block},
             std::pair{"shipped_imbalance", &u.shipped}, std::pair{"assisted_imbalance", &u.assisted},
-            std::pair{"assist_critical", &u.critical}, std::pair{"replicated_imbalance", &u.replicated},
-            std::pair{"replicated_pairs_imbalance", &u.replicated_pairs}})
+            std::pair{"assist_critical", &u.critical}, std::pair{"replicated_imbalance", &u.replicated}})
         j[name] = {{"mean", round_to(sp->mean, 3)}, {"median", round_to(sp->median, 3)}, {"max", round_to(sp->max, 3)}};
       summary.push_back(std::move(j));
     }
@@ -1232,18 +1235,18 @@ void run_scale(const ScaleArgs& a) {
       "first to the least loaded worker: what no static mapping beats), shipped = the deal after the work shipping "
       "model moved up to %u blocks judged by the round before (the probe %.3g mm away; a model, not built); "
       "assisted = the workers' max / mean when the client answers up to %u blocks itself (client assist, built: "
-      "net::choose_assist on the pairs per block of the round before), critical = the slowest of them and the "
-      "client against all the work dealt evenly over W (blocks' own denominator); replicated = every block also "
-      "held by a second worker (drawn by a hash of the block) and each round given to the less loaded holder, "
-      "judged by the counted work of each block the round before (repl#) or by its pairs (repl pairs; a model, not "
-      "built: two shares' memory per worker)\n",
+      "net::choose_assist on the work reported per block the round before), critical = the slowest of them and "
+      "the client against all the work dealt evenly over W (blocks' own denominator); replicated = every block "
+      "also held by a second worker (drawn by a hash of the block) and each round given to the less loaded "
+      "holder, judged by the work reported per block the round before (a model, not built: two shares' memory "
+      "per worker)\n",
       poses.size(), a.ship_blocks, a.ship_motion_mm, a.assist_blocks);
-  std::printf("%3s %-12s %20s %20s %20s %20s %20s %20s %20s %20s %20s %20s %20s\n", "W", "mapping", "imbal#", "imbal",
-              "redun#", "redun", "blocks", "oracle", "shipped", "assisted", "critical", "repl#", "repl pairs");
+  std::printf("%3s %-12s %20s %20s %20s %20s %20s %20s %20s %20s %20s %20s\n", "W", "mapping", "imbal#", "imbal",
+              "redun#", "redun", "blocks", "oracle", "shipped", "assisted", "critical", "replicated");
   for (const Summary& u : summaries) {
     std::printf("%3u %-12s", u.workers, geom::to_string(u.mapping));
     for (const Spread* sp : {&u.imbalance_counted, &u.imbalance, &u.redundancy_counted, &u.redundancy, &u.block,
-                             &u.oracle, &u.shipped, &u.assisted, &u.critical, &u.replicated, &u.replicated_pairs})
+                             &u.oracle, &u.shipped, &u.assisted, &u.critical, &u.replicated})
       std::printf("   %5.2f / %5.2f / %5.2f", sp->mean, sp->median, sp->max);
     std::printf("\n");
   }

@@ -58,7 +58,7 @@ void run(const Body& probe, const Body& object, const Pose& relative, const Coll
          geom::CollideScratch& scratch, geom::CollideResult& inner, CollisionResult& result,
          geom::CoherentCollider* coherent = nullptr) {
   result.clear();
-  if (!check(request).empty()) {
+  if (!check(request).empty() || (request.node_work && request.node_work->work.size() < object.tree().num_nodes())) {
     result.bad_request = true;
     return;
   }
@@ -68,6 +68,7 @@ void run(const Body& probe, const Body& object, const Pose& relative, const Coll
   options.restrict_object = request.restrict_object;
   options.tri_filter = request.tri_filter;
   options.max_work = request.max_work;
+  options.node_work = request.node_work;
   // geom::collide stops once more than options.max_pairs are found: stop at the first max_pairs.
   const bool capped = request.max_pairs != SIZE_MAX;
   options.max_pairs = capped ? request.max_pairs - 1 : SIZE_MAX;

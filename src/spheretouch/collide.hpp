@@ -111,6 +111,10 @@ struct CollisionRequest {
   /// and stats.work_limit_hit. UINT64_MAX: no budget. A service answering requests it does not
   /// trust sets one (a worker's Limits::work_base + work_per_pair × pairs).
   std::uint64_t max_work = UINT64_MAX;
+  /// Charge the query's work to the object tree's nodes (geom::NodeWork, `work` sized to the
+  /// object tree's nodes, else the result is a bad_request): which parts of the object cost it (a
+  /// worker's per-block work). Null: not counted. Must outlive the query.
+  geom::NodeWork* node_work = nullptr;
 
   static CollisionRequest all_pairs() { return {}; }                                       ///< every colliding pair
   static CollisionRequest first_pair() { return {.max_pairs = 1}; }                        ///< "do they touch?"

@@ -62,6 +62,9 @@ void wire_seeds(const fs::path& dir) {
   write_frame(dir, "query_skip", QueryMsg{3, 0xabcull, some_pose(), {0, 2, 9}});
   write_frame(dir, "result", ResultMsg{99, 3, 0xabcull, {10, 20, 30}, {{1, 2}, {3, 4}, {0xffffffffu, 0}}});
   write_frame(dir, "result_empty", ResultMsg{1, 0, 0, {}, {}});
+  ResultMsg worked{99, 3, 0xabcull, {10, 20, 30}, {{1, 2}}};
+  worked.worked = {{0, 5}, {17, 1}, {4096, 0xffffffffu}};
+  write_frame(dir, "result_worked", worked);
   write_frame(dir, "heartbeat", HeartbeatMsg{0x55aa});
   write_frame(dir, "error", ErrorMsg{ErrorCode::NotLoaded, 17, "block set 0x11 not held"});
   // A whole block set in one chunk, as a client sends a small one: a box probe against an
@@ -217,7 +220,7 @@ void shm_seeds(const fs::path& dir) {
   m.flags = geom::kInContact;
   m.force_dir = geom::to_pod(geom::Vec3(0, 0, 1));
   m.penetration_mm = 0.8;
-  seg.value()->models().write(m);
+  seg.value()->models().write(geom::ContactSet::of(m));
   // A view frame with a few faces (what a run publishes for a live view).
   auto f = std::make_unique<rt::ViewFrame>();
   f->round = 3;

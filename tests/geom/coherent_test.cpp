@@ -324,3 +324,72 @@ TEST_CASE("arbitration against collide()'s time changes the path, never the pair
   CHECK(cc.stats().rounds == 700);
   CHECK(cc.stats().plain_rounds >= 700 / 128);  // at least the timed ones
 }
+
+TEST_CASE("node work: collide() and the coherent collider charge the triangle tests they make to the object's leaves") {
+  const CoBody probe(*st::test::model_mesh("hand_L2.off"));
+  const CoBody object(*st::test::model_mesh("elephant.off"));
+  const auto normals = st::test::vertex_normals(object.mesh);
+  std::mt19937_64 rng(11);
+  CollideScratch scratch;
+  CollideResult plain;
+  Pose start;
+  do {
+    std::uniform_int_distribution<std::uint32_t> vo(0, object.mesh.num_vertices() - 1);
+    const std::uint32_t o = vo(rng);
+    start = st::test::pose_near(probe.mesh, 0, object.mesh, o, normals[o], 3.0, st::test::random_rotation(rng));
+    collide(probe.mesh, probe.tree, object.mesh, object.tree, start, {}, scratch, plain);
+  } while (plain.pairs.size() < 50);
+  // The object leaf of each face (the leaf whose face range holds it).
+  std::vector<std::uint32_t> leaf_of(object.mesh.faces.size(), ~0u);
+  for (std::uint32_t i = 0; i < object.tree.num_nodes(); ++i)
+    if (object.tree.nodes[i].leaf)
+      for (std::uint32_t k = 0; k < object.tree.nodes[i].count; ++k)
+        leaf_of[object.tree.face_order[object.tree.nodes[i].first + k]] = i;
+  NodeWork work;
+  work.work.assign(object.tree.num_nodes(), 0);
+  // What a query charged: only leaves, each listed once, in all its triangle tests plus at most
+  // one per leaf pair that had any (so between tri_pairs and 2 x tri_pairs).
+  const auto charged = [&](const CollideResult& r) {
+    std::vector<std::uint32_t> t = work.touched;
+    std::sort(t.begin(), t.end());
+    CHECK(std::adjacent_find(t.begin(), t.end()) == t.end());
+    std::uint64_t sum = 0;
+    for (std::uint32_t n = 0; n < work.work.size(); ++n) {
+      CHECK((work.work[n] > 0) == std::binary_search(t.begin(), t.end(), n));
+      if (work.work[n] > 0) CHECK(object.tree.nodes[n].leaf);
+      sum += work.work[n];
+    }
+    CHECK(sum >= r.stats.tri_pairs);
+    CHECK(sum <= 2 * r.stats.tri_pairs);
+    return sum;
+  };
+  CollideConfig counted;
+  counted.node_work = &work;
+  CollideResult r;
+  for (bool filter : {true, false}) {
+    counted.tri_filter = filter;
+    collide(probe.mesh, probe.tree, object.mesh, object.tree, start, counted, scratch, r);
+    CHECK(r.pairs.size() == plain.pairs.size());
+    CHECK(charged(r) > 0);
+    for (const FacePair& fp : r.pairs) CHECK(work.work[leaf_of[fp.object]] > 0);  // every hit was tested
+    work.clear();
+    CHECK(std::all_of(work.work.begin(), work.work.end(), [](std::uint32_t w) { return w == 0; }));
+  }
+  // The coherent collider along a slide: the same pairs, and once its certificates hold, fewer
+  // tests charged than collide() makes at the same pose.
+  CoherentCollider cc(fixed());
+  counted.tri_filter = true;
+  std::uint64_t last_coherent = 0;
+  for (int k = 0; k < 40; ++k) {
+    const Pose pose = moved(start, Vec3::Zero(), Vec3::UnitX(), 0.01 * k, Vec3::UnitZ(), 0.01 * k);
+    cc.collide(probe.mesh, probe.tree, object.mesh, object.tree, pose, counted, r);
+    collide(probe.mesh, probe.tree, object.mesh, object.tree, pose, {}, scratch, plain);
+    std::sort(r.pairs.begin(), r.pairs.end());
+    std::sort(plain.pairs.begin(), plain.pairs.end());
+    REQUIRE(r.pairs == plain.pairs);
+    last_coherent = charged(r);
+    work.clear();
+  }
+  CHECK(cc.stats().reused > 0);
+  CHECK(last_coherent < plain.stats.tri_pairs);
+}

@@ -30,6 +30,8 @@ std::vector<Message> samples() {
   v.push_back(QueryMsg{100, 0xabcull, some_pose(), {0, 7, 0xfffffu}});
   ResultMsg r{99, 3, 0xabcull, {10, 20, 30}, {{1, 2}, {3, 4}, {0xffffffffu, 0}}};
   v.push_back(r);
+  r.worked = {{0, 1}, {7, 0xffffffffu}, {0xfffffu, 12}};
+  v.push_back(r);
   v.push_back(ResultMsg{1, 0, 0, {}, {}});
   v.push_back(HeartbeatMsg{0x55aa});
   v.push_back(ErrorMsg{ErrorCode::NotLoaded, 17, "block set 0x11 not held"});
@@ -59,7 +61,7 @@ TEST_CASE("every message survives encode/decode unchanged") {
 TEST_CASE("header layout is pinned: magic, version, type, flags, body length, little-endian") {
   const auto b = encode(HeartbeatMsg{0x0102030405060708ull});
   REQUIRE(b.size() == kHeaderBytes + 8);
-  const std::vector<std::uint8_t> want{'S', 'T', 'N', 'P', 3, 0, 5, 0, 8, 0, 0, 0, 8, 7, 6, 5, 4, 3, 2, 1};
+  const std::vector<std::uint8_t> want{'S', 'T', 'N', 'P', 4, 0, 5, 0, 8, 0, 0, 0, 8, 7, 6, 5, 4, 3, 2, 1};
   CHECK(b == want);
 }
 
@@ -78,7 +80,7 @@ TEST_CASE("a message truncated at every byte offset is rejected with a message")
 
 TEST_CASE("truncating the body but fixing the length field still fails inside the body, naming the field") {
   auto b = encode(ResultMsg{5, 1, 2, {}, {{1, 2}, {3, 4}}});
-  b.resize(b.size() - 3);
+  b.resize(b.size() - 4 - 3);  // the worked count and 3 bytes of the last pair
   const std::uint32_t body = static_cast<std::uint32_t>(b.size() - kHeaderBytes);
   std::memcpy(b.data() + 8, &body, 4);
   auto d = decode(b, DefaultLimits());
@@ -103,7 +105,7 @@ TEST_CASE("wrong magic, version, type and flags are rejected, naming the field")
     std::uint8_t v;
     const char* word;
   };
-  for (Case c : {Case{0, 'X', "magic"}, Case{4, 2, "version"}, Case{4, 4, "version"}, Case{5, 1, "version"},
+  for (Case c : {Case{0, 'X', "magic"}, Case{4, 3, "version"}, Case{4, 5, "version"}, Case{5, 1, "version"},
                  Case{6, 0, "type"}, Case{6, 7, "type"}, Case{7, 1, "flags"}}) {
     auto b = good;
     b[c.at] = c.v;
@@ -118,7 +120,7 @@ TEST_CASE("oversized counts are refused before allocating") {
   SUBCASE("pair count over the limit") {
     auto b = encode(ResultMsg{1, 1, 1, {}, {}});
     const std::uint32_t huge = 0xffffffffu;
-    std::memcpy(b.data() + b.size() - 4, &huge, 4);
+    std::memcpy(b.data() + b.size() - 8, &huge, 4);  // pair count, then the worked count
     auto d = decode(b, L);
     REQUIRE_FALSE(d.ok());
     CHECK(d.error().find("exceeds the limit") != std::string::npos);
@@ -126,7 +128,7 @@ TEST_CASE("oversized counts are refused before allocating") {
   SUBCASE("pair count under the limit but more than the bytes present") {
     auto b = encode(ResultMsg{1, 1, 1, {}, {}});
     const std::uint32_t n = L.max_pairs;
-    std::memcpy(b.data() + b.size() - 4, &n, 4);
+    std::memcpy(b.data() + b.size() - 8, &n, 4);
     auto d = decode(b, L);
     REQUIRE_FALSE(d.ok());
     CHECK(d.error().find("does not fit") != std::string::npos);
@@ -186,6 +188,35 @@ TEST_CASE("Query and Result name the scene object (protocol 3); one at or above 
   const auto br = decode(encode(r), small);
   REQUIRE_FALSE(br.ok());
   CHECK(br.error().find("byte 32") != std::string::npos);  // header 12, seq 8, worker_id 4, hash 8
+}
+
+TEST_CASE("a Result's worked blocks (protocol 4): ascending, below max_blocks, non-zero, at most max_worked") {
+  ResultMsg r{7, 2, 0xabcull, {}, {{1, 2}}};
+  r.worked = {{3, 10}, {9, 1}};
+  auto d = decode(encode(r), DefaultLimits());
+  REQUIRE(d.ok());
+  CHECK(std::get<ResultMsg>(d.value()).worked == r.worked);
+  // header 12, seq 8, worker_id 4, hash 8, object 4, stats 24, pair count 4, one pair 8,
+  // worked count 4: the first worked block at byte 76, its work at 80, the second block at 84.
+  const auto refused = [](const ResultMsg& m, const Limits& L, const std::string& at, const std::string& what) {
+    const auto e = decode(encode(m), L);
+    REQUIRE_FALSE(e.ok());
+    CHECK_MESSAGE(e.error().find(at) != std::string::npos, e.error());
+    CHECK_MESSAGE(e.error().find(what) != std::string::npos, e.error());
+  };
+  ResultMsg bad = r;
+  bad.worked = {{9, 1}, {3, 10}};
+  refused(bad, DefaultLimits(), "byte 84", "worked block: block 3 after 9 (must be strictly ascending)");
+  bad.worked = {{3, 10}, {3, 1}};
+  refused(bad, DefaultLimits(), "byte 84", "must be strictly ascending");
+  bad.worked = {{3, 0}};
+  refused(bad, DefaultLimits(), "byte 80", "worked work: 0");
+  Limits small = DefaultLimits();
+  small.max_blocks = 9;
+  refused(r, small, "byte 84", "worked block: block 9 is not below max_blocks = 9");
+  small = DefaultLimits();
+  small.max_worked = 1;
+  refused(r, small, "worked count", "exceeds the limit");
 }
 
 TEST_CASE("non-finite and non-rigid poses are refused") {

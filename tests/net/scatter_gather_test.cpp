@@ -659,6 +659,20 @@ TEST_CASE("a backend leaves out the blocks a Query skips, and only those (tree a
       be->query(pose, {}, full, {});
       std::sort(full.begin(), full.end());
       REQUIRE(full == reference_collide(s.probe, s.object, pose));
+      // The tree backend reports the work of each block it worked in (ascending ids, each > 0,
+      // every block that gave a pair among them); the reference backend does not count.
+      const std::vector<WorkedBlock> worked = be->worked();
+      const auto worked_in = [&worked](std::uint32_t b) {
+        return std::any_of(worked.begin(), worked.end(), [b](const WorkedBlock& w) { return w.block == b; });
+      };
+      if (use_tree) {
+        if (!full.empty()) CHECK_FALSE(worked.empty());
+        for (std::size_t i = 1; i < worked.size(); ++i) CHECK(worked[i - 1].block < worked[i].block);
+        for (const WorkedBlock& w : worked) CHECK(w.work > 0);
+        for (const FacePair& p : full) CHECK(worked_in(block_of[p.object]));
+      } else {
+        CHECK(worked.empty());
+      }
       // Skip every block that has pairs but one, plus a block id no set holds.
       std::vector<std::uint32_t> skip;
       for (const FacePair& p : full) skip.push_back(block_of[p.object]);
@@ -676,6 +690,13 @@ TEST_CASE("a backend leaves out the blocks a Query skips, and only those (tree a
       CHECK(part == expect);
       CHECK_FALSE(expect.empty());
       CHECK(st.tri_tests > 0);
+      const std::vector<WorkedBlock> part_worked = be->worked();
+      for (const WorkedBlock& w : part_worked)  // a skipped block costs nothing
+        CHECK_FALSE(std::binary_search(skip.begin(), skip.end(), w.block));
+      if (use_tree)
+        for (const FacePair& p : part)
+          CHECK(std::any_of(part_worked.begin(), part_worked.end(),
+                            [&](const WorkedBlock& w) { return w.block == block_of[p.object]; }));
       ++checked;
     }
     CHECK(checked >= 2);  // the poses touch several blocks
@@ -739,6 +760,27 @@ TEST_CASE("client assist: the client answers some blocks itself, every round sta
     }
   }
   CHECK(assisted_rounds > 0);
+  // Workers whose backend reports no work per block (the reference backend): the assist weighs
+  // the pairs each block gave instead, and still takes blocks.
+  {
+    const std::string t2 = tag();
+    auto wr = LocalWorkers::start(ctx, 4, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t2); });
+    REQUIRE_MESSAGE(wr.ok(), wr.error());
+    ScatterConfig rcfg = cfg;
+    rcfg.endpoints = wr.value()->endpoints();
+    auto rc = ScatterGather::create(ctx, rcfg, s.probe, s.object, blocks.value());
+    REQUIRE_MESSAGE(rc.ok(), rc.error());
+    REQUIRE(rc.value()->wait_ready(Clock::now() + 10s));
+    std::uint32_t by_pairs = 0;
+    for (const geom::Pose& pose : test::contact_poses(s, 4))
+      for (int k = 0; k < 2; ++k) {
+        RoundResult r = rc.value()->round(++seq, pose, Clock::now() + 5s);
+        CHECK(r.complete);
+        CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+        by_pairs += r.blocks_assisted > 0;
+      }
+    CHECK(by_pairs > 0);
+  }
   // More than the skip list may carry is refused up front.
   cfg.assist_blocks = cfg.limits.max_skip + 1;
   CHECK_FALSE(ScatterGather::create(ctx, cfg, s.probe, s.object, blocks.value()).ok());

@@ -465,13 +465,13 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       if (tp && to) {
         const detail::FrontEntry* known = rerooting ? known_leaf(p, o) : nullptr;
         if (!known)
-          leaf(p, o, nullptr);
+          counted(o, [&] { leaf(p, o, nullptr); });
         else if (known->kind == detail::kLeafPair || known->kind == detail::kLeafPending)
-          visit_leaf(*known);
+          counted(o, [&] { visit_leaf(*known); });
         else if (still(*known, known->margin))  // a leaf pair its boxes proved apart
           cc.groups_.push_back(*known);
         else
-          leaf(p, o, nullptr);
+          counted(o, [&] { leaf(p, o, nullptr); });
         continue;
       }
       if (n + kMaxChildren > sc.stack_cap_) [[unlikely]] {
@@ -504,6 +504,17 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     walk_front(stack, n);
   }
 
+  // A leaf pair's handling `f`, its work charged to the object leaf o as collide() charges it
+  // (CollideConfig::node_work; a reused answer costs nothing).
+  template <class F>
+  void counted(std::uint32_t o, F&& f) {
+    if (!opt.node_work) [[likely]]
+      return f();
+    const std::uint64_t tris = res.stats.tri_pairs;
+    f();
+    if (res.stats.tri_pairs != tris)
+      opt.node_work->charge(o, 1 + std::uint32_t(std::min<std::uint64_t>(res.stats.tri_pairs - tris, UINT32_MAX - 1)));
+  }
   // A leaf-pair entry of the front: built when pending, refreshed when due, else reused.
   void visit_leaf(const detail::FrontEntry& e) {
     if (e.kind == detail::kLeafPending) {
@@ -582,7 +593,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       };
       for (const detail::FrontEntry& e : cc.front_) {  // the leaf pairs
         if (cut(1 + e.count)) break;
-        visit_leaf(e);
+        counted(e.o, [&] { visit_leaf(e); });
       }
       // The groups, in place: the groups the expansions append are at this pose (not looked at).
       // Without a work budget a group still valid needs no check of the limits (nothing grew).

@@ -42,6 +42,13 @@ class CollisionBackend {
   /// ids not held are ignored): the client assist answers a few blocks from a set of them all.
   virtual QueryStats query_only(const geom::Pose& pose, std::span<const std::uint32_t> only, std::vector<FacePair>& out,
                                 const QueryBudget& budget) = 0;
+  /// The held blocks the last query() or query_only() did any work in, by ascending global id,
+  /// with that work (geom::NodeWork's units): what the client weighs to deal the next round. A
+  /// backend that does not count returns none (this default).
+  virtual const std::vector<WorkedBlock>& worked() const {
+    static const std::vector<WorkedBlock> none;
+    return none;
+  }
 };
 
 /// Makes an empty backend; a worker calls it once per block set it loads.

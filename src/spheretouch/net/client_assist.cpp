@@ -57,6 +57,7 @@ void ClientAssist::answer(const geom::Pose& pose, RoundResult& out, std::vector<
     const QueryStats st = backend_->query_only(pose, std::span(&b, 1), pairs_, {max_pairs_, UINT64_MAX});
     if (pairs_.size() > max_pairs_) continue;  // left to the worker's refusal: the round is incomplete
     out.pairs.insert(out.pairs.end(), pairs_.begin(), pairs_.end());
+    note_worked(backend_->worked());
     out.assist.sphere_tests += st.sphere_tests;
     out.assist.tri_tests += st.tri_tests;
     ++out.blocks_assisted;
@@ -68,14 +69,26 @@ void ClientAssist::answer(const geom::Pose& pose, RoundResult& out, std::vector<
       std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count());
 }
 
-void ClientAssist::note_work(const std::vector<FacePair>& pairs) {
+void ClientAssist::note_worked(std::span<const WorkedBlock> worked) {
+  for (const WorkedBlock& w : worked)
+    if (w.block < block_work_.size() && w.work > 0) reported_.push_back(w);
+}
+
+void ClientAssist::end_round(const std::vector<FacePair>& pairs) {
   for (std::uint32_t b : worked_) block_work_[b] = 0;
   worked_.clear();
+  const auto add = [this](std::uint32_t b, double w) {
+    if (block_work_[b] == 0) worked_.push_back(b);
+    block_work_[b] += w;
+  };
+  if (!reported_.empty()) {
+    for (const WorkedBlock& w : reported_) add(w.block, double(w.work));
+    reported_.clear();
+    return;
+  }
   for (const FacePair& fp : pairs) {
     const std::uint32_t b = fp.object < face_block_.size() ? face_block_[fp.object] : UINT32_MAX;
-    if (b == UINT32_MAX) continue;
-    if (block_work_[b] == 0) worked_.push_back(b);
-    block_work_[b] += 1;
+    if (b != UINT32_MAX) add(b, 1.0);
   }
 }
 

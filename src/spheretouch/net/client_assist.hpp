@@ -8,6 +8,7 @@
 #include <spheretouch/abi.hpp>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include <spheretouch/net/backend.hpp>
@@ -22,22 +23,27 @@ class ClientAssist {
   /// worker's refusal). Builds the backend (cold: a tree over the whole object).
   static Result<std::unique_ptr<ClientAssist>> create(const SceneData& scene, std::uint32_t max_blocks,
                                                       std::uint32_t max_pairs);
-  /// This round's blocks (choose_assist() over the pairs each block gave last round, among the
+  /// This round's blocks (choose_assist() over the work each block cost last round, among the
   /// blocks some asked worker holds) and each asked worker's share of them (its skip list).
   void choose(std::vector<Peer>& peers);
   /// Answers the chosen blocks at `pose`: their pairs appended to out.pairs, covered[b] set for
   /// each one answered, out.assist and out.stats counted.
   void answer(const geom::Pose& pose, RoundResult& out, std::vector<std::uint8_t>& covered);
-  /// Each block's pairs in the round's merged result: what choose() weighs next round.
-  void note_work(const std::vector<FacePair>& pairs);
+  /// The work of the blocks a worker's Result reports (ResultMsg::worked), this round.
+  void note_worked(std::span<const WorkedBlock> worked);
+  /// The round is over: what the workers and the assist reported is what choose() weighs next
+  /// round. Without any report (backends that do not count), each block's pairs in the round's
+  /// merged result stand in for its work.
+  void end_round(const std::vector<FacePair>& pairs);
 
  private:
   ClientAssist() = default;
   std::uint32_t max_blocks_ = 0, max_pairs_ = 0;
   std::unique_ptr<CollisionBackend> backend_;  // a worker's backend over every block
   std::vector<std::uint32_t> face_block_;      // object face -> its block
-  std::vector<double> block_work_;             // per block: pairs it gave last round (0 where none)
+  std::vector<double> block_work_;             // per block: its work last round (0 where none)
   std::vector<std::uint32_t> worked_;          // blocks with block_work_ > 0
+  std::vector<WorkedBlock> reported_;          // this round's reports (workers' and the assist's own)
   std::vector<std::uint32_t> taken_;           // blocks answered this round, ascending
   std::vector<BlockWork> candidates_;          // scratch for choose_assist
   std::vector<FacePair> pairs_;                // scratch: one block's pairs

@@ -78,6 +78,11 @@ struct BodyEncoder {
     w.u64(m.stats.compute_ns);
     w.u32(static_cast<std::uint32_t>(m.pairs.size()));
     w.raw(m.pairs.data(), m.pairs.size() * sizeof(FacePair));  // {u32 probe, u32 object} LE, no padding
+    w.u32(static_cast<std::uint32_t>(m.worked.size()));
+    for (const WorkedBlock& b : m.worked) {
+      w.u32(b.block);
+      w.u32(b.work);
+    }
   }
   void operator()(const HeartbeatMsg& m) { w.u64(m.nonce); }
   void operator()(const ErrorMsg& m) {
@@ -176,6 +181,21 @@ Result<Message> decode_body(MsgType type, Reader& r, const Limits& L) {
         m.pairs.resize(n);
         auto b = r.bytes(std::size_t{n} * sizeof(FacePair), "pairs");
         if (r.ok() && n > 0) std::memcpy(m.pairs.data(), b.data(), b.size());
+      }
+      const std::uint32_t nw = r.u32("worked count");
+      if (r.count_ok(nw, L.max_worked, 8, "worked count")) {
+        m.worked.resize(nw);
+        for (std::uint32_t i = 0; i < nw && r.ok(); ++i) {
+          const std::size_t at = r.offset();
+          m.worked[i].block = r.u32("worked block");
+          m.worked[i].work = r.u32("worked work");
+          if (r.ok() && m.worked[i].block >= L.max_blocks)
+            r.fail_at(at, "worked block", ": block ", m.worked[i].block, " is not below max_blocks = ", L.max_blocks);
+          if (r.ok() && i > 0 && m.worked[i].block <= m.worked[i - 1].block)
+            r.fail_at(at, "worked block", ": block ", m.worked[i].block, " after ", m.worked[i - 1].block,
+                      " (must be strictly ascending)");
+          if (r.ok() && m.worked[i].work == 0) r.fail_at(at + 4, "worked work", ": 0 (a listed block did work)");
+        }
       }
       out = std::move(m);
       break;

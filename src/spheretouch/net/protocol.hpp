@@ -23,8 +23,8 @@ namespace st::inline SPHERETOUCH_ABI::net {
 
 inline constexpr std::uint32_t kMagic = 0x504E5453;  ///< "STNP" read as a little-endian u32
 /// Bumped on any incompatible change (2: Query skip list; 3: Query and Result name the scene
-/// object, block sets carry it).
-inline constexpr std::uint16_t kVersion = 3;
+/// object, block sets carry it; 4: Result reports the work of its blocks).
+inline constexpr std::uint16_t kVersion = 4;
 inline constexpr std::size_t kHeaderBytes = 12;  ///< magic, version, type, flags, body length
 
 /// Upper bounds applied while decoding; a message over any of them is rejected, not truncated.
@@ -44,6 +44,7 @@ struct Limits {
   std::uint32_t max_skip = 256;             ///< blocks a Query may ask the worker to leave out
   std::uint32_t max_leaf_faces = 1u << 16;  ///< sphere-tree leaf size parameter
   std::uint32_t max_objects = 1024;         ///< scene objects a block set, Query or Result may name
+  std::uint32_t max_worked = 4096;          ///< blocks whose work one Result reports (WorkedBlock)
 };
 
 /// Default limits (sized for multi-million-face meshes; workers may lower max_blockset_bytes).
@@ -116,6 +117,17 @@ struct QueryMsg {
   }
 };
 
+/// The work one block of a worker's set cost it in a query (geom::NodeWork summed over the
+/// block's leaves: its candidate triangle pairs and the leaf pairs that tested any): what the
+/// client weighs to deal the next round's blocks (the client assist). On the wire as
+/// {u32 block, u32 work}.
+struct WorkedBlock {
+  std::uint32_t block = 0;  ///< global block id
+  std::uint32_t work = 0;   ///< > 0
+  /// Field by field.
+  friend bool operator==(const WorkedBlock&, const WorkedBlock&) = default;
+};
+
 /// Worker → client: the colliding pairs of one Query.
 struct ResultMsg {
   std::uint64_t seq = 0;        ///< the Query's sequence number
@@ -124,11 +136,14 @@ struct ResultMsg {
   QueryStats stats;             ///< work counters
   std::vector<FacePair> pairs;  ///< colliding (probe, global object) face pairs
   std::uint32_t object = 0;     ///< the scene object whose faces `pairs` name (on the wire after `hash`)
+  /// The blocks that cost the query any work, by ascending id, at most Limits::max_worked (the
+  /// heaviest when more did); on the wire after `pairs`.
+  std::vector<WorkedBlock> worked{};
   /// Field by field; of the stats, the sphere and triangle tests and compute_ns.
   friend bool operator==(const ResultMsg& a, const ResultMsg& b) {
     return a.seq == b.seq && a.worker_id == b.worker_id && a.hash == b.hash && a.object == b.object &&
            a.pairs == b.pairs && a.stats.sphere_tests == b.stats.sphere_tests &&
-           a.stats.tri_tests == b.stats.tri_tests && a.stats.compute_ns == b.stats.compute_ns;
+           a.stats.tri_tests == b.stats.tri_tests && a.stats.compute_ns == b.stats.compute_ns && a.worked == b.worked;
   }
 };
 

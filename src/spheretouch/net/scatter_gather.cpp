@@ -102,6 +102,7 @@ struct ScatterGather::Impl {
     for (std::uint32_t b : p.asked->blocks)
       if (!std::binary_search(p.skip.begin(), p.skip.end(), b)) covered[b] = 1;
     out->worker_stats[std::size_t(&p - peers.data())] = r.stats;
+    if (assist) assist->note_worked(r.worked);
     out->stats.sphere_tests += r.stats.sphere_tests;
     out->stats.tri_tests += r.stats.tri_tests;
     out->stats.compute_ns = std::max(out->stats.compute_ns, r.stats.compute_ns);
@@ -411,7 +412,7 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   out.object_faces.erase(std::unique(out.object_faces.begin(), out.object_faces.end()), out.object_faces.end());
   out.blocks_covered = static_cast<std::uint32_t>(std::count(m.covered.begin(), m.covered.end(), 1));
   out.complete = out.blocks_covered == out.blocks_total;
-  if (m.assist) m.assist->note_work(out.pairs);
+  if (m.assist) m.assist->end_round(out.pairs);
 }
 
 RoundResult ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time_point deadline) {

@@ -13,8 +13,9 @@
 //
 // Client assist (ScatterConfig::assist_blocks, off by default): a static deal leaves one worker
 // with more of a contact's work than the others, a different one at each pose. Each round the
-// client takes a few of the busiest workers' heaviest blocks (judged by the pairs each block gave
-// the round before: the probe moves little between rounds), those workers skip them (the Query's
+// client takes a few of the busiest workers' heaviest blocks (judged by the work each block cost
+// the round before, which each Result reports: the probe moves little between rounds; the pairs
+// a block gave say little, most of its work being tests that found none), those workers skip them (the Query's
 // skip list), and the collision thread answers them itself while the Queries are out, from its
 // own copy of the object (it holds it to encode the block sets). A block counts as covered when
 // its answer is merged, whoever gave it.
@@ -113,7 +114,7 @@ struct ScatterConfig {
   std::string routing_id;
   /// Client assist: each round the collision thread answers up to this many blocks itself while
   /// the Queries are out (their workers skip them, QueryMsg::skip): the heaviest blocks of the
-  /// busiest workers by the pairs each block gave the round before (choose_assist()). The
+  /// busiest workers by the work each block cost the round before (choose_assist()). The
   /// collision thread waits for the gather anyway; this is work it takes off the slowest worker.
   /// It answers them with a worker's own backend (tree_backend.hpp) holding a block set of every
   /// block: costs that set's trees (the probe's and the object's, one subtree per block, as a
@@ -198,7 +199,7 @@ class ScatterGather {
 struct BlockWork {
   std::uint32_t block = 0;  ///< global block id
   std::uint32_t owner = 0;  ///< the worker asked for it this round (< workers)
-  double work = 0;          ///< its work the round before (the client counts the pairs it gave), > 0
+  double work = 0;          ///< its work the round before (ResultMsg::worked; its pairs where none was reported), > 0
 };
 /// The blocks the client answers itself this round (ScatterConfig::assist_blocks), ascending: up
 /// to `max_blocks` times, the busiest worker's heaviest block lighter than that worker's load

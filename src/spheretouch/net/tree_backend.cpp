@@ -35,6 +35,7 @@ class TreeBackend final : public CollisionBackend {
     params.leaf_faces = std::clamp<std::uint32_t>(set.leaf_faces, 1, geom::kMaxLeafFaces);
     set_ = set;
     collider_.reset();
+    worked_.clear();
     // The meshes move into the bodies the collider shares; set_ keeps the ids and blocks.
     auto probe = std::make_shared<const geom::Mesh>(std::exchange(set_.probe, {}));
     auto object = std::make_shared<const geom::Mesh>(std::exchange(set_.object, {}));
@@ -59,6 +60,24 @@ class TreeBackend final : public CollisionBackend {
     is_root_.assign(tree.num_nodes(), 0);
     for (const auto& roots : block_roots_)
       for (std::uint32_t r : roots) is_root_[r] = 1;
+    // Each node's held block (the subtrees under its roots), for the work of each block.
+    node_block_.assign(tree.num_nodes(), kNoBlock);
+    for (std::uint32_t b = 0; b < block_roots_.size(); ++b)
+      for (std::uint32_t r : block_roots_[b]) {
+        stack_.assign(1, r);
+        while (!stack_.empty()) {
+          const std::uint32_t i = stack_.back();
+          stack_.pop_back();
+          node_block_[i] = b;
+          if (!tree.nodes[i].leaf)
+            for (std::uint32_t c = tree.nodes[i].first; c < tree.nodes[i].first + tree.nodes[i].count; ++c)
+              stack_.push_back(c);
+        }
+      }
+    node_work_.work.assign(per_block_ ? tree.num_nodes() : 0, 0);
+    node_work_.touched.clear();
+    block_work_.assign(set_.blocks.size(), 0);
+    worked_.clear();
     cut_.assign(tree.num_nodes(), 0);
     stamp_ = 0;
     Result<Body> pb = Body::make(std::move(probe), std::make_shared<const geom::SphereTree>(std::move(pt).value()));
@@ -144,7 +163,9 @@ class TreeBackend final : public CollisionBackend {
       request.restrict_object = true;
       request.object_roots = roots_;
     }
+    if (!node_work_.work.empty()) request.node_work = &node_work_;
     collider_->at_relative(pose, request, result_);
+    note_worked();
     out.reserve(out.size() + result_.pairs.size());
     for (const geom::FacePair& p : result_.pairs) out.push_back({p.probe, set_.object_face_ids[p.object]});
     st.sphere_tests = result_.stats.node_pairs;
@@ -155,7 +176,37 @@ class TreeBackend final : public CollisionBackend {
     return st;
   }
 
-  BlockSet set_;  // the ids and blocks (its meshes are moved into the collider's bodies)
+  // worked_ from what the query charged to the share tree's nodes, summed per held block.
+  void note_worked() {
+    worked_.clear();
+    if (node_work_.touched.empty()) return;
+    for (std::uint32_t n : node_work_.touched) {
+      const std::uint32_t b = node_block_[n];
+      if (b == kNoBlock) continue;  // above the blocks' roots: the share tree's own top
+      std::uint32_t& w = block_work_[b];
+      if (w == 0) worked_.push_back({b, 0});
+      const std::uint32_t add = node_work_.work[n];
+      w = w > UINT32_MAX - add ? UINT32_MAX : w + add;
+    }
+    node_work_.clear();
+    for (WorkedBlock& x : worked_) {
+      x.work = std::exchange(block_work_[x.block], 0);
+      x.block = set_.blocks[x.block];  // held index -> global id (ascending like set_.blocks)
+    }
+    std::sort(worked_.begin(), worked_.end(),
+              [](const WorkedBlock& a, const WorkedBlock& b) { return a.block < b.block; });
+  }
+
+ public:
+  const std::vector<WorkedBlock>& worked() const override { return worked_; }
+
+ private:
+  static constexpr std::uint32_t kNoBlock = UINT32_MAX;
+  std::vector<std::uint32_t> node_block_;  // per share-tree node: its held block's index, or kNoBlock
+  geom::NodeWork node_work_;               // what a query charged to the share tree's nodes
+  std::vector<std::uint32_t> block_work_;  // scratch: per held block, work summed (0 between queries)
+  std::vector<WorkedBlock> worked_;        // the last query's blocks with work, by global id
+  BlockSet set_;                           // the ids and blocks (its meshes are moved into the collider's bodies)
   std::shared_ptr<const geom::SphereTree> object_tree_;  // the share's tree (shared with the collider)
   std::optional<ComputeCollision> collider_;             // empty for an empty share
   CollisionResult result_;

@@ -638,10 +638,20 @@ void WorkerService::answer(const Pending& p) {
   std::sort(pairs_.begin(), pairs_.end());
   pairs_.erase(std::unique(pairs_.begin(), pairs_.end()), pairs_.end());
   ++counters_.queries;
-  ResultMsg r{q.seq, cfg_.worker_id, q.hash, st, {}, q.object};
+  ResultMsg r{q.seq, cfg_.worker_id, q.hash, st, {}, q.object, {}};
+  r.worked.swap(worked_);
+  r.worked.assign(it->backend->worked().begin(), it->backend->worked().end());
+  if (r.worked.size() > cfg_.limits.max_worked) {  // the heaviest, by ascending id again
+    std::nth_element(r.worked.begin(), r.worked.begin() + cfg_.limits.max_worked, r.worked.end(),
+                     [](const WorkedBlock& a, const WorkedBlock& b) { return a.work > b.work; });
+    r.worked.resize(cfg_.limits.max_worked);
+    std::sort(r.worked.begin(), r.worked.end(),
+              [](const WorkedBlock& a, const WorkedBlock& b) { return a.block < b.block; });
+  }
   r.pairs.swap(pairs_);
   send(peer, r);
   pairs_.swap(r.pairs);  // keep the capacity for the next query
+  worked_.swap(r.worked);
 }
 
 void WorkerService::on_load(const zmq::message_t& peer, const std::string& owner, const LoadBlocksMsg& m) {

@@ -298,6 +298,7 @@ class WorkerService {
   std::unordered_map<std::string, Client> clients_;  // by owner; bounded (kMaxClients)
   std::vector<Pending> pending_;                     // this batch's Queries, one per client
   std::vector<FacePair> pairs_;                      // reused per query
+  std::vector<WorkedBlock> worked_;                  // reused per query: the Result's worked blocks
   std::vector<std::uint8_t> out_;                    // reused encode buffer
   std::chrono::steady_clock::time_point bad_logged_{};
   std::chrono::steady_clock::time_point next_idle_check_{};
