@@ -38,6 +38,22 @@ CoherentConfig fixed() {
   return c;
 }
 
+// A pose of the probe pressed 3 mm into the object at a random vertex (random turn, seeded) with
+// at least 50 pairs; `plain` holds collide()'s answer there.
+Pose pressed_start(const CoBody& probe, const CoBody& object, std::uint64_t seed, CollideScratch& scratch,
+                   CollideResult& plain) {
+  const auto normals = st::test::vertex_normals(object.mesh);
+  std::mt19937_64 rng(seed);
+  Pose start;
+  do {
+    std::uniform_int_distribution<std::uint32_t> vo(0, object.mesh.num_vertices() - 1);
+    const std::uint32_t o = vo(rng);
+    start = st::test::pose_near(probe.mesh, 0, object.mesh, o, normals[o], 3.0, st::test::random_rotation(rng));
+    collide(probe.mesh, probe.tree, object.mesh, object.tree, start, {}, scratch, plain);
+  } while (plain.pairs.size() < 50);
+  return start;
+}
+
 // A pose moved from `start` by `along` (object frame) and turned by `deg` about `axis` through `pivot`.
 Pose moved(const Pose& start, const Vec3& pivot, const Vec3& dir, double along, const Vec3& axis, double deg) {
   Pose p = Pose::Identity();
@@ -208,16 +224,8 @@ TEST_CASE("the coherent collider is exact on coplanar, touching and degenerate f
 TEST_CASE("the coherent collider keeps collide()'s limits and falls back on jumps, a full pool and non-finite poses") {
   const CoBody probe(*st::test::model_mesh("hand_L2.off"));
   const CoBody object(*st::test::model_mesh("elephant.off"));
-  const auto normals = st::test::vertex_normals(object.mesh);
-  std::mt19937_64 rng(3);
-  Pose start;
   CoherentCompare cmp;
-  do {
-    std::uniform_int_distribution<std::uint32_t> vo(0, object.mesh.num_vertices() - 1);
-    const std::uint32_t o = vo(rng);
-    start = st::test::pose_near(probe.mesh, 0, object.mesh, o, normals[o], 3.0, st::test::random_rotation(rng));
-    collide(probe.mesh, probe.tree, object.mesh, object.tree, start, {}, cmp.scratch, cmp.plain);
-  } while (cmp.plain.pairs.size() < 50);
+  const Pose start = pressed_start(probe, object, 3, cmp.scratch, cmp.plain);
   const Vec3 x = Vec3::UnitX();
 
   SUBCASE("max_pairs stops it as it stops collide(); max_work bounds its own work; both drop the cache") {
@@ -328,17 +336,9 @@ TEST_CASE("arbitration against collide()'s time changes the path, never the pair
 TEST_CASE("node work: collide() and the coherent collider charge the triangle tests they make to the object's leaves") {
   const CoBody probe(*st::test::model_mesh("hand_L2.off"));
   const CoBody object(*st::test::model_mesh("elephant.off"));
-  const auto normals = st::test::vertex_normals(object.mesh);
-  std::mt19937_64 rng(11);
   CollideScratch scratch;
   CollideResult plain;
-  Pose start;
-  do {
-    std::uniform_int_distribution<std::uint32_t> vo(0, object.mesh.num_vertices() - 1);
-    const std::uint32_t o = vo(rng);
-    start = st::test::pose_near(probe.mesh, 0, object.mesh, o, normals[o], 3.0, st::test::random_rotation(rng));
-    collide(probe.mesh, probe.tree, object.mesh, object.tree, start, {}, scratch, plain);
-  } while (plain.pairs.size() < 50);
+  const Pose start = pressed_start(probe, object, 11, scratch, plain);
   // The object leaf of each face (the leaf whose face range holds it).
   std::vector<std::uint32_t> leaf_of(object.mesh.faces.size(), ~0u);
   for (std::uint32_t i = 0; i < object.tree.num_nodes(); ++i)
