@@ -78,7 +78,7 @@ int main(int argc, char** argv) {
   std::string key_out;
   bool insecure = false, keygen = false, force = false;
   app.add_option("--config", config_file,
-                 "TOML config (bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb, "
+                 "TOML config (bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb, coherent, "
                  "max_sets_per_client, max_client_mb, "
                  "ipc_allowed_uids, [curve])")
       ->check(CLI::ExistingFile);
@@ -189,7 +189,8 @@ int main(int argc, char** argv) {
   int rc = 0;
   {
     // Sphere trees + collide() (exact); the SAT reference backend stays for tests.
-    auto made = st::net::WorkerService::create(ctx, wc, st::net::tree_backend_factory());
+    auto made = st::net::WorkerService::create(
+        ctx, wc, st::net::tree_backend_factory(true, st::net::kDefaultMaxCrowding, cfg.coherent));
     if (wc.curve) st::net::wipe_secret(wc.curve->secret_z85);  // the service has handed it to libzmq
     if (!made) {
       log_line(3, made.error());

@@ -703,6 +703,40 @@ TEST_CASE("a backend leaves out the blocks a Query skips, and only those (tree a
   }
 }
 
+TEST_CASE("the tree backend's coherent switch: the same pairs; certificates reused only when on") {
+  test::NetScene s = test::small_scene(16, 24);
+  const geom::SphereTree tree = geom::SphereTree::build(s.object).value();
+  auto blocks = tree_blocks(tree, 3, 1);
+  REQUIRE(blocks.ok());
+  std::vector<std::uint32_t> all(blocks.value().size());
+  std::iota(all.begin(), all.end(), 0u);
+  auto set = make_block_set(s.probe, s.object, blocks.value(), all, 24);
+  REQUIRE(set.ok());
+  auto coherent = tree_backend_factory(true, kDefaultMaxCrowding, true)();
+  auto plain = tree_backend_factory(true, kDefaultMaxCrowding, false)();
+  REQUIRE(coherent->load(set.value()).ok());
+  REQUIRE(plain->load(set.value()).ok());
+  int reused = 0, poses = 0;
+  for (const geom::Pose& pose : test::contact_poses(s, 4)) {
+    std::vector<std::uint64_t> tc, tp;
+    for (int k = 0; k < 8; ++k) {  // the same pose again: nothing moved, every certificate holds
+      std::vector<FacePair> a, b;
+      tc.push_back(coherent->query(pose, {}, a, {}).tri_tests);
+      tp.push_back(plain->query(pose, {}, b, {}).tri_tests);
+      std::sort(a.begin(), a.end());
+      std::sort(b.begin(), b.end());
+      CHECK(a == b);
+      CHECK(b == reference_collide(s.probe, s.object, pose));
+    }
+    if (tp[0] == 0) continue;
+    ++poses;
+    CHECK(tp[7] == tp[0]);  // the plain path tests the same pairs every time
+    reused += tc[7] < tp[7];
+  }
+  REQUIRE(poses > 0);
+  CHECK(reused == poses);
+}
+
 TEST_CASE("choose_assist takes the busiest worker's heaviest blocks while each move shortens the round") {
   // Worker 0 carries 8 (blocks 10: 5, 11: 3), worker 1 carries 1: the client takes block 10;
   // then worker 0 (3) is lighter than the client (5) and nothing more helps.

@@ -20,6 +20,7 @@ worker_id = 5
 log_level = "debug"
 max_sets = 4
 max_blockset_mb = 256
+coherent = false
 )",
                                "w.toml");
   REQUIRE_MESSAGE(c.ok(), c.error());
@@ -28,6 +29,8 @@ max_blockset_mb = 256
   CHECK(c.value().log_level == "debug");
   CHECK(c.value().max_sets == 4);
   CHECK(c.value().max_blockset_mb == 256);
+  CHECK_FALSE(c.value().coherent);
+  CHECK(DefaultDaemonConfig().coherent);
   CHECK_FALSE(c.value().insecure);
   CHECK(check_daemon_config(c.value()).ok());
 }
@@ -38,11 +41,12 @@ TEST_CASE("unknown keys, wrong types and bad values are errors naming the key an
     REQUIRE_FALSE(c.ok());
     return c.error();
   };
-  CHECK(e("bind = \"tcp://127.0.0.1:1\"\nbnid = 3\n").find("w.toml:2: unknown key 'bnid' (known: bind, curve,") !=
+  CHECK(e("bind = \"tcp://127.0.0.1:1\"\nbnid = 3\n").find("w.toml:2: unknown key 'bnid' (known: bind, coherent, curve,") !=
         std::string::npos);
   CHECK(e("worker_id = \"3\"\n").find("worker_id: expected an integer") != std::string::npos);
   CHECK(e("worker_id = -1\n").find("worker_id: expected a value in [0, 1048576] (found -1)") != std::string::npos);
   CHECK(e("insecure = 1\n").find("insecure") != std::string::npos);
+  CHECK(e("coherent = \"no\"\n").find("coherent: expected true or false") != std::string::npos);
   CHECK(e("[curve]\nsecret = \"x\"\n").find("unknown key 'curve.secret'") != std::string::npos);
   CHECK(e("bind = \n").find("w.toml:1") != std::string::npos);  // TOML syntax error, with its line
 }

@@ -211,7 +211,8 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
     base.max_sets = std::max<std::uint32_t>(base.max_sets, std::uint32_t(2 * objects.size() + 1));
     if (objects.size() > 1) base.idle_set_ttl = std::chrono::milliseconds(0);
     Result<std::unique_ptr<net::LocalWorkers>> lw = net::LocalWorkers::start(
-        fleet->ctx, spec.workers, net::tree_backend_factory(), [&](int i) { return net::inproc_endpoint(i, tag); }, base);
+        fleet->ctx, spec.workers, net::tree_backend_factory(true, net::kDefaultMaxCrowding, spec.coherent),
+        [&](int i) { return net::inproc_endpoint(i, tag); }, base);
     if (!lw) return fail("in-process workers: ", lw.error());
     fleet->local = std::move(lw).value();
     cfg.endpoints = fleet->local->endpoints();

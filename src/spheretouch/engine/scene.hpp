@@ -126,8 +126,9 @@ struct Scene {
   int assist_blocks = -1;
   double collision_rate_hz = 0;     ///< cap on collision rounds per second (0 = as fast as possible)
   int approx_layer = geom::kExact;  ///< kExact, or a sphere layer for the approximate mode
-  /// [collision] coherent: the collision thread's own queries carry certificates between rounds
-  /// (geom::CoherentCollider; the same pairs, faster at haptic speeds)
+  /// [collision] coherent: the collision thread's own queries and the in-process workers' carry
+  /// certificates between rounds (geom::CoherentCollider; the same pairs, faster at haptic
+  /// speeds); worker daemons follow their own `coherent` config key
   bool coherent = true;
   rt::HapticLoopConfig haptic = rt::DefaultHapticLoopConfig();  ///< servo loop
   /// stack of every thread run starts ([haptic] thread_stack_kb); 0 = glibc's default

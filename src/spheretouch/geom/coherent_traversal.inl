@@ -458,7 +458,9 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
           return;
         }
       }
-      const auto [p, o] = stack[--n];
+      // Plain names, not a structured binding: the lambdas below capture them (clang 14 cannot).
+      const std::uint32_t p = stack[n - 1].first, o = stack[n - 1].second;
+      --n;
       const SphereNode& hp = PT.nodes[p];
       const SphereNode& ho = OT.nodes[o];
       const bool tp = hp.leaf, to = ho.leaf;

@@ -29,6 +29,7 @@ Result<DaemonConfig> parse_daemon_config(std::string_view text, const std::strin
   r.integer("max_blockset_mb", c.max_blockset_mb, 1, 1 << 20);
   r.integer("max_sets_per_client", c.max_sets_per_client, 0, 64);
   r.integer("max_client_mb", c.max_client_mb, 0, 1 << 26);
+  r.boolean("coherent", c.coherent);
   r.integers("ipc_allowed_uids", c.ipc_allowed_uids, 0, 0x7fffffff);
   const toml::table* curve = r.table("curve");
   if (Status s = r.finish(); !s) return Error{s.error()};

@@ -26,11 +26,14 @@ struct DaemonConfig {
   /// Largest block set accepted, MiB (memory bound: about 6.5x this for the build, 6x per held
   /// set; 256 MiB is ~9 M faces and fits the unit's MemoryMax=8G with the other defaults).
   std::uint64_t max_blockset_mb = 256;
-  std::uint32_t max_sets_per_client = 0;           ///< block sets one client may hold (0: max_sets)
-  std::uint64_t max_client_mb = 0;                 ///< encoded MiB one client may hold (0: max_sets x max_blockset_mb)
-  std::vector<std::uint32_t> ipc_allowed_uids;     ///< ipc://: users besides the worker's own that may connect
-  std::string curve_secret_key_file;               ///< [curve] secret_key_file (Z85), empty: no CURVE
-  std::vector<std::string> curve_allowed_clients;  ///< [curve] allowed_clients (Z85 public keys)
+  std::uint32_t max_sets_per_client = 0;  ///< block sets one client may hold (0: max_sets)
+  std::uint64_t max_client_mb = 0;        ///< encoded MiB one client may hold (0: max_sets x max_blockset_mb)
+  /// Answer queries through the coherent collider (tree_backend_factory(): certificates carried
+  /// between a client's rounds, the same pairs); false answers each from scratch.
+  bool coherent = true;
+  std::vector<std::uint32_t> ipc_allowed_uids;           ///< ipc://: users besides the worker's own that may connect
+  std::string curve_secret_key_file;                     ///< [curve] secret_key_file (Z85), empty: no CURVE
+  std::vector<std::string> curve_allowed_clients;        ///< [curve] allowed_clients (Z85 public keys)
   std::vector<std::string> curve_allowed_clients_files;  ///< [curve] allowed_clients_files (PREFIX.pub paths)
 };
 
