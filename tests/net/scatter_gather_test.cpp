@@ -637,22 +637,38 @@ TEST_CASE("workers bound to tcp://localhost and tcp://[::1] serve a client (docs
   }
 }
 
-TEST_CASE("a backend leaves out the blocks a Query skips, and only those (tree and reference backends)") {
+namespace {
+// The small scene's layer-3 blocks and one block set holding them all (what the client assist
+// loads), for testing a backend on its own.
+struct WholeSet {
   test::NetScene s = test::small_scene(16, 24);
-  const geom::SphereTree tree = geom::SphereTree::build(s.object).value();
-  auto blocks = tree_blocks(tree, 3, 1);
-  REQUIRE(blocks.ok());
-  std::vector<std::uint32_t> all(blocks.value().size());
-  std::iota(all.begin(), all.end(), 0u);
-  auto set = make_block_set(s.probe, s.object, blocks.value(), all, 24);
-  REQUIRE(set.ok());
+  Blocks blocks;
+  BlockSet set;
+  WholeSet() {
+    const geom::SphereTree tree = geom::SphereTree::build(s.object).value();
+    auto b = tree_blocks(tree, 3, 1);
+    REQUIRE(b.ok());
+    blocks = std::move(b).value();
+    std::vector<std::uint32_t> all(blocks.size());
+    std::iota(all.begin(), all.end(), 0u);
+    auto made = make_block_set(s.probe, s.object, blocks, all, 24);
+    REQUIRE(made.ok());
+    set = std::move(made).value();
+  }
+};
+}  // namespace
+
+TEST_CASE("a backend leaves out the blocks a Query skips, and only those (tree and reference backends)") {
+  WholeSet whole;
+  const test::NetScene& s = whole.s;
+  const Blocks& blocks = whole.blocks;
   std::vector<std::uint32_t> block_of(s.object.faces.size());
-  for (std::uint32_t b = 0; b < blocks.value().size(); ++b)
-    for (std::uint32_t f : blocks.value()[b]) block_of[f] = b;
+  for (std::uint32_t b = 0; b < blocks.size(); ++b)
+    for (std::uint32_t f : blocks[b]) block_of[f] = b;
   for (bool use_tree : {true, false}) {
     CAPTURE(use_tree);
     auto be = use_tree ? tree_backend_factory()() : reference_backend_factory()();
-    REQUIRE(be->load(set.value()).ok());
+    REQUIRE(be->load(whole.set).ok());
     int checked = 0;
     for (const geom::Pose& pose : test::contact_poses(s, 6)) {
       std::vector<FacePair> full;
@@ -680,7 +696,7 @@ TEST_CASE("a backend leaves out the blocks a Query skips, and only those (tree a
       skip.erase(std::unique(skip.begin(), skip.end()), skip.end());
       if (skip.size() < 2) continue;
       skip.erase(skip.begin());
-      skip.push_back(std::uint32_t(blocks.value().size()) + 5);
+      skip.push_back(std::uint32_t(blocks.size()) + 5);
       std::vector<FacePair> part;
       const QueryStats st = be->query(pose, skip, part, {});
       std::sort(part.begin(), part.end());
@@ -704,18 +720,12 @@ TEST_CASE("a backend leaves out the blocks a Query skips, and only those (tree a
 }
 
 TEST_CASE("the tree backend's coherent switch: the same pairs; certificates reused only when on") {
-  test::NetScene s = test::small_scene(16, 24);
-  const geom::SphereTree tree = geom::SphereTree::build(s.object).value();
-  auto blocks = tree_blocks(tree, 3, 1);
-  REQUIRE(blocks.ok());
-  std::vector<std::uint32_t> all(blocks.value().size());
-  std::iota(all.begin(), all.end(), 0u);
-  auto set = make_block_set(s.probe, s.object, blocks.value(), all, 24);
-  REQUIRE(set.ok());
+  WholeSet whole;
+  const test::NetScene& s = whole.s;
   auto coherent = tree_backend_factory(true, kDefaultMaxCrowding, true)();
   auto plain = tree_backend_factory(true, kDefaultMaxCrowding, false)();
-  REQUIRE(coherent->load(set.value()).ok());
-  REQUIRE(plain->load(set.value()).ok());
+  REQUIRE(coherent->load(whole.set).ok());
+  REQUIRE(plain->load(whole.set).ok());
   int reused = 0, poses = 0;
   for (const geom::Pose& pose : test::contact_poses(s, 4)) {
     std::vector<std::uint64_t> tc, tp;
