@@ -514,8 +514,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       return f();
     const std::uint64_t tris = res.stats.tri_pairs;
     f();
-    if (res.stats.tri_pairs != tris)
-      opt.node_work->charge(o, 1 + std::uint32_t(std::min<std::uint64_t>(res.stats.tri_pairs - tris, UINT32_MAX - 1)));
+    opt.node_work->charge_leaf_pair(o, res.stats.tri_pairs - tris);
   }
   // A leaf-pair entry of the front: built when pending, refreshed when due, else reused.
   void visit_leaf(const detail::FrontEntry& e) {

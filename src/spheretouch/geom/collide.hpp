@@ -98,6 +98,10 @@ struct NodeWork {
     if (w == 0) touched.push_back(node);
     w = w > UINT32_MAX - n ? UINT32_MAX : w + n;
   }
+  /// A leaf pair that tested `tris` candidate triangle pairs: 1 plus them to `leaf` (none: nothing).
+  void charge_leaf_pair(std::uint32_t leaf, std::uint64_t tris) {
+    if (tris != 0) charge(leaf, 1 + std::uint32_t(tris < UINT32_MAX - 1 ? tris : UINT32_MAX - 1));
+  }
   /// Zeroes what the last queries charged.
   void clear() {
     for (std::uint32_t n : touched) work[n] = 0;

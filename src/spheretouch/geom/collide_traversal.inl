@@ -288,8 +288,7 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
       return leaf_leaf(p, o);
     const std::uint64_t tris = res.stats.tri_pairs;
     leaf_leaf(p, o);
-    if (res.stats.tri_pairs != tris)
-      opt.node_work->charge(o, 1 + std::uint32_t(std::min<std::uint64_t>(res.stats.tri_pairs - tris, UINT32_MAX - 1)));
+    opt.node_work->charge_leaf_pair(o, res.stats.tri_pairs - tris);
   }
 
   // Leaf pair: object faces against the probe leaf's box, probe faces against the survivors'
