@@ -28,6 +28,8 @@ std::vector<Message> samples() {
   v.push_back(lb);
   v.push_back(QueryMsg{99, 0xabcull, some_pose(), {}});
   v.push_back(QueryMsg{100, 0xabcull, some_pose(), {0, 7, 0xfffffu}});
+  v.push_back(QueryMsg{101, 0xabcull, some_pose(), {3}, 2, 0xdefull, {1, 4, 0xfffffu}});
+  v.push_back(QueryMsg{102, 0xabcull, some_pose(), {}, 0, 0xdefull, {}});
   ResultMsg r{99, 3, 0xabcull, {10, 20, 30}, {{1, 2}, {3, 4}, {0xffffffffu, 0}}};
   v.push_back(r);
   r.worked = {{0, 1}, {7, 0xffffffffu}, {0xfffffu, 12}};
@@ -61,7 +63,7 @@ TEST_CASE("every message survives encode/decode unchanged") {
 TEST_CASE("header layout is pinned: magic, version, type, flags, body length, little-endian") {
   const auto b = encode(HeartbeatMsg{0x0102030405060708ull});
   REQUIRE(b.size() == kHeaderBytes + 8);
-  const std::vector<std::uint8_t> want{'S', 'T', 'N', 'P', 4, 0, 5, 0, 8, 0, 0, 0, 8, 7, 6, 5, 4, 3, 2, 1};
+  const std::vector<std::uint8_t> want{'S', 'T', 'N', 'P', 5, 0, 5, 0, 8, 0, 0, 0, 8, 7, 6, 5, 4, 3, 2, 1};
   CHECK(b == want);
 }
 
@@ -105,7 +107,7 @@ TEST_CASE("wrong magic, version, type and flags are rejected, naming the field")
     std::uint8_t v;
     const char* word;
   };
-  for (Case c : {Case{0, 'X', "magic"}, Case{4, 3, "version"}, Case{4, 5, "version"}, Case{5, 1, "version"},
+  for (Case c : {Case{0, 'X', "magic"}, Case{4, 4, "version"}, Case{4, 6, "version"}, Case{5, 1, "version"},
                  Case{6, 0, "type"}, Case{6, 7, "type"}, Case{7, 1, "flags"}}) {
     auto b = good;
     b[c.at] = c.v;
@@ -265,6 +267,27 @@ TEST_CASE("a Query's skip list must be ascending, below max_blocks and within ma
   const std::uint32_t huge = 200;
   std::memcpy(b.data() + list_at - 4, &huge, 4);
   CHECK_FALSE(decode(b, L).ok());
+}
+
+TEST_CASE("a Query's standby set and take list (protocol 5): ascending, within max_take, a second set, named") {
+  const Limits L = DefaultLimits();
+  const std::size_t take_at = kHeaderBytes + 20 + 96 + 4 + 8 + 4;  // seq, hash, object, pose, skip count, standby, count
+  auto refused = [&](QueryMsg q, const char* what, const Limits& lim) {
+    const auto d = decode(encode(q), lim);
+    REQUIRE_FALSE(d.ok());
+    CHECK_MESSAGE(d.error().find(what) != std::string::npos, d.error());
+    return d.error();
+  };
+  const std::string e = refused(QueryMsg{1, 2, some_pose(), {}, 0, 9, {4, 4}}, "ascending", L);
+  CHECK(e.find("byte " + std::to_string(take_at + 4)) != std::string::npos);
+  CHECK(e.find("take") != std::string::npos);
+  refused(QueryMsg{1, 2, some_pose(), {}, 0, 9, {L.max_blocks}}, "max_blocks", L);
+  refused(QueryMsg{1, 2, some_pose(), {}, 0, 0, {1}}, "no standby set named", L);
+  refused(QueryMsg{1, 2, some_pose(), {}, 0, 2, {1}}, "the same block set as hash", L);
+  Limits small = L;
+  small.max_take = 2;
+  refused(QueryMsg{1, 2, some_pose(), {}, 0, 9, {1, 2, 3}}, "take count", small);
+  CHECK(decode(encode(QueryMsg{1, 2, some_pose(), {}, 0, 9, {1, 2}}), small).ok());
 }
 
 TEST_CASE("unknown error codes are refused") {

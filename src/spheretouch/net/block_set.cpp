@@ -250,6 +250,22 @@ std::vector<std::vector<std::uint32_t>> deal_blocks(std::uint32_t num_blocks, st
   return out;
 }
 
+std::uint32_t second_holder(std::uint32_t block, std::uint32_t owner, std::uint32_t workers) {
+  if (workers < 2) return owner;
+  const std::uint64_t h = (std::uint64_t(block) + 1) * 0x9e3779b97f4a7c15ull;  // Fibonacci hashing
+  return std::uint32_t((owner + 1 + (h >> 33) % (workers - 1)) % workers);
+}
+
+std::vector<std::vector<std::uint32_t>> standby_shares(const std::vector<std::vector<std::uint32_t>>& shares) {
+  const auto workers = static_cast<std::uint32_t>(shares.size());
+  std::vector<std::vector<std::uint32_t>> out(workers);
+  if (workers < 2) return out;
+  for (std::uint32_t w = 0; w < workers; ++w)
+    for (std::uint32_t b : shares[w]) out[second_holder(b, w, workers)].push_back(b);
+  for (auto& v : out) std::sort(v.begin(), v.end());
+  return out;
+}
+
 std::vector<std::vector<std::uint32_t>> block_cyclic(std::uint32_t num_blocks, std::uint32_t workers) {
   return deal_blocks(num_blocks, workers, geom::Mapping::block_cyclic);
 }

@@ -67,6 +67,15 @@ Result<BlockSet> decode_block_set(std::span<const std::uint8_t> encoded, const L
 /// The blocks of each worker, dealt by `mapping` (geom::block_owners), ascending in each list.
 std::vector<std::vector<std::uint32_t>> deal_blocks(std::uint32_t num_blocks, std::uint32_t workers,
                                                     geom::Mapping mapping, std::uint64_t seed = 1);
+/// The worker that keeps a standby copy of block `block` owned by `owner` (ScatterConfig::replicas):
+/// one of the other workers, drawn by a hash of the block, so that the blocks of one contact
+/// (neighbours in the tree's order, which block-cyclic deals to neighbouring workers) have their
+/// copies spread over the fleet. `owner` itself when there is no other worker.
+std::uint32_t second_holder(std::uint32_t block, std::uint32_t owner, std::uint32_t workers);
+/// The standby copies each worker keeps when `shares` (worker -> its blocks, deal_blocks()) are
+/// replicated once: block b of shares[w] goes to second_holder(b, w, W). Ascending in each list;
+/// all empty for fewer than two workers.
+std::vector<std::vector<std::uint32_t>> standby_shares(const std::vector<std::vector<std::uint32_t>>& shares);
 /// Block-cyclic mapping (paper §3.4, [10]): block b goes to worker b mod workers.
 std::vector<std::vector<std::uint32_t>> block_cyclic(std::uint32_t num_blocks, std::uint32_t workers);
 

@@ -22,33 +22,21 @@ Result<std::unique_ptr<ClientAssist>> ClientAssist::create(const SceneData& scen
   if (!set) return fail("scatter-gather: client assist: ", set.error());
   a->backend_ = tree_backend_factory()();
   if (Status s = a->backend_->load(set.value()); !s) return fail("scatter-gather: client assist: ", s.error());
-  a->face_block_.assign(scene.object.faces.size(), UINT32_MAX);
-  for (std::uint32_t b = 0; b < nblocks; ++b)
-    for (std::uint32_t f : scene.blocks[b])
-      if (f < a->face_block_.size() && a->face_block_[f] == UINT32_MAX) a->face_block_[f] = b;
-  a->block_work_.assign(nblocks, 0);
   return a;
 }
 
-void ClientAssist::choose(std::vector<Peer>& peers) {
+void ClientAssist::choose(std::vector<Peer>& peers, BlockDeal& deal, const WorkLedger& ledger) {
   taken_.clear();
-  for (Peer& p : peers) p.skip.clear();
-  if (worked_.empty()) return;
+  if (ledger.worked().empty()) return;
   candidates_.clear();
-  for (std::uint32_t b : worked_)
-    for (std::uint32_t i = 0; i < peers.size(); ++i)
-      if (const Peer& p = peers[i]; p.asked && std::binary_search(p.asked->blocks.begin(), p.asked->blocks.end(), b)) {
-        candidates_.push_back({b, i, block_work_[b]});
-        break;
-      }
-  taken_ = choose_assist(candidates_, static_cast<std::uint32_t>(peers.size()), max_blocks_);
-  for (Peer& p : peers)
-    if (p.asked)
-      for (std::uint32_t b : taken_)
-        if (std::binary_search(p.asked->blocks.begin(), p.asked->blocks.end(), b)) p.skip.push_back(b);
+  for (std::uint32_t b : ledger.worked())
+    if (const std::uint32_t a = deal.answerer(b); a != BlockDeal::kNone)
+      candidates_.push_back({b, a, ledger.work()[b]});
+  for (std::uint32_t b : choose_assist(candidates_, static_cast<std::uint32_t>(peers.size()), max_blocks_))
+    if (deal.withdraw(peers, b)) taken_.push_back(b);
 }
 
-void ClientAssist::answer(const geom::Pose& pose, RoundResult& out, std::vector<std::uint8_t>& covered) {
+void ClientAssist::answer(const geom::Pose& pose, RoundResult& out, std::vector<std::uint8_t>& covered, WorkLedger& ledger) {
   if (taken_.empty()) return;
   const auto t0 = std::chrono::steady_clock::now();
   for (std::uint32_t b : taken_) {
@@ -57,7 +45,7 @@ void ClientAssist::answer(const geom::Pose& pose, RoundResult& out, std::vector<
     const QueryStats st = backend_->query_only(pose, std::span(&b, 1), pairs_, {max_pairs_, UINT64_MAX});
     if (pairs_.size() > max_pairs_) continue;  // left to the worker's refusal: the round is incomplete
     out.pairs.insert(out.pairs.end(), pairs_.begin(), pairs_.end());
-    note_worked(backend_->worked());
+    ledger.note(backend_->worked());
     out.assist.sphere_tests += st.sphere_tests;
     out.assist.tri_tests += st.tri_tests;
     ++out.blocks_assisted;
@@ -67,29 +55,6 @@ void ClientAssist::answer(const geom::Pose& pose, RoundResult& out, std::vector<
   out.stats.tri_tests += out.assist.tri_tests;
   out.assist.compute_ns =
       std::uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count());
-}
-
-void ClientAssist::note_worked(std::span<const WorkedBlock> worked) {
-  for (const WorkedBlock& w : worked)
-    if (w.block < block_work_.size() && w.work > 0) reported_.push_back(w);
-}
-
-void ClientAssist::end_round(const std::vector<FacePair>& pairs) {
-  for (std::uint32_t b : worked_) block_work_[b] = 0;
-  worked_.clear();
-  const auto add = [this](std::uint32_t b, double w) {
-    if (block_work_[b] == 0) worked_.push_back(b);
-    block_work_[b] += w;
-  };
-  if (!reported_.empty()) {
-    for (const WorkedBlock& w : reported_) add(w.block, double(w.work));
-    reported_.clear();
-    return;
-  }
-  for (const FacePair& fp : pairs) {
-    const std::uint32_t b = fp.object < face_block_.size() ? face_block_[fp.object] : UINT32_MAX;
-    if (b != UINT32_MAX) add(b, 1.0);
-  }
 }
 
 }  // namespace client

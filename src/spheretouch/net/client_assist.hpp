@@ -12,6 +12,7 @@
 #include <vector>
 
 #include <spheretouch/net/backend.hpp>
+#include <spheretouch/net/block_deal.hpp>
 #include <spheretouch/net/block_set_cache.hpp>
 #include <spheretouch/net/peer.hpp>
 
@@ -23,27 +24,17 @@ class ClientAssist {
   /// worker's refusal). Builds the backend (cold: a tree over the whole object).
   static Result<std::unique_ptr<ClientAssist>> create(const SceneData& scene, std::uint32_t max_blocks,
                                                       std::uint32_t max_pairs);
-  /// This round's blocks (choose_assist() over the work each block cost last round, among the
-  /// blocks some asked worker holds) and each asked worker's share of them (its skip list).
-  void choose(std::vector<Peer>& peers);
+  /// This round's blocks: choose_assist() over the work each block cost last round and the
+  /// worker `deal` gives it to, each withdrawn from that worker's lists.
+  void choose(std::vector<Peer>& peers, BlockDeal& deal, const WorkLedger& ledger);
   /// Answers the chosen blocks at `pose`: their pairs appended to out.pairs, covered[b] set for
-  /// each one answered, out.assist and out.stats counted.
-  void answer(const geom::Pose& pose, RoundResult& out, std::vector<std::uint8_t>& covered);
-  /// The work of the blocks a worker's Result reports (ResultMsg::worked), this round.
-  void note_worked(std::span<const WorkedBlock> worked);
-  /// The round is over: what the workers and the assist reported is what choose() weighs next
-  /// round. Without any report (backends that do not count), each block's pairs in the round's
-  /// merged result stand in for its work.
-  void end_round(const std::vector<FacePair>& pairs);
+  /// each one answered, their work noted in `ledger`, out.assist and out.stats counted.
+  void answer(const geom::Pose& pose, RoundResult& out, std::vector<std::uint8_t>& covered, WorkLedger& ledger);
 
  private:
   ClientAssist() = default;
   std::uint32_t max_blocks_ = 0, max_pairs_ = 0;
   std::unique_ptr<CollisionBackend> backend_;  // a worker's backend over every block
-  std::vector<std::uint32_t> face_block_;      // object face -> its block
-  std::vector<double> block_work_;             // per block: its work last round (0 where none)
-  std::vector<std::uint32_t> worked_;          // blocks with block_work_ > 0
-  std::vector<WorkedBlock> reported_;          // this round's reports (workers' and the assist's own)
   std::vector<std::uint32_t> taken_;           // blocks answered this round, ascending
   std::vector<BlockWork> candidates_;          // scratch for choose_assist
   std::vector<FacePair> pairs_;                // scratch: one block's pairs

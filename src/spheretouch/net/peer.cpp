@@ -65,10 +65,13 @@ void Peer::heartbeat(const ScatterConfig& cfg, Clock::time_point now, std::vecto
 }
 
 void Peer::maybe_start_upload(const ScatterConfig& cfg, const BlockSetCache& sets, Clock::time_point now) {
-  if (!heard(link) || !target_hash || holds(target_hash)) return;
-  if (link == Link::Loading && upload->hash == target_hash) return;
-  if (refused_hash == target_hash && now - refused_at < cfg.load_timeout) return;
-  upload = sets.find(target_hash);
+  const std::uint64_t want = wanted();
+  if (!heard(link) || !want) return;
+  if (link == Link::Loading && upload->hash == want) return;
+  if (refused_hash == want && now - refused_at < cfg.load_timeout) return;
+  SetPtr s = sets.find(want);
+  if (!s) return;
+  upload = std::move(s);
   upload_off = 0;
   load_progress_at = now;
   ++loads_sent;
@@ -150,11 +153,12 @@ void prune_sets(const std::vector<Peer>& peers, BlockSetCache& sets) {
   for (const Peer& p : peers) {
     for (std::uint64_t h : p.held) keep[h] = true;
     if (p.target_hash) keep[p.target_hash] = true;
+    if (p.standby_hash) keep[p.standby_hash] = true;
     if (p.link == Link::Loading) keep[p.upload->hash] = true;
   }
   sets.prune([&](const EncodedSet& s) {
     return keep.count(s.hash) || std::any_of(peers.begin(), peers.end(), [&](const Peer& p) {
-             return p.original == s.blocks || p.target == s.blocks;
+             return p.original == s.blocks || p.target == s.blocks || p.standby == s.blocks;
            });
   });
 }

@@ -78,6 +78,8 @@ struct Peer {
   std::vector<std::uint32_t> original;   // its own blocks (ScatterConfig::mapping)
   std::vector<std::uint32_t> target;     // blocks it should hold now
   std::uint64_t target_hash = 0;         // 0 while the target is being encoded
+  std::vector<std::uint32_t> standby;    // its copies of other workers' blocks (ScatterConfig::replicas)
+  std::uint64_t standby_hash = 0;        // their set's hash (0: none)
   SetPtr upload;                         // the block set being sent: non-null exactly while Loading
   std::size_t upload_off = 0;            // bytes of `upload` handed to ZeroMQ
   Clock::time_point load_progress_at{};  // upload started or last chunk queued: load_timeout runs from here
@@ -92,7 +94,9 @@ struct Peer {
   std::string unreadable;           // why its last undecodable message was refused
   std::string refused;              // why it last refused a set we sent (its Error text)
   SetPtr asked;                     // the block set this round's Query named; null if no Query was queued
-  std::vector<std::uint32_t> skip;  // blocks of `asked` the client answers this round (assist)
+  SetPtr standby_asked;             // its standby set, named by this round's Query (null: none)
+  std::vector<std::uint32_t> skip;  // blocks of `asked` someone else answers this round (BlockDeal)
+  std::vector<std::uint32_t> take;  // blocks of `standby_asked` it answers this round (BlockDeal)
   // Totals.
   std::uint64_t bytes_sent = 0;
   std::uint32_t loads_sent = 0;
@@ -112,8 +116,15 @@ struct Peer {
 
   /// A Heartbeat now; the next one due heartbeat_period later.
   void heartbeat(const ScatterConfig& cfg, Clock::time_point now, std::vector<std::uint8_t>& buf);
-  /// Starts sending its target set if it is heard from, does not hold it, is not being sent it
-  /// and did not refuse it within load_timeout (a newer target replaces a set still being sent).
+  /// The set it should be sent next: its target, then its standby set; 0 when it holds both
+  /// (or the target is still being encoded).
+  std::uint64_t wanted() const {
+    if (!target.empty() && !target_hash) return 0;
+    if (target_hash && !holds(target_hash)) return target_hash;
+    return standby_hash && !holds(standby_hash) ? standby_hash : 0;
+  }
+  /// Starts sending wanted() if it is heard from, is not being sent it and did not refuse it
+  /// within load_timeout (a newer target replaces a set still being sent).
   void maybe_start_upload(const ScatterConfig& cfg, const BlockSetCache& sets, Clock::time_point now);
   /// Queues the chunks of the set being sent until ZeroMQ's queue is full.
   void pump_upload(const ScatterConfig& cfg, Clock::time_point now, std::vector<std::uint8_t>& buf);

@@ -27,6 +27,23 @@ void put_pose(Writer& w, const geom::Pose& p) {
     for (int c = 0; c < 4; ++c) w.f64(m(r, c));  // rows of [R | t], row-major
 }
 
+/// A list of global block ids (a Query's skip or take): a u32 count ≤ `limit`, then the ids,
+/// strictly ascending and below max_blocks. Errors name "<field> count" or "<field>".
+void read_blocks(Reader& r, const Limits& L, std::uint32_t limit, const char* field, std::vector<std::uint32_t>& out) {
+  const std::string count_field = std::string(field) + " count";
+  const std::uint32_t n = r.u32(count_field.c_str());
+  if (!r.count_ok(n, limit, 4, count_field.c_str())) return;
+  out.resize(n);
+  for (std::uint32_t i = 0; i < n && r.ok(); ++i) {
+    const std::size_t at = r.offset();
+    out[i] = r.u32(field);
+    if (r.ok() && out[i] >= L.max_blocks)
+      r.fail_at(at, field, ": block ", out[i], " is not below max_blocks = ", L.max_blocks);
+    if (r.ok() && i > 0 && out[i] <= out[i - 1])
+      r.fail_at(at, field, ": block ", out[i], " after ", out[i - 1], " (must be strictly ascending)");
+  }
+}
+
 geom::Pose get_pose(Reader& r) {
   const std::size_t at = r.offset();
   Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
@@ -67,6 +84,9 @@ struct BodyEncoder {
     put_pose(w, m.pose);
     w.u32(static_cast<std::uint32_t>(m.skip.size()));
     for (std::uint32_t b : m.skip) w.u32(b);
+    w.u64(m.standby);
+    w.u32(static_cast<std::uint32_t>(m.take.size()));
+    for (std::uint32_t b : m.take) w.u32(b);
   }
   void operator()(const ResultMsg& m) {
     w.u64(m.seq);
@@ -147,18 +167,16 @@ Result<Message> decode_body(MsgType type, Reader& r, const Limits& L) {
           r.fail_at(at, "object", ": ", m.object, " is not below max_objects = ", L.max_objects);
       }
       m.pose = get_pose(r);
-      const std::uint32_t n = r.u32("skip count");
-      if (r.count_ok(n, L.max_skip, 4, "skip count")) {
-        m.skip.resize(n);
-        for (std::uint32_t i = 0; i < n && r.ok(); ++i) {
-          const std::size_t at = r.offset();
-          m.skip[i] = r.u32("skip");
-          if (r.ok() && m.skip[i] >= L.max_blocks)
-            r.fail_at(at, "skip", ": block ", m.skip[i], " is not below max_blocks = ", L.max_blocks);
-          if (r.ok() && i > 0 && m.skip[i] <= m.skip[i - 1])
-            r.fail_at(at, "skip", ": block ", m.skip[i], " after ", m.skip[i - 1], " (must be strictly ascending)");
-        }
+      read_blocks(r, L, L.max_skip, "skip", m.skip);
+      {
+        const std::size_t at = r.offset();
+        m.standby = r.u64("standby");
+        if (r.ok() && m.standby != 0 && m.standby == m.hash)
+          r.fail_at(at, "standby", ": the same block set as hash (a standby set is a second one)");
       }
+      read_blocks(r, L, L.max_take, "take", m.take);
+      if (r.ok() && m.standby == 0 && !m.take.empty())
+        r.fail_at(r.offset(), "take", ": ", m.take.size(), " blocks to take but no standby set named");
       out = std::move(m);
       break;
     }

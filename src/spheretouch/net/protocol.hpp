@@ -23,8 +23,9 @@ namespace st::inline SPHERETOUCH_ABI::net {
 
 inline constexpr std::uint32_t kMagic = 0x504E5453;  ///< "STNP" read as a little-endian u32
 /// Bumped on any incompatible change (2: Query skip list; 3: Query and Result name the scene
-/// object, block sets carry it; 4: Result reports the work of its blocks).
-inline constexpr std::uint16_t kVersion = 4;
+/// object, block sets carry it; 4: Result reports the work of its blocks; 5: Query names a standby
+/// set and the blocks of it to take).
+inline constexpr std::uint16_t kVersion = 5;
 inline constexpr std::size_t kHeaderBytes = 12;  ///< magic, version, type, flags, body length
 
 /// Upper bounds applied while decoding; a message over any of them is rejected, not truncated.
@@ -45,6 +46,7 @@ struct Limits {
   std::uint32_t max_leaf_faces = 1u << 16;  ///< sphere-tree leaf size parameter
   std::uint32_t max_objects = 1024;         ///< scene objects a block set, Query or Result may name
   std::uint32_t max_worked = 4096;          ///< blocks whose work one Result reports (WorkedBlock)
+  std::uint32_t max_take = 4096;            ///< blocks of its standby set a Query may ask the worker to answer
 };
 
 /// Default limits (sized for multi-million-face meshes; workers may lower max_blockset_bytes).
@@ -100,7 +102,9 @@ struct LoadBlocksMsg {
 };
 
 /// Client → worker: collide the probe at `pose` against block set `hash`, leaving out the blocks
-/// in `skip` (the client answers those itself this round: ScatterConfig::assist_blocks).
+/// in `skip` (another worker or the client answers those this round: ScatterConfig::replicas,
+/// ScatterConfig::assist_blocks), and against the blocks `take` of block set `standby` (the
+/// worker's second copies of other workers' blocks, ScatterConfig::replicas).
 struct QueryMsg {
   std::uint64_t seq = 0;                     ///< round sequence number, echoed in the Result
   std::uint64_t hash = 0;                    ///< block set to answer with (content-addressed)
@@ -110,10 +114,16 @@ struct QueryMsg {
   std::vector<std::uint32_t> skip;
   /// The scene object the set is a share of (checked by the worker; on the wire after `hash`).
   std::uint32_t object = 0;
+  /// A second block set of the same client and object the worker holds (0: none; on the wire
+  /// after `skip`): named, it counts as used this round even when `take` is empty.
+  std::uint64_t standby = 0;
+  /// Global block ids of `standby` to answer too, strictly ascending, at most Limits::max_take;
+  /// ids the standby set does not hold are ignored. Empty when `standby` is 0.
+  std::vector<std::uint32_t> take{};
   /// Field by field (the pose's matrices exactly).
   friend bool operator==(const QueryMsg& a, const QueryMsg& b) {
     return a.seq == b.seq && a.hash == b.hash && a.object == b.object && a.pose.matrix() == b.pose.matrix() &&
-           a.skip == b.skip;
+           a.skip == b.skip && a.standby == b.standby && a.take == b.take;
   }
 };
 

@@ -12,6 +12,7 @@
 
 #include <spheretouch/geom/check.hpp>
 #include <spheretouch/geom/collide.hpp>
+#include <spheretouch/net/block_deal.hpp>
 #include <spheretouch/net/block_set_cache.hpp>
 #include <spheretouch/net/client_assist.hpp>
 #include <spheretouch/net/curve_keys.hpp>
@@ -45,6 +46,8 @@ struct ScatterGather::Impl {
   std::vector<Peer> peers;
   std::unique_ptr<client::BlockSetCache> sets;
   std::unique_ptr<client::ClientAssist> assist;  // null unless cfg.assist_blocks
+  std::unique_ptr<client::WorkLedger> ledger;    // each block's work the round before
+  std::unique_ptr<client::BlockDeal> deal;       // who answers each block this round
   bool reassign_pending = false;                 // a worker went down or came back: reassign()
   bool prune_pending = false;                    // a worker dropped a set: prune_sets()
   std::uint64_t cur_seq = 0;
@@ -101,8 +104,9 @@ struct ScatterGather::Impl {
     runs.end(out->pairs);
     for (std::uint32_t b : p.asked->blocks)
       if (!std::binary_search(p.skip.begin(), p.skip.end(), b)) covered[b] = 1;
+    for (std::uint32_t b : p.take) covered[b] = 1;  // blocks of its standby set
     out->worker_stats[std::size_t(&p - peers.data())] = r.stats;
-    if (assist) assist->note_worked(r.worked);
+    ledger->note(r.worked);
     out->stats.sphere_tests += r.stats.sphere_tests;
     out->stats.tri_tests += r.stats.tri_tests;
     out->stats.compute_ns = std::max(out->stats.compute_ns, r.stats.compute_ns);
@@ -176,7 +180,7 @@ struct ScatterGather::Impl {
   // ---- choosing what to ask -----------------------------------------------------------------
 
   /// Picks the block set each live worker is queried with: its target if it holds it, otherwise
-  /// the largest set it holds; then, while blocks are uncovered, a held superset that covers
+  /// the largest set it holds but its standby set; then, while blocks are uncovered, a held superset that covers
   /// them (a survivor keeps answering for a returning worker's blocks until that one is loaded).
   void choose_sets() {
     std::fill(covered.begin(), covered.end(), 0);
@@ -187,7 +191,9 @@ struct ScatterGather::Impl {
         p.asked = sets->find(p.target_hash);
       else
         for (std::uint64_t h : p.held)
-          if (SetPtr s = sets->find(h); s && (!p.asked || s->blocks.size() > p.asked->blocks.size())) p.asked = s;
+          if (SetPtr s = h != p.standby_hash ? sets->find(h) : nullptr;
+              s && (!p.asked || s->blocks.size() > p.asked->blocks.size()))
+            p.asked = s;
       if (p.asked)
         for (std::uint32_t b : p.asked->blocks) covered[b] = 1;
     }
@@ -197,7 +203,7 @@ struct ScatterGather::Impl {
       SetPtr best;
       std::size_t best_gain = 0;
       for (std::uint64_t h : p.held) {
-        const SetPtr s = sets->find(h);
+        const SetPtr s = h != p.standby_hash ? sets->find(h) : nullptr;  // the standby set is taken from, not asked
         if (!s || (p.asked && !is_superset(s->blocks, p.asked->blocks))) continue;
         std::size_t gain = 0;
         for (std::uint32_t b : s->blocks) gain += !covered[b];
@@ -210,6 +216,15 @@ struct ScatterGather::Impl {
         p.asked = best;
         for (std::uint32_t b : best->blocks) covered[b] = 1;
       }
+    }
+  }
+
+  /// The standby set each queried worker holds (ScatterConfig::replicas), named by its Query.
+  void choose_standby() {
+    for (Peer& p : peers) {
+      p.standby_asked = nullptr;
+      if (p.asked && p.standby_hash != p.asked->hash && p.holds(p.standby_hash))
+        p.standby_asked = sets->find(p.standby_hash);
     }
   }
 
@@ -237,7 +252,10 @@ struct ScatterGather::Impl {
     client::refresh_targets(peers, *sets);
     for (Peer& p : peers) p.maybe_start_upload(cfg, *sets, now);
     choose_sets();
-    if (assist) assist->choose(peers);
+    choose_standby();
+    deal->deal(peers, *ledger);
+    out->blocks_moved = deal->moved();
+    if (assist) assist->choose(peers, *deal, *ledger);
     std::fill(covered.begin(), covered.end(), 0);
     for (Peer& p : peers) {
       p.step(TurnEvent::NewRound);
@@ -248,7 +266,8 @@ struct ScatterGather::Impl {
       if (p.asked) {
         ++out->workers_asked;
         p.asked_at = now;
-        if (p.send(QueryMsg{cur_seq, p.asked->hash, pose, p.skip, cfg.object}, buf)) {
+        const std::uint64_t standby = p.standby_asked ? p.standby_asked->hash : 0;
+        if (p.send(QueryMsg{cur_seq, p.asked->hash, pose, p.skip, cfg.object, standby, p.take}, buf)) {
           p.step(TurnEvent::QuerySent);
         } else {
           p.asked = nullptr;
@@ -340,22 +359,29 @@ Result<std::unique_ptr<ScatterGather>> ScatterGather::create(zmq::context_t& ctx
   }
   const auto share = deal_blocks(nblocks, static_cast<std::uint32_t>(impl->cfg.endpoints.size()), impl->cfg.mapping,
                                  impl->cfg.mapping_seed);
+  const auto standby = impl->cfg.replicas ? standby_shares(share) : decltype(share)(share.size());
+  impl->ledger = std::make_unique<client::WorkLedger>(impl->scene->blocks, impl->scene->object.faces.size());
+  impl->deal = std::make_unique<client::BlockDeal>(nblocks, impl->cfg.limits, impl->cfg.replicas,
+                                                   std::max(0.0, impl->cfg.deal_stickiness));
   for (std::size_t i = 0; i < impl->cfg.endpoints.size(); ++i) {
     Peer p;
     p.endpoint = impl->cfg.endpoints[i];
     if (Status st = p.open(ctx, impl->cfg, impl->routing_id); !st) return Error{st.error()};
     p.original = share[i];
     p.target = p.original;
+    p.standby = standby[i];
     impl->peers.push_back(std::move(p));
   }
-  // The own shares are encoded up front (cold); reassigned variants later, in the background.
-  for (Peer& p : impl->peers) {
-    if (p.original.empty()) continue;
-    auto s = client::encode_set(*impl->scene, p.original);
-    if (!s) return Error{s.error()};
-    impl->sets->remember(s.value());
-    p.target_hash = s.value()->hash;
-  }
+  // The own shares and standby copies are encoded up front (cold); reassigned variants later, in
+  // the background.
+  for (Peer& p : impl->peers)
+    for (auto [list, hash] : {std::pair{&p.original, &p.target_hash}, std::pair{&p.standby, &p.standby_hash}}) {
+      if (list->empty()) continue;
+      auto s = client::encode_set(*impl->scene, *list);
+      if (!s) return Error{s.error()};
+      impl->sets->remember(s.value());
+      *hash = s.value()->hash;
+    }
   const auto now = Clock::now();
   for (Peer& p : impl->peers) p.heartbeat(impl->cfg, now, impl->buf);
   return std::unique_ptr<ScatterGather>(new ScatterGather(std::move(impl)));
@@ -375,7 +401,7 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   out.blocks_total = static_cast<std::uint32_t>(m.covered.size());
   out.stale_dropped = out.bad_messages = 0;
   out.stats = {};
-  out.blocks_assisted = 0;
+  out.blocks_assisted = out.blocks_moved = 0;
   out.assist = {};
   out.worker_stats.assign(m.peers.size(), QueryStats{});
   m.out = &out;
@@ -387,7 +413,7 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   m.begin_round_sends(pose, Clock::now());
   if (m.assist) {  // while the workers compute
     m.runs.begin(out.pairs.size());
-    m.assist->answer(pose, out, m.covered);
+    m.assist->answer(pose, out, m.covered, *m.ledger);
     m.runs.end(out.pairs);
   }
   const auto spin_until = std::min(deadline, Clock::now() + std::chrono::microseconds(m.cfg.spin_us));
@@ -412,7 +438,7 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   out.object_faces.erase(std::unique(out.object_faces.begin(), out.object_faces.end()), out.object_faces.end());
   out.blocks_covered = static_cast<std::uint32_t>(std::count(m.covered.begin(), m.covered.end(), 1));
   out.complete = out.blocks_covered == out.blocks_total;
-  if (m.assist) m.assist->end_round(out.pairs);
+  m.ledger->end_round(out.pairs);
 }
 
 RoundResult ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time_point deadline) {
@@ -440,7 +466,7 @@ bool ScatterGather::wait_ready(Clock::time_point deadline) {
       if (p.link == Link::Unknown && now >= p.heartbeat_due) p.heartbeat(m.cfg, now, m.buf);
       p.maybe_start_upload(m.cfg, *m.sets, now);
       p.pump_upload(m.cfg, now, m.buf);
-      if (p.link == Link::Unknown || (!p.target.empty() && !p.holds(p.target_hash))) ready = false;
+      if (p.link == Link::Unknown || p.wanted() || (!p.target.empty() && !p.holds(p.target_hash))) ready = false;
     }
     const auto up = [](const Peer& p) { return p.link != Link::Down; };
     if (ready && std::any_of(m.peers.begin(), m.peers.end(), up)) return true;
@@ -453,7 +479,8 @@ std::vector<WorkerStatus> ScatterGather::workers() const {
   std::vector<WorkerStatus> v;
   for (const Peer& p : impl_->peers)
     v.push_back({p.endpoint, p.link != Link::Down, p.worker_id, p.epoch, p.misses, p.target, p.holds(p.target_hash),
-                 p.bytes_sent, p.loads_sent, p.held.size(), p.unreadable, p.refused});
+                 p.bytes_sent, p.loads_sent, p.held.size(), p.unreadable, p.refused, p.standby,
+                 p.standby.empty() || p.holds(p.standby_hash)});
   return v;
 }
 

@@ -120,6 +120,17 @@ struct ScatterConfig {
   /// block: costs that set's trees (the probe's and the object's, one subtree per block, as a
   /// worker builds them), built once by create(), and 4 bytes per object face. 0 = off (the default).
   std::uint32_t assist_blocks = 0;
+  /// Replicated deal: every block is also held by a second worker (its standby copy, on a worker
+  /// drawn by a hash of the block, second_holder()), and each round the blocks that worked the
+  /// round before go, the heaviest first, to the less loaded of their two holders (judged by the
+  /// work the workers report); a down worker's blocks are answered from their copies at once.
+  /// Costs each worker a second block set (as much memory again as its share, sent once) and a
+  /// Query two lists (QueryMsg::skip, QueryMsg::take). Off (the default): one holder per block.
+  bool replicas = false;
+  /// With replicas: a block stays with the holder that answered it the round before unless the
+  /// other is lighter by more than this fraction of the mean load (each change of a worker's
+  /// blocks costs its coherent collider a plain round). 0: the fresh two-choice deal every round.
+  double deal_stickiness = 0.05;
   /// The scene object this client answers for (a scene of several objects has one client per
   /// object over the same workers): its block sets carry it, its Queries name it, and a Result
   /// naming another is refused. < Limits::max_objects.
@@ -142,7 +153,8 @@ struct RoundResult {
   QueryStats stats;                         ///< summed counters; compute_ns is the slowest worker's
   std::vector<QueryStats> worker_stats;     ///< per worker (endpoint order): its Result's counters, zero if none
   std::uint32_t blocks_assisted = 0;        ///< blocks the client answered itself (ScatterConfig::assist_blocks)
-  QueryStats assist;  ///< the client's own work on them (tests also in `stats`; its time here only)
+  QueryStats assist;               ///< the client's own work on them (tests also in `stats`; its time here only)
+  std::uint32_t blocks_moved = 0;  ///< blocks answered by their standby holder to balance the load (replicas)
   /// "Contacts" (paper §3.5): distinct colliding probe faces + distinct colliding object faces.
   std::size_t contacts() const { return probe_faces.size() + object_faces.size(); }
 };
@@ -165,6 +177,8 @@ struct WorkerStatus {
   /// Why it last refused a block set this client sent (its LoadFailed or TooLarge text, such as a
   /// set over its max_blockset_bytes or "worker full"); empty: none refused.
   std::string refused;
+  std::vector<std::uint32_t> standby_blocks;  ///< its copies of other workers' blocks (ScatterConfig::replicas)
+  bool holds_standby = false;                 ///< it has acknowledged its standby set (or has none)
 };
 
 /// The collision thread's client to the worker fleet.

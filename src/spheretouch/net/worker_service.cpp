@@ -21,6 +21,27 @@
 
 namespace st::inline SPHERETOUCH_ABI::net {
 
+namespace {
+/// Adds `more` (ascending by block) to `into` (ascending by block): a block in both sums its work.
+void add_worked(std::vector<WorkedBlock>& into, const std::vector<WorkedBlock>& more) {
+  if (more.empty()) return;
+  const std::size_t mid = into.size();
+  into.insert(into.end(), more.begin(), more.end());
+  const auto by_block = [](const WorkedBlock& a, const WorkedBlock& b) { return a.block < b.block; };
+  std::inplace_merge(into.begin(), into.begin() + std::ptrdiff_t(mid), into.end(), by_block);
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < into.size(); ++i) {
+    if (n > 0 && into[n - 1].block == into[i].block) {
+      const std::uint32_t w = into[i].work;
+      into[n - 1].work = into[n - 1].work > UINT32_MAX - w ? UINT32_MAX : into[n - 1].work + w;
+    } else {
+      into[n++] = into[i];
+    }
+  }
+  into.resize(n);
+}
+}  // namespace
+
 /// A complete upload being hashed, decoded and built on the loader thread. The thread owns a
 /// reference, so a service destroyed mid-build leaves it to finish on its own.
 struct WorkerService::LoadJob {
@@ -593,13 +614,26 @@ void WorkerService::answer(const Pending& p) {
     send(peer, hello(p.owner, 0));  // tell the client what is held so it can load the right set
     return;
   }
-  if (it->object != q.object) {  // the client named another object than the set's: its pairs would be misread
-    send_error(peer, ErrorCode::BadMessage, q.seq,
-               st::fail("Query names object ", q.object, " but block set ", std::hex, q.hash, std::dec,
-                        " is a share of object ", it->object)
-                   .message);
-    return;
+  // The standby set (ScatterConfig::replicas): this client's too, held, of the same object.
+  auto sb = sets_.end();
+  if (q.standby != 0) {
+    sb = std::find_if(sets_.begin(), sets_.end(),
+                      [&](const Loaded& l) { return l.hash == q.standby && l.owner == p.owner; });
+    if (sb == sets_.end()) {
+      send_error(peer, ErrorCode::NotLoaded, q.seq,
+                 st::fail("standby block set ", std::hex, q.standby, " is not held").message);
+      send(peer, hello(p.owner, 0));
+      return;
+    }
   }
+  for (const auto& l : {it, sb})
+    if (l != sets_.end() && l->object != q.object) {  // another object than the set's: its pairs would be misread
+      send_error(peer, ErrorCode::BadMessage, q.seq,
+                 st::fail("Query names object ", q.object, " but block set ", std::hex, l->hash, std::dec,
+                          " is a share of object ", l->object)
+                     .message);
+      return;
+    }
   Client& c = client(p.owner);
   const auto now = std::chrono::steady_clock::now();
   if (now < c.penalty_until) {  // its last query was refused as too large: no work for it yet
@@ -611,13 +645,26 @@ void WorkerService::answer(const Pending& p) {
                    .message);
     return;
   }
+  if (sb != sets_.end()) {
+    sets_.splice(sets_.begin(), sets_, sb);
+    sb->last_used = sb->queried = now;
+  }
   sets_.splice(sets_.begin(), sets_, it);  // most recently used first
   it->last_used = it->queried = now;
   pairs_.clear();
   // The backend stops past max_pairs (a block set of faces piled on each other cannot make the
   // worker compute and hold N² pairs before refusing) and past the set's work budget (nor N²
   // tests that find no pair).
-  const QueryStats st = it->backend->query(q.pose, q.skip, pairs_, {cfg_.limits.max_pairs, it->work});
+  QueryStats st = it->backend->query(q.pose, q.skip, pairs_, {cfg_.limits.max_pairs, it->work});
+  worked_.assign(it->backend->worked().begin(), it->backend->worked().end());
+  if (sb != sets_.end() && !q.take.empty() && pairs_.size() <= cfg_.limits.max_pairs && !st.work_limit_hit) {
+    const QueryStats more = sb->backend->query_only(q.pose, q.take, pairs_, {cfg_.limits.max_pairs, sb->work});
+    st.sphere_tests += more.sphere_tests;
+    st.tri_tests += more.tri_tests;
+    st.compute_ns += more.compute_ns;
+    st.work_limit_hit = more.work_limit_hit;
+    add_worked(worked_, sb->backend->worked());
+  }
   c.cost_ns = std::max(c.cost_at(now), double(st.compute_ns));
   c.seen = now;
   const bool too_many = pairs_.size() > cfg_.limits.max_pairs;
@@ -640,7 +687,6 @@ void WorkerService::answer(const Pending& p) {
   ++counters_.queries;
   ResultMsg r{q.seq, cfg_.worker_id, q.hash, st, {}, q.object, {}};
   r.worked.swap(worked_);
-  r.worked.assign(it->backend->worked().begin(), it->backend->worked().end());
   if (r.worked.size() > cfg_.limits.max_worked) {  // the heaviest, by ascending id again
     std::nth_element(r.worked.begin(), r.worked.begin() + cfg_.limits.max_worked, r.worked.end(),
                      [](const WorkedBlock& a, const WorkedBlock& b) { return a.work > b.work; });
