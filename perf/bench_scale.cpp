@@ -356,11 +356,12 @@ struct Row {
   const std::vector<std::uint32_t>* block_faces = nullptr;  // faces per block
   double block_imbalance = 0, shipped_imbalance = 0;
   std::uint32_t shipped_blocks = 0, shipped_faces = 0;
-  // The replicated deal (a model; not built): every block held by two workers (its owner and
-  // second_holder()), and each round the client gives each block that worked the round before to
-  // the less loaded of its two holders (replicated_deal()), judged by the work the workers report
-  // for each block (ResultMsg::worked) at the pose of the round before. Each worker holds two
-  // shares' memory.
+  // The replicated deal (built: ScatterConfig::replicas; modelled here on each block's counted
+  // work): every block held by two workers (its owner and net::second_holder()), and each round
+  // the client gives each block that worked the round before to the less loaded of its two holders
+  // (replicated_deal(), a fresh deal without the client's stickiness), judged by the work the
+  // workers report for each block (ResultMsg::worked) at the pose of the round before. Each worker
+  // holds two shares' memory.
   double replicated_imbalance = 0;
   // Client assist (built: ScatterConfig::assist_blocks): the client answers the blocks
   // net::choose_assist() picks from the work reported for each block at the pose of the round
@@ -461,17 +462,8 @@ std::vector<std::uint32_t> ship(const std::vector<double>& before, std::vector<s
   return moved;
 }
 
-/// The second holder of block k in the replicated deal: a worker other than its owner, drawn by a
-/// hash of k, so that the blocks of one contact (neighbours in the tree's order, which
-/// block-cyclic deals to neighbouring workers) have their second copies spread over the fleet.
-std::uint32_t second_holder(std::uint32_t k, std::uint32_t owner, std::uint32_t workers) {
-  if (workers < 2) return owner;
-  const std::uint64_t h = (std::uint64_t(k) + 1) * 0x9e3779b97f4a7c15ull;
-  return std::uint32_t((owner + 1 + (h >> 33) % (workers - 1)) % workers);
-}
-
 /// The replicated deal of one round: the blocks with work predicted (by the round before), the
-/// heaviest first, each to the less loaded of its owner and second_holder() (a two-choice longest
+/// heaviest first, each to the less loaded of its owner and net::second_holder() (a two-choice longest
 /// processing time first); the others stay with their owner. Returns block -> worker.
 std::vector<std::uint32_t> replicated_deal(const std::vector<double>& predicted, std::vector<std::uint32_t> owner,
                                            std::uint32_t workers) {
@@ -481,7 +473,7 @@ std::vector<std::uint32_t> replicated_deal(const std::vector<double>& predicted,
   std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) { return predicted[x] > predicted[y]; });
   std::vector<double> load(workers, 0.0);
   for (std::uint32_t k : order) {
-    const std::uint32_t other = second_holder(k, owner[k], workers);
+    const std::uint32_t other = net::second_holder(k, owner[k], workers);
     if (load[other] < load[owner[k]]) owner[k] = other;
     load[owner[k]] += predicted[k];
   }
@@ -737,9 +729,14 @@ void run_scale(const ScaleArgs& a) {
           net::ResultMsg msg;
           msg.seq = 1;
           msg.worker_id = w;
-          msg.pairs = out;
           std::vector<std::uint8_t> frame;
-          const double enc = time_median_us(a.runs, [&] { net::encode(msg, frame); });
+          // The worker sorts its pairs (the client merges sorted runs), then encodes them.
+          const double enc = time_median_us(a.runs, [&] {
+            msg.pairs = out;
+            std::sort(msg.pairs.begin(), msg.pairs.end());
+            msg.pairs.erase(std::unique(msg.pairs.begin(), msg.pairs.end()), msg.pairs.end());
+            net::encode(msg, frame);
+          });
           Row& r = prow[i];
           ++r.busy;
           r.sum_us += q;
@@ -758,16 +755,21 @@ void run_scale(const ScaleArgs& a) {
       for (std::size_t i = 0; i < poses.size(); ++i) {
         Row& r = prow[i];
         r.mean_us = r.sum_us / W;
-        // The client: decode every Result, merge (sort, deduplicate) their pairs.
+        // The client: decode every Result and merge their pairs as ScatterGather does (each
+        // worker's pairs a sorted run, one k-way merge, duplicates dropped).
         r.client_us = time_median_us(a.runs, [&] {
           std::vector<net::FacePair> merged;
+          geom::SortedRuns runs;
           for (const auto& f : replies[i]) {
             auto d = net::decode(f, limits);
             if (d)
-              if (const auto* res = std::get_if<net::ResultMsg>(&d.value()))
+              if (const auto* res = std::get_if<net::ResultMsg>(&d.value())) {
+                runs.begin(merged.size());
                 merged.insert(merged.end(), res->pairs.begin(), res->pairs.end());
+                runs.end(merged);
+              }
           }
-          std::sort(merged.begin(), merged.end());
+          runs.merge(merged);
           merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
         });
         r.compute_round_us = r.encode_max_us + r.client_us;
@@ -841,60 +843,79 @@ void run_scale(const ScaleArgs& a) {
   // cost per test. Deterministic: counts, not times (the 8 workers share this VM's two cores).
   struct AssistRound {
     std::size_t pose = 0;
-    std::uint32_t contacts = 0, blocks = 0;
+    std::uint32_t workers = 0, contacts = 0, blocks = 0;
     double imbalance = 0;  // without assist: max / mean of the workers' counted work
     double assisted = 0;   // with assist: the same over the workers
     double critical = 0;   // with assist: max(slowest worker, client) / (all of it / W)
     double client = 0;     // with assist: the client's work / the slowest worker's
+    double replicated = 0;           // the replicated deal (ScatterConfig::replicas): workers' max / mean
+    double replicated_critical = 0;  // replicas + assist: max(slowest worker, client) / (all of it / W)
+    std::uint32_t moved = 0;         // blocks the replicated deal gave to their standby holder
   };
   std::vector<AssistRound> assist_rounds;
-  const std::uint32_t assist_w = std::min<std::uint32_t>(8, a.max_workers);
-  if (a.assist_blocks > 0 && assist_w >= 2) {
+  std::vector<std::uint32_t> real_ws;
+  for (std::uint32_t w : {8u, 16u, 32u})
+    if (w <= a.max_workers) real_ws.push_back(w);
+  if (a.assist_blocks > 0 && real_ws.empty() && a.max_workers >= 2) real_ws.push_back(a.max_workers);
+  for (const std::uint32_t assist_w : real_ws) {
+    if (a.assist_blocks == 0) break;
+    std::fprintf(stderr, "scale: real rounds with %u in-process workers (plain, assist, replicas, both)\n", assist_w);
     zmq::context_t actx(1);
     const Split sp = split_for(assist_w, geom::Mapping::block_cyclic);
     auto blocks = net::tree_blocks(part_tree, sp.layer, sp.block_size);
     if (!blocks) die(blocks.error());
-    const std::string tag = "assist-" + std::to_string(::getpid());
+    const std::string tag = "assist-" + std::to_string(::getpid()) + "-" + std::to_string(assist_w);
+    net::WorkerConfig room;  // four clients, up to two sets each (a share and its standby copies)
+    room.max_sets = 8;
     auto lw = net::LocalWorkers::start(actx, int(assist_w), share_backends(per_block),
-                                       [&](int i) { return net::inproc_endpoint(i, tag); });
+                                       [&](int i) { return net::inproc_endpoint(i, tag); }, room);
     if (!lw) die(lw.error());
-    std::unique_ptr<net::ScatterGather> sg[2];
-    for (int k = 0; k < 2; ++k) {
+    constexpr int kClients = 4;  // plain, assist, replicas, replicas + assist
+    std::unique_ptr<net::ScatterGather> sg[kClients];
+    for (int k = 0; k < kClients; ++k) {
       net::ScatterConfig cfg;
       cfg.endpoints = lw.value()->endpoints();
-      cfg.assist_blocks = k ? a.assist_blocks : 0;
+      cfg.assist_blocks = k % 2 ? a.assist_blocks : 0;
+      cfg.replicas = k >= 2;
       auto c = net::ScatterGather::create(actx, cfg, probe, object, blocks.value());
       if (!c) die(c.error());
       sg[k] = std::move(c).value();
-      if (!sg[k]->wait_ready(Clock::now() + std::chrono::seconds(120))) die("in-process workers not ready");
+      if (!sg[k]->wait_ready(Clock::now() + std::chrono::seconds(300))) die("in-process workers not ready");
     }
     const auto work = [&](const net::QueryStats& q) {
       return cost_sphere_us * double(q.sphere_tests) + cost_tri_us * double(q.tri_tests);
     };
     std::uint64_t seq = 0;
-    net::RoundResult r[2];
+    net::RoundResult r[kClients];
     for (std::size_t i = 0; i < poses.size(); ++i) {
-      for (int k = 0; k < 2; ++k) {
+      for (int k = 0; k < kClients; ++k) {
         sg[k]->round(++seq, poses_before[i], Clock::now() + std::chrono::seconds(60), r[k]);
         sg[k]->round(++seq, poses[i], Clock::now() + std::chrono::seconds(60), r[k]);
-        if (!r[k].complete) die("client assist check: an incomplete round");
+        if (!r[k].complete) die("real rounds check: an incomplete round");
+        if (r[k].pairs != r[0].pairs) die("real rounds check: the pairs differ with assist or replicas");
       }
-      if (r[0].pairs != r[1].pairs) die("client assist check: the pairs differ with and without assist");
       AssistRound ar;
       ar.pose = i + 1;
+      ar.workers = assist_w;
       ar.contacts = std::uint32_t(r[0].contacts());
       ar.blocks = r[1].blocks_assisted;
-      double load[2] = {0, 0}, sum[2] = {0, 0};
-      for (int k = 0; k < 2; ++k)
+      ar.moved = r[2].blocks_moved;
+      double load[kClients] = {}, sum[kClients] = {};
+      for (int k = 0; k < kClients; ++k)
         for (const net::QueryStats& q : r[k].worker_stats) {
           load[k] = std::max(load[k], work(q));
           sum[k] += work(q);
         }
-      const double client = work(r[1].assist);
+      const auto critical = [&](int k) {
+        const double client = work(r[k].assist), all = sum[k] + client;
+        return all > 0 ? std::max(load[k], client) * assist_w / all : 1.0;
+      };
       ar.imbalance = sum[0] > 0 ? load[0] * assist_w / sum[0] : 1.0;
       ar.assisted = sum[1] > 0 ? load[1] * assist_w / sum[1] : 1.0;
-      ar.critical = sum[1] + client > 0 ? std::max(load[1], client) * assist_w / (sum[1] + client) : 1.0;
-      ar.client = load[1] > 0 ? client / load[1] : 0.0;
+      ar.critical = critical(1);
+      ar.client = load[1] > 0 ? work(r[1].assist) / load[1] : 0.0;
+      ar.replicated = sum[2] > 0 ? load[2] * assist_w / sum[2] : 1.0;
+      ar.replicated_critical = critical(3);
       assist_rounds.push_back(ar);
     }
   }
@@ -1064,6 +1085,15 @@ void run_scale(const ScaleArgs& a) {
   const auto predicted = [&](const Row& r, const Network& n) {
     return r.compute_round_us + client_gather(r.workers, n) + n.rtt_us + double(r.max_reply_bytes) / n.bytes_per_us;
   };
+  // With the replicated deal (ScatterConfig::replicas): the slowest worker is the mean one times
+  // the deal's imbalance (replicated_imbalance, judged by the work reported the round before);
+  // its encode and the client's merge as measured.
+  const auto compute_replicated = [](const Row& r) {
+    return r.mean_us * r.replicated_imbalance + (r.encode_max_us - r.max_us) + r.client_us;
+  };
+  const auto predicted_replicated = [&](const Row& r, const Network& n) {
+    return predicted(r, n) - r.compute_round_us + compute_replicated(r);
+  };
 
   if (a.json) {
     // Byte and face counts are whole numbers held in doubles: integers in the JSON, as before.
@@ -1138,19 +1168,25 @@ void run_scale(const ScaleArgs& a) {
         j[std::string("round_") + n.name + "_us"] = round_to(predicted(r, n), 2);
         j[std::string("speedup_") + n.name] = round_to(r.single_us / predicted(r, n), 3);
       }
+      j["compute_speedup_replicated"] = round_to(r.single_us / compute_replicated(r), 3);
+      for (const Network& n : kNetworks)
+        j[std::string("speedup_") + n.name + "_replicated"] = round_to(r.single_us / predicted_replicated(r, n), 3);
       rws.push_back(std::move(j));
     }
     Json assist = Json::array();
     for (const AssistRound& x : assist_rounds)
       assist.push_back({{"pose", x.pose},
                         {"contacts", x.contacts},
-                        {"workers", assist_w},
+                        {"workers", x.workers},
                         {"assist_blocks", a.assist_blocks},
                         {"blocks_assisted", x.blocks},
                         {"imbalance_counted", round_to(x.imbalance, 3)},
                         {"assisted_imbalance", round_to(x.assisted, 3)},
                         {"assist_critical", round_to(x.critical, 3)},
-                        {"assist_client", round_to(x.client, 3)}});
+                        {"assist_client", round_to(x.client, 3)},
+                        {"replicated_real", round_to(x.replicated, 3)},
+                        {"replicated_assist_critical", round_to(x.replicated_critical, 3)},
+                        {"blocks_moved", x.moved}});
     Json summary = Json::array();
     for (const Summary& u : summaries) {
       Json j = {{"workers", u.workers}, {"mapping", geom::to_string(u.mapping)}, {"poses", u.poses}};
@@ -1211,24 +1247,26 @@ void run_scale(const ScaleArgs& a) {
       "counted work: %.4f us per sphere-pair test, %.4f us per triangle-pair test (measured: the single thread's "
       "queries stopped at the leaf spheres, and the rest of the exact ones)\n",
       cost_sphere_us, cost_tri_us);
-  std::printf("\n%4s %8s %3s %-12s %5s %4s %8s %8s %8s %6s %6s %6s %6s %6s %6s %8s %8s %7s %7s %7s\n", "pose",
+  std::printf("\n%4s %8s %3s %-12s %5s %4s %8s %8s %8s %6s %6s %6s %6s %6s %6s %8s %8s %7s %7s %7s %7s\n", "pose",
               "contacts", "W", "mapping", "layer", "B", "single", "max", "mean", "imbal", "redund", "imbal#", "redun#",
-              "xsph", "xtri", "compute", "10GbE", "x10GbE", "xvm", "x100GbE");
+              "xsph", "xtri", "compute", "10GbE", "x10GbE", "xvm", "x100GbE", "xrep");
   for (const Row& r : rows)
     std::printf(
         "%4zu %8u %3u %-12s %5u %4u %8.1f %8.1f %8.1f %6.2f %6.2f %6.2f %6.2f %6.2f %6.2f %8.1f %8.1f %7.2f %7.2f "
-        "%7.2f\n",
+        "%7.2f %7.2f\n",
         r.pose, r.contacts, r.workers, geom::to_string(r.mapping), r.split.layer, r.split.block_size, r.single_us,
         r.max_us, r.mean_us, r.imbalance(), r.redundancy(), r.work_imbalance(), r.work_redundancy(), r.sphere_ratio(),
         r.tri_ratio(), r.compute_round_us, predicted(r, kNetworks[0]), r.single_us / predicted(r, kNetworks[0]),
-        r.single_us / predicted(r, kNetworks[1]), r.single_us / predicted(r, kNetworks[2]));
+        r.single_us / predicted(r, kNetworks[1]), r.single_us / predicted(r, kNetworks[2]),
+        r.single_us / predicted_replicated(r, kNetworks[0]));
   std::printf(
       "single/max/mean: us per round (one thread; slowest worker; mean over W); imbal = max/mean; redund = sum "
       "over workers / single (time); imbal#, redun#: the same from the counted tests weighted by the measured cost "
       "per test (deterministic); xsph, xtri = sphere-pair and triangle-pair tests summed over workers / single "
       "(counted); compute = slowest worker with its encode + the client's decode and merge; "
       "10GbE = compute + W x message work + 16.25 us + largest reply at 10 Gbit/s; x = single / predicted "
-      "round (xvm: with this VM's client CPU per round instead)\n");
+      "round (xvm: with this VM's client CPU per round instead; xrep: 10GbE with the replicated deal, the slowest "
+      "worker = mean x the deal's imbalance)\n");
   std::printf(
       "\nover the %zu poses (mean / median / max): imbal#, imbal, redun#, redun as above; from the counted work of "
       "each block alone: blocks = the mapping's deal, oracle = the same blocks dealt knowing the pose (largest "
@@ -1238,7 +1276,7 @@ void run_scale(const ScaleArgs& a) {
       "net::choose_assist on the work reported per block the round before), critical = the slowest of them and "
       "the client against all the work dealt evenly over W (blocks' own denominator); replicated = every block "
       "also held by a second worker (drawn by a hash of the block) and each round given to the less loaded "
-      "holder, judged by the work reported per block the round before (a model, not built: two shares' memory "
+      "holder, judged by the work reported per block the round before (built: ScatterConfig::replicas, modelled here on each block's work; two shares' memory "
       "per worker)\n",
       poses.size(), a.ship_blocks, a.ship_motion_mm, a.assist_blocks);
   std::printf("%3s %-12s %20s %20s %20s %20s %20s %20s %20s %20s %20s %20s\n", "W", "mapping", "imbal#", "imbal",
@@ -1263,20 +1301,17 @@ void run_scale(const ScaleArgs& a) {
         c.compute_corun_us, c.predicted_corun_us, 100.0 * (c.predicted_corun_us - c.measured_us) / c.measured_us);
   if (!assist_rounds.empty()) {
     std::printf(
-        "client assist in real rounds (W = %u in-process workers, block-cyclic; up to %u blocks; after a round at the "
-        "pose %.3g mm away; counted work from each worker's Result): imbalance = workers' max / mean without assist, "
-        "assisted = with it, critical = max(slowest worker, client) / (all work / W), client = client / slowest "
-        "worker\n",
-        assist_w, a.assist_blocks, a.ship_motion_mm);
-    double m[4] = {0, 0, 0, 0}, x[4] = {0, 0, 0, 0};
-    for (const AssistRound& r : assist_rounds) {
-      std::printf("  pose %zu, %u contacts: imbalance %.2f, assisted %.2f, critical %.2f, client %.2f (%u blocks)\n",
-                  r.pose, r.contacts, r.imbalance, r.assisted, r.critical, r.client, r.blocks);
-      const double v[4] = {r.imbalance, r.assisted, r.critical, r.client};
-      for (int k = 0; k < 4; ++k) m[k] += v[k] / double(assist_rounds.size()), x[k] = std::max(x[k], v[k]);
-    }
-    std::printf("  mean / max: imbalance %.2f / %.2f, assisted %.2f / %.2f, critical %.2f / %.2f, client %.2f / %.2f\n",
-                m[0], x[0], m[1], x[1], m[2], x[2], m[3], x[3]);
+        "real rounds (in-process workers, block-cyclic; assist up to %u blocks; after a round at the pose %.3g mm "
+        "away; counted work from each worker's Result): imbalance = workers' max / mean, plain; assisted = with the "
+        "client assist; critical = max(slowest worker, client) / (all work / W); client = client / slowest worker; "
+        "replicated = with the replicated deal; repl+assist critical = both\n",
+        a.assist_blocks, a.ship_motion_mm);
+    for (const AssistRound& r : assist_rounds)
+      std::printf(
+          "  W=%u pose %zu, %u contacts: imbalance %.2f, assisted %.2f, critical %.2f, client %.2f (%u blocks); "
+          "replicated %.2f (%u moved), repl+assist critical %.2f\n",
+          r.workers, r.pose, r.contacts, r.imbalance, r.assisted, r.critical, r.client, r.blocks, r.replicated, r.moved,
+          r.replicated_critical);
   }
   std::printf("memory: largest share / whole object (tree + mesh):");
   for (const Memory& m : memory)

@@ -1026,6 +1026,23 @@ def scale_doc(doc, md):
                         f_ratio(r.get(k)) for k in ["compute_speedup"] + [f"speedup_{n}" for n in nets]))
                 body.append(row)
             md += md_table(["contacts", "mapping", "one thread µs"] + [f"W={w}" for w in ws], body, left=2)
+            rep = [k for k in keys if k[1] == "block-cyclic"
+                   and any("compute_speedup_replicated" in by.get((k[0], k[1], w), {}) for w in ws)]
+            if rep:
+                md.append("With the replicated deal (`[workers] replicas`: the slowest worker = the mean one x the "
+                          "deal's imbalance on the work reported the round before), block-cyclic, compute only"
+                          + "".join(f" / {n}" for n in nets) + ":\n")
+                body = []
+                for pose, mapping in rep:
+                    r0 = next((by[(pose, mapping, w)] for w in ws if (pose, mapping, w) in by), {})
+                    row = [f_count(r0.get("contacts")), f_us(r0.get("single_us"))]
+                    for w in ws:
+                        r = by.get((pose, mapping, w))
+                        row.append(DASH if r is None else " / ".join(
+                            f_ratio(r.get(k)) for k in ["compute_speedup_replicated"]
+                            + [f"speedup_{n}_replicated" for n in nets]))
+                    body.append(row)
+                md += md_table(["contacts", "one thread µs"] + [f"W={w}" for w in ws], body, left=2)
         summ = []
         if summary_table(d.get("summary") or [], summ):
             md.append(f"Over the {len({r.get('pose') for r in rows_}) or DASH} poses, per W and mapping, mean / median / "
@@ -1054,8 +1071,10 @@ def scale_doc(doc, md):
             ak = []
             for a in ar:
                 ak += [k for k in a if k not in ak]
-            md.append("Client assist in real rounds (counted work; assist client = the client's work / the slowest "
-                      "worker's):\n")
+            md.append("Real rounds over in-process workers (counted work, from each worker's Result): the workers' "
+                      "max / mean plain, with the client assist, with the replicated deal (`replicated real`); "
+                      "critical = max(slowest worker, client) / (all work / W); assist client = the client's work / "
+                      "the slowest worker's:\n")
             md += md_table([label(k) for k in ak], [[f_auto(k, a.get(k)) for k in ak] for a in ar], left=0)
         mem = [m for m in d.get("memory") or [] if isinstance(m, dict)]
         if mem:
