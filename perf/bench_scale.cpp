@@ -844,10 +844,10 @@ void run_scale(const ScaleArgs& a) {
   struct AssistRound {
     std::size_t pose = 0;
     std::uint32_t workers = 0, contacts = 0, blocks = 0;
-    double imbalance = 0;  // without assist: max / mean of the workers' counted work
-    double assisted = 0;   // with assist: the same over the workers
-    double critical = 0;   // with assist: max(slowest worker, client) / (all of it / W)
-    double client = 0;     // with assist: the client's work / the slowest worker's
+    double imbalance = 0;            // without assist: max / mean of the workers' counted work
+    double assisted = 0;             // with assist: the same over the workers
+    double critical = 0;             // with assist: max(slowest worker, client) / (all of it / W)
+    double client = 0;               // with assist: the client's work / the slowest worker's
     double replicated = 0;           // the replicated deal (ScatterConfig::replicas): workers' max / mean
     double replicated_critical = 0;  // replicas + assist: max(slowest worker, client) / (all of it / W)
     std::uint32_t moved = 0;         // blocks the replicated deal gave to their standby holder
@@ -867,8 +867,8 @@ void run_scale(const ScaleArgs& a) {
     const std::string tag = "assist-" + std::to_string(::getpid()) + "-" + std::to_string(assist_w);
     net::WorkerConfig room;  // four clients, up to two sets each (a share and its standby copies)
     room.max_sets = 8;
-    auto lw = net::LocalWorkers::start(actx, int(assist_w), share_backends(per_block),
-                                       [&](int i) { return net::inproc_endpoint(i, tag); }, room);
+    auto lw = net::LocalWorkers::start(
+        actx, int(assist_w), share_backends(per_block), [&](int i) { return net::inproc_endpoint(i, tag); }, room);
     if (!lw) die(lw.error());
     constexpr int kClients = 4;  // plain, assist, replicas, replicas + assist
     std::unique_ptr<net::ScatterGather> sg[kClients];
@@ -1276,7 +1276,8 @@ void run_scale(const ScaleArgs& a) {
       "net::choose_assist on the work reported per block the round before), critical = the slowest of them and "
       "the client against all the work dealt evenly over W (blocks' own denominator); replicated = every block "
       "also held by a second worker (drawn by a hash of the block) and each round given to the less loaded "
-      "holder, judged by the work reported per block the round before (built: ScatterConfig::replicas, modelled here on each block's work; two shares' memory "
+      "holder, judged by the work reported per block the round before (built: ScatterConfig::replicas, modelled here "
+      "on each block's work; two shares' memory "
       "per worker)\n",
       poses.size(), a.ship_blocks, a.ship_motion_mm, a.assist_blocks);
   std::printf("%3s %-12s %20s %20s %20s %20s %20s %20s %20s %20s %20s %20s\n", "W", "mapping", "imbal#", "imbal",

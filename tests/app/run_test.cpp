@@ -249,6 +249,22 @@ TEST_CASE(
   CHECK(flagged_sliding == sliding);
 }
 
+TEST_CASE("run: [workers] replicas = true deals every block over two in-process workers; every round complete") {
+  st::test::TempDir d;
+  std::string scene = kScene;
+  scene.replace(scene.find("count = 0"), 9, "count = 3\nreplicas = true");
+  st::test::write_file(d.file("scene.toml"), scene);
+  const auto r =
+      run_command(spheretouch_exe() + " run " + d.file("scene.toml") + " --out " + d.file("run") + " --duration 2.5");
+  INFO(r.output);
+  REQUIRE(r.exit_code == 0);
+  CHECK(contains(r.output, "3 in-process workers, every block on two workers (replicated deal)"));
+  CHECK(contains(r.output, " 0 incomplete"));
+  const auto at = r.output.find("force           peak ");
+  REQUIRE(at != std::string::npos);
+  CHECK(std::atof(r.output.c_str() + at + 21) > 0.1);  // pressed: the replicated rounds found the contact
+}
+
 TEST_CASE("run: a full disk is an error naming the file, and the summary is printed whatever happens") {
   // /dev/full accepts the open and fails every write with ENOSPC, as a full disk does.
   REQUIRE(std::filesystem::exists("/dev/full"));
@@ -368,6 +384,8 @@ TEST_CASE("scene files: each kind of mistake gets an error naming the field") {
        "workers.count: expected an integer"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[collision]\ncoherent = \"yes\"\n",
        "collision.coherent: expected true or false"},
+      {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[workers]\nreplicas = 2\n",
+       "workers.replicas: expected true or false"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[device]\ntarget = [1, 2]\n",
        "device.target: expected an array of 3 numbers"},
       {"[probe]\nbuiltin = \"capsule\"\n[object]\nbuiltin = \"box\"\n[force]\ncontinuous_n = 5\n",
@@ -585,6 +603,7 @@ TEST_CASE("scene files: configs/demo.toml and configs/small.toml parse, with the
   CHECK(demo.value().layer == st::geom::kFree);
   CHECK(demo.value().block_size == 0);
   CHECK(demo.value().mapping == st::geom::Mapping::block_cyclic);
+  CHECK_FALSE(demo.value().replicas);  // one holder per block unless a scene asks for two
   // The documented contact and passivity values are the defaults.
   CHECK(demo.value().contact.model == st::geom::DefaultContactConfig().model);
   CHECK(demo.value().contact.hold_margin_mm == st::geom::DefaultContactConfig().hold_margin_mm);

@@ -60,6 +60,7 @@ void wire_seeds(const fs::path& dir) {
   write_frame(dir, "query", QueryMsg{99, 0xabcull, some_pose(), {}});
   write_frame(dir, "query_identity", QueryMsg{1, 2, geom::Pose::Identity(), {}});
   write_frame(dir, "query_skip", QueryMsg{3, 0xabcull, some_pose(), {0, 2, 9}});
+  write_frame(dir, "query_take", QueryMsg{4, 0xabcull, some_pose(), {1}, 0, 0xdefull, {0, 2, 9}});
   write_frame(dir, "result", ResultMsg{99, 3, 0xabcull, {10, 20, 30}, {{1, 2}, {3, 4}, {0xffffffffu, 0}}});
   write_frame(dir, "result_empty", ResultMsg{1, 0, 0, {}, {}});
   ResultMsg worked{99, 3, 0xabcull, {10, 20, 30}, {{1, 2}}};
@@ -177,6 +178,17 @@ void worker_seeds(const fs::path& dir) {
   add_record(seq, 1, encode(QueryMsg{2, h, touching, {}}));
   add_record(seq, 1, encode(HeartbeatMsg{3}));
   write(dir / "seed_load_query.bin", seq.data(), seq.size());
+  // A second set (standby copies of the first blocks), then a Query naming it and taking two.
+  seq.clear();
+  const std::vector<std::uint32_t> few = {0, 1, 2};
+  const std::vector<std::uint8_t> enc2 = encode_block_set(make_block_set(probe, object, blocks, few, 4).value());
+  const std::uint64_t h2 = block_set_hash(enc2);
+  add_record(seq, 0, encode(first));
+  add_record(seq, 0, encode(second));
+  add_record(seq, 0, encode(LoadBlocksMsg{h2, enc2.size(), 0, enc2}));
+  add_record(seq, 0, encode(QueryMsg{5, h, touching, {1}, 0, h2, {0, 1}}));
+  add_record(seq, 0, encode(QueryMsg{6, h, touching, {}, 0, h2 ^ 1, {2}}));
+  write(dir / "seed_standby.bin", seq.data(), seq.size());
   // Interleaved uploads, one restarted, a third client refused, then the same bytes shared.
   seq.clear();
   add_record(seq, 0, encode(first));

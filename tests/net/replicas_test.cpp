@@ -154,8 +154,9 @@ TEST_CASE("the deal: a block stays with its last holder within the stickiness; a
   for (const auto& p : peers) CHECK((p.skip.empty() && p.take.empty()));
 }
 
-TEST_CASE("replicated deal over in-process workers: exact, complete and balanced; a stopped worker's blocks from "
-          "their copies") {
+TEST_CASE(
+    "replicated deal over in-process workers: exact, complete and balanced; a stopped worker's blocks from "
+    "their copies") {
   zmq::context_t ctx;
   test::NetScene s = test::small_scene(16, 24);
   const geom::SphereTree tree = geom::SphereTree::build(s.object).value();
@@ -170,8 +171,9 @@ TEST_CASE("replicated deal over in-process workers: exact, complete and balanced
     // the last one sends after the fault: no set is evicted for another.
     WorkerConfig room;
     room.max_sets = 8;
-    auto wr = LocalWorkers::start(ctx, 4, tree_backend ? tree_backend_factory() : reference_backend_factory(),
-                                  [&](int i) { return inproc_endpoint(i, t); }, room);
+    auto wr = LocalWorkers::start(
+        ctx, 4, tree_backend ? tree_backend_factory() : reference_backend_factory(),
+        [&](int i) { return inproc_endpoint(i, t); }, room);
     REQUIRE_MESSAGE(wr.ok(), wr.error());
     LocalWorkers& w = *wr.value();
     for (const std::uint32_t assist : {0u, 4u}) {

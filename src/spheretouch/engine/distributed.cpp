@@ -178,6 +178,7 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
   cfg.mapping = spec.mapping;
   cfg.miss_limit = spec.miss_limit;
   cfg.assist_blocks = spec.assist_blocks;
+  cfg.replicas = spec.replicas;
   cfg.leaf_faces = spec.leaf_faces;
   if (spec.curve.enabled() && spec.endpoints.empty())
     return fail(
@@ -205,10 +206,10 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
     // A tag unique to this fleet keeps inproc names apart when several fleets share a process.
     static std::atomic<int> fleets{0};
     const std::string tag = std::to_string(::getpid()) + "-" + std::to_string(fleets++);
-    // Every object's set stays in memory (its own share and a reassigned variant), however long
-    // the probe stays away from it.
+    // Every object's sets stay in memory (its own share, its standby copies with replicas, and a
+    // reassigned variant), however long the probe stays away from it.
     net::WorkerConfig base;
-    base.max_sets = std::max<std::uint32_t>(base.max_sets, std::uint32_t(2 * objects.size() + 1));
+    base.max_sets = std::max<std::uint32_t>(base.max_sets, std::uint32_t((spec.replicas ? 3 : 2) * objects.size() + 1));
     if (objects.size() > 1) base.idle_set_ttl = std::chrono::milliseconds(0);
     Result<std::unique_ptr<net::LocalWorkers>> lw = net::LocalWorkers::start(
         fleet->ctx, spec.workers, net::tree_backend_factory(true, net::kDefaultMaxCrowding, spec.coherent),
@@ -218,6 +219,7 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
     cfg.endpoints = fleet->local->endpoints();
     fleet->description = std::to_string(spec.workers) + " in-process worker" + (spec.workers == 1 ? "" : "s");
   }
+  if (spec.replicas) fleet->description += ", every block on two workers (replicated deal)";
   if (spec.assist_blocks > 0)
     fleet->description += " + client assist (" + std::to_string(spec.assist_blocks) + " blocks)";
   for (std::size_t k = 0; k < objects.size(); ++k) {

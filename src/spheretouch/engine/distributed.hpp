@@ -49,7 +49,8 @@ struct FleetSpec {
   std::uint32_t leaf_faces = geom::DefaultTreeConfig().leaf_faces;  ///< tree knob sent to workers
   std::uint32_t miss_limit = 3;                                     ///< missed deadlines before a worker is marked down
   std::uint32_t assist_blocks = 0;  ///< blocks the client answers itself each round (net::ScatterConfig::assist_blocks)
-  bool coherent = true;  ///< in-process workers answer through the coherent collider (daemons: their own config)
+  bool coherent = true;   ///< in-process workers answer through the coherent collider (daemons: their own config)
+  bool replicas = false;  ///< every block on two workers, dealt by the work reported (net::ScatterConfig::replicas)
   std::chrono::milliseconds ready_timeout{30000};  ///< time allowed for the first upload
   /// A daemon silent this long is probed: a refused CURVE key or a security mismatch fails the
   /// start at once (waiting cannot help); anything else waits out ready_timeout.

@@ -224,6 +224,7 @@ Status RunEngine::State::prepare() {
     spec.assist_blocks =
         s.assist_blocks >= 0 ? std::uint32_t(s.assist_blocks) : (spec.endpoints.empty() ? 0u : kAutoAssistBlocks);
     spec.coherent = s.coherent;
+    spec.replicas = s.replicas;
     spec.curve = opt.curve;
     spec.note = opt.note;
     note("starting workers and loading their blocks ...");

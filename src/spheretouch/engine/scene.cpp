@@ -232,6 +232,7 @@ Result<Scene> parse_scene(const std::string& text, const std::string& name, cons
     r.number("deadline_ms", s.deadline_ms, 0.1, 10000);
     r.integer("down_after", s.down_after, 1, 1000);
     r.integer_or_auto("assist_blocks", s.assist_blocks, 0, 256, -1);
+    r.boolean("replicas", s.replicas);
     for (const std::string& ep : s.endpoints)
       if (ep.rfind("tcp://", 0) != 0 && ep.rfind("ipc://", 0) != 0)
         r.error("endpoints", "expected tcp://HOST:PORT or ipc://PATH endpoints (found '" + ep + "')");

@@ -124,6 +124,10 @@ struct Scene {
   /// Blocks the collision thread answers itself each round (net::ScatterConfig::assist_blocks);
   /// -1 = "auto": kAutoAssistBlocks with worker daemons, 0 (off) with in-process workers.
   int assist_blocks = -1;
+  /// Every block also on a second worker, dealt each round by the work reported
+  /// (net::ScatterConfig::replicas): evener rounds past 8 workers, a down worker's blocks answered
+  /// at once; twice the workers' memory.
+  bool replicas = false;
   double collision_rate_hz = 0;     ///< cap on collision rounds per second (0 = as fast as possible)
   int approx_layer = geom::kExact;  ///< kExact, or a sphere layer for the approximate mode
   /// [collision] coherent: the collision thread's own queries and the in-process workers' carry
