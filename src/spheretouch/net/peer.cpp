@@ -2,6 +2,7 @@
 // Peer (peer.hpp).
 #include <spheretouch/net/peer.hpp>
 
+#include <algorithm>
 #include <unordered_map>
 
 #include <spheretouch/geom/check.hpp>
@@ -119,6 +120,54 @@ Peer::Received Peer::receive(const Limits& limits, Clock::time_point now, Messag
   silent_since = std::max(silent_since, now);
   m = std::move(r).value();
   return Received::message;
+}
+
+namespace {
+bool is_superset(const std::vector<std::uint32_t>& big, const std::vector<std::uint32_t>& small) {
+  return std::includes(big.begin(), big.end(), small.begin(), small.end());
+}
+}  // namespace
+
+void choose_sets(std::vector<Peer>& peers, const BlockSetCache& sets, std::vector<std::uint8_t>& covered) {
+  std::fill(covered.begin(), covered.end(), 0);
+  // A held set the worker may be queried with: any but its standby set, which is taken from.
+  const auto queryable = [&](const Peer& p, std::uint64_t h) { return h != p.standby_hash ? sets.find(h) : nullptr; };
+  for (Peer& p : peers) {
+    p.asked = nullptr;
+    if (!heard(p.link)) continue;
+    if (p.holds(p.target_hash))
+      p.asked = sets.find(p.target_hash);
+    else
+      for (std::uint64_t h : p.held)
+        if (SetPtr s = queryable(p, h); s && (!p.asked || s->blocks.size() > p.asked->blocks.size())) p.asked = s;
+    if (p.asked)
+      for (std::uint32_t b : p.asked->blocks) covered[b] = 1;
+  }
+  if (!std::all_of(covered.begin(), covered.end(), [](std::uint8_t c) { return c; }))
+    for (Peer& p : peers) {
+      if (!heard(p.link)) continue;
+      SetPtr best;
+      std::size_t best_gain = 0;
+      for (std::uint64_t h : p.held) {
+        const SetPtr s = queryable(p, h);
+        if (!s || (p.asked && !is_superset(s->blocks, p.asked->blocks))) continue;
+        std::size_t gain = 0;
+        for (std::uint32_t b : s->blocks) gain += !covered[b];
+        if (gain > best_gain) {
+          best_gain = gain;
+          best = s;
+        }
+      }
+      if (best) {
+        p.asked = best;
+        for (std::uint32_t b : best->blocks) covered[b] = 1;
+      }
+    }
+  for (Peer& p : peers) {
+    p.standby_asked = nullptr;
+    if (p.asked && p.standby_hash != p.asked->hash && p.holds(p.standby_hash))
+      p.standby_asked = sets.find(p.standby_hash);
+  }
 }
 
 void refresh_targets(std::vector<Peer>& peers, BlockSetCache& sets) {

@@ -140,6 +140,12 @@ struct Peer {
   Received receive(const Limits& limits, Clock::time_point now, Message& m);
 };
 
+/// Picks the block set each live worker is queried with (Peer::asked): its target if it holds it,
+/// otherwise the largest set it holds but its standby set; then, while blocks are uncovered, a
+/// held superset that covers them (a survivor keeps answering for a returning worker's blocks
+/// until that one is loaded). `covered` (per block) says which blocks the asked sets hold. Each
+/// queried worker that holds its standby set names it too (Peer::standby_asked).
+void choose_sets(std::vector<Peer>& peers, const BlockSetCache& sets, std::vector<std::uint8_t>& covered);
 /// Each live worker's target hash, once its target set is encoded (BlockSetCache::get starts
 /// the encoding).
 void refresh_targets(std::vector<Peer>& peers, BlockSetCache& sets);

@@ -29,12 +29,6 @@ using client::SetPtr;
 using client::Turn;
 using client::TurnEvent;
 
-namespace {
-bool is_superset(const std::vector<std::uint32_t>& big, const std::vector<std::uint32_t>& small) {
-  return std::includes(big.begin(), big.end(), small.begin(), small.end());
-}
-}  // namespace
-
 struct ScatterGather::Impl {
   zmq::context_t* ctx = nullptr;
   // This client's ZeroMQ routing id on every worker socket (reconnects keep it); see
@@ -177,57 +171,6 @@ struct ScatterGather::Impl {
     for (Peer& p : peers) drain(p, now);
   }
 
-  // ---- choosing what to ask -----------------------------------------------------------------
-
-  /// Picks the block set each live worker is queried with: its target if it holds it, otherwise
-  /// the largest set it holds but its standby set; then, while blocks are uncovered, a held superset that covers
-  /// them (a survivor keeps answering for a returning worker's blocks until that one is loaded).
-  void choose_sets() {
-    std::fill(covered.begin(), covered.end(), 0);
-    for (Peer& p : peers) {
-      p.asked = nullptr;
-      if (!heard(p.link)) continue;
-      if (p.holds(p.target_hash))
-        p.asked = sets->find(p.target_hash);
-      else
-        for (std::uint64_t h : p.held)
-          if (SetPtr s = h != p.standby_hash ? sets->find(h) : nullptr;
-              s && (!p.asked || s->blocks.size() > p.asked->blocks.size()))
-            p.asked = s;
-      if (p.asked)
-        for (std::uint32_t b : p.asked->blocks) covered[b] = 1;
-    }
-    if (std::all_of(covered.begin(), covered.end(), [](std::uint8_t c) { return c; })) return;
-    for (Peer& p : peers) {
-      if (!heard(p.link)) continue;
-      SetPtr best;
-      std::size_t best_gain = 0;
-      for (std::uint64_t h : p.held) {
-        const SetPtr s = h != p.standby_hash ? sets->find(h) : nullptr;  // the standby set is taken from, not asked
-        if (!s || (p.asked && !is_superset(s->blocks, p.asked->blocks))) continue;
-        std::size_t gain = 0;
-        for (std::uint32_t b : s->blocks) gain += !covered[b];
-        if (gain > best_gain) {
-          best_gain = gain;
-          best = s;
-        }
-      }
-      if (best) {
-        p.asked = best;
-        for (std::uint32_t b : best->blocks) covered[b] = 1;
-      }
-    }
-  }
-
-  /// The standby set each queried worker holds (ScatterConfig::replicas), named by its Query.
-  void choose_standby() {
-    for (Peer& p : peers) {
-      p.standby_asked = nullptr;
-      if (p.asked && p.standby_hash != p.asked->hash && p.holds(p.standby_hash))
-        p.standby_asked = sets->find(p.standby_hash);
-    }
-  }
-
   /// Gives a fresh socket to every worker that was asked but has been silent for
   /// reconnect_after (unless it is busy loading what we sent).
   void revive_silent(Clock::time_point now) {
@@ -251,8 +194,7 @@ struct ScatterGather::Impl {
     }
     client::refresh_targets(peers, *sets);
     for (Peer& p : peers) p.maybe_start_upload(cfg, *sets, now);
-    choose_sets();
-    choose_standby();
+    client::choose_sets(peers, *sets, covered);
     deal->deal(peers, *ledger);
     out->blocks_moved = deal->moved();
     if (assist) assist->choose(peers, *deal, *ledger);

@@ -20,6 +20,12 @@
 // own copy of the object (it holds it to encode the block sets). A block counts as covered when
 // its answer is merged, whoever gave it.
 //
+// Replicated deal (ScatterConfig::replicas, off by default): each worker also holds standby
+// copies of other workers' blocks, as a second block set; each round the blocks that worked the
+// round before go to the lighter of their two holders (client::BlockDeal: the owner skips such a
+// block, the other holder takes it, QueryMsg::take), and a down worker's blocks are taken from
+// their copies until the reassignment below holds them again. The assist works on top of the deal.
+//
 // Never blocks without a timeout: sends are non-blocking (a full queue counts as a miss), and
 // every wait is bounded by the round's deadline. Not thread-safe: one thread owns it.
 //
