@@ -29,6 +29,7 @@ void add_collide(CLI::App& app);  ///< collide() query time at contact buckets, 
 void add_slides(CLI::App& app);  ///< the coherent collider against collide() along slides and a jerk (bench_slides.cpp)
 void add_exchange(CLI::App& app);  ///< TripleBuffer vs mutex take-newest latency
 void add_haptic(CLI::App& app);    ///< HapticLoop vs bare clock_nanosleep wake-up latency
+void add_echo(CLI::App& app);      ///< hidden: a raw ZeroMQ echo process (scatter --spawn's floor)
 void add_scatter(CLI::App& app);   ///< scatter-gather round trip of an empty query, N workers × transport
 void add_tables(CLI::App& app);  ///< the paper's tables: table1, table2, table3, peers, trade, icosphere (bench_tables.cpp)
 void add_force(CLI::App& app);    ///< force rendering quality per contact model, simulated time (bench_force.cpp)

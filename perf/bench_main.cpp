@@ -14,6 +14,7 @@ int main(int argc, char** argv) {
   st::bench::add_exchange(app);
   st::bench::add_haptic(app);
   st::bench::add_scatter(app);
+  st::bench::add_echo(app);
   st::bench::add_tables(app);
   st::bench::add_force(app);
   st::bench::add_hostile(app);

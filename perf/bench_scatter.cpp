@@ -8,6 +8,8 @@
 //  * baseline: one plain request-reply (Heartbeat -> Hello) with worker 0 over the same transport;
 //  * floor: the same N-way fan-out and gather done with raw ZeroMQ sockets (N ROUTER echo
 //    threads, one 8-byte frame each), i.e. what the machine and libzmq cost before any of ours.
+// And a split of the overhead, alternating with them: the floor's raw client sending our encoded
+// Query to our workers (split - floor: what our workers add; ours - split: what our client adds).
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -69,6 +71,25 @@ int free_tcp_port() {
   return ntohs(addr.sin_port);
 }
 
+/// The hidden `echo` subcommand: one raw ROUTER echo in its own process (the floor of
+/// `scatter --spawn`), until SIGTERM.
+void add_echo(CLI::App& app) {
+  auto bind = std::make_shared<std::string>();
+  CLI::App* cmd = app.add_subcommand("echo", "raw ZeroMQ echo process: scatter --spawn's floor")->group("");
+  cmd->add_option("--bind", *bind, "endpoint")->required();
+  cmd->callback([bind] {
+    zmq::context_t ctx(1);
+    zmq::socket_t s(ctx, zmq::socket_type::router);
+    s.set(zmq::sockopt::linger, 0);
+    s.bind(*bind);
+    std::vector<std::uint8_t> reply(8, 0);
+    for (;;) {
+      zmq::pollitem_t it{s.handle(), 0, ZMQ_POLLIN, 0};
+      if (zmq::poll(&it, 1, std::chrono::milliseconds(20)) > 0) echo_pending(s, reply);
+    }
+  });
+}
+
 void add_scatter(CLI::App& app) {
   struct Args {
     int workers = 4;
@@ -112,7 +133,7 @@ void add_scatter(CLI::App& app) {
     std::vector<std::unique_ptr<zmq::context_t>> wctx;
     std::vector<std::unique_ptr<net::LocalWorkers>> local;
     std::vector<pid_t> procs;
-    std::vector<std::string> endpoints;
+    std::vector<std::string> endpoints, echo_endpoints;
     if (!a->spawn.empty()) {
       if (a->transport == "inproc") {
         std::fprintf(stderr, "--spawn needs tcp or ipc\n");
@@ -130,6 +151,20 @@ void add_scatter(CLI::App& app) {
         }
         procs.push_back(pid);
         endpoints.push_back(ep);
+      }
+      // The floor's echoes as processes too (this binary's hidden `echo` subcommand): a round to
+      // daemons crosses processes, each with its own ZeroMQ I/O thread, which echo threads of this
+      // process would not.
+      for (int i = 0; i < a->workers; ++i) {
+        std::string ep = a->transport == "ipc" ? endpoint_for("ipc", i, "floor")
+                                               : "tcp://127.0.0.1:" + std::to_string(free_tcp_port());
+        const pid_t pid = ::fork();
+        if (pid == 0) {
+          ::execl("/proc/self/exe", "spheretouch-bench", "echo", "--bind", ep.c_str(), (char*)nullptr);
+          ::_exit(127);
+        }
+        procs.push_back(pid);
+        echo_endpoints.push_back(ep);
       }
     } else {
       for (int i = 0; i < a->workers; ++i) {
@@ -198,13 +233,84 @@ void add_scatter(CLI::App& app) {
       return zmq::poll(&it, 1, deadline) > 0 && d.recv(m, zmq::recv_flags::dontwait).has_value();
     };
 
+    // Split: raw DEALERs (the floor's client) sending our pre-encoded Query to our workers and
+    // waiting for their Results undecoded. Against the floor it is what our workers add; against
+    // our rounds, what our client adds. It queries block sets a second client (routing id
+    // "split") loaded and left on the workers.
+    std::vector<zmq::socket_t> raw;
+    std::vector<std::vector<std::uint8_t>> raw_query;
+    {
+      net::ScatterConfig scfg = cfg;
+      scfg.routing_id = "bench-split-client";
+      auto loader = net::ScatterGather::create(ctx, scfg, probe, object, blocks);
+      if (!loader || !loader.value()->wait_ready(Clock::now() + std::chrono::seconds(10))) {
+        std::fprintf(stderr, "split client: workers not ready\n");
+        throw CLI::RuntimeError(2);
+      }
+    }
+    for (const std::string& ep : endpoints) {
+      zmq::socket_t s(ctx, zmq::socket_type::dealer);
+      s.set(zmq::sockopt::linger, 0);
+      s.set(zmq::sockopt::routing_id, "bench-split-client");
+      s.connect(ep);
+      s.send(zmq::buffer(net::encode(net::HeartbeatMsg{7})), zmq::send_flags::none);
+      std::uint64_t hash = 0;
+      for (int tries = 0; tries < 100 && !hash; ++tries) {
+        zmq::pollitem_t it{s.handle(), 0, ZMQ_POLLIN, 0};
+        zmq::message_t m;
+        if (zmq::poll(&it, 1, std::chrono::milliseconds(100)) <= 0 || !s.recv(m, zmq::recv_flags::dontwait)) continue;
+        auto d = net::decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, net::DefaultLimits());
+        if (d)
+          if (const auto* h = std::get_if<net::HelloMsg>(&d.value()); h && !h->held.empty()) hash = h->held[0].hash;
+      }
+      if (!hash) {
+        std::fprintf(stderr, "split client: %s holds no set for it\n", ep.c_str());
+        throw CLI::RuntimeError(2);
+      }
+      raw_query.push_back(net::encode(net::QueryMsg{0, hash, far, {}}));
+      raw.push_back(std::move(s));
+    }
+    std::uint64_t raw_seq = 1u << 30;
+    std::vector<zmq::pollitem_t> raw_items(raw.size());
+    auto split_round = [&](bool) {
+      ++raw_seq;
+      for (std::size_t i = 0; i < raw.size(); ++i) {
+        std::memcpy(raw_query[i].data() + net::kHeaderBytes, &raw_seq, sizeof raw_seq);  // the Query's seq
+        raw[i].send(zmq::buffer(raw_query[i]), zmq::send_flags::dontwait);
+      }
+      std::size_t got = 0;
+      const auto end = Clock::now() + deadline;
+      while (got < raw.size()) {
+        for (std::size_t i = 0; i < raw.size(); ++i) raw_items[i] = {raw[i].handle(), 0, ZMQ_POLLIN, 0};
+        const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(end - Clock::now());
+        if (left.count() <= 0 || zmq::poll(raw_items.data(), raw_items.size(), left) <= 0) return false;
+        for (std::size_t i = 0; i < raw.size(); ++i) {
+          zmq::message_t m;
+          while ((raw_items[i].revents & ZMQ_POLLIN) && raw[i].recv(m, zmq::recv_flags::dontwait)) {
+            std::uint64_t back = 0;  // a Result's seq follows the header, as a Query's does
+            if (m.size() >= net::kHeaderBytes + sizeof back)
+              std::memcpy(&back, static_cast<const char*>(m.data()) + net::kHeaderBytes, sizeof back);
+            got += back == raw_seq;
+          }
+        }
+      }
+      return true;
+    };
+
     // Floor: the same fan-out with nothing of ours in it: N raw ROUTER echo threads on the same
     // transport and context, and N DEALERs sending one 8-byte frame each and waiting for all N
     // echoes. No ZeroMQ scatter-gather to N separate workers can be cheaper on this machine.
-    FanOutFloor floor(ctx, a->transport, a->workers);
-    auto floor_round = [&](bool) { return floor.round(deadline); };
+    std::unique_ptr<FanOutFloor> floor_threads;
+    std::unique_ptr<FanOutGather> floor_procs;
+    if (echo_endpoints.empty())
+      floor_threads = std::make_unique<FanOutFloor>(ctx, a->transport, a->workers);
+    else
+      floor_procs = std::make_unique<FanOutGather>(ctx, echo_endpoints);
+    auto floor_round = [&](bool) {
+      return floor_threads ? floor_threads->round(deadline) : floor_procs->round(deadline);
+    };
 
-    std::vector<double> us, base, flo;
+    std::vector<double> us, base, flo, split;
     int lost = 0;  // baseline or floor rounds with no reply by the deadline (counted, not timed)
     auto run_block = [&](auto& one, std::vector<double>* into, int n, bool measured) {
       for (int i = 0; i < n; ++i) {
@@ -223,16 +329,19 @@ void add_scatter(CLI::App& app) {
     run_block(scatter_round, nullptr, a->warmup, false);
     run_block(baseline_round, nullptr, a->warmup, false);
     run_block(floor_round, nullptr, a->warmup, false);
+    run_block(split_round, nullptr, a->warmup, false);
     constexpr int kBlock = 100;
     for (int done = 0; done < a->rounds; done += kBlock) {
       const int n = std::min(kBlock, a->rounds - done);
       run_block(scatter_round, &us, n, true);
       run_block(baseline_round, &base, n, true);
       run_block(floor_round, &flo, n, true);
+      run_block(split_round, &split, n, true);
     }
     const Stats s = summarise(us);
     const Stats b = summarise(base);
     const Stats f = summarise(flo);
+    const Stats sp = summarise(split);
 
     if (a->json)
       print_json({{"bench", "scatter"},
@@ -249,15 +358,18 @@ void add_scatter(CLI::App& app) {
                   {"baseline_p99_us", round_to(b.p99, 1)},
                   {"floor_p50_us", round_to(f.p50, 1)},
                   {"floor_p99_us", round_to(f.p99, 1)},
+                  {"split_p50_us", round_to(sp.p50, 1)},
+                  {"split_p99_us", round_to(sp.p99, 1)},
                   {"lost", lost}});
     else
       std::printf(
           "scatter  %d workers  %-6s gap %5d us  %d rounds (%d incomplete)  p50 %7.1f us  p99 %7.1f us  max %8.1f us"
           "\n  baseline 1 req-rep: p50 %6.1f us  p99 %6.1f us\n  floor, raw %d-way fan-out: p50 %6.1f us  p99 %6.1f us"
-          "  (ours / floor: p50 x%.2f, p99 x%.2f)%s\n",
+          "  (ours / floor: p50 x%.2f, p99 x%.2f)%s\n  split, the floor's raw client to our workers: p50 %6.1f us  "
+          "p99 %6.1f us  (our workers add %+.1f us at p50, our client %+.1f us)\n",
           a->workers, a->transport.c_str(), a->gap_us, a->rounds, incomplete, s.p50, s.p99, s.max, b.p50, b.p99,
           a->workers, f.p50, f.p99, f.p50 > 0 ? s.p50 / f.p50 : 0.0, f.p99 > 0 ? s.p99 / f.p99 : 0.0,
-          lost ? "  (some baseline/floor rounds lost: see --json)" : "");
+          lost ? "  (some baseline/floor rounds lost: see --json)" : "", sp.p50, sp.p99, sp.p50 - f.p50, s.p50 - sp.p50);
     if (!a->csv.empty()) {
       const bool fresh = !std::ifstream(a->csv).good();
       std::ofstream o(a->csv, std::ios::app);
