@@ -305,3 +305,81 @@ TEST_CASE("a worker answers a Query's standby part only with a standby set it ho
   REQUIRE(std::holds_alternative<ErrorMsg>(r.value()));
   CHECK(std::get<ErrorMsg>(r.value()).code == ErrorCode::NotLoaded);
 }
+
+TEST_CASE("a worker that dropped a client's standby copies: that client sends them again, not its share") {
+  zmq::context_t ctx;
+  const test::NetScene s = test::small_scene(8, 24);
+  const auto poses = test::contact_poses(s, 3);
+  const std::string t = replicas_tag();
+  WorkerConfig tight;  // two sets per worker; a set queried within 2 s is in use
+  tight.max_sets = 2;
+  auto w = LocalWorkers::start(
+      ctx, 2, tree_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, tight);
+  REQUIRE_MESSAGE(w.ok(), w.error());
+  ScatterConfig cfg;
+  cfg.endpoints = w.value()->endpoints();
+  cfg.replicas = true;
+  const auto b_cfg = [&] {
+    ScatterConfig other = cfg;
+    other.replicas = false;
+    return other;
+  };
+  {  // Another client's share first; it stops querying, so its set is idle.
+    auto b = ScatterGather::create(ctx, b_cfg(), s.probe, s.object, s.blocks);
+    REQUIRE_MESSAGE(b.ok(), b.error());
+    REQUIRE(b.value()->wait_ready(Clock::now() + 10s));
+  }
+  auto a = ScatterGather::create(ctx, cfg, s.probe, s.object, s.blocks);
+  REQUIRE_MESSAGE(a.ok(), a.error());
+  REQUIRE(a.value()->wait_ready(Clock::now() + 10s));
+  std::uint64_t seq = 0;
+  bool exact = false;
+  for (int k = 0; k < 200 && !exact; ++k) {
+    const geom::Pose& pose = poses[k % poses.size()];
+    RoundResult r = a.value()->round(++seq, pose, Clock::now() + 2s);
+    auto ws = a.value()->workers();
+    exact = r.complete && r.workers_replied == 2 && ws[0].holds_standby && ws[1].holds_standby &&
+            r.pairs == reference_collide(s.probe, s.object, pose);
+  }
+  CHECK(exact);
+  // Each worker made room by dropping the idle set, never one of this client's two in use: each
+  // was sent once.
+  for (const WorkerStatus& ws : a.value()->workers()) {
+    CHECK(ws.holds_target);
+    CHECK(ws.loads_sent == 2);
+    CHECK(ws.refused.empty());
+  }
+}
+
+TEST_CASE("a worker with room for one set: the client keeps its share, answers without copies there, and says why") {
+  zmq::context_t ctx;
+  const test::NetScene s = test::small_scene(8, 24);
+  const auto poses = test::contact_poses(s, 3);
+  const std::string t = replicas_tag();
+  WorkerConfig one;
+  one.max_sets = 1;
+  auto w = LocalWorkers::start(
+      ctx, 2, tree_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, one);
+  REQUIRE_MESSAGE(w.ok(), w.error());
+  ScatterConfig cfg;
+  cfg.endpoints = w.value()->endpoints();
+  cfg.replicas = true;
+  auto a = ScatterGather::create(ctx, cfg, s.probe, s.object, s.blocks);
+  REQUIRE_MESSAGE(a.ok(), a.error());
+  // Ready without the copies: each worker's share displaced by its copies, sent again, and the
+  // copies held back for load_timeout instead of trading places with the share on every load.
+  REQUIRE(a.value()->wait_ready(Clock::now() + 10s));
+  std::uint64_t seq = 0;
+  for (int k = 0; k < 30; ++k) {
+    const geom::Pose& pose = poses[k % poses.size()];
+    RoundResult r = a.value()->round(++seq, pose, Clock::now() + 2s);
+    CHECK(r.complete);
+    CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+  }
+  for (const WorkerStatus& ws : a.value()->workers()) {
+    CHECK(ws.holds_target);
+    CHECK_FALSE(ws.holds_standby);
+    CHECK(ws.loads_sent <= 3);  // share, copies, share again
+    CHECK(ws.refused.find("standby") != std::string::npos);
+  }
+}

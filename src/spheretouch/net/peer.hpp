@@ -123,6 +123,11 @@ struct Peer {
     if (target_hash && !holds(target_hash)) return target_hash;
     return standby_hash && !holds(standby_hash) ? standby_hash : 0;
   }
+  /// Its standby set was refused (or cost it its share) within load_timeout: not sent again,
+  /// and not waited for, until then.
+  bool standby_refused(const ScatterConfig& cfg, Clock::time_point now) const {
+    return standby_hash && refused_hash == standby_hash && now - refused_at < cfg.load_timeout;
+  }
   /// Starts sending wanted() if it is heard from, is not being sent it and did not refuse it
   /// within load_timeout (a newer target replaces a set still being sent).
   void maybe_start_upload(const ScatterConfig& cfg, const BlockSetCache& sets, Clock::time_point now);

@@ -67,9 +67,17 @@ struct ScatterGather::Impl {
     p.epoch = h.epoch;
     p.worker_id = h.worker_id;
     const std::size_t had = p.held.size();
+    const bool had_target = p.holds(p.target_hash);
     p.held.clear();
     for (const Held& x : h.held) p.held.push_back(x.hash);
     if (p.held.size() < had) prune_pending = true;  // it dropped a set: maybe ours can go too
+    if (had_target && !p.holds(p.target_hash) && p.holds(p.standby_hash)) {
+      // Its share gave way to its standby copies: no room for both. The share comes first; the
+      // copies wait for load_timeout (else the two would displace each other on every load).
+      p.refused_hash = p.standby_hash;
+      p.refused = "no room for its standby copies beside its share (max_sets)";
+      p.refused_at = now;
+    }
     if (p.link == Link::Loading && p.holds(p.upload->hash)) link(p, LinkEvent::LoadEnd);  // load acknowledged
     link(p, h.epoch ? LinkEvent::Hello : LinkEvent::BlankHello);
     p.step(TurnEvent::Hello);
@@ -110,7 +118,9 @@ struct ScatterGather::Impl {
     const bool query_turn = p.turn == Turn::Queried || p.turn == Turn::Unsent || p.turn == Turn::Answered;
     if (e.code == ErrorCode::NotLoaded && in_round && e.ref == cur_seq && query_turn) {
       p.step(TurnEvent::NotLoaded);  // alive, just not holding what we asked for; its Hello follows
-      p.held.erase(std::remove(p.held.begin(), p.held.end(), p.asked ? p.asked->hash : 0), p.held.end());
+      // With a standby set named either set may be the one missing: the Hello says which.
+      if (!p.standby_asked)
+        p.held.erase(std::remove(p.held.begin(), p.held.end(), p.asked ? p.asked->hash : 0), p.held.end());
     } else if (e.code == ErrorCode::LoadFailed || e.code == ErrorCode::TooLarge) {
       if (p.link == Link::Loading && (e.ref == p.upload->hash || e.ref == 0)) {
         p.refused_hash = p.upload->hash;
@@ -408,7 +418,10 @@ bool ScatterGather::wait_ready(Clock::time_point deadline) {
       if (p.link == Link::Unknown && now >= p.heartbeat_due) p.heartbeat(m.cfg, now, m.buf);
       p.maybe_start_upload(m.cfg, *m.sets, now);
       p.pump_upload(m.cfg, now, m.buf);
-      if (p.link == Link::Unknown || p.wanted() || (!p.target.empty() && !p.holds(p.target_hash))) ready = false;
+      const std::uint64_t want = p.wanted();
+      if (p.link == Link::Unknown || (want && !(want == p.standby_hash && p.standby_refused(m.cfg, now))) ||
+          (!p.target.empty() && !p.holds(p.target_hash)))
+        ready = false;
     }
     const auto up = [](const Peer& p) { return p.link != Link::Down; };
     if (ready && std::any_of(m.peers.begin(), m.peers.end(), up)) return true;

@@ -840,19 +840,23 @@ bool WorkerService::make_room(const std::string& owner, std::uint64_t bytes) {
     own_bytes -= it->bytes;
     it = sets_.erase(it);
   }
-  // Then the worker's: the client's own sets, else sets nobody has queried for active_set; a set
-  // another client uses is never evicted for this one.
+  // Then the worker's, from the least recently used: a set nobody has queried for active_set
+  // (this client's or another's), else this client's own least recently used set. A set another
+  // client uses is never evicted for this one, and this client's sets in use go last: a client
+  // that queries two sets at once (its share and its standby copies, ScatterConfig::replicas)
+  // would otherwise trade one for the other on every load while an idle set kept its slot.
   const auto now = std::chrono::steady_clock::now();
   while (distinct_backends() >= max_sets) {
-    auto victim = sets_.end();
+    auto victim = sets_.end(), own = sets_.end();
     for (auto it = sets_.end(); it != sets_.begin();) {
       --it;
-      if (it->owner == owner) {
+      if (now - it->queried >= cfg_.active_set) {
         victim = it;
         break;
       }
-      if (victim == sets_.end() && now - it->queried >= cfg_.active_set) victim = it;
+      if (own == sets_.end() && it->owner == owner) own = it;
     }
+    if (victim == sets_.end()) victim = own;
     if (victim == sets_.end()) return false;
     sets_.erase(victim);
   }

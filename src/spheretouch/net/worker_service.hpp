@@ -255,8 +255,9 @@ class WorkerService {
   void answer(const Pending& p);
   Client& client(const std::string& owner);
   bool free_upload_slot();  ///< displaces a stalled or trickling upload; false if none is
-  /// Makes room for `owner`'s new backend of `bytes` (its own LRU sets first, then sets no one
-  /// used for active_set); false when the worker is full of sets others use.
+  /// Makes room for `owner`'s new backend of `bytes` (its own LRU sets over its quota first, then
+  /// sets no one used for active_set, then its own LRU set); false when the worker is full of
+  /// sets others use.
   bool make_room(const std::string& owner, std::uint64_t bytes);
   void handle_zap();
   void handle_monitor();  ///< connection accepted / closed: counts, enforces max_connections
