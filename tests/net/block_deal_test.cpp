@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Tests the replicated deal (ScatterConfig::replicas; src/spheretouch/net/block_deal.*): the
+// Tests src/spheretouch/net/block_deal.* and the replicated deal it serves (ScatterConfig::replicas): the
 // standby copies each worker keeps, the deal of the blocks that worked between their two holders
 // (skip and take lists, stickiness, limits, withdrawal by the assist), and rounds over in-process
 // workers: exact and complete, balanced, and complete again as soon as a stopped worker is marked
