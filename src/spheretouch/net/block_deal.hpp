@@ -12,8 +12,8 @@
 // also have a standby holder; with replicas, each round the blocks that worked the round before
 // are dealt, the heaviest first, to the less loaded of the two (a two-choice longest processing
 // time first), a block staying where it was answered the round before unless the other holder is
-// lighter by more than `stickiness` of the mean load: a worker's blocks then change only when the
-// contact moves, and its coherent collider keeps its front.
+// lighter by more than `stickiness` of the mean load, so that a worker's blocks change little
+// from one round to the next (each change costs its coherent collider a plain round).
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <cstdint>
