@@ -100,6 +100,7 @@ void BlockDeal::deal(std::vector<Peer>& peers, const WorkLedger& ledger) {
     else
       answer_[b] = kNone;  // over the limit: uncovered this round (the reassigned sets will hold it)
   }
+  if (!balance_) return;  // every block at home; the forced takes are ascending (forced_ is)
   const std::span<const double> work = ledger.work();
   load_.assign(peers.size(), 0.0);
   double total = 0;

@@ -40,7 +40,8 @@ struct ScatterGather::Impl {
   std::vector<Peer> peers;
   std::unique_ptr<client::BlockSetCache> sets;
   std::unique_ptr<client::ClientAssist> assist;  // null unless cfg.assist_blocks
-  std::unique_ptr<client::WorkLedger> ledger;    // each block's work the round before
+  std::unique_ptr<client::WorkLedger> ledger;    // each block's work the round before (kept only if weigh)
+  bool weigh = false;                            // the assist or the replicated deal weighs the blocks' work
   std::unique_ptr<client::BlockDeal> deal;       // who answers each block this round
   bool reassign_pending = false;                 // a worker went down or came back: reassign()
   bool prune_pending = false;                    // a worker dropped a set: prune_sets()
@@ -108,7 +109,7 @@ struct ScatterGather::Impl {
       if (!std::binary_search(p.skip.begin(), p.skip.end(), b)) covered[b] = 1;
     for (std::uint32_t b : p.take) covered[b] = 1;  // blocks of its standby set
     out->worker_stats[std::size_t(&p - peers.data())] = r.stats;
-    ledger->note(r.worked);
+    if (weigh) ledger->note(r.worked);
     out->stats.sphere_tests += r.stats.sphere_tests;
     out->stats.tri_tests += r.stats.tri_tests;
     out->stats.compute_ns = std::max(out->stats.compute_ns, r.stats.compute_ns);
@@ -312,7 +313,11 @@ Result<std::unique_ptr<ScatterGather>> ScatterGather::create(zmq::context_t& ctx
   const auto share = deal_blocks(nblocks, static_cast<std::uint32_t>(impl->cfg.endpoints.size()), impl->cfg.mapping,
                                  impl->cfg.mapping_seed);
   const auto standby = impl->cfg.replicas ? standby_shares(share) : decltype(share)(share.size());
-  impl->ledger = std::make_unique<client::WorkLedger>(impl->scene->blocks, impl->scene->object.faces.size());
+  // Without the assist or the replicated deal nothing weighs the blocks: the ledger stays empty,
+  // and no round pays for keeping it.
+  impl->weigh = impl->cfg.assist_blocks > 0 || impl->cfg.replicas;
+  impl->ledger =
+      std::make_unique<client::WorkLedger>(impl->scene->blocks, impl->weigh ? impl->scene->object.faces.size() : 0);
   impl->deal = std::make_unique<client::BlockDeal>(nblocks, impl->cfg.limits, impl->cfg.replicas,
                                                    std::max(0.0, impl->cfg.deal_stickiness));
   for (std::size_t i = 0; i < impl->cfg.endpoints.size(); ++i) {
@@ -390,7 +395,7 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   out.object_faces.erase(std::unique(out.object_faces.begin(), out.object_faces.end()), out.object_faces.end());
   out.blocks_covered = static_cast<std::uint32_t>(std::count(m.covered.begin(), m.covered.end(), 1));
   out.complete = out.blocks_covered == out.blocks_total;
-  m.ledger->end_round(out.pairs);
+  if (m.weigh) m.ledger->end_round(out.pairs);
 }
 
 RoundResult ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time_point deadline) {
