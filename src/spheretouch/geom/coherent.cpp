@@ -118,7 +118,7 @@ void CoherentCollider::note_contact(const Mesh& probe, const CollideResult& resu
 }
 
 std::uint32_t CoherentCollider::build_budget() const {
-  if (!have_front_) return 4;
+  if (!have_front_) return 0;
   const double share = std::min(0.25, 0.02 * std::pow(1.5, double(std::min<std::uint32_t>(ramp_, 16))));
   return std::max<std::uint32_t>(4, static_cast<std::uint32_t>(std::ceil(share * leaf_entries_)));
 }

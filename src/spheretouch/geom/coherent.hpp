@@ -21,9 +21,11 @@
 // larger than it keeps the origin inside (coherent_traversal.inl proves the margins).
 // A leaf pair's certificate is refreshed before it runs out, at a fraction of δ that differs
 // between leaf pairs (staggered), so refreshes spread over rounds instead of falling on one.
-// What bounds a round's cost: leaf pairs are (re)built within a budget per round (2 % of the
-// front's after a rebuild, growing to 25 %), the others answered by collide()'s own leaf stage
-// meanwhile, so a rebuild costs about what collide() does; a round whose probe (its part in
+// What bounds a round's cost: a rebuild descends only the sphere pairs that meet (as collide()
+// does; those apart by less than δ become groups with their gap, expanded a few at a time by the
+// motion of the next rounds) and builds no leaf pair, so it costs about what collide() does; leaf
+// pairs are (re)built within a budget per round (2 % of the front's after a rebuild, growing to
+// 25 %), the others answered by collide()'s own leaf stage meanwhile; a round whose probe (its part in
 // contact) moved more than max_step since the last one runs collide() and drops the cache (a jerk
 // costs one plain round and one rebuild); the front is walked again from the roots when it has
 // doubled (it only refines as the probe moves); and, with `arbitrate`, the collider times itself
@@ -181,8 +183,8 @@ class CoherentCollider {
   static double moved_since(const RelTransform& a, const RelTransform& b, const Vec3& c, double r);
   // near_ from a round's pairs (a sample of their probe faces), or none.
   void note_contact(const Mesh& probe, const CollideResult& result);
-  // Leaf pairs this round may build: a share of the front's that grows from 2 % after a rebuild
-  // to 25 % (coherent.hpp, top).
+  // Leaf pairs this round may build: none in a rebuild, then a share of the front's that grows
+  // from 2 % to 25 % (coherent.hpp, top).
   std::uint32_t build_budget() const;
   // This round walks from the roots again: the front has doubled since it last did (checked
   // every kRerootEvery rounds).

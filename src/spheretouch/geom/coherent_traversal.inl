@@ -104,8 +104,15 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   }
 
   CoherentCollider& cc;
-  double reach = 0;               // δ of the entries made this round
-  float reach_f = 0;              // δ rounded down to float (what entries record)
+  double reach = 0;   // δ of the entries made this round
+  float reach_f = 0;  // δ rounded down to float (what entries record)
+  // This round builds the front from the roots (no front yet): it descends only the sphere
+  // pairs that meet, as collide() does, so it costs about what collide() does; the pairs apart by
+  // less than δ become groups with their gap, and the motion of the next rounds expands them a
+  // few at a time (a later walk descends what is nearer than δ).
+  bool fresh = false;
+  // A sphere pair this round records as a group with its gap (NaN never).
+  bool is_apart(float gap) const { return fresh ? gap > 0.0f : gap >= reach_f; }
   std::uint32_t round = 0;        // this round's id
   bool overflow = false;          // the pool went over max_bytes: this round is abandoned
   std::uint32_t builds_left = 0;  // leaf pairs this round may still build (leaf())
@@ -283,7 +290,8 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   // else answered by collide()'s own leaf stage and kept for a later round (`old`, an entry due
   // for its refresh, unchanged with its candidates; a new pair as kLeafPending). So a round after
   // a rebuild, or one where many leaf pairs fall due at once, costs little more than collide().
-  void leaf(std::uint32_t p, std::uint32_t o, const detail::FrontEntry* old) {
+  // `spheres_apart`: split() found the pair's spheres apart (no leaf stage needed).
+  void leaf(std::uint32_t p, std::uint32_t o, const detail::FrontEntry* old, bool spheres_apart = false) {
     if (builds_left > 0) {
       const std::uint32_t before = leaf_count;
       build_leaf(p, o, old);
@@ -300,6 +308,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     // collide() reaches a leaf pair only when its spheres meet; the front also keeps those within
     // δ, whose faces cannot meet: the same sphere test first spares them the leaf stage (and the
     // probe leaf's transform).
+    if (spheres_apart) return;
     put_probe_sphere(p);
     const float* ps = sc.psph_.data();
     const std::size_t sp = sc.nstride_p_;
@@ -437,7 +446,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     float least = std::numeric_limits<float>::infinity();
     for (std::uint32_t m = mask; m != 0; m &= m - 1) {
       const unsigned k = static_cast<unsigned>(std::countr_zero(m));
-      if (gap[k] >= reach_f) {  // NaN is near: never certified
+      if (is_apart(gap[k])) {  // NaN is near: never certified
         apart |= 1u << k;
         least = std::min(least, gap[k]);
       } else {
@@ -445,8 +454,18 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       }
     }
     if (apart != 0) add_group(probe_side ? detail::kProbeChildren : detail::kObjectChildren, p, o, apart, least);
-    push_children(near, h.first, probe_side ? o : p, probe_side, stack, n);
+    // As push_children, with kSpheresApart on the object node of a pair whose spheres do not
+    // meet (gap > 0: the true gap is at least the computed one), which collide() would not visit.
+    for (; near != 0; near &= ~(1u << (31 - std::countl_zero(near)))) {
+      const unsigned k = 31 - static_cast<unsigned>(std::countl_zero(near));
+      const std::uint32_t c = h.first + k, apart_flag = gap[k] > 0 ? kSpheresApart : 0u;
+      stack[n++] = probe_side ? std::pair{c, o | apart_flag} : std::pair{p, c | apart_flag};
+    }
+    ST_ASSERT(n <= sc.stack_cap_, "walk_front leaves room for kMaxChildren before each split");
   }
+  // On a stacked pair's object node: the pair's spheres are apart (split()). Object trees have
+  // far fewer than 2^31 nodes (SphereTree's indices and the memory they take).
+  static constexpr std::uint32_t kSpheresApart = 1u << 31;
 
   // The walk of collide() from the pairs on the stack, recording the front as it goes.
   void walk_front(std::pair<std::uint32_t, std::uint32_t>* stack, std::uint32_t n) {
@@ -459,7 +478,8 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
         }
       }
       // Plain names, not a structured binding: the lambdas below capture them (clang 14 cannot).
-      const std::uint32_t p = stack[n - 1].first, o = stack[n - 1].second;
+      const std::uint32_t p = stack[n - 1].first, o = stack[n - 1].second & ~kSpheresApart;
+      const bool spheres_apart = (stack[n - 1].second & kSpheresApart) != 0;
       --n;
       const SphereNode& hp = PT.nodes[p];
       const SphereNode& ho = OT.nodes[o];
@@ -467,13 +487,13 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       if (tp && to) {
         const detail::FrontEntry* known = rerooting ? known_leaf(p, o) : nullptr;
         if (!known)
-          counted(o, [&] { leaf(p, o, nullptr); });
+          counted(o, [&] { leaf(p, o, nullptr, spheres_apart); });
         else if (known->kind == detail::kLeafPair || known->kind == detail::kLeafPending)
           counted(o, [&] { visit_leaf(*known); });
         else if (still(*known, known->margin))  // a leaf pair its boxes proved apart
           cc.groups_.push_back(*known);
         else
-          counted(o, [&] { leaf(p, o, nullptr); });
+          counted(o, [&] { leaf(p, o, nullptr, spheres_apart); });
         continue;
       }
       if (n + kMaxChildren > sc.stack_cap_) [[unlikely]] {
@@ -497,7 +517,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       float gap;
       sphere_gaps(sc.osph_.data() + e.o, sc.nstride_o_, 1, ps[e.p], ps[sp + e.p], ps[2 * sp + e.p], ps[3 * sp + e.p], &gap);
       res.stats.node_pairs += 1;
-      if (gap >= reach_f) return add_group(detail::kPairApart, e.p, e.o, 0, gap);
+      if (is_apart(gap)) return add_group(detail::kPairApart, e.p, e.o, 0, gap);
       stack[n++] = {e.p, e.o};
     } else {
       if (e.kind == detail::kObjectChildren) put_probe_sphere(e.p);
@@ -568,7 +588,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       std::sort(cc.leaf_index_.begin(), cc.leaf_index_.end());
     }
     if (!cc.have_front_ || rerooting) {
-      if (!rerooting) ++cc.stats_.rebuilds;
+      if (!rerooting) ++cc.stats_.rebuilds, fresh = true;
       if (!opt.restrict_object) {
         expand_root(0);
       } else {
