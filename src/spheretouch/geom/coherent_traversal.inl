@@ -366,23 +366,25 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   }
 
   // How far a probe leaf's sphere (c, r) moved since `pose`: the tighter of the whole probe's
-  // bound and its own (infinite for a pose no longer kept), remembered for the last few poses
-  // asked during one visit (a leaf's candidates carry a handful of poses, interleaved).
+  // bound and its own (infinite for a pose no longer kept), remembered for the poses asked
+  // during one visit (a leaf's candidates carry a handful of poses, interleaved).
   struct LeafBounds {
-    std::uint32_t pose[4] = {~0u, ~0u, ~0u, ~0u};
-    double bound[4] = {};
-    unsigned next = 0;
+    // Direct-mapped by the pose's low bits: a leaf's candidates carry the rounds they were last
+    // tested at, interleaved, and poses less than kSlots rounds apart never share a slot.
+    static constexpr unsigned kSlots = 16;
+    std::array<std::uint32_t, kSlots> pose;
+    std::array<double, kSlots> bound;
+    LeafBounds() { pose.fill(~0u); }
   };
   double leaf_motion(const float* c, float r, std::uint32_t pose, LeafBounds& lb) {
-    for (int k = 0; k < 4; ++k)
-      if (lb.pose[k] == pose) return lb.bound[k];
+    const unsigned k = pose % LeafBounds::kSlots;
+    if (lb.pose[k] == pose) return lb.bound[k];
     double b = std::numeric_limits<double>::infinity();
     if (round - pose < CoherentCollider::kPoses) {
       const Delta& d = delta(pose);
       b = std::min(d.whole, sphere_motion(d, c, r));
     }
-    lb.pose[lb.next] = pose, lb.bound[lb.next] = b;
-    lb.next = (lb.next + 1) & 3u;
+    lb.pose[k] = pose, lb.bound[k] = b;
     return b;
   }
 
