@@ -52,7 +52,7 @@ for m in hand_L2 elephant armadillo armadillo_L1 armadillo_L2; do
 done
 
 mkdir -p "$out/poses"
-rm -f "$out"/*.csv "$out"/*.json "$out"/*.png; rm -rf "$out/force"
+rm -f "$out"/*.csv "$out"/*.json "$out"/*.png "$out/rerun.txt"; rm -rf "$out/force"
 hand="$models/hand_L2.off"
 
 # Machine and load, for the report.
