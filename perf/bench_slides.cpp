@@ -6,7 +6,9 @@
 // paths: "today" (collide() with every candidate through the exact test, the path before the
 // float filter), the filter (collide()'s default) and the coherent collider; each series is run
 // --reps times (the collider reset each time) and a round's time is its median over the reps.
-// The pair sets of the coherent collider and of collide() are compared on every round.
+// The pair sets of the coherent collider and of collide() are compared on every round. With
+// --withdraw, a series pulls the probe out along the contact's normal, and the rounds after the
+// contact ends are reported apart (what the front of a past contact costs).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -37,14 +39,21 @@ constexpr double kPi = 3.14159265358979323846;
 
 /// The motion of one series: from `start`, a slide of `step_mm` along `dir` and a turn of
 /// `step_deg` about `axis` through `pivot` per round, forth for `half` rounds then back; a jerk
-/// of 1 mm + 1° added from round `jerk_at` on (never when jerk_at < 0).
+/// of 1 mm + 1° added from round `jerk_at` on (never when jerk_at < 0). `withdraw`: `step_mm`
+/// a round along `normal`, out of the object, and no turn.
 struct Series {
   Pose start;
-  Vec3 pivot, dir, axis;
+  Vec3 pivot, dir, axis, normal;
   double step_mm = 0, step_deg = 0;
   int half = 100, jerk_at = -1;
+  bool withdraw = false;
 
   Pose at(int k) const {
+    if (withdraw) {
+      Pose p = start;
+      p.translation() += k * step_mm * normal;
+      return p;
+    }
     const int period = 2 * half;
     const int phase = k % period;
     const double s = phase <= half ? phase : period - phase;  // forth, then back
@@ -76,6 +85,7 @@ bool series_at(const Mesh& object, const std::vector<geom::FacePair>& pairs, Ser
   if (dir.norm() < 0.1) dir = n.cross(Vec3::UnitY());
   dir.normalize();
   s.pivot = c;
+  s.normal = n;
   s.dir = dir;
   s.axis = (n + n.cross(dir)).normalized();
   return true;
@@ -92,8 +102,10 @@ struct SeriesRow {
   std::string name;
   std::uint32_t contacts0 = 0;
   double step_mm = 0, step_deg = 0;
-  bool jerk = false;
+  bool jerk = false, withdraw = false;
   int rounds = 0;
+  int out_rounds = 0;                                   // withdraw: rounds without contact
+  double out_today_us = 0, out_coherent_us = 0;         // ... their mean per round
   double today_us = 0, filter_us = 0, coherent_us = 0;  // mean per round
   double ratio_mean = 0, ratio_p90 = 0, ratio_max = 0;  // coherent / today, per round
   int ratio_max_round = 0;
@@ -119,6 +131,7 @@ void add_slides(CLI::App& app) {
     double turn = 0.01;
     geom::CoherentConfig coherent;
     bool jerk = true, json = false, only_coherent = false;
+    double withdraw = 0;
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
@@ -136,6 +149,11 @@ void add_slides(CLI::App& app) {
       ->check(CLI::Range(1, 101))
       ->capture_default_str();
   cmd->add_option("--jerk", a->jerk, "also a 0.01 mm series with a 1 mm + 1° jump half-way")->capture_default_str();
+  cmd->add_option("--withdraw", a->withdraw,
+                  "also a series that pulls the probe out along the contact's normal this many mm a round "
+                  "(0: none); the rounds without contact are reported apart")
+      ->check(CLI::Range(0.0, 10.0))
+      ->capture_default_str();
   cmd->add_option("--reach", a->coherent.reach, "the coherent collider's reach δ, mm (0: adapted to the motion)")
       ->capture_default_str();
   cmd->add_option("--max-step", a->coherent.max_step,
@@ -173,7 +191,7 @@ void add_slides(CLI::App& app) {
     sorted.sort_pairs = true;
     std::vector<SeriesRow> rows;
     int done = 0;
-    const int total = int(lines.value().size()) * (int(steps.size()) + (a->jerk ? 1 : 0));
+    const int total = int(lines.value().size()) * (int(steps.size()) + (a->jerk ? 1 : 0) + (a->withdraw > 0 ? 1 : 0));
     for (const geom::PoseLine& line : lines.value()) {
       geom::collide(probe, pt, object, ot, line.pose, sorted, sc, sorted_plain);
       Series base;
@@ -192,10 +210,17 @@ void add_slides(CLI::App& app) {
         s.step_mm = 0.01, s.step_deg = a->turn, s.jerk_at = a->rounds / 2;
         series.push_back(s);
       }
+      if (a->withdraw > 0) {
+        Series s = base;
+        s.step_mm = a->withdraw, s.withdraw = true;
+        series.push_back(s);
+      }
       for (const Series& s : series) {
         SeriesRow row;
         row.contacts0 = contacts0;
         row.step_mm = s.step_mm, row.step_deg = s.step_deg, row.jerk = s.jerk_at >= 0, row.rounds = a->rounds;
+        row.withdraw = s.withdraw;
+        std::vector<char> in_contact(a->rounds, 0);
         std::vector<std::vector<double>> t_today(a->rounds), t_filter(a->rounds), t_coh(a->rounds);
         geom::CoherentConfig ccfg = a->coherent;
         if (a->only_coherent) ccfg.arbitrate = false;
@@ -220,6 +245,7 @@ void add_slides(CLI::App& app) {
             t_coh[k].push_back(us_since(t0));
             if (rep == 0) {  // the pair sets, every round (untimed)
               geom::collide(probe, pt, object, ot, pose, sorted, sc, sorted_plain);
+              in_contact[k] = !sorted_plain.pairs.empty();
               sorted_coh.pairs = r_coh.pairs;
               std::sort(sorted_coh.pairs.begin(), sorted_coh.pairs.end());
               if (sorted_coh.pairs != sorted_plain.pairs || r_coh.contacts() != sorted_plain.contacts()) {
@@ -267,8 +293,17 @@ void add_slides(CLI::App& app) {
         row.rebuild_ratio = ratio[rebuild];
         for (int k = 0; k < a->rounds; ++k)
           if (k != rebuild && k != 0) row.max_ratio_except_rebuild = std::max(row.max_ratio_except_rebuild, ratio[k]);
+        for (int k = 0; k < a->rounds; ++k)
+          if (!in_contact[k]) {
+            ++row.out_rounds;
+            row.out_today_us += percentile(t_today[k], 0.5), row.out_coherent_us += percentile(t_coh[k], 0.5);
+          }
+        if (row.out_rounds > 0) row.out_today_us /= row.out_rounds, row.out_coherent_us /= row.out_rounds;
         char name[96];
-        std::snprintf(name, sizeof name, "%s%.3g mm + %.3g°/round", row.jerk ? "jerk at " : "", s.step_mm, s.step_deg);
+        if (row.withdraw)
+          std::snprintf(name, sizeof name, "withdraw %.3g mm/round", s.step_mm);
+        else
+          std::snprintf(name, sizeof name, "%s%.3g mm + %.3g°/round", row.jerk ? "jerk at " : "", s.step_mm, s.step_deg);
         row.name = name;
         rows.push_back(row);
         ++done;
@@ -283,6 +318,10 @@ void add_slides(CLI::App& app) {
                        {"step_mm", w.step_mm},
                        {"step_deg", w.step_deg},
                        {"jerk", w.jerk},
+                       {"withdraw", w.withdraw},
+                       {"out_rounds", w.out_rounds},
+                       {"out_today_us", round_to(w.out_today_us, 2)},
+                       {"out_coherent_us", round_to(w.out_coherent_us, 2)},
                        {"rounds", w.rounds},
                        {"today_us", round_to(w.today_us, 2)},
                        {"filter_us", round_to(w.filter_us, 2)},
@@ -330,6 +369,10 @@ void add_slides(CLI::App& app) {
                   w.max_ratio_except_rebuild, w.rebuild_ratio, w.vs_filter_mean,
                   static_cast<unsigned long long>(w.stats.refreshes), double(w.stats.peak_bytes) / 1e6,
                   w.mismatched_rounds == 0 ? "yes" : "NO");
+    for (const SeriesRow& w : rows)
+      if (w.withdraw)
+        std::printf("%u contacts, %s: %d of %d rounds without contact, today %.1f µs, coherent %.1f µs a round\n",
+                    w.contacts0, w.name.c_str(), w.out_rounds, w.rounds, w.out_today_us, w.out_coherent_us);
   });
 }
 

@@ -129,6 +129,10 @@ log "collision core: coherent collider along slides (${collide_objects[*]})"
 for o in "${collide_objects[@]}"; do
   if [ "$o" = elephant ]; then pf="$out/poses/hand_elephant.txt"; else pf="$out/poses/hand_${o}_targets.txt"; fi
   "$bench" slides --probe "$hand" --object "$models/$o.off" --poses "$pf" "${slide_args[@]}" --json > "$out/slides_${o}.json"
+  # The probe withdrawn from each pose, long enough to leave contact from the deepest.
+  if [ $quick = 1 ]; then withdraw_args=(--rounds 60 --reps 1); else withdraw_args=(--rounds 1200 --reps 3); fi
+  "$bench" slides --probe "$hand" --object "$models/$o.off" --poses "$pf" --steps '' --jerk 0 --withdraw 0.01 \
+    "${withdraw_args[@]}" --json > "$out/withdraw_${o}.json"
 done
 
 log "table 1: hand x elephant, contacts x workers ($workers)"

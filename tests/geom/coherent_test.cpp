@@ -254,6 +254,55 @@ TEST_CASE("a rebuild walks what collide() walks: the sphere pairs that meet, no 
   }
 }
 
+TEST_CASE("a probe withdrawn: the front is walked from the roots again and becomes as coarse as the contact") {
+  const CoBody probe(*st::test::model_mesh("hand_L2.off"));
+  const CoBody object(*st::test::model_mesh("elephant.off"));
+  CoherentCompare cmp;
+  const Pose pressed = pressed_start(probe, object, 11, cmp.scratch, cmp.plain);
+  Vec3 pivot, dir, axis, out = Vec3::Zero();
+  slide_frame(object.mesh, cmp.plain.pairs, pivot, dir, axis);
+  for (const FacePair& fp : cmp.plain.pairs) {  // the touched faces' mean normal
+    const auto& t = object.mesh.faces[fp.object];
+    const Vec3 a = object.mesh.vertex(t[0]);
+    out += (object.mesh.vertex(t[1]) - a).cross(object.mesh.vertex(t[2]) - a);
+  }
+  out.normalize();
+  // The way along it, and the distance, at which the contact ends (1 mm steps); the test starts
+  // 1 mm before, in light contact.
+  auto pairs_at = [&](const Vec3& way, double d) {
+    collide(probe.mesh, probe.tree, object.mesh, object.tree, moved(pressed, pivot, way, d, axis, 0.0), {}, cmp.scratch,
+            cmp.plain);
+    return cmp.plain.pairs.size();
+  };
+  Vec3 away = out;
+  double gone = 1;
+  for (; gone < 200; ++gone) {
+    if (pairs_at(out, gone) == 0) break;
+    if (pairs_at(-out, gone) == 0) {
+      away = -out;
+      break;
+    }
+  }
+  REQUIRE(gone < 200);
+  const Pose start = moved(pressed, pivot, away, gone - 1, axis, 0.0);
+  CoherentCollider cc(fixed());
+  int k = 0;
+  for (; k < 40; ++k) cmp.at(cc, probe, object, moved(start, pivot, dir, 0.0, axis, 0.002 * k));  // turning in contact
+  REQUIRE(!cmp.plain.pairs.empty());
+  const std::size_t in_contact = cc.stats().entries;
+  // Withdrawn 0.02 mm a round until 140 rounds out of contact: more than twice the rounds between
+  // two checks for a walk from the roots (CoherentCollider::kRerootEvery).
+  for (int left = 0; k < 400 && left < 140; ++k) {
+    cmp.at(cc, probe, object, moved(start, pivot, away, 0.02 * (k - 39), axis, 0.002 * 39));
+    left = cmp.plain.pairs.empty() ? left + 1 : 0;
+  }
+  REQUIRE(cmp.plain.pairs.empty());
+  CHECK(cc.stats().plain_rounds == 0);
+  CHECK(cc.stats().reroots >= 1);
+  // Without contact the walk from the roots stops nearer them than the front of the contact.
+  CHECK(2 * cc.stats().entries < in_contact);  // (before: 773 entries of 724, none walked again)
+}
+
 TEST_CASE("the coherent collider keeps collide()'s limits and falls back on jumps, a full pool and non-finite poses") {
   const CoBody probe(*st::test::model_mesh("hand_L2.off"));
   const CoBody object(*st::test::model_mesh("elephant.off"));

@@ -28,7 +28,8 @@
 // 25 %), the others answered by collide()'s own leaf stage meanwhile; a round whose probe (its part in
 // contact) moved more than max_step since the last one runs collide() and drops the cache (a jerk
 // costs one plain round and one rebuild); the front is walked again from the roots when it has
-// doubled (it only refines as the probe moves); and, with `arbitrate`, the collider times itself
+// doubled (it only refines as the probe moves) or the contact has shrunk to a quarter or ended
+// (a withdrawn probe would keep the fine front of its contact); and, with `arbitrate`, the collider times itself
 // against collide() and gives way to it where the bookkeeping costs more than it saves.
 // Other trees or other object roots (a worker asked to skip other blocks this round) start a new
 // front only when a second round in a row asks for them: a setup met once is answered by
@@ -186,10 +187,14 @@ class CoherentCollider {
   // Leaf pairs this round may build: none in a rebuild, then a share of the front's that grows
   // from 2 % to 25 % (coherent.hpp, top).
   std::uint32_t build_budget() const;
-  // This round walks from the roots again: the front has doubled since it last did (checked
-  // every kRerootEvery rounds).
+  // This round walks from the roots again (checked every kRerootEvery rounds): the front has
+  // doubled since it last did, or the contact has shrunk to under a quarter of what it was then,
+  // or there is none (a probe withdrawn leaves a front as fine as the contact it had, and moving
+  // away only refines it: a walk from the roots makes it as coarse as the contact now, and costs
+  // what collide() does, little without contact).
   bool reroot_due() const {
-    return have_front_ && ramp_ % kRerootEvery == kRerootEvery - 1 && entries() > 2 * rooted_size_;
+    return have_front_ && ramp_ % kRerootEvery == kRerootEvery - 1 &&
+           (entries() > 2 * rooted_size_ || 4 * last_pairs_ + 16 < rooted_pairs_ || last_pairs_ == 0);
   }
   // The pool (what max_bytes bounds) with `leaf_entries` leaf-pair entries: those, the group
   // store (dead entries included until compacted) and the candidates.
@@ -221,6 +226,7 @@ class CoherentCollider {
   bool have_front_ = false;
   std::uint32_t leaf_entries_ = 0;         // leaf pairs (built or pending) in the front
   std::size_t rooted_size_ = 0;            // front entries after the last walk from the roots
+  std::size_t rooted_pairs_ = 0;           // ... and the pairs of that round
   std::uint32_t ramp_ = 0;                 // rounds since the front was rebuilt (the build budget grows with it)
   std::uint32_t plain_until_ = 0;          // after an overflow or giving way: plain rounds until this round
   double plain_ns_ = 0, coherent_ns_ = 0;  // arbitrate: recent round times (moving averages)

@@ -474,9 +474,13 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
     const auto t0 = std::chrono::steady_clock::now();
     query(probe, probe_tree, object, object_tree, options, scratch_, result, f);
     const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count();
-    plain_ns_ = plain_ns_ > 0 ? 0.7 * plain_ns_ + 0.3 * ns : ns;
+    // A contact of about the size last timed smooths the time; another replaces it (a time of a
+    // larger contact would keep the collider from ever timing collide() again: settled()).
+    const std::size_t pairs = result.pairs.size();
+    const bool alike = pairs <= 2 * timed_pairs_ + 16 && timed_pairs_ <= 2 * pairs + 16;
+    plain_ns_ = plain_ns_ > 0 && alike ? 0.7 * plain_ns_ + 0.3 * ns : ns;
     timed_round_ = round;
-    timed_pairs_ = last_pairs_ = result.pairs.size();
+    timed_pairs_ = last_pairs_ = pairs;
     note_contact(probe, result);
     return;
   }
@@ -505,7 +509,7 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
     front_.swap(next_front_);
     old_groups_.clear();
     compact_groups();
-    if (!have_front_ || rerooting) rooted_size_ = entries();
+    if (!have_front_ || rerooting) rooted_size_ = entries(), rooted_pairs_ = result.pairs.size();
     ramp_ = have_front_ ? ramp_ + 1 : 0;
     have_front_ = true;
     if (garbage_ > 4096 && 2 * garbage_ > cands_.size()) compact();
