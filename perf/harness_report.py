@@ -1243,6 +1243,8 @@ def withdraw_doc(doc, md):
             if not r.get("withdraw"):
                 continue
             out_t, out_c = r.get("out_today_us"), r.get("out_coherent_us")
+            if not r.get("out_rounds"):
+                out_t = out_c = None  # never out of contact in the series
             ratio = out_c / out_t if finite(out_t) and finite(out_c) and out_t > 0 else None
             rows.append(f"| {o} ({f_count(d.get('object_faces'))}) | {f_count(r.get('contacts'))} | "
                         f"{r.get('step_mm')} mm | {f_count(r.get('rounds'))} | {f_us(r.get('today_us'))} | "
