@@ -1230,15 +1230,22 @@ def scene_doc(doc, md):
     md += md_table(["objects", "probe", "round median µs", "p90 µs", "× 1 object", "pairs", "pairs = 1 object"], body)
 
 
+def slides_jsons(doc, md, prefix, cmd):
+    """(object, document) of each `<prefix>_<object>.json` of spheretouch-bench slides that reads;
+    a line for each that is missing."""
+    for o in COLLIDE_OBJECTS:
+        p = doc.path(f"{prefix}_{o}.json")
+        d = jload(p) if os.path.exists(p) else None
+        if not isinstance(d, dict) or not isinstance(d.get("series"), list):
+            md.append(doc.missing(f"{prefix}_{o}.json", cmd.replace("<object>", o)))
+            continue
+        yield o, d
+
+
 def withdraw_doc(doc, md):
     """The coherent collider as the probe is pulled out of contact (spheretouch-bench slides --withdraw)."""
     rows = []
-    for o in COLLIDE_OBJECTS:
-        p = doc.path(f"withdraw_{o}.json")
-        d = jload(p) if os.path.exists(p) else None
-        if not isinstance(d, dict) or not isinstance(d.get("series"), list):
-            md.append(doc.missing(f"withdraw_{o}.json", CMD_WITHDRAW.replace("<object>", o)))
-            continue
+    for o, d in slides_jsons(doc, md, "withdraw", CMD_WITHDRAW):
         for r in d["series"]:
             if not r.get("withdraw"):
                 continue
@@ -1246,18 +1253,15 @@ def withdraw_doc(doc, md):
             if not r.get("out_rounds"):
                 out_t = out_c = None  # never out of contact in the series
             ratio = out_c / out_t if finite(out_t) and finite(out_c) and out_t > 0 else None
-            rows.append(f"| {o} ({f_count(d.get('object_faces'))}) | {f_count(r.get('contacts'))} | "
-                        f"{r.get('step_mm')} mm | {f_count(r.get('rounds'))} | {f_us(r.get('today_us'))} | "
-                        f"{f_us(r.get('coherent_us'))} | {f_count(r.get('out_rounds'))} | {f_us(out_t)} | "
-                        f"{f_us(out_c)} | {f_ratio(ratio)} | {f_count(r.get('rebuilds'))} | "
-                        f"{'yes' if r.get('mismatched_rounds') == 0 else 'NO'} |")
+            rows.append([f"{o} ({f_count(d.get('object_faces'))})", f_count(r.get("contacts")), f"{r.get('step_mm')} mm",
+                         f_count(r.get("rounds")), f_us(r.get("today_us")), f_us(r.get("coherent_us")),
+                         f_count(r.get("out_rounds")), f_us(out_t), f_us(out_c), f_ratio(ratio),
+                         f_count(r.get("rebuilds")), "yes" if r.get("mismatched_rounds") == 0 else "NO"])
     if not rows:
         return
-    md.append("| object (faces) | contacts at start | withdrawn per round | rounds | today µs | coherent µs | "
-              "rounds without contact | today µs (those) | coherent µs (those) | ratio (those) | rebuilds | same pairs |")
-    md.append("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---|")
-    md.extend(rows)
-    md.append("")
+    md += md_table(["object (faces)", "contacts at start", "withdrawn per round", "rounds", "today µs", "coherent µs",
+                    "rounds without contact", "today µs (those)", "coherent µs (those)", "ratio (those)", "rebuilds",
+                    "same pairs"], rows)
     md.append("From each pose the probe is pulled out along the touched faces' mean normal, a fixed step per round "
               "and no turn; the times are each round's median over the reps, averaged over the series and over "
               "its rounds without contact. What a past contact's front costs once the probe has left: the "
@@ -1268,12 +1272,7 @@ def withdraw_doc(doc, md):
 def slides_doc(doc, md):
     """The coherent collider along slides and a jerk (spheretouch-bench slides --json), per object."""
     rows, targets = [], []
-    for o in COLLIDE_OBJECTS:
-        p = doc.path(f"slides_{o}.json")
-        d = jload(p) if os.path.exists(p) else None
-        if not isinstance(d, dict) or not isinstance(d.get("series"), list):
-            md.append(doc.missing(f"slides_{o}.json", CMD_SLIDES.replace("<object>", o)))
-            continue
+    for o, d in slides_jsons(doc, md, "slides", CMD_SLIDES):
         if not rows:
             md.append(f"Probe hand_L2, {d.get('rounds', DASH)} rounds per series (forth then back), a round's time the "
                       f"median of {d.get('reps', DASH)} runs of the series; ISA {d.get('isa', DASH)}.\n")
