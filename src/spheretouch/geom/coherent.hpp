@@ -25,12 +25,13 @@
 // does; those apart by less than δ become groups with their gap, expanded a few at a time by the
 // motion of the next rounds) and builds no leaf pair, so it costs about what collide() does; leaf
 // pairs are (re)built within a budget per round (2 % of the front's after a rebuild, growing to
-// 25 %), the others answered by collide()'s own leaf stage meanwhile; a round whose probe (its part in
-// contact) moved more than max_step since the last one runs collide() and drops the cache (a jerk
-// costs one plain round and one rebuild); the front is walked again from the roots when it has
-// doubled (it only refines as the probe moves) or the contact has shrunk to a quarter or ended
-// (a withdrawn probe would keep the fine front of its contact); and, with `arbitrate`, the collider times itself
-// against collide() and gives way to it where the bookkeeping costs more than it saves.
+// 25 %), the others answered by collide()'s own leaf stage meanwhile; a round whose probe (its
+// part in contact) moved more than max_step since the last one runs collide() and drops the cache
+// (a jerk costs one plain round and one rebuild); the front is walked again from the roots when
+// it has doubled (it only refines as the probe moves) or the contact has shrunk to a quarter or
+// ended (a withdrawn probe would keep the fine front of its contact); and, with `arbitrate`, the
+// collider times itself against collide() and gives way to it where the bookkeeping costs more
+// than it saves.
 // Other trees or other object roots (a worker asked to skip other blocks this round) start a new
 // front only when a second round in a row asks for them: a setup met once is answered by
 // collide() and the front kept for the one it was built for, so rounds that alternate (a client
