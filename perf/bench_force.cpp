@@ -1321,7 +1321,7 @@ void add_force(CLI::App& app) {
     }
     std::vector<int> worker_counts;
     if (a->workers_check != "none") {
-      for (int w : parse_int_list(a->workers_check))
+      for (int w : parse_int_list(a->workers_check, "--workers-check"))
         if (w < 1 || w > 64)
           die("--workers-check: worker counts in 1..64, got " + std::to_string(w));
         else

@@ -22,6 +22,7 @@
 
 #include "bench.hpp"
 #include "bench_json.hpp"
+#include "bench_tables_common.hpp"
 #include <spheretouch/geom/coherent.hpp>
 #include <spheretouch/geom/collide.hpp>
 #include <spheretouch/geom/pose_io.hpp>
@@ -173,12 +174,7 @@ void add_slides(CLI::App& app) {
       std::fprintf(stderr, "%s\n", lines.error().c_str());
       throw CLI::RuntimeError(2);
     }
-    std::vector<double> steps;
-    {
-      std::stringstream ss(a->steps);
-      std::string tok;
-      while (std::getline(ss, tok, ',')) steps.push_back(std::stod(tok));
-    }
+    const std::vector<double> steps = parse_positive_list(a->steps, "--steps");
 
     // Each path has its own scratch, as each would in a collision thread of its own (the coherent
     // collider holds one): no path runs on caches another warmed.

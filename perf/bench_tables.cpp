@@ -21,10 +21,13 @@
 #include <sys/socket.h>
 
 #include <algorithm>
+#include <charconv>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -58,6 +61,18 @@ void add_trade(CLI::App& app);  // bench_trade.cpp
 
 // ------------------------------------------------------------------------------ common helpers
 
+namespace {
+// `tok` read whole as a T, or nothing.
+template <class T>
+std::optional<T> whole_number(const std::string& tok) {
+  T v{};
+  const char* end = tok.data() + tok.size();
+  const auto [p, ec] = std::from_chars(tok.data(), end, v);
+  if (ec != std::errc() || p != end) return std::nullopt;
+  return v;
+}
+}  // namespace
+
 Body load_body(const std::string& spec, std::uint32_t leaf_faces) {
   Body b;
   if (spec.rfind("icosphere", 0) == 0) {
@@ -66,8 +81,17 @@ Body load_body(const std::string& spec, std::uint32_t leaf_faces) {
     std::stringstream ss(spec);
     std::string tok;
     std::getline(ss, tok, ':');
-    if (std::getline(ss, tok, ':')) radius = std::stod(tok);
-    if (std::getline(ss, tok, ':')) freq = std::stoi(tok);
+    if (std::getline(ss, tok, ':')) {
+      const auto v = whole_number<double>(tok);
+      if (!v || !std::isfinite(*v) || !(*v > 0))
+        die("icosphere:RADIUS:FREQ: radius '" + tok + "' is not a positive number");
+      radius = *v;
+    }
+    if (std::getline(ss, tok, ':')) {
+      const auto v = whole_number<int>(tok);
+      if (!v || *v < 1 || *v > 64) die("icosphere:RADIUS:FREQ: frequency '" + tok + "' is not an integer in [1, 64]");
+      freq = *v;
+    }
     b.mesh = geom::make_icosphere(radius, freq);
     b.label = "icosphere";
   } else {
@@ -151,12 +175,30 @@ void append_csv(const std::string& path, const std::string& header, const std::s
   o << row << '\n';
 }
 
-std::vector<int> parse_int_list(const std::string& s) {
+std::vector<int> parse_int_list(const std::string& s, const std::string& option) {
   std::vector<int> out;
   std::stringstream ss(s);
   std::string tok;
   while (std::getline(ss, tok, ','))
-    if (!tok.empty()) out.push_back(std::stoi(tok));
+    if (!tok.empty()) {
+      const auto v = whole_number<int>(tok);
+      if (!v) throw CLI::ValidationError(option, "'" + tok + "' is not an integer (a comma-separated list: 1,2,4)");
+      out.push_back(*v);
+    }
+  return out;
+}
+
+std::vector<double> parse_positive_list(const std::string& s, const std::string& option) {
+  std::vector<double> out;
+  std::stringstream ss(s);
+  std::string tok;
+  while (std::getline(ss, tok, ','))
+    if (!tok.empty()) {
+      const auto v = whole_number<double>(tok);
+      if (!v || !std::isfinite(*v) || !(*v > 0))
+        throw CLI::ValidationError(option, "'" + tok + "' is not a positive number (a comma-separated list: 0.01,0.1)");
+      out.push_back(*v);
+    }
   return out;
 }
 
@@ -221,7 +263,7 @@ void add_rounds(CLI::App& app, const char* name, const char* what) {
       std::uint64_t seq = 0;
     };
     std::vector<std::unique_ptr<Config>> configs;
-    for (const int w : parse_int_list(a->workers)) {
+    for (const int w : parse_int_list(a->workers, "--workers")) {
       auto c = std::make_unique<Config>();
       c->workers = w;
       if (w > 0) {

@@ -60,8 +60,12 @@ class Daemons {
 double quantile(std::vector<double>& v, double q);
 /// Appends `row` to the CSV file, writing `header` first when the file is new or empty.
 void append_csv(const std::string& path, const std::string& header, const std::string& row);
-/// Splits "1,2,4" into integers.
-std::vector<int> parse_int_list(const std::string& s);
+/// Splits "1,2,4" into integers (empty tokens skipped); a token that is not an integer is a
+/// CLI::ValidationError naming `option` and the token.
+std::vector<int> parse_int_list(const std::string& s, const std::string& option);
+/// Splits "0.01,0.1" into positive finite numbers (empty tokens skipped); anything else is a
+/// CLI::ValidationError naming `option` and the token.
+std::vector<double> parse_positive_list(const std::string& s, const std::string& option);
 /// File stem of a path ("a/b/hand_L2.off" -> "hand_L2").
 std::string stem(const std::string& path);
 /// Heap bytes of a mesh's vertex and face arrays.

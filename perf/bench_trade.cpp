@@ -250,7 +250,7 @@ void add_trade(CLI::App& app) {
       rms = std::sqrt(rms / double(ticks));
       mag = std::sqrt(mag / double(ticks));
     };
-    const std::vector<int> rates = parse_int_list(a->rates);
+    const std::vector<int> rates = parse_int_list(a->rates, "--rates");
     std::vector<rt::InterpMode> modes;
     {
       std::stringstream ss(a->interps);
@@ -298,7 +298,7 @@ void add_trade(CLI::App& app) {
     std::vector<std::vector<geom::FacePair>> base_pairs;
     for (std::size_t i : sample) base_pairs.push_back(fine.pairs[i]);
     const Row base = rows[fi];  // finest, 1000 Hz, hold
-    for (int leaf : parse_int_list(a->leafs)) {
+    for (int leaf : parse_int_list(a->leafs, "--leafs")) {
       Body p = load_body(a->probe, std::uint32_t(leaf));
       Body o = load_body(paths.back(), std::uint32_t(leaf));
       std::vector<std::vector<geom::FacePair>> got;
