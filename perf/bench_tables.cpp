@@ -175,31 +175,33 @@ void append_csv(const std::string& path, const std::string& header, const std::s
   o << row << '\n';
 }
 
-std::vector<int> parse_int_list(const std::string& s, const std::string& option) {
-  std::vector<int> out;
+namespace {
+// The comma-separated tokens of `s` (empty ones skipped), each read whole as a T that `fits`;
+// anything else is a CLI::ValidationError naming `option`, the token and `what` was expected.
+template <class T, class Fits>
+std::vector<T> parse_list(const std::string& s, const std::string& option, Fits fits, const char* what) {
+  std::vector<T> out;
   std::stringstream ss(s);
   std::string tok;
   while (std::getline(ss, tok, ','))
     if (!tok.empty()) {
-      const auto v = whole_number<int>(tok);
-      if (!v) throw CLI::ValidationError(option, "'" + tok + "' is not an integer (a comma-separated list: 1,2,4)");
+      const auto v = whole_number<T>(tok);
+      if (!v || !fits(*v)) throw CLI::ValidationError(option, "'" + tok + "' is not " + what);
       out.push_back(*v);
     }
   return out;
 }
+}  // namespace
+
+std::vector<int> parse_int_list(const std::string& s, const std::string& option) {
+  return parse_list<int>(
+      s, option, [](int) { return true; }, "an integer (a comma-separated list: 1,2,4)");
+}
 
 std::vector<double> parse_positive_list(const std::string& s, const std::string& option) {
-  std::vector<double> out;
-  std::stringstream ss(s);
-  std::string tok;
-  while (std::getline(ss, tok, ','))
-    if (!tok.empty()) {
-      const auto v = whole_number<double>(tok);
-      if (!v || !std::isfinite(*v) || !(*v > 0))
-        throw CLI::ValidationError(option, "'" + tok + "' is not a positive number (a comma-separated list: 0.01,0.1)");
-      out.push_back(*v);
-    }
-  return out;
+  return parse_list<double>(
+      s, option, [](double v) { return std::isfinite(v) && v > 0; },
+      "a positive number (a comma-separated list: 0.01,0.1)");
 }
 
 std::string stem(const std::string& path) {
