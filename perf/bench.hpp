@@ -4,6 +4,7 @@
 #pragma once
 #include <CLI/CLI.hpp>
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -13,6 +14,12 @@ namespace st::bench {
 
 /// A TCP port on 127.0.0.1 that was free a moment ago (for workers the benchmarks start).
 int free_tcp_port();
+/// Prints "spheretouch-bench: msg" to stderr and ends the command with exit status 2.
+[[noreturn]] void die(const std::string& msg);
+/// Prints "spheretouch-bench <command>: msg" to stderr and ends the command with exit status 2.
+[[noreturn]] void die(const char* command, const std::string& msg);
+/// The 1 kHz servo's tick (rt::kDefaultRateHz), ns: the simulated clock of the force benches.
+inline constexpr std::int64_t kTickNs = 1'000'000;
 
 // Shared by the collision benches (defined in bench_collide.cpp).
 /// The q-quantile of v (q in [0, 1]; 0 for an empty v).

@@ -42,13 +42,7 @@
 namespace st::bench {
 namespace {
 
-[[noreturn]] void die(const std::string& msg) {
-  std::fprintf(stderr, "spheretouch-bench force: %s\n", msg.c_str());
-  throw CLI::RuntimeError(2);
-}
-
 constexpr double kPi = 3.14159265358979323846;
-constexpr std::int64_t kTickNs = 1'000'000;  // 1 kHz servo
 constexpr double kDirMinN = 0.05;            // directions are compared only above this force, N
 constexpr double kPopDepthMm = 0.5;
 /// collide() as the run engine calls it without workers: exact, pairs sorted (the order the
@@ -88,7 +82,7 @@ Body generated(const std::string& label, geom::Mesh mesh, const geom::TreeConfig
   b.label = label;
   b.mesh = std::move(mesh);
   auto t = geom::SphereTree::build(b.mesh, tree);
-  if (!t) die(label + ": " + t.error());
+  if (!t) die("force", label + ": " + t.error());
   b.tree = std::move(t).value();
   return b;
 }
@@ -710,7 +704,7 @@ Replay replay(const ForceScene& s, const Model& model, bool closed, int C, engin
       const auto t0 = std::chrono::steady_clock::now();
       if (fleet) {
         fleet->client().round(seq + 1, pose, net::Clock::now() + std::chrono::seconds(10), round);
-        if (!round.complete) die(s.name + ": a scatter-gather round came back incomplete");
+        if (!round.complete) die("force", s.name + ": a scatter-gather round came back incomplete");
         r.pairs.assign(round.pairs.begin(), round.pairs.end());
       } else {
         geom::collide(s.probe.mesh, s.probe.tree, s.object.mesh, s.object.tree, pose, kEngineCollide, sc, r);
@@ -1072,7 +1066,7 @@ int same_at_worker_counts(const ForceScene& s, const Model& m, int C, const Repl
     spec.leaf_faces = kSolidLeafFaces;
     auto f = engine::start_fleet(spec, s.probe.mesh, s.object.mesh, s.object.tree);
     if (!f && f.error().find("gives " + std::to_string(w) + " workers a block each") != std::string::npos) continue;
-    if (!f) die(s.name + ": " + f.error());
+    if (!f) die("force", s.name + ": " + f.error());
     checked += (checked.empty() ? "" : ",") + std::to_string(w);
     const Replay rp = replay(s, m, false, C, f.value().get());
     if (rp.ticks.size() != base.ticks.size()) return 0;
@@ -1087,7 +1081,7 @@ int same_at_worker_counts(const ForceScene& s, const Model& m, int C, const Repl
 
 void write_trace(const std::string& path, const Replay& rp, const ForceScene& s) {
   std::FILE* f = std::fopen(path.c_str(), "w");
-  if (!f) die(path + ": cannot create");
+  if (!f) die("force", path + ": cannot create");
   std::fputs("t_s,x,y,z,fx,fy,fz,f,pd_mm,depth_ref_mm\n", f);
   for (std::size_t i = 0; i < rp.ticks.size(); ++i) {
     const Tick& t = rp.ticks[i];
@@ -1097,7 +1091,7 @@ void write_trace(const std::string& path, const Replay& rp, const ForceScene& s)
                  : s.truth   ? s.truth(t.x).depth_mm
                              : std::nan(""));
   }
-  if (std::fclose(f) != 0) die(path + ": write failed");
+  if (std::fclose(f) != 0) die("force", path + ": write failed");
 }
 
 /// Contact model cost at the perf poses: cold (a fresh builder) and warm (after 100 rounds
@@ -1121,7 +1115,7 @@ std::vector<WrenchCheck> wrench_checks() {
     geom::collide(probe, pt, plate, ot, pose, kEngineCollide, sc, r);
     geom::ContactBuilder b;
     geom::ContactModel m = b.build(probe, plate, pose, r.pairs);
-    if (!m.in_contact()) die("wrench check " + name + ": no contact");
+    if (!m.in_contact()) die("force", "wrench check " + name + ": no contact");
     m.seq = 1;
     m.pose = geom::to_pod(pose);
     rt::Interpolator in(rt::ForceLaw{}, rt::DefaultInterpolatorConfig());
@@ -1281,7 +1275,7 @@ void add_force(CLI::App& app) {
     for (std::string m; std::getline(ms, m, ',');) {
       Model mm{m, geom::DefaultContactConfig(), rt::DefaultPassivityConfig()};
       auto kind = geom::parse_contact_model(m);
-      if (!kind) die("--models: " + kind.error());
+      if (!kind) die("force", "--models: " + kind.error());
       mm.contact.model = kind.value();
       mm.passivity.enabled = kind.value() == geom::ContactModelKind::patch;
       models.push_back(mm);
@@ -1313,7 +1307,7 @@ void add_force(CLI::App& app) {
       } else if (auto g = generated_scenes(n); !g.empty()) {
         for (ForceScene& x : g) scenes.push_back(std::move(x));
       } else {
-        die("--scenes: unknown scene '" + n +
+        die("force", "--scenes: unknown scene '" + n +
             "' (box, sphere, plate, hand_elephant, hand_armadillo, hand_elephant_twist, box_edge, box_corner, ridge, "
             "crease, "
             "inner_corner, pocket, plate_through, release, meshes, friction)");
@@ -1323,7 +1317,7 @@ void add_force(CLI::App& app) {
     if (a->workers_check != "none") {
       for (int w : parse_int_list(a->workers_check, "--workers-check"))
         if (w < 1 || w > 64)
-          die("--workers-check: worker counts in 1..64, got " + std::to_string(w));
+          die("force", "--workers-check: worker counts in 1..64, got " + std::to_string(w));
         else
           worker_counts.push_back(w);
     }

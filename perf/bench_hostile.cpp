@@ -109,12 +109,6 @@ struct CaseResult {
   std::string note;
 };
 
-double quantile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, std::size_t(q * double(v.size())))];
-}
-
 }  // namespace
 
 void add_hostile(CLI::App& app) {
@@ -207,7 +201,7 @@ void add_hostile(CLI::App& app) {
       quiet.push_back(round_ms(ok));
       std::this_thread::sleep_for(1ms);
     }
-    const double quiet_p50 = quantile(quiet, 0.5), quiet_p99 = quantile(quiet, 0.99);
+    const double quiet_p50 = percentile(quiet, 0.5), quiet_p99 = percentile(quiet, 0.99);
     const double rss_quiet = rss_mb();
 
     // One case: the attack runs on its own thread, repeated until its window is over (an attack
@@ -250,8 +244,8 @@ void add_hostile(CLI::App& app) {
       if (c.outcome != Outcome::crashed && c.honest_incomplete * 10 > during.size()) c.outcome = Outcome::stalled;
       c.worker_rss_mb = peak;
       c.honest_rounds = static_cast<std::uint32_t>(during.size());
-      c.answer_ms_p50 = quantile(during, 0.5);
-      c.answer_ms_p99 = quantile(during, 0.99);
+      c.answer_ms_p50 = percentile(during, 0.5);
+      c.answer_ms_p99 = percentile(during, 0.99);
       results.push_back(c);
     };
 

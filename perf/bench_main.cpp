@@ -2,6 +2,22 @@
 // spheretouch-bench: the benchmark programs behind perf/RESULTS.md.
 #include "bench.hpp"
 
+#include <cstdio>
+
+namespace st::bench {
+
+void die(const std::string& msg) {
+  std::fprintf(stderr, "spheretouch-bench: %s\n", msg.c_str());
+  throw CLI::RuntimeError(2);
+}
+
+void die(const char* command, const std::string& msg) {
+  std::fprintf(stderr, "spheretouch-bench %s: %s\n", command, msg.c_str());
+  throw CLI::RuntimeError(2);
+}
+
+}  // namespace st::bench
+
 int main(int argc, char** argv) {
   CLI::App app{
       "spheretouch-bench: benchmarks behind perf/RESULTS.md (ratios against baselines "

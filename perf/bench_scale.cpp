@@ -116,11 +116,6 @@ double process_cpu_us() {
   return double(ts.tv_sec) * 1e6 + double(ts.tv_nsec) * 1e-3;
 }
 
-[[noreturn]] void die(const std::string& msg) {
-  std::fprintf(stderr, "spheretouch-bench scale: %s\n", msg.c_str());
-  throw CLI::RuntimeError(2);
-}
-
 /// The fan-out ZeroMQ offers besides a DEALER per worker (issue 33, "measure, then choose"): one
 /// PUB the workers subscribe to carries the query (one send for all of them), one PULL gathers
 /// their replies (no poll over W sockets).
@@ -139,7 +134,7 @@ std::vector<double> client_cpu_tcp(const std::vector<std::uint32_t>& ws, std::si
     for (std::uint32_t i = 0; i < (pub ? 2u : W); ++i) ports.push_back(free_tcp_port());
     auto tcp = [](int port) { return "tcp://127.0.0.1:" + std::to_string(port); };
     const pid_t pid = ::fork();
-    if (pid < 0) die("fork failed");
+    if (pid < 0) die("scale", "fork failed");
     if (pid == 0) {
       // The echoes: one thread polling W ROUTERs (or W SUBs, answering on their PUSHes), answering
       // with reply_bytes bytes.
@@ -268,20 +263,20 @@ double client_message_work_us(std::size_t query_bytes, std::size_t reply_bytes, 
     socklen_t len = sizeof addr;
     if (ls < 0 || ::bind(ls, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0 || ::listen(ls, 1) != 0 ||
         ::getsockname(ls, reinterpret_cast<sockaddr*>(&addr), &len) != 0)
-      die("loopback tcp socket for the message-work measurement");
+      die("scale", "loopback tcp socket for the message-work measurement");
     const int a = ::socket(AF_INET, SOCK_STREAM, 0);
-    if (::connect(a, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) die("loopback connect");
+    if (::connect(a, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) die("scale", "loopback connect");
     const int b = ::accept(ls, nullptr, nullptr);
     const int one = 1;
     ::setsockopt(a, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
     ::setsockopt(b, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
     std::vector<std::uint8_t> q(query_bytes, 1), rep(reply_bytes, 2), buf(std::max(query_bytes, reply_bytes));
     auto xfer = [&](int from, int to, const std::vector<std::uint8_t>& m) {
-      if (::write(from, m.data(), m.size()) != ssize_t(m.size())) die("loopback write");
+      if (::write(from, m.data(), m.size()) != ssize_t(m.size())) die("scale", "loopback write");
       std::size_t got = 0;
       while (got < m.size()) {
         const ssize_t k = ::read(to, buf.data(), m.size() - got);
-        if (k <= 0) die("loopback read");
+        if (k <= 0) die("scale", "loopback read");
         got += std::size_t(k);
       }
     };
@@ -507,12 +502,12 @@ void run_scale(const ScaleArgs& a) {
   geom::Mesh probe, object;
   for (auto [path, mesh] : {std::pair{&a.probe, &probe}, std::pair{&a.object, &object}}) {
     auto m = geom::load_mesh(*path);
-    if (!m) die(m.error());
+    if (!m) die("scale", m.error());
     *mesh = std::move(m.value().mesh);
   }
   auto lines = geom::read_pose_lines(a.poses);
-  if (!lines) die(lines.error());
-  if (lines.value().empty()) die(a.poses + ": no poses");
+  if (!lines) die("scale", lines.error());
+  if (lines.value().empty()) die("scale", a.poses + ": no poses");
   std::vector<geom::Pose> poses;
   for (const auto& l : lines.value()) poses.push_back(l.pose);
   const auto parse_knob = [](const std::string& v, const char* what, std::uint32_t free) -> std::uint32_t {
@@ -522,13 +517,13 @@ void run_scale(const ScaleArgs& a) {
       if (x > (1u << 20)) throw std::out_of_range(what);
       return std::uint32_t(x);
     } catch (const std::exception&) {
-      die(std::string("--") + what + ": expected an integer or auto (found '" + v + "')");
+      die("scale", std::string("--") + what + ": expected an integer or auto (found '" + v + "')");
     }
   };
   const bool per_block = a.share_tree == "per-block";
   const std::uint32_t fixed_layer = parse_knob(a.layer, "layer", geom::kFree);
   const std::uint32_t fixed_block = parse_knob(a.block_size, "block-size", 0);
-  if (fixed_block == 0 && a.block_size != "auto") die("--block-size must be >= 1 or auto");
+  if (fixed_block == 0 && a.block_size != "auto") die("scale", "--block-size must be >= 1 or auto");
 
   std::vector<std::uint32_t> ws;
   for (std::uint32_t w = 1; w <= a.max_workers; w *= 2) ws.push_back(w);
@@ -553,7 +548,7 @@ void run_scale(const ScaleArgs& a) {
     geom::TreeConfig tc = geom::DefaultTreeConfig();
     tc.leaf_faces = a.partition_leaf_faces;
     auto t = geom::SphereTree::build(object, tc);
-    if (!t) die(t.error());
+    if (!t) die("scale", t.error());
     finer = std::move(t).value();
   }
   const geom::SphereTree& part_tree = a.partition_leaf_faces ? finer : ot;
@@ -577,7 +572,7 @@ void run_scale(const ScaleArgs& a) {
     const geom::CollideConfig full = geom::DefaultCollideConfig();
     single[i] = time_median_us(a.runs, [&] { geom::collide(probe, pt, object, ot, poses[i], full, scratch, result); });
     if (result.stats.node_pairs != sphere_tests)
-      die("pose " + std::to_string(i + 1) + ": the descent stopped at the leaf spheres made " +
+      die("scale", "pose " + std::to_string(i + 1) + ": the descent stopped at the leaf spheres made " +
           std::to_string(sphere_tests) + " sphere tests, the exact one " + std::to_string(result.stats.node_pairs));
     contacts[i] = std::uint32_t(result.contacts());
     single_spheres[i] = result.stats.node_pairs;
@@ -593,7 +588,7 @@ void run_scale(const ScaleArgs& a) {
       s.block_size = fixed_block;
     } else {
       auto pick = geom::choose_split(part_tree, W, m, model, fixed_layer, fixed_block);
-      if (!pick) die(pick.error());
+      if (!pick) die("scale", pick.error());
       s.layer = pick.value().layer;
       s.block_size = pick.value().block_size;
       s.automatic = true;
@@ -626,7 +621,7 @@ void run_scale(const ScaleArgs& a) {
     auto [it, fresh] = block_tests.try_emplace({sp.layer, sp.block_size});
     if (!fresh) return it->second;
     auto part = geom::make_partition(part_tree, sp.layer, 1, sp.block_size);
-    if (!part) die(part.error());
+    if (!part) die("scale", part.error());
     BlockTests& bt = it->second;
     for (std::uint32_t b = 0; b < part.value().num_blocks(); ++b) {
       std::uint32_t f = 0;
@@ -666,7 +661,7 @@ void run_scale(const ScaleArgs& a) {
     for (geom::Mapping m : mappings) {
       Split sp = split_for(W, m);
       auto blocks = net::tree_blocks(part_tree, sp.layer, sp.block_size);
-      if (!blocks) die(blocks.error());
+      if (!blocks) die("scale", blocks.error());
       sp.blocks = std::uint32_t(blocks.value().size());
       if (sp.blocks < W) {
         std::fprintf(stderr, "W=%u %s: only %u blocks at layer %u, skipped\n", W, geom::to_string(m), sp.blocks, sp.layer);
@@ -704,9 +699,9 @@ void run_scale(const ScaleArgs& a) {
       for (std::uint32_t w = 0; w < W; ++w) {
         if (share[w].empty()) continue;
         auto set = net::make_block_set(probe, object, blocks.value(), share[w], geom::DefaultTreeConfig().leaf_faces);
-        if (!set) die(set.error());
+        if (!set) die("scale", set.error());
         std::unique_ptr<net::CollisionBackend> be = share_backends(per_block)();
-        if (Status st = be->load(set.value()); !st) die(st.error());
+        if (Status st = be->load(set.value()); !st) die("scale", st.error());
         {
           // What this worker holds of the object: its share's tree (rebuilt here to size it) and mesh.
           const geom::SphereTree st =
@@ -863,13 +858,13 @@ void run_scale(const ScaleArgs& a) {
     zmq::context_t actx(1);
     const Split sp = split_for(assist_w, geom::Mapping::block_cyclic);
     auto blocks = net::tree_blocks(part_tree, sp.layer, sp.block_size);
-    if (!blocks) die(blocks.error());
+    if (!blocks) die("scale", blocks.error());
     const std::string tag = "assist-" + std::to_string(::getpid()) + "-" + std::to_string(assist_w);
     net::WorkerConfig room;  // four clients, up to two sets each (a share and its standby copies)
     room.max_sets = 8;
     auto lw = net::LocalWorkers::start(
         actx, int(assist_w), share_backends(per_block), [&](int i) { return net::inproc_endpoint(i, tag); }, room);
-    if (!lw) die(lw.error());
+    if (!lw) die("scale", lw.error());
     constexpr int kClients = 4;  // plain, assist, replicas, replicas + assist
     std::unique_ptr<net::ScatterGather> sg[kClients];
     for (int k = 0; k < kClients; ++k) {
@@ -878,9 +873,9 @@ void run_scale(const ScaleArgs& a) {
       cfg.assist_blocks = k % 2 ? a.assist_blocks : 0;
       cfg.replicas = k >= 2;
       auto c = net::ScatterGather::create(actx, cfg, probe, object, blocks.value());
-      if (!c) die(c.error());
+      if (!c) die("scale", c.error());
       sg[k] = std::move(c).value();
-      if (!sg[k]->wait_ready(Clock::now() + std::chrono::seconds(300))) die("in-process workers not ready");
+      if (!sg[k]->wait_ready(Clock::now() + std::chrono::seconds(300))) die("scale", "in-process workers not ready");
     }
     const auto work = [&](const net::QueryStats& q) {
       return cost_sphere_us * double(q.sphere_tests) + cost_tri_us * double(q.tri_tests);
@@ -891,8 +886,8 @@ void run_scale(const ScaleArgs& a) {
       for (int k = 0; k < kClients; ++k) {
         sg[k]->round(++seq, poses_before[i], Clock::now() + std::chrono::seconds(60), r[k]);
         sg[k]->round(++seq, poses[i], Clock::now() + std::chrono::seconds(60), r[k]);
-        if (!r[k].complete) die("real rounds check: an incomplete round");
-        if (r[k].pairs != r[0].pairs) die("real rounds check: the pairs differ with assist or replicas");
+        if (!r[k].complete) die("scale", "real rounds check: an incomplete round");
+        if (r[k].pairs != r[0].pairs) die("scale", "real rounds check: the pairs differ with assist or replicas");
       }
       AssistRound ar;
       ar.pose = i + 1;
@@ -991,12 +986,12 @@ void run_scale(const ScaleArgs& a) {
         const std::string tag = "scale-" + std::to_string(::getpid()) + "-" + std::to_string(fleets++);
         auto lw = net::LocalWorkers::start(ctx, int(W), share_backends(per_block),
                                            [&](int i) { return net::inproc_endpoint(i, tag); });
-        if (!lw) die(lw.error());
+        if (!lw) die("scale", lw.error());
         net::ScatterConfig cfg;
         cfg.endpoints = lw.value()->endpoints();
         auto sg = net::ScatterGather::create(ctx, cfg, probe, object, std::move(blocks).value());
-        if (!sg) die(sg.error());
-        if (!sg.value()->wait_ready(Clock::now() + std::chrono::seconds(60))) die("in-process workers not ready");
+        if (!sg) die("scale", sg.error());
+        if (!sg.value()->wait_ready(Clock::now() + std::chrono::seconds(60))) die("scale", "in-process workers not ready");
         const double fl = std::find_if(floors.begin(), floors.end(), [&](auto& f) { return f.first == W; })->second;
         net::RoundResult rr;
         std::uint64_t seq = 0;
@@ -1008,13 +1003,13 @@ void run_scale(const ScaleArgs& a) {
         std::vector<std::unique_ptr<net::CollisionBackend>> shares;
         {
           auto bl = net::tree_blocks(part_tree, sp.layer, sp.block_size);
-          if (!bl) die(bl.error());
+          if (!bl) die("scale", bl.error());
           for (const auto& ids : net::deal_blocks(std::uint32_t(bl.value().size()), W, geom::Mapping::block_cyclic, 1)) {
             if (ids.empty()) continue;
             auto set = net::make_block_set(probe, object, bl.value(), ids, geom::DefaultTreeConfig().leaf_faces);
-            if (!set) die(set.error());
+            if (!set) die("scale", set.error());
             shares.push_back(share_backends(per_block)());
-            if (Status st = shares.back()->load(set.value()); !st) die(st.error());
+            if (Status st = shares.back()->load(set.value()); !st) die("scale", st.error());
           }
         }
         // Per pose, the real round, the empty round, the shares' queries one after the other

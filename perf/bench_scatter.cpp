@@ -259,9 +259,9 @@ void add_scatter(CLI::App& app) {
         zmq::pollitem_t it{s.handle(), 0, ZMQ_POLLIN, 0};
         zmq::message_t m;
         if (zmq::poll(&it, 1, std::chrono::milliseconds(100)) <= 0 || !s.recv(m, zmq::recv_flags::dontwait)) continue;
-        auto d = net::decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, net::DefaultLimits());
-        if (d)
-          if (const auto* h = std::get_if<net::HelloMsg>(&d.value()); h && !h->held.empty()) hash = h->held[0].hash;
+        auto reply = net::decode({static_cast<const std::uint8_t*>(m.data()), m.size()}, net::DefaultLimits());
+        if (reply)
+          if (const auto* h = std::get_if<net::HelloMsg>(&reply.value()); h && !h->held.empty()) hash = h->held[0].hash;
       }
       if (!hash) {
         std::fprintf(stderr, "split client: %s holds no set for it\n", ep.c_str());

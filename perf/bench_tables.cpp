@@ -54,11 +54,6 @@ namespace st::bench {
 
 void add_trade(CLI::App& app);  // bench_trade.cpp
 
-[[noreturn]] static void die(const std::string& msg) {
-  std::fprintf(stderr, "spheretouch-bench: %s\n", msg.c_str());
-  throw CLI::RuntimeError(2);
-}
-
 // ------------------------------------------------------------------------------ common helpers
 
 namespace {

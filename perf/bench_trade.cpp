@@ -35,12 +35,6 @@
 namespace st::bench {
 namespace {
 
-[[noreturn]] void die(const std::string& msg) {
-  std::fprintf(stderr, "spheretouch-bench trade: %s\n", msg.c_str());
-  throw CLI::RuntimeError(2);
-}
-
-constexpr std::int64_t kTickNs = 1'000'000;  // 1 kHz servo (rt::kDefaultRateHz)
 
 /// Exact pairs at every tick of the script for one level.
 struct LevelRun {
@@ -173,7 +167,7 @@ void add_trade(CLI::App& app) {
       std::string tok;
       while (std::getline(ss, tok, ',')) paths.push_back(tok);
     }
-    if (paths.empty()) die("--levels: no mesh");
+    if (paths.empty()) die("trade", "--levels: no mesh");
     std::vector<LevelRun> lv(paths.size());
     for (std::size_t l = 0; l < paths.size(); ++l) {
       lv[l].body = load_body(paths[l], default_leaf);
@@ -181,7 +175,7 @@ void add_trade(CLI::App& app) {
     }
     for (std::size_t l = 0; l + 1 < lv.size(); ++l)
       if (lv[l].body.mesh.num_faces() * 4 != lv[l + 1].body.mesh.num_faces())
-        die(paths[l + 1] + " is not one Loop level above " + paths[l] + " (face count is not 4x)");
+        die("trade", paths[l + 1] + " is not one Loop level above " + paths[l] + " (face count is not 4x)");
     LevelRun& fine = lv.back();
     const rt::Trajectory script = press_slide_script(probe.mesh, fine.body.mesh, a->seconds);
     const std::size_t ticks = std::size_t(std::llround(a->seconds * 1000)) + 1;
@@ -211,7 +205,7 @@ void add_trade(CLI::App& app) {
     std::vector<std::size_t> in_contact, sample;
     for (std::size_t i = 0; i < ticks; ++i)
       if (!fine.pairs[i].empty()) in_contact.push_back(i);
-    if (in_contact.empty()) die("the script never touches " + paths.back());
+    if (in_contact.empty()) die("trade", "the script never touches " + paths.back());
     const std::size_t n = std::min<std::size_t>(std::size_t(std::max(1, a->samples)), in_contact.size());
     for (std::size_t j = 0; j < n; ++j) sample.push_back(in_contact[j * in_contact.size() / n]);
     for (LevelRun& L : lv) L.latency_us = time_collide(probe, L.body, poses, sample, nullptr);
@@ -257,7 +251,7 @@ void add_trade(CLI::App& app) {
       std::string tok;
       while (std::getline(ss, tok, ',')) {
         auto m = rt::parse_interp_mode(tok);
-        if (!m) die(m.error());
+        if (!m) die("trade", m.error());
         modes.push_back(m.value());
       }
     }
@@ -330,7 +324,7 @@ void add_trade(CLI::App& app) {
     }
     if (!a->trace_csv.empty()) {
       std::FILE* f = std::fopen(a->trace_csv.c_str(), "w");
-      if (!f) die(a->trace_csv + ": cannot write");
+      if (!f) die("trade", a->trace_csv + ": cannot write");
       std::fprintf(f, "t_s,reference");
       for (const auto& [name, t] : traces) std::fprintf(f, ",%s", name.c_str());
       std::fprintf(f, "\n");

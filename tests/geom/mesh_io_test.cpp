@@ -420,7 +420,7 @@ TEST_CASE("a mesh 10^6 mm from the origin keeps its shape to 1e-9 relative") {
   for (const double offset : {1e6, -1e6, 3.7e6}) {
     std::string s = "OFF\n5 5 0\n";
     std::vector<Vec3> placed;
-    char buf[64];
+    char buf[80];  // three %.17g of up to 24 characters, two spaces and a newline
     for (const Vec3& p : kPos) {
       // Perturb the shape so it is not grid-aligned, then place it far away.
       const Vec3 q = Vec3(offset, offset / 2, -offset) + p * 1.2345678;

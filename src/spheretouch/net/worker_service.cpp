@@ -847,16 +847,16 @@ bool WorkerService::make_room(const std::string& owner, std::uint64_t bytes) {
   // would otherwise trade one for the other on every load while an idle set kept its slot.
   const auto now = std::chrono::steady_clock::now();
   while (distinct_backends() >= max_sets) {
-    auto victim = sets_.end(), own = sets_.end();
+    auto victim = sets_.end(), own_lru = sets_.end();
     for (auto it = sets_.end(); it != sets_.begin();) {
       --it;
       if (now - it->queried >= cfg_.active_set) {
         victim = it;
         break;
       }
-      if (own == sets_.end() && it->owner == owner) own = it;
+      if (own_lru == sets_.end() && it->owner == owner) own_lru = it;
     }
-    if (victim == sets_.end()) victim = own;
+    if (victim == sets_.end()) victim = own_lru;
     if (victim == sets_.end()) return false;
     sets_.erase(victim);
   }
