@@ -43,7 +43,7 @@ namespace st::bench {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-constexpr double kDirMinN = 0.05;            // directions are compared only above this force, N
+constexpr double kDirMinN = 0.05;  // directions are compared only above this force, N
 constexpr double kPopDepthMm = 0.5;
 /// collide() as the run engine calls it without workers: exact, pairs sorted (the order the
 /// workers' merge gives, so that the contact model does not depend on the worker count).
@@ -1308,9 +1308,10 @@ void add_force(CLI::App& app) {
         for (ForceScene& x : g) scenes.push_back(std::move(x));
       } else {
         die("force", "--scenes: unknown scene '" + n +
-            "' (box, sphere, plate, hand_elephant, hand_armadillo, hand_elephant_twist, box_edge, box_corner, ridge, "
-            "crease, "
-            "inner_corner, pocket, plate_through, release, meshes, friction)");
+                         "' (box, sphere, plate, hand_elephant, hand_armadillo, hand_elephant_twist, box_edge, "
+                         "box_corner, ridge, "
+                         "crease, "
+                         "inner_corner, pocket, plate_through, release, meshes, friction)");
       }
     }
     std::vector<int> worker_counts;

@@ -573,7 +573,8 @@ void run_scale(const ScaleArgs& a) {
     single[i] = time_median_us(a.runs, [&] { geom::collide(probe, pt, object, ot, poses[i], full, scratch, result); });
     if (result.stats.node_pairs != sphere_tests)
       die("scale", "pose " + std::to_string(i + 1) + ": the descent stopped at the leaf spheres made " +
-          std::to_string(sphere_tests) + " sphere tests, the exact one " + std::to_string(result.stats.node_pairs));
+                       std::to_string(sphere_tests) + " sphere tests, the exact one " +
+                       std::to_string(result.stats.node_pairs));
     contacts[i] = std::uint32_t(result.contacts());
     single_spheres[i] = result.stats.node_pairs;
     single_tris[i] = result.stats.tri_pairs;
@@ -991,7 +992,8 @@ void run_scale(const ScaleArgs& a) {
         cfg.endpoints = lw.value()->endpoints();
         auto sg = net::ScatterGather::create(ctx, cfg, probe, object, std::move(blocks).value());
         if (!sg) die("scale", sg.error());
-        if (!sg.value()->wait_ready(Clock::now() + std::chrono::seconds(60))) die("scale", "in-process workers not ready");
+        if (!sg.value()->wait_ready(Clock::now() + std::chrono::seconds(60)))
+          die("scale", "in-process workers not ready");
         const double fl = std::find_if(floors.begin(), floors.end(), [&](auto& f) { return f.first == W; })->second;
         net::RoundResult rr;
         std::uint64_t seq = 0;

@@ -35,7 +35,6 @@
 namespace st::bench {
 namespace {
 
-
 /// Exact pairs at every tick of the script for one level.
 struct LevelRun {
   Body body;
