@@ -305,6 +305,49 @@ TEST_CASE("a probe withdrawn: the front is walked from the roots again and becom
   CHECK(cc.stats().entries < in_contact);  // 396 of 724 (before: 773 of 724, never walked again)
 }
 
+TEST_CASE("a probe clear of the object: one sphere test a round, the front dropped, exact when it comes back") {
+  const CoBody probe(*st::test::model_mesh("hand_L2.off"));
+  const CoBody object(*st::test::model_mesh("elephant.off"));
+  CoherentCompare cmp;
+  const Pose start = pressed_start(probe, object, 5, cmp.scratch, cmp.plain);
+  const Vec3 x = Vec3::UnitX();
+  // No step is a jump (max_step): what ends the front here is the probe being clear.
+  CoherentConfig cfg = fixed();
+  cfg.max_step = 1e9;
+  CoherentCollider cc(cfg);
+  for (int k = 0; k < 5; ++k) cmp.at(cc, probe, object, moved(start, Vec3::Zero(), x, 0.001 * k, x, 0.0));
+  REQUIRE(cc.stats().entries > 0);
+  // Far off (the probe's and the object's bounding spheres apart by a metre, on either side): no
+  // pair, after one sphere test, as collide() answers; nothing of the contact's front is kept.
+  const double far = 2 * (double(probe.tree.nodes[0].radius) + double(object.tree.nodes[0].radius)) + 1000;
+  for (const double way : {far, -far, far + 1}) {
+    const std::uint64_t plain = cc.stats().plain_rounds;
+    cmp.at(cc, probe, object, moved(start, Vec3::Zero(), x, way, x, 0.0));
+    CHECK(cmp.coh.pairs.empty());
+    CHECK(cmp.coh.stats.node_pairs == 1);
+    CHECK(cmp.plain.stats.node_pairs == 1);
+    CHECK(cc.stats().plain_rounds == plain + 1);
+    CHECK(cc.stats().entries == 0);
+  }
+  // Back in contact: a rebuild, then certificates again, every round collide()'s pairs.
+  const std::uint64_t rebuilds = cc.stats().rebuilds;
+  for (int k = 0; k < 5; ++k) cmp.at(cc, probe, object, moved(start, Vec3::Zero(), x, 0.001 * k, x, 0.0));
+  CHECK(cc.stats().rebuilds == rebuilds + 1);
+  CHECK(cc.stats().reused > 0);
+  // Object roots restricted (a worker's blocks): apart only when every root is.
+  CollideConfig blocks;
+  blocks.restrict_object = true;
+  std::vector<std::uint32_t> roots;
+  for (std::uint32_t c = 0; c < object.tree.nodes[0].count; ++c) roots.push_back(object.tree.nodes[0].first + c);
+  blocks.object_roots = roots;
+  for (int k = 0; k < 3; ++k) cmp.at(cc, probe, object, moved(start, Vec3::Zero(), x, 0.001 * k, x, 0.0), blocks);
+  CHECK(!cmp.coh.pairs.empty());
+  cmp.at(cc, probe, object, moved(start, Vec3::Zero(), x, far, x, 0.0), blocks);
+  CHECK(cmp.coh.pairs.empty());
+  CHECK(cmp.coh.stats.node_pairs == roots.size());
+  CHECK(cc.stats().entries == 0);
+}
+
 TEST_CASE("the coherent collider keeps collide()'s limits and falls back on jumps, a full pool and non-finite poses") {
   const CoBody probe(*st::test::model_mesh("hand_L2.off"));
   const CoBody object(*st::test::model_mesh("elephant.off"));

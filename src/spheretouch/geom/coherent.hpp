@@ -38,6 +38,7 @@
 // that takes a worker's busiest block some rounds and not others) cost no rebuild each.
 #pragma once
 #include <spheretouch/abi.hpp>
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -204,6 +205,12 @@ class CoherentCollider {
   }
   // Live entries of the front: leaf pairs and groups.
   std::size_t entries() const { return front_.size() + groups_.size() - dead_; }
+  // The pool's figures in stats_ after a round (entries, candidates, peak bytes).
+  void note_pool() {
+    stats_.entries = entries();
+    stats_.candidates = cands_.size();
+    stats_.peak_bytes = std::max(stats_.peak_bytes, pool_bytes(front_.size()));
+  }
   // Drops the dead groups once they are most of the store.
   void compact_groups();
   // δ for this round's new entries (config_.reach, or adapted to step_).

@@ -334,6 +334,25 @@ bool frame_query(const Mesh& probe, const SphereTree& probe_tree, const Mesh& ob
   return true;
 }
 
+// collide() would answer nothing after one sphere test per object root: the probe's root sphere
+// is apart from each root the query descends from, by more than the float tests' slack (so the
+// float test collide() makes agrees; the padded radii enclose every face, so no pair is missed).
+bool roots_apart(const SphereTree& probe_tree, const SphereTree& object_tree, const CollideConfig& options,
+                 const QueryFrame& f, std::uint64_t& tests) {
+  const SphereNode& rp = probe_tree.nodes[0];
+  const Vec3 c = apply(f.rt, centre_of(rp));
+  const double r = f.s * rp.radius + f.slack;
+  const auto apart = [&](std::uint32_t o) {
+    ++tests;
+    const SphereNode& ro = object_tree.nodes[o];
+    return (c - centre_of(ro)).norm() > r + ro.radius + f.slack;
+  };
+  if (!options.restrict_object) return apart(0);
+  for (const std::uint32_t o : options.object_roots)
+    if (o < object_tree.num_nodes() && !apart(o)) return false;
+  return true;
+}
+
 }  // namespace
 
 void SortedRuns::end(std::vector<FacePair>& pairs) {
@@ -453,6 +472,20 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
     drop();
     return;
   }
+  // The probe clear of the object: collide()'s answer, no pair, after a sphere test per root, and
+  // nothing else (no timing, no step: a scene's far objects cost what collide() costs). The front
+  // goes: as fine as the contact it was made for, of no use until the probe comes back, and then
+  // rebuilt at about a plain round's cost.
+  if (roots_apart(probe_tree, object_tree, options, f, result.stats.node_pairs)) {
+    ++stats_.plain_rounds;
+    if (have_front_) drop();
+    last_rt_ = f.rt;
+    have_last_ = true;
+    near_.radius = -1;
+    last_pairs_ = 0;
+    note_pool();
+    return;
+  }
   // The step: of the probe leaves near the object when there are any (what the certificates
   // care about), else of the whole probe.
   const SphereNode& root = probe_tree.nodes[0];
@@ -482,6 +515,7 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
     timed_round_ = round;
     timed_pairs_ = last_pairs_ = pairs;
     note_contact(probe, result);
+    note_pool();
     return;
   }
   const auto t0 = std::chrono::steady_clock::now();
@@ -501,6 +535,7 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
     result.clear();
     f.gen = scratch_.next_generation();
     query(probe, probe_tree, object, object_tree, options, scratch_, result, f);
+    note_pool();
     return;
   }
   if (result.stats.pair_limit_hit || result.stats.work_limit_hit || result.stats.truncated != 0) {
@@ -532,9 +567,7 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   }
   note_contact(probe, result);
   last_pairs_ = result.pairs.size();
-  stats_.entries = entries();
-  stats_.candidates = cands_.size();
-  stats_.peak_bytes = std::max(stats_.peak_bytes, pool_bytes(front_.size()));
+  note_pool();
   if (options.sort_pairs) scratch_.sort(result.pairs);
 }
 
