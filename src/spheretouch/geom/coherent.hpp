@@ -27,11 +27,12 @@
 // pairs are (re)built within a budget per round (2 % of the front's after a rebuild, growing to
 // 25 %), the others answered by collide()'s own leaf stage meanwhile; a round whose probe (its
 // part in contact) moved more than max_step since the last one runs collide() and drops the cache
-// (a jerk costs one plain round and one rebuild); the front is walked again from the roots when
-// it has doubled (it only refines as the probe moves) or the contact has shrunk to a quarter or
-// ended (a withdrawn probe would keep the fine front of its contact); and, with `arbitrate`, the
-// collider times itself against collide() and gives way to it where the bookkeeping costs more
-// than it saves.
+// (a jerk costs one plain round and one rebuild); a probe clear of the object (its root sphere
+// apart from every object root) costs one sphere test per root, as in collide(), and drops the
+// front; the front is walked again from the roots when it has doubled (it only refines as the
+// probe moves) or the contact has shrunk to a quarter or ended (a withdrawn probe would keep the
+// fine front of its contact); and, with `arbitrate`, the collider times itself against collide()
+// and gives way to it where the bookkeeping costs more than it saves.
 // Other trees or other object roots (a worker asked to skip other blocks this round) start a new
 // front only when a second round in a row asks for them: a setup met once is answered by
 // collide() and the front kept for the one it was built for, so rounds that alternate (a client
@@ -64,7 +65,8 @@ struct CoherentConfig {
   std::size_t max_bytes = std::size_t(64) << 20;
   /// Time itself against collide() (a plain round every 128, the cache kept; skipped while it
   /// takes under half of collide()'s time on a contact within a factor of 2 of the one collide()
-  /// was last timed on, up to 1,024 rounds: a timed round runs cold) and give way to it
+  /// was last timed on, up to 1,024 rounds: a timed round runs cold; the other plain rounds, jumps
+  /// and spells, read no clock) and give way to it
   /// for 256 rounds (doubling, up to 8192, while it keeps losing) when its rounds cost more than
   /// 0.95 of collide()'s (light contact, where collide() takes microseconds and the
   /// certificates' bookkeeping does not pay). The pairs are the same either way; false makes the
