@@ -80,6 +80,16 @@ struct CoherentCompare {
   }
 };
 
+// The hand_L2 probe pressed into the elephant (pressed_start, seeded) and the comparison of the
+// two paths, for the tests that start from one such pose.
+struct HandOnElephant {
+  CoBody probe{*st::test::model_mesh("hand_L2.off")};
+  CoBody object{*st::test::model_mesh("elephant.off")};
+  CoherentCompare cmp;
+  Pose start;
+  explicit HandOnElephant(std::uint64_t seed) : start(pressed_start(probe, object, seed, cmp.scratch, cmp.plain)) {}
+};
+
 // The pivot and slide direction at a pose in contact: the touched object faces' centre and a
 // direction in their mean plane.
 void slide_frame(const Mesh& object, const std::vector<FacePair>& pairs, Vec3& pivot, Vec3& dir, Vec3& axis) {
@@ -306,10 +316,8 @@ TEST_CASE("a probe withdrawn: the front is walked from the roots again and becom
 }
 
 TEST_CASE("a probe clear of the object: one sphere test a round, the front dropped, exact when it comes back") {
-  const CoBody probe(*st::test::model_mesh("hand_L2.off"));
-  const CoBody object(*st::test::model_mesh("elephant.off"));
-  CoherentCompare cmp;
-  const Pose start = pressed_start(probe, object, 5, cmp.scratch, cmp.plain);
+  HandOnElephant scene(5);
+  auto& [probe, object, cmp, start] = scene;
   const Vec3 x = Vec3::UnitX();
   // No step is a jump (max_step): what ends the front here is the probe being clear.
   CoherentConfig cfg = fixed();
@@ -349,10 +357,8 @@ TEST_CASE("a probe clear of the object: one sphere test a round, the front dropp
 }
 
 TEST_CASE("the coherent collider keeps collide()'s limits and falls back on jumps, a full pool and non-finite poses") {
-  const CoBody probe(*st::test::model_mesh("hand_L2.off"));
-  const CoBody object(*st::test::model_mesh("elephant.off"));
-  CoherentCompare cmp;
-  const Pose start = pressed_start(probe, object, 3, cmp.scratch, cmp.plain);
+  HandOnElephant scene(3);
+  auto& [probe, object, cmp, start] = scene;
   const Vec3 x = Vec3::UnitX();
 
   SUBCASE("max_pairs stops it as it stops collide(); max_work bounds its own work; both drop the cache") {
