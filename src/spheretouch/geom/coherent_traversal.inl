@@ -290,8 +290,10 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   // else answered by collide()'s own leaf stage and kept for a later round (`old`, an entry due
   // for its refresh, unchanged with its candidates; a new pair as kLeafPending). So a round after
   // a rebuild, or one where many leaf pairs fall due at once, costs little more than collide().
-  // `spheres_apart`: split() found the pair's spheres apart (no leaf stage needed).
-  void leaf(std::uint32_t p, std::uint32_t o, const detail::FrontEntry* old, bool spheres_apart = false) {
+  // `spheres`: what this round's walk found of the pair's spheres (apart: no leaf stage needed;
+  // meeting: no need to test them again), unknown for an entry of the front.
+  enum class Spheres : std::uint8_t { unknown, apart, meet };
+  void leaf(std::uint32_t p, std::uint32_t o, const detail::FrontEntry* old, Spheres spheres = Spheres::unknown) {
     if (builds_left > 0) {
       const std::uint32_t before = leaf_count;
       build_leaf(p, o, old);
@@ -307,8 +309,12 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     ++cc.stats_.deferred;
     // collide() reaches a leaf pair only when its spheres meet; the front also keeps those within
     // δ, whose faces cannot meet: the same sphere test first spares them the leaf stage (and the
-    // probe leaf's transform).
-    if (spheres_apart) return;
+    // probe leaf's transform). The walk has just made it (split()): its answer stands. Where the
+    // float rounding of the gap and of collide()'s squared test could disagree at a touching pair,
+    // the leaf stage runs on spheres that barely miss: it finds no face pair there (the spheres
+    // enclose the faces), so the pairs stay collide()'s.
+    if (spheres == Spheres::apart) return;
+    if (spheres == Spheres::meet) return leaf_leaf(p, o);
     put_probe_sphere(p);
     const float* ps = sc.psph_.data();
     const std::size_t sp = sc.nstride_p_;
@@ -481,7 +487,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       }
       // Plain names, not a structured binding: the lambdas below capture them (clang 14 cannot).
       const std::uint32_t p = stack[n - 1].first, o = stack[n - 1].second & ~kSpheresApart;
-      const bool spheres_apart = (stack[n - 1].second & kSpheresApart) != 0;
+      const Spheres spheres = (stack[n - 1].second & kSpheresApart) != 0 ? Spheres::apart : Spheres::meet;
       --n;
       const SphereNode& hp = PT.nodes[p];
       const SphereNode& ho = OT.nodes[o];
@@ -489,13 +495,13 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       if (tp && to) {
         const detail::FrontEntry* known = rerooting ? known_leaf(p, o) : nullptr;
         if (!known)
-          counted(o, [&] { leaf(p, o, nullptr, spheres_apart); });
+          counted(o, [&] { leaf(p, o, nullptr, spheres); });
         else if (known->kind == detail::kLeafPair || known->kind == detail::kLeafPending)
           counted(o, [&] { visit_leaf(*known); });
         else if (still(*known, known->margin))  // a leaf pair its boxes proved apart
           cc.groups_.push_back(*known);
         else
-          counted(o, [&] { leaf(p, o, nullptr, spheres_apart); });
+          counted(o, [&] { leaf(p, o, nullptr, spheres); });
         continue;
       }
       if (n + kMaxChildren > sc.stack_cap_) [[unlikely]] {
@@ -520,7 +526,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       sphere_gaps(sc.osph_.data() + e.o, sc.nstride_o_, 1, ps[e.p], ps[sp + e.p], ps[2 * sp + e.p], ps[3 * sp + e.p], &gap);
       res.stats.node_pairs += 1;
       if (is_apart(gap)) return add_group(detail::kPairApart, e.p, e.o, 0, gap);
-      stack[n++] = {e.p, e.o};
+      stack[n++] = {e.p, e.o | (gap > 0 ? kSpheresApart : 0u)};  // flagged as split() flags
     } else {
       if (e.kind == detail::kObjectChildren) put_probe_sphere(e.p);
       split(e.p, e.o, e.kind == detail::kProbeChildren, e.arg, stack, n);
