@@ -504,7 +504,7 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   if (step > max_step_ || round < plain_until_ || timing) {
     if (!timing && have_front_) drop();
     ++stats_.plain_rounds;
-    if (!timing) {  // only the timed rounds read the clock: on a light round its two reads cost 1.3x
+    if (!timing) {  // only the timed rounds read the clock: two reads cost as much as a light round
       query(probe, probe_tree, object, object_tree, options, scratch_, result, f);
       last_pairs_ = result.pairs.size();
     } else {
