@@ -1309,9 +1309,7 @@ void add_force(CLI::App& app) {
       } else {
         die("force", "--scenes: unknown scene '" + n +
                          "' (box, sphere, plate, hand_elephant, hand_armadillo, hand_elephant_twist, box_edge, "
-                         "box_corner, ridge, "
-                         "crease, "
-                         "inner_corner, pocket, plate_through, release, meshes, friction)");
+                         "box_corner, ridge, crease, inner_corner, pocket, plate_through, release, meshes, friction)");
       }
     }
     std::vector<int> worker_counts;

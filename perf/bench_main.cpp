@@ -6,13 +6,10 @@
 
 namespace st::bench {
 
-void die(const std::string& msg) {
-  std::fprintf(stderr, "spheretouch-bench: %s\n", msg.c_str());
-  throw CLI::RuntimeError(2);
-}
+void die(const std::string& msg) { die("", msg); }
 
 void die(const char* command, const std::string& msg) {
-  std::fprintf(stderr, "spheretouch-bench %s: %s\n", command, msg.c_str());
+  std::fprintf(stderr, "spheretouch-bench%s%s: %s\n", *command ? " " : "", command, msg.c_str());
   throw CLI::RuntimeError(2);
 }
 

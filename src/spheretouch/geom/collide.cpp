@@ -504,20 +504,18 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   if (step > max_step_ || round < plain_until_ || timing) {
     if (!timing && have_front_) drop();
     ++stats_.plain_rounds;
-    if (!timing) {  // only the timed rounds read the clock: two reads cost as much as a light round
-      query(probe, probe_tree, object, object_tree, options, scratch_, result, f);
-      last_pairs_ = result.pairs.size();
-    } else {
-      const auto t0 = std::chrono::steady_clock::now();
-      query(probe, probe_tree, object, object_tree, options, scratch_, result, f);
+    // Only the timed rounds read the clock: two reads cost as much as a light round.
+    const auto t0 = timing ? std::chrono::steady_clock::now() : std::chrono::steady_clock::time_point{};
+    query(probe, probe_tree, object, object_tree, options, scratch_, result, f);
+    last_pairs_ = result.pairs.size();
+    if (timing) {
       const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count();
       // A contact of about the size last timed smooths the time; another replaces it (a time of a
       // larger contact would keep the collider from ever timing collide() again: settled()).
-      const std::size_t pairs = result.pairs.size();
-      const bool alike = pairs <= 2 * timed_pairs_ + 16 && timed_pairs_ <= 2 * pairs + 16;
+      const bool alike = last_pairs_ <= 2 * timed_pairs_ + 16 && timed_pairs_ <= 2 * last_pairs_ + 16;
       plain_ns_ = plain_ns_ > 0 && alike ? 0.7 * plain_ns_ + 0.3 * ns : ns;
       timed_round_ = round;
-      timed_pairs_ = last_pairs_ = pairs;
+      timed_pairs_ = last_pairs_;
     }
     note_contact(probe, result);
     note_pool();
