@@ -12,7 +12,12 @@
 //    its answer and its margin (the separation, or the depth of the origin inside P − O, proved
 //    by the certified float filter, or 0 when the exact test decided). Valid while the probe leaf
 //    has moved less than δ; a candidate's answer holds while the leaf moved less than its margin,
-//    else it is tested again at this pose.
+//    else it is tested again at this pose. The candidates' margins are measured from one pose of
+//    their entry, its anchor A, so a visit computes one bound B(A, now) for all of them. A visit
+//    that tests some again moves the anchor to this pose: the others keep their margin less
+//    B(A, now) (a point's motion from A to a later pose is at most B(A, now) plus its motion from
+//    now), which loses nothing while the motion goes one way; a visit that tests none keeps A,
+//    so jitter uses nothing up.
 // "Moved" is a bound on |apply(T, v) - apply(T_i, v)| over the node's sphere, T_i the pose the
 // certificate was made at (never a sum of steps: jitter back and forth uses no margin up):
 // |(R - R_i) c + (t - t_i)| + ||R - R_i||_F r, widened for the rounding of both apply()s.
@@ -105,6 +110,7 @@ struct FrontEntry {
   std::uint16_t count = 0;     ///< leaf pair: candidates
   std::uint8_t kind = 0;       ///< FrontKind
   std::uint8_t theta = 0;      ///< leaf pair: refreshed once it moved (768 + theta) / 1024 of δ
+  std::uint32_t anchor = 0;    ///< leaf pair: the round its candidates' margins are measured from
   float c[3] = {};             ///< probe node p's sphere centre (probe-local), copied: a check reads nothing else
   float r = 0;                 ///< ... and its radius
 };
@@ -121,10 +127,10 @@ enum FrontKind : std::uint8_t {
 struct Candidate {
   std::uint32_t slot = 0;  ///< probe slot (tree order)
   std::uint32_t face = 0;  ///< object face
-  float margin = 0;        ///< the answer holds while the probe leaf moved less than this from `pose`
-  std::uint32_t pose = 0;  ///< round of the certificate (a candidate tested again gets a new one)
-  std::uint8_t hit = 0;    ///< 1 when the faces intersect at the certificate's pose
-  std::uint8_t j = 0;      ///< the object face's place in its leaf (candidates are in (j, slot) order)
+  /// The answer holds while the probe leaf's motion bound since its entry's anchor is less than this.
+  float margin = 0;
+  std::uint8_t hit = 0;  ///< 1 when the faces intersect while the certificate holds
+  std::uint8_t j = 0;    ///< the object face's place in its leaf (candidates are in (j, slot) order)
 };
 /// A round's change since a certificate pose (coherent_traversal.inl), kept per ring slot.
 struct PoseDelta {

@@ -175,7 +175,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   // A front entry for (p, o), made at this round's pose, with p's sphere.
   detail::FrontEntry entry(std::uint8_t kind, std::uint32_t p, std::uint32_t o) const {
     detail::FrontEntry e;
-    e.p = p, e.o = o, e.pose = round, e.kind = kind;
+    e.p = p, e.o = o, e.pose = e.anchor = round, e.kind = kind;
     const SphereNode& h = PT.nodes[p];
     e.c[0] = h.centre[0], e.c[1] = h.centre[1], e.c[2] = h.centre[2], e.r = h.radius;
     return e;
@@ -233,8 +233,10 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     float w[6];
     for (int k = 0; k < 3; ++k) w[k] = widen_below(u[k], reach), w[3 + k] = widen_above(u[3 + k], reach);
     std::uint32_t prev = old ? old->arg : 0;  // indices: cands_ grows below
-    LeafBounds lb;
     const std::uint32_t prev_end = old ? old->arg + old->count : 0;
+    // The old entry's candidates hold while the leaf moved less than their margins from its
+    // anchor: one kept holds from this pose while it moves less than what is left (coherent.hpp, top).
+    const double moved_old = old ? leaf_motion(hp.centre, hp.radius, old->anchor) : 0.0;
     const FaceBox* ob = OT.face_boxes.data() + ho.first;
     const std::uint64_t mo = face_box_mask(ob, ho.count, w);
     if (mo != 0) {
@@ -261,14 +263,15 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
           for (int k = 0; k < 3; ++k)
             gap = std::max(gap, std::max(fb.lo[k] - pb[(3 + k) * st + slot], pb[k * st + slot] - fb.hi[k]));
           const auto at = static_cast<std::uint32_t>(cc.cands_.size());
-          cc.cands_.push_back({slot, of, gap * (1.0f - 0x1p-20f), round, 0, static_cast<std::uint8_t>(j)});
+          cc.cands_.push_back({slot, of, gap * (1.0f - 0x1p-20f), 0, static_cast<std::uint8_t>(j)});
           if (gap > 0) continue;
           // The same pair in the entry refreshed, its certificate still good: kept.
           auto before = [&](const detail::Candidate& c) { return c.j < j || (c.j == j && c.slot < slot); };
           while (prev != prev_end && before(cc.cands_[prev])) ++prev;
           if (prev != prev_end && cc.cands_[prev].j == j && cc.cands_[prev].slot == slot &&
-              double(cc.cands_[prev].margin) > leaf_motion(hp.centre, hp.radius, cc.cands_[prev].pose, lb)) {
-            const detail::Candidate kept = cc.cands_[prev];
+              double(cc.cands_[prev].margin) > moved_old) {
+            detail::Candidate kept = cc.cands_[prev];
+            kept.margin = std::max(0.0f, float_below(double(kept.margin) - moved_old));
             cc.cands_.back() = kept;
             ++cc.stats_.reused;
             check_decision(slot, of, kept.hit != 0);
@@ -372,64 +375,50 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     }
     h_n = 0;
   }
+  // Candidate `at` found (not) intersecting at this pose, its answer good while the leaf moves
+  // less than `margin` from here (its entry's anchor is this pose).
   void certify(std::uint32_t at, float margin, bool hit) {
     detail::Candidate& c = cc.cands_[at];
     c.margin = margin;
-    c.pose = round;
     c.hit = hit;
   }
 
   // How far a probe leaf's sphere (c, r) moved since `pose`: the tighter of the whole probe's
-  // bound and its own (infinite for a pose no longer kept), remembered for the poses asked
-  // during one visit (a leaf's candidates carry a handful of poses, interleaved).
-  struct LeafBounds {
-    // Direct-mapped by the pose's low bits: a leaf's candidates carry the rounds they were last
-    // tested at, interleaved, and poses less than kSlots rounds apart never share a slot.
-    static constexpr unsigned kSlots = 16;
-    std::array<std::uint32_t, kSlots> pose;
-    std::array<double, kSlots> bound;
-    LeafBounds() { pose.fill(~0u); }
-  };
-  double leaf_motion(const float* c, float r, std::uint32_t pose, LeafBounds& lb) {
-    const unsigned k = pose % LeafBounds::kSlots;
-    if (lb.pose[k] == pose) return lb.bound[k];
-    double b = std::numeric_limits<double>::infinity();
-    if (round - pose < CoherentCollider::kPoses) {
-      const Delta& d = delta(pose);
-      b = std::min(d.whole, sphere_motion(d, c, r));
-    }
-    lb.pose[k] = pose, lb.bound[k] = b;
-    return b;
+  // bound and its own (infinite for a pose no longer kept).
+  double leaf_motion(const float* c, float r, std::uint32_t pose) {
+    if (round - pose >= CoherentCollider::kPoses) return std::numeric_limits<double>::infinity();
+    const Delta& d = delta(pose);
+    return std::min(d.whole, sphere_motion(d, c, r));
   }
-
-  // A cached leaf pair: the candidates whose certificate holds give their answer, the others
-  // are tested at this pose and certified anew (the leaf pair's own certificate, for the face
-  // pairs that are not candidates, stays the entry's). A candidate kept through a refresh keeps
-  // its older pose, so each is bounded against its own.
-  void reuse_leaf(const detail::FrontEntry& e, LeafBounds& lb) {
+  // A cached leaf pair, its leaf `moved` (a bound) since the entry's anchor: the candidates whose
+  // certificate holds give their answer, the others are tested at this pose and certified anew,
+  // and then the anchor moves here (coherent.hpp, top). The leaf pair's own certificate, for the
+  // face pairs that are not candidates, stays the entry's.
+  void reuse_leaf(const detail::FrontEntry& e, double moved) {
     cc.next_front_.push_back(e);  // its candidates stay where they are
     ++leaf_count;
-    const detail::Candidate* c = cc.cands_.data() + e.arg;  // nothing is appended to cands_ here
+    detail::Candidate* c = cc.cands_.data() + e.arg;  // nothing is appended to cands_ here
     bool prepared = false;
-    std::uint32_t last_pose = ~0u;
-    double moved = 0;
-    std::uint64_t reused = 0, retested = 0;
+    // A float at or above the bound: a margin above it is above the bound.
+    const float bound = float_above(moved);
+    std::uint32_t retested = 0;
     for (std::uint32_t i = 0; i < e.count; ++i) {
-      const std::uint32_t at = e.arg + i;
-      if (c[i].pose != last_pose) last_pose = c[i].pose, moved = leaf_motion(e.c, e.r, last_pose, lb);
-      if (double(c[i].margin) > moved) {
-        ++reused;
+      if (c[i].margin > bound) {
+        if (retested != 0) c[i].margin = float_below(double(c[i].margin) - moved);
         if (c[i].hit) emit(PT.face_order[c[i].slot], c[i].face);
         check_decision(c[i].slot, c[i].face, c[i].hit != 0, prepared, e.p);
         continue;
       }
-      ++retested;
-      if (!prepared) probe_leaf(e.p), prepared = true;
+      if (retested++ == 0) {  // the anchor moves here: the answers taken so far keep what is left
+        cc.next_front_.back().anchor = round;
+        for (std::uint32_t k = 0; k < i; ++k) c[k].margin = float_below(double(c[k].margin) - moved);
+        if (!prepared) probe_leaf(e.p), prepared = true;
+      }
       ++res.stats.tri_pairs;
-      m_index[m_n] = at, m_slot[m_n] = c[i].slot, m_face[m_n] = c[i].face;
+      m_index[m_n] = e.arg + i, m_slot[m_n] = c[i].slot, m_face[m_n] = c[i].face;
       if (++m_n == kTriBatch) flush_margins();
     }
-    cc.stats_.reused += reused;
+    cc.stats_.reused += e.count - retested;
     cc.stats_.retested += retested;
   }
   // Checking mode: a reused answer against the exact test at this pose (the leaf transformed first).
@@ -558,12 +547,12 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       leaf(e.p, e.o, nullptr);
       return;
     }
-    LeafBounds lb;
-    if (!(double(e.margin * float(768 + e.theta) / 1024.0f) > leaf_motion(e.c, e.r, e.pose, lb))) {
+    const double moved = leaf_motion(e.c, e.r, e.pose);
+    if (!(double(e.margin * float(768 + e.theta) / 1024.0f) > moved)) {
       ++cc.stats_.refreshes;
       leaf(e.p, e.o, &e);
     } else {
-      reuse_leaf(e, lb);
+      reuse_leaf(e, e.anchor == e.pose ? moved : leaf_motion(e.c, e.r, e.anchor));
     }
   }
   // Re-rooting: the old front's entry for leaf pair (p, o), if it has one (a leaf-pair entry of
