@@ -91,6 +91,9 @@ void CoherentCollider::reset() {
   plain_ns_ = coherent_ns_ = 0;
   timed_round_ = 0;
   timed_pairs_ = last_pairs_ = 0;
+  rebuild_ns_ = 0;
+  rebuild_round_ = 0;
+  rebuild_pairs_ = 0;
   coherent_rounds_ = spells_ = 0;
   have_last_ = false;
   step_ = 0;

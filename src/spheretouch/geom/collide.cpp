@@ -544,16 +544,18 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   if (result.stats.pair_limit_hit || result.stats.work_limit_hit || result.stats.truncated != 0) {
     drop();  // a front cut short proves nothing about what it did not reach
   } else {
+    const bool rebuilt = !have_front_;
     front_.swap(next_front_);
     old_groups_.clear();
     compact_groups();
-    if (!have_front_ || rerooting) rooted_size_ = entries(), rooted_pairs_ = result.pairs.size();
-    ramp_ = have_front_ ? ramp_ + 1 : 0;
+    if (rebuilt || rerooting) rooted_size_ = entries(), rooted_pairs_ = result.pairs.size();
+    ramp_ = rebuilt ? 0 : ramp_ + 1;
     have_front_ = true;
     if (garbage_ > 4096 && 2 * garbage_ > cands_.size()) compact();
     // arbitrate: certificates that cost more than the plain query they save (light contact,
     // where collide() itself takes microseconds) give way to it for kPlainSpell rounds.
     const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count();
+    if (rebuilt) rebuild_ns_ = ns, rebuild_round_ = round, rebuild_pairs_ = result.pairs.size();
     coherent_ns_ = coherent_rounds_ > 0 ? 0.95 * coherent_ns_ + 0.05 * ns : ns;
     ++coherent_rounds_;
     if (config_.arbitrate && coherent_rounds_ >= 64 && plain_ns_ > 0) {
