@@ -39,6 +39,26 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       for (int l = 0; l < Lanes::width && k + l < n; ++l) gap[k + l] = out[l];
     }
   }
+  // sphere_gaps, and which of the n spheres are apart as this round records them (is_apart():
+  // bit k of `apart`) and which do not meet (gap > 0: bit k of `positive`); NaN is neither.
+  void classify(const float* c, std::size_t st, std::uint32_t n, float qx, float qy, float qz, float qr, float* gap,
+                std::uint32_t& apart, std::uint32_t& positive) const {
+    const Lanes x = Lanes::broadcast(qx), y = Lanes::broadcast(qy), z = Lanes::broadcast(qz), r = Lanes::broadcast(qr);
+    const Lanes zero = Lanes::broadcast(0.0f), at = Lanes::broadcast(reach_f);
+    apart = positive = 0;
+    for (std::uint32_t k = 0; k < n; k += Lanes::width) {
+      const Lanes dx = Lanes::load(c + k) - x;
+      const Lanes dy = Lanes::load(c + st + k) - y;
+      const Lanes dz = Lanes::load(c + 2 * st + k) - z;
+      const Lanes g = sqrt(dx * dx + dy * dy + dz * dz) - (Lanes::load(c + 3 * st + k) + r);
+      alignas(64) float out[Lanes::width];
+      store(out, g);
+      for (int l = 0; l < Lanes::width && k + l < n; ++l) gap[k + l] = out[l];
+      const std::uint32_t pos = (g > zero).bits();
+      positive |= pos << k;
+      apart |= (fresh ? pos : (g >= at).bits()) << k;
+    }
+  }
   template <class L>
   static void store(float* out, L v) {
     std::memcpy(out, &v.v, sizeof(float) * L::width);
@@ -440,30 +460,26 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     const std::size_t sp = sc.nstride_p_, so = sc.nstride_o_;
     const SphereNode& h = probe_side ? PT.nodes[p] : OT.nodes[o];
     float gap[kMaxChildren];
+    std::uint32_t apart = 0, positive = 0;  // NaN is near: never certified
     if (probe_side) {
       probe_children(p);
-      sphere_gaps(ps + h.first, sp, h.count, os[o], os[so + o], os[2 * so + o], os[3 * so + o], gap);
+      classify(ps + h.first, sp, h.count, os[o], os[so + o], os[2 * so + o], os[3 * so + o], gap, apart, positive);
     } else {
-      sphere_gaps(os + h.first, so, h.count, ps[p], ps[sp + p], ps[2 * sp + p], ps[3 * sp + p], gap);
+      classify(os + h.first, so, h.count, ps[p], ps[sp + p], ps[2 * sp + p], ps[3 * sp + p], gap, apart, positive);
     }
     res.stats.node_pairs += static_cast<std::uint32_t>(std::popcount(mask));
-    std::uint32_t near = 0, apart = 0;
-    float least = std::numeric_limits<float>::infinity();
-    for (std::uint32_t m = mask; m != 0; m &= m - 1) {
-      const unsigned k = static_cast<unsigned>(std::countr_zero(m));
-      if (is_apart(gap[k])) {  // NaN is near: never certified
-        apart |= 1u << k;
-        least = std::min(least, gap[k]);
-      } else {
-        near |= 1u << k;
-      }
+    apart &= mask;
+    std::uint32_t near = mask & ~apart;
+    if (apart != 0) {
+      float least = std::numeric_limits<float>::infinity();
+      for (std::uint32_t m = apart; m != 0; m &= m - 1) least = std::min(least, gap[std::countr_zero(m)]);
+      add_group(probe_side ? detail::kProbeChildren : detail::kObjectChildren, p, o, apart, least);
     }
-    if (apart != 0) add_group(probe_side ? detail::kProbeChildren : detail::kObjectChildren, p, o, apart, least);
     // As push_children, with kSpheresApart on the object node of a pair whose spheres do not
     // meet (gap > 0: the true gap is at least the computed one), which collide() would not visit.
     for (; near != 0; near &= ~(1u << (31 - std::countl_zero(near)))) {
       const unsigned k = 31 - static_cast<unsigned>(std::countl_zero(near));
-      const std::uint32_t c = h.first + k, apart_flag = gap[k] > 0 ? kSpheresApart : 0u;
+      const std::uint32_t c = h.first + k, apart_flag = (positive >> k) & 1u ? kSpheresApart : 0u;
       stack[n++] = probe_side ? std::pair{c, o | apart_flag} : std::pair{p, c | apart_flag};
     }
     ST_ASSERT(n <= sc.stack_cap_, "walk_front leaves room for kMaxChildren before each split");
