@@ -135,7 +135,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   bool is_apart(float gap) const { return fresh ? gap > 0.0f : gap >= reach_f; }
   std::uint32_t round = 0;        // this round's id
   bool overflow = false;          // the pool went over max_bytes: this round is abandoned
-  std::uint32_t builds_left = 0;  // leaf pairs this round may still build (leaf())
+  std::uint32_t builds_left = 0;  // leaf pairs this round may still build, in kBuildUnits (leaf())
   bool rerooting = false;         // this round walks from the roots, keeping the front's leaf pairs
   std::uint32_t leaf_count = 0;   // leaf-pair entries of the new front
   using Delta = detail::PoseDelta;
@@ -220,7 +220,9 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   // Leaf pair (p, o) at this pose: its candidates within δ with their certificates (or the pair
   // apart, with its gap, when its boxes are farther than δ). Emits the intersecting pairs. `old`:
   // the entry this refreshes, whose candidates keep their certificates where these still hold.
-  void build_leaf(std::uint32_t p, std::uint32_t o, const detail::FrontEntry* old = nullptr) {
+  // What it cost against a round's budget of builds (leaf()): 0 when the leaf boxes settled it,
+  // 1 when its face boxes gathered no candidate, kBuildUnits when it has candidates.
+  std::uint32_t build_leaf(std::uint32_t p, std::uint32_t o, const detail::FrontEntry* old = nullptr) {
     const SphereNode& hp = PT.nodes[p];
     const SphereNode& ho = OT.nodes[o];
     ++res.stats.leaf_pairs;
@@ -236,13 +238,13 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
         d2 += d * d;
       }
       const float gap = std::sqrt(d2) - (os[3 * so + o] + slack);
-      if (gap >= reach_f) return add_group(detail::kPairApart, p, o, 0, gap);
+      if (gap >= reach_f) return add_group(detail::kPairApart, p, o, 0, gap), 0;
     }
     {  // the probe leaf's box against the object leaf's box
       const std::array<float, 8>& v = sc.obox_[o];
       float gap = 0;
       for (int k = 0; k < 3; ++k) gap = std::max(gap, std::max(v[k] - u[3 + k], u[k] - v[3 + k]));
-      if (gap >= reach_f) return add_group(detail::kPairApart, p, o, 0, gap);
+      if (gap >= reach_f) return add_group(detail::kPairApart, p, o, 0, gap), 0;
     }
     detail::FrontEntry e = entry(detail::kLeafPair, p, o);
     e.margin = reach_f;
@@ -312,10 +314,15 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     // are such (207 of 325 a round on the 98-contact armadillo_L2 slide). Its gap is taken as a
     // fraction of δ that differs between pairs, as a leaf pair's refresh point: pairs built in
     // the same rounds would otherwise all be expanded in one.
-    if (e.count == 0) return add_group(detail::kPairApart, p, o, 0, reach_f * float(768 + e.theta) / 1024.0f);
+    if (e.count == 0) {
+      add_group(detail::kPairApart, p, o, 0, reach_f * float(768 + e.theta) / 1024.0f);
+      return 1;
+    }
     cc.next_front_.push_back(e);
     ++leaf_count;
+    return kBuildUnits;
   }
+  static constexpr std::uint32_t kBuildUnits = 4;
 
   // Leaf pair (p, o) reached this round, to be (re)built: built while this round's budget lasts;
   // else answered by collide()'s own leaf stage and kept for a later round (`old`, an entry due
@@ -326,9 +333,11 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   enum class Spheres : std::uint8_t { unknown, apart, meet };
   void leaf(std::uint32_t p, std::uint32_t o, const detail::FrontEntry* old, Spheres spheres = Spheres::unknown) {
     if (builds_left > 0) {
-      const std::uint32_t before = leaf_count;
-      build_leaf(p, o, old);
-      if (leaf_count != before) --builds_left;  // a pair found apart at the box level cost little
+      // A pair its leaf boxes settle costs little; one whose face boxes gathered nothing, a
+      // quarter of one with candidates (a round after a rebuild would otherwise gather every
+      // empty pair of the front at once).
+      const std::uint32_t used = build_leaf(p, o, old);
+      builds_left -= std::min(used, builds_left);
       return;
     }
     if (old) {

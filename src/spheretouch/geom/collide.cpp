@@ -305,7 +305,7 @@ bool run_coherent(CoherentCollider& cc, const Mesh& probe, const SphereTree& pro
   q.round = round;
   q.reach = reach;
   q.reach_f = static_cast<float>(reach * (1 - 1e-6));
-  q.builds_left = builds;
+  q.builds_left = builds * q.kBuildUnits;
   q.rerooting = rerooting;
   return q.run();
 }
