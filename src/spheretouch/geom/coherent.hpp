@@ -30,9 +30,10 @@
 // does; those apart by less than δ become groups with their gap, expanded a few at a time by the
 // motion of the next rounds) and builds no leaf pair, so it costs about what collide() does; leaf
 // pairs are (re)built within a budget per round (2 % of the front's after a rebuild, growing to
-// 25 %), the others answered by collide()'s own leaf stage meanwhile; a round whose probe (its
-// part in contact) moved more than max_step since the last one runs collide() and drops the cache
-// (a jerk costs one plain round and one rebuild); a probe clear of the object (its root sphere
+// 25 %; a pair whose face boxes gather no candidate counts a quarter), the others answered by
+// collide()'s own leaf stage meanwhile; a round whose probe (its part in contact) moved more than
+// max_step since the last one runs collide() and drops the cache (a jerk costs one plain round
+// and one rebuild); a probe clear of the object (its root sphere
 // apart from every object root) costs one sphere test per root, as in collide(), and drops the
 // front; the front is walked again from the roots when it has doubled (it only refines as the
 // probe moves) or the contact has shrunk to a quarter or ended (a withdrawn probe would keep the

@@ -238,13 +238,19 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
         d2 += d * d;
       }
       const float gap = std::sqrt(d2) - (os[3 * so + o] + slack);
-      if (gap >= reach_f) return add_group(detail::kPairApart, p, o, 0, gap), 0;
+      if (gap >= reach_f) {
+        add_group(detail::kPairApart, p, o, 0, gap);
+        return 0;
+      }
     }
     {  // the probe leaf's box against the object leaf's box
       const std::array<float, 8>& v = sc.obox_[o];
       float gap = 0;
       for (int k = 0; k < 3; ++k) gap = std::max(gap, std::max(v[k] - u[3 + k], u[k] - v[3 + k]));
-      if (gap >= reach_f) return add_group(detail::kPairApart, p, o, 0, gap), 0;
+      if (gap >= reach_f) {
+        add_group(detail::kPairApart, p, o, 0, gap);
+        return 0;
+      }
     }
     detail::FrontEntry e = entry(detail::kLeafPair, p, o);
     e.margin = reach_f;
