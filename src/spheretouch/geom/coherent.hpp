@@ -71,8 +71,8 @@ struct CoherentConfig {
   std::size_t max_bytes = std::size_t(64) << 20;
   /// Time itself against collide() (a plain round every 128, the cache kept; skipped while it
   /// takes under half of collide()'s time on a contact within a factor of 2 of the one collide()
-  /// was last timed on, or before the first, of its rebuild's, up to 1,024 rounds: a timed round
-  /// runs cold; the other plain rounds, jumps
+  /// was last timed on (before it has been timed: under 0.4 of the rebuild's time), up to 1,024
+  /// rounds: a timed round runs cold; the other plain rounds, jumps
   /// and spells, read no clock) and give way to it
   /// for 256 rounds (doubling, up to 8192, while it keeps losing) when its rounds cost more than
   /// 0.95 of collide()'s (light contact, where collide() takes microseconds and the
@@ -260,14 +260,13 @@ class CoherentCollider {
   // leaf stage and the front's bookkeeping: taken at 0.8 of its time), so a collider that wins
   // from the start runs no cold timed round at 127.
   bool settled(std::uint32_t round) const {
-    const auto alike = [this](std::size_t pairs) {
-      return last_pairs_ <= 2 * pairs + 16 && pairs <= 2 * last_pairs_ + 16;
-    };
     if (plain_ns_ > 0)
-      return coherent_ns_ < 0.5 * plain_ns_ && round - timed_round_ < 8 * kTimeEvery && alike(timed_pairs_);
+      return coherent_ns_ < 0.5 * plain_ns_ && round - timed_round_ < 8 * kTimeEvery && alike(last_pairs_, timed_pairs_);
     return rebuild_ns_ > 0 && coherent_ns_ < 0.4 * rebuild_ns_ && round - rebuild_round_ < 8 * kTimeEvery &&
-           alike(rebuild_pairs_);
+           alike(last_pairs_, rebuild_pairs_);
   }
+  // Contacts about as large (pair counts within a factor of 2, or both small).
+  static bool alike(std::size_t a, std::size_t b) { return a <= 2 * b + 16 && b <= 2 * a + 16; }
   std::uint32_t coherent_rounds_ = 0;  // arbitrate: coherent rounds since it last gave way
   std::uint32_t spells_ = 0;           // arbitrate: times in a row it gave way (the spell doubles)
   // What the front was built for.

@@ -25,22 +25,9 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   using Base = CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes>;
 
   // Gap of sphere k (k < n <= 8) of a float SoA block to the sphere (qx, qy, qz; qr), as
-  // sphere_mask computes its test: sqrt(|c_k - q|^2) - (r_k + qr); NaN stays NaN.
-  static void sphere_gaps(const float* c, std::size_t st, std::uint32_t n, float qx, float qy, float qz, float qr,
-                          float* gap) {
-    const Lanes x = Lanes::broadcast(qx), y = Lanes::broadcast(qy), z = Lanes::broadcast(qz), r = Lanes::broadcast(qr);
-    for (std::uint32_t k = 0; k < n; k += Lanes::width) {
-      const Lanes dx = Lanes::load(c + k) - x;
-      const Lanes dy = Lanes::load(c + st + k) - y;
-      const Lanes dz = Lanes::load(c + 2 * st + k) - z;
-      const Lanes g = sqrt(dx * dx + dy * dy + dz * dz) - (Lanes::load(c + 3 * st + k) + r);
-      alignas(64) float out[Lanes::width];
-      store(out, g);
-      for (int l = 0; l < Lanes::width && k + l < n; ++l) gap[k + l] = out[l];
-    }
-  }
-  // sphere_gaps, and which of the n spheres are apart as this round records them (is_apart():
-  // bit k of `apart`) and which do not meet (gap > 0: bit k of `positive`); NaN is neither.
+  // sphere_mask computes its test: sqrt(|c_k - q|^2) - (r_k + qr), NaN staying NaN; and which
+  // spheres are apart as this round records them (bit k of `apart`: gap > 0 in a fresh round, else
+  // gap >= δ) and which do not meet (gap > 0: bit k of `positive`). NaN is neither.
   void classify(const float* c, std::size_t st, std::uint32_t n, float qx, float qy, float qz, float qr, float* gap,
                 std::uint32_t& apart, std::uint32_t& positive) const {
     const Lanes x = Lanes::broadcast(qx), y = Lanes::broadcast(qy), z = Lanes::broadcast(qz), r = Lanes::broadcast(qr);
@@ -131,8 +118,6 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   // less than δ become groups with their gap, and the motion of the next rounds expands them a
   // few at a time (a later walk descends what is nearer than δ).
   bool fresh = false;
-  // A sphere pair this round records as a group with its gap (NaN never).
-  bool is_apart(float gap) const { return fresh ? gap > 0.0f : gap >= reach_f; }
   std::uint32_t round = 0;        // this round's id
   bool overflow = false;          // the pool went over max_bytes: this round is abandoned
   std::uint32_t builds_left = 0;  // leaf pairs this round may still build, in kBuildUnits (leaf())
@@ -551,10 +536,12 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       const float* ps = sc.psph_.data();
       const std::size_t sp = sc.nstride_p_;
       float gap;
-      sphere_gaps(sc.osph_.data() + e.o, sc.nstride_o_, 1, ps[e.p], ps[sp + e.p], ps[2 * sp + e.p], ps[3 * sp + e.p], &gap);
+      std::uint32_t apart = 0, positive = 0;
+      classify(sc.osph_.data() + e.o, sc.nstride_o_, 1, ps[e.p], ps[sp + e.p], ps[2 * sp + e.p], ps[3 * sp + e.p], &gap,
+               apart, positive);
       res.stats.node_pairs += 1;
-      if (is_apart(gap)) return add_group(detail::kPairApart, e.p, e.o, 0, gap);
-      stack[n++] = {e.p, e.o | (gap > 0 ? kSpheresApart : 0u)};  // flagged as split() flags
+      if (apart & 1u) return add_group(detail::kPairApart, e.p, e.o, 0, gap);
+      stack[n++] = {e.p, e.o | (positive & 1u ? kSpheresApart : 0u)};  // flagged as split() flags
     } else {
       if (e.kind == detail::kObjectChildren) put_probe_sphere(e.p);
       split(e.p, e.o, e.kind == detail::kProbeChildren, e.arg, stack, n);

@@ -512,8 +512,7 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
       const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count();
       // A contact of about the size last timed smooths the time; another replaces it (a time of a
       // larger contact would keep the collider from ever timing collide() again: settled()).
-      const bool alike = last_pairs_ <= 2 * timed_pairs_ + 16 && timed_pairs_ <= 2 * last_pairs_ + 16;
-      plain_ns_ = plain_ns_ > 0 && alike ? 0.7 * plain_ns_ + 0.3 * ns : ns;
+      plain_ns_ = plain_ns_ > 0 && alike(last_pairs_, timed_pairs_) ? 0.7 * plain_ns_ + 0.3 * ns : ns;
       timed_round_ = round;
       timed_pairs_ = last_pairs_;
     }
