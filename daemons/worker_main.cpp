@@ -2,9 +2,12 @@
 // spheretouch-worker: one worker of the distributed collision (paper §3.4) as a daemon. Binds a
 // ZeroMQ endpoint, holds the block sets it is sent in memory and answers queries (WorkerService).
 // Logs to stderr (with <N> syslog prefixes when journald reads it); under systemd it sends
-// READY=1 once bound and WATCHDOG=1 pings; SIGTERM/SIGINT stop it within 0.1 s.
+// READY=1 once bound and WATCHDOG=1 pings; SIGTERM/SIGINT stop it within 0.1 s. An abort once
+// it listens (libzmq asserting on a hostile peer) re-executes it in place: see AbortRestart.
 #include <CLI/CLI.hpp>
 #include <malloc.h>
+#include <time.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <fstream>
@@ -14,6 +17,7 @@
 #include <cstdlib>
 #include <ctime>
 #include <string>
+#include <vector>
 #include <zmq.hpp>
 #ifdef ST_HAVE_SYSTEMD
 #include <systemd/sd-daemon.h>
@@ -55,6 +59,82 @@ std::uint64_t cgroup_memory_max() {
   return 0;
 }
 
+/// Re-executes the worker in place when it aborts. libzmq 4.3's I/O thread asserts
+/// (`!_io_error`, stream_engine_base.cpp) when it decodes a ZMTP PING from a connection that was
+/// reset while its input was stopped (its queue to this process at rcvhwm): any peer past the
+/// handshake — any local user on loopback without CURVE, an allowed client with it — can send
+/// that, and no socket option avoids it while the queue is bounded (socket_options.hpp). The
+/// worker then execs its own binary with the same arguments: same pid (systemd, a test or a
+/// bench that started it sees no exit), a new epoch (clients reload their block sets), back to
+/// listening in milliseconds. More than `max` aborts within 60 s and the abort proceeds (the
+/// unit's Restart=on-failure takes over); 0 turns it off. The history crosses the exec in the
+/// environment (ST_WORKER_ABORTS=count:first, CLOCK_MONOTONIC seconds).
+class AbortRestart {
+ public:
+  static void install(char** argv, int max) {
+    if (max <= 0) return;
+    auto& r = self();
+    r.argv_ = argv;
+    r.max_ = max;
+    if (const char* h = std::getenv("ST_WORKER_ABORTS")) std::sscanf(h, "%ld:%ld", &r.count_, &r.first_);
+    for (char** e = ::environ; *e; ++e)
+      if (std::string_view(*e).rfind("ST_WORKER_ABORTS=", 0) != 0) r.env_.push_back(*e);
+    r.env_.push_back(r.history_);
+    r.env_.push_back(nullptr);
+    struct sigaction sa {};
+    sa.sa_handler = on_abort;
+    sa.sa_flags = SA_NODEFER;  // the exec'd image must not start with SIGABRT blocked
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGABRT, &sa, nullptr);
+  }
+  /// Aborts re-executed so far within the current 60 s (0 in a first start).
+  static long count() { return self().count_; }
+
+ private:
+  static AbortRestart& self() {
+    static AbortRestart r;
+    return r;
+  }
+  // Async-signal-safe only: clock_gettime, write, execve (formatting by hand).
+  static void on_abort(int) {
+    auto& r = self();
+    timespec now{};
+    clock_gettime(CLOCK_MONOTONIC, &now);
+    long count = r.count_, first = r.first_;
+    if (count == 0 || now.tv_sec - first > 60) count = 0, first = now.tv_sec;
+    if (count >= r.max_) {
+      say("spheretouch-worker: aborted again: more than max-abort-restarts within 60 s; exiting\n");
+      signal(SIGABRT, SIG_DFL);
+      return;  // abort() raises again with the default action
+    }
+    char* p = r.history_ + sizeof "ST_WORKER_ABORTS=" - 1;
+    p = digits(p, count + 1);
+    *p++ = ':';
+    *digits(p, first) = '\0';
+    say("spheretouch-worker: aborted (libzmq assertion on a hostile connection?); restarting in place\n");
+    execve("/proc/self/exe", r.argv_, r.env_.data());
+    say("spheretouch-worker: cannot re-execute /proc/self/exe; exiting\n");
+    signal(SIGABRT, SIG_DFL);
+  }
+  static void say(const char* m) {
+    std::size_t n = 0;
+    while (m[n]) ++n;
+    (void)!::write(2, m, n);
+  }
+  static char* digits(char* p, long v) {
+    char t[24];
+    int n = 0;
+    do t[n++] = char('0' + v % 10);
+    while ((v /= 10) > 0);
+    while (n) *p++ = t[--n];
+    return p;
+  }
+  char** argv_ = nullptr;
+  long max_ = 0, count_ = 0, first_ = 0;
+  std::vector<char*> env_;
+  char history_[64] = "ST_WORKER_ABORTS=";
+};
+
 void notify(const char* state) {
 #ifdef ST_HAVE_SYSTEMD
   sd_notify(0, state);
@@ -66,6 +146,16 @@ void notify(const char* state) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  {
+    // Re-executed from libzmq's I/O thread (AbortRestart), this image inherits that thread's
+    // signal mask, which blocks everything (SIGTERM must reach it again), and its pending
+    // signals: the SIGPIPEs of its writes to reset connections, discarded by ignoring SIGPIPE
+    // (every write of the worker's reports a closed peer as an error instead).
+    std::signal(SIGPIPE, SIG_IGN);
+    sigset_t none;
+    sigemptyset(&none);
+    sigprocmask(SIG_SETMASK, &none, nullptr);
+  }
   // One malloc arena: block-set chunks arrive in buffers allocated by ZeroMQ's I/O thread; in a
   // per-thread arena their freed memory stays resident, in the main one malloc_trim() returns it
   // when idle sets are dropped (perf/soak.sh: worker memory flat across reassignments).
@@ -77,6 +167,7 @@ int main(int argc, char** argv) {
   std::int64_t worker_id = -1;
   std::string key_out;
   bool insecure = false, keygen = false, force = false;
+  int max_abort_restarts = 5;
   app.add_option("--config", config_file,
                  "TOML config (bind, worker_id, log_level, insecure, max_sets, idle_set_s, max_blockset_mb, coherent, "
                  "max_sets_per_client, max_client_mb, "
@@ -87,6 +178,10 @@ int main(int argc, char** argv) {
       "endpoint to bind: tcp://HOST:PORT or ipc://PATH (overrides the config; default tcp://127.0.0.1:5555)");
   app.add_option("--id", worker_id, "worker id (overrides the config)")->check(CLI::Range(0, 1 << 20));
   app.add_option("--log-level", log_level, "error, warning, info or debug (overrides the config)");
+  app.add_option("--max-abort-restarts", max_abort_restarts,
+                 "once listening, re-execute in place (same pid, a new epoch) after an abort — libzmq asserts on "
+                 "some hostile input — at most this many times within 60 s; 0: exit on an abort")
+      ->check(CLI::Range(0, 1000));
   app.add_flag("--insecure", insecure, "allow binding a non-loopback address without CURVE (trusted networks only)");
   auto* kg = app.add_flag("--keygen", keygen,
                           "make a new CURVE key pair and exit: with --out, write PREFIX.key (mode 0600) and PREFIX.pub "
@@ -208,6 +303,10 @@ int main(int argc, char** argv) {
       log_line(5,
                "loopback TCP without CURVE: every local user can connect; bind ipc://PATH (this user only) or "
                "configure [curve] to keep other users out");
+    AbortRestart::install(argv, max_abort_restarts);
+    if (AbortRestart::count() > 0)
+      log_line(4, "restarted in place after an abort (" + std::to_string(AbortRestart::count()) +
+                      " within the last 60 s): block sets lost, a new epoch");
     notify(("READY=1\nSTATUS=listening on " + ep).c_str());
 
     // Watchdog: ping at a quarter of WatchdogSec; the loop wakes at least every 100 ms.

@@ -938,9 +938,10 @@ def hostile_doc(doc, md):
                        [[f_auto(k, c.get(k)) for k in keys] for c in cases], left=2)
     else:
         md.append("_no cases in hostile.json_\n")
-    md.append(f"All refused or answered: {f_auto('', h.get('all_refused_or_answered'))}. Worker memory per byte of "
+    md.append(f"All refused or answered (ping_after_reset may instead restart the worker in place: libzmq 4.3 aborts "
+              f"on it): {f_auto('', h.get('all_refused_or_answered'))}. Worker memory per byte of "
               f"an encoded block set (large_legal_load): {f_auto('', h.get('set_memory_factor'))}×.\n")
-    md.append(f"Honest client within the target (p50 < 2× its quiet p50 and p99 < 50 ms) in every case: "
+    md.append(f"Honest client within the target (p50 < 2× its quiet p50 and p99 < 50 ms) in every case but a restart: "
               f"{f_auto('', h.get('honest_within_target'))}.\n")
     md.append("Each case attacks a live `spheretouch-worker` (12 set slots) from other connections, repeating the attack "
               f"until its window ({f_auto('', h.get('attack_window_ms'))} ms) closes (a longer attack runs once, to its "

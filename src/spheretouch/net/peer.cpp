@@ -19,8 +19,8 @@ Status Peer::open(zmq::context_t& ctx, const ScatterConfig& cfg, const std::stri
   sock.set(zmq::sockopt::immediate, 1);        // no queueing to a worker that is not connected
   sock.set(zmq::sockopt::reconnect_ivl, 100);  // a restarted worker is found within 0.1 s
   sock.set(zmq::sockopt::reconnect_ivl_max, 1000);
-  sock.set(zmq::sockopt::heartbeat_ivl, 500);  // ZMTP heartbeats drop half-open connections
-  sock.set(zmq::sockopt::heartbeat_timeout, 1500);
+  // No ZMTP heartbeats (socket_options.hpp): a worker that stops answering the client's own
+  // Heartbeat messages gets a fresh socket (ScatterGather's revive_silent).
   if (!cfg.curve_server_public.empty()) {
     sock.set(zmq::sockopt::curve_serverkey, cfg.curve_server_public);
     sock.set(zmq::sockopt::curve_publickey, cfg.curve_public);
