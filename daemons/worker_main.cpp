@@ -6,6 +6,7 @@
 // it listens (libzmq asserting on a hostile peer) re-executes it in place: see AbortRestart.
 #include <CLI/CLI.hpp>
 #include <malloc.h>
+#include <sys/prctl.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -15,6 +16,7 @@
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <ctime>
 #include <string>
 #include <vector>
@@ -59,7 +61,7 @@ std::uint64_t cgroup_memory_max() {
   return 0;
 }
 
-/// Re-executes the worker in place when it aborts. libzmq 4.3's I/O thread asserts
+/// Re-executes the worker in place when libzmq aborts it. libzmq 4.3's I/O thread asserts
 /// (`!_io_error`, stream_engine_base.cpp) when it decodes a ZMTP PING from a connection that was
 /// reset while its input was stopped (its queue to this process at rcvhwm): any peer past the
 /// handshake — any local user on loopback without CURVE, an allowed client with it — can send
@@ -95,26 +97,34 @@ class AbortRestart {
     static AbortRestart r;
     return r;
   }
-  // Async-signal-safe only: clock_gettime, write, execve (formatting by hand).
+  // Async-signal-safe only: prctl, clock_gettime, write, execve (formatting by hand).
   static void on_abort(int) {
     auto& r = self();
+    // Only libzmq's own threads (named "ZMQbg/..."): an abort of the worker's code (a failed
+    // assertion in a checking build, std::terminate) stays what it is.
+    char name[17] = {};
+    if (::prctl(PR_GET_NAME, name) != 0 || std::strncmp(name, "ZMQbg/", 6) != 0) return die();
     timespec now{};
     clock_gettime(CLOCK_MONOTONIC, &now);
     long count = r.count_, first = r.first_;
     if (count == 0 || now.tv_sec - first > 60) count = 0, first = now.tv_sec;
     if (count >= r.max_) {
       say("spheretouch-worker: aborted again: more than max-abort-restarts within 60 s; exiting\n");
-      signal(SIGABRT, SIG_DFL);
-      return;  // abort() raises again with the default action
+      return die();
     }
     char* p = r.history_ + sizeof "ST_WORKER_ABORTS=" - 1;
     p = digits(p, count + 1);
     *p++ = ':';
     *digits(p, first) = '\0';
-    say("spheretouch-worker: aborted (libzmq assertion on a hostile connection?); restarting in place\n");
+    say("spheretouch-worker: libzmq aborted (an assertion on a hostile connection); restarting in place\n");
     execve("/proc/self/exe", r.argv_, r.env_.data());
     say("spheretouch-worker: cannot re-execute /proc/self/exe; exiting\n");
+    die();
+  }
+  // The default action, now (SA_NODEFER: not held until the handler returns), whoever sent it.
+  static void die() {
     signal(SIGABRT, SIG_DFL);
+    raise(SIGABRT);
   }
   static void say(const char* m) {
     std::size_t n = 0;
@@ -179,8 +189,8 @@ int main(int argc, char** argv) {
   app.add_option("--id", worker_id, "worker id (overrides the config)")->check(CLI::Range(0, 1 << 20));
   app.add_option("--log-level", log_level, "error, warning, info or debug (overrides the config)");
   app.add_option("--max-abort-restarts", max_abort_restarts,
-                 "once listening, re-execute in place (same pid, a new epoch) after an abort — libzmq asserts on "
-                 "some hostile input — at most this many times within 60 s; 0: exit on an abort")
+                 "once listening, re-execute in place (same pid, a new epoch) when libzmq's I/O thread aborts (an "
+                 "assertion some hostile input reaches), at most this many times within 60 s; 0: exit on it")
       ->check(CLI::Range(0, 1000));
   app.add_flag("--insecure", insecure, "allow binding a non-loopback address without CURVE (trusted networks only)");
   auto* kg = app.add_flag("--keygen", keygen,
