@@ -188,7 +188,7 @@ Status WorkerService::init(zmq::context_t& ctx) {
   }
   try {
     // A client that reconnects with its routing id takes it over at once (a half-open old
-    // connection would otherwise hold it until the heartbeat drops it).
+    // connection would otherwise hold it until TCP keepalive drops it).
     sock_.set(zmq::sockopt::router_handover, 1);
     // No ZMTP heartbeats (socket_options.hpp): TCP keepalive drops the half-open connections of
     // vanished clients (after about 10 + 3 x 2 s of silence).
