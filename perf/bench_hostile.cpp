@@ -1,9 +1,9 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // spheretouch-bench hostile: the reproducers of the security review, replayed against a live
 // worker daemon on loopback while an honest client keeps querying it. Per case: what the worker
-// did with the attack (outcome: refused, answered, restarted, crashed, stalled), its resident memory at the
-// peak of the case, and the honest client's round times during the attack against its quiet
-// round time measured first in the same run.
+// did with the attack (outcome: refused, answered, restarted, crashed, stalled), its resident
+// memory at the peak of the case, and the honest client's round times during the attack against
+// its quiet round time measured first in the same run.
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
