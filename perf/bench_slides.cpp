@@ -180,7 +180,7 @@ void add_slides(CLI::App& app) {
     // Each path has its own scratch, as each would in a collision thread of its own (the coherent
     // collider holds one), and runs each series in a pass of its own (below).
     geom::CollideScratch sc, sc_today, sc_filter;
-    geom::CollideResult r_today, r_filter, r_coh, sorted_plain, sorted_coh;
+    geom::CollideResult r_today, r_filter, r_coh, sorted_plain;
     geom::CollideConfig today;
     today.tri_filter = false;
     const geom::CollideConfig filter;
@@ -230,7 +230,8 @@ void add_slides(CLI::App& app) {
         std::vector<std::vector<geom::FacePair>> coh_pairs(a->rounds);  // the first repeat's, sorted
         std::vector<std::uint32_t> coh_contacts(a->rounds, 0);
         for (int rep = 0; rep < a->reps; ++rep) {
-          for (int pass = 0; pass < 3; ++pass) {
+          const int passes = a->only_coherent ? 1 : 3;
+          for (int pass = 0; pass < passes; ++pass) {
             const int path = a->only_coherent ? 2 : (pass + rep) % 3;
             if (path == 2) coh.reset(), coh.reset_stats();
             for (int k = 0; k < a->rounds; ++k) {
@@ -252,7 +253,6 @@ void add_slides(CLI::App& app) {
                 }
               }
             }
-            if (a->only_coherent) break;
           }
         }
         // The pair sets, every round: the coherent collider's against collide()'s.
