@@ -37,7 +37,7 @@
 // apart from every object root) costs one sphere test per root, as in collide(), and drops the
 // front; the front is walked again from the roots when it has doubled (it only refines as the
 // probe moves) or the contact has shrunk to a quarter or ended (a withdrawn probe would keep the
-// fine front of its contact); and, with `arbitrate`, the collider times itself against collide()
+// fine front of its contact; ended, the walk is a rebuild: no leaf pair is worth keeping); and, with `arbitrate`, the collider times itself against collide()
 // and gives way to it where the bookkeeping costs more than it saves.
 // Other trees or other object roots (a worker asked to skip other blocks this round) start a new
 // front only when a second round in a row asks for them: a setup met once is answered by
@@ -203,7 +203,8 @@ class CoherentCollider {
   // doubled since it last did, or the contact has shrunk to under a quarter of what it was then,
   // or there is none (a probe withdrawn leaves a front as fine as the contact it had, and moving
   // away only refines it: a walk from the roots makes it as coarse as the contact now, and costs
-  // what collide() does, little without contact).
+  // what collide() does, little without contact). Without contact the caller rebuilds instead:
+  // the walk would index and look up leaf pairs none of which is worth keeping.
   bool reroot_due() const {
     return have_front_ && ramp_ % kRerootEvery == kRerootEvery - 1 &&
            (entries() > 2 * rooted_size_ || 4 * last_pairs_ + 16 < rooted_pairs_ || last_pairs_ == 0);
