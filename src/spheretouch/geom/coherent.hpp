@@ -37,8 +37,9 @@
 // apart from every object root) costs one sphere test per root, as in collide(), and drops the
 // front; the front is walked again from the roots when it has doubled (it only refines as the
 // probe moves) or the contact has shrunk to a quarter or ended (a withdrawn probe would keep the
-// fine front of its contact; ended, the walk is a rebuild: no leaf pair is worth keeping); and, with `arbitrate`, the collider times itself against collide()
-// and gives way to it where the bookkeeping costs more than it saves.
+// fine front of its contact; ended, the walk is a rebuild: no leaf pair is worth keeping); and,
+// with `arbitrate`, the collider times itself against collide() and gives way to it where the
+// bookkeeping costs more than it saves.
 // Other trees or other object roots (a worker asked to skip other blocks this round) start a new
 // front only when a second round in a row asks for them: a setup met once is answered by
 // collide() and the front kept for the one it was built for, so rounds that alternate (a client
