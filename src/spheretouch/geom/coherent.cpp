@@ -128,7 +128,7 @@ std::uint32_t CoherentCollider::build_budget() const {
 
 double CoherentCollider::choose_reach() const {
   if (config_.reach > 0) return config_.reach;
-  return std::clamp(8 * step_, leaf_radius_ / 256, leaf_radius_ / 8);
+  return std::clamp(8 * step_, leaf_radius_ / 16, leaf_radius_ / 8);
 }
 
 std::size_t CoherentCollider::bytes() const {

@@ -60,7 +60,8 @@ namespace st::inline SPHERETOUCH_ABI::geom {
 struct CoherentConfig {
   /// Reach δ of a leaf pair's candidates (face pairs farther apart than δ are not kept).
   /// 0 = adapt to the motion: 8 steps of the recent motion per round, within
-  /// [leaf radius / 256, leaf radius / 8] (the probe tree's mean leaf radius).
+  /// [leaf radius / 16, leaf radius / 8] (the probe tree's mean leaf radius; a smaller δ at slow
+  /// motion made more refreshes than its smaller candidate sets saved).
   double reach = 0;
   /// Motion in one round (a bound over the probe's faces in contact the round before, or over the
   /// whole probe when none were) above which the round runs plain collide() and the cache is
