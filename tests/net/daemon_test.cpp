@@ -295,17 +295,24 @@ TEST_CASE("daemon: libzmq's abort on a PING after a reset restarts it in place; 
   // stopped (socket_options.hpp); the worker re-executes itself (AbortRestart in worker_main).
   Fleet f(1);
   zmq::context_t ctx;
+  // A request in flight when the worker aborts is lost with the connection (the restart drops
+  // it: the honest client resends on its heartbeat): ask again on a fresh connection.
   auto epoch = [&] {
-    zmq::socket_t d = dealer_to(ctx, f.endpoint(0), 10000);
-    const Message m = decoded(request(d, encode(HeartbeatMsg{5})));
-    return std::get<HelloMsg>(m).epoch;
+    for (int attempt = 0; attempt < 3; ++attempt) {
+      zmq::socket_t d = dealer_to(ctx, f.endpoint(0), 10000);
+      d.send(zmq::buffer(encode(HeartbeatMsg{5})), zmq::send_flags::none);
+      zmq::message_t m;
+      if (d.recv(m)) return std::get<HelloMsg>(decoded(m)).epoch;
+    }
+    FAIL("the worker did not answer three requests of 10 s each");
+    return std::uint64_t{0};
   };
   const std::uint64_t first = epoch();
   std::uint64_t now = first;
   int resets = 0;
   for (; resets < 20 && now == first; ++resets) {
     REQUIRE(bench::ping_after_reset(f.ports[0], 4000));
-    now = epoch();  // REQUIREs an answer within 10 s: the worker serves after every reset
+    now = epoch();  // an answer within 30 s: the worker serves after every reset
   }
   MESSAGE(resets << " reset connection(s); epoch "
                  << std::string(now == first ? "unchanged (this libzmq survives them)"
