@@ -205,12 +205,15 @@ class CoherentCollider {
   // doubled since it last did, or the contact has shrunk to under a quarter of what it was then,
   // or there is none (a probe withdrawn leaves a front as fine as the contact it had, and moving
   // away only refines it: a walk from the roots makes it as coarse as the contact now, and costs
-  // what collide() does, little without contact). Without contact the caller rebuilds instead:
-  // the walk would index and look up leaf pairs none of which is worth keeping.
+  // what collide() does, little without contact). Without contact it is a rebuild instead
+  // (rebuild_due()): the walk would index and look up leaf pairs none of which is worth keeping.
   bool reroot_due() const {
     return have_front_ && ramp_ % kRerootEvery == kRerootEvery - 1 &&
-           (entries() > 2 * rooted_size_ || 4 * last_pairs_ + 16 < rooted_pairs_ || last_pairs_ == 0);
+           (entries() > 2 * rooted_size_ || 4 * last_pairs_ + 16 < rooted_pairs_);
   }
+  // The walk from the roots due this round finds no contact to keep (reroot_due()): the front is
+  // dropped and rebuilt.
+  bool rebuild_due() const { return have_front_ && ramp_ % kRerootEvery == kRerootEvery - 1 && last_pairs_ == 0; }
   // The pool (what max_bytes bounds) with `leaf_entries` leaf-pair entries: those, the group
   // store (dead entries included until compacted) and the candidates.
   std::size_t pool_bytes(std::size_t leaf_entries) const {

@@ -524,11 +524,8 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   step_ = std::max(step, step_ * 0.9);
   poses_[round % kPoses] = {f.rt, f.mag, round};
   reach_ = choose_reach();
-  bool rerooting = reroot_due();        // decided once: the round changes what it reads
-  if (rerooting && last_pairs_ == 0) {  // no contact: no leaf pair worth keeping (reroot_due())
-    drop();
-    rerooting = false;
-  }
+  if (rebuild_due()) drop();
+  const bool rerooting = reroot_due();  // decided once: the round changes what it reads
   const bool ok = on_active_isa([&](auto isa) {
     return run_coherent<typename decltype(isa)::type>(*this, probe, probe_tree, object, object_tree, options, scratch_,
                                                       result, f, round, reach_, build_budget(), rerooting);
