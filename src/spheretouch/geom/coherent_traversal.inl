@@ -251,14 +251,9 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     // anchor: one kept holds from this pose while it moves less than what is left (coherent.hpp, top).
     const double moved_old = old ? leaf_motion(hp.centre, hp.radius, old->anchor) : 0.0;
     const FaceBox* ob = OT.face_boxes.data() + ho.first;
-    const std::uint64_t mo = face_box_mask(ob, ho.count, w);
+    float ou[6];
+    const std::uint64_t mo = face_box_mask(ob, ho.count, w, ou);
     if (mo != 0) {
-      const float inf = std::numeric_limits<float>::infinity();
-      float ou[6] = {inf, inf, inf, -inf, -inf, -inf};
-      for (std::uint64_t m = mo; m != 0; m &= m - 1) {
-        const FaceBox& fb = ob[std::countr_zero(m)];
-        for (int k = 0; k < 3; ++k) ou[k] = std::min(ou[k], fb.lo[k]), ou[3 + k] = std::max(ou[3 + k], fb.hi[k]);
-      }
       for (int k = 0; k < 3; ++k) ou[k] = widen_below(ou[k], reach), ou[3 + k] = widen_above(ou[3 + k], reach);
       const std::uint64_t mp = probe_mask(hp.first, hp.count, ou);
       const float* pb = sc.pbox_.data();

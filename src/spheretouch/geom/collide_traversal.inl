@@ -51,23 +51,34 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
     return n >= 64 ? m : m & ((std::uint64_t{1} << n) - 1);
   }
 
-  // Bit j (j < n <= 64) set when face box fb[j] meets box b (lo xyz, hi xyz). Exact. A step's boxes
-  // are gathered from the 24-byte AoS, reading nothing past fb[n - 1] (face_boxes is not padded).
-  static std::uint64_t face_box_mask(const FaceBox* fb, std::uint32_t n, const float* b) {
+  // Bit j (j < n <= 64) set when face box fb[j] meets box b (lo xyz, hi xyz), and `ou` the union of
+  // those boxes (lo xyz, hi xyz; +inf/-inf when there are none), both exact: comparisons, min and
+  // max. A step's boxes are gathered from the 24-byte AoS, reading nothing past fb[n - 1]
+  // (face_boxes is not padded). The union rides on the gathered lanes: a loop over the set bits
+  // reading each box again was a fifth of leaf_leaf's time (~16 boxes a leaf pair in contact).
+  static std::uint64_t face_box_mask(const FaceBox* fb, std::uint32_t n, const float* b, float* ou) {
     static_assert(sizeof(FaceBox) == 6 * sizeof(float), "face boxes are read as 6 packed floats");
     const Lanes blx = Lanes::broadcast(b[0]), bly = Lanes::broadcast(b[1]), blz = Lanes::broadcast(b[2]);
     const Lanes bhx = Lanes::broadcast(b[3]), bhy = Lanes::broadcast(b[4]), bhz = Lanes::broadcast(b[5]);
+    const Lanes inf = Lanes::broadcast(std::numeric_limits<float>::infinity());
+    const Lanes ninf = Lanes::broadcast(-std::numeric_limits<float>::infinity());
+    Lanes ulx = inf, uly = inf, ulz = inf, uhx = ninf, uhy = ninf, uhz = ninf;
     const float* f = reinterpret_cast<const float*>(fb);
     std::uint64_t m = 0;
     for (std::uint32_t j = 0; j < n; j += Lanes::width) {
       const std::uint32_t live = n - j;
       const float* p = f + 6 * j;
+      const Lanes lx = Lanes::gather<6>(p, live), ly = Lanes::gather<6>(p + 1, live), lz = Lanes::gather<6>(p + 2, live);
+      const Lanes hx = Lanes::gather<6>(p + 3, live), hy = Lanes::gather<6>(p + 4, live),
+                  hz = Lanes::gather<6>(p + 5, live);
       // Lanes past the last box are gathered as 0 and may compare true: the live mask clears them.
-      const Mask h = Mask::first(live) & (Lanes::gather<6>(p, live) <= bhx) & (Lanes::gather<6>(p + 1, live) <= bhy) &
-                     (Lanes::gather<6>(p + 2, live) <= bhz) & (Lanes::gather<6>(p + 3, live) >= blx) &
-                     (Lanes::gather<6>(p + 4, live) >= bly) & (Lanes::gather<6>(p + 5, live) >= blz);
+      const Mask h = Mask::first(live) & (lx <= bhx) & (ly <= bhy) & (lz <= bhz) & (hx >= blx) & (hy >= bly) & (hz >= blz);
+      ulx = min(ulx, select(h, lx, inf)), uly = min(uly, select(h, ly, inf)), ulz = min(ulz, select(h, lz, inf));
+      uhx = max(uhx, select(h, hx, ninf)), uhy = max(uhy, select(h, hy, ninf)), uhz = max(uhz, select(h, hz, ninf));
       m |= std::uint64_t{h.bits()} << j;
     }
+    ou[0] = hmin(ulx), ou[1] = hmin(uly), ou[2] = hmin(ulz);
+    ou[3] = hmax(uhx), ou[4] = hmax(uhy), ou[5] = hmax(uhz);
     return m;
   }
 
@@ -321,17 +332,9 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
         return;
     }
     const FaceBox* ob = OT.face_boxes.data() + ho.first;
-    const std::uint64_t mo = face_box_mask(ob, ho.count, u.data());
+    float ou[6];
+    const std::uint64_t mo = face_box_mask(ob, ho.count, u.data(), ou);
     if (mo == 0) return;
-    const float inf = std::numeric_limits<float>::infinity();
-    float ou[6] = {inf, inf, inf, -inf, -inf, -inf};
-    for (std::uint64_t m = mo; m != 0; m &= m - 1) {
-      const FaceBox& fb = ob[std::countr_zero(m)];
-      for (int k = 0; k < 3; ++k) {
-        ou[k] = std::min(ou[k], fb.lo[k]);
-        ou[3 + k] = std::max(ou[3 + k], fb.hi[k]);
-      }
-    }
     const std::uint64_t mp = probe_mask(hp.first, hp.count, ou);
     if (mp == 0) return;
     for (std::uint64_t m = mo; m != 0; m &= m - 1) {

@@ -68,7 +68,7 @@ const char* isa_name(Isa isa);
 bool parse_isa(std::string_view name, Isa& isa);
 
 // Per ISA: Mask (one flag per lane; first(live), bits(), &, |) and Lanes (width floats: load,
-// broadcast, gather, + - * /, min, max, abs, sqrt, comparisons), the collision core's; and Quad
+// broadcast, gather, + - * /, min, max, abs, sqrt, comparisons, select, hmin, hmax), the collision core's; and Quad
 // and QuadMask (four doubles, one record per lane: + - * /, sqrt, <, >, select, transpose), the
 // contact model's segment kernel's (AVX-512 runs the AVX2 Quad). Operators are free functions,
 // not in-class friends: GCC does not give friends defined in a class the target of their region.
@@ -99,17 +99,20 @@ struct Lanes {
     return {live > 0 ? *p : 0.0f};
   }
 };
-inline Lanes operator+(Lanes a, Lanes b) { return {a.v + b.v}; }        ///< a + b
-inline Lanes operator-(Lanes a, Lanes b) { return {a.v - b.v}; }        ///< a - b
-inline Lanes operator*(Lanes a, Lanes b) { return {a.v * b.v}; }        ///< a · b
-inline Lanes min(Lanes a, Lanes b) { return {a.v < b.v ? a.v : b.v}; }  ///< as minps (b if NaN)
-inline Lanes max(Lanes a, Lanes b) { return {a.v > b.v ? a.v : b.v}; }  ///< as maxps (b if NaN)
-inline Lanes abs(Lanes a) { return {__builtin_fabsf(a.v)}; }            ///< |a|
-inline Lanes operator/(Lanes a, Lanes b) { return {a.v / b.v}; }        ///< a / b, correctly rounded
-inline Lanes sqrt(Lanes a) { return {__builtin_sqrtf(a.v)}; }           ///< √a, correctly rounded
-inline Mask operator<=(Lanes a, Lanes b) { return {a.v <= b.v}; }       ///< a <= b (false for NaN)
-inline Mask operator>=(Lanes a, Lanes b) { return {a.v >= b.v}; }       ///< a >= b (false for NaN)
-inline Mask operator>(Lanes a, Lanes b) { return {a.v > b.v}; }         ///< a > b (false for NaN)
+inline Lanes operator+(Lanes a, Lanes b) { return {a.v + b.v}; }             ///< a + b
+inline Lanes operator-(Lanes a, Lanes b) { return {a.v - b.v}; }             ///< a - b
+inline Lanes operator*(Lanes a, Lanes b) { return {a.v * b.v}; }             ///< a · b
+inline Lanes min(Lanes a, Lanes b) { return {a.v < b.v ? a.v : b.v}; }       ///< as minps (b if NaN)
+inline Lanes max(Lanes a, Lanes b) { return {a.v > b.v ? a.v : b.v}; }       ///< as maxps (b if NaN)
+inline Lanes abs(Lanes a) { return {__builtin_fabsf(a.v)}; }                 ///< |a|
+inline Lanes operator/(Lanes a, Lanes b) { return {a.v / b.v}; }             ///< a / b, correctly rounded
+inline Lanes sqrt(Lanes a) { return {__builtin_sqrtf(a.v)}; }                ///< √a, correctly rounded
+inline Mask operator<=(Lanes a, Lanes b) { return {a.v <= b.v}; }            ///< a <= b (false for NaN)
+inline Mask operator>=(Lanes a, Lanes b) { return {a.v >= b.v}; }            ///< a >= b (false for NaN)
+inline Mask operator>(Lanes a, Lanes b) { return {a.v > b.v}; }              ///< a > b (false for NaN)
+inline Lanes select(Mask m, Lanes a, Lanes b) { return {m.v ? a.v : b.v}; }  ///< m ? a : b
+inline float hmin(Lanes a) { return a.v; }                                   ///< least lane (lanes not NaN)
+inline float hmax(Lanes a) { return a.v; }                                   ///< greatest lane (lanes not NaN)
 
 /// Four doubles, one record per lane (the contact model's segment kernel), as a loop per operation.
 struct Quad {
@@ -222,6 +225,18 @@ inline Mask operator<=(Lanes a, Lanes b) { return {_mm_cmple_ps(a.v, b.v)}; }
 inline Mask operator>=(Lanes a, Lanes b) { return {_mm_cmpge_ps(a.v, b.v)}; }
 /// a > b per lane; false where either is NaN, as in scalar float.
 inline Mask operator>(Lanes a, Lanes b) { return {_mm_cmpgt_ps(a.v, b.v)}; }
+/// m ? a : b per lane.
+inline Lanes select(Mask m, Lanes a, Lanes b) { return {_mm_or_ps(_mm_and_ps(m.v, a.v), _mm_andnot_ps(m.v, b.v))}; }
+/// The least lane (lanes not NaN).
+inline float hmin(Lanes a) {
+  const __m128 m = _mm_min_ps(a.v, _mm_movehl_ps(a.v, a.v));
+  return _mm_cvtss_f32(_mm_min_ss(m, _mm_shuffle_ps(m, m, 1)));
+}
+/// The greatest lane (lanes not NaN).
+inline float hmax(Lanes a) {
+  const __m128 m = _mm_max_ps(a.v, _mm_movehl_ps(a.v, a.v));
+  return _mm_cvtss_f32(_mm_max_ss(m, _mm_shuffle_ps(m, m, 1)));
+}
 
 /// Four doubles, one record per lane (the contact model's segment kernel), as two SSE2 halves.
 struct Quad {
@@ -323,6 +338,20 @@ inline Mask operator<=(Lanes a, Lanes b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_
 inline Mask operator>=(Lanes a, Lanes b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_GE_OQ)}; }
 /// a > b per lane; false where either is NaN, as in scalar float.
 inline Mask operator>(Lanes a, Lanes b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_GT_OQ)}; }
+/// m ? a : b per lane.
+inline Lanes select(Mask m, Lanes a, Lanes b) { return {_mm256_blendv_ps(b.v, a.v, m.v)}; }
+/// The least lane (lanes not NaN).
+inline float hmin(Lanes a) {
+  __m128 m = _mm_min_ps(_mm256_castps256_ps128(a.v), _mm256_extractf128_ps(a.v, 1));
+  m = _mm_min_ps(m, _mm_movehl_ps(m, m));
+  return _mm_cvtss_f32(_mm_min_ss(m, _mm_shuffle_ps(m, m, 1)));
+}
+/// The greatest lane (lanes not NaN).
+inline float hmax(Lanes a) {
+  __m128 m = _mm_max_ps(_mm256_castps256_ps128(a.v), _mm256_extractf128_ps(a.v, 1));
+  m = _mm_max_ps(m, _mm_movehl_ps(m, m));
+  return _mm_cvtss_f32(_mm_max_ss(m, _mm_shuffle_ps(m, m, 1)));
+}
 
 /// Four doubles, one record per lane (the contact model's segment kernel).
 struct Quad {
@@ -415,6 +444,9 @@ inline Mask operator<=(Lanes a, Lanes b) { return {_mm512_cmp_ps_mask(a.v, b.v, 
 inline Mask operator>=(Lanes a, Lanes b) { return {_mm512_cmp_ps_mask(a.v, b.v, _CMP_GE_OQ)}; }
 /// a > b per lane; false where either is NaN, as in scalar float.
 inline Mask operator>(Lanes a, Lanes b) { return {_mm512_cmp_ps_mask(a.v, b.v, _CMP_GT_OQ)}; }
+inline Lanes select(Mask m, Lanes a, Lanes b) { return {_mm512_mask_blend_ps(m.v, b.v, a.v)}; }  ///< m ? a : b per lane
+inline float hmin(Lanes a) { return _mm512_reduce_min_ps(a.v); }  ///< the least lane (lanes not NaN)
+inline float hmax(Lanes a) { return _mm512_reduce_max_ps(a.v); }  ///< the greatest lane (lanes not NaN)
 
 }  // namespace avx512
 ST_TARGET_END
