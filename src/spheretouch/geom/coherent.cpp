@@ -98,6 +98,8 @@ void CoherentCollider::reset() {
   have_last_ = false;
   step_ = 0;
   for (detail::CertPose& p : poses_) p.round = ~0u;
+  last_cached_ = ~0u;
+  path_ = 0;
   for (detail::PoseDelta& d : deltas_) d.key = ~std::uint64_t{0};  // rounds count from 0 again
 }
 

@@ -21,6 +21,12 @@
 // "Moved" is a bound on |apply(T, v) - apply(T_i, v)| over the node's sphere, T_i the pose the
 // certificate was made at (never a sum of steps: jitter back and forth uses no margin up):
 // |(R - R_i) c + (t - t_i)| + ||R - R_i||_F r, widened for the rounding of both apply()s.
+// A shortcut for the groups: the probe's path, the whole probe's bounds from each cached pose to
+// the next summed as the rounds go. A group whose node was found to have moved m < g since its
+// pose at a round where the path was L stays apart while the path is below L + g - m (a point's
+// motion from T_i to now is at most its motion to that round plus its path since), one comparison
+// a round; only past it is its motion bounded from T_i again, which sets a new limit. The sum
+// only makes a round's check cheaper, never a certificate shorter: jitter still uses none up.
 // Why that is enough: a probe point moves by at most that bound, so a gap larger than it stays
 // open, and the support function of P − O changes by at most it in any direction, so a depth
 // larger than it keeps the origin inside (coherent_traversal.inl proves the margins).
@@ -107,6 +113,7 @@ struct CoherentStats {
 namespace detail {
 /// One entry of the front (coherent.hpp, top): apart sphere pairs, or a leaf pair.
 struct FrontEntry {
+  double until = 0;  ///< group: apart while the probe's path (CertPose::path) is below this (coherent.hpp, top)
   std::uint32_t p = 0, o = 0;  ///< probe node, object node
   std::uint32_t pose = 0;      ///< round the certificate was made at
   float margin = 0;            ///< group: smallest gap; leaf pair: the reach δ its candidates were gathered with
@@ -150,6 +157,7 @@ struct CertPose {
   RelTransform rt;
   double mag = 0;             ///< magnitude of the coordinates (for the rounding allowance)
   std::uint32_t round = ~0u;  ///< the round it belongs to (a ring slot holds one of many)
+  double path = 0;            ///< the whole probe's motion bounds from cached pose to cached pose, summed since reset
 };
 }  // namespace detail
 
@@ -247,6 +255,8 @@ class CoherentCollider {
   std::array<detail::CertPose, kPoses> poses_{};
   std::array<detail::PoseDelta, kPoses> deltas_{};  // this round's change since each kept pose (lazily)
   std::uint32_t round_ = 0;                         // rounds since reset (the current pose's id)
+  std::uint32_t last_cached_ = ~0u;                 // the last round whose pose is in poses_ (~0u: none)
+  double path_ = 0;                                 // its CertPose::path
   bool have_front_ = false;
   std::uint32_t leaf_entries_ = 0;         // leaf pairs (built or pending) in the front
   std::size_t rooted_size_ = 0;            // front entries after the last walk from the roots

@@ -132,15 +132,27 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   std::uint32_t h_n = 0;
   alignas(64) float h_v[15][kTriBatch] = {};
 
-  // Below `margin`, the motion since `pose` of the probe node whose sphere is (c, r)? The whole
-  // probe's bound first (one per pose and round), the node's own only when that is not enough
-  // (coherent.hpp, top); never when that pose is no longer kept.
-  bool still(const float* c, float r, std::uint32_t pose, float margin) {
-    if (round - pose >= CoherentCollider::kPoses) return false;
-    const Delta& d = delta(pose);
-    return double(margin) > d.whole || double(margin) > sphere_motion(d, c, r);
+  // A group's gap still open: its probe node moved less than its margin since its pose? Never
+  // when that pose is no longer kept. First the shortcut (coherent.hpp, top): the probe's path
+  // still below the group's `until`; else the motion bound from its pose (the whole probe's or
+  // the node's own, the tighter), which sets `until` anew.
+  bool still_group(detail::FrontEntry& g) {
+    if (round - g.pose >= CoherentCollider::kPoses) return false;
+    if (path < g.until) return true;
+    const Delta& d = delta(g.pose);
+    const double margin = g.margin;
+    const double moved = std::min(d.whole, sphere_motion(d, g.c, g.r));
+    if (!(margin > moved)) return false;
+    g.until = until(margin - moved);
+    return true;
   }
-  bool still(const detail::FrontEntry& e, float margin) { return still(e.c, e.r, e.pose, margin); }
+  // A group's `until` from this round, its node `slack` short of using its margin up: while the
+  // path from here grows by less than the slack, the node's motion since its pose stays below
+  // its margin (at most its motion to here plus the path since: coherent.hpp, top). The path's
+  // own rounding (its additions since the group's pose, fewer than kPoses, each within 2^-53 of
+  // the total, and the difference) is well within 1e-12 of it.
+  double until(double slack) const { return path + slack * (1 - 1e-9) - 1e-12 * (path + slack) - 1e-300; }
+  double path = 0;  // this round's CertPose::path
   // This round's change since `pose` (kept no more than kPoses rounds).
   const Delta& delta(std::uint32_t pose) {
     const std::uint64_t key = (std::uint64_t{round} << 32) | pose;
@@ -192,6 +204,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     detail::FrontEntry e = entry(kind, p, o);
     e.arg = mask;
     e.margin = gap * (1.0f - 0x1p-20f);
+    e.until = until(e.margin);
     cc.groups_.push_back(e);
   }
 
@@ -506,8 +519,8 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
           counted(o, [&] { leaf(p, o, nullptr, spheres); });
         else if (known->kind == detail::kLeafPair || known->kind == detail::kLeafPending)
           counted(o, [&] { visit_leaf(*known); });
-        else if (still(*known, known->margin))  // a leaf pair its boxes proved apart
-          cc.groups_.push_back(*known);
+        else if (detail::FrontEntry g = *known; still_group(g))  // a leaf pair its boxes proved apart
+          cc.groups_.push_back(g);
         else
           counted(o, [&] { leaf(p, o, nullptr, spheres); });
         continue;
@@ -605,6 +618,18 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       }
       std::sort(cc.leaf_index_.begin(), cc.leaf_index_.end());
     }
+    {  // the path (coherent.hpp, top): the whole probe's bound from the last cached pose
+      // (kPoses rounds ago or more, or none, and every group made since has expired: none gets
+      // that far, and the path goes on from where it was)
+      const std::uint32_t prev = cc.last_cached_;
+      if (prev != ~0u && prev != round && round - prev < CoherentCollider::kPoses)
+        path = cc.path_ + delta(prev).whole;
+      else
+        path = cc.path_;
+      cc.poses_[round % CoherentCollider::kPoses].path = path;
+      cc.path_ = path;
+      cc.last_cached_ = round;
+    }
     if (!cc.have_front_ || rerooting) {
       if (!rerooting) ++cc.stats_.rebuilds, fresh = true;
       if (!opt.restrict_object) {
@@ -641,7 +666,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       for (std::size_t i = 0; i < groups; ++i) {
         detail::FrontEntry& g = cc.groups_[i];
         if (g.kind == detail::kDead) continue;
-        const bool valid = still(g, g.margin);
+        const bool valid = still_group(g);
         if ((budgeted || !valid) && cut(1)) break;
         if (valid) continue;
         const detail::FrontEntry e = g;  // expand() appends to groups_
