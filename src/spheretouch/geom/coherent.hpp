@@ -113,7 +113,10 @@ struct CoherentStats {
 namespace detail {
 /// One entry of the front (coherent.hpp, top): apart sphere pairs, or a leaf pair.
 struct FrontEntry {
-  double until = 0;  ///< group: apart while the probe's path (CertPose::path) is below this (coherent.hpp, top)
+  /// group: apart while the probe's path (CertPose::path) is below this; leaf pair: the motion
+  /// charged to its candidates since they were gathered, each margin stored with it added
+  /// (coherent.hpp, top)
+  double level = 0;
   std::uint32_t p = 0, o = 0;  ///< probe node, object node
   std::uint32_t pose = 0;      ///< round the certificate was made at
   float margin = 0;            ///< group: smallest gap; leaf pair: the reach δ its candidates were gathered with

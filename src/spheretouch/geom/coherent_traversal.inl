@@ -126,27 +126,29 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   using Delta = detail::PoseDelta;
   // The filter-with-margins batch: candidates (by index in cands_) waiting for tri_margins.
   std::uint32_t m_index[kTriBatch] = {}, m_slot[kTriBatch] = {}, m_face[kTriBatch] = {};
+  double m_level[kTriBatch] = {};  // ... and their entries' levels (FrontEntry::level)
   std::uint32_t m_n = 0;
   // ... and those the normals did not prove apart, with their coordinates, for all 11 axes.
   std::uint32_t h_index[kTriBatch] = {}, h_slot[kTriBatch] = {}, h_face[kTriBatch] = {};
+  double h_level[kTriBatch] = {};
   std::uint32_t h_n = 0;
   alignas(64) float h_v[15][kTriBatch] = {};
 
   // A group's gap still open: its probe node moved less than its margin since its pose? Never
   // when that pose is no longer kept. First the shortcut (coherent.hpp, top): the probe's path
-  // still below the group's `until`; else the motion bound from its pose (the whole probe's or
-  // the node's own, the tighter), which sets `until` anew.
+  // still below the group's `level`; else the motion bound from its pose (the whole probe's or
+  // the node's own, the tighter), which sets `level` anew.
   bool still_group(detail::FrontEntry& g) {
     if (round - g.pose >= CoherentCollider::kPoses) return false;
-    if (path < g.until) return true;
+    if (path < g.level) return true;
     const Delta& d = delta(g.pose);
     const double margin = g.margin;
     const double moved = std::min(d.whole, sphere_motion(d, g.c, g.r));
     if (!(margin > moved)) return false;
-    g.until = until(margin - moved);
+    g.level = until(margin - moved);
     return true;
   }
-  // A group's `until` from this round, its node `slack` short of using its margin up: while the
+  // A group's `level` from this round, its node `slack` short of using its margin up: while the
   // path from here grows by less than the slack, the node's motion since its pose stays below
   // its margin (at most its motion to here plus the path since: coherent.hpp, top). The path's
   // own rounding (its additions since the group's pose, fewer than kPoses, each within 2^-53 of
@@ -204,7 +206,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     detail::FrontEntry e = entry(kind, p, o);
     e.arg = mask;
     e.margin = gap * (1.0f - 0x1p-20f);
-    e.until = until(e.margin);
+    e.level = until(e.margin);
     cc.groups_.push_back(e);
   }
 
@@ -263,6 +265,8 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     // The old entry's candidates hold while the leaf moved less than their margins from its
     // anchor: one kept holds from this pose while it moves less than what is left (coherent.hpp, top).
     const double moved_old = old ? leaf_motion(hp.centre, hp.radius, old->anchor) : 0.0;
+    // ... the margins as stored (FrontEntry::level added) against that motion and the level.
+    const double charged_old = old ? (moved_old + old->level) * (1 + 1e-12) : 0.0;
     const FaceBox* ob = OT.face_boxes.data() + ho.first;
     float ou[6];
     const std::uint64_t mo = face_box_mask(ob, ho.count, w, ou);
@@ -290,9 +294,9 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
           auto before = [&](const detail::Candidate& c) { return c.j < j || (c.j == j && c.slot < slot); };
           while (prev != prev_end && before(cc.cands_[prev])) ++prev;
           if (prev != prev_end && cc.cands_[prev].j == j && cc.cands_[prev].slot == slot &&
-              double(cc.cands_[prev].margin) > moved_old) {
+              double(cc.cands_[prev].margin) > charged_old) {
             detail::Candidate kept = cc.cands_[prev];
-            kept.margin = std::max(0.0f, float_below(double(kept.margin) - moved_old));
+            kept.margin = std::max(0.0f, float_below(double(kept.margin) - charged_old));
             cc.cands_.back() = kept;
             ++cc.stats_.reused;
             check_decision(slot, of, kept.hit != 0);
@@ -300,7 +304,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
             continue;
           }
           ++res.stats.tri_pairs;
-          m_index[m_n] = at, m_slot[m_n] = slot, m_face[m_n] = of;
+          m_index[m_n] = at, m_slot[m_n] = slot, m_face[m_n] = of, m_level[m_n] = 0;
           if (++m_n == kTriBatch) flush_margins();
         }
       }
@@ -373,10 +377,10 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     for (std::uint32_t i = 0; i < m_n; ++i) {
       if ((apart >> i) & 1u) {
         check_decision(m_slot[i], m_face[i], false);
-        certify(m_index[i], margin[i], false);
+        certify(m_index[i], margin[i], false, m_level[i]);
         continue;
       }
-      h_index[h_n] = m_index[i], h_slot[h_n] = m_slot[i], h_face[h_n] = m_face[i];
+      h_index[h_n] = m_index[i], h_slot[h_n] = m_slot[i], h_face[h_n] = m_face[i], h_level[h_n] = m_level[i];
       for (int r = 0; r < 15; ++r) h_v[r][h_n] = v[r][i];
       if (++h_n == kTriBatch) flush_hard();
     }
@@ -398,16 +402,17 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
         hit = exact_pair(h_slot[i], h_face[i]);
         margin[i] = 0;
       }
-      certify(h_index[i], margin[i], hit);
+      certify(h_index[i], margin[i], hit, h_level[i]);
       if (hit) emit(PT.face_order[h_slot[i]], h_face[i]);
     }
     h_n = 0;
   }
   // Candidate `at` found (not) intersecting at this pose, its answer good while the leaf moves
-  // less than `margin` from here (its entry's anchor is this pose).
-  void certify(std::uint32_t at, float margin, bool hit) {
+  // less than `margin` from here (its entry's anchor is this pose), stored with its entry's
+  // `level` added (FrontEntry::level), rounded down.
+  void certify(std::uint32_t at, float margin, bool hit, double level) {
     detail::Candidate& c = cc.cands_[at];
-    c.margin = margin;
+    c.margin = level == 0 ? margin : float_below(double(margin) + level);
     c.hit = hit;
   }
 
@@ -427,23 +432,32 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     ++leaf_count;
     detail::Candidate* c = cc.cands_.data() + e.arg;  // nothing is appended to cands_ here
     bool prepared = false;
-    // A float at or above the bound: a margin above it is above the bound.
-    const float bound = float_above(moved);
+    double base = e.level;
+    if (base > 16.0 * e.margin) {                  // jitter can charge a level without end: stored near it, the
+      for (std::uint32_t k = 0; k < e.count; ++k)  // margins would lose their low bits
+        c[k].margin = std::max(0.0f, float_below(double(c[k].margin) - base));
+      base = cc.next_front_.back().level = 0;
+    }
+    // A float at or above the bound (the margins are stored with the entry's level added): a
+    // margin above it is above the bound.
+    const float bound = float_above(moved + base);
+    // When the anchor moves here, what the answers kept lose is charged to the level instead of
+    // each margin (FrontEntry::level), rounded up; the retested are stored with it.
+    const double level = (base + moved) * (1 + 1e-12);
     std::uint32_t retested = 0;
     for (std::uint32_t i = 0; i < e.count; ++i) {
       if (c[i].margin > bound) {
-        if (retested != 0) c[i].margin = float_below(double(c[i].margin) - moved);
         if (c[i].hit) emit(PT.face_order[c[i].slot], c[i].face);
         check_decision(c[i].slot, c[i].face, c[i].hit != 0, prepared, e.p);
         continue;
       }
       if (retested++ == 0) {  // the anchor moves here: the answers taken so far keep what is left
         cc.next_front_.back().anchor = round;
-        for (std::uint32_t k = 0; k < i; ++k) c[k].margin = float_below(double(c[k].margin) - moved);
+        cc.next_front_.back().level = level;
         if (!prepared) probe_leaf(e.p), prepared = true;
       }
       ++res.stats.tri_pairs;
-      m_index[m_n] = e.arg + i, m_slot[m_n] = c[i].slot, m_face[m_n] = c[i].face;
+      m_index[m_n] = e.arg + i, m_slot[m_n] = c[i].slot, m_face[m_n] = c[i].face, m_level[m_n] = level;
       if (++m_n == kTriBatch) flush_margins();
     }
     cc.stats_.reused += e.count - retested;
