@@ -156,6 +156,18 @@ TEST_CASE(
       CHECK(cc.stats().refreshes == before);
       CHECK(cc.stats().plain_rounds == 0);
     }
+    {  // a long jitter within a small reach: every visit that tests some candidates again charges
+       // the motion to its entry's level (FrontEntry::level), which is folded back into the
+       // margins once past 16 reaches (hundreds of times here): answers stay exact throughout
+      CoherentConfig small = fixed();
+      small.reach = 0.01;
+      CoherentCollider cc(small);
+      const int rounds = st::test::kSanitizerBuild ? 200 : 600;
+      for (int k = 0; k < rounds; ++k)
+        cmp.at(cc, probe, object, moved(start, pivot, dir, 0.002 * (k % 3), axis, 0.002 * (k % 2)));
+      CHECK(cc.stats().plain_rounds == 0);
+      CHECK(cc.stats().retested > 0);
+    }
     {  // a long creep (0.0005 mm a round): candidates carried through many refreshes outlive the
        // poses kept (CoherentCollider::kPoses) and must then be tested again, not trusted
       CoherentCollider cc(fixed());
