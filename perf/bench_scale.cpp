@@ -752,10 +752,12 @@ void run_scale(const ScaleArgs& a) {
         Row& r = prow[i];
         r.mean_us = r.sum_us / W;
         // The client: decode every Result and merge their pairs as ScatterGather does (each
-        // worker's pairs a sorted run, one k-way merge, duplicates dropped).
+        // worker's pairs a sorted run, one k-way merge, duplicates dropped; its vectors are
+        // kept from round to round, as the client's are).
+        std::vector<net::FacePair> merged;
+        geom::SortedRuns runs;
         r.client_us = time_median_us(a.runs, [&] {
-          std::vector<net::FacePair> merged;
-          geom::SortedRuns runs;
+          merged.clear();
           for (const auto& f : replies[i]) {
             auto d = net::decode(f, limits);
             if (d)
