@@ -52,6 +52,8 @@ void CoherentCollider::adopt(const SphereTree& probe_tree, const SphereTree& obj
     if (n.leaf) sum += n.radius, ++leaves;
   leaf_radius_ = leaves > 0 ? sum / double(leaves) : 0.0;
   max_step_ = config_.max_step > 0 ? config_.max_step : leaf_radius_ / 64;
+  const double root = probe_tree.nodes.empty() ? 0.0 : double(probe_tree.nodes[0].radius);
+  path_quantum_ = std::isfinite(root) && root > 0 ? std::ldexp(1.0, std::ilogb(root) - 40) : std::ldexp(1.0, -1000);
 }
 
 void CoherentCollider::drop() {
@@ -61,6 +63,7 @@ void CoherentCollider::drop() {
   near_.radius = -1;
   front_.clear();
   groups_.clear();
+  glevel_.clear();
   old_groups_.clear();
   dead_ = 0;
   cands_.clear();
@@ -69,6 +72,8 @@ void CoherentCollider::drop() {
 void CoherentCollider::compact_groups() {
   if (dead_ < 1024 || 2 * dead_ < groups_.size()) return;
   std::erase_if(groups_, [](const detail::FrontEntry& e) { return e.kind == detail::kDead; });
+  glevel_.clear();
+  for (const detail::FrontEntry& g : groups_) glevel_.push_back(g.level);
   dead_ = 0;
 }
 
@@ -135,8 +140,8 @@ double CoherentCollider::choose_reach() const {
 
 std::size_t CoherentCollider::bytes() const {
   auto b = [](const auto& v) { return v.capacity() * sizeof(v[0]); };
-  return b(front_) + b(next_front_) + b(groups_) + b(old_groups_) + b(cands_) + b(next_cands_) + b(leaf_index_) +
-         b(roots_) + scratch_.bytes();
+  return b(front_) + b(next_front_) + b(groups_) + b(glevel_) + b(old_groups_) + b(cands_) + b(next_cands_) +
+         b(leaf_index_) + b(roots_) + scratch_.bytes();
 }
 
 }  // namespace st::geom

@@ -22,11 +22,13 @@
 // certificate was made at (never a sum of steps: jitter back and forth uses no margin up):
 // |(R - R_i) c + (t - t_i)| + ||R - R_i||_F r, widened for the rounding of both apply()s.
 // A shortcut for the groups: the probe's path, the whole probe's bounds from each cached pose to
-// the next summed as the rounds go. A group whose node was found to have moved m < g since its
-// pose at a round where the path was L stays apart while the path is below L + g - m (a point's
-// motion from T_i to now is at most its motion to that round plus its path since), one comparison
-// a round; only past it is its motion bounded from T_i again, which sets a new limit. The sum
-// only makes a round's check cheaper, never a certificate shorter: jitter still uses none up.
+// the next summed as the rounds go (each rounded up to a multiple of a power of two, so that the
+// sums are exact). A group whose node was found to have moved m < g since its pose at a round
+// where the path was L stays apart while the path is below its level L + g - m, rounded down (a
+// point's motion from T_i to now is at most its motion to that round plus its path since): one
+// comparison a round, on an array of the groups' levels; only past its level is a group's motion
+// bounded from T_i again, which sets a new level. The sum only makes a round's check cheaper,
+// never a certificate shorter: jitter still uses none up.
 // Why that is enough: a probe point moves by at most that bound, so a gap larger than it stays
 // open, and the support function of P − O changes by at most it in any direction, so a depth
 // larger than it keeps the origin inside (coherent_traversal.inl proves the margins).
@@ -113,7 +115,7 @@ struct CoherentStats {
 namespace detail {
 /// One entry of the front (coherent.hpp, top): apart sphere pairs, or a leaf pair.
 struct FrontEntry {
-  /// group: apart while the probe's path (CertPose::path) is below this; leaf pair: the motion
+  /// group: apart while the probe's path (CoherentCollider::path_) is below this; leaf pair: the motion
   /// charged to its candidates since they were gathered, each margin stored with it added
   /// (coherent.hpp, top)
   double level = 0;
@@ -160,7 +162,6 @@ struct CertPose {
   RelTransform rt;
   double mag = 0;             ///< magnitude of the coordinates (for the rounding allowance)
   std::uint32_t round = ~0u;  ///< the round it belongs to (a ring slot holds one of many)
-  double path = 0;            ///< the whole probe's motion bounds from cached pose to cached pose, summed since reset
 };
 }  // namespace detail
 
@@ -228,7 +229,8 @@ class CoherentCollider {
   // The pool (what max_bytes bounds) with `leaf_entries` leaf-pair entries: those, the group
   // store (dead entries included until compacted) and the candidates.
   std::size_t pool_bytes(std::size_t leaf_entries) const {
-    return (leaf_entries + groups_.size()) * sizeof(detail::FrontEntry) + cands_.size() * sizeof(detail::Candidate);
+    return (leaf_entries + groups_.size()) * sizeof(detail::FrontEntry) + glevel_.size() * sizeof(double) +
+           cands_.size() * sizeof(detail::Candidate);
   }
   // Live entries of the front: leaf pairs and groups.
   std::size_t entries() const { return front_.size() + groups_.size() - dead_; }
@@ -251,15 +253,20 @@ class CoherentCollider {
   // motion used up into new entries appended, and marks those kDead; most stay untouched).
   std::vector<detail::FrontEntry> front_, next_front_;
   std::vector<detail::FrontEntry> groups_, old_groups_;  // old_groups_: the groups a re-rooting round walks past
-  std::size_t dead_ = 0;                                 // kDead entries in groups_
-  std::vector<detail::Candidate> cands_, next_cands_;    // leaf pairs' candidates (in place); compact()'s scratch
-  std::size_t garbage_ = 0;                              // candidates of refreshed leaf pairs still in cands_
+  std::vector<double> glevel_;  // per group of groups_: its level (+inf when dead), what a round's scan reads
+  std::size_t dead_ = 0;        // kDead entries in groups_
+  std::vector<detail::Candidate> cands_, next_cands_;  // leaf pairs' candidates (in place); compact()'s scratch
+  std::size_t garbage_ = 0;                            // candidates of refreshed leaf pairs still in cands_
   std::vector<std::pair<std::uint64_t, std::uint32_t>> leaf_index_;  // re-rooting: (p << 32 | o, front entry)
   std::array<detail::CertPose, kPoses> poses_{};
   std::array<detail::PoseDelta, kPoses> deltas_{};  // this round's change since each kept pose (lazily)
   std::uint32_t round_ = 0;                         // rounds since reset (the current pose's id)
   std::uint32_t last_cached_ = ~0u;                 // the last round whose pose is in poses_ (~0u: none)
-  double path_ = 0;                                 // its CertPose::path
+  // The probe's path at that round: the whole probe's motion bounds from cached pose to cached
+  // pose, each rounded up to a multiple of path_quantum_ (a power of two), summed since reset or
+  // the last rebase: every sum exact (coherent.hpp, top).
+  double path_ = 0;
+  double path_quantum_ = 0;  // 2^-40 of the probe's root radius, rounded down to a power of two
   bool have_front_ = false;
   std::uint32_t leaf_entries_ = 0;         // leaf pairs (built or pending) in the front
   std::size_t rooted_size_ = 0;            // front entries after the last walk from the roots

@@ -150,11 +150,14 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   }
   // A group's `level` from this round, its node `slack` short of using its margin up: while the
   // path from here grows by less than the slack, the node's motion since its pose stays below
-  // its margin (at most its motion to here plus the path since: coherent.hpp, top). The path's
-  // own rounding (its additions since the group's pose, fewer than kPoses, each within 2^-53 of
-  // the total, and the difference) is well within 1e-12 of it.
-  double until(double slack) const { return path + slack * (1 - 1e-9) - 1e-12 * (path + slack) - 1e-300; }
-  double path = 0;  // this round's CertPose::path
+  // its margin (at most its motion to here plus the path since: coherent.hpp, top). Rounded down
+  // to a multiple of the path's quantum, and at most 2^52 of them ahead, the level is exact, as
+  // the path is: so is the comparison.
+  double until(double slack) const {
+    const double q = cc.path_quantum_;
+    return path + std::min(std::floor(slack * (1 - 1e-9) / q), 0x1p52) * q;
+  }
+  double path = 0;  // the probe's path at this round (CoherentCollider::path_)
   // This round's change since `pose` (kept no more than kPoses rounds).
   const Delta& delta(std::uint32_t pose) {
     const std::uint64_t key = (std::uint64_t{round} << 32) | pose;
@@ -207,7 +210,12 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     e.arg = mask;
     e.margin = gap * (1.0f - 0x1p-20f);
     e.level = until(e.margin);
-    cc.groups_.push_back(e);
+    push_group(e);
+  }
+  // Appends a group to the store, and its level to the scan's (CoherentCollider::glevel_).
+  void push_group(const detail::FrontEntry& g) {
+    cc.groups_.push_back(g);
+    cc.glevel_.push_back(g.level);
   }
 
   // A leaf pair's refresh point: a fraction of δ in [3/4, 1) that differs between leaf pairs.
@@ -534,7 +542,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
         else if (known->kind == detail::kLeafPair || known->kind == detail::kLeafPending)
           counted(o, [&] { visit_leaf(*known); });
         else if (detail::FrontEntry g = *known; still_group(g))  // a leaf pair its boxes proved apart
-          cc.groups_.push_back(g);
+          push_group(g);
         else
           counted(o, [&] { leaf(p, o, nullptr, spheres); });
         continue;
@@ -615,10 +623,29 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     cc.next_front_.clear();
     const std::size_t limit = cc.config_.max_bytes;
     auto expand_root = [&](std::uint32_t r) { expand(entry(detail::kPairApart, 0, r)); };
+    {  // the path (coherent.hpp, top): the whole probe's bound from the last cached pose added,
+       // rounded up to a multiple of the quantum (a power of two: the division, the rounding and
+       // the product are exact, and so is the sum below 2^52 quanta)
+      const double q = cc.path_quantum_;
+      const std::uint32_t prev = cc.last_cached_;
+      const double step = prev != ~0u && prev != round && round - prev < CoherentCollider::kPoses
+                              ? std::ceil(delta(prev).whole / q) * q
+                              : std::numeric_limits<double>::infinity();  // none kept: a gap
+      path = cc.path_ + step;
+      if (!(path < 0x1p52 * q)) {  // a gap, or the sums about to be inexact: no level holds across
+        path = 0;
+        for (std::size_t i = 0; i < cc.groups_.size(); ++i)
+          if (cc.groups_[i].kind != detail::kDead)
+            cc.groups_[i].level = cc.glevel_[i] = -std::numeric_limits<double>::infinity();
+      }
+      cc.path_ = path;
+      cc.last_cached_ = round;
+    }
     if (rerooting) {  // every group is made again by the walk; the leaf pairs' entries are looked up
       ++cc.stats_.reroots;
       cc.old_groups_.clear();
       cc.old_groups_.swap(cc.groups_);
+      cc.glevel_.clear();
       cc.dead_ = 0;
       cc.leaf_index_.clear();
       for (std::uint32_t i = 0; i < cc.front_.size(); ++i) {
@@ -631,18 +658,6 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
           cc.leaf_index_.emplace_back((std::uint64_t{e.p} << 32) | e.o, i | kOldGroup);
       }
       std::sort(cc.leaf_index_.begin(), cc.leaf_index_.end());
-    }
-    {  // the path (coherent.hpp, top): the whole probe's bound from the last cached pose
-      // (kPoses rounds ago or more, or none, and every group made since has expired: none gets
-      // that far, and the path goes on from where it was)
-      const std::uint32_t prev = cc.last_cached_;
-      if (prev != ~0u && prev != round && round - prev < CoherentCollider::kPoses)
-        path = cc.path_ + delta(prev).whole;
-      else
-        path = cc.path_;
-      cc.poses_[round % CoherentCollider::kPoses].path = path;
-      cc.path_ = path;
-      cc.last_cached_ = round;
     }
     if (!cc.have_front_ || rerooting) {
       if (!rerooting) ++cc.stats_.rebuilds, fresh = true;
@@ -676,15 +691,25 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       // The groups, in place: the groups the expansions append are at this pose (not looked at).
       // Without a work budget a group still valid needs no check of the limits (nothing grew).
       const bool budgeted = opt.max_work != UINT64_MAX;
+      // The scan reads the groups' levels (8 bytes a group), the group itself only when the path
+      // has passed its level.
       const std::size_t groups = cc.groups_.size();
+      const double path_now = path;  // in a register: the loop stores through pointers
       for (std::size_t i = 0; i < groups; ++i) {
+        if (path_now < cc.glevel_[i]) {  // still_group()'s shortcut (a dead group's level is +inf)
+          if (budgeted && cc.groups_[i].kind != detail::kDead && cut(1)) break;
+          continue;
+        }
         detail::FrontEntry& g = cc.groups_[i];
-        if (g.kind == detail::kDead) continue;
         const bool valid = still_group(g);
         if ((budgeted || !valid) && cut(1)) break;
-        if (valid) continue;
+        if (valid) {
+          cc.glevel_[i] = g.level;
+          continue;
+        }
         const detail::FrontEntry e = g;  // expand() appends to groups_
         g.kind = detail::kDead;
+        cc.glevel_[i] = std::numeric_limits<double>::infinity();
         ++cc.dead_;
         expand(e);
       }
