@@ -134,10 +134,11 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   std::uint32_t h_n = 0;
   alignas(64) float h_v[15][kTriBatch] = {};
 
-  // A group's gap still open: its probe node moved less than its margin since its pose? Never
-  // when that pose is no longer kept. First the shortcut (coherent.hpp, top): the probe's path
-  // still below the group's `level`; else the motion bound from its pose (the whole probe's or
-  // the node's own, the tighter), which sets `level` anew.
+  // A group's gap still open: its probe node moved less than its margin since its pose? The
+  // shortcut first (coherent.hpp, top): the probe's path still below the group's `level`; else
+  // the motion bound from its pose (the whole probe's or the node's own, the tighter), which sets
+  // `level` anew. Never when its pose is no longer kept: a round's scan (run()) keeps such a group
+  // while the path is below its level (exact sums, however many rounds), and expands it after.
   bool still_group(detail::FrontEntry& g) {
     if (round - g.pose >= CoherentCollider::kPoses) return false;
     if (path < g.level) return true;
