@@ -53,7 +53,9 @@ void CoherentCollider::adopt(const SphereTree& probe_tree, const SphereTree& obj
   leaf_radius_ = leaves > 0 ? sum / double(leaves) : 0.0;
   max_step_ = config_.max_step > 0 ? config_.max_step : leaf_radius_ / 64;
   const double root = probe_tree.nodes.empty() ? 0.0 : double(probe_tree.nodes[0].radius);
-  path_quantum_ = std::isfinite(root) && root > 0 ? std::ldexp(1.0, std::ilogb(root) - 40) : std::ldexp(1.0, -1000);
+  const int e = std::isfinite(root) && root > 0 ? std::ilogb(root) - 40 : -1000;
+  path_quantum_ = std::ldexp(1.0, e);
+  path_per_quantum_ = std::ldexp(1.0, -e);
 }
 
 void CoherentCollider::drop() {

@@ -266,7 +266,8 @@ class CoherentCollider {
   // pose, each rounded up to a multiple of path_quantum_ (a power of two), summed since reset or
   // the last rebase: every sum exact (coherent.hpp, top).
   double path_ = 0;
-  double path_quantum_ = 0;  // 2^-40 of the probe's root radius, rounded down to a power of two
+  double path_quantum_ = 0;      // 2^-40 of the probe's root radius, rounded down to a power of two
+  double path_per_quantum_ = 0;  // its inverse (a power of two too: a product by it is exact)
   bool have_front_ = false;
   std::uint32_t leaf_entries_ = 0;         // leaf pairs (built or pending) in the front
   std::size_t rooted_size_ = 0;            // front entries after the last walk from the roots

@@ -155,8 +155,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   // to a multiple of the path's quantum, and at most 2^52 of them ahead, the level is exact, as
   // the path is: so is the comparison.
   double until(double slack) const {
-    const double q = cc.path_quantum_;
-    return path + std::min(std::floor(slack * (1 - 1e-9) / q), 0x1p52) * q;
+    return path + std::min(std::floor(slack * (1 - 1e-9) * cc.path_per_quantum_), 0x1p52) * cc.path_quantum_;
   }
   double path = 0;  // the probe's path at this round (CoherentCollider::path_)
   // This round's change since `pose` (kept no more than kPoses rounds).
@@ -625,12 +624,13 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     const std::size_t limit = cc.config_.max_bytes;
     auto expand_root = [&](std::uint32_t r) { expand(entry(detail::kPairApart, 0, r)); };
     {  // the path (coherent.hpp, top): the whole probe's bound from the last cached pose added,
-       // rounded up to a multiple of the quantum (a power of two: the division, the rounding and
-       // the product are exact, and so is the sum below 2^52 quanta)
+       // rounded up to a multiple of the quantum, one at least (a power of two: the scalings and
+       // the rounding are exact, and so is the sum below 2^52 quanta; a bound small enough to
+       // underflow in quanta still counts one)
       const double q = cc.path_quantum_;
       const std::uint32_t prev = cc.last_cached_;
       const double step = prev != ~0u && prev != round && round - prev < CoherentCollider::kPoses
-                              ? std::ceil(delta(prev).whole / q) * q
+                              ? std::max(1.0, std::ceil(delta(prev).whole * cc.path_per_quantum_)) * q
                               : std::numeric_limits<double>::infinity();  // none kept: a gap
       path = cc.path_ + step;
       if (!(path < 0x1p52 * q)) {  // a gap, or the sums about to be inexact: no level holds across
