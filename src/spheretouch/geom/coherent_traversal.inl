@@ -135,16 +135,13 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
   alignas(64) float h_v[15][kTriBatch] = {};
 
   // A group's gap still open: its probe node moved less than its margin since its pose? The
-  // shortcut first (coherent.hpp, top): the probe's path still below the group's `level`; else
-  // the motion bound from its pose (the whole probe's or the node's own, the tighter), which sets
-  // `level` anew. Never when its pose is no longer kept: a round's scan (run()) keeps such a group
-  // while the path is below its level (exact sums, however many rounds), and expands it after.
+  // shortcut first (coherent.hpp, top): the probe's path still below the group's `level` (exact
+  // sums, however many rounds); else the node's motion bound from its pose (none once that pose is
+  // no longer kept), which sets `level` anew.
   bool still_group(detail::FrontEntry& g) {
-    if (round - g.pose >= CoherentCollider::kPoses) return false;
     if (path < g.level) return true;
-    const Delta& d = delta(g.pose);
     const double margin = g.margin;
-    const double moved = std::min(d.whole, sphere_motion(d, g.c, g.r));
+    const double moved = node_motion(g.c, g.r, g.pose);
     if (!(margin > moved)) return false;
     g.level = until(margin - moved);
     return true;
@@ -272,7 +269,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     const std::uint32_t prev_end = old ? old->arg + old->count : 0;
     // The old entry's candidates hold while the leaf moved less than their margins from its
     // anchor: one kept holds from this pose while it moves less than what is left (coherent.hpp, top).
-    const double moved_old = old ? leaf_motion(hp.centre, hp.radius, old->anchor) : 0.0;
+    const double moved_old = old ? node_motion(hp.centre, hp.radius, old->anchor) : 0.0;
     // ... the margins as stored (FrontEntry::level added) against that motion and the level.
     const double charged_old = old ? (moved_old + old->level) * (1 + 1e-12) : 0.0;
     const FaceBox* ob = OT.face_boxes.data() + ho.first;
@@ -424,9 +421,9 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     c.hit = hit;
   }
 
-  // How far a probe leaf's sphere (c, r) moved since `pose`: the tighter of the whole probe's
+  // How far a probe node's sphere (c, r) moved since `pose`: the tighter of the whole probe's
   // bound and its own (infinite for a pose no longer kept).
-  double leaf_motion(const float* c, float r, std::uint32_t pose) {
+  double node_motion(const float* c, float r, std::uint32_t pose) {
     if (round - pose >= CoherentCollider::kPoses) return std::numeric_limits<double>::infinity();
     const Delta& d = delta(pose);
     return std::min(d.whole, sphere_motion(d, c, r));
@@ -595,12 +592,12 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       leaf(e.p, e.o, nullptr);
       return;
     }
-    const double moved = leaf_motion(e.c, e.r, e.pose);
+    const double moved = node_motion(e.c, e.r, e.pose);
     if (!(double(e.margin * float(768 + e.theta) / 1024.0f) > moved)) {
       ++cc.stats_.refreshes;
       leaf(e.p, e.o, &e);
     } else {
-      reuse_leaf(e, e.anchor == e.pose ? moved : leaf_motion(e.c, e.r, e.anchor));
+      reuse_leaf(e, e.anchor == e.pose ? moved : node_motion(e.c, e.r, e.anchor));
     }
   }
   // Re-rooting: the old front's entry for leaf pair (p, o), if it has one (a leaf-pair entry of
@@ -629,7 +626,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
        // underflow in quanta still counts one)
       const double q = cc.path_quantum_;
       const std::uint32_t prev = cc.last_cached_;
-      const double step = prev != ~0u && prev != round && round - prev < CoherentCollider::kPoses
+      const double step = prev != ~0u && round - prev < CoherentCollider::kPoses
                               ? std::max(1.0, std::ceil(delta(prev).whole * cc.path_per_quantum_)) * q
                               : std::numeric_limits<double>::infinity();  // none kept: a gap
       path = cc.path_ + step;
