@@ -24,26 +24,28 @@ template <>
 struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
   using Base = CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes>;
 
-  // Gap of sphere k (k < n <= 8) of a float SoA block to the sphere (qx, qy, qz; qr), as
-  // sphere_mask computes its test: sqrt(|c_k - q|^2) - (r_k + qr), NaN staying NaN; and which
-  // spheres are apart as this round records them (bit k of `apart`: gap > 0 in a fresh round, else
-  // gap >= δ) and which do not meet (gap > 0: bit k of `positive`). NaN is neither.
-  void classify(const float* c, std::size_t st, std::uint32_t n, float qx, float qy, float qz, float qr, float* gap,
+  // Which spheres k (k < n <= 8) of a float SoA block are apart from the sphere (qx, qy, qz; qr)
+  // as this round records them, by their gap as sphere_mask computes its test,
+  // sqrt(|c_k - q|^2) - (r_k + qr), NaN staying NaN (bit k of `apart`: gap > 0 in a fresh round,
+  // else gap >= δ), which do not meet (gap > 0: bit k of `positive`; NaN is neither), and the
+  // least gap of those apart (+inf: none), taken on the lanes.
+  void classify(const float* c, std::size_t st, std::uint32_t n, float qx, float qy, float qz, float qr, float& least,
                 std::uint32_t& apart, std::uint32_t& positive) const {
     const Lanes x = Lanes::broadcast(qx), y = Lanes::broadcast(qy), z = Lanes::broadcast(qz), r = Lanes::broadcast(qr);
     const Lanes zero = Lanes::broadcast(0.0f), at = Lanes::broadcast(reach_f);
+    const Lanes none = Lanes::broadcast(std::numeric_limits<float>::infinity());
     apart = positive = 0;
+    least = std::numeric_limits<float>::infinity();
     for (std::uint32_t k = 0; k < n; k += Lanes::width) {
       const Lanes dx = Lanes::load(c + k) - x;
       const Lanes dy = Lanes::load(c + st + k) - y;
       const Lanes dz = Lanes::load(c + 2 * st + k) - z;
       const Lanes g = sqrt(dx * dx + dy * dy + dz * dz) - (Lanes::load(c + 3 * st + k) + r);
-      alignas(64) float out[Lanes::width];
-      store(out, g);
-      for (int l = 0; l < Lanes::width && k + l < n; ++l) gap[k + l] = out[l];
-      const std::uint32_t pos = (g > zero).bits();
-      positive |= pos << k;
-      apart |= (fresh ? pos : (g >= at).bits()) << k;
+      const auto pos = g > zero;
+      const auto far = (fresh ? pos : g >= at) & decltype(pos)::first(n - k);
+      positive |= pos.bits() << k;
+      apart |= far.bits() << k;
+      least = std::min(least, hmin(select(far, g, none)));  // the lanes selected are not NaN
     }
   }
   template <class L>
@@ -146,13 +148,13 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     g.level = until(margin - moved);
     return true;
   }
-  // A group's `level` from this round, its node `slack` short of using its margin up: while the
-  // path from here grows by less than the slack, the node's motion since its pose stays below
+  // A group's `level` from this round, its node `room` short of using its margin up: while the
+  // path from here grows by less than that, the node's motion since its pose stays below
   // its margin (at most its motion to here plus the path since: coherent.hpp, top). Rounded down
   // to a multiple of the path's quantum, and at most 2^52 of them ahead, the level is exact, as
   // the path is: so is the comparison.
-  double until(double slack) const {
-    return path + std::min(std::floor(slack * (1 - 1e-9) * cc.path_per_quantum_), 0x1p52) * cc.path_quantum_;
+  double until(double room) const {
+    return path + std::min(std::floor(room * (1 - 1e-9) * cc.path_per_quantum_), 0x1p52) * cc.path_quantum_;
   }
   double path = 0;  // the probe's path at this round (CoherentCollider::path_)
   // This round's change since `pose` (kept no more than kPoses rounds).
@@ -486,22 +488,20 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     const float* os = sc.osph_.data();
     const std::size_t sp = sc.nstride_p_, so = sc.nstride_o_;
     const SphereNode& h = probe_side ? PT.nodes[p] : OT.nodes[o];
-    float gap[kMaxChildren];
+    float least = 0;
     std::uint32_t apart = 0, positive = 0;  // NaN is near: never certified
     if (probe_side) {
       probe_children(p);
-      classify(ps + h.first, sp, h.count, os[o], os[so + o], os[2 * so + o], os[3 * so + o], gap, apart, positive);
+      classify(ps + h.first, sp, h.count, os[o], os[so + o], os[2 * so + o], os[3 * so + o], least, apart, positive);
     } else {
-      classify(os + h.first, so, h.count, ps[p], ps[sp + p], ps[2 * sp + p], ps[3 * sp + p], gap, apart, positive);
+      classify(os + h.first, so, h.count, ps[p], ps[sp + p], ps[2 * sp + p], ps[3 * sp + p], least, apart, positive);
     }
     res.stats.node_pairs += static_cast<std::uint32_t>(std::popcount(mask));
     apart &= mask;
     std::uint32_t near = mask & ~apart;
-    if (apart != 0) {
-      float least = std::numeric_limits<float>::infinity();
-      for (std::uint32_t m = apart; m != 0; m &= m - 1) least = std::min(least, gap[std::countr_zero(m)]);
-      add_group(probe_side ? detail::kProbeChildren : detail::kObjectChildren, p, o, apart, least);
-    }
+    // The group's margin: the least gap of all the children apart, those outside `mask` (an
+    // expanded group's subset) included: at most the least of its own, so a margin that holds.
+    if (apart != 0) add_group(probe_side ? detail::kProbeChildren : detail::kObjectChildren, p, o, apart, least);
     // As push_children, with kSpheresApart on the object node of a pair whose spheres do not
     // meet (gap > 0: the true gap is at least the computed one), which collide() would not visit.
     for (; near != 0; near &= ~(1u << (31 - std::countl_zero(near)))) {
@@ -564,7 +564,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
       const std::size_t sp = sc.nstride_p_;
       float gap;
       std::uint32_t apart = 0, positive = 0;
-      classify(sc.osph_.data() + e.o, sc.nstride_o_, 1, ps[e.p], ps[sp + e.p], ps[2 * sp + e.p], ps[3 * sp + e.p], &gap,
+      classify(sc.osph_.data() + e.o, sc.nstride_o_, 1, ps[e.p], ps[sp + e.p], ps[2 * sp + e.p], ps[3 * sp + e.p], gap,
                apart, positive);
       res.stats.node_pairs += 1;
       if (apart & 1u) return add_group(detail::kPairApart, e.p, e.o, 0, gap);
