@@ -115,6 +115,7 @@ struct SeriesRow {
   double filter_ratio_mean = 0;                                     // filter / today
   double rebuild_ratio = 0;  // jerk series: the rebuild round after the jump, coherent / today
   double max_ratio_except_rebuild = 0;
+  int max_except_rebuild_round = 0;  // ... its round
   std::size_t mismatched_rounds = 0;
   geom::CoherentStats stats;
   std::size_t bytes = 0;
@@ -300,7 +301,8 @@ void add_slides(CLI::App& app) {
         const int rebuild = s.jerk_at >= 0 ? s.jerk_at + 1 : 0;
         row.rebuild_ratio = ratio[rebuild];
         for (int k = 0; k < a->rounds; ++k)
-          if (k != rebuild && k != 0) row.max_ratio_except_rebuild = std::max(row.max_ratio_except_rebuild, ratio[k]);
+          if (k != rebuild && k != 0 && ratio[k] > row.max_ratio_except_rebuild)
+            row.max_ratio_except_rebuild = ratio[k], row.max_except_rebuild_round = k;
         for (int k = 0; k < a->rounds; ++k)
           if (!in_contact[k]) {
             ++row.out_rounds;
@@ -339,6 +341,7 @@ void add_slides(CLI::App& app) {
                        {"ratio_max", round_to(w.ratio_max, 4)},
                        {"ratio_max_round", w.ratio_max_round},
                        {"max_ratio_except_rebuild", round_to(w.max_ratio_except_rebuild, 4)},
+                       {"max_except_rebuild_round", w.max_except_rebuild_round},
                        {"rebuild_ratio", round_to(w.rebuild_ratio, 4)},
                        {"vs_filter_mean", round_to(w.vs_filter_mean, 4)},
                        {"vs_filter_p90", round_to(w.vs_filter_p90, 4)},

@@ -80,8 +80,8 @@ struct CoherentConfig {
   /// collide(), and so do the next 64 rounds.
   std::size_t max_bytes = std::size_t(64) << 20;
   /// Time itself against collide() (a plain round every 128, the cache kept; skipped while it
-  /// takes under half of collide()'s time on a contact within a factor of 2 of the one collide()
-  /// was last timed on (before it has been timed: under 0.4 of the rebuild's time), up to 1,024
+  /// takes under 0.75 of collide()'s time on a contact within a factor of 2 of the one collide()
+  /// was last timed on (before it has been timed: under 0.6 of the rebuild's time), up to 1,024
   /// rounds: a timed round runs cold; the other plain rounds, jumps
   /// and spells, read no clock) and give way to it
   /// for 256 rounds (doubling, up to 8192, while it keeps losing) when its rounds cost more than
@@ -281,15 +281,17 @@ class CoherentCollider {
   double rebuild_ns_ = 0;                  // arbitrate: the time of the last rebuild (0: none since reset)
   std::uint32_t rebuild_round_ = 0;        // ... its round
   std::size_t rebuild_pairs_ = 0;          // ... and its pair count
-  // arbitrate: no plain round need be timed now, the collider clearly winning (under half of
-  // collide()'s time) on a contact about as large as when collide() was last timed, not long ago.
+  // arbitrate: no plain round need be timed now, the collider winning by a quarter at least
+  // (under 0.75 of collide()'s time: far from the 0.95 where it gives way) on a contact about as
+  // large as when collide() was last timed, not long ago. A timed round runs cold (1.04-1.4x a
+  // plain round in a run of plain rounds), so it is spent only where the choice is in doubt.
   // Before collide() has been timed, the last rebuild stands in for it (collide()'s descent and
-  // leaf stage and the front's bookkeeping: taken at 0.8 of its time), so a collider that wins
-  // from the start runs no cold timed round at 127.
+  // leaf stage and the front's bookkeeping: 1.13-1.3x collide()'s time on the perf poses, taken
+  // at 0.8 of it), so a collider that wins from the start runs no cold timed round at 127.
   bool settled(std::uint32_t round) const {
     if (plain_ns_ > 0)
-      return coherent_ns_ < 0.5 * plain_ns_ && round - timed_round_ < 8 * kTimeEvery && alike(last_pairs_, timed_pairs_);
-    return rebuild_ns_ > 0 && coherent_ns_ < 0.4 * rebuild_ns_ && round - rebuild_round_ < 8 * kTimeEvery &&
+      return coherent_ns_ < 0.75 * plain_ns_ && round - timed_round_ < 8 * kTimeEvery && alike(last_pairs_, timed_pairs_);
+    return rebuild_ns_ > 0 && coherent_ns_ < 0.75 * 0.8 * rebuild_ns_ && round - rebuild_round_ < 8 * kTimeEvery &&
            alike(last_pairs_, rebuild_pairs_);
   }
   // Contacts about as large (pair counts within a factor of 2, or both small).
