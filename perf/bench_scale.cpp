@@ -326,7 +326,7 @@ struct Row {
   Split split;
   double single_us = 0, max_us = 0, mean_us = 0, sum_us = 0;
   double encode_max_us = 0;     // slowest worker's query + its Result's encoding, minus its query
-  double client_us = 0;         // the client's decode of every Result and the merge
+  double client_us = 0;         // the client's decode of every Result, the merge and the distinct faces
   double compute_round_us = 0;  // max_w (query_w + encode_w) + client
   std::size_t max_reply_bytes = 0, total_reply_bytes = 0;
   // Counted work (deterministic, unlike the times): sphere-pair and triangle-pair tests.
@@ -752,9 +752,10 @@ void run_scale(const ScaleArgs& a) {
         Row& r = prow[i];
         r.mean_us = r.sum_us / W;
         // The client: decode every Result and merge their pairs as ScatterGather does (each
-        // worker's pairs a sorted run, one k-way merge, duplicates dropped; its vectors are
-        // kept from round to round, as the client's are).
+        // worker's pairs a sorted run, one k-way merge, duplicates dropped, the distinct faces
+        // taken; its vectors are kept from round to round, as the client's are).
         std::vector<net::FacePair> merged;
+        std::vector<std::uint32_t> probe_faces, object_faces, ids_scratch;
         geom::SortedRuns runs;
         r.client_us = time_median_us(a.runs, [&] {
           merged.clear();
@@ -769,6 +770,7 @@ void run_scale(const ScaleArgs& a) {
           }
           runs.merge(merged);
           merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
+          net::distinct_faces(merged, probe_faces, object_faces, ids_scratch);
         });
         r.compute_round_us = r.encode_max_us + r.client_us;
         rows.push_back(r);

@@ -493,6 +493,33 @@ TEST_CASE("SortedRuns merges sorted runs (and unsorted ones it sorts) into what 
     }
 }
 
+TEST_CASE("sort_distinct_ids and count_faces give std::sort + std::unique's ids, at every size and id range") {
+  std::mt19937_64 rng(12);
+  std::vector<std::uint32_t> scratch, scratch2;
+  for (std::uint32_t range : {0u, 1u, 7u, 2048u, 70000u, 1u << 24, 0xffffffffu})
+    for (std::size_t n : {0, 1, 63, 64, 65, 1000, 20000}) {
+      std::vector<std::uint32_t> ids(n);
+      std::vector<FacePair> pairs(n);
+      for (std::size_t i = 0; i < n; ++i) {
+        ids[i] = std::uint32_t(rng() % (std::uint64_t(range) + 1));
+        pairs[i] = {std::uint32_t(rng() % (std::uint64_t(range) + 1)), ids[i]};
+      }
+      std::vector<std::uint32_t> expect = ids, probes;
+      std::sort(expect.begin(), expect.end());
+      expect.erase(std::unique(expect.begin(), expect.end()), expect.end());
+      for (const FacePair& p : pairs) probes.push_back(p.probe);
+      std::sort(probes.begin(), probes.end());
+      const auto distinct_probes = std::size_t(std::unique(probes.begin(), probes.end()) - probes.begin());
+      st::geom::sort_distinct_ids(ids, scratch);
+      const st::geom::FaceCounts counts = st::geom::count_faces(pairs, scratch2);
+      CAPTURE(range);
+      CAPTURE(n);
+      CHECK(ids == expect);
+      CHECK(counts.object_faces == expect.size());
+      CHECK(counts.probe_faces == distinct_probes);
+    }
+}
+
 TEST_CASE("sort_face_pairs orders pairs as std::sort does, at every size and index range") {
   std::mt19937_64 rng(11);
   std::vector<std::uint64_t> scratch;

@@ -413,12 +413,51 @@ void sort_face_pairs(std::span<FacePair> pairs, std::vector<std::uint64_t>& scra
   ST_ASSERT(std::is_sorted(pairs.begin(), pairs.end()), "the radix passes leave the pairs in (probe, object) order");
 }
 
+namespace {
+// sort_distinct_ids on ids[0, n) with tmp[0, n) for the passes: the count of distinct ids, which
+// are left ascending in ids[0, count).
+std::size_t sort_distinct(std::uint32_t* ids, std::size_t n, std::uint32_t* tmp) {
+  if (n < 256) {  // a few: the comparison sort is as quick as clearing the counts
+    std::sort(ids, ids + n);
+  } else {
+    // The fewest passes of at most 11 bits over the used bits, the digits as even as they go
+    // (20 bits: two of 10, 1,024 counts each), every pass's counts taken in one read.
+    const int bits = std::max(1, int(std::bit_width(*std::max_element(ids, ids + n))));
+    const int passes = (bits + 10) / 11, digit = (bits + passes - 1) / passes;
+    const std::uint32_t mask = (std::uint32_t(1) << digit) - 1;
+    constexpr std::size_t kMaxBuckets = std::size_t(1) << 11;
+    std::uint32_t count[3][kMaxBuckets];
+    for (int k = 0; k < passes; ++k) std::fill(count[k], count[k] + mask + 1, 0u);
+    for (std::size_t i = 0; i < n; ++i)
+      for (int k = 0; k < passes; ++k) ++count[k][(ids[i] >> (k * digit)) & mask];
+    std::uint32_t* a = ids;
+    std::uint32_t* b = tmp;
+    for (int k = 0; k < passes; ++k) {  // one stable counting pass per digit, lowest first
+      const int shift = k * digit;
+      if (count[k][(a[0] >> shift) & mask] == n) continue;  // one digit value: nothing moves
+      std::uint32_t sum = 0;
+      for (std::uint32_t j = 0; j <= mask; ++j) sum += std::exchange(count[k][j], sum);
+      for (std::size_t i = 0; i < n; ++i) b[count[k][(a[i] >> shift) & mask]++] = a[i];
+      std::swap(a, b);
+    }
+    if (a != ids) std::copy(a, a + n, ids);
+  }
+  ST_ASSERT(std::is_sorted(ids, ids + n), "the radix passes leave the ids ascending");
+  return static_cast<std::size_t>(std::unique(ids, ids + n) - ids);
+}
+}  // namespace
+
+void sort_distinct_ids(std::vector<std::uint32_t>& ids, std::vector<std::uint32_t>& scratch) {
+  scratch.resize(ids.size());
+  ids.resize(sort_distinct(ids.data(), ids.size(), scratch.data()));
+}
+
 FaceCounts count_faces(std::span<const FacePair> pairs, std::vector<std::uint32_t>& scratch) {
+  const std::size_t n = pairs.size();
+  scratch.resize(2 * n);  // the ids, then the passes' room
   const auto distinct = [&](auto field) {
-    scratch.clear();
-    for (const FacePair& p : pairs) scratch.push_back(p.*field);
-    std::sort(scratch.begin(), scratch.end());
-    return static_cast<std::uint32_t>(std::unique(scratch.begin(), scratch.end()) - scratch.begin());
+    for (std::size_t i = 0; i < n; ++i) scratch[i] = pairs[i].*field;
+    return static_cast<std::uint32_t>(sort_distinct(scratch.data(), n, scratch.data() + n));
   };
   return {distinct(&FacePair::probe), distinct(&FacePair::object)};
 }

@@ -54,6 +54,12 @@ struct FaceCounts {
 /// Counts the pairs' distinct faces (any order; `scratch` is reused, no allocation once warm).
 FaceCounts count_faces(std::span<const FacePair> pairs, std::vector<std::uint32_t>& scratch);
 
+/// Sorts `ids` ascending and drops repeats, as std::sort + std::unique would, in a few linear
+/// passes (an LSD radix sort of digits of at most 11 bits over the ids' used bits: 2 for a mesh
+/// of up to ~4 million faces), a comparison sort below 256 ids. `scratch` is reused (no
+/// allocation once warm).
+void sort_distinct_ids(std::vector<std::uint32_t>& ids, std::vector<std::uint32_t>& scratch);
+
 /// Sorts pairs by (probe, object), as std::sort would, in a few linear passes (an LSD radix
 /// sort of 11-bit digits over the key's used bits: 3 passes for two meshes of ~60,000 faces).
 /// `scratch` is reused (no allocation once warm).
