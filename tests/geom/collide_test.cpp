@@ -497,7 +497,7 @@ TEST_CASE("sort_distinct_ids and count_faces give std::sort + std::unique's ids,
   std::mt19937_64 rng(12);
   std::vector<std::uint32_t> scratch, scratch2;
   for (std::uint32_t range : {0u, 1u, 7u, 2048u, 70000u, 1u << 24, 0xffffffffu})
-    for (std::size_t n : {0, 1, 63, 64, 65, 1000, 20000}) {
+    for (std::size_t n : {0, 1, 63, 64, 255, 256, 257, 1000, 20000}) {  // both sides of the radix's threshold
       std::vector<std::uint32_t> ids(n);
       std::vector<FacePair> pairs(n);
       for (std::size_t i = 0; i < n; ++i) {
