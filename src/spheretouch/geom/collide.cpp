@@ -381,6 +381,43 @@ void SortedRuns::merge(std::vector<FacePair>& pairs) {
   starts_.clear();
 }
 
+namespace {
+// LSD radix passes over the keys a[0, n), b[0, n) their room: the fewest digits of at most 11
+// bits that cover the keys' `bits`, as even as they go (20 bits: two of 10), one stable counting
+// pass each, lowest first; a digit every key shares moves nothing and is skipped. Returns the
+// array that holds the keys ascending (a or b).
+template <class Key>
+Key* radix_passes(Key* a, Key* b, std::size_t n, int bits) {
+  constexpr int kMaxDigit = 11;
+  const int passes = std::max(1, (bits + kMaxDigit - 1) / kMaxDigit), digit = (bits + passes - 1) / passes;
+  const std::size_t buckets = std::size_t(1) << digit;
+  std::uint32_t count[std::size_t(1) << kMaxDigit];
+  for (int shift = 0; shift < bits; shift += digit) {
+    std::fill(count, count + buckets, 0u);
+    for (std::size_t i = 0; i < n; ++i) ++count[(a[i] >> shift) & (buckets - 1)];
+    if (count[(a[0] >> shift) & (buckets - 1)] == n) continue;
+    std::uint32_t sum = 0;
+    for (std::size_t j = 0; j < buckets; ++j) sum += std::exchange(count[j], sum);
+    for (std::size_t i = 0; i < n; ++i) b[count[(a[i] >> shift) & (buckets - 1)]++] = a[i];
+    std::swap(a, b);
+  }
+  return a;
+}
+
+// sort_distinct_ids on ids[0, n) with tmp[0, n) for the passes: the count of distinct ids, which
+// are left ascending in ids[0, count).
+std::size_t sort_distinct(std::uint32_t* ids, std::size_t n, std::uint32_t* tmp) {
+  if (n < 256) {  // a few: the comparison sort is as quick as clearing the counts
+    std::sort(ids, ids + n);
+  } else {
+    const std::uint32_t* sorted = radix_passes(ids, tmp, n, std::bit_width(*std::max_element(ids, ids + n)));
+    if (sorted != ids) std::copy(sorted, sorted + n, ids);
+  }
+  ST_ASSERT(std::is_sorted(ids, ids + n), "the radix passes leave the ids ascending");
+  return static_cast<std::size_t>(std::unique(ids, ids + n) - ids);
+}
+}  // namespace
+
 void sort_face_pairs(std::span<FacePair> pairs, std::vector<std::uint64_t>& scratch) {
   const std::size_t n = pairs.size();
   if (n < 64) {  // a handful: the comparison sort is quicker than clearing the counts
@@ -390,62 +427,16 @@ void sort_face_pairs(std::span<FacePair> pairs, std::vector<std::uint64_t>& scra
   std::uint32_t max_probe = 0, max_object = 0;
   for (const FacePair& p : pairs) max_probe = std::max(max_probe, p.probe), max_object = std::max(max_object, p.object);
   const int object_bits = std::bit_width(max_object), bits = std::bit_width(max_probe) + object_bits;
-  constexpr int kDigit = 11;
-  constexpr std::size_t kBuckets = std::size_t(1) << kDigit;
   scratch.resize(2 * n);
-  std::uint64_t* a = scratch.data();
-  std::uint64_t* b = a + n;
-  for (std::size_t i = 0; i < n; ++i) a[i] = (std::uint64_t(pairs[i].probe) << object_bits) | pairs[i].object;
-  // One stable counting pass per digit, lowest first: the order of the keys is (probe, object).
-  std::uint32_t count[kBuckets];
-  for (int shift = 0; shift < bits; shift += kDigit) {
-    std::fill(count, count + kBuckets, 0u);
-    for (std::size_t i = 0; i < n; ++i) ++count[(a[i] >> shift) & (kBuckets - 1)];
-    if (count[(a[0] >> shift) & (kBuckets - 1)] == n) continue;  // one digit value: nothing moves
-    std::uint32_t sum = 0;
-    for (std::uint32_t& c : count) sum += std::exchange(c, sum);
-    for (std::size_t i = 0; i < n; ++i) b[count[(a[i] >> shift) & (kBuckets - 1)]++] = a[i];
-    std::swap(a, b);
-  }
+  std::uint64_t* keys = scratch.data();
+  // The order of the keys is (probe, object).
+  for (std::size_t i = 0; i < n; ++i) keys[i] = (std::uint64_t(pairs[i].probe) << object_bits) | pairs[i].object;
+  const std::uint64_t* sorted = radix_passes(keys, keys + n, n, bits);
   const std::uint64_t object_mask = (std::uint64_t(1) << object_bits) - 1;
   for (std::size_t i = 0; i < n; ++i)
-    pairs[i] = {std::uint32_t(a[i] >> object_bits), std::uint32_t(a[i] & object_mask)};
+    pairs[i] = {std::uint32_t(sorted[i] >> object_bits), std::uint32_t(sorted[i] & object_mask)};
   ST_ASSERT(std::is_sorted(pairs.begin(), pairs.end()), "the radix passes leave the pairs in (probe, object) order");
 }
-
-namespace {
-// sort_distinct_ids on ids[0, n) with tmp[0, n) for the passes: the count of distinct ids, which
-// are left ascending in ids[0, count).
-std::size_t sort_distinct(std::uint32_t* ids, std::size_t n, std::uint32_t* tmp) {
-  if (n < 256) {  // a few: the comparison sort is as quick as clearing the counts
-    std::sort(ids, ids + n);
-  } else {
-    // The fewest passes of at most 11 bits over the used bits, the digits as even as they go
-    // (20 bits: two of 10, 1,024 counts each), every pass's counts taken in one read.
-    const int bits = std::max(1, int(std::bit_width(*std::max_element(ids, ids + n))));
-    const int passes = (bits + 10) / 11, digit = (bits + passes - 1) / passes;
-    const std::uint32_t mask = (std::uint32_t(1) << digit) - 1;
-    constexpr std::size_t kMaxBuckets = std::size_t(1) << 11;
-    std::uint32_t count[3][kMaxBuckets];
-    for (int k = 0; k < passes; ++k) std::fill(count[k], count[k] + mask + 1, 0u);
-    for (std::size_t i = 0; i < n; ++i)
-      for (int k = 0; k < passes; ++k) ++count[k][(ids[i] >> (k * digit)) & mask];
-    std::uint32_t* a = ids;
-    std::uint32_t* b = tmp;
-    for (int k = 0; k < passes; ++k) {  // one stable counting pass per digit, lowest first
-      const int shift = k * digit;
-      if (count[k][(a[0] >> shift) & mask] == n) continue;  // one digit value: nothing moves
-      std::uint32_t sum = 0;
-      for (std::uint32_t j = 0; j <= mask; ++j) sum += std::exchange(count[k][j], sum);
-      for (std::size_t i = 0; i < n; ++i) b[count[k][(a[i] >> shift) & mask]++] = a[i];
-      std::swap(a, b);
-    }
-    if (a != ids) std::copy(a, a + n, ids);
-  }
-  ST_ASSERT(std::is_sorted(ids, ids + n), "the radix passes leave the ids ascending");
-  return static_cast<std::size_t>(std::unique(ids, ids + n) - ids);
-}
-}  // namespace
 
 void sort_distinct_ids(std::vector<std::uint32_t>& ids, std::vector<std::uint32_t>& scratch) {
   scratch.resize(ids.size());

@@ -61,7 +61,7 @@ FaceCounts count_faces(std::span<const FacePair> pairs, std::vector<std::uint32_
 void sort_distinct_ids(std::vector<std::uint32_t>& ids, std::vector<std::uint32_t>& scratch);
 
 /// Sorts pairs by (probe, object), as std::sort would, in a few linear passes (an LSD radix
-/// sort of 11-bit digits over the key's used bits: 3 passes for two meshes of ~60,000 faces).
+/// sort of digits of at most 11 bits over the key's used bits: 3 passes for two meshes of ~60,000 faces).
 /// `scratch` is reused (no allocation once warm).
 void sort_face_pairs(std::span<FacePair> pairs, std::vector<std::uint64_t>& scratch);
 
