@@ -367,11 +367,82 @@ struct Row {
   const std::vector<std::uint32_t>* block_reported_before = nullptr;
   double assisted_imbalance = 0, assist_critical = 0, assist_client = 0;
   std::uint32_t assisted_blocks = 0;
+  // A two-level gather (a model; not built): the busy workers in groups of `group` consecutive ones,
+  // the first of each a leader that relays the Query to the others, decodes their Results, merges
+  // them with its own pairs and sends the client one Result; the client decodes and merges one
+  // Result per group. Measured here: the slowest leader's decode + merge + encode, the client's
+  // decode + merge + distinct faces, and the largest leader's reply.
+  struct TwoLevel {
+    std::uint32_t group = 0;
+    double leader_us = 0, client_us = 0;
+    std::size_t leader_reply_bytes = 0;
+  };
+  std::vector<TwoLevel> two_level;
   double imbalance() const { return mean_us > 0 ? max_us / mean_us : 0; }
   double redundancy() const { return single_us > 0 ? sum_us / single_us : 0; }
   double sphere_ratio() const { return single_spheres ? double(sum_spheres) / double(single_spheres) : 0; }
   double tri_ratio() const { return single_tris ? double(sum_tris) / double(single_tris) : 0; }
 };
+
+/// The two-level gather's costs (Row::TwoLevel) for every group size 2, 4, ... below the number of
+/// Results `frames` (one per busy worker, in worker order): for each, the slowest group's leader
+/// (decode the other members' Results, merge them with its own pairs as ScatterGather merges,
+/// encode one Result) and the client (decode the leaders' Results, merge, distinct faces), each a
+/// median over `runs`.
+std::vector<Row::TwoLevel> two_level_gather(const std::vector<std::vector<std::uint8_t>>& frames,
+                                            const net::Limits& limits, std::vector<std::uint32_t>& probe_faces,
+                                            std::vector<std::uint32_t>& object_faces, int runs) {
+  std::vector<Row::TwoLevel> out;
+  std::vector<std::vector<net::FacePair>> own(frames.size());  // each worker's pairs, as a leader holds its own
+  for (std::size_t k = 0; k < frames.size(); ++k)
+    if (auto d = net::decode(frames[k], limits))
+      if (const auto* res = std::get_if<net::ResultMsg>(&d.value())) own[k] = res->pairs;
+  std::vector<net::FacePair> merged;
+  std::vector<std::uint32_t> ids_scratch;
+  geom::SortedRuns sorted_runs;
+  // Decodes each of `group` Results into one sorted run of `merged`, then merges them.
+  const auto merge_frames = [&](std::span<const std::vector<std::uint8_t>> group) {
+    for (const auto& f : group)
+      if (auto d = net::decode(f, limits))
+        if (const auto* res = std::get_if<net::ResultMsg>(&d.value())) {
+          sorted_runs.begin(merged.size());
+          merged.insert(merged.end(), res->pairs.begin(), res->pairs.end());
+          sorted_runs.end(merged);
+        }
+    sorted_runs.merge(merged);
+    merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
+  };
+  for (std::size_t g = 2; g < frames.size(); g *= 2) {
+    Row::TwoLevel t;
+    t.group = static_cast<std::uint32_t>(g);
+    std::vector<std::vector<std::uint8_t>> leader_frames;
+    for (std::size_t first = 0; first < frames.size(); first += g) {
+      const std::size_t end = std::min(frames.size(), first + g);
+      net::ResultMsg msg;
+      msg.seq = 1;
+      std::vector<std::uint8_t> frame;
+      const double us = time_median_us(runs, [&] {
+        merged.clear();
+        sorted_runs.begin(0);  // the leader's own pairs, sorted where it computed them
+        merged.insert(merged.end(), own[first].begin(), own[first].end());
+        sorted_runs.end(merged);
+        merge_frames(std::span(frames).subspan(first + 1, end - first - 1));
+        msg.pairs = merged;
+        net::encode(msg, frame);
+      });
+      t.leader_us = std::max(t.leader_us, us);
+      t.leader_reply_bytes = std::max(t.leader_reply_bytes, frame.size());
+      leader_frames.push_back(std::move(frame));
+    }
+    t.client_us = time_median_us(runs, [&] {
+      merged.clear();
+      merge_frames(leader_frames);
+      net::distinct_faces(merged, probe_faces, object_faces, ids_scratch);
+    });
+    out.push_back(t);
+  }
+  return out;
+}
 
 struct Memory {
   std::uint32_t workers = 0;
@@ -773,6 +844,7 @@ void run_scale(const ScaleArgs& a) {
           net::distinct_faces(merged, probe_faces, object_faces, ids_scratch);
         });
         r.compute_round_us = r.encode_max_us + r.client_us;
+        r.two_level = two_level_gather(replies[i], limits, probe_faces, object_faces, a.runs);
         rows.push_back(r);
       }
     }
@@ -1095,6 +1167,17 @@ void run_scale(const ScaleArgs& a) {
   const auto predicted_replicated = [&](const Row& r, const Network& n) {
     return predicted(r, n) - r.compute_round_us + compute_replicated(r);
   };
+  // The two-level gather (Row::TwoLevel) on network n: the slowest worker (with its encode), two
+  // round trips (client - leader, leader - member), the client's message work for the ceil(W / g)
+  // leaders and a leader's for its g - 1 members, the slowest leader's merge and the client's, and
+  // the largest member and leader replies on the wire. Without this VM's client CPU (the leaders'
+  // wake-ups would be a second client's).
+  const auto predicted_two_level = [&](const Row& r, const Row::TwoLevel& t, const Network& n, bool replicated) {
+    const double worker = replicated ? r.mean_us * r.replicated_imbalance + (r.encode_max_us - r.max_us) : r.encode_max_us;
+    const double leaders = std::ceil(double(r.workers) / t.group);
+    return worker + 2 * n.rtt_us + (leaders + t.group - 1) * msg_work + t.leader_us + t.client_us +
+           double(r.max_reply_bytes + t.leader_reply_bytes) / n.bytes_per_us;
+  };
 
   if (a.json) {
     // Byte and face counts are whole numbers held in doubles: integers in the JSON, as before.
@@ -1172,6 +1255,21 @@ void run_scale(const ScaleArgs& a) {
       j["compute_speedup_replicated"] = round_to(r.single_us / compute_replicated(r), 3);
       for (const Network& n : kNetworks)
         j[std::string("speedup_") + n.name + "_replicated"] = round_to(r.single_us / predicted_replicated(r, n), 3);
+      Json two = Json::array();
+      for (const Row::TwoLevel& t : r.two_level) {
+        Json x = {{"group", t.group},
+                  {"leader_us", round_to(t.leader_us, 2)},
+                  {"client_us", round_to(t.client_us, 2)},
+                  {"leader_reply_bytes", t.leader_reply_bytes}};
+        for (const Network& n : kNetworks) {
+          if (n.vm_client) continue;
+          x[std::string("speedup_") + n.name] = round_to(r.single_us / predicted_two_level(r, t, n, false), 3);
+          x[std::string("speedup_") + n.name + "_replicated"] =
+              round_to(r.single_us / predicted_two_level(r, t, n, true), 3);
+        }
+        two.push_back(std::move(x));
+      }
+      j["two_level"] = std::move(two);
       rws.push_back(std::move(j));
     }
     Json assist = Json::array();
@@ -1268,6 +1366,22 @@ void run_scale(const ScaleArgs& a) {
       "10GbE = compute + W x message work + 16.25 us + largest reply at 10 Gbit/s; x = single / predicted "
       "round (xvm: with this VM's client CPU per round instead; xrep: 10GbE with the replicated deal, the slowest "
       "worker = mean x the deal's imbalance)\n");
+  std::printf(
+      "\ntwo-level gather (a model, not built): groups of g workers, a leader relays the Query and merges its "
+      "group's Results; 10GbE with the replicated deal, flat (xrep above) against the best g (its leader's and the "
+      "client's decode + merge measured):\n");
+  for (const Row& r : rows) {
+    if (r.mapping != geom::Mapping::block_cyclic || r.two_level.empty()) continue;
+    const Row::TwoLevel* best = nullptr;
+    double best_us = 0;
+    for (const Row::TwoLevel& t : r.two_level) {
+      const double us = predicted_two_level(r, t, kNetworks[0], true);
+      if (!best || us < best_us) best = &t, best_us = us;
+    }
+    std::printf("  pose %zu W=%u: flat %.1f us (x%.2f), g=%u %.1f us (x%.2f): leader %.1f us, client %.1f us\n", r.pose,
+                r.workers, predicted_replicated(r, kNetworks[0]), r.single_us / predicted_replicated(r, kNetworks[0]),
+                best->group, best_us, r.single_us / best_us, best->leader_us, best->client_us);
+  }
   std::printf(
       "\nover the %zu poses (mean / median / max): imbal#, imbal, redun#, redun as above; from the counted work of "
       "each block alone: blocks = the mapping's deal, oracle = the same blocks dealt knowing the pose (largest "

@@ -1064,6 +1064,29 @@ def scale_doc(doc, md):
                             + [f"speedup_{n}_replicated" for n in nets]))
                     body.append(row)
                 md += md_table(["contacts", "one thread µs"] + [f"W={w}" for w in ws], body, left=2)
+            two = [k for k in rep if any(by.get((k[0], k[1], w), {}).get("two_level") for w in ws)]
+            if two and nets:
+                net = nets[0]
+                key = f"speedup_{net}_replicated"
+                md.append(f"A two-level gather (a model, not built: groups of g workers, the first of each relaying "
+                          f"the Query and merging its group's Results into one for the client; two round trips, "
+                          f"the client's message work for W / g leaders and a leader's for g - 1 members, the "
+                          f"leader's and the client's decode and merge measured), {net}, replicated deal: flat "
+                          f"(as above) / two-level at the best g (g):\n")
+                body = []
+                for pose, mapping in two:
+                    r0 = next((by[(pose, mapping, w)] for w in ws if (pose, mapping, w) in by), {})
+                    row = [f_count(r0.get("contacts")), f_us(r0.get("single_us"))]
+                    for w in ws:
+                        r = by.get((pose, mapping, w)) or {}
+                        opts = [t for t in r.get("two_level") or [] if isinstance(t, dict) and finite(t.get(key))]
+                        if not opts:
+                            row.append(f_ratio(r.get(key)) if r else DASH)
+                            continue
+                        best = max(opts, key=lambda t: t[key])
+                        row.append(f"{f_ratio(r.get(key))} / {f_ratio(best[key])} ({best.get('group')})")
+                    body.append(row)
+                md += md_table(["contacts", "one thread µs"] + [f"W={w}" for w in ws], body, left=2)
         summ = []
         if summary_table(d.get("summary") or [], summ):
             md.append(f"Over the {len({r.get('pose') for r in rows_}) or DASH} poses, per W and mapping, mean / median / "
