@@ -113,7 +113,7 @@ struct SeriesRow {
   int ratio_max_round = 0;
   double vs_filter_mean = 0, vs_filter_p90 = 0, vs_filter_max = 0;  // coherent / filter
   double filter_ratio_mean = 0;                                     // filter / today
-  double rebuild_ratio = 0;  // jerk series: the rebuild round after the jump, coherent / today
+  double rebuild_ratio = 0;  // jerk series: the jump's round (a rebuild), coherent / today
   double max_ratio_except_rebuild = 0;
   int max_except_rebuild_round = 0;  // ... its round
   std::size_t mismatched_rounds = 0;
@@ -296,9 +296,9 @@ void add_slides(CLI::App& app) {
         row.vs_filter_mean = mean(vs_filter), row.vs_filter_p90 = percentile(vs_filter, 0.9);
         row.vs_filter_max = *std::max_element(vs_filter.begin(), vs_filter.end());
         row.filter_ratio_mean = mean(filter_ratio);
-        // The first round builds the front (a rebuild, as after a jerk); a jerk's rebuild is the
-        // round after the jump (the jump itself runs collide()).
-        const int rebuild = s.jerk_at >= 0 ? s.jerk_at + 1 : 0;
+        // The first round builds the front (a rebuild, cold); a jerk's rebuild is the jump's round
+        // (the collider rebuilds its front there rather than run collide() and rebuild after).
+        const int rebuild = s.jerk_at >= 0 ? s.jerk_at : 0;
         row.rebuild_ratio = ratio[rebuild];
         for (int k = 0; k < a->rounds; ++k)
           if (k != rebuild && k != 0 && ratio[k] > row.max_ratio_except_rebuild)

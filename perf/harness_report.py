@@ -1336,9 +1336,10 @@ def slides_doc(doc, md):
               + ("**Met.**" if not missed else "**Not met.**") + "\n")
     md.append("Ratios are the coherent collider's round time over today's path (`collide()` with every candidate "
               "through the exact test) on the same round; \"vs filter\" over `collide()`'s default (the certified "
-              "filter). \"max (but rebuilds)\" leaves out round 0 (the first, a cold rebuild) and the round after the "
-              "jerk, reported in the next column (for a slide series: round 0). Plain rounds: the rounds the collider "
-              "ran `collide()` itself (a jump, a step over `max_step`, its timed rounds). \"same pairs\": the pair set "
+              "filter). \"max (but rebuilds)\" leaves out round 0 (the first, a cold rebuild) and the jerk's round "
+              "(the collider rebuilds its front there), reported in the next column (for a slide series: round 0). "
+              "Plain rounds: the rounds the collider ran `collide()` itself (a step over `max_step` that does not "
+              "follow a round from the front, its timed rounds). \"same pairs\": the pair set "
               "equal to `collide()`'s on every round of the series.\n")
 
 

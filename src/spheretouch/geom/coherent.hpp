@@ -40,8 +40,9 @@
 // pairs are (re)built within a budget per round (2 % of the front's after a rebuild, growing to
 // 25 %; a pair whose face boxes gather no candidate counts a quarter), the others answered by
 // collide()'s own leaf stage meanwhile; a round whose probe (its part in contact) moved more than
-// max_step since the last one runs collide() and drops the cache (a jerk costs one plain round
-// and one rebuild); a probe clear of the object (its root sphere
+// max_step since the last one runs collide() and drops the cache, unless the round before used
+// the front (a jerk out of slow motion: the front is rebuilt at once, so a jerk costs one rebuild,
+// and fast motion one rebuild, then plain rounds); a probe clear of the object (its root sphere
 // apart from every object root) costs one sphere test per root, as in collide(), and drops the
 // front; the front is walked again from the roots when it has doubled (it only refines as the
 // probe moves) or the contact has shrunk to a quarter or ended (a withdrawn probe would keep the
@@ -94,8 +95,8 @@ struct CoherentConfig {
 /// What the coherent collider did (totals since construction or reset_stats()).
 struct CoherentStats {
   std::uint64_t rounds = 0;  ///< rounds answered
-  /// of those, by plain collide() (a jump, the pool full, a mode it does not cache, other trees
-  /// or object roots asked for once)
+  /// of those, by plain collide() (a jump after a jump, the pool full, a mode it does not cache,
+  /// other trees or object roots asked for once)
   std::uint64_t plain_rounds = 0;
   std::uint64_t rebuilds = 0;    ///< rounds that started from the roots (first round, after a drop)
   std::uint64_t reroots = 0;     ///< rounds that walked again from the roots, keeping the leaf pairs' entries
@@ -310,6 +311,7 @@ class CoherentCollider {
   // Motion.
   RelTransform last_rt_{};
   bool have_last_ = false;
+  bool jumped_ = false;     // the last round's motion was over max_step
   double leaf_radius_ = 0;  // the probe tree's mean leaf radius
   double step_ = 0;         // recent motion per round (decaying maximum)
   struct {

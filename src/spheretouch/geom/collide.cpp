@@ -529,9 +529,16 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   have_last_ = true;
   const std::uint32_t round = round_++;
   // A jump (every certificate would fail), a spell of plain rounds, or (arbitrate) the plain round
-  // that times collide() now and then, the cache kept.
+  // that times collide() now and then, the cache kept. The first jump out of a front's rounds (a
+  // jerk) rebuilds the front at once instead: the round after it would rebuild it anyway, warm
+  // where the jump is cold, so a jerk costs one rebuild and no plain round. A jump right after a
+  // jump (fast motion, which no front pays for) runs collide() and drops the cache.
   const bool timing = config_.arbitrate && have_front_ && round % kTimeEvery == kTimeEvery - 1 && !settled(round);
-  if (step > max_step_ || round < plain_until_ || timing) {
+  const bool jump = step > max_step_;
+  const bool rebuild_now = jump && have_front_ && !jumped_ && !timing && round >= plain_until_;
+  jumped_ = jump;
+  if (rebuild_now) drop();
+  if ((jump && !rebuild_now) || round < plain_until_ || timing) {
     if (!timing && have_front_) drop();
     ++stats_.plain_rounds;
     // Only the timed rounds read the clock: two reads cost as much as a light round.
@@ -551,7 +558,7 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
     return;
   }
   const auto t0 = std::chrono::steady_clock::now();
-  step_ = std::max(step, step_ * 0.9);
+  if (!jump) step_ = std::max(step, step_ * 0.9);  // a jerk says nothing of the motion after it (reach_)
   poses_[round % kPoses] = {f.rt, f.mag, round};
   reach_ = choose_reach();
   if (rebuild_due()) drop();
