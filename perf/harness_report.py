@@ -1338,8 +1338,8 @@ def slides_doc(doc, md):
               "through the exact test) on the same round; \"vs filter\" over `collide()`'s default (the certified "
               "filter). \"max (but rebuilds)\" leaves out round 0 (the first, a cold rebuild) and the jerk's round "
               "(the collider rebuilds its front there), reported in the next column (for a slide series: round 0). "
-              "Plain rounds: the rounds the collider ran `collide()` itself (a step over `max_step` that does not "
-              "follow a round from the front, its timed rounds). \"same pairs\": the pair set "
+              "Plain rounds: the rounds the collider ran `collide()` itself (a step over `max_step` in the round "
+              "after a rebuild or a plain round, its timed rounds). \"same pairs\": the pair set "
               "equal to `collide()`'s on every round of the series.\n")
 
 

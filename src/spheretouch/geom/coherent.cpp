@@ -103,7 +103,6 @@ void CoherentCollider::reset() {
   rebuild_pairs_ = 0;
   coherent_rounds_ = spells_ = 0;
   have_last_ = false;
-  jumped_ = false;
   step_ = 0;
   for (detail::CertPose& p : poses_) p.round = ~0u;
   last_cached_ = ~0u;

@@ -40,10 +40,10 @@
 // pairs are (re)built within a budget per round (2 % of the front's after a rebuild, growing to
 // 25 %; a pair whose face boxes gather no candidate counts a quarter), the others answered by
 // collide()'s own leaf stage meanwhile; a round whose probe (its part in contact) moved more than
-// max_step since the last one runs collide() and drops the cache, unless the round before used
-// the front (a jerk out of slow motion: the front is rebuilt at once, so a jerk costs one rebuild,
-// and fast motion one rebuild, then plain rounds); a probe clear of the object (its root sphere
-// apart from every object root) costs one sphere test per root, as in collide(), and drops the
+// max_step since the last one runs collide() and drops the cache, unless rounds have been answered
+// from the front since it was built (a jerk out of slow motion: the front is rebuilt at once, so a
+// jerk costs one rebuild; fast motion, one rebuild, then plain rounds); a probe clear of the
+// object (its root sphere apart from every object root) costs one sphere test per root, as in collide(), and drops the
 // front; the front is walked again from the roots when it has doubled (it only refines as the
 // probe moves) or the contact has shrunk to a quarter or ended (a withdrawn probe would keep the
 // fine front of its contact; ended, the walk is a rebuild: no leaf pair is worth keeping); and,
@@ -311,7 +311,6 @@ class CoherentCollider {
   // Motion.
   RelTransform last_rt_{};
   bool have_last_ = false;
-  bool jumped_ = false;     // the last round's motion was over max_step
   double leaf_radius_ = 0;  // the probe tree's mean leaf radius
   double step_ = 0;         // recent motion per round (decaying maximum)
   struct {

@@ -529,14 +529,14 @@ void CoherentCollider::collide(const Mesh& probe, const SphereTree& probe_tree, 
   have_last_ = true;
   const std::uint32_t round = round_++;
   // A jump (every certificate would fail), a spell of plain rounds, or (arbitrate) the plain round
-  // that times collide() now and then, the cache kept. The first jump out of a front's rounds (a
-  // jerk) rebuilds the front at once instead: the round after it would rebuild it anyway, warm
-  // where the jump is cold, so a jerk costs one rebuild and no plain round. A jump right after a
-  // jump (fast motion, which no front pays for) runs collide() and drops the cache.
+  // that times collide() now and then, the cache kept. A jump out of rounds answered from a front
+  // (a jerk out of slow motion) rebuilds the front at once instead: the round after it would
+  // rebuild it anyway, warm where the jump is cold, so a jerk costs one rebuild and no plain
+  // round. A jump in the round after a rebuild (fast motion, which no front pays for: a second
+  // jump in a row, or motion fast from the start) runs collide() and drops the cache.
   const bool timing = config_.arbitrate && have_front_ && round % kTimeEvery == kTimeEvery - 1 && !settled(round);
   const bool jump = step > max_step_;
-  const bool rebuild_now = jump && have_front_ && !jumped_ && !timing && round >= plain_until_;
-  jumped_ = jump;
+  const bool rebuild_now = jump && have_front_ && ramp_ > 0 && !timing && round >= plain_until_;
   if (rebuild_now) drop();
   if ((jump && !rebuild_now) || round < plain_until_ || timing) {
     if (!timing && have_front_) drop();
