@@ -20,6 +20,8 @@ int free_tcp_port();
 [[noreturn]] void die(const char* command, const std::string& msg);
 /// The 1 kHz servo's tick (rt::kDefaultRateHz), ns: the simulated clock of the force benches.
 inline constexpr std::int64_t kTickNs = 1'000'000;
+/// CPU time of this process so far (every thread, user + system), µs.
+double process_cpu_us();
 
 // Shared by the collision benches (defined in bench_collide.cpp).
 /// The q-quantile of v (q in [0, 1]; 0 for an empty v).

@@ -3,8 +3,15 @@
 #include "bench.hpp"
 
 #include <cstdio>
+#include <ctime>
 
 namespace st::bench {
+
+double process_cpu_us() {
+  timespec ts{};
+  ::clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) * 1e6 + double(ts.tv_nsec) * 1e-3;
+}
 
 void die(const std::string& msg) { die("", msg); }
 

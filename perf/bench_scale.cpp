@@ -110,12 +110,6 @@ double time_median_us(int runs, F&& f) {
   return median(std::move(t));
 }
 
-double process_cpu_us() {
-  timespec ts{};
-  ::clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) * 1e6 + double(ts.tv_nsec) * 1e-3;
-}
-
 /// The fan-out ZeroMQ offers besides a DEALER per worker (issue 33, "measure, then choose"): one
 /// PUB the workers subscribe to carries the query (one send for all of them), one PULL gathers
 /// their replies (no poll over W sockets).

@@ -16,6 +16,7 @@
 #include <cstring>
 #include <cstdio>
 #include <fstream>
+#include <map>
 #include <string>
 #include <thread>
 #include <arpa/inet.h>
@@ -312,7 +313,12 @@ void add_scatter(CLI::App& app) {
 
     std::vector<double> us, base, flo, split;
     int lost = 0;  // baseline or floor rounds with no reply by the deadline (counted, not timed)
+    // This process's CPU time over each variant's measured blocks (client, worker threads, echo
+    // threads and ZeroMQ's I/O threads; the idle gaps' few wake-ups included): with threads, every
+    // variant's whole cost per round. Daemons (--spawn) spend theirs in other processes.
+    std::map<const std::vector<double>*, double> cpu;
     auto run_block = [&](auto& one, std::vector<double>* into, int n, bool measured) {
+      const double c0 = process_cpu_us();
       for (int i = 0; i < n; ++i) {
         const auto t0 = Clock::now();
         const bool ok = one(measured);
@@ -325,6 +331,7 @@ void add_scatter(CLI::App& app) {
         }
         if (gap.count()) std::this_thread::sleep_until(t1 + gap);
       }
+      if (measured && into) cpu[into] += process_cpu_us() - c0;
     };
     run_block(scatter_round, nullptr, a->warmup, false);
     run_block(baseline_round, nullptr, a->warmup, false);
@@ -342,6 +349,8 @@ void add_scatter(CLI::App& app) {
     const Stats b = summarise(base);
     const Stats f = summarise(flo);
     const Stats sp = summarise(split);
+    const bool threads = procs.empty();
+    auto cpu_per_round = [&](const std::vector<double>& v) { return v.empty() ? 0.0 : cpu[&v] / double(v.size()); };
 
     if (a->json)
       print_json({{"bench", "scatter"},
@@ -360,6 +369,9 @@ void add_scatter(CLI::App& app) {
                   {"floor_p99_us", round_to(f.p99, 1)},
                   {"split_p50_us", round_to(sp.p50, 1)},
                   {"split_p99_us", round_to(sp.p99, 1)},
+                  {"cpu_per_round_us", threads ? Json(round_to(cpu_per_round(us), 1)) : Json(nullptr)},
+                  {"floor_cpu_per_round_us", threads ? Json(round_to(cpu_per_round(flo), 1)) : Json(nullptr)},
+                  {"split_cpu_per_round_us", threads ? Json(round_to(cpu_per_round(split), 1)) : Json(nullptr)},
                   {"lost", lost}});
     else
       std::printf(
@@ -370,6 +382,12 @@ void add_scatter(CLI::App& app) {
           a->workers, a->transport.c_str(), a->gap_us, a->rounds, incomplete, s.p50, s.p99, s.max, b.p50, b.p99,
           a->workers, f.p50, f.p99, f.p50 > 0 ? s.p50 / f.p50 : 0.0, f.p99 > 0 ? s.p99 / f.p99 : 0.0,
           lost ? "  (some baseline/floor rounds lost: see --json)" : "", sp.p50, sp.p99, sp.p50 - f.p50, s.p50 - sp.p50);
+    if (!a->json && threads)
+      std::printf(
+          "  CPU per round, this process (client, workers, ZeroMQ's threads): ours %.1f us, floor %.1f us, split "
+          "%.1f us (our workers add %+.1f us, our client %+.1f us)\n",
+          cpu_per_round(us), cpu_per_round(flo), cpu_per_round(split), cpu_per_round(split) - cpu_per_round(flo),
+          cpu_per_round(us) - cpu_per_round(split));
     if (!a->csv.empty()) {
       const bool fresh = !std::ifstream(a->csv).good();
       std::ofstream o(a->csv, std::ios::app);
