@@ -379,7 +379,7 @@ struct Row {
 };
 
 /// The two-level gather's costs (Row::TwoLevel) for every group size 2, 4, ... below the number of
-/// Results `frames` (one per busy worker, in worker order): for each, the slowest group's leader
+/// Results `frames` (one per worker, the busy ones first): for each, the slowest group's leader
 /// (decode the other members' Results, merge them with its own pairs as ScatterGather merges,
 /// encode one Result) and the client (decode the leaders' Results, merge, distinct faces), each a
 /// median over `runs`.
@@ -838,7 +838,13 @@ void run_scale(const ScaleArgs& a) {
           net::distinct_faces(merged, probe_faces, object_faces, ids_scratch);
         });
         r.compute_round_us = r.encode_max_us + r.client_us;
-        r.two_level = two_level_gather(replies[i], limits, probe_faces, object_faces, a.runs);
+        {  // every worker answers, the idle ones with an empty Result (as in the flat gather)
+          std::vector<std::vector<std::uint8_t>> frames = replies[i];
+          net::ResultMsg empty;
+          empty.seq = 1;
+          frames.resize(W, net::encode(empty));
+          r.two_level = two_level_gather(frames, limits, probe_faces, object_faces, a.runs);
+        }
         rows.push_back(r);
       }
     }
