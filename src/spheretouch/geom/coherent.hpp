@@ -43,10 +43,11 @@
 // max_step since the last one runs collide() and drops the cache, unless rounds have been answered
 // from the front since it was built (a jerk out of slow motion: the front is rebuilt at once, so a
 // jerk costs one rebuild; fast motion, one rebuild, then plain rounds); a probe clear of the
-// object (its root sphere apart from every object root) costs one sphere test per root, as in collide(), and drops the
-// front; the front is walked again from the roots when it has doubled (it only refines as the
-// probe moves) or the contact has shrunk to a quarter or ended (a withdrawn probe would keep the
-// fine front of its contact; ended, the walk is a rebuild: no leaf pair is worth keeping); and,
+// object (its root sphere apart from every object root) costs one sphere test per root, as in
+// collide(), and drops the front; the front is walked again from the roots when it has doubled
+// (it only refines as the probe moves) or the contact has shrunk to a quarter or ended (a
+// withdrawn probe would keep the fine front of its contact; ended, the walk is a rebuild: no leaf
+// pair is worth keeping); and,
 // with `arbitrate`, the collider times itself against collide() and gives way to it where the
 // bookkeeping costs more than it saves.
 // Other trees or other object roots (a worker asked to skip other blocks this round) start a new
@@ -95,8 +96,8 @@ struct CoherentConfig {
 /// What the coherent collider did (totals since construction or reset_stats()).
 struct CoherentStats {
   std::uint64_t rounds = 0;  ///< rounds answered
-  /// of those, by plain collide() (a jump after a jump, the pool full, a mode it does not cache,
-  /// other trees or object roots asked for once)
+  /// of those, by plain collide() (a jump in the round after a rebuild or a plain round, the pool
+  /// full, a mode it does not cache, other trees or object roots asked for once)
   std::uint64_t plain_rounds = 0;
   std::uint64_t rebuilds = 0;    ///< rounds that started from the roots (first round, after a drop)
   std::uint64_t reroots = 0;     ///< rounds that walked again from the roots, keeping the leaf pairs' entries
