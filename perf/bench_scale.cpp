@@ -378,6 +378,22 @@ struct Row {
   double tri_ratio() const { return single_tris ? double(sum_tris) / double(single_tris) : 0; }
 };
 
+/// The client's merge, as ScatterGather does it: each Result of `frames` decoded into one sorted
+/// run appended to `merged` (after the runs already begun in `runs`), then all of them merged and
+/// the duplicates dropped.
+void merge_results(std::span<const std::vector<std::uint8_t>> frames, const net::Limits& limits, geom::SortedRuns& runs,
+                   std::vector<net::FacePair>& merged) {
+  for (const auto& f : frames)
+    if (auto d = net::decode(f, limits))
+      if (const auto* res = std::get_if<net::ResultMsg>(&d.value())) {
+        runs.begin(merged.size());
+        merged.insert(merged.end(), res->pairs.begin(), res->pairs.end());
+        runs.end(merged);
+      }
+  runs.merge(merged);
+  merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
+}
+
 /// The two-level gather's costs (Row::TwoLevel) for every group size 2, 4, ... below the number of
 /// Results `frames` (one per worker, the busy ones first): for each, the slowest group's leader
 /// (decode the other members' Results, merge them with its own pairs as ScatterGather merges,
@@ -394,18 +410,6 @@ std::vector<Row::TwoLevel> two_level_gather(const std::vector<std::vector<std::u
   std::vector<net::FacePair> merged;
   std::vector<std::uint32_t> ids_scratch;
   geom::SortedRuns sorted_runs;
-  // Decodes each of `group` Results into one sorted run of `merged`, then merges them.
-  const auto merge_frames = [&](std::span<const std::vector<std::uint8_t>> group) {
-    for (const auto& f : group)
-      if (auto d = net::decode(f, limits))
-        if (const auto* res = std::get_if<net::ResultMsg>(&d.value())) {
-          sorted_runs.begin(merged.size());
-          merged.insert(merged.end(), res->pairs.begin(), res->pairs.end());
-          sorted_runs.end(merged);
-        }
-    sorted_runs.merge(merged);
-    merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
-  };
   for (std::size_t g = 2; g < frames.size(); g *= 2) {
     Row::TwoLevel t;
     t.group = static_cast<std::uint32_t>(g);
@@ -420,7 +424,7 @@ std::vector<Row::TwoLevel> two_level_gather(const std::vector<std::vector<std::u
         sorted_runs.begin(0);  // the leader's own pairs, sorted where it computed them
         merged.insert(merged.end(), own[first].begin(), own[first].end());
         sorted_runs.end(merged);
-        merge_frames(std::span(frames).subspan(first + 1, end - first - 1));
+        merge_results(std::span(frames).subspan(first + 1, end - first - 1), limits, sorted_runs, merged);
         msg.pairs = merged;
         net::encode(msg, frame);
       });
@@ -430,7 +434,7 @@ std::vector<Row::TwoLevel> two_level_gather(const std::vector<std::vector<std::u
     }
     t.client_us = time_median_us(runs, [&] {
       merged.clear();
-      merge_frames(leader_frames);
+      merge_results(leader_frames, limits, sorted_runs, merged);
       net::distinct_faces(merged, probe_faces, object_faces, ids_scratch);
     });
     out.push_back(t);
@@ -824,17 +828,7 @@ void run_scale(const ScaleArgs& a) {
         geom::SortedRuns runs;
         r.client_us = time_median_us(a.runs, [&] {
           merged.clear();
-          for (const auto& f : replies[i]) {
-            auto d = net::decode(f, limits);
-            if (d)
-              if (const auto* res = std::get_if<net::ResultMsg>(&d.value())) {
-                runs.begin(merged.size());
-                merged.insert(merged.end(), res->pairs.begin(), res->pairs.end());
-                runs.end(merged);
-              }
-          }
-          runs.merge(merged);
-          merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
+          merge_results(replies[i], limits, runs, merged);
           net::distinct_faces(merged, probe_faces, object_faces, ids_scratch);
         });
         r.compute_round_us = r.encode_max_us + r.client_us;
