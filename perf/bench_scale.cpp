@@ -361,8 +361,8 @@ struct Row {
   const std::vector<std::uint32_t>* block_reported_before = nullptr;
   double assisted_imbalance = 0, assist_critical = 0, assist_client = 0;
   std::uint32_t assisted_blocks = 0;
-  // A two-level gather (a model; not built): the busy workers in groups of `group` consecutive ones,
-  // the first of each a leader that relays the Query to the others, decodes their Results, merges
+  // A two-level gather (a model; not built): the workers in groups of `group` consecutive ones (the
+  // busy ones first), the first of each a leader that relays the Query to the others, decodes their Results, merges
   // them with its own pairs and sends the client one Result; the client decodes and merges one
   // Result per group. Measured here: the slowest leader's decode + merge + encode, the client's
   // decode + merge + distinct faces, and the largest leader's reply.
