@@ -435,7 +435,7 @@ std::vector<Row::TwoLevel> two_level_gather(const std::vector<std::vector<std::u
     t.client_us = time_median_us(runs, [&] {
       merged.clear();
       merge_results(leader_frames, limits, sorted_runs, merged);
-      net::distinct_faces(merged, probe_faces, object_faces, ids_scratch);
+      geom::distinct_faces(merged, probe_faces, object_faces, ids_scratch);
     });
     out.push_back(t);
   }
@@ -829,7 +829,7 @@ void run_scale(const ScaleArgs& a) {
         r.client_us = time_median_us(a.runs, [&] {
           merged.clear();
           merge_results(replies[i], limits, runs, merged);
-          net::distinct_faces(merged, probe_faces, object_faces, ids_scratch);
+          geom::distinct_faces(merged, probe_faces, object_faces, ids_scratch);
         });
         r.compute_round_us = r.encode_max_us + r.client_us;
         {  // every worker answers, the idle ones with an empty Result (as in the flat gather)

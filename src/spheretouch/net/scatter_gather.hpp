@@ -227,12 +227,4 @@ struct BlockWork {
 /// with work (the others weigh nothing), each once.
 std::vector<std::uint32_t> choose_assist(std::span<const BlockWork> worked, std::uint32_t workers, std::uint32_t max_blocks);
 
-/// A round's distinct faces from its pairs, sorted by (probe, object) and unique, as
-/// RoundResult holds them (both ascending); `scratch` is reused (no allocation once warm).
-void distinct_faces(std::span<const FacePair> pairs, std::vector<std::uint32_t>& probe_faces,
-                    std::vector<std::uint32_t>& object_faces, std::vector<std::uint32_t>& scratch);
-
-/// "Contacts" (paper §3.5, geom::count_faces): distinct probe faces + distinct object faces in `pairs`.
-std::size_t count_contacts(const std::vector<FacePair>& pairs);
-
 }  // namespace st::net
