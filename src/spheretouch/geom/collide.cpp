@@ -154,31 +154,36 @@ void CollideScratch::prepare_probe(const Mesh& probe, const SphereTree& probe_tr
   };
   // Probe leaves as little meshes (distinct vertices per leaf, faces as indices into them).
   lvrange_.assign(probe_tree.nodes.size(), {0, 0});
-  lverts_.clear();
+  std::vector<Vec3> verts;  // AoS while the leaves are walked, then SoA into lverts_
   lidx_.assign(probe_tree.face_order.size(), {0, 0, 0});
   {
     std::vector<std::uint32_t> at(probe.local.size(), kNoNode), stamp(probe.local.size(), kNoNode);
     for (std::uint32_t i = 0; i < probe_tree.num_nodes(); ++i) {
       const SphereNode& h = probe_tree.nodes[i];
       if (!h.leaf) continue;
-      const auto begin = static_cast<std::uint32_t>(lverts_.size());
+      const auto begin = static_cast<std::uint32_t>(verts.size());
       for (std::uint32_t slot = h.first; slot < h.first + h.count; ++slot) {
         const Tri& t = probe.faces[probe_tree.face_order[slot]];
         for (int k = 0; k < 3; ++k) {
           const std::uint32_t v = t[k];
           if (stamp[v] != i) {
             stamp[v] = i;
-            at[v] = static_cast<std::uint32_t>(lverts_.size());
-            lverts_.push_back(probe.local[v]);
+            at[v] = static_cast<std::uint32_t>(verts.size());
+            verts.push_back(probe.local[v]);
           }
           lidx_[slot][k] = at[v];
         }
       }
-      lvrange_[i] = {begin, static_cast<std::uint32_t>(lverts_.size())};
+      lvrange_[i] = {begin, static_cast<std::uint32_t>(verts.size())};
     }
   }
+  nverts_ = verts.size();
+  lverts_.assign(3 * nverts_, 0.0);
   lverts_.shrink_to_fit();
-  ptx_.resize(lverts_.size());
+  for (std::size_t v = 0; v < nverts_; ++v)
+    for (int c = 0; c < 3; ++c) lverts_[c * nverts_ + v] = verts[v][c];
+  ptx_.assign(3 * nverts_, 0.0);
+  ptx_.shrink_to_fit();
   pkey_ = probe_tree.nodes.data();
   phash_ = probe_tree.mesh_hash;
   fit(cstamp_, probe_tree.nodes.size());

@@ -225,10 +225,15 @@ class CollideScratch {
   std::vector<std::uint64_t> sort_keys_;  // sort_face_pairs' scratch (CollideConfig::sort_pairs)
   // Probe leaves as little meshes, so a query transforms a leaf's vertices in one sequential pass
   // (derived from the probe tree once, keyed by pkey_/phash_):
+  // Vertices are held by coordinate (x of every leaf vertex, then y, then z: component c of vertex
+  // v at c * nverts_ + v), so a leaf's transform is three sequential streams the compiler vectorizes.
   std::vector<std::array<std::uint32_t, 2>> lvrange_;  // probe leaf node -> its vertices [begin, end) in lverts_
-  std::vector<Vec3> lverts_;  // distinct vertices of each leaf, leaves one after another, probe-local
+  std::vector<double> lverts_;  // distinct vertices of each leaf, leaves one after another, probe-local, SoA
   std::vector<std::array<std::uint32_t, 3>> lidx_;  // probe slot -> its face's vertices as indices into lverts_
-  std::vector<Vec3> ptx_;              // lverts_ transformed into object-local (valid for leaves stamped this query)
+  std::vector<double> ptx_;  // lverts_ transformed into object-local, SoA (valid for leaves stamped this query)
+  std::size_t nverts_ = 0;   // the leaves' vertices: the stride of lverts_ and ptx_
+  /// Leaf vertex v transformed this query (the very doubles the exact test sees).
+  Vec3 ptx(std::uint32_t v) const { return {ptx_[v], ptx_[nverts_ + v], ptx_[2 * nverts_ + v]}; }
   const void* pkey_ = nullptr;         // probe tree the above was derived from (nodes.data()) ...
   std::uint64_t phash_ = 0;            // ... and its mesh_hash
   std::vector<std::uint32_t> cstamp_;  // probe node -> generation its CHILDREN's spheres were transformed

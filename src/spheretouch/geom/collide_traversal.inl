@@ -240,6 +240,27 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
   static float float_below(double x) { return static_cast<float>(x - std::abs(x) * 0x1p-22 - 1e-30); }
   static float float_above(double x) { return static_cast<float>(x + std::abs(x) * 0x1p-22 + 1e-30); }
 
+  // Leaf vertices l (n of them, component c at l[c * nv]) through rt into t (same layout), and
+  // each coordinate's float bounds into lo and hi (component, vertex). A function of its own on
+  // restrict pointers: so GCC 12 vectorizes the loop on AVX2 and AVX-512 (written inside
+  // probe_leaf, it vectorized it on neither; SSE2 has no fma instruction to vectorize with).
+  static void transform_leaf(const double* __restrict l, std::size_t nv, std::uint32_t n, const RelTransform& rt,
+                             double* __restrict t, float (*__restrict lo)[3 * kMaxLeafFaces],
+                             float (*__restrict hi)[3 * kMaxLeafFaces]) {
+    const double r00 = rt.R(0, 0), r01 = rt.R(0, 1), r02 = rt.R(0, 2), t0 = rt.t[0];
+    const double r10 = rt.R(1, 0), r11 = rt.R(1, 1), r12 = rt.R(1, 2), t1 = rt.t[1];
+    const double r20 = rt.R(2, 0), r21 = rt.R(2, 1), r22 = rt.R(2, 2), t2 = rt.t[2];
+    for (std::uint32_t i = 0; i < n; ++i) {
+      const double x = l[i], y = l[nv + i], z = l[2 * nv + i];
+      const double a = std::fma(r00, x, std::fma(r01, y, std::fma(r02, z, t0)));
+      const double b = std::fma(r10, x, std::fma(r11, y, std::fma(r12, z, t1)));
+      const double c = std::fma(r20, x, std::fma(r21, y, std::fma(r22, z, t2)));
+      t[i] = a, t[nv + i] = b, t[2 * nv + i] = c;
+      lo[0][i] = float_below(a), lo[1][i] = float_below(b), lo[2][i] = float_below(c);
+      hi[0][i] = float_above(a), hi[1][i] = float_above(b), hi[2][i] = float_above(c);
+    }
+  }
+
   // Probe leaf p's face boxes (float, enclosing the transformed doubles) in SoA by slot, and their
   // union, computed once per query.
   const std::array<float, 8>& probe_leaf(std::uint32_t p) {
@@ -247,27 +268,36 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
     if (sc.lstamp_[p] == gen) return u;
     sc.lstamp_[p] = gen;
     const SphereNode& hp = PT.nodes[p];
+    const auto [v0, v1] = sc.lvrange_[p];
+    const std::uint32_t n = v1 - v0;
+    ST_ASSERT(n <= 3 * kMaxLeafFaces, "a leaf's distinct vertices are at most three a face");
+    // The very doubles tri_tri_overlap will see: apply(rt, v) of the same local vertices, each
+    // coordinate fma(R_i0, x, fma(R_i1, y, fma(R_i2, z, t_i))) as apply() computes it (an fma is
+    // rounded once, so a vector fma gives the same bits), and each coordinate's float bounds.
+    // float_below and float_above are non-decreasing (a product by a power of two, a difference
+    // and a rounding to float, each monotone), so the least float_below of a face's three
+    // vertices is float_below of their least coordinate: the face box the face's own doubles
+    // give. One pass a vertex instead of one a face corner, over coordinate streams (SoA).
+    const std::size_t nv = sc.nverts_;
+    float lo[3][3 * kMaxLeafFaces], hi[3][3 * kMaxLeafFaces];
+    transform_leaf(sc.lverts_.data() + v0, nv, n, rt, sc.ptx_.data() + v0, lo, hi);
     const float inf = std::numeric_limits<float>::infinity();
-    u = {inf, inf, inf, -inf, -inf, -inf, 0, 0};
+    float ul[3] = {inf, inf, inf}, uh[3] = {-inf, -inf, -inf};  // the union, in registers
     float* pb = sc.pbox_.data();
     const std::size_t st = sc.pstride_;
-    // The very doubles tri_tri_overlap will see: apply(rt, v) of the same local vertices.
-    const auto [v0, v1] = sc.lvrange_[p];
-    for (std::uint32_t v = v0; v < v1; ++v) sc.ptx_[v] = apply(rt, sc.lverts_[v]);
     for (std::uint32_t slot = hp.first, e = hp.first + hp.count; slot < e; ++slot) {
       const auto& ix = sc.lidx_[slot];
-      const Vec3& a = sc.ptx_[ix[0]];
-      const Vec3& b = sc.ptx_[ix[1]];
-      const Vec3& c = sc.ptx_[ix[2]];
+      const std::uint32_t a = ix[0] - v0, b = ix[1] - v0, c = ix[2] - v0;
       for (int k = 0; k < 3; ++k) {
-        const float lo = float_below(std::min(a[k], std::min(b[k], c[k])));
-        const float hi = float_above(std::max(a[k], std::max(b[k], c[k])));
-        pb[k * st + slot] = lo;
-        pb[(3 + k) * st + slot] = hi;
-        u[k] = std::min(u[k], lo);
-        u[3 + k] = std::max(u[3 + k], hi);
+        const float l = std::min(lo[k][a], std::min(lo[k][b], lo[k][c]));
+        const float h = std::max(hi[k][a], std::max(hi[k][b], hi[k][c]));
+        pb[k * st + slot] = l;
+        pb[(3 + k) * st + slot] = h;
+        ul[k] = std::min(ul[k], l);
+        uh[k] = std::max(uh[k], h);
       }
     }
+    u = {ul[0], ul[1], ul[2], uh[0], uh[1], uh[2], 0, 0};
     return u;
   }
 
@@ -368,7 +398,7 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
   bool overlaps(std::uint32_t slot, std::uint32_t of) const {
     const auto& ix = sc.lidx_[slot];
     const Tri& ot = O.faces[of];
-    return tri_tri_overlap(sc.ptx_[ix[0]], sc.ptx_[ix[1]], sc.ptx_[ix[2]], O.local[ot[0]], O.local[ot[1]], O.local[ot[2]]);
+    return tri_tri_overlap(sc.ptx(ix[0]), sc.ptx(ix[1]), sc.ptx(ix[2]), O.local[ot[0]], O.local[ot[1]], O.local[ot[2]]);
   }
   // Lanes n.. of a batch: read by whole steps, never decided.
   static void pad_lanes(float (*v)[kTriBatch], std::uint32_t n) {
@@ -384,7 +414,7 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
       const Tri& ot = O.faces[faces[i]];
       const Vec3& o0 = O.local[ot[0]];
       for (int k = 0; k < 3; ++k)
-        for (int c = 0; c < 3; ++c) v[3 * k + c][i] = static_cast<float>(sc.ptx_[ix[k]][c] - o0[c]);
+        for (int c = 0; c < 3; ++c) v[3 * k + c][i] = static_cast<float>(sc.ptx_[c * sc.nverts_ + ix[k]] - o0[c]);
       // Candidates come grouped by object face (leaf_leaf's inner loop): its two edges once.
       if (i > 0 && faces[i] == faces[i - 1]) {
         for (int r = 9; r < 15; ++r) v[r][i] = v[r][i - 1];
