@@ -32,8 +32,8 @@
 #include "fanout_floor.hpp"
 #include <spheretouch/geom/primitives.hpp>
 #include <spheretouch/net/local_workers.hpp>
-#include <spheretouch/net/reference_backend.hpp>
 #include <spheretouch/net/scatter_gather.hpp>
+#include <spheretouch/net/tree_backend.hpp>
 
 namespace st::bench {
 
@@ -175,7 +175,9 @@ void add_scatter(CLI::App& app) {
           wc = wctx.back().get();
         }
         const std::string ep = endpoint_for(a->own_context && a->transport == "inproc" ? "tcp" : a->transport, i);
-        auto w = net::LocalWorkers::start(*wc, 1, net::reference_backend_factory(), [&](int) { return ep; });
+        // The backend the worker daemon runs (tree_backend_factory()'s defaults, as
+        // spheretouch-worker's): on the far probe, a sphere test per root.
+        auto w = net::LocalWorkers::start(*wc, 1, net::tree_backend_factory(), [&](int) { return ep; });
         if (!w) {
           std::fprintf(stderr, "%s\n", w.error().c_str());
           throw CLI::RuntimeError(2);
