@@ -325,6 +325,9 @@ struct Row {
   std::size_t max_reply_bytes = 0, total_reply_bytes = 0;
   // Counted work (deterministic, unlike the times): sphere-pair and triangle-pair tests.
   std::uint64_t single_spheres = 0, single_tris = 0, sum_spheres = 0, sum_tris = 0;
+  // Probe leaves transformed and boxed (CollideStats::probe_leaves): one thread's, and summed over
+  // the workers (each transforms the probe leaves its blocks meet: work the tests do not count).
+  std::uint64_t single_probe_leaves = 0, sum_probe_leaves = 0;
   std::vector<std::array<double, 3>> shares;  // per busy worker: sphere tests, triangle tests, query µs
   // The counted work in µs (tests weighted by the run's fitted cost per test): max and mean over
   // the W workers, and the single thread's.
@@ -376,6 +379,9 @@ struct Row {
   double redundancy() const { return single_us > 0 ? sum_us / single_us : 0; }
   double sphere_ratio() const { return single_spheres ? double(sum_spheres) / double(single_spheres) : 0; }
   double tri_ratio() const { return single_tris ? double(sum_tris) / double(single_tris) : 0; }
+  double probe_leaves_ratio() const {
+    return single_probe_leaves ? double(sum_probe_leaves) / double(single_probe_leaves) : 0;
+  }
 };
 
 /// The client's merge, as ScatterGather does it: each Result of `frames` decoded into one sorted
@@ -629,7 +635,7 @@ void run_scale(const ScaleArgs& a) {
   geom::CollideResult result;
   std::vector<double> single(poses.size());
   std::vector<std::uint32_t> contacts(poses.size());
-  std::vector<std::uint64_t> single_spheres(poses.size()), single_tris(poses.size());
+  std::vector<std::uint64_t> single_spheres(poses.size()), single_tris(poses.size()), single_leaves(poses.size());
   std::vector<double> single_spheres_us(poses.size());  // the same descent stopped at the leaf spheres
   for (std::size_t i = 0; i < poses.size(); ++i) {
     geom::CollideConfig spheres_only = geom::DefaultCollideConfig();
@@ -647,6 +653,7 @@ void run_scale(const ScaleArgs& a) {
     contacts[i] = std::uint32_t(result.contacts());
     single_spheres[i] = result.stats.node_pairs;
     single_tris[i] = result.stats.tri_pairs;
+    single_leaves[i] = result.stats.probe_leaves;
     std::fprintf(stderr, "pose %zu: %u contacts, %zu pairs, single thread %.1f us\n", i + 1, contacts[i],
                  result.pairs.size(), single[i]);
   }
@@ -755,6 +762,7 @@ void run_scale(const ScaleArgs& a) {
         prow[i].single_us = single[i];
         prow[i].single_spheres = single_spheres[i];
         prow[i].single_tris = single_tris[i];
+        prow[i].single_probe_leaves = single_leaves[i];
         prow[i].block_tests = &per_block_tests.now[i];
         prow[i].block_tests_before = &per_block_tests.before[i];
         prow[i].block_reported_before = &per_block_tests.reported_before[i];
@@ -782,6 +790,11 @@ void run_scale(const ScaleArgs& a) {
           if (bytes > mem.max_share_bytes) {
             mem.max_share_bytes = bytes;
             mem.max_share_faces = double(set.value().object.faces.size());
+          }
+          // The probe leaves this worker transforms at each pose (on the tree it queries).
+          for (std::size_t i = 0; i < poses.size(); ++i) {
+            geom::collide(probe, pt, set.value().object, st, poses[i], geom::DefaultCollideConfig(), scratch, result);
+            prow[i].sum_probe_leaves += result.stats.probe_leaves;
           }
         }
         std::vector<net::FacePair> out;
@@ -1230,6 +1243,7 @@ void run_scale(const ScaleArgs& a) {
                 {"compute_speedup", round_to(r.single_us / r.compute_round_us, 3)},
                 {"sphere_tests_ratio", round_to(r.sphere_ratio(), 3)},
                 {"tri_tests_ratio", round_to(r.tri_ratio(), 3)},
+                {"probe_leaves_ratio", round_to(r.probe_leaves_ratio(), 3)},
                 {"imbalance_counted", round_to(r.work_imbalance(), 3)},
                 {"redundancy_counted", round_to(r.work_redundancy(), 3)},
                 {"oracle_imbalance", round_to(r.oracle_imbalance, 3)},

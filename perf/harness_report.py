@@ -1087,6 +1087,22 @@ def scale_doc(doc, md):
                         row.append(f"{f_ratio(r.get(key))} / {f_ratio(best[key])} ({best.get('group')})")
                     body.append(row)
                 md += md_table(["contacts", "one thread µs"] + [f"W={w}" for w in ws], body, left=2)
+            leafy = [k for k in keys if any(finite(by.get((k[0], k[1], w), {}).get("probe_leaves_ratio")) for w in ws)
+                     and k[1] == "block-cyclic"]
+            if leafy:
+                md.append("Where the workers' redundant work goes (counted, block-cyclic): the workers' summed "
+                          "sphere tests / triangle tests / probe leaves transformed and boxed, over one thread's. "
+                          "Every worker transforms the probe leaves its blocks meet, work the tests do not count:\n")
+                body = []
+                for pose, mapping in leafy:
+                    r0 = next((by[(pose, mapping, w)] for w in ws if (pose, mapping, w) in by), {})
+                    row = [f_count(r0.get("contacts"))]
+                    for w in ws:
+                        r = by.get((pose, mapping, w))
+                        row.append(DASH if r is None else " / ".join(
+                            f_ratio(r.get(k)) for k in ["sphere_tests_ratio", "tri_tests_ratio", "probe_leaves_ratio"]))
+                    body.append(row)
+                md += md_table(["contacts"] + [f"W={w}" for w in ws], body, left=1)
         summ = []
         if summary_table(d.get("summary") or [], summ):
             md.append(f"Over the {len({r.get('pose') for r in rows_}) or DASH} poses, per W and mapping, mean / median / "

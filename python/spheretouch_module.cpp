@@ -176,6 +176,7 @@ py::dict stats_dict(const CollideStats& s) {
   d["tri_pairs"] = s.tri_pairs;
   d["tri_exact"] = s.tri_exact;
   d["sphere_pairs"] = s.sphere_pairs;
+  d["probe_leaves"] = s.probe_leaves;
   d["truncated"] = s.truncated;
   d["pair_limit_hit"] = s.pair_limit_hit;
   d["work_limit_hit"] = s.work_limit_hit;
@@ -292,8 +293,8 @@ PYBIND11_MODULE(_core, m) {
       .def_readonly("complete", &CollisionResult::complete, "False when the query stopped at max_pairs")
       .def_property_readonly(
           "stats", [](const CollisionResult& r) { return stats_dict(r.stats); },
-          "traversal counters: node_pairs, leaf_pairs, tri_pairs, tri_exact, sphere_pairs, truncated, pair_limit_hit, "
-          "work_limit_hit");
+          "traversal counters: node_pairs, leaf_pairs, tri_pairs, tri_exact, sphere_pairs, probe_leaves, truncated, "
+          "pair_limit_hit, work_limit_hit");
 
   py::class_<PyComputeCollision>(
       m, "ComputeCollision",

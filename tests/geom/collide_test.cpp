@@ -325,12 +325,18 @@ TEST_CASE("every SIMD instruction set gives the same pairs and counters (run-tim
       if (isa == Isa::scalar) {
         ref = res;
         touching += !res.pairs.empty();
+        // A leaf's faces are boxed once a query: never more leaves than the probe has, some
+        // whenever a pair was found (its probe face's leaf), none without a leaf pair.
+        CHECK(res.stats.probe_leaves <= probe.tree.num_leaves());
+        CHECK(res.stats.probe_leaves <= res.stats.leaf_pairs);
+        if (!res.pairs.empty()) CHECK(res.stats.probe_leaves > 0);
         continue;
       }
       CHECK(res.pairs == ref.pairs);
       CHECK(res.stats.node_pairs == ref.stats.node_pairs);
       CHECK(res.stats.leaf_pairs == ref.stats.leaf_pairs);
       CHECK(res.stats.tri_pairs == ref.stats.tri_pairs);
+      CHECK(res.stats.probe_leaves == ref.stats.probe_leaves);
     }
   }
   CHECK(touching >= poses.size() / 2);  // the poses exercise the leaf stage, not only far misses

@@ -167,6 +167,9 @@ struct CollideStats {
   std::uint64_t tri_exact = 0;     ///< of those, decided by tri_tri_overlap (the filter's undecided)
   std::uint64_t exact_evals = 0;   ///< exact-arithmetic predicate evaluations (inputs on a plane or line)
   std::uint64_t sphere_pairs = 0;  ///< approximate mode: overlapping sphere pairs reported
+  /// probe leaves whose vertices were transformed and face boxes made (exact mode; once a leaf a
+  /// query): a worker pays this for every probe leaf its blocks meet, so it grows with the workers
+  std::uint64_t probe_leaves = 0;
   /// traversals stopped: a tree deeper than its num_depths (or > kMaxTreeDepth); 0 for valid trees
   std::uint64_t truncated = 0;
   bool pair_limit_hit = false;  ///< the traversal stopped at CollideConfig::max_pairs

@@ -267,6 +267,7 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
     std::array<float, 8>& u = sc.lbox_[p];
     if (sc.lstamp_[p] == gen) return u;
     sc.lstamp_[p] = gen;
+    ++res.stats.probe_leaves;
     const SphereNode& hp = PT.nodes[p];
     const auto [v0, v1] = sc.lvrange_[p];
     const std::uint32_t n = v1 - v0;
