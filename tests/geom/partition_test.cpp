@@ -154,6 +154,36 @@ TEST_CASE("automatic split: by its own model, the pick is no worse than the pape
     CHECK(c.blocks >= W);
     // The chosen split is no worse, by the model, than the paper's fixed layer 2, block size 1.
     const Result<SplitChoice> fixed = choose_split(t, W, Mapping::block_cyclic, cfg, 2, 1);
-    if (fixed) CHECK(c.predicted_max <= fixed.value().predicted_max * (1 + cfg.tie) + 1e-9);
+    if (fixed)
+      CHECK(c.predicted_max <= fixed.value().predicted_max * (1 + cfg.tie) * (1 + cfg.smaller_blocks_tie) + 1e-9);
+  }
+}
+
+TEST_CASE("automatic split: a smaller block size at the pick's layer wins within smaller_blocks_tie") {
+  const Mesh* ep = st::test::model_mesh("elephant.off");
+  const Mesh ele = ep ? *ep : make_icosphere(30, 20);
+  const SphereTree t = SphereTree::build(ele).value();
+  SplitModelConfig strict;
+  strict.contact_radius = 12;
+  strict.smaller_blocks_tie = 0;
+  SplitModelConfig cfg = strict;
+  cfg.smaller_blocks_tie = 0.05;
+  for (std::uint32_t W : {2u, 4u, 8u}) {
+    CAPTURE(W);
+    const SplitChoice cheapest = choose_split(t, W, Mapping::block_cyclic, strict).value();
+    const SplitChoice c = choose_split(t, W, Mapping::block_cyclic, cfg).value();
+    MESSAGE("W=", W, ": cheapest ", cheapest.why, "; picked ", c.why);
+    CHECK(c.layer == cheapest.layer);
+    CHECK(c.block_size <= cheapest.block_size);
+    CHECK(c.predicted_max <= cheapest.predicted_max * 1.05 + 1e-9);
+    // The pick is the smallest block size within the tie: every smaller one costs more than it allows.
+    for (std::uint32_t B = 1; B < c.block_size; ++B) {
+      const Result<SplitChoice> smaller = choose_split(t, W, Mapping::block_cyclic, strict, c.layer, B);
+      if (smaller) CHECK(smaller.value().predicted_max > cheapest.predicted_max * 1.05);
+    }
+    // And what it gave up for it, the cheapest's model cost, is where it says.
+    const Result<SplitChoice> same = choose_split(t, W, Mapping::block_cyclic, strict, c.layer, c.block_size);
+    REQUIRE(same.ok());
+    CHECK(same.value().predicted_max == doctest::Approx(c.predicted_max));
   }
 }

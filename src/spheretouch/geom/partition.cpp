@@ -195,6 +195,11 @@ Result<SplitChoice> choose_split(const SphereTree& tree, std::uint32_t workers, 
   SplitChoice best;
   bool have = false;
   double best_cost = 0;
+  struct Tried {
+    std::uint32_t layer, block_size, blocks;
+    double cost, mean;
+  };
+  std::vector<Tried> tried;  // for cfg.smaller_blocks_tie
   std::vector<double> load(workers);
   std::vector<std::uint32_t> seen;  // last region that entered each block
   for (std::uint32_t layer = 0; layer < tree.num_depths; ++layer) {
@@ -229,6 +234,7 @@ Result<SplitChoice> choose_split(const SphereTree& tree, std::uint32_t workers, 
       }
       const double cost = sum_max / nsites;
       ++best.candidates;
+      tried.push_back({layer, B, nb, cost, sum_mean / nsites});
       // The cheapest wins; within cfg.tie of the best, the one with fewer blocks.
       const bool better =
           !have || cost < best_cost * (1 - cfg.tie) || (cost <= best_cost * (1 + cfg.tie) && nb < best.blocks);
@@ -247,6 +253,15 @@ Result<SplitChoice> choose_split(const SphereTree& tree, std::uint32_t workers, 
     return fail("split: no layer of this object's sphere tree (", tree.num_depths, " layers, ", m.leaf_node.size(),
                 " leaves) gives ", workers, " workers a block each", fixed_layer != kFree ? " at the fixed layer" : "",
                 fixed_block_size ? " with the fixed block size" : "", ": use fewer workers");
+  // The smallest block size at the pick's layer within cfg.smaller_blocks_tie of its cost.
+  for (const Tried& t : tried)
+    if (t.layer == best.layer && t.block_size < best.block_size &&
+        t.cost <= best_cost * (1 + std::max(0.0, cfg.smaller_blocks_tie))) {
+      best.block_size = t.block_size;
+      best.blocks = t.blocks;
+      best.predicted_max = t.cost;
+      best.predicted_mean = t.mean;
+    }
   char buf[320];
   std::snprintf(buf, sizeof buf,
                 "layer %u, block size %u: %u blocks, %s over %u workers; predicted busiest/mean worker %.2f over %u "

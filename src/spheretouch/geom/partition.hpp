@@ -82,6 +82,13 @@ struct SplitModelConfig {
   /// Two splits within this relative cost are a tie, won by the one with fewer blocks (0: the
   /// cheapest wins; the measurements did not favour fewer blocks).
   double tie = 0;
+  /// Within this relative cost of the pick, a smaller block size at its layer wins. The model
+  /// charges a block entered block_cost_faces whatever its size, and so favours larger blocks by a
+  /// little; a worker's tree over blocks of several nodes costs more than it says: at W = 2 and 4
+  /// on armadillo_L2, block size 1 at the same layer made 10-25 % fewer sphere tests and 2-5x fewer
+  /// probe-leaf transforms (spheretouch-bench scale, counted work) where the model put it 0.8-1.9 %
+  /// behind.
+  double smaller_blocks_tie = 0.05;
 };
 
 /// The automatic split: layer and block size for `workers` workers and `mapping`.
