@@ -85,9 +85,9 @@ struct SplitModelConfig {
   /// Within this relative cost of the pick, a smaller block size at its layer wins. The model
   /// charges a block entered block_cost_faces whatever its size, and so favours larger blocks by a
   /// little; a worker's tree over blocks of several nodes costs more than it says: at W = 2 and 4
-  /// on armadillo_L2, block size 1 at the same layer made 10-25 % fewer sphere tests and 2-5x fewer
-  /// probe-leaf transforms (spheretouch-bench scale, counted work) where the model put it 0.8-1.9 %
-  /// behind.
+  /// on armadillo_L2's ~1,000- and ~1,500-contact poses, block size 1 at the same layer made up to
+  /// 23 % fewer sphere tests and 1.4-5.4x fewer probe-leaf transforms (spheretouch-bench scale,
+  /// counted work) where the model put it 0.8-1.9 % behind.
   double smaller_blocks_tie = 0.05;
 };
 
