@@ -142,10 +142,18 @@ TEST_CASE("automatic split: in range, no empty block, every worker served; pinne
   CHECK(too_many.error().find("workers a block each") != std::string::npos);
 }
 
-TEST_CASE("automatic split: by its own model, the pick is no worse than the paper's layer 2, block size 1") {
+namespace {
+
+// The elephant's tree (an icosphere's where the model set is absent), the splits' test object.
+SphereTree elephant_tree() {
   const Mesh* ep = st::test::model_mesh("elephant.off");
-  const Mesh ele = ep ? *ep : make_icosphere(30, 20);
-  const SphereTree t = SphereTree::build(ele).value();
+  return SphereTree::build(ep ? *ep : make_icosphere(30, 20)).value();
+}
+
+}  // namespace
+
+TEST_CASE("automatic split: by its own model, the pick is no worse than the paper's layer 2, block size 1") {
+  const SphereTree t = elephant_tree();
   SplitModelConfig cfg;
   cfg.contact_radius = 12;
   for (std::uint32_t W : {2u, 8u}) {
@@ -160,9 +168,7 @@ TEST_CASE("automatic split: by its own model, the pick is no worse than the pape
 }
 
 TEST_CASE("automatic split: a smaller block size at the pick's layer wins within smaller_blocks_tie") {
-  const Mesh* ep = st::test::model_mesh("elephant.off");
-  const Mesh ele = ep ? *ep : make_icosphere(30, 20);
-  const SphereTree t = SphereTree::build(ele).value();
+  const SphereTree t = elephant_tree();
   SplitModelConfig strict;
   strict.contact_radius = 12;
   strict.smaller_blocks_tie = 0;
