@@ -18,7 +18,7 @@
 // not move with the host's speed from one share's timing to the next); and the predicted round
 //   compute = max_w (query_w + encode of its Result) + the client's decode and merge
 //   network   = compute + client CPU(W) + round trip + largest reply / bandwidth
-// with speed-up = single-thread collide() / predicted round. The model is checked where this
+// with speed-up = single-thread collide() (timed beside each W) / predicted round. The model is checked where this
 // machine can: W = 1 and 2 in-process workers over inproc, predicted (our empty round + the
 // slowest share's query + encode and merge) against the measured round, same poses, the terms and
 // the rounds timed in interleaved blocks so that all see the host at the same speed.
@@ -318,7 +318,10 @@ struct Row {
   std::uint32_t contacts = 0, workers = 0, busy = 0;
   geom::Mapping mapping = geom::Mapping::block_cyclic;
   Split split;
+  // single_us: one thread's collide() at this pose, the mean of the medians timed just before and
+  // just after this W's shares (single_beside_us); the speed-ups and the timed redundancy use it.
   double single_us = 0, max_us = 0, mean_us = 0, sum_us = 0;
+  std::array<double, 2> single_beside_us{};
   double encode_max_us = 0;     // slowest worker's query + its Result's encoding, minus its query
   double client_us = 0;         // the client's decode of every Result, the merge and the distinct faces
   double compute_round_us = 0;  // max_w (query_w + encode_w) + client
@@ -747,6 +750,17 @@ void run_scale(const ScaleArgs& a) {
       std::fprintf(stderr, "W=%u %s: layer %u, block size %u, %u blocks%s\n", W, geom::to_string(m), sp.layer,
                    sp.block_size, sp.blocks, sp.automatic ? " (automatic)" : "");
       const auto share = net::deal_blocks(sp.blocks, W, m, 1);
+      // One thread timed again beside this W's shares, before and after them: a speed-up compares
+      // times of one phase of the host (on a shared VM the one-thread round moved 1.0-1.9x between
+      // the start of a run and its end).
+      const auto time_single = [&](std::vector<double>& us) {
+        us.resize(poses.size());
+        const geom::CollideConfig full = geom::DefaultCollideConfig();
+        for (std::size_t i = 0; i < poses.size(); ++i)
+          us[i] = time_median_us(a.runs, [&] { geom::collide(probe, pt, object, ot, poses[i], full, scratch, result); });
+      };
+      std::vector<double> single_before, single_after;
+      time_single(single_before);
       BlockTests& per_block_tests = tests_per_block(sp);
       per_block_tests.owners.emplace_back(sp.blocks);
       std::vector<std::uint32_t>& owners = per_block_tests.owners.back();
@@ -759,7 +773,6 @@ void run_scale(const ScaleArgs& a) {
         prow[i].workers = W;
         prow[i].mapping = m;
         prow[i].split = sp;
-        prow[i].single_us = single[i];
         prow[i].single_spheres = single_spheres[i];
         prow[i].single_tris = single_tris[i];
         prow[i].single_probe_leaves = single_leaves[i];
@@ -830,8 +843,11 @@ void run_scale(const ScaleArgs& a) {
         }
       }
       memory.push_back(mem);
+      time_single(single_after);
       for (std::size_t i = 0; i < poses.size(); ++i) {
         Row& r = prow[i];
+        r.single_beside_us = {single_before[i], single_after[i]};
+        r.single_us = 0.5 * (single_before[i] + single_after[i]);
         r.mean_us = r.sum_us / W;
         // The client: decode every Result and merge their pairs as ScatterGather does (each
         // worker's pairs a sorted run, one k-way merge, duplicates dropped, the distinct faces
@@ -1232,6 +1248,7 @@ void run_scale(const ScaleArgs& a) {
                 {"auto_split", r.split.automatic},
                 {"busy_workers", r.busy},
                 {"single_us", round_to(r.single_us, 2)},
+                {"single_beside_us", {round_to(r.single_beside_us[0], 2), round_to(r.single_beside_us[1], 2)}},
                 {"max_worker_us", round_to(r.max_us, 2)},
                 {"mean_worker_us", round_to(r.mean_us, 2)},
                 {"sum_worker_us", round_to(r.sum_us, 2)},

@@ -1035,12 +1035,23 @@ def scale_doc(doc, md):
                     keys.append(k)
             keys.sort(key=lambda k: (k[0] if finite(k[0]) else 0, str(k[1])))
             by = {(r.get("pose"), r.get("mapping"), r.get("workers")): r for r in rows_}
-            md.append("Predicted speed-up against one thread, per W: compute only (the slowest share plus the "
-                      "client's merge, no network)" + "".join(f" / {n}" for n in nets) + ":\n")
+
+            def single_range(pose, mapping):
+                """One thread's time at the pose: the least and greatest over the W's it was timed beside."""
+                us = [by[(pose, mapping, w)].get("single_us") for w in ws if (pose, mapping, w) in by]
+                us = [u for u in us if finite(u)]
+                if not us:
+                    return DASH
+                lo, hi = min(us), max(us)
+                return f_us(lo) if f_us(lo) == f_us(hi) else f"{f_us(lo)}–{f_us(hi)}"
+
+            md.append("Predicted speed-up against one thread (timed beside each W's shares, before and after "
+                      "them: one thread µs gives the least and greatest over the W's), per W: compute only (the "
+                      "slowest share plus the client's merge, no network)" + "".join(f" / {n}" for n in nets) + ":\n")
             body = []
             for pose, mapping in keys:
                 r0 = next((by[(pose, mapping, w)] for w in ws if (pose, mapping, w) in by), {})
-                row = [f_count(r0.get("contacts")), mapping or DASH, f_us(r0.get("single_us"))]
+                row = [f_count(r0.get("contacts")), mapping or DASH, single_range(pose, mapping)]
                 for w in ws:
                     r = by.get((pose, mapping, w))
                     row.append(DASH if r is None else " / ".join(
@@ -1056,7 +1067,7 @@ def scale_doc(doc, md):
                 body = []
                 for pose, mapping in rep:
                     r0 = next((by[(pose, mapping, w)] for w in ws if (pose, mapping, w) in by), {})
-                    row = [f_count(r0.get("contacts")), f_us(r0.get("single_us"))]
+                    row = [f_count(r0.get("contacts")), single_range(pose, mapping)]
                     for w in ws:
                         r = by.get((pose, mapping, w))
                         row.append(DASH if r is None else " / ".join(
@@ -1076,7 +1087,7 @@ def scale_doc(doc, md):
                 body = []
                 for pose, mapping in two:
                     r0 = next((by[(pose, mapping, w)] for w in ws if (pose, mapping, w) in by), {})
-                    row = [f_count(r0.get("contacts")), f_us(r0.get("single_us"))]
+                    row = [f_count(r0.get("contacts")), single_range(pose, mapping)]
                     for w in ws:
                         r = by.get((pose, mapping, w)) or {}
                         opts = [t for t in r.get("two_level") or [] if isinstance(t, dict) and finite(t.get(key))]
