@@ -279,6 +279,7 @@ struct CoherentQuery<ST_COLLIDE_WIDE_SIMD::Lanes> : CollideQuery<ST_COLLIDE_WIDE
     const std::uint64_t mo = face_box_mask(ob, ho.count, w, ou);
     if (mo != 0) {
       for (int k = 0; k < 3; ++k) ou[k] = widen_below(ou[k], reach), ou[3 + k] = widen_above(ou[3 + k], reach);
+      probe_faces(p);
       const std::uint64_t mp = probe_mask(hp.first, hp.count, ou);
       const float* pb = sc.pbox_.data();
       const std::size_t st = sc.pstride_;

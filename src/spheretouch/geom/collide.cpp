@@ -184,6 +184,8 @@ void CollideScratch::prepare_probe(const Mesh& probe, const SphereTree& probe_tr
     for (int c = 0; c < 3; ++c) lverts_[c * nverts_ + v] = verts[v][c];
   ptx_.assign(3 * nverts_, 0.0);
   ptx_.shrink_to_fit();
+  vbnd_.assign(6 * nverts_, 0.0f);
+  vbnd_.shrink_to_fit();
   pkey_ = probe_tree.nodes.data();
   phash_ = probe_tree.mesh_hash;
   fit(cstamp_, probe_tree.nodes.size());
@@ -199,7 +201,7 @@ void CollideScratch::prepare_probe(const Mesh& probe, const SphereTree& probe_tr
 std::size_t CollideScratch::bytes() const {
   auto b = [](const auto& v) { return v.capacity() * sizeof(v[0]); };
   return b(lvrange_) + b(lverts_) + b(lidx_) + b(ptx_) + b(cstamp_) + b(psph_) + b(osph_) + b(obox_) + b(lstamp_) +
-         b(lbox_) + b(pbox_) + b(pmark_) + b(omark_) + b(stack_) + b(sort_keys_);
+         b(lbox_) + b(vbnd_) + b(pbox_) + b(pmark_) + b(omark_) + b(stack_) + b(sort_keys_);
 }
 
 // One query, traversal and leaf stage, per instruction set (collide_traversal.inl; the primary

@@ -247,8 +247,9 @@ class CollideScratch {
   std::vector<std::array<float, 8>> obox_;  // object leaf: union of its face boxes (lo xyz, hi xyz, pad)
   const void* osph_key_ = nullptr;          // object tree osph_ was filled from (nodes.data()) ...
   std::uint64_t osph_hash_ = 0;             // ... and its mesh_hash
-  std::vector<std::uint32_t> lstamp_;       // probe leaf node -> generation of its cached face boxes
-  std::vector<std::array<float, 8>> lbox_;  // probe leaf: union of its face boxes (lo xyz, hi xyz, pad)
+  std::vector<std::uint32_t> lstamp_;       // probe leaf node -> generation it was transformed (ptx_, vbnd_, lbox_)
+  std::vector<std::array<float, 8>> lbox_;  // probe leaf: union of its face boxes (lo xyz, hi xyz); [6] != 0: in pbox_
+  std::vector<float> vbnd_;                 // ptx_'s float bounds, SoA: lo x, y, z, hi x, y, z (stride nverts_)
   std::vector<float> pbox_;                 // probe face boxes by slot, SoA: component k at k * pstride_
   std::size_t pstride_ = 0;                 // slots + padding for whole-vector loads
   std::vector<std::uint32_t> pmark_;        // probe face -> generation it was counted as a contact

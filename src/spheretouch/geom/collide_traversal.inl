@@ -241,12 +241,11 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
   static float float_above(double x) { return static_cast<float>(x + std::abs(x) * 0x1p-22 + 1e-30); }
 
   // Leaf vertices l (n of them, component c at l[c * nv]) through rt into t (same layout), and
-  // each coordinate's float bounds into lo and hi (component, vertex). A function of its own on
+  // each coordinate's float bounds into lo and hi (same layout). A function of its own on
   // restrict pointers: so GCC 12 vectorizes the loop on AVX2 and AVX-512 (written inside
   // probe_leaf, it vectorized it on neither; SSE2 has no fma instruction to vectorize with).
   static void transform_leaf(const double* __restrict l, std::size_t nv, std::uint32_t n, const RelTransform& rt,
-                             double* __restrict t, float (*__restrict lo)[3 * kMaxLeafFaces],
-                             float (*__restrict hi)[3 * kMaxLeafFaces]) {
+                             double* __restrict t, float* __restrict lo, float* __restrict hi) {
     const double r00 = rt.R(0, 0), r01 = rt.R(0, 1), r02 = rt.R(0, 2), t0 = rt.t[0];
     const double r10 = rt.R(1, 0), r11 = rt.R(1, 1), r12 = rt.R(1, 2), t1 = rt.t[1];
     const double r20 = rt.R(2, 0), r21 = rt.R(2, 1), r22 = rt.R(2, 2), t2 = rt.t[2];
@@ -256,50 +255,82 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
       const double b = std::fma(r10, x, std::fma(r11, y, std::fma(r12, z, t1)));
       const double c = std::fma(r20, x, std::fma(r21, y, std::fma(r22, z, t2)));
       t[i] = a, t[nv + i] = b, t[2 * nv + i] = c;
-      lo[0][i] = float_below(a), lo[1][i] = float_below(b), lo[2][i] = float_below(c);
-      hi[0][i] = float_above(a), hi[1][i] = float_above(b), hi[2][i] = float_above(c);
+      lo[i] = float_below(a), lo[nv + i] = float_below(b), lo[2 * nv + i] = float_below(c);
+      hi[i] = float_above(a), hi[nv + i] = float_above(b), hi[2 * nv + i] = float_above(c);
     }
   }
 
-  // Probe leaf p's face boxes (float, enclosing the transformed doubles) in SoA by slot, and their
-  // union, computed once per query.
+  // Probe leaf p transformed (its vertices' doubles into ptx_, their float bounds into vbnd_) and
+  // its box: the union of its face boxes, which is the least / greatest bound over its vertices
+  // (every vertex of a leaf's range belongs to one of its faces). Once per query; the face boxes
+  // themselves wait for probe_faces(): a leaf pair that the leaf boxes settle never needs them.
   const std::array<float, 8>& probe_leaf(std::uint32_t p) {
     std::array<float, 8>& u = sc.lbox_[p];
     if (sc.lstamp_[p] == gen) return u;
     sc.lstamp_[p] = gen;
     ++res.stats.probe_leaves;
-    const SphereNode& hp = PT.nodes[p];
     const auto [v0, v1] = sc.lvrange_[p];
     const std::uint32_t n = v1 - v0;
     ST_ASSERT(n <= 3 * kMaxLeafFaces, "a leaf's distinct vertices are at most three a face");
     // The very doubles tri_tri_overlap will see: apply(rt, v) of the same local vertices, each
     // coordinate fma(R_i0, x, fma(R_i1, y, fma(R_i2, z, t_i))) as apply() computes it (an fma is
     // rounded once, so a vector fma gives the same bits), and each coordinate's float bounds.
-    // float_below and float_above are non-decreasing (a product by a power of two, a difference
-    // and a rounding to float, each monotone), so the least float_below of a face's three
-    // vertices is float_below of their least coordinate: the face box the face's own doubles
-    // give. One pass a vertex instead of one a face corner, over coordinate streams (SoA).
     const std::size_t nv = sc.nverts_;
-    float lo[3][3 * kMaxLeafFaces], hi[3][3 * kMaxLeafFaces];
+    float* lo = sc.vbnd_.data() + v0;
+    float* hi = lo + 3 * nv;
     transform_leaf(sc.lverts_.data() + v0, nv, n, rt, sc.ptx_.data() + v0, lo, hi);
+    for (int k = 0; k < 3; ++k) bounds_union(lo + k * nv, hi + k * nv, n, u[k], u[3 + k]);
+    u[6] = 0;  // face boxes not made yet
+    return u;
+  }
+
+  // The least of lo[0, n) and the greatest of hi[0, n) (NaN left out), by whole vectors: the last
+  // one overlaps the one before when n is not a multiple of the width (a lane seen twice does not
+  // change a min or a max), so nothing past n is read; fewer than a vector, one at a time.
+  static void bounds_union(const float* lo, const float* hi, std::uint32_t n, float& least, float& greatest) {
     const float inf = std::numeric_limits<float>::infinity();
-    float ul[3] = {inf, inf, inf}, uh[3] = {-inf, -inf, -inf};  // the union, in registers
+    constexpr auto w = static_cast<std::uint32_t>(Lanes::width);
+    if (n < w) {
+      least = inf, greatest = -inf;
+      for (std::uint32_t i = 0; i < n; ++i) least = std::min(least, lo[i]), greatest = std::max(greatest, hi[i]);
+      return;
+    }
+    // min(x, acc) / max(x, acc) keep acc where x is NaN (the second operand wins, as minps does).
+    Lanes a = Lanes::broadcast(inf), b = Lanes::broadcast(-inf);
+    for (std::uint32_t i = 0;; i += w) {
+      const std::uint32_t at = std::min(i, n - w);
+      a = min(Lanes::load(lo + at), a);
+      b = max(Lanes::load(hi + at), b);
+      if (at == n - w) break;
+    }
+    least = hmin(a), greatest = hmax(b);
+  }
+
+  // Probe leaf p's face boxes (float, enclosing the transformed doubles) into pbox_ by slot, once
+  // per query, after probe_leaf(p). float_below and float_above are non-decreasing (a product by
+  // a power of two, a difference and a rounding to float, each monotone), so the least
+  // float_below of a face's three vertices is float_below of their least coordinate: the face box
+  // the face's own doubles give, taken from the bounds made once a vertex.
+  void probe_faces(std::uint32_t p) {
+    std::array<float, 8>& u = sc.lbox_[p];
+    ST_ASSERT(sc.lstamp_[p] == gen, "probe_leaf() transformed the leaf this query");
+    if (u[6] != 0) return;
+    u[6] = 1;
+    const SphereNode& hp = PT.nodes[p];
+    const std::size_t nv = sc.nverts_;
+    const float* lo = sc.vbnd_.data();
+    const float* hi = lo + 3 * nv;
     float* pb = sc.pbox_.data();
     const std::size_t st = sc.pstride_;
     for (std::uint32_t slot = hp.first, e = hp.first + hp.count; slot < e; ++slot) {
       const auto& ix = sc.lidx_[slot];
-      const std::uint32_t a = ix[0] - v0, b = ix[1] - v0, c = ix[2] - v0;
       for (int k = 0; k < 3; ++k) {
-        const float l = std::min(lo[k][a], std::min(lo[k][b], lo[k][c]));
-        const float h = std::max(hi[k][a], std::max(hi[k][b], hi[k][c]));
-        pb[k * st + slot] = l;
-        pb[(3 + k) * st + slot] = h;
-        ul[k] = std::min(ul[k], l);
-        uh[k] = std::max(uh[k], h);
+        const float* l = lo + k * nv;
+        const float* h = hi + k * nv;
+        pb[k * st + slot] = std::min(l[ix[0]], std::min(l[ix[1]], l[ix[2]]));
+        pb[(3 + k) * st + slot] = std::max(h[ix[0]], std::max(h[ix[1]], h[ix[2]]));
       }
     }
-    u = {ul[0], ul[1], ul[2], uh[0], uh[1], uh[2], 0, 0};
-    return u;
   }
 
   void emit(std::uint32_t pf, std::uint32_t of) {
@@ -366,6 +397,7 @@ struct CollideQuery<ST_COLLIDE_WIDE_SIMD::Lanes> {
     float ou[6];
     const std::uint64_t mo = face_box_mask(ob, ho.count, u.data(), ou);
     if (mo == 0) return;
+    probe_faces(p);
     const std::uint64_t mp = probe_mask(hp.first, hp.count, ou);
     if (mp == 0) return;
     for (std::uint64_t m = mo; m != 0; m &= m - 1) {
