@@ -47,6 +47,9 @@ struct ScatterGather::Impl {
   bool prune_pending = false;                    // a worker dropped a set: prune_sets()
   std::uint64_t cur_seq = 0;
   bool in_round = false;
+  // Nothing owed after the last round (every worker Live, its Result in, no heartbeat out): the
+  // next skips its drain before the sends (two system calls a socket for nothing).
+  bool owed_nothing = false;
   std::vector<std::uint8_t> covered;  // per block, this round
   std::vector<std::uint8_t> buf;      // encode buffer
   std::vector<zmq::pollitem_t> items;
@@ -230,6 +233,7 @@ struct ScatterGather::Impl {
         if (now >= p.held_refresh_due) {  // the Hello it answers with may arrive in any later round
           p.held_refresh_due = now + cfg.held_refresh_period;
           p.send(HeartbeatMsg{++p.nonce}, buf);
+          owed_nothing = false;
         }
       } else if (p.link != Link::Loading) {
         p.step(TurnEvent::Ping);  // unknown or empty: it must at least say hello by the deadline
@@ -365,7 +369,8 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   m.out = &out;
   m.runs.clear();
   m.in_round = false;
-  m.service_now();  // old replies are dropped here, Hellos applied
+  if (!m.owed_nothing) m.service_now();  // old replies are dropped here, Hellos applied
+  m.owed_nothing = true;
   m.cur_seq = seq;
   m.in_round = true;
   m.begin_round_sends(pose, Clock::now());
@@ -382,6 +387,8 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   }
   m.in_round = false;
   m.end_round(Clock::now());
+  m.owed_nothing = m.owed_nothing && out.workers_replied == m.peers.size() &&
+                   std::all_of(m.peers.begin(), m.peers.end(), [](const Peer& p) { return p.link == Link::Live; });
   m.out = nullptr;
   m.runs.merge(out.pairs);  // a k-way merge of the sorted runs
   out.pairs.erase(std::unique(out.pairs.begin(), out.pairs.end()), out.pairs.end());
@@ -400,6 +407,7 @@ RoundResult ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Cloc
 
 bool ScatterGather::wait_ready(Clock::time_point deadline) {
   Impl& m = *impl_;
+  m.owed_nothing = false;  // it sends heartbeats and uploads
   for (;;) {
     const auto now = Clock::now();
     m.revive_silent(now);
