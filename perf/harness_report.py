@@ -1045,9 +1045,12 @@ def scale_doc(doc, md):
                 lo, hi = min(us), max(us)
                 return f_us(lo) if f_us(lo) == f_us(hi) else f"{f_us(lo)}–{f_us(hi)}"
 
-            md.append("Predicted speed-up against one thread (timed beside each W's shares, before and after "
-                      "them: one thread µs gives the least and greatest over the W's), per W: compute only (the "
-                      "slowest share plus the client's merge, no network)" + "".join(f" / {n}" for n in nets) + ":\n")
+            beside = any("single_beside_us" in r for r in rows_)  # runs since 28 Nov 21:00
+            md.append("Predicted speed-up against one thread" + (
+                " (timed beside each W's shares, before and after them: one thread µs gives the least and "
+                "greatest over the W's)" if beside else " (timed once, before every W)") +
+                ", per W: compute only (the slowest share plus the client's merge, no network)"
+                + "".join(f" / {n}" for n in nets) + ":\n")
             body = []
             for pose, mapping in keys:
                 r0 = next((by[(pose, mapping, w)] for w in ws if (pose, mapping, w) in by), {})
