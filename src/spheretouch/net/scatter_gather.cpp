@@ -7,10 +7,8 @@
 #include <algorithm>
 #include <random>
 #include <thread>
-#include <unordered_map>
 #include <utility>
 
-#include <spheretouch/geom/check.hpp>
 #include <spheretouch/geom/collide.hpp>
 #include <spheretouch/net/block_deal.hpp>
 #include <spheretouch/net/block_set_cache.hpp>
@@ -20,12 +18,10 @@
 
 namespace st::inline SPHERETOUCH_ABI::net {
 
-using client::heard;
 using client::Link;
 using client::LinkEvent;
 using client::missed;
 using client::Peer;
-using client::SetPtr;
 using client::Turn;
 using client::TurnEvent;
 
