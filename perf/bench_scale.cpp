@@ -18,10 +18,11 @@
 // not move with the host's speed from one share's timing to the next); and the predicted round
 //   compute = max_w (query_w + encode of its Result) + the client's decode and merge
 //   network   = compute + client CPU(W) + round trip + largest reply / bandwidth
-// with speed-up = single-thread collide() (timed beside each W) / predicted round. The model is checked where this
-// machine can: W = 1 and 2 in-process workers over inproc, predicted (our empty round + the
-// slowest share's query + encode and merge) against the measured round, same poses, the terms and
-// the rounds timed in interleaved blocks so that all see the host at the same speed.
+// with speed-up = single-thread collide() (timed beside each W) / predicted round. The model is
+// checked where this machine can: W = 1 and 2 in-process workers over inproc, predicted (our
+// empty round + the slowest share's query + encode and merge) against the measured round, same
+// poses, the terms and the rounds timed in interleaved blocks so that all see the host at the
+// same speed.
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -661,6 +662,16 @@ void run_scale(const ScaleArgs& a) {
                  result.pairs.size(), single[i]);
   }
 
+  // One thread timed again beside each W's shares, before and after them (below): a speed-up
+  // compares times of one phase of the host (on a shared VM the one-thread round moved 1.0-1.9x
+  // between the start of a run and its end).
+  const auto time_single = [&](std::vector<double>& us) {
+    us.resize(poses.size());
+    const geom::CollideConfig full = geom::DefaultCollideConfig();
+    for (std::size_t i = 0; i < poses.size(); ++i)
+      us[i] = time_median_us(a.runs, [&] { geom::collide(probe, pt, object, ot, poses[i], full, scratch, result); });
+  };
+
   const auto split_for = [&](std::uint32_t W, geom::Mapping m) -> Split {
     Split s;
     if (fixed_layer != geom::kFree && fixed_block != 0) {
@@ -750,15 +761,6 @@ void run_scale(const ScaleArgs& a) {
       std::fprintf(stderr, "W=%u %s: layer %u, block size %u, %u blocks%s\n", W, geom::to_string(m), sp.layer,
                    sp.block_size, sp.blocks, sp.automatic ? " (automatic)" : "");
       const auto share = net::deal_blocks(sp.blocks, W, m, 1);
-      // One thread timed again beside this W's shares, before and after them: a speed-up compares
-      // times of one phase of the host (on a shared VM the one-thread round moved 1.0-1.9x between
-      // the start of a run and its end).
-      const auto time_single = [&](std::vector<double>& us) {
-        us.resize(poses.size());
-        const geom::CollideConfig full = geom::DefaultCollideConfig();
-        for (std::size_t i = 0; i < poses.size(); ++i)
-          us[i] = time_median_us(a.runs, [&] { geom::collide(probe, pt, object, ot, poses[i], full, scratch, result); });
-      };
       std::vector<double> single_before, single_after;
       time_single(single_before);
       BlockTests& per_block_tests = tests_per_block(sp);
