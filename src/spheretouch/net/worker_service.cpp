@@ -170,6 +170,7 @@ Status WorkerService::init(zmq::context_t& ctx) {
       sock_.set(zmq::sockopt::curve_secretkey, cfg_.curve->secret_z85);
       wipe_secret(cfg_.curve->secret_z85);  // libzmq holds it now
       sock_.set(zmq::sockopt::zap_domain, "spheretouch");
+      zap_fd_ = zap_.get(zmq::sockopt::fd);
     } catch (const zmq::error_t& e) { return fail("CURVE set-up: ", e.what()); }
   }
   // Connection events: libzmq has no limit on the connections a ROUTER accepts, so the service
@@ -184,6 +185,7 @@ Status WorkerService::init(zmq::context_t& ctx) {
       monitor_ = zmq::socket_t(ctx, zmq::socket_type::pair);
       monitor_.set(zmq::sockopt::linger, 0);
       monitor_.connect(addr);
+      monitor_fd_ = monitor_.get(zmq::sockopt::fd);
     }
   }
   try {
@@ -321,19 +323,19 @@ void WorkerService::send_error(const zmq::message_t& peer, ErrorCode code, std::
   send(peer, ErrorMsg{code, ref, std::move(text)});
 }
 
-void WorkerService::handle_zap() {
+bool WorkerService::handle_zap() {
   // Request frames: version, request id, domain, address, routing id, mechanism, credentials.
   std::vector<zmq::message_t> f;
   try {
     do {
       f.emplace_back();
-      if (!zap_.recv(f.back(), zmq::recv_flags::dontwait)) return;
+      if (!zap_.recv(f.back(), zmq::recv_flags::dontwait)) return f.size() > 1;
     } while (f.back().more() && f.size() < 16);
     while (f.back().more()) {
       zmq::message_t junk;
       (void)zap_.recv(junk);
     }
-  } catch (const zmq::error_t&) { return; }
+  } catch (const zmq::error_t&) { return false; }
   bool ok = false;
   if (f.size() >= 7 && f[5].to_string_view() == "CURVE" && f[6].size() == 32) {
     const std::string key(static_cast<const char*>(f[6].data()), 32);
@@ -372,15 +374,16 @@ void WorkerService::handle_zap() {
     zap_.send(zmq::buffer(std::string_view(user)), zmq::send_flags::sndmore);
     zap_.send(zmq::str_buffer(""), zmq::send_flags::none);
   } catch (const zmq::error_t&) {}
+  return true;
 }
 
-void WorkerService::handle_monitor() {
+bool WorkerService::handle_monitor() {
   for (int budget = 0; budget < 256; ++budget) {
     zmq::message_t ev, addr;
     try {
-      if (!monitor_.recv(ev, zmq::recv_flags::dontwait)) return;
+      if (!monitor_.recv(ev, zmq::recv_flags::dontwait)) return true;
       if (ev.more()) (void)monitor_.recv(addr, zmq::recv_flags::none);
-    } catch (const zmq::error_t&) { return; }
+    } catch (const zmq::error_t&) { return true; }
     if (ev.size() < 6) continue;
     std::uint16_t event = 0;
     std::uint32_t value = 0;
@@ -400,28 +403,45 @@ void WorkerService::handle_monitor() {
       if (connections_ > 0) --connections_;
     }
   }
+  return false;  // more may be waiting
+}
+
+void WorkerService::drain_side_sockets() {
+  // Their descriptors signal only when a mailbox goes from empty to not empty, so each is read
+  // until EAGAIN (or again at the next poll, without waiting, when a budget stopped it first).
+  bool drained = true;
+  if (zap_) {
+    int budget = 256;
+    while (budget > 0 && handle_zap()) --budget;
+    drained = budget > 0;
+  }
+  if (monitor_) drained = handle_monitor() && drained;
+  side_pending_ = !drained;
 }
 
 bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
-  // An absent socket is polled as descriptor -1 (ignored), never as descriptor 0 (stdin).
+  // An absent descriptor is polled as -1 (ignored), never as descriptor 0 (stdin). Only sock_ is
+  // polled as a socket; the ZAP handler and the monitor by their descriptors (zap_fd_).
   zmq::pollitem_t items[4] = {{sock_.handle(), 0, ZMQ_POLLIN, 0},
-                              {zap_.handle(), -1, ZMQ_POLLIN, 0},
+                              {nullptr, zap_fd_, ZMQ_POLLIN, 0},
                               {nullptr, job_ ? job_->fd : -1, ZMQ_POLLIN, 0},
-                              {monitor_.handle(), -1, ZMQ_POLLIN, 0}};
+                              {nullptr, monitor_fd_, ZMQ_POLLIN, 0}};
   // The loader's eventfd wakes the poll when a set is built; without one (eventfd failed) the
   // poll is kept short while a load runs.
   if (job_ && job_->fd < 0) timeout = std::min(timeout, std::chrono::milliseconds(5));
+  if (side_pending_) timeout = std::chrono::milliseconds(0);
+  int ready = 0;
   try {
-    if (zmq::poll(items, 4, timeout) <= 0) {
-      if (job_ && job_->done.load(std::memory_order_acquire)) finish_job();
-      drop_idle();
-      return true;
-    }
+    ready = zmq::poll(items, 4, timeout);
   } catch (const zmq::error_t& e) {
     return e.num() != ETERM;  // EINTR (a signal): let the caller look at its stop flag
   }
-  if (zap_ && (items[1].revents & ZMQ_POLLIN)) handle_zap();
-  if (monitor_ && (items[3].revents & ZMQ_POLLIN)) handle_monitor();
+  if (side_pending_ || (items[1].revents | items[3].revents) & ZMQ_POLLIN) drain_side_sockets();
+  if (ready <= 0) {
+    if (job_ && job_->done.load(std::memory_order_acquire)) finish_job();
+    drop_idle();
+    return true;
+  }
   if (job_ && job_->done.load(std::memory_order_acquire)) finish_job();
   drop_idle();
   if (!(items[0].revents & ZMQ_POLLIN)) return true;

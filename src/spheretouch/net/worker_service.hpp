@@ -259,8 +259,9 @@ class WorkerService {
   /// sets no one used for active_set, then its own LRU set); false when the worker is full of
   /// sets others use.
   bool make_room(const std::string& owner, std::uint64_t bytes);
-  void handle_zap();
-  void handle_monitor();  ///< connection accepted / closed: counts, enforces max_connections
+  bool handle_zap();      ///< answers one ZAP request; false when none was waiting
+  bool handle_monitor();  ///< connection accepted / closed: counts, enforces max_connections; true when drained
+  void drain_side_sockets();
   void on_load(const zmq::message_t& peer, const std::string& owner, const LoadBlocksMsg& m);
   void send(const zmq::message_t& peer, const Message& m);
   void send(const std::string& peer, const Message& m);
@@ -285,6 +286,14 @@ class WorkerService {
   zmq::socket_t sock_;
   zmq::socket_t zap_;                                 // ZAP handler (CURVE client allow-list), or empty
   zmq::socket_t monitor_;                             // events of sock_ (accepted, disconnected), or empty
+  // zap_ and monitor_ are polled by their ZMQ_FD (a plain descriptor, readable when their command
+  // mailbox is signalled) and drained to EAGAIN when it fires: zmq_poll on a socket checks its
+  // mailbox with two system calls before and after every wait, for every Query.
+  // A socket's descriptor is signalled only for what comes after a read found its queues empty
+  // (a pipe new to a reader does not signal its first message): so the first poll drains both,
+  // as does the one after a drain stopped at its budget.
+  int zap_fd_ = -1, monitor_fd_ = -1;
+  bool side_pending_ = true;
   std::uint32_t connections_ = 0;                     // TCP/ipc connections open now
   std::unordered_map<int, std::uint32_t> bad_by_fd_;  // bad messages per open connection (its descriptor)
   std::vector<std::string> allowed_;                  // admitted client public keys, 32 raw bytes each
