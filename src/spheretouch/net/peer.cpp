@@ -80,7 +80,7 @@ void Peer::maybe_start_upload(const ScatterConfig& cfg, const BlockSetCache& set
 }
 
 void Peer::pump_upload(const ScatterConfig& cfg, Clock::time_point now, std::vector<std::uint8_t>& buf) {
-  if (link != Link::Loading || upload_off >= upload->bytes.size()) return;
+  if (!upload_has_room()) return;
   const auto& bytes = upload->bytes;
   const std::size_t chunk = std::max<std::size_t>(1, std::min(cfg.chunk_bytes, cfg.limits.max_chunk_bytes));
   LoadBlocksMsg m{upload->hash, bytes.size(), 0, {}};

@@ -65,6 +65,8 @@ constexpr Turn turn_after(Turn from, TurnEvent e) {
 constexpr bool heard(Link l) { return l == Link::Live || l == Link::Loading; }
 /// At the round's end: asked and not answered, a miss.
 constexpr bool missed(Turn t) { return t == Turn::Queried || t == Turn::Unsent || t == Turn::Pinged; }
+/// In a round: a reply is still awaited (a Result, or the Hello a ping asks for).
+constexpr bool awaited(Turn t) { return t == Turn::Queried || t == Turn::Pinged; }
 
 struct Peer {
   std::string endpoint;
@@ -133,6 +135,8 @@ struct Peer {
   void maybe_start_upload(const ScatterConfig& cfg, const BlockSetCache& sets, Clock::time_point now);
   /// Queues the chunks of the set being sent until ZeroMQ's queue is full.
   void pump_upload(const ScatterConfig& cfg, Clock::time_point now, std::vector<std::uint8_t>& buf);
+  /// Loading with bytes not yet handed to ZeroMQ: it waits for send room (pump_upload).
+  bool upload_has_room() const { return link == Link::Loading && upload_off < upload->bytes.size(); }
   /// Loading, and nothing sent or acknowledged for load_timeout.
   bool load_stuck(const ScatterConfig& cfg, Clock::time_point now) const {
     return link == Link::Loading && now - load_progress_at > cfg.load_timeout;

@@ -20,7 +20,6 @@ namespace st::inline SPHERETOUCH_ABI::net {
 
 using client::Link;
 using client::LinkEvent;
-using client::missed;
 using client::Peer;
 using client::Turn;
 using client::TurnEvent;
@@ -49,6 +48,7 @@ struct ScatterGather::Impl {
   std::vector<std::uint8_t> covered;  // per block, this round
   std::vector<std::uint8_t> buf;      // encode buffer
   std::vector<zmq::pollitem_t> items;
+  std::vector<std::uint32_t> polled;  // the peer of each item
   RoundResult* out = nullptr;
   // The round's pairs come in sorted runs (a worker sorts its own; the assist's are sorted as
   // they come), merged at the end without sorting them again.
@@ -63,8 +63,7 @@ struct ScatterGather::Impl {
   // ---- receiving ---------------------------------------------------------------------------
 
   void on_hello(Peer& p, const HelloMsg& h, Clock::time_point now) {
-    if (p.link == Link::Loading && h.epoch != p.epoch)
-      link(p, LinkEvent::LoadEnd);  // restarted: whatever was sent is gone
+    if (p.link == Link::Loading && h.epoch != p.epoch) link(p, LinkEvent::LoadEnd);  // restarted: what was sent is gone
     p.epoch = h.epoch;
     p.worker_id = h.worker_id;
     const std::size_t had = p.held.size();
@@ -153,14 +152,19 @@ struct ScatterGather::Impl {
     }
   }
 
-  /// Waits until `until` (bounded) for replies or send room, then handles everything waiting.
+  /// Waits until `until` (bounded) for replies or send room, then handles everything waiting. In a
+  /// round it polls only the workers it awaits and uploads with room to fill (zmq_poll checks each
+  /// socket's mailbox before and after a wait); the others are read when next asked.
   void wait_and_service(Clock::time_point until) {
     items.clear();
-    for (Peer& p : peers) {
-      short ev = ZMQ_POLLIN;
-      if (p.link == Link::Loading && p.upload_off < p.upload->bytes.size()) ev |= ZMQ_POLLOUT;
-      items.push_back({p.sock.handle(), 0, ev, 0});
-    }
+    polled.clear();
+    for (int all = 0; all < 2 && items.empty(); ++all)
+      for (std::uint32_t i = 0; i < peers.size(); ++i) {  // nobody awaited: all of them
+        const bool upload = peers[i].upload_has_room();
+        if (!all && in_round && !upload && !client::awaited(peers[i].turn)) continue;
+        items.push_back({peers[i].sock.handle(), 0, static_cast<short>(ZMQ_POLLIN | (upload ? ZMQ_POLLOUT : 0)), 0});
+        polled.push_back(i);
+      }
     const auto now = Clock::now();
     const auto left_us = std::chrono::duration_cast<std::chrono::microseconds>(until - now).count();
     // zmq_poll counts in ms: wait whole ms, and poll without waiting through the last fraction
@@ -171,9 +175,9 @@ struct ScatterGather::Impl {
     } catch (const zmq::error_t&) {}
     if (timeout_ms == 0 && left_us > 0) std::this_thread::yield();
     const auto t = Clock::now();
-    for (std::size_t i = 0; i < peers.size(); ++i) {
-      if (items[i].revents & ZMQ_POLLIN) drain(peers[i], t);
-      if (items[i].revents & ZMQ_POLLOUT) peers[i].pump_upload(cfg, t, buf);
+    for (std::size_t i = 0; i < items.size(); ++i) {
+      if (items[i].revents & ZMQ_POLLIN) drain(peers[polled[i]], t);
+      if (items[i].revents & ZMQ_POLLOUT) peers[polled[i]].pump_upload(cfg, t, buf);
     }
   }
 
@@ -195,14 +199,11 @@ struct ScatterGather::Impl {
 
   void begin_round_sends(const geom::Pose& pose, Clock::time_point now) {
     revive_silent(now);
-    if (reassign_pending || prune_pending) {
-      // reassign() prunes too: a worker went down or came back, or one dropped a set.
-      if (reassign_pending)
-        client::reassign(peers, *sets);
-      else
-        client::prune_sets(peers, *sets);
-      reassign_pending = prune_pending = false;
-    }
+    if (reassign_pending)  // a worker went down or came back (reassign() prunes too)
+      client::reassign(peers, *sets);
+    else if (prune_pending)  // a worker dropped a set
+      client::prune_sets(peers, *sets);
+    reassign_pending = prune_pending = false;
     client::refresh_targets(peers, *sets);
     for (Peer& p : peers) p.maybe_start_upload(cfg, *sets, now);
     client::choose_sets(peers, *sets, covered);
@@ -245,7 +246,7 @@ struct ScatterGather::Impl {
     bool any = false;
     for (const Peer& p : peers) {
       if (p.asked) any = true;  // a Query is out (answered or not)
-      if (p.turn == Turn::Queried || p.turn == Turn::Pinged) return false;
+      if (client::awaited(p.turn)) return false;
     }
     return any;  // nobody to wait for: wait out the deadline instead of spinning the caller
   }
@@ -253,7 +254,7 @@ struct ScatterGather::Impl {
   void end_round(Clock::time_point now) {
     for (Peer& p : peers) {
       if (p.link == Link::Down) continue;
-      if (!missed(p.turn)) {
+      if (!client::missed(p.turn)) {
         if (p.turn != Turn::Idle) p.misses = 0;  // Answered or Greeted
         if (p.load_stuck(cfg, now)) mark_down(p);
         continue;

@@ -284,8 +284,8 @@ class WorkerService {
   WorkerConfig cfg_;
   BackendFactory factory_;
   zmq::socket_t sock_;
-  zmq::socket_t zap_;                                 // ZAP handler (CURVE client allow-list), or empty
-  zmq::socket_t monitor_;                             // events of sock_ (accepted, disconnected), or empty
+  zmq::socket_t zap_;      // ZAP handler (CURVE client allow-list), or empty
+  zmq::socket_t monitor_;  // events of sock_ (accepted, disconnected), or empty
   // zap_ and monitor_ are polled by their ZMQ_FD (a plain descriptor, readable when their command
   // mailbox is signalled) and drained to EAGAIN when it fires: zmq_poll on a socket checks its
   // mailbox with two system calls before and after every wait, for every Query.
