@@ -29,10 +29,11 @@ void put_pose(Writer& w, const geom::Pose& p) {
 
 /// A list of global block ids (a Query's skip or take): a u32 count ≤ `limit`, then the ids,
 /// strictly ascending and below max_blocks. Errors name "<field> count" or "<field>".
-void read_blocks(Reader& r, const Limits& L, std::uint32_t limit, const char* field, std::vector<std::uint32_t>& out) {
-  const std::string count_field = std::string(field) + " count";
-  const std::uint32_t n = r.u32(count_field.c_str());
-  if (!r.count_ok(n, limit, 4, count_field.c_str())) return;
+// `field` and its count's name, e.g. "skip" and "skip count" (literals: nothing built a message).
+void read_blocks(Reader& r, const Limits& L, std::uint32_t limit, const char* field, const char* count_field,
+                 std::vector<std::uint32_t>& out) {
+  const std::uint32_t n = r.u32(count_field);
+  if (!r.count_ok(n, limit, 4, count_field)) return;
   out.resize(n);
   for (std::uint32_t i = 0; i < n && r.ok(); ++i) {
     const std::size_t at = r.offset();
@@ -167,14 +168,14 @@ Result<Message> decode_body(MsgType type, Reader& r, const Limits& L) {
           r.fail_at(at, "object", ": ", m.object, " is not below max_objects = ", L.max_objects);
       }
       m.pose = get_pose(r);
-      read_blocks(r, L, L.max_skip, "skip", m.skip);
+      read_blocks(r, L, L.max_skip, "skip", "skip count", m.skip);
       {
         const std::size_t at = r.offset();
         m.standby = r.u64("standby");
         if (r.ok() && m.standby != 0 && m.standby == m.hash)
           r.fail_at(at, "standby", ": the same block set as hash (a standby set is a second one)");
       }
-      read_blocks(r, L, L.max_take, "take", m.take);
+      read_blocks(r, L, L.max_take, "take", "take count", m.take);
       if (r.ok() && m.standby == 0 && !m.take.empty())
         r.fail_at(r.offset(), "take", ": ", m.take.size(), " blocks to take but no standby set named");
       out = std::move(m);

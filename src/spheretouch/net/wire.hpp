@@ -125,15 +125,18 @@ class Reader {
   }
 
  private:
+  // Inline, so a field's fixed size makes the copy a load; the failure path is out of line.
   bool take(void* dst, std::size_t n, const char* field) {
-    if (!ok()) return false;
-    if (n > left()) {
-      fail_at(pos_, field, ": truncated (needs ", n, " bytes, ", left(), " left)");
-      return false;
+    if (ok() && n <= left()) [[likely]] {
+      std::memcpy(dst, d_.data() + pos_, n);
+      pos_ += n;
+      return true;
     }
-    std::memcpy(dst, d_.data() + pos_, n);
-    pos_ += n;
-    return true;
+    return short_of(n, field);
+  }
+  [[gnu::noinline, gnu::cold]] bool short_of(std::size_t n, const char* field) {
+    if (ok()) fail_at(pos_, field, ": truncated (needs ", n, " bytes, ", left(), " left)");
+    return false;
   }
 
   std::span<const std::uint8_t> d_;

@@ -17,6 +17,7 @@
 #include <filesystem>
 #include <random>
 #include <set>
+#include <span>
 #include <stdexcept>
 
 namespace st::inline SPHERETOUCH_ABI::net {
@@ -267,13 +268,14 @@ HelloMsg WorkerService::hello(const std::string& owner, std::uint64_t echo) cons
   return h;
 }
 
-std::string WorkerService::owner_of(const zmq::message_t& peer, const zmq::message_t& frame) const {
+const std::string& WorkerService::owner_of(const zmq::message_t& peer, const zmq::message_t& frame) {
   // Under CURVE the ZAP handler names each connection by its client key (User-Id), which a
-  // client cannot choose; else the routing id, which ScatterGather draws at random.
+  // client cannot choose; else the routing id, which ScatterGather draws at random. Into one
+  // string kept from message to message (no allocation a message).
   if (zap_) {
-    if (const char* id = zmq_msg_gets(frame.handle(), "User-Id"); id && *id) return std::string("key:") + id;
+    if (const char* id = zmq_msg_gets(frame.handle(), "User-Id"); id && *id) return owner_.assign("key:").append(id);
   }
-  return std::string("id:") + std::string(static_cast<const char*>(peer.data()), peer.size());
+  return owner_.assign("id:").append(static_cast<const char*>(peer.data()), peer.size());
 }
 
 void WorkerService::send(const std::string& peer, const Message& m) {
@@ -571,15 +573,18 @@ void WorkerService::handle(const zmq::message_t& peer, const std::string& owner,
   if (auto* q = std::get_if<QueryMsg>(&msg)) {
     // Answered at the end of the batch (serve_queries); a newer Query of the same client takes
     // the place of one still waiting.
-    const std::string id(static_cast<const char*>(peer.data()), peer.size());
-    for (Pending& p : pending_)
-      if (p.owner == owner) {
-        ++counters_.superseded;
-        p.peer = id;
-        p.q = std::move(*q);
-        return;
-      }
-    pending_.push_back({id, owner, std::move(*q)});
+    // Slots are kept from batch to batch, so their strings are assigned without allocating.
+    auto p = std::find_if(pending_.begin(), pending_.begin() + std::ptrdiff_t(npending_),
+                          [&](const Pending& x) { return x.owner == owner; });
+    if (p != pending_.begin() + std::ptrdiff_t(npending_)) {
+      ++counters_.superseded;
+    } else {
+      if (npending_ == pending_.size()) pending_.emplace_back();
+      p = pending_.begin() + std::ptrdiff_t(npending_++);
+      p->owner = owner;
+    }
+    p->peer.assign(static_cast<const char*>(peer.data()), peer.size());
+    p->q = std::move(*q);
     return;
   }
   if (auto* l = std::get_if<LoadBlocksMsg>(&msg)) return on_load(peer, owner, *l);
@@ -600,7 +605,7 @@ WorkerService::Client& WorkerService::client(const std::string& owner) {
 }
 
 void WorkerService::serve_queries() {
-  if (pending_.empty()) return;
+  if (npending_ == 0) return;
   // Cheapest clients first: a client whose queries kept the worker busy waits behind those
   // whose queries are cheap (an unknown client counts as 1 ms), so an honest haptic client waits
   // for at most the one budget-bounded query in progress.
@@ -610,10 +615,11 @@ void WorkerService::serve_queries() {
     const auto it = clients_.find(owner);
     return it == clients_.end() ? kUnknownCostNs : it->second.cost_at(now);
   };
-  std::vector<Pending> batch;
-  batch.swap(pending_);
-  std::stable_sort(batch.begin(), batch.end(),
-                   [&](const Pending& a, const Pending& b) { return recent(a.owner) < recent(b.owner); });
+  const auto batch = std::span(pending_).first(npending_);
+  npending_ = 0;         // answer() adds none
+  if (batch.size() > 1)  // (a sort of one still asks for a buffer)
+    std::stable_sort(batch.begin(), batch.end(),
+                     [&](const Pending& a, const Pending& b) { return recent(a.owner) < recent(b.owner); });
   for (const Pending& p : batch) {
     try {
       answer(p);
@@ -623,8 +629,6 @@ void WorkerService::serve_queries() {
       send_error(p.peer, ErrorCode::TooLarge, p.q.seq, "worker out of memory answering the query");
     }
   }
-  batch.clear();
-  if (pending_.empty()) pending_.swap(batch);  // keep the capacity
 }
 
 void WorkerService::answer(const Pending& p) {

@@ -268,7 +268,7 @@ class WorkerService {
   void send_error(const zmq::message_t& peer, ErrorCode code, std::uint64_t ref, std::string text);
   void send_error(const std::string& peer, ErrorCode code, std::uint64_t ref, std::string text);
   HelloMsg hello(const std::string& owner, std::uint64_t echo) const;
-  std::string owner_of(const zmq::message_t& peer, const zmq::message_t& frame) const;
+  const std::string& owner_of(const zmq::message_t& peer, const zmq::message_t& frame);  ///< into owner_
   void log(int priority, const std::string& text) const {
     if (cfg_.log) cfg_.log(priority, text);
   }
@@ -306,10 +306,12 @@ class WorkerService {
   std::thread loader_;
   WorkerCounters counters_;
   std::unordered_map<std::string, Client> clients_;  // by owner; bounded (kMaxClients)
-  std::vector<Pending> pending_;                     // this batch's Queries, one per client
-  std::vector<FacePair> pairs_;                      // reused per query
-  std::vector<WorkedBlock> worked_;                  // reused per query: the Result's worked blocks
-  std::vector<std::uint8_t> out_;                    // reused encode buffer
+  std::vector<Pending> pending_;                     // this batch's Queries (the first npending_), one per client
+  std::size_t npending_ = 0;
+  std::string owner_;                // owner_of()'s result
+  std::vector<FacePair> pairs_;      // reused per query
+  std::vector<WorkedBlock> worked_;  // reused per query: the Result's worked blocks
+  std::vector<std::uint8_t> out_;    // reused encode buffer
   std::chrono::steady_clock::time_point bad_logged_{};
   std::chrono::steady_clock::time_point next_idle_check_{};
   std::uint64_t bad_unlogged_ = 0;
