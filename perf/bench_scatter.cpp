@@ -274,30 +274,15 @@ void add_scatter(CLI::App& app) {
       raw.push_back(std::move(s));
     }
     std::uint64_t raw_seq = 1u << 30;
-    std::vector<zmq::pollitem_t> raw_items(raw.size());
-    auto split_round = [&](bool) {
+    AwaitReplies raw_wait;
+    auto split_round = [&](bool) {  // the floor's client, our Query
       ++raw_seq;
       for (std::size_t i = 0; i < raw.size(); ++i) {
         std::memcpy(raw_query[i].data() + net::kHeaderBytes, &raw_seq, sizeof raw_seq);  // the Query's seq
         raw[i].send(zmq::buffer(raw_query[i]), zmq::send_flags::dontwait);
       }
-      std::size_t got = 0;
-      const auto end = Clock::now() + deadline;
-      while (got < raw.size()) {
-        for (std::size_t i = 0; i < raw.size(); ++i) raw_items[i] = {raw[i].handle(), 0, ZMQ_POLLIN, 0};
-        const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(end - Clock::now());
-        if (left.count() <= 0 || zmq::poll(raw_items.data(), raw_items.size(), left) <= 0) return false;
-        for (std::size_t i = 0; i < raw.size(); ++i) {
-          zmq::message_t m;
-          while ((raw_items[i].revents & ZMQ_POLLIN) && raw[i].recv(m, zmq::recv_flags::dontwait)) {
-            std::uint64_t back = 0;  // a Result's seq follows the header, as a Query's does
-            if (m.size() >= net::kHeaderBytes + sizeof back)
-              std::memcpy(&back, static_cast<const char*>(m.data()) + net::kHeaderBytes, sizeof back);
-            got += back == raw_seq;
-          }
-        }
-      }
-      return true;
+      // A Result's seq follows the header, as a Query's does.
+      return raw_wait.all(raw, raw_seq, net::kHeaderBytes, Clock::now() + deadline);
     };
 
     // Floor: the same fan-out with nothing of ours in it: N raw ROUTER echo threads on the same

@@ -37,6 +37,42 @@ inline void echo_pending(zmq::socket_t& s, std::vector<std::uint8_t>& reply) {
   }
 }
 
+/// The gather of a raw fan-out: waits until every socket has answered round `word` (the 8 bytes
+/// at `word_at` of a reply), polling only those not heard from yet, as ScatterGather does
+/// (zmq_poll checks every socket's command mailbox before and after a wait: two system calls a
+/// socket). An answer to an earlier round that timed out is not this round's. False at `end`.
+class AwaitReplies {
+ public:
+  bool all(std::vector<zmq::socket_t>& socks, std::uint64_t word, std::size_t word_at,
+           std::chrono::steady_clock::time_point end) {
+    heard_.assign(socks.size(), 0);
+    for (std::size_t got = 0; got < socks.size();) {
+      items_.clear();
+      which_.clear();
+      for (std::size_t i = 0; i < socks.size(); ++i)
+        if (!heard_[i]) items_.push_back({socks[i].handle(), 0, ZMQ_POLLIN, 0}), which_.push_back(i);
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(end - std::chrono::steady_clock::now());
+      if (left.count() <= 0 || zmq::poll(items_.data(), items_.size(), left) <= 0) return false;
+      for (std::size_t k = 0; k < items_.size(); ++k) {
+        const std::size_t i = which_[k];
+        zmq::message_t m;
+        while ((items_[k].revents & ZMQ_POLLIN) && socks[i].recv(m, zmq::recv_flags::dontwait)) {
+          std::uint64_t back = 0;
+          if (m.size() >= word_at + sizeof back)
+            std::memcpy(&back, static_cast<const char*>(m.data()) + word_at, sizeof back);
+          if (back == word && !heard_[i]) heard_[i] = 1, ++got;
+        }
+      }
+    }
+    return true;
+  }
+
+ private:
+  std::vector<zmq::pollitem_t> items_;
+  std::vector<std::size_t> which_;  // the socket of each item
+  std::vector<std::uint8_t> heard_;
+};
+
 /// N DEALERs, one per echo endpoint: one frame to every echo, then wait for all of them.
 class FanOutGather {
  public:
@@ -47,7 +83,6 @@ class FanOutGather {
       dl.connect(ep);
       dealers_.push_back(std::move(dl));
     }
-    items_.resize(dealers_.size());
   }
 
   /// Sends `query_bytes` (at least the 8-byte round number) to every echo and waits for all the
@@ -57,27 +92,12 @@ class FanOutGather {
     query_.assign(std::max<std::size_t>(query_bytes, sizeof word), 0);
     std::memcpy(query_.data(), &word, sizeof word);
     for (zmq::socket_t& dl : dealers_) dl.send(zmq::buffer(query_), zmq::send_flags::dontwait);
-    std::size_t got = 0;
-    const auto end = std::chrono::steady_clock::now() + deadline;
-    while (got < dealers_.size()) {
-      for (std::size_t i = 0; i < dealers_.size(); ++i) items_[i] = {dealers_[i].handle(), 0, ZMQ_POLLIN, 0};
-      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(end - std::chrono::steady_clock::now());
-      if (left.count() <= 0 || zmq::poll(items_.data(), items_.size(), left) <= 0) return false;
-      for (std::size_t i = 0; i < dealers_.size(); ++i) {
-        zmq::message_t m;
-        while ((items_[i].revents & ZMQ_POLLIN) && dealers_[i].recv(m, zmq::recv_flags::dontwait)) {
-          std::uint64_t back = 0;
-          if (m.size() >= sizeof back) std::memcpy(&back, m.data(), sizeof back);
-          got += back == word;  // an echo of a round that timed out earlier is not this round's
-        }
-      }
-    }
-    return true;
+    return wait_.all(dealers_, word, 0, std::chrono::steady_clock::now() + deadline);
   }
 
  private:
   std::vector<zmq::socket_t> dealers_;
-  std::vector<zmq::pollitem_t> items_;
+  AwaitReplies wait_;
   std::vector<std::uint8_t> query_;
   std::uint64_t seq_ = 0;
 };
