@@ -331,7 +331,7 @@ bool WorkerService::handle_zap() {
   try {
     do {
       f.emplace_back();
-      if (!zap_.recv(f.back(), zmq::recv_flags::dontwait)) return f.size() > 1;
+      if (!zap_.recv(f.back(), zmq::recv_flags::dontwait)) return false;
     } while (f.back().more() && f.size() < 16);
     while (f.back().more()) {
       zmq::message_t junk;
@@ -432,18 +432,12 @@ bool WorkerService::poll_once(std::chrono::milliseconds timeout) {
   // poll is kept short while a load runs.
   if (job_ && job_->fd < 0) timeout = std::min(timeout, std::chrono::milliseconds(5));
   if (side_pending_) timeout = std::chrono::milliseconds(0);
-  int ready = 0;
   try {
-    ready = zmq::poll(items, 4, timeout);
+    zmq::poll(items, 4, timeout);  // (a timeout leaves every revents 0)
   } catch (const zmq::error_t& e) {
     return e.num() != ETERM;  // EINTR (a signal): let the caller look at its stop flag
   }
   if (side_pending_ || (items[1].revents | items[3].revents) & ZMQ_POLLIN) drain_side_sockets();
-  if (ready <= 0) {
-    if (job_ && job_->done.load(std::memory_order_acquire)) finish_job();
-    drop_idle();
-    return true;
-  }
   if (job_ && job_->done.load(std::memory_order_acquire)) finish_job();
   drop_idle();
   if (!(items[0].revents & ZMQ_POLLIN)) return true;
