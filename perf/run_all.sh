@@ -209,6 +209,10 @@ if [ $quick = 0 ]; then  # needs the browser and ~3 minutes; the browser tests c
   log "in-process device (callback-clocked) against the UDP bridge, same run"
   ninja -C "$build" -j"${ST_JOBS:-1}" examples/custom_device >/dev/null
   perf/device_bench.sh 5 "$out" > "$out/device.txt"
+  log "the demo's collision latency, coherent collider on and off"
+  perf/demo_coherent.sh 6 3 "0 2" "$out" > "$out/demo_coherent.txt"
+else
+  perf/demo_coherent.sh 1 1 0 "$out" > "$out/demo_coherent.txt"
 fi
 
 log "report"

@@ -168,10 +168,19 @@ TEST_CASE("run: a short scene ticks at its rate, presses with force, releases to
     std::string line;
     std::getline(in, line);
     CHECK(line == "start_ns,end_ns,pose_seq,pairs,contacts,pd_mm,complete");
-    std::size_t n = 0;
-    while (std::getline(in, line)) ++n;
+    std::size_t n = 0, with_pairs = 0;
+    while (std::getline(in, line)) {
+      ++n;
+      // pairs is the fourth field
+      std::size_t at = 0;
+      for (int k = 0; k < 3 && at != std::string::npos; ++k) at = line.find(',', at + 1);
+      if (at != std::string::npos && std::stoul(line.substr(at + 1)) > 0) ++with_pairs;
+    }
     CHECK(n > 100);
     CHECK(contains(r.output, "collision       " + std::to_string(n) + " rounds"));
+    // The rounds in contact are timed apart: as many as rounds.csv has with pairs.
+    CHECK(with_pairs > 0);
+    CHECK(contains(r.output, "in contact      " + std::to_string(with_pairs) + " rounds with pairs, latency p50 "));
   }
 
   const std::string trace = st::test::slurp_file(out + "/trace.json");

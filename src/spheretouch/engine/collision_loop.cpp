@@ -313,6 +313,7 @@ void CollisionLoop::run() {
       status_->store(st);
     }
     latency_.record(t1 - t0);
+    if (pairs_total > 0) contact_latency_.record(t1 - t0);
     const RoundRecord rec{t0, t1, sample.seq, pairs_total, contacts, pd, complete};
     if (records_.size() < max_rounds_) records_.push_back(rec);
     if (rounds_csv_ && rounds_error_.empty() &&

@@ -115,6 +115,9 @@ class CollisionLoop {
   }                                                                     ///< newest round's contacts
   const std::vector<RoundRecord>& records() const { return records_; }  ///< the first max_rounds, after stop()
   const rt::LatencyHistogram& latency() const { return latency_; }      ///< every round's latency, after stop()
+  /// The latency of the rounds that found contact (pairs), after stop(): what the force waits
+  /// for, which the rounds without contact (most of a run, a sphere test or a few) hide in latency().
+  const rt::LatencyHistogram& contact_latency() const { return contact_latency_; }
   /// The round with the deepest penetration (the peak of the force law): its pose (probe → that
   /// object) and pairs, and which object.
   const geom::Pose& peak_pose() const { return peak_pose_; }
@@ -150,7 +153,7 @@ class CollisionLoop {
   std::atomic<std::int64_t> last_latency_ns_{0};
   std::atomic<std::uint32_t> last_contacts_{0};
   std::vector<RoundRecord> records_;
-  rt::LatencyHistogram latency_;
+  rt::LatencyHistogram latency_, contact_latency_;
   std::FILE* rounds_csv_ = nullptr;
   std::string rounds_path_, rounds_error_;
   geom::Pose peak_pose_ = geom::Pose::Identity();

@@ -606,6 +606,10 @@ RunReport RunEngine::finish(int signal) {
           static_cast<unsigned long long>(collision.rounds()), double(collision.rounds()) / secs,
           double(lat.percentile_ns(0.5)) * 1e-6, double(lat.percentile_ns(0.99)) * 1e-6,
           static_cast<unsigned long long>(collision.incomplete()), e.backend.c_str());
+  if (const rt::LatencyHistogram& cl = collision.contact_latency(); cl.count() > 0)
+    appendf(summary, "  in contact      %llu rounds with pairs, latency p50 %.3f ms, p99 %.3f ms\n",
+            static_cast<unsigned long long>(cl.count()), double(cl.percentile_ns(0.5)) * 1e-6,
+            double(cl.percentile_ns(0.99)) * 1e-6);
   {  // the collision thread's coherent colliders (after the run: that thread has ended)
     geom::CoherentStats cs;
     for (const std::optional<ComputeCollision>& c : e.colliders)
