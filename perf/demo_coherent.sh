@@ -57,16 +57,20 @@ for w in workers:
             per_run.append({"rounds": len(us), "contact_rounds": len(contact), "p50_us": q(us, 0.5),
                             "contact_p50_us": q(contact, 0.5), "contact_p90_us": q(contact, 0.9),
                             "contact_mean_us": statistics.fmean(contact) if contact else None})
-        row[v] = {"runs": per_run,
-                  "p50_us": statistics.median(x["p50_us"] for x in per_run),
-                  "contact_p50_us": statistics.median(x["contact_p50_us"] for x in per_run),
-                  "contact_p90_us": statistics.median(x["contact_p90_us"] for x in per_run)}
-    row["contact_p50_ratio"] = row["on"]["contact_p50_us"] / row["off"]["contact_p50_us"]
-    row["contact_p90_ratio"] = row["on"]["contact_p90_us"] / row["off"]["contact_p90_us"]
+        # A run too short to reach the contact has no rounds with pairs: its figures are null.
+        med = lambda key: statistics.median(x[key] for x in per_run) if all(x[key] is not None for x in per_run) else None
+        row[v] = {"runs": per_run, "p50_us": med("p50_us"), "contact_p50_us": med("contact_p50_us"),
+                  "contact_p90_us": med("contact_p90_us")}
+    ratio = lambda key: row["on"][key] / row["off"][key] if row["on"][key] and row["off"][key] else None
+    row["contact_p50_ratio"] = ratio("contact_p50_us")
+    row["contact_p90_ratio"] = ratio("contact_p90_us")
     rows.append(row)
 json.dump({"seconds": secs, "runs": runs, "rows": rows}, open(out, "w"), indent=1)
 for row in rows:
     on, off = row["on"], row["off"]
+    if row["contact_p50_ratio"] is None or row["contact_p90_ratio"] is None:
+        print(f"workers {row['workers']}: no rounds with pairs in some run (too short to reach the contact)")
+        continue
     print(f"workers {row['workers']}: rounds with pairs p50 {on['contact_p50_us']:.1f} us coherent on, "
           f"{off['contact_p50_us']:.1f} us off ({row['contact_p50_ratio']:.3f}x), p90 {on['contact_p90_us']:.1f} / "
           f"{off['contact_p90_us']:.1f} us ({row['contact_p90_ratio']:.3f}x); every round p50 {on['p50_us']:.1f} / "
