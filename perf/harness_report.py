@@ -1246,7 +1246,8 @@ def demo_coherent_doc(doc, md):
                      f_us(off.get("contact_p50_us")), f_us(on.get("contact_p50_us")), f_ratio(r.get("contact_p50_ratio")),
                      f_us(off.get("contact_p90_us")), f_us(on.get("contact_p90_us")), f_ratio(r.get("contact_p90_ratio")),
                      f_us(off.get("p50_us")), f_us(on.get("p50_us"))])
-    md.append(f"`spheretouch run configs/demo.toml` for {f_fixed(d.get('seconds'), 0)} s, coherent on and off "
+    secs = d.get("seconds")
+    md.append(f"`spheretouch run configs/demo.toml` for {f'{secs:g}' if finite(secs) else DASH} s, coherent on and off "
               f"alternated, {f_count(d.get('runs'))} runs each (a figure is the median over the runs):\n")
     md += md_table(["collide in", "rounds", "rounds with pairs", "with pairs p50 µs, off", "on", "ratio",
                     "p90 µs, off", "on", "ratio", "every round p50 µs, off", "on"], body)
