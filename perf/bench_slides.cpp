@@ -9,7 +9,9 @@
 // time, the passes' order rotating) and a round's time is its median over the reps.
 // The pair sets of the coherent collider and of collide() are compared on every round. With
 // --withdraw, a series pulls the probe out along the contact's normal, and the rounds after the
-// contact ends are reported apart (what the front of a past contact costs).
+// contact ends are reported apart (what the front of a past contact costs). With --follow, each
+// round's pose is also moved along the contact's normal so that the probe stays as deep in the
+// object as at the start (a hand kept on a curved surface; a straight slide leaves it or digs in).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -17,6 +19,7 @@
 #include <cstdlib>
 #include <iterator>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -93,6 +96,58 @@ bool series_at(const Mesh& object, const std::vector<geom::FacePair>& pairs, Ser
   return true;
 }
 
+/// How far along `n` (out of the object) the probe at `p` must move so that it no longer overlaps
+/// the object: an offset with pairs and one without, found by doubling from 0.5 mm, then bisected
+/// to `tol` mm (the offset returned is the one without pairs). Nothing when no offset within
+/// `reach` mm has the other answer (a probe wrapped round the object, or far from it).
+std::optional<double> clear_offset(const Mesh& probe, const geom::SphereTree& pt, const Mesh& object,
+                                   const geom::SphereTree& ot, const Pose& p, const Vec3& n, double reach, double tol,
+                                   geom::CollideScratch& sc, geom::CollideResult& r) {
+  auto touches = [&](double h) {
+    Pose q = p;
+    q.translation() += h * n;
+    geom::collide(probe, pt, object, ot, q, {}, sc, r);
+    return !r.pairs.empty();
+  };
+  double in = 0, out = 0;  // an offset with pairs, one without
+  const bool at0 = touches(0);
+  for (double h = 0.5;; h *= 2) {
+    if (h > reach) return std::nullopt;
+    if (touches(at0 ? h : -h) != at0) {
+      (at0 ? out : in) = at0 ? h : -h;
+      break;
+    }
+    (at0 ? in : out) = at0 ? h : -h;
+  }
+  while (std::abs(out - in) > tol) {
+    const double mid = 0.5 * (in + out);
+    (touches(mid) ? in : out) = mid;
+  }
+  return out;
+}
+
+/// The poses of a series kept on the surface (--follow): each round's pose moved along the start's
+/// normal by the change of clear_offset() since the start, so the probe is as deep as it started.
+/// A round whose offset cannot be found keeps the correction of the round before.
+std::vector<Pose> followed(const Series& s, int rounds, const Mesh& probe, const geom::SphereTree& pt,
+                           const Mesh& object, const geom::SphereTree& ot) {
+  geom::CollideScratch sc;
+  geom::CollideResult r;
+  constexpr double kReach = 64, kTol = 1e-5;  // mm
+  const std::optional<double> d0 = clear_offset(probe, pt, object, ot, s.start, s.normal, kReach, kTol, sc, r);
+  std::vector<Pose> out;
+  double shift = 0;
+  for (int k = 0; k < rounds; ++k) {
+    Pose p = s.at(k);
+    if (d0) {
+      if (const auto d = clear_offset(probe, pt, object, ot, p, s.normal, kReach, kTol, sc, r)) shift = *d - *d0;
+      p.translation() += shift * s.normal;
+    }
+    out.push_back(p);
+  }
+  return out;
+}
+
 double mean(const std::vector<double>& v) {
   double s = 0;
   for (double x : v) s += x;
@@ -104,9 +159,9 @@ struct SeriesRow {
   std::string name;
   std::uint32_t contacts0 = 0;
   double step_mm = 0, step_deg = 0;
-  bool jerk = false, withdraw = false;
+  bool jerk = false, withdraw = false, follow = false;
   int rounds = 0;
-  int out_rounds = 0;                                   // withdraw: rounds without contact
+  int out_rounds = 0;                                   // rounds without contact
   double out_today_us = 0, out_coherent_us = 0;         // ... their mean per round
   double today_us = 0, filter_us = 0, coherent_us = 0;  // mean per round
   double ratio_mean = 0, ratio_p90 = 0, ratio_max = 0;  // coherent / today, per round
@@ -133,7 +188,7 @@ void add_slides(CLI::App& app) {
     int rounds = 200, reps = 5;
     double turn = 0.01;
     geom::CoherentConfig coherent;
-    bool jerk = true, json = false, only_coherent = false;
+    bool jerk = true, json = false, only_coherent = false, follow = false;
     double withdraw = 0;
   };
   auto a = std::make_shared<Args>();
@@ -157,6 +212,9 @@ void add_slides(CLI::App& app) {
                   "(0: none); the rounds without contact are reported apart")
       ->check(CLI::Range(0.0, 10.0))
       ->capture_default_str();
+  cmd->add_flag("--follow", a->follow,
+                "keep the slides on the surface: each round's pose also moves along the contact's normal so "
+                "that the probe is as deep as at the start (bisected, before any timing)");
   cmd->add_option("--reach", a->coherent.reach, "the coherent collider's reach δ, mm (0: adapted to the motion)")
       ->capture_default_str();
   cmd->add_option("--max-step", a->coherent.max_step,
@@ -214,10 +272,16 @@ void add_slides(CLI::App& app) {
         series.push_back(s);
       }
       for (const Series& s : series) {
+        std::vector<Pose> poses;  // every round's, computed before the timing
+        if (a->follow && !s.withdraw)
+          poses = followed(s, a->rounds, probe, pt, object, ot);
+        else
+          for (int k = 0; k < a->rounds; ++k) poses.push_back(s.at(k));
         SeriesRow row;
         row.contacts0 = contacts0;
         row.step_mm = s.step_mm, row.step_deg = s.step_deg, row.jerk = s.jerk_at >= 0, row.rounds = a->rounds;
         row.withdraw = s.withdraw;
+        row.follow = a->follow && !s.withdraw;
         std::vector<char> in_contact(a->rounds, 0);
         std::vector<std::vector<double>> t_today(a->rounds), t_filter(a->rounds), t_coh(a->rounds);
         geom::CoherentConfig ccfg = a->coherent;
@@ -236,7 +300,7 @@ void add_slides(CLI::App& app) {
             const int path = a->only_coherent ? 2 : (pass + rep) % 3;
             if (path == 2) coh.reset(), coh.reset_stats();
             for (int k = 0; k < a->rounds; ++k) {
-              const Pose pose = s.at(k);
+              const Pose& pose = poses[k];
               const auto t0 = std::chrono::steady_clock::now();
               if (path == 0) {
                 geom::collide(probe, pt, object, ot, pose, today, sc_today, r_today);
@@ -258,7 +322,7 @@ void add_slides(CLI::App& app) {
         }
         // The pair sets, every round: the coherent collider's against collide()'s.
         for (int k = 0; k < a->rounds && !a->only_coherent; ++k) {
-          geom::collide(probe, pt, object, ot, s.at(k), sorted, sc, sorted_plain);
+          geom::collide(probe, pt, object, ot, poses[k], sorted, sc, sorted_plain);
           in_contact[k] = !sorted_plain.pairs.empty();
           const auto& pairs = coh_pairs[k];
           if (pairs == sorted_plain.pairs && coh_contacts[k] == sorted_plain.contacts()) continue;
@@ -313,7 +377,8 @@ void add_slides(CLI::App& app) {
         if (row.withdraw)
           std::snprintf(name, sizeof name, "withdraw %.3g mm/round", s.step_mm);
         else
-          std::snprintf(name, sizeof name, "%s%.3g mm + %.3g°/round", row.jerk ? "jerk at " : "", s.step_mm, s.step_deg);
+          std::snprintf(name, sizeof name, "%s%.3g mm + %.3g°/round%s", row.jerk ? "jerk at " : "", s.step_mm,
+                        s.step_deg, row.follow ? ", followed" : "");
         row.name = name;
         rows.push_back(row);
         ++done;
@@ -329,6 +394,7 @@ void add_slides(CLI::App& app) {
                        {"step_deg", w.step_deg},
                        {"jerk", w.jerk},
                        {"withdraw", w.withdraw},
+                       {"follow", w.follow},
                        {"out_rounds", w.out_rounds},
                        {"out_today_us", round_to(w.out_today_us, 2)},
                        {"out_coherent_us", round_to(w.out_coherent_us, 2)},
@@ -371,14 +437,14 @@ void add_slides(CLI::App& app) {
     }
     std::printf("%s x %s, %d rounds per series, median of %d reps per round, SIMD %s\n", a->probe.c_str(),
                 a->object.c_str(), a->rounds, a->reps, geom::simd::isa_name(geom::simd::active_isa()));
-    std::printf("%8s %-32s %9s %9s %9s %7s %7s %7s %9s %9s %8s %8s %9s %5s\n", "contacts", "series", "today_us",
-                "filter_us", "coh_us", "mean", "p90", "max", "max_ex_rb", "rebuild", "vs_filt", "refresh", "pool_MB",
-                "same");
+    std::printf("%8s %-42s %9s %9s %9s %7s %7s %7s %9s %9s %8s %8s %8s %9s %5s\n", "contacts", "series", "today_us",
+                "filter_us", "coh_us", "mean", "p90", "max", "max_ex_rb", "rebuild", "vs_filt", "refresh", "no_pairs",
+                "pool_MB", "same");
     for (const SeriesRow& w : rows)
-      std::printf("%8u %-32s %9.1f %9.1f %9.1f %7.3f %7.3f %7.3f %9.3f %9.3f %8.3f %8llu %9.2f %5s\n", w.contacts0,
+      std::printf("%8u %-42s %9.1f %9.1f %9.1f %7.3f %7.3f %7.3f %9.3f %9.3f %8.3f %8llu %8d %9.2f %5s\n", w.contacts0,
                   w.name.c_str(), w.today_us, w.filter_us, w.coherent_us, w.ratio_mean, w.ratio_p90, w.ratio_max,
                   w.max_ratio_except_rebuild, w.rebuild_ratio, w.vs_filter_mean,
-                  static_cast<unsigned long long>(w.stats.refreshes), double(w.stats.peak_bytes) / 1e6,
+                  static_cast<unsigned long long>(w.stats.refreshes), w.out_rounds, double(w.stats.peak_bytes) / 1e6,
                   w.mismatched_rounds == 0 ? "yes" : "NO");
     for (const SeriesRow& w : rows)
       if (w.withdraw)

@@ -654,6 +654,9 @@ CMD_COLLIDE = ("build/perf/spheretouch-bench collide --probe .cache/models/hand_
 CMD_SLIDES = ("build/perf/spheretouch-bench slides --probe .cache/models/hand_L2.off "
               "--object .cache/models/<object>.off --poses <poses> --rounds 200 --reps 5 --json "
               "> {out}/slides_<object>.json")
+CMD_SLIDES_FOLLOW = ("build/perf/spheretouch-bench slides --probe .cache/models/hand_L2.off "
+                     "--object .cache/models/<object>.off --poses <poses> --rounds 200 --reps 5 --follow --json "
+                     "> {out}/slides_follow_<object>.json")
 CMD_WITHDRAW = ("build/perf/spheretouch-bench slides --probe .cache/models/hand_L2.off "
                 "--object .cache/models/<object>.off --poses <poses> --steps '' --jerk 0 --withdraw 0.01 "
                 "--rounds 1200 --reps 3 --json > {out}/withdraw_<object>.json")
@@ -1351,10 +1354,10 @@ def withdraw_doc(doc, md):
               "No target of the issue; reported so that this cost stays visible.\n")
 
 
-def slides_doc(doc, md):
+def slides_doc(doc, md, prefix="slides", cmd=CMD_SLIDES):
     """The coherent collider along slides and a jerk (spheretouch-bench slides --json), per object."""
     rows, targets = [], []
-    for o, d in slides_jsons(doc, md, "slides", CMD_SLIDES):
+    for o, d in slides_jsons(doc, md, prefix, cmd):
         if not rows:
             md.append(f"Probe hand_L2, {d.get('rounds', DASH)} rounds per series (forth then back), a round's time the "
                       f"median of {d.get('reps', DASH)} runs of the series; ISA {d.get('isa', DASH)}.\n")
@@ -1365,7 +1368,7 @@ def slides_doc(doc, md):
                         f"{f_ratio(r.get('ratio_mean'))} | {f_ratio(r.get('ratio_p90'))} | "
                         f"{f_ratio(r.get('max_ratio_except_rebuild'))} | {f_ratio(r.get('rebuild_ratio'))} | "
                         f"{f_ratio(r.get('vs_filter_mean'))} | {f_count(r.get('plain_rounds'))} | "
-                        f"{f_fixed((r.get('peak_pool_bytes') or 0) / 1e6, 2)} | "
+                        f"{f_count(r.get('out_rounds'))} | {f_fixed((r.get('peak_pool_bytes') or 0) / 1e6, 2)} | "
                         f"{'yes' if r.get('mismatched_rounds') == 0 else 'NO (' + str(r.get('mismatched_rounds')) + ' rounds)'} |")
             step, mean, p90 = r.get("step_mm"), r.get("ratio_mean"), r.get("ratio_p90")
             label = f"{o} {r.get('contacts')} {name}"
@@ -1382,8 +1385,9 @@ def slides_doc(doc, md):
     if not rows:
         return
     md.append("| object (faces) | contacts | series (per round) | today µs | filter µs | coherent µs | mean | p90 | "
-              "max (but rebuilds) | rebuild after jerk / first round | vs filter (mean) | plain rounds | pool MB | same pairs |")
-    md.append("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+              "max (but rebuilds) | rebuild after jerk / first round | vs filter (mean) | plain rounds | rounds without pairs | "
+              "pool MB | same pairs |")
+    md.append("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
     md.extend(rows)
     met = [f"{t} ({v})" for t, ok, v in targets if ok]
     missed = [f"{t} ({v})" for t, ok, v in targets if not ok]
@@ -1397,8 +1401,9 @@ def slides_doc(doc, md):
               "filter). \"max (but rebuilds)\" leaves out round 0 (the first, a cold rebuild) and the jerk's round "
               "(the collider rebuilds its front there), reported in the next column (for a slide series: round 0). "
               "Plain rounds: the rounds the collider ran `collide()` itself (a step over `max_step` in the round "
-              "after a rebuild or a plain round, its timed rounds). \"same pairs\": the pair set "
-              "equal to `collide()`'s on every round of the series.\n")
+              "after a rebuild or a plain round, its timed rounds). Rounds without pairs: the probe out of contact "
+              "(both paths then descend the spheres alone, or test faces that do not meet). \"same pairs\": the "
+              "pair set equal to `collide()`'s on every round of the series.\n")
 
 
 # title, inputs (any present: render), the file and command of the missing note, commands, renderer.
@@ -1419,6 +1424,13 @@ def results_sections(doc, harness):
                  "contact, a fixed step per round (0.001, 0.01, 0.05, 0.1 mm, each + 0.01°), forth then back; the "
                  "jerk series slides 0.01 mm a round and jumps 1 mm + 1° half-way."),
          None, lambda md: slides_doc(doc, md)),
+        ("Collision core: the coherent collider along slides kept on the surface",
+         [("Command", CMD_SLIDES_FOLLOW)],
+         doc.cmd("`<poses>` as above. The same series, each round's pose also moved along the contact's normal so "
+                 "that the probe stays as deep in the object as at the start (the offset that separates them, "
+                 "bisected to 1e-5 mm before any timing): a hand kept on a curved surface, where the straight slides "
+                 "above leave it (rounds without pairs) or dig in."),
+         None, lambda md: slides_doc(doc, md, "slides_follow", CMD_SLIDES_FOLLOW)),
         ("Collision core: the coherent collider as the probe is withdrawn",
          [("Command", CMD_WITHDRAW)],
          doc.cmd("`<poses>` as above."),

@@ -129,6 +129,9 @@ log "collision core: coherent collider along slides (${collide_objects[*]})"
 for o in "${collide_objects[@]}"; do
   if [ "$o" = elephant ]; then pf="$out/poses/hand_elephant.txt"; else pf="$out/poses/hand_${o}_targets.txt"; fi
   "$bench" slides --probe "$hand" --object "$models/$o.off" --poses "$pf" "${slide_args[@]}" --json > "$out/slides_${o}.json"
+  # The same series kept on the surface (each round's pose moved along the normal to the start's depth).
+  "$bench" slides --probe "$hand" --object "$models/$o.off" --poses "$pf" "${slide_args[@]}" --follow --json \
+    > "$out/slides_follow_${o}.json"
   # The probe withdrawn from each pose, long enough to leave contact from the deepest.
   if [ $quick = 1 ]; then withdraw_args=(--rounds 60 --reps 1); else withdraw_args=(--rounds 1200 --reps 3); fi
   "$bench" slides --probe "$hand" --object "$models/$o.off" --poses "$pf" --steps '' --jerk 0 --withdraw 0.01 \
