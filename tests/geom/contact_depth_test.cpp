@@ -12,6 +12,7 @@
 
 #include <spheretouch/geom/contact_patch.hpp>
 #include <spheretouch/geom/primitives.hpp>
+#include "analytic_shapes.hpp"
 #include "test_models.hpp"
 
 namespace st::inline SPHERETOUCH_ABI::geom {
@@ -26,16 +27,9 @@ using Patch = PatchTestAccess::Patch;
 
 namespace {
 
-constexpr double kDepthTol = 0.05;  // mm: the depth target for analytic shapes (docs/user-guide/force-rendering.md)
-
-const Mesh& box40() {  // faces at ±20
-  static const Mesh m = make_box({40, 40, 40});
-  return m;
-}
-const Mesh& ball10() {  // vertex spacing ~0.7 mm: within ~0.01 mm of the sphere
-  static const Mesh m = make_icosphere(10, 16);
-  return m;
-}
+using st::test::ball10;
+using st::test::box40;
+using st::test::kDepthTol;
 
 using st::test::pose_at;
 

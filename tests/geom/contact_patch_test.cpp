@@ -13,6 +13,7 @@
 
 #include <spheretouch/geom/contact.hpp>
 #include <spheretouch/geom/primitives.hpp>
+#include "analytic_shapes.hpp"
 #include "test_models.hpp"
 
 using namespace st::geom;
@@ -38,16 +39,9 @@ bool finite_model(const ContactModel& m) {
   return finite(m.force_dir) && finite(m.plane_point) && finite(m.probe_point) && finite(m.contact_point) &&
          std::isfinite(m.penetration_mm) && m.penetration_mm >= 0;
 }
-// Meshes: a 40 mm box (faces at ±20), a 10 mm ball (5,120 faces: vertex spacing ~0.7 mm, so the
-// deepest vertex is within ~0.01 mm of the sphere's deepest point).
-const Mesh& box40() {
-  static const Mesh m = make_box({40, 40, 40});
-  return m;
-}
-const Mesh& ball10() {
-  static const Mesh m = make_icosphere(10, 16);
-  return m;
-}
+using st::test::ball10;  // analytic_shapes.hpp
+using st::test::box40;
+using st::test::kDepthTol;
 // Two 10 mm balls (ball10's mesh) 30 mm apart along x, centred on the origin.
 Mesh make_dumbbell() {
   Mesh dumbbell;
@@ -59,7 +53,6 @@ Mesh make_dumbbell() {
   }
   return dumbbell;
 }
-constexpr double kDepthTol = 0.05;  // mm: the depth target for analytic shapes (docs/user-guide/force-rendering.md)
 }  // namespace
 
 TEST_CASE("contact patch: the default model is patch; names parse") {

@@ -53,7 +53,8 @@ struct Fleet {
   }
 };
 
-std::unique_ptr<ScatterGather> client(zmq::context_t& ctx, const std::vector<std::string>& eps, const test::NetScene& s) {
+std::unique_ptr<ScatterGather> daemon_client(zmq::context_t& ctx, const std::vector<std::string>& eps,
+                                             const test::NetScene& s) {
   ScatterConfig cfg;
   cfg.endpoints = eps;
   cfg.heartbeat_period = 50ms;
@@ -100,7 +101,7 @@ TEST_CASE("daemons: pair sets identical to the single-process query for W = 1, 2
   for (int n : {1, 2, 4, 8}) {
     CAPTURE(n);
     Fleet f(n);
-    auto c = client(ctx, f.endpoints(), s);
+    auto c = daemon_client(ctx, f.endpoints(), s);
     REQUIRE(c->wait_ready(Clock::now() + 30s));
     std::uint64_t seq = 0;
     for (std::size_t k = 0; k < poses.size(); ++k) {
@@ -149,7 +150,7 @@ TEST_CASE(
   for (const auto& p : poses) want.push_back(reference_collide(s.probe, s.object, p));
   zmq::context_t ctx;
   Fleet f(4);
-  auto c = client(ctx, f.endpoints(), s);
+  auto c = daemon_client(ctx, f.endpoints(), s);
   REQUIRE(c->wait_ready(Clock::now() + 30s));
   // A round's deadline while a worker is dead: short, so misses are counted quickly. Rounds that
   // check exactness (every live worker holds its blocks) get a long one: under TSan on a busy

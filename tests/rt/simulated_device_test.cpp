@@ -13,7 +13,7 @@
 using namespace st::rt;
 
 namespace {
-constexpr std::int64_t kMs = 1'000'000;
+constexpr std::int64_t kOneMs = 1'000'000;
 }
 
 TEST_CASE("trajectory: file format parsed and validated with line numbers") {
@@ -51,12 +51,12 @@ TEST_CASE("simulated device: built-in script approaches, presses, slides, releas
   Eigen::Isometry3d p;
   REQUIRE(dev.read_pose(0, p));
   CHECK(p.translation().z() == doctest::Approx(10.0));
-  REQUIRE(dev.read_pose(2000 * kMs, p));
+  REQUIRE(dev.read_pose(2000 * kOneMs, p));
   CHECK(p.translation().z() == doctest::Approx(-3.0));
-  REQUIRE(dev.read_pose(4000 * kMs, p));
+  REQUIRE(dev.read_pose(4000 * kOneMs, p));
   CHECK(p.translation().head<2>().norm() == doctest::Approx(20.0));
   CHECK(p.translation().z() == doctest::Approx(-3.0));
-  REQUIRE(dev.read_pose(6000 * kMs, p));
+  REQUIRE(dev.read_pose(6000 * kOneMs, p));
   CHECK(p.translation().z() == doctest::Approx(10.0));
   CHECK(dev.finished());
 }
@@ -72,15 +72,15 @@ TEST_CASE("simulated device: the virtual user yields to the commanded force; rec
   Eigen::Isometry3d p;
   // A wall at z = 0 rendered as a 0.5 N/mm spring, 2 s at 1 kHz.
   for (int i = 0; i < 2000; ++i) {
-    REQUIRE(dev.read_pose(i * kMs, p));
+    REQUIRE(dev.read_pose(i * kOneMs, p));
     const double z = p.translation().z();
-    dev.command_force(i * kMs, Eigen::Vector3d(0, 0, z < 0 ? -0.5 * z : 0.0));
+    dev.command_force(i * kOneMs, Eigen::Vector3d(0, 0, z < 0 ? -0.5 * z : 0.0));
   }
   // Equilibrium: 0.3 (target - z) = -0.5 z  ->  z = -0.9 / 0.8 = -1.125 mm.
   CHECK(p.translation().z() == doctest::Approx(-1.125).epsilon(0.01));
   CHECK(dev.records().size() == 100);
   CHECK(dev.dropped_records() == 1900);
-  CHECK(dev.records()[5].t_ns == 5 * kMs);
+  CHECK(dev.records()[5].t_ns == 5 * kOneMs);
 }
 
 TEST_CASE("load_trajectory: /dev/zero, a directory and an oversized file are refused before reading") {

@@ -13,18 +13,18 @@
 using st::rt::TripleBuffer;
 
 namespace {
-struct Payload {
+struct TbPayload {
   std::uint64_t seq = 0;
   std::int64_t stamp_ns = 0;
   std::uint64_t words[14] = {};  // each = seq * (i + 1): a torn copy mixes sequences
 };
-bool consistent(const Payload& p) {
+bool tb_consistent(const TbPayload& p) {
   for (std::uint64_t i = 0; i < 14; ++i)
     if (p.words[i] != p.seq * (i + 1)) return false;
   return static_cast<std::uint64_t>(p.stamp_ns) == p.seq;
 }
-Payload make(std::uint64_t seq) {
-  Payload p;
+TbPayload tb_make(std::uint64_t seq) {
+  TbPayload p;
   p.seq = seq;
   p.stamp_ns = static_cast<std::int64_t>(seq);
   for (std::uint64_t i = 0; i < 14; ++i) p.words[i] = seq * (i + 1);
@@ -37,27 +37,27 @@ std::uint64_t hammer_count() {
 }  // namespace
 
 TEST_CASE("TripleBuffer: layout is pinned") {
-  static_assert(alignof(TripleBuffer<Payload>) == 64);
-  static_assert(sizeof(TripleBuffer<Payload>) == 3 * 64 + 3 * 128);
+  static_assert(alignof(TripleBuffer<TbPayload>) == 64);
+  static_assert(sizeof(TripleBuffer<TbPayload>) == 3 * 64 + 3 * 128);
   static_assert(sizeof(TripleBuffer<char>) == 6 * 64);
   CHECK(true);
 }
 
 TEST_CASE("TripleBuffer: reader sees only the newest value, once") {
-  TripleBuffer<Payload> tb;
+  TripleBuffer<TbPayload> tb;
   CHECK_FALSE(tb.update());
   CHECK(tb.output().seq == 0);
-  tb.write(make(1));
-  tb.write(make(2));
-  tb.write(make(3));
+  tb.write(tb_make(1));
+  tb.write(tb_make(2));
+  tb.write(tb_make(3));
   CHECK(tb.has_update());
-  Payload out;
+  TbPayload out;
   CHECK(tb.read(out));
   CHECK(out.seq == 3);
-  CHECK(consistent(out));
+  CHECK(tb_consistent(out));
   CHECK_FALSE(tb.read(out));  // nothing new: old value stays
   CHECK(out.seq == 3);
-  tb.input() = make(4);  // filled but not published: invisible
+  tb.input() = tb_make(4);  // filled but not published: invisible
   CHECK_FALSE(tb.update());
   tb.publish();
   CHECK(tb.update());
@@ -65,10 +65,10 @@ TEST_CASE("TripleBuffer: reader sees only the newest value, once") {
 }
 
 TEST_CASE("TripleBuffer: interleaved single-thread sequence") {
-  TripleBuffer<Payload> tb;
+  TripleBuffer<TbPayload> tb;
   std::uint64_t last = 0;
   for (std::uint64_t s = 1; s <= 1000; ++s) {
-    tb.write(make(s));
+    tb.write(tb_make(s));
     if (s % 3 == 0) {
       REQUIRE(tb.update());
       CHECK(tb.output().seq == s);
@@ -79,7 +79,7 @@ TEST_CASE("TripleBuffer: interleaved single-thread sequence") {
 }
 
 TEST_CASE("TripleBuffer: two threads, >= 10^7 exchanges, never torn, never backwards") {
-  auto tb = std::make_unique<TripleBuffer<Payload>>();
+  auto tb = std::make_unique<TripleBuffer<TbPayload>>();
   const std::uint64_t n = hammer_count();
   constexpr std::uint64_t kPace = 1024;  // every 1024th publish waits until the reader has seen it
   std::atomic<bool> writer_done{false};
@@ -88,7 +88,7 @@ TEST_CASE("TripleBuffer: two threads, >= 10^7 exchanges, never torn, never backw
   std::atomic<std::uint64_t> reader_seen{0};
   std::thread writer([&] {
     for (std::uint64_t s = 1; s <= n; ++s) {
-      tb->input() = make(s);
+      tb->input() = tb_make(s);
       tb->publish();
       if (s % kPace == 0)
         while (reader_seen.load(std::memory_order_relaxed) < s) std::this_thread::yield();
@@ -100,8 +100,8 @@ TEST_CASE("TripleBuffer: two threads, >= 10^7 exchanges, never torn, never backw
     const bool done = writer_done.load(std::memory_order_acquire);
     if (tb->update()) {
       ++fresh;
-      const Payload& p = tb->output();
-      if (!consistent(p)) ++torn;
+      const TbPayload& p = tb->output();
+      if (!tb_consistent(p)) ++torn;
       if (p.seq <= last) ++backwards;
       last = p.seq;
       reader_seen.store(last, std::memory_order_relaxed);
@@ -120,19 +120,19 @@ TEST_CASE("TripleBuffer: any bytes written over its state (shared memory) never 
   // Hostile or stray writes into a shared-memory segment: every byte of the index area set to every
   // value. Each operation must stay inside the three slots (ASan in CI would see a stray access;
   // here the slot addresses are checked directly).
-  struct Payload {
+  struct TbPayload {
     std::uint64_t v[8];
   };
   for (int offset : {0, 64, 128}) {  // the back byte, the writer's index, the reader's index
     for (int value = 0; value < 256; ++value) {
-      auto tb = std::make_unique<st::rt::TripleBuffer<Payload>>();
+      auto tb = std::make_unique<st::rt::TripleBuffer<TbPayload>>();
       auto* bytes = reinterpret_cast<unsigned char*>(tb.get());
       bytes[offset] = static_cast<unsigned char>(value);
       const auto* lo = reinterpret_cast<const unsigned char*>(tb.get()) + 3 * 64;
       const auto* hi = reinterpret_cast<const unsigned char*>(tb.get()) + sizeof(*tb);
       auto inside = [&](const void* p) {
         const auto* c = static_cast<const unsigned char*>(p);
-        return c >= lo && c + sizeof(Payload) <= hi;
+        return c >= lo && c + sizeof(TbPayload) <= hi;
       };
       CAPTURE(offset);
       CAPTURE(value);
