@@ -62,8 +62,9 @@ sanitizers="${ST_SANITIZERS:-1}"
 # -Dunity=on: each target's sources compile four to a file. CLI11 costs 10-15 s per file that
 # includes it under ASan, and the sanitizer builds are most of CI's compile time: unity saves
 # about a sixth of the ASan build (measured 13.3 against 16 CPU-minutes). Release builds stay
-# one file per source. Two files' internal helpers of the same name break only these builds:
-# share the helper (tests/test_util.hpp) or rename one.
+# one file per source (each test suite is one unity file in every build: tests/meson.build). Two
+# files' internal helpers of the same name break these builds: share the helper
+# (tests/test_util.hpp) or rename one.
 # -fno-sanitize=alignment,null,object-size: three of UBSan's checks that more than double what
 # the build costs (the engine's largest file: 71 CPU-s with them, 35 without, 20 with no sanitizer;
 # alignment alone is 13-20 s of it, its checks on every Eigen reference) and that ASan or another
