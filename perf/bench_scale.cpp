@@ -39,6 +39,7 @@
 #include <string>
 #include <sys/wait.h>
 #include <thread>
+#include <tuple>
 #include <unistd.h>
 #include <vector>
 #include <arpa/inet.h>
@@ -379,6 +380,17 @@ struct Row {
     std::size_t leader_reply_bytes = 0;
   };
   std::vector<TwoLevel> two_level;
+  // The flat gather simulated event by event (predicted_simulated): per worker, all W, its query
+  // + encode µs (an idle one's empty Result: 0) and its reply's bytes; with the replicated deal,
+  // the mean worker's time x its share of the deal's counted load, + the encode; the order the
+  // Queries go out in under each deal (ScatterGather sends the slowest worker of the round before
+  // first; here by the work each worker's blocks were reported to do at the pose before); the
+  // client's work on the W Results as they come (decode, pairs appended as a sorted run) and what
+  // is left after the last (the k-way merge, the repeats, the distinct faces), measured.
+  std::vector<double> worker_us, replicated_us;
+  std::vector<std::size_t> reply_bytes;
+  std::vector<std::uint32_t> send_order, replicated_send_order;
+  double arrivals_us = 0, tail_us = 0;
   double imbalance() const { return mean_us > 0 ? max_us / mean_us : 0; }
   double redundancy() const { return single_us > 0 ? sum_us / single_us : 0; }
   double sphere_ratio() const { return single_spheres ? double(sum_spheres) / double(single_spheres) : 0; }
@@ -391,8 +403,8 @@ struct Row {
 /// The client's merge, as ScatterGather does it: each Result of `frames` decoded into one sorted
 /// run appended to `merged` (after the runs already begun in `runs`), then all of them merged and
 /// the duplicates dropped.
-void merge_results(std::span<const std::vector<std::uint8_t>> frames, const net::Limits& limits, geom::SortedRuns& runs,
-                   std::vector<net::FacePair>& merged) {
+void take_results(std::span<const std::vector<std::uint8_t>> frames, const net::Limits& limits, geom::SortedRuns& runs,
+                  std::vector<net::FacePair>& merged) {
   for (const auto& f : frames)
     if (auto d = net::decode(f, limits))
       if (const auto* res = std::get_if<net::ResultMsg>(&d.value())) {
@@ -400,8 +412,52 @@ void merge_results(std::span<const std::vector<std::uint8_t>> frames, const net:
         merged.insert(merged.end(), res->pairs.begin(), res->pairs.end());
         runs.end(merged);
       }
+}
+void merge_results(std::span<const std::vector<std::uint8_t>> frames, const net::Limits& limits, geom::SortedRuns& runs,
+                   std::vector<net::FacePair>& merged) {
+  take_results(frames, limits, runs, merged);
   runs.merge(merged);
   merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
+}
+
+/// The client's work on one round's Results `frames`, split as ScatterGather::round does it: the
+/// medians over `runs` of its work on them as they come (each decoded, its pairs appended as a
+/// sorted run: on_result) and of what is left once the last is in (the k-way merge, the repeats
+/// dropped, the distinct faces).
+std::pair<double, double> client_split(std::span<const std::vector<std::uint8_t>> frames, const net::Limits& limits,
+                                       int runs) {
+  geom::SortedRuns sorted_runs;
+  std::vector<net::FacePair> merged;
+  std::vector<std::uint32_t> probe_faces, object_faces, ids_scratch;
+  std::vector<double> arrivals, tails;
+  for (int k = -1; k < runs; ++k) {  // the first warms the vectors, as the client's are kept
+    merged.clear();
+    sorted_runs.clear();
+    const auto t0 = Clock::now();
+    take_results(frames, limits, sorted_runs, merged);
+    const auto t1 = Clock::now();
+    sorted_runs.merge(merged);
+    merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
+    geom::distinct_faces(merged, probe_faces, object_faces, ids_scratch);
+    const auto t2 = Clock::now();
+    if (k < 0) continue;
+    arrivals.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+    tails.push_back(std::chrono::duration<double, std::micro>(t2 - t1).count());
+  }
+  return {median(std::move(arrivals)), median(std::move(tails))};
+}
+
+/// The order a client sends its Queries in: the heaviest worker of the round before first (its
+/// load the work reported for each block it answers, `before`, block -> its worker `owner`).
+std::vector<std::uint32_t> heaviest_first(const std::vector<double>& before, const std::vector<std::uint32_t>& owner,
+                                          std::uint32_t workers) {
+  std::vector<double> load(workers, 0.0);
+  for (std::size_t k = 0; k < owner.size(); ++k) load[owner[k]] += before[k];
+  std::vector<std::uint32_t> order(workers);
+  for (std::uint32_t w = 0; w < workers; ++w) order[w] = w;
+  std::sort(order.begin(), order.end(),
+            [&](std::uint32_t x, std::uint32_t y) { return load[x] != load[y] ? load[x] > load[y] : x < y; });
+  return order;
 }
 
 /// The two-level gather's costs (Row::TwoLevel) for every group size 2, 4, ... below the number of
@@ -783,6 +839,8 @@ void run_scale(const ScaleArgs& a) {
         prow[i].block_reported_before = &per_block_tests.reported_before[i];
         prow[i].owners = &owners;
         prow[i].block_faces = &per_block_tests.faces;
+        prow[i].worker_us.assign(W, 0.0);
+        prow[i].reply_bytes.assign(W, net::encode(net::ResultMsg{}).size());
       }
       std::vector<std::vector<std::vector<std::uint8_t>>> replies(poses.size());  // encoded Results per pose
       std::vector<std::vector<net::FacePair>> all_pairs(poses.size());
@@ -838,6 +896,8 @@ void run_scale(const ScaleArgs& a) {
           r.shares.push_back({double(counted.sphere_tests), double(counted.tri_tests), q});
           r.max_us = std::max(r.max_us, q);
           r.encode_max_us = std::max(r.encode_max_us, q + enc);  // the slowest worker including its encode
+          r.worker_us[w] = q + enc;
+          r.reply_bytes[w] = frame.size();
           r.max_reply_bytes = std::max(r.max_reply_bytes, frame.size());
           r.total_reply_bytes += frame.size();
           replies[i].push_back(frame);
@@ -869,6 +929,7 @@ void run_scale(const ScaleArgs& a) {
           empty.seq = 1;
           frames.resize(W, net::encode(empty));
           r.two_level = two_level_gather(frames, limits, probe_faces, object_faces, a.runs);
+          std::tie(r.arrivals_us, r.tail_us) = client_split(frames, limits, a.runs);
         }
         rows.push_back(r);
       }
@@ -928,7 +989,23 @@ void run_scale(const ScaleArgs& a) {
       r.assist_critical = total > 0 ? std::max(max_load, client) * r.workers / total : 1.0;
       r.assist_client = max_load > 0 ? client / max_load : 0.0;
       r.assisted_blocks = std::uint32_t(taken.size());
-      r.replicated_imbalance = deal_imbalance(work, replicated_deal(reported, *r.owners, r.workers), r.workers);
+      const std::vector<std::uint32_t> replicated_owner = replicated_deal(reported, *r.owners, r.workers);
+      r.replicated_imbalance = deal_imbalance(work, replicated_owner, r.workers);
+      // The simulated gather's send orders (the client's is by the compute each worker reported the
+      // round before; here by the work reported for its blocks at the pose before, summed), and
+      // the replicated deal's workers, each the mean worker's time x its load / the mean load.
+      r.send_order = heaviest_first(reported, *r.owners, r.workers);
+      r.replicated_send_order = heaviest_first(reported, replicated_owner, r.workers);
+      std::vector<double> replicated_load(r.workers, 0.0);
+      double total_work = 0;
+      for (std::size_t k = 0; k < work.size(); ++k) {
+        replicated_load[replicated_owner[k]] += work[k];
+        total_work += work[k];
+      }
+      r.replicated_us.resize(r.workers);
+      for (std::uint32_t w = 0; w < r.workers; ++w)
+        r.replicated_us[w] = (total_work > 0 ? r.mean_us * replicated_load[w] * r.workers / total_work : r.mean_us) +
+                             (r.encode_max_us - r.max_us);
       r.oracle_imbalance = oracle_imbalance(std::move(work), r.workers);
     }
   }
@@ -1192,6 +1269,35 @@ void run_scale(const ScaleArgs& a) {
   const auto predicted_replicated = [&](const Row& r, const Network& n) {
     return predicted(r, n) - r.compute_round_us + compute_replicated(r);
   };
+  // The flat gather on network n simulated event by event (Row::worker_us), as ScatterGather runs
+  // it: the client sends the W Queries in `order`, each half a message pair of its work (the other
+  // half is its Result's receipt); worker w starts when its Query has crossed (half a round trip)
+  // and its Result is ready after its query and encode; the Results cross back (half a round
+  // trip), one at a time on the client's link (their bytes at its bandwidth); the client takes each
+  // when it has arrived and the client is free (it is busy sending until all Queries are out): the
+  // other half of a message pair and its share of the work on the Results as they come; after the
+  // last, the rest of the merge. Unlike `predicted`, the receipts of all but the last Results
+  // overlap the slower workers' compute. On this VM's client CPU (vm_client) a message pair costs
+  // the fit's b and a round its a (added at the end).
+  const auto predicted_simulated = [&](const Row& r, const Network& n, bool replicated) {
+    const std::vector<double>& worker = replicated ? r.replicated_us : r.worker_us;
+    const std::vector<std::uint32_t>& order = replicated ? r.replicated_send_order : r.send_order;
+    if (worker.size() != r.workers || order.size() != r.workers) return 0.0;
+    const double half = 0.5 * (n.vm_client ? cpu_b : msg_work), each = r.arrivals_us / r.workers;
+    std::vector<std::pair<double, std::size_t>> ready;  // (when its Result leaves the worker, its bytes)
+    double t = 0;
+    for (const std::uint32_t w : order) {
+      t += half;
+      ready.push_back({t + n.rtt_us / 2 + worker[w], r.reply_bytes[w]});
+    }
+    std::sort(ready.begin(), ready.end());
+    double link = 0, client = t;
+    for (const auto& [leaves, bytes] : ready) {
+      link = std::max(link, leaves + n.rtt_us / 2) + double(bytes) / n.bytes_per_us;
+      client = std::max(client, link) + half + each;
+    }
+    return client + r.tail_us + (n.vm_client ? cpu_a : 0.0);
+  };
   // The two-level gather (Row::TwoLevel) on network n: the slowest worker (with its encode), two
   // round trips (client - leader, leader - member), the client's message work for the ceil(W / g)
   // leaders and a leader's for its g - 1 members, the slowest leader's merge and the client's, and
@@ -1279,6 +1385,15 @@ void run_scale(const ScaleArgs& a) {
         j[std::string("round_") + n.name + "_us"] = round_to(predicted(r, n), 2);
         j[std::string("speedup_") + n.name] = round_to(r.single_us / predicted(r, n), 3);
       }
+      j["client_arrivals_us"] = round_to(r.arrivals_us, 2);
+      j["client_tail_us"] = round_to(r.tail_us, 2);
+      for (const Network& n : kNetworks)
+        for (const bool replicated : {false, true})
+          if (const double us = predicted_simulated(r, n, replicated); us > 0) {
+            const std::string key = std::string(n.name) + "_simulated" + (replicated ? "_replicated" : "");
+            j["round_" + key + "_us"] = round_to(us, 2);
+            j["speedup_" + key] = round_to(r.single_us / us, 3);
+          }
       j["compute_speedup_replicated"] = round_to(r.single_us / compute_replicated(r), 3);
       for (const Network& n : kNetworks)
         j[std::string("speedup_") + n.name + "_replicated"] = round_to(r.single_us / predicted_replicated(r, n), 3);
@@ -1408,6 +1523,17 @@ void run_scale(const ScaleArgs& a) {
     std::printf("  pose %zu W=%u: flat %.1f us (x%.2f), g=%u %.1f us (x%.2f): leader %.1f us, client %.1f us\n", r.pose,
                 r.workers, predicted_replicated(r, kNetworks[0]), r.single_us / predicted_replicated(r, kNetworks[0]),
                 best->group, best_us, r.single_us / best_us, best->leader_us, best->client_us);
+  }
+  std::printf(
+      "\nthe flat gather simulated event by event (the client takes each Result as it comes, the slowest worker of "
+      "the round before sent its Query first; receipts overlap the slower workers' compute): 10GbE plain / "
+      "replicated deal, and the client's work on the Results as they come / after the last:\n");
+  for (const Row& r : rows) {
+    if (r.mapping != geom::Mapping::block_cyclic) continue;
+    const double plain = predicted_simulated(r, kNetworks[0], false), rep = predicted_simulated(r, kNetworks[0], true);
+    if (plain <= 0 || rep <= 0) continue;
+    std::printf("  pose %zu W=%u: %.1f us (x%.2f) / %.1f us (x%.2f); client %.1f / %.1f us\n", r.pose, r.workers, plain,
+                r.single_us / plain, rep, r.single_us / rep, r.arrivals_us, r.tail_us);
   }
   std::printf(
       "\nover the %zu poses (mean / median / max): imbal#, imbal, redun#, redun as above; from the counted work of "

@@ -1105,6 +1105,30 @@ def scale_doc(doc, md):
                         row.append(f"{f_ratio(r.get(key))} / {f_ratio(best[key])} ({best.get('group')})")
                     body.append(row)
                 md += md_table(["contacts", "one thread µs"] + [f"W={w}" for w in ws], body, left=2)
+            simulated = [k for k in keys if k[1] == "block-cyclic"
+                        and any(f"speedup_{n}_simulated" in by.get((k[0], k[1], w), {}) for w in ws for n in nets[:1])]
+            if simulated:
+                net = nets[0]
+                md.append(f"The flat gather simulated event by event, as the client runs it (each Result taken as "
+                          f"it comes, so the receipts of all but the last overlap the slower workers' compute; the "
+                          f"Query sent first to the worker slowest the round before; a send and a receipt half a "
+                          f"message pair of work each; the Results crossing back one at a time on the client's link; "
+                          f"then the k-way merge and the distinct faces), {net}, block-cyclic: plain deal / "
+                          f"replicated deal; the client's work on the Results as they come / after the last, µs:\n")
+                body = []
+                for pose, mapping in simulated:
+                    r0 = next((by[(pose, mapping, w)] for w in ws if (pose, mapping, w) in by), {})
+                    row = [f_count(r0.get("contacts")), single_range(pose, mapping)]
+                    for w in ws:
+                        r = by.get((pose, mapping, w)) or {}
+                        if f"speedup_{net}_simulated" not in r:
+                            row.append(DASH)
+                            continue
+                        row.append(f"{f_ratio(r.get(f'speedup_{net}_simulated'))} / "
+                                   f"{f_ratio(r.get(f'speedup_{net}_simulated_replicated'))}; "
+                                   f"{f_us(r.get('client_arrivals_us'))} / {f_us(r.get('client_tail_us'))}")
+                    body.append(row)
+                md += md_table(["contacts", "one thread µs"] + [f"W={w}" for w in ws], body, left=2)
             leafy = [k for k in keys if any(finite(by.get((k[0], k[1], w), {}).get("probe_leaves_ratio")) for w in ws)
                      and k[1] == "block-cyclic"]
             if leafy:

@@ -212,4 +212,12 @@ void prune_sets(const std::vector<Peer>& peers, BlockSetCache& sets) {
   });
 }
 
+void send_order(const std::vector<Peer>& peers, std::vector<std::uint32_t>& order) {
+  order.resize(peers.size());
+  for (std::uint32_t i = 0; i < peers.size(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
+    return peers[a].compute_ns != peers[b].compute_ns ? peers[a].compute_ns > peers[b].compute_ns : a < b;
+  });
+}
+
 }  // namespace st::net::client

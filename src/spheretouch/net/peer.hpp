@@ -99,6 +99,7 @@ struct Peer {
   SetPtr standby_asked;             // its standby set, named by this round's Query (null: none)
   std::vector<std::uint32_t> skip;  // blocks of `asked` someone else answers this round (BlockDeal)
   std::vector<std::uint32_t> take;  // blocks of `standby_asked` it answers this round (BlockDeal)
+  std::uint64_t compute_ns = 0;     // the compute its last Result reported (send_order())
   // Totals.
   std::uint64_t bytes_sent = 0;
   std::uint32_t loads_sent = 0;
@@ -163,5 +164,10 @@ void refresh_targets(std::vector<Peer>& peers, BlockSetCache& sets);
 void reassign(std::vector<Peer>& peers, BlockSetCache& sets);
 /// Drops encoded sets no worker is meant to hold, holds, is being sent or owns originally.
 void prune_sets(const std::vector<Peer>& peers, BlockSetCache& sets);
+/// The order a round's Queries go out in (`order`: every peer's index): the slowest worker of the
+/// round before first (by the compute its Result reported). A worker starts when its Query is out,
+/// and the client's sends take about a microsecond each on a real network (half a message pair of
+/// its work, spheretouch-bench scale): the one that needs longest should not also start last.
+void send_order(const std::vector<Peer>& peers, std::vector<std::uint32_t>& order);
 
 }  // namespace st::net::client

@@ -54,6 +54,7 @@ struct ScatterGather::Impl {
   // they come), merged at the end without sorting them again.
   geom::SortedRuns runs;
   std::vector<std::uint32_t> ids_scratch;  // distinct_faces()'s room
+  std::vector<std::uint32_t> order;        // the peers in the order a round's Queries go out (client::send_order)
 
   /// A worker's link state changes (Peer::step); entering or leaving Down deals the blocks anew.
   void link(Peer& p, LinkEvent e) {
@@ -108,6 +109,7 @@ struct ScatterGather::Impl {
       if (!std::binary_search(p.skip.begin(), p.skip.end(), b)) covered[b] = 1;
     for (std::uint32_t b : p.take) covered[b] = 1;  // blocks of its standby set
     out->worker_stats[std::size_t(&p - peers.data())] = r.stats;
+    p.compute_ns = r.stats.compute_ns;
     if (weigh) ledger->note(r.worked);
     out->stats.sphere_tests += r.stats.sphere_tests;
     out->stats.tri_tests += r.stats.tri_tests;
@@ -211,7 +213,9 @@ struct ScatterGather::Impl {
     out->blocks_moved = deal->moved();
     if (assist) assist->choose(peers, *deal, *ledger);
     std::fill(covered.begin(), covered.end(), 0);
-    for (Peer& p : peers) {
+    client::send_order(peers, order);  // the slowest of the round before first
+    for (const std::uint32_t i : order) {
+      Peer& p = peers[i];
       p.step(TurnEvent::NewRound);
       if (p.link == Link::Down) {
         if (now >= p.heartbeat_due) p.heartbeat(cfg, now, buf);
