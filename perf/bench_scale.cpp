@@ -39,7 +39,6 @@
 #include <string>
 #include <sys/wait.h>
 #include <thread>
-#include <tuple>
 #include <unistd.h>
 #include <vector>
 #include <arpa/inet.h>
@@ -385,12 +384,14 @@ struct Row {
   // the mean worker's time x its share of the deal's counted load, + the encode; the order the
   // Queries go out in under each deal (ScatterGather sends the slowest worker of the round before
   // first; here by the work each worker's blocks were reported to do at the pose before); the
-  // client's work on the W Results as they come (decode, pairs appended as a sorted run) and what
-  // is left after the last (the k-way merge, the repeats, the distinct faces), measured.
+  // client's work on the W Results as they come (decode, pairs appended as a sorted run), what is
+  // left after the last (the k-way merge, the repeats dropped) and the distinct faces, measured.
+  // The simulated round is the run's client: it takes no distinct faces (ScatterConfig::
+  // distinct_faces off in engine::start_fleet); the flat model's client_us includes them.
   std::vector<double> worker_us, replicated_us;
   std::vector<std::size_t> reply_bytes;
   std::vector<std::uint32_t> send_order, replicated_send_order;
-  double arrivals_us = 0, tail_us = 0;
+  double arrivals_us = 0, tail_us = 0, distinct_us = 0;
   double imbalance() const { return mean_us > 0 ? max_us / mean_us : 0; }
   double redundancy() const { return single_us > 0 ? sum_us / single_us : 0; }
   double sphere_ratio() const { return single_spheres ? double(sum_spheres) / double(single_spheres) : 0; }
@@ -422,14 +423,19 @@ void merge_results(std::span<const std::vector<std::uint8_t>> frames, const net:
 
 /// The client's work on one round's Results `frames`, split as ScatterGather::round does it: the
 /// medians over `runs` of its work on them as they come (each decoded, its pairs appended as a
-/// sorted run: on_result) and of what is left once the last is in (the k-way merge, the repeats
-/// dropped, the distinct faces).
-std::pair<double, double> client_split(std::span<const std::vector<std::uint8_t>> frames, const net::Limits& limits,
-                                       int runs) {
+/// sorted run: on_result), of the merge once the last is in (the k-way merge, the repeats
+/// dropped) and of the distinct faces (ScatterConfig::distinct_faces).
+struct ClientSplit {
+  double arrivals_us = 0, merge_us = 0, distinct_us = 0;
+};
+ClientSplit client_split(std::span<const std::vector<std::uint8_t>> frames, const net::Limits& limits, int runs) {
   geom::SortedRuns sorted_runs;
   std::vector<net::FacePair> merged;
   std::vector<std::uint32_t> probe_faces, object_faces, ids_scratch;
-  std::vector<double> arrivals, tails;
+  std::vector<double> arrivals, merges, distincts;
+  const auto us = [](Clock::time_point a, Clock::time_point b) {
+    return std::chrono::duration<double, std::micro>(b - a).count();
+  };
   for (int k = -1; k < runs; ++k) {  // the first warms the vectors, as the client's are kept
     merged.clear();
     sorted_runs.clear();
@@ -438,13 +444,15 @@ std::pair<double, double> client_split(std::span<const std::vector<std::uint8_t>
     const auto t1 = Clock::now();
     sorted_runs.merge(merged);
     merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
-    geom::distinct_faces(merged, probe_faces, object_faces, ids_scratch);
     const auto t2 = Clock::now();
+    geom::distinct_faces(merged, probe_faces, object_faces, ids_scratch);
+    const auto t3 = Clock::now();
     if (k < 0) continue;
-    arrivals.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
-    tails.push_back(std::chrono::duration<double, std::micro>(t2 - t1).count());
+    arrivals.push_back(us(t0, t1));
+    merges.push_back(us(t1, t2));
+    distincts.push_back(us(t2, t3));
   }
-  return {median(std::move(arrivals)), median(std::move(tails))};
+  return {median(std::move(arrivals)), median(std::move(merges)), median(std::move(distincts))};
 }
 
 /// The order a client sends its Queries in: the heaviest worker of the round before first (its
@@ -929,7 +937,10 @@ void run_scale(const ScaleArgs& a) {
           empty.seq = 1;
           frames.resize(W, net::encode(empty));
           r.two_level = two_level_gather(frames, limits, probe_faces, object_faces, a.runs);
-          std::tie(r.arrivals_us, r.tail_us) = client_split(frames, limits, a.runs);
+          const ClientSplit split = client_split(frames, limits, a.runs);
+          r.arrivals_us = split.arrivals_us;
+          r.tail_us = split.merge_us;
+          r.distinct_us = split.distinct_us;
         }
         rows.push_back(r);
       }
@@ -1276,7 +1287,7 @@ void run_scale(const ScaleArgs& a) {
   // trip), one at a time on the client's link (their bytes at its bandwidth); the client takes each
   // when it has arrived and the client is free (it is busy sending until all Queries are out): the
   // other half of a message pair and its share of the work on the Results as they come; after the
-  // last, the rest of the merge. Unlike `predicted`, the receipts of all but the last Results
+  // last, the rest of the merge (the run's client: no distinct faces). Unlike `predicted`, the receipts of all but the last Results
   // overlap the slower workers' compute. On this VM's client CPU (vm_client) a message pair costs
   // the fit's b and a round its a (added at the end).
   const auto predicted_simulated = [&](const Row& r, const Network& n, bool replicated) {
@@ -1387,6 +1398,7 @@ void run_scale(const ScaleArgs& a) {
       }
       j["client_arrivals_us"] = round_to(r.arrivals_us, 2);
       j["client_tail_us"] = round_to(r.tail_us, 2);
+      j["client_distinct_us"] = round_to(r.distinct_us, 2);
       for (const Network& n : kNetworks)
         for (const bool replicated : {false, true})
           if (const double us = predicted_simulated(r, n, replicated); us > 0) {
@@ -1527,13 +1539,14 @@ void run_scale(const ScaleArgs& a) {
   std::printf(
       "\nthe flat gather simulated event by event (the client takes each Result as it comes, the slowest worker of "
       "the round before sent its Query first; receipts overlap the slower workers' compute): 10GbE plain / "
-      "replicated deal, and the client's work on the Results as they come / after the last:\n");
+      "replicated deal (the run's client: no distinct faces), and the client's work on the Results as they come / "
+      "after the last / the distinct faces it leaves out:\n");
   for (const Row& r : rows) {
     if (r.mapping != geom::Mapping::block_cyclic) continue;
     const double plain = predicted_simulated(r, kNetworks[0], false), rep = predicted_simulated(r, kNetworks[0], true);
     if (plain <= 0 || rep <= 0) continue;
-    std::printf("  pose %zu W=%u: %.1f us (x%.2f) / %.1f us (x%.2f); client %.1f / %.1f us\n", r.pose, r.workers, plain,
-                r.single_us / plain, rep, r.single_us / rep, r.arrivals_us, r.tail_us);
+    std::printf("  pose %zu W=%u: %.1f us (x%.2f) / %.1f us (x%.2f); client %.1f / %.1f / %.1f us\n", r.pose, r.workers,
+                plain, r.single_us / plain, rep, r.single_us / rep, r.arrivals_us, r.tail_us, r.distinct_us);
   }
   std::printf(
       "\nover the %zu poses (mean / median / max): imbal#, imbal, redun#, redun as above; from the counted work of "

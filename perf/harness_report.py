@@ -1113,8 +1113,9 @@ def scale_doc(doc, md):
                           f"it comes, so the receipts of all but the last overlap the slower workers' compute; the "
                           f"Query sent first to the worker slowest the round before; a send and a receipt half a "
                           f"message pair of work each; the Results crossing back one at a time on the client's link; "
-                          f"then the k-way merge and the distinct faces), {net}, block-cyclic: plain deal / "
-                          f"replicated deal; the client's work on the Results as they come / after the last, µs:\n")
+                          f"then the k-way merge; the run's client, which takes no distinct faces), {net}, "
+                          f"block-cyclic: plain deal / replicated deal; the client's work on the Results as they come "
+                          f"/ after the last / on the distinct faces it leaves out, µs:\n")
                 body = []
                 for pose, mapping in simulated:
                     r0 = next((by[(pose, mapping, w)] for w in ws if (pose, mapping, w) in by), {})
@@ -1126,7 +1127,8 @@ def scale_doc(doc, md):
                             continue
                         row.append(f"{f_ratio(r.get(f'speedup_{net}_simulated'))} / "
                                    f"{f_ratio(r.get(f'speedup_{net}_simulated_replicated'))}; "
-                                   f"{f_us(r.get('client_arrivals_us'))} / {f_us(r.get('client_tail_us'))}")
+                                   f"{f_us(r.get('client_arrivals_us'))} / {f_us(r.get('client_tail_us'))} / "
+                                   f"{f_us(r.get('client_distinct_us'))}")
                     body.append(row)
                 md += md_table(["contacts", "one thread µs"] + [f"W={w}" for w in ws], body, left=2)
             leafy = [k for k in keys if any(finite(by.get((k[0], k[1], w), {}).get("probe_leaves_ratio")) for w in ws)

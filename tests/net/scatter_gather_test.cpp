@@ -80,6 +80,33 @@ TEST_CASE("merged pairs equal the single-process reference for 1, 2, 4 and 8 inp
   }
 }
 
+TEST_CASE("without distinct_faces a round gives the same pairs and leaves the face lists empty") {
+  zmq::context_t ctx;
+  const test::NetScene s = test::small_scene(10, 24);
+  const std::string t = tag();
+  auto w = LocalWorkers::start(ctx, 3, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); });
+  REQUIRE_MESSAGE(w.ok(), w.error());
+  ScatterConfig cfg;
+  cfg.endpoints = w.value()->endpoints();
+  cfg.distinct_faces = false;
+  auto c = ScatterGather::create(ctx, cfg, s.probe, s.object, s.blocks);
+  REQUIRE_MESSAGE(c.ok(), c.error());
+  REQUIRE(c.value()->wait_ready(Clock::now() + 10s));
+  std::uint64_t seq = 0;
+  RoundResult r;
+  r.probe_faces = {1, 2};  // a caller's vector reused from a round that had them
+  int touching = 0;
+  for (const geom::Pose& pose : test::contact_poses(s, 4)) {
+    c.value()->round(++seq, pose, Clock::now() + 5s, r);
+    CHECK(r.complete);
+    CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+    CHECK(r.probe_faces.empty());
+    CHECK(r.object_faces.empty());
+    touching += !r.pairs.empty();
+  }
+  CHECK(touching > 0);  // rounds that had faces to leave out
+}
+
 TEST_CASE("every mapping (block-cyclic, contiguous, random) of sphere-layer blocks gives the exact merged result") {
   zmq::context_t ctx;
   test::NetScene s = test::small_scene(16, 24);

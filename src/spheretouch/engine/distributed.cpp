@@ -180,6 +180,7 @@ Result<std::unique_ptr<Fleet>> start_fleet(const FleetSpec& spec, const geom::Me
   cfg.assist_blocks = spec.assist_blocks;
   cfg.replicas = spec.replicas;
   cfg.leaf_faces = spec.leaf_faces;
+  cfg.distinct_faces = spec.distinct_faces;
   if (spec.curve.enabled() && spec.endpoints.empty())
     return fail(
         "CURVE keys (server key, client key) are for worker daemons; in-process workers need none "

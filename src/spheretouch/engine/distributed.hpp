@@ -51,6 +51,9 @@ struct FleetSpec {
   std::uint32_t assist_blocks = 0;  ///< blocks the client answers itself each round (net::ScatterConfig::assist_blocks)
   bool coherent = true;   ///< in-process workers answer through the coherent collider (daemons: their own config)
   bool replicas = false;  ///< every block on two workers, dealt by the work reported (net::ScatterConfig::replicas)
+  /// each round's distinct faces (net::ScatterConfig::distinct_faces): the run, which counts its
+  /// contacts in its contact model, turns them off
+  bool distinct_faces = true;
   std::chrono::milliseconds ready_timeout{30000};  ///< time allowed for the first upload
   /// A daemon silent this long is probed: a refused CURVE key or a security mismatch fails the
   /// start at once (waiting cannot help); anything else waits out ready_timeout.

@@ -225,6 +225,7 @@ Status RunEngine::State::prepare() {
         s.assist_blocks >= 0 ? std::uint32_t(s.assist_blocks) : (spec.endpoints.empty() ? 0u : kAutoAssistBlocks);
     spec.coherent = s.coherent;
     spec.replicas = s.replicas;
+    spec.distinct_faces = false;  // the contact model counts the contacts: the pairs are all it needs
     spec.curve = opt.curve;
     spec.note = opt.note;
     note("starting workers and loading their blocks ...");

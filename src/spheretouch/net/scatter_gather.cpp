@@ -394,7 +394,9 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   m.runs.merge(out.pairs);  // a k-way merge of the sorted runs
   out.pairs.erase(std::unique(out.pairs.begin(), out.pairs.end()), out.pairs.end());
   // The same probe face collides on several workers: merge to distinct faces (paper §3.5).
-  geom::distinct_faces(out.pairs, out.probe_faces, out.object_faces, m.ids_scratch);
+  out.probe_faces.clear();
+  out.object_faces.clear();
+  if (m.cfg.distinct_faces) geom::distinct_faces(out.pairs, out.probe_faces, out.object_faces, m.ids_scratch);
   out.blocks_covered = static_cast<std::uint32_t>(std::count(m.covered.begin(), m.covered.end(), 1));
   out.complete = out.blocks_covered == out.blocks_total;
   if (m.weigh) m.ledger->end_round(out.pairs);

@@ -137,6 +137,12 @@ struct ScatterConfig {
   /// other is lighter by more than this fraction of the mean load (each change of a worker's
   /// blocks costs its coherent collider a plain round). 0: the fresh two-choice deal every round.
   double deal_stickiness = 0.05;
+  /// Take each round's distinct faces (RoundResult::probe_faces, object_faces, contacts(): paper
+  /// §3.5's merge), a pass over the merged pairs and a sort of their object faces after the last
+  /// Result is in: about as long as the k-way merge itself (`spheretouch-bench scale`,
+  /// client_distinct_us). Off: both lists stay empty, for a caller that needs the pairs alone
+  /// (the run's collision thread, which counts contacts in its contact model).
+  bool distinct_faces = true;
   /// The scene object this client answers for (a scene of several objects has one client per
   /// object over the same workers): its block sets carry it, its Queries name it, and a Result
   /// naming another is refused. < Limits::max_objects.
@@ -145,10 +151,11 @@ struct ScatterConfig {
 
 /// What the collision thread gets back from one round.
 struct RoundResult {
-  std::uint64_t seq = 0;                    ///< the round's sequence number
-  std::vector<FacePair> pairs;              ///< colliding pairs, sorted by (probe, object), unique
-  std::vector<std::uint32_t> probe_faces;   ///< distinct colliding probe faces, ascending (merged over workers)
-  std::vector<std::uint32_t> object_faces;  ///< distinct colliding object faces, ascending
+  std::uint64_t seq = 0;        ///< the round's sequence number
+  std::vector<FacePair> pairs;  ///< colliding pairs, sorted by (probe, object), unique
+  /// distinct colliding probe faces, ascending (merged over workers; empty unless ScatterConfig::distinct_faces)
+  std::vector<std::uint32_t> probe_faces;
+  std::vector<std::uint32_t> object_faces;  ///< distinct colliding object faces, ascending (the same)
   bool complete = false;                    ///< the merged replies cover every block: pairs are exact
   std::uint32_t workers_asked = 0;          ///< Queries sent this round
   std::uint32_t workers_replied = 0;        ///< Results merged this round
