@@ -2,7 +2,8 @@
 # SPDX-License-Identifier: BSD-3-Clause
 """Plots spheretouch-bench scale --json output: predicted speed-up against one thread vs the
 number of workers W, one line per mapping, on the 10 GbE model (solid) and compute only (no
-network, dashed), for the pose closest to --contacts contacts. OUT.svg is written directly (no
+network, dashed), and for block-cyclic the 10 GbE round simulated event by event with the
+replicated deal (dotted, where the JSON has it), for the pose closest to --contacts contacts. OUT.svg is written directly (no
 dependencies); OUT.png through gnuplot (OUT.dat and OUT.gp beside it).
 
 usage: scale_plot.py OUT.svg|OUT.png SCALE.json [SCALE.json ...] [--contacts 1500]"""
@@ -12,6 +13,9 @@ import subprocess
 import sys
 
 COLOURS = {'block-cyclic': '#1f77b4', 'contiguous': '#d62728', 'random': '#2ca02c'}
+# The block-cyclic round simulated event by event with the replicated deal (one line, no compute-only twin).
+SIMULATED = 'block-cyclic, simulated, replicas'
+COLOURS[SIMULATED] = '#9467bd'
 
 
 def load(paths, want):
@@ -28,6 +32,9 @@ def load(paths, want):
             if r['pose'] != pose or r['speedup_10GbE'] is None or r['compute_speedup'] is None:
                 continue  # null: a speed-up the bench could not compute (a zero time)
             lines.setdefault(r['mapping'], []).append((r['workers'], r['speedup_10GbE'], r['compute_speedup']))
+            sim = r.get('speedup_10GbE_simulated_replicated')
+            if r['mapping'] == 'block-cyclic' and sim is not None:
+                lines.setdefault(SIMULATED, []).append((r['workers'], sim, None))
         panels.append((f"{name} ({d['object_faces']:,} faces), pose {pose}: {contacts:,} contacts", lines))
     return panels
 
@@ -41,7 +48,7 @@ def svg(panels, out):
         x0 = k * pw + m
         x1, y0, y1 = x0 + pw - m - 20, ph - 10, 40
         ws = sorted({w for pts in lines.values() for w, _, _ in pts})
-        ymax = max([max(s, c) for pts in lines.values() for _, s, c in pts] + [1.0])
+        ymax = max([max(s, c if c is not None else s) for pts in lines.values() for _, s, c in pts] + [1.0])
         ymax = 2 ** math.ceil(math.log2(max(ymax, 1.0)))
         lx = lambda w: x0 + (x1 - x0) * (math.log2(w) / max(math.log2(ws[-1]), 1))
         ly = lambda v: y0 - (y0 - y1) * (v / ymax)
@@ -62,11 +69,13 @@ def svg(panels, out):
         for j, (mapping, pts) in enumerate(sorted(lines.items())):
             pts.sort()
             col = COLOURS.get(mapping, 'black')
-            for idx, dash in ((1, ''), (2, ' stroke-dasharray="5,4"')):
+            for idx, dash in ((1, ' stroke-dasharray="1,3"' if mapping == SIMULATED else ''), (2, ' stroke-dasharray="5,4"')):
+                if any(p[idx] is None for p in pts):
+                    continue
                 path = ' '.join(f'{"M" if i == 0 else "L"}{lx(p[0]):.1f},{ly(p[idx]):.1f}' for i, p in enumerate(pts))
                 o.append(f'<path d="{path}" fill="none" stroke="{col}" stroke-width="1.8"{dash}/>')
             o.append(f'<text x="{x0 + 10}" y="{y1 + 14 * j + 4}" fill="{col}">{mapping}</text>')
-        o.append(f'<text x="{x0 + 110}" y="{y1 + 4}">solid: 10 GbE model; dashed: compute only</text>')
+        o.append(f'<text x="{x0 + 110}" y="{y1 + 4}">solid: 10 GbE model; dashed: compute only; dotted: simulated</text>')
     o.append('</svg>')
     with open(out, 'w') as f:
         f.write('\n'.join(o) + '\n')
@@ -80,8 +89,12 @@ def png(panels, out):
         for mapping, pts in sorted(lines.items()):
             pts.sort()
             i = len(blocks)
-            blocks.append('\n'.join(f'{w} {s:.4f} {c:.4f}' for w, s, c in pts))
             col = COLOURS.get(mapping, 'black')
+            if mapping == SIMULATED:
+                blocks.append('\n'.join(f'{w} {s:.4f}' for w, s, _ in pts))
+                cmds.append(f"'{base}.dat' index {i} using 1:2 with linespoints dt 3 lw 2 lc rgb '{col}' title '{mapping}, 10 GbE'")
+                continue
+            blocks.append('\n'.join(f'{w} {s:.4f} {c:.4f}' for w, s, c in pts))
             cmds.append(f"'{base}.dat' index {i} using 1:2 with linespoints lw 2 lc rgb '{col}' title '{mapping}, 10 GbE'")
             cmds.append(f"'{base}.dat' index {i} using 1:3 with lines dt 2 lw 1.5 lc rgb '{col}' title '{mapping}, compute only'")
         plots.append((title, cmds))
