@@ -1049,6 +1049,16 @@ def scale_doc(doc, md):
                 lo, hi = min(us), max(us)
                 return f_us(lo) if f_us(lo) == f_us(hi) else f"{f_us(lo)}–{f_us(hi)}"
 
+            def per_w_table(pairs, cell):
+                """A table of one row per (pose, mapping) in `pairs` (block-cyclic ones): contacts, one thread's
+                time, and cell(row) for each W (row None where the run has none)."""
+                body = []
+                for pose, mapping in pairs:
+                    r0 = next((by[(pose, mapping, w)] for w in ws if (pose, mapping, w) in by), {})
+                    body.append([f_count(r0.get("contacts")), single_range(pose, mapping)]
+                                + [cell(by.get((pose, mapping, w))) for w in ws])
+                return md_table(["contacts", "one thread µs"] + [f"W={w}" for w in ws], body, left=2)
+
             beside = any("single_beside_us" in r for r in rows_)  # runs since 28 Nov 21:00
             md.append("Predicted speed-up against one thread" + (
                 " (timed beside each W's shares, before and after them: one thread µs gives the least and "
@@ -1071,17 +1081,8 @@ def scale_doc(doc, md):
                 md.append("With the replicated deal (`[workers] replicas`: the slowest worker = the mean one x the "
                           "deal's imbalance on the work reported the round before), block-cyclic, compute only"
                           + "".join(f" / {n}" for n in nets) + ":\n")
-                body = []
-                for pose, mapping in rep:
-                    r0 = next((by[(pose, mapping, w)] for w in ws if (pose, mapping, w) in by), {})
-                    row = [f_count(r0.get("contacts")), single_range(pose, mapping)]
-                    for w in ws:
-                        r = by.get((pose, mapping, w))
-                        row.append(DASH if r is None else " / ".join(
-                            f_ratio(r.get(k)) for k in ["compute_speedup_replicated"]
-                            + [f"speedup_{n}_replicated" for n in nets]))
-                    body.append(row)
-                md += md_table(["contacts", "one thread µs"] + [f"W={w}" for w in ws], body, left=2)
+                md += per_w_table(rep, lambda r: DASH if r is None else " / ".join(
+                    f_ratio(r.get(k)) for k in ["compute_speedup_replicated"] + [f"speedup_{n}_replicated" for n in nets]))
             two = [k for k in rep if any(by.get((k[0], k[1], w), {}).get("two_level") for w in ws)]
             if two and nets:
                 net = nets[0]
@@ -1091,20 +1092,16 @@ def scale_doc(doc, md):
                           f"the client's message work for W / g leaders and a leader's for g - 1 members, the "
                           f"leader's and the client's decode and merge measured), {net}, replicated deal: flat "
                           f"(as above) / two-level at the best g (g):\n")
-                body = []
-                for pose, mapping in two:
-                    r0 = next((by[(pose, mapping, w)] for w in ws if (pose, mapping, w) in by), {})
-                    row = [f_count(r0.get("contacts")), single_range(pose, mapping)]
-                    for w in ws:
-                        r = by.get((pose, mapping, w)) or {}
-                        opts = [t for t in r.get("two_level") or [] if isinstance(t, dict) and finite(t.get(key))]
-                        if not opts:
-                            row.append(f_ratio(r.get(key)) if r else DASH)
-                            continue
-                        best = max(opts, key=lambda t: t[key])
-                        row.append(f"{f_ratio(r.get(key))} / {f_ratio(best[key])} ({best.get('group')})")
-                    body.append(row)
-                md += md_table(["contacts", "one thread µs"] + [f"W={w}" for w in ws], body, left=2)
+
+                def two_level_cell(r):
+                    if r is None:
+                        return DASH
+                    opts = [t for t in r.get("two_level") or [] if isinstance(t, dict) and finite(t.get(key))]
+                    if not opts:
+                        return f_ratio(r.get(key))
+                    best = max(opts, key=lambda t: t[key])
+                    return f"{f_ratio(r.get(key))} / {f_ratio(best[key])} ({best.get('group')})"
+                md += per_w_table(two, two_level_cell)
             simulated = [k for k in keys if k[1] == "block-cyclic"
                         and any(f"speedup_{n}_simulated" in by.get((k[0], k[1], w), {}) for w in ws for n in nets[:1])]
             if simulated:
@@ -1116,21 +1113,11 @@ def scale_doc(doc, md):
                           f"then the k-way merge; the run's client, which takes no distinct faces), {net}, "
                           f"block-cyclic: plain deal / replicated deal; the client's work on the Results as they come "
                           f"/ after the last / on the distinct faces it leaves out, µs:\n")
-                body = []
-                for pose, mapping in simulated:
-                    r0 = next((by[(pose, mapping, w)] for w in ws if (pose, mapping, w) in by), {})
-                    row = [f_count(r0.get("contacts")), single_range(pose, mapping)]
-                    for w in ws:
-                        r = by.get((pose, mapping, w)) or {}
-                        if f"speedup_{net}_simulated" not in r:
-                            row.append(DASH)
-                            continue
-                        row.append(f"{f_ratio(r.get(f'speedup_{net}_simulated'))} / "
-                                   f"{f_ratio(r.get(f'speedup_{net}_simulated_replicated'))}; "
-                                   f"{f_us(r.get('client_arrivals_us'))} / {f_us(r.get('client_tail_us'))} / "
-                                   f"{f_us(r.get('client_distinct_us'))}")
-                    body.append(row)
-                md += md_table(["contacts", "one thread µs"] + [f"W={w}" for w in ws], body, left=2)
+                md += per_w_table(simulated, lambda r: DASH if r is None or f"speedup_{net}_simulated" not in r else (
+                    f"{f_ratio(r.get(f'speedup_{net}_simulated'))} / "
+                    f"{f_ratio(r.get(f'speedup_{net}_simulated_replicated'))}; "
+                    f"{f_us(r.get('client_arrivals_us'))} / {f_us(r.get('client_tail_us'))} / "
+                    f"{f_us(r.get('client_distinct_us'))}"))
             leafy = [k for k in keys if any(finite(by.get((k[0], k[1], w), {}).get("probe_leaves_ratio")) for w in ws)
                      and k[1] == "block-cyclic"]
             if leafy:
