@@ -1187,6 +1187,23 @@ def scale_doc(doc, md):
         md.append("Per W and mapping over the poses, mean / median / max:\n")
         if not summary_table(d.get("summary") or [], md):
             md.append("_no summary in this file_\n")
+        nets = [n.get("name") for n in d.get("networks") or [] if isinstance(n, dict) and n.get("name")]
+        keys = [f"speedup_{nets[0]}", f"speedup_{nets[0]}_replicated", f"speedup_{nets[0]}_simulated",
+                f"speedup_{nets[0]}_simulated_replicated"] if nets else []
+        cyclic = [r for r in d.get("rows") or [] if isinstance(r, dict) and r.get("mapping") == "block-cyclic"]
+        ws = sorted({r.get("workers") for r in cyclic if finite(r.get("workers"))})
+        if keys and any(finite(r.get(keys[2])) for r in cyclic):
+            md.append(f"Predicted {nets[0]} speed-up over the poses, block-cyclic, least / median / greatest: the flat "
+                      f"model, with the replicated deal, simulated event by event (the run's client), simulated "
+                      f"with the replicated deal:\n")
+            body = []
+            for w in ws:
+                row = [str(w)]
+                for k in keys:
+                    v = sorted(r.get(k) for r in cyclic if r.get("workers") == w and finite(r.get(k)))
+                    row.append(f"{f_ratio(v[0])} / {f_ratio(v[len(v) // 2])} / {f_ratio(v[-1])}" if v else DASH)
+                body.append(row)
+            md += md_table(["W", "flat", "flat, replicas", "simulated", "simulated, replicas"], body)
     md.append("Ratios only: imbalance and redundancy are 1 for an even deal without overlap; a speed-up above 1 "
               "means distribution beats one thread at that pose, on the modelled network (the workers here share "
               "this machine's cores, so the rounds are modelled from each share timed alone).\n")
