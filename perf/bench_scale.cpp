@@ -18,7 +18,10 @@
 // not move with the host's speed from one share's timing to the next); and the predicted round
 //   compute = max_w (query_w + encode of its Result) + the client's decode and merge
 //   network   = compute + client CPU(W) + round trip + largest reply / bandwidth
-// with speed-up = single-thread collide() (timed beside each W) / predicted round. The model is
+// with speed-up = single-thread collide() (timed beside each W) / predicted round; and the same
+// round simulated event by event as the client runs it (predicted_simulated: Queries out one by
+// one, the slowest worker of the round before first, each Result taken when it arrives, so all
+// receipts but the last overlap the slower workers' compute, then the merge). The model is
 // checked where this machine can: W = 1 and 2 in-process workers over inproc, predicted (our
 // empty round + the slowest share's query + encode and merge) against the measured round, same
 // poses, the terms and the rounds timed in interleaved blocks so that all see the host at the
@@ -1610,8 +1613,9 @@ void add_scale(CLI::App& app) {
       "scale",
       "Scale-out model: each worker's share of a collision round timed alone, for W = 1, 2, 4, ... workers and the\n"
       "block-cyclic, contiguous and random mappings (critical path, imbalance, redundant work), the gather measured\n"
-      "here (inproc floor, client CPU over tcp) and predicted on 10 GbE / 100 GbE; checked against real rounds at W = "
-      "1, 2.\nOver the poses: the spread of imbalance and redundancy, the oracle deal of the same blocks, and a work\n"
+      "here (inproc floor, client CPU over tcp) and predicted on 10 GbE / 100 GbE, flat and simulated event by event "
+      "as the client runs it; checked against real rounds at W = 1, 2.\nOver the poses: the spread of imbalance and "
+      "redundancy, the oracle deal of the same blocks, and a work\n"
       "shipping model (a few blocks moved each round by the round before's work).");
   cmd->add_option("--probe", a->probe, "probe mesh (the hand)")->required()->check(CLI::ExistingFile);
   cmd->add_option("--object", a->object, "object mesh")->required()->check(CLI::ExistingFile);
