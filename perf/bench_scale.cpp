@@ -404,9 +404,8 @@ struct Row {
   }
 };
 
-/// The client's merge, as ScatterGather does it: each Result of `frames` decoded into one sorted
-/// run appended to `merged` (after the runs already begun in `runs`), then all of them merged and
-/// the duplicates dropped.
+/// The client's receipts, as ScatterGather's on_result: each Result of `frames` decoded into one
+/// sorted run appended to `merged` (after the runs already begun in `runs`).
 void take_results(std::span<const std::vector<std::uint8_t>> frames, const net::Limits& limits, geom::SortedRuns& runs,
                   std::vector<net::FacePair>& merged) {
   for (const auto& f : frames)
@@ -417,6 +416,8 @@ void take_results(std::span<const std::vector<std::uint8_t>> frames, const net::
         runs.end(merged);
       }
 }
+/// The client's merge, as ScatterGather does it: the receipts (take_results), then all the runs
+/// merged and the duplicates dropped.
 void merge_results(std::span<const std::vector<std::uint8_t>> frames, const net::Limits& limits, geom::SortedRuns& runs,
                    std::vector<net::FacePair>& merged) {
   take_results(frames, limits, runs, merged);
@@ -1290,9 +1291,9 @@ void run_scale(const ScaleArgs& a) {
   // trip), one at a time on the client's link (their bytes at its bandwidth); the client takes each
   // when it has arrived and the client is free (it is busy sending until all Queries are out): the
   // other half of a message pair and its share of the work on the Results as they come; after the
-  // last, the rest of the merge (the run's client: no distinct faces). Unlike `predicted`, the receipts of all but the last Results
-  // overlap the slower workers' compute. On this VM's client CPU (vm_client) a message pair costs
-  // the fit's b and a round its a (added at the end).
+  // last, the rest of the merge (the run's client: no distinct faces). Unlike `predicted`, the
+  // receipts of all but the last Results overlap the slower workers' compute. On this VM's client
+  // CPU (vm_client) a message pair costs the fit's b and a round its a (added at the end).
   const auto predicted_simulated = [&](const Row& r, const Network& n, bool replicated) {
     const std::vector<double>& worker = replicated ? r.replicated_us : r.worker_us;
     const std::vector<std::uint32_t>& order = replicated ? r.replicated_send_order : r.send_order;
@@ -1613,9 +1614,9 @@ void add_scale(CLI::App& app) {
       "scale",
       "Scale-out model: each worker's share of a collision round timed alone, for W = 1, 2, 4, ... workers and the\n"
       "block-cyclic, contiguous and random mappings (critical path, imbalance, redundant work), the gather measured\n"
-      "here (inproc floor, client CPU over tcp) and predicted on 10 GbE / 100 GbE, flat and simulated event by event "
-      "as the client runs it; checked against real rounds at W = 1, 2.\nOver the poses: the spread of imbalance and "
-      "redundancy, the oracle deal of the same blocks, and a work\n"
+      "here (inproc floor, client CPU over tcp) and predicted on 10 GbE / 100 GbE, flat and simulated event by\n"
+      "event as the client runs it; checked against real rounds at W = 1, 2.\n"
+      "Over the poses: the spread of imbalance and redundancy, the oracle deal of the same blocks, and a work\n"
       "shipping model (a few blocks moved each round by the round before's work).");
   cmd->add_option("--probe", a->probe, "probe mesh (the hand)")->required()->check(CLI::ExistingFile);
   cmd->add_option("--object", a->object, "object mesh")->required()->check(CLI::ExistingFile);
