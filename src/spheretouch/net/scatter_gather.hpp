@@ -168,7 +168,8 @@ struct RoundResult {
   std::uint32_t blocks_assisted = 0;        ///< blocks the client answered itself (ScatterConfig::assist_blocks)
   QueryStats assist;               ///< the client's own work on them (tests also in `stats`; its time here only)
   std::uint32_t blocks_moved = 0;  ///< blocks answered by their standby holder to balance the load (replicas)
-  /// "Contacts" (paper §3.5): distinct colliding probe faces + distinct colliding object faces.
+  /// "Contacts" (paper §3.5): distinct colliding probe faces + distinct colliding object faces (0
+  /// without ScatterConfig::distinct_faces).
   std::size_t contacts() const { return probe_faces.size() + object_faces.size(); }
 };
 
