@@ -390,7 +390,8 @@ struct Row {
   // client's work on the W Results as they come (decode, pairs appended as a sorted run), what is
   // left after the last (the k-way merge, the repeats dropped) and the distinct faces, measured.
   // The simulated round is the run's client: it takes no distinct faces (ScatterConfig::
-  // distinct_faces off in engine::start_fleet); the flat model's client_us includes them.
+  // distinct_faces off in engine::start_fleet); the flat model's client_us includes them. The
+  // replies' bytes and the client's work on them are the plain deal's under either deal.
   std::vector<double> worker_us, replicated_us;
   std::vector<std::size_t> reply_bytes;
   std::vector<std::uint32_t> send_order, replicated_send_order;
