@@ -114,6 +114,25 @@ double time_median_us(int runs, F&& f) {
   return median(std::move(t));
 }
 
+/// This process's CPU per call of `round`, over `rounds` calls spaced 200 µs apart (as a collision
+/// loop spaces its rounds) in 5 blocks: the median block's mean, so that a block this VM stalled
+/// (it once charged a block 70x the others) does not move the figure.
+template <class F>
+double cpu_per_round(F&& round, int rounds) {
+  constexpr int kBlocks = 5;
+  const int n = std::max(1, rounds / kBlocks);
+  std::vector<double> per;
+  for (int b = 0; b < kBlocks; ++b) {
+    const double c0 = process_cpu_us();
+    for (int r = 0; r < n; ++r) {
+      round();
+      std::this_thread::sleep_for(std::chrono::microseconds(200));
+    }
+    per.push_back((process_cpu_us() - c0) / n);
+  }
+  return median(std::move(per));
+}
+
 /// The fan-out ZeroMQ offers besides a DEALER per worker (issue 33, "measure, then choose"): one
 /// PUB the workers subscribe to carries the query (one send for all of them), one PULL gathers
 /// their replies (no poll over W sockets).
@@ -121,8 +140,8 @@ enum class FanOut { dealers, pub_pull };
 
 /// The client's CPU per round over tcp: W DEALERs here (or one PUB and one PULL), W ROUTER echoes
 /// (or SUB + PUSH pairs) in a child process (so this process's CPU time is the client's alone:
-/// its thread and its ZeroMQ I/O thread). Returns microseconds per round for each W. Runs before
-/// this process starts any other thread.
+/// its thread and its ZeroMQ I/O thread). Returns microseconds per round for each W
+/// (cpu_per_round). Runs before this process starts any other thread.
 std::vector<double> client_cpu_tcp(const std::vector<std::uint32_t>& ws, std::size_t reply_bytes, int rounds,
                                    FanOut how = FanOut::dealers) {
   std::vector<double> out;
@@ -209,12 +228,7 @@ std::vector<double> client_cpu_tcp(const std::vector<std::uint32_t>& ws, std::si
         std::this_thread::sleep_for(std::chrono::milliseconds(300));
       }
       for (int r = 0; r < 50; ++r) round();  // connect and warm
-      const double c0 = process_cpu_us();
-      for (int r = 0; r < rounds; ++r) {
-        round();
-        std::this_thread::sleep_for(std::chrono::microseconds(200));  // spaced like a collision loop
-      }
-      per_round = (process_cpu_us() - c0) / rounds;
+      per_round = cpu_per_round(round, rounds);
     }
     ::kill(pid, SIGTERM);
     int st = 0;
@@ -644,6 +658,62 @@ net::BackendFactory share_backends(bool per_block) {
 /// The worker's resident bytes for a share: its object tree and its mesh (the probe is shared by all).
 double share_bytes(const geom::Mesh& m, const geom::SphereTree& t) {
   return double(t.bytes()) + double(m.faces.size() * sizeof(m.faces[0])) + double(m.local.size() * sizeof(m.local[0]));
+}
+
+/// Our client's CPU per round over tcp, for the model's client side checked against real rounds
+/// (issue 33): W in-process workers over tcp in a child process (so this process's CPU time is the
+/// client's alone, as in client_cpu_tcp: its thread and its ZeroMQ I/O thread), our ScatterGather
+/// here as the run sets it up (no assist, no replicas, no distinct faces), `rounds` rounds at each
+/// pose after 50 to warm (cpu_per_round). The workers are the run's `workers` factory: with the
+/// coherent collider a pose asked again is answered from its certificates, so the Results are a
+/// real round's while the workers' compute, which on two cores takes the CPU from the client and
+/// makes each of its wake-ups dearer, stays small. Returns µs per round, per pose. Forks: call it
+/// while this process runs no other thread.
+std::vector<double> our_client_cpu_tcp(std::uint32_t W, const geom::Mesh& probe, const geom::Mesh& object,
+                                       net::Blocks blocks, const net::BackendFactory& workers,
+                                       const std::vector<geom::Pose>& poses, int rounds) {
+  std::vector<std::string> endpoints;
+  for (std::uint32_t i = 0; i < W; ++i) endpoints.push_back("tcp://127.0.0.1:" + std::to_string(free_tcp_port()));
+  const pid_t pid = ::fork();
+  if (pid < 0) die("scale", "fork failed");
+  if (pid == 0) {  // the workers, until the parent's SIGTERM
+    zmq::context_t ctx(1);
+    auto lw = net::LocalWorkers::start(ctx, int(W), workers, [&](int i) { return endpoints[std::size_t(i)]; });
+    if (!lw) {
+      std::fprintf(stderr, "scale: workers for the client-CPU check: %s\n", lw.error().c_str());
+      ::_exit(1);
+    }
+    for (;;) ::pause();
+  }
+  std::vector<double> out;
+  {
+    zmq::context_t ctx(1);
+    net::ScatterConfig cfg;
+    cfg.endpoints = endpoints;
+    cfg.distinct_faces = false;
+    auto sg = net::ScatterGather::create(ctx, cfg, probe, object, std::move(blocks));
+    if (!sg) die("scale", sg.error());
+    if (!sg.value()->wait_ready(Clock::now() + std::chrono::seconds(300)))
+      die("scale", "client-CPU check: " + std::to_string(W) + " workers over tcp not ready in 300 s");
+    net::RoundResult rr;
+    std::uint64_t seq = 0;
+    int incomplete = 0;
+    for (const geom::Pose& pose : poses) {
+      const auto round = [&] {
+        sg.value()->round(++seq, pose, Clock::now() + std::chrono::seconds(5), rr);
+        incomplete += !rr.complete;
+      };
+      for (int r = 0; r < 50; ++r) round();
+      out.push_back(cpu_per_round(round, rounds));
+    }
+    if (incomplete)
+      die("scale", "client-CPU check: " + std::to_string(incomplete) + " incomplete rounds with " + std::to_string(W) +
+                       " workers over tcp");
+  }
+  ::kill(pid, SIGTERM);
+  int st = 0;
+  ::waitpid(pid, &st, 0);
+  return out;
 }
 
 void run_scale(const ScaleArgs& a) {
@@ -1268,6 +1338,48 @@ void run_scale(const ScaleArgs& a) {
     }
   }
 
+  // 5. Our client's CPU per round over tcp at the fit's W (our_client_cpu_tcp), at an empty query
+  //    and at each pose: against the raw fit (the same DEALERs to echoes, without our protocol,
+  //    workers or merge) and against what the model charges this VM's client (the fit's a + b W
+  //    and the measured work on the Results, as they come and after the last). Every context of
+  //    the sections above is gone: no thread runs here when it forks.
+  struct OurClient {
+    std::uint32_t workers = 0;
+    std::vector<double> us;  // the empty query's, then each pose's
+  };
+  std::vector<OurClient> ours;
+  if (a.validate) {
+    geom::Pose far = geom::Pose::Identity();
+    far.translation() = geom::Vec3(1e5, 0, 0);
+    std::vector<geom::Pose> at = {far};
+    at.insert(at.end(), poses.begin(), poses.end());
+    for (std::uint32_t W : cpu_ws) {
+      if (W > a.max_workers) break;
+      const Split sp = split_for(W, geom::Mapping::block_cyclic);
+      auto blocks = net::tree_blocks(part_tree, sp.layer, sp.block_size);
+      if (!blocks || blocks.value().size() < W) continue;
+      std::fprintf(stderr, "scale: our client's CPU per round over tcp, %u workers in a child process ...\n", W);
+      ours.push_back({W, our_client_cpu_tcp(W, probe, object, std::move(blocks).value(),
+                                            net::tree_backend_factory(per_block), at, std::max(50, a.gather_rounds / 2))});
+    }
+  }
+  std::vector<std::uint32_t> ours_ws;
+  std::vector<double> ours_far;
+  for (const OurClient& o : ours) {
+    ours_ws.push_back(o.workers);
+    ours_far.push_back(o.us[0]);
+  }
+  const auto [ours_a, ours_b] = fit_line(ours_ws, ours_far);
+  // What the model charges this VM's client at pose i (1-based; 0: the empty query) and W.
+  const auto client_predicted = [&](std::size_t i, std::uint32_t W) {
+    double us = cpu_a + cpu_b * W;
+    if (i == 0) return us;
+    for (const Row& r : rows)
+      if (r.pose == i && r.workers == W && r.mapping == geom::Mapping::block_cyclic)
+        return us + r.arrivals_us + r.tail_us;
+    return 0.0;
+  };
+
   // The client's side of the gather: W message pairs of work (wake-up free), or this VM's measured
   // CPU per round (a + b W, its wake-ups included).
   const auto client_gather = [&](std::uint32_t W, const Network& n) {
@@ -1457,6 +1569,26 @@ void run_scale(const ScaleArgs& a) {
         j[name] = {{"mean", round_to(sp->mean, 3)}, {"median", round_to(sp->median, 3)}, {"max", round_to(sp->max, 3)}};
       summary.push_back(std::move(j));
     }
+    // Our client's CPU per round (section 5): per W, the empty query's and each pose's, with what
+    // the model charges the client there.
+    Json ours_json = Json::object();
+    if (!ours.empty()) {
+      Json far_us = Json::array(), per_pose = Json::array();
+      for (const OurClient& o : ours) far_us.push_back(round_to(o.us[0], 2));
+      for (std::size_t i = 1; i <= poses.size(); ++i) {
+        Json us = Json::array(), pred = Json::array();
+        for (const OurClient& o : ours) {
+          us.push_back(round_to(o.us[i], 2));
+          pred.push_back(round_to(client_predicted(i, o.workers), 2));
+        }
+        per_pose.push_back({{"pose", i}, {"us_per_round", std::move(us)}, {"predicted_us", std::move(pred)}});
+      }
+      ours_json = {{"workers", ours_ws},
+                   {"empty_us_per_round", std::move(far_us)},
+                   {"fit_a_us", round_to(ours_a, 2)},
+                   {"fit_b_us_per_worker", round_to(ours_b, 3)},
+                   {"poses", std::move(per_pose)}};
+    }
     print_json({{"bench", "scale"},
                 {"probe", a.probe},
                 {"object", a.object},
@@ -1476,6 +1608,7 @@ void run_scale(const ScaleArgs& a) {
                   {"fit_a_us", round_to(pub_a, 2)},
                   {"fit_b_us_per_worker", round_to(pub_b, 3)}}},
                 {"client_message_work_us", round_to(msg_work, 3)},
+                {"client_cpu_ours", std::move(ours_json)},
                 {"test_cost",
                  {{"us_per_sphere_test", round_to(cost_sphere_us, 6)}, {"us_per_tri_test", round_to(cost_tri_us, 6)}}},
                 {"networks", std::move(networks)},
@@ -1499,6 +1632,19 @@ void run_scale(const ScaleArgs& a) {
   for (std::size_t i = 0; i < cpu_pub.size(); ++i) std::printf("W=%u %.1f us  ", cpu_ws[i], cpu_pub[i]);
   std::printf("-> %.1f + %.2f W us\nclient work per worker message, no wake-up (measured): %.2f us\n", pub_a, pub_b,
               msg_work);
+  if (!ours.empty()) {
+    std::printf("our client's CPU per round over tcp (workers in a child process; empty query): ");
+    for (const OurClient& o : ours) std::printf("W=%u %.1f us  ", o.workers, o.us[0]);
+    std::printf("-> %.1f + %.2f W us (raw: %.1f + %.2f W)\n", ours_a, ours_b, cpu_a, cpu_b);
+    for (std::size_t i = 1; i <= poses.size(); ++i) {
+      std::printf("  pose %zu: ", i);
+      for (const OurClient& o : ours) {
+        const double p = client_predicted(i, o.workers);
+        std::printf("W=%u %.1f us (model %.1f, %+.1f %%)  ", o.workers, o.us[i], p, 100.0 * (p - o.us[i]) / o.us[i]);
+      }
+      std::printf("\n");
+    }
+  }
   std::printf("inproc fan-out floor p50 (measured): ");
   for (auto& f : floors) std::printf("W=%u %.1f us  ", f.first, f.second);
   std::printf(
@@ -1632,7 +1778,9 @@ void add_scale(CLI::App& app) {
   cmd->add_option("--gather-rounds", a->gather_rounds, "rounds per floor / client-CPU / validation point")
       ->check(CLI::Range(20, 1000000))
       ->capture_default_str();
-  cmd->add_flag("!--no-validate", a->validate, "skip the W = 1, 2 in-process rounds that check the model");
+  cmd->add_flag("!--no-validate", a->validate,
+                "skip the checks of the model against real rounds: in-process at W = 1, 2, and our client's CPU per "
+                "round over tcp at W = 1..16");
   cmd->add_option("--partition-leaf-faces", a->partition_leaf_faces,
                   "cut the blocks from a tree of the object with leaves this small (finer blocks than the object "
                   "tree's own leaves; 0 = those)")

@@ -1157,6 +1157,34 @@ def scale_doc(doc, md):
             md.append("Model check (in-process workers, block-cyclic): predicted against measured round, µs; error = "
                       "(predicted − measured) / measured:\n")
             md += md_table(head, body, left=0)
+        oc = d.get("client_cpu_ours") or {}
+        if oc.get("workers"):
+            contacts = {r.get("pose"): r.get("contacts") for r in rows_}
+            cc = d.get("client_cpu_tcp") or {}
+            ws, empty = oc.get("workers") or [], oc.get("empty_us_per_round") or []
+            poses_ = [p for p in oc.get("poses") or [] if isinstance(p, dict)]
+            raw = lambda w: (cc["fit_a_us"] + cc["fit_b_us_per_worker"] * w
+                             if finite(cc.get("fit_a_us")) and finite(cc.get("fit_b_us_per_worker")) else None)
+            body = []
+            for k, w in enumerate(ws):
+                e = empty[k] if k < len(empty) else None
+                row = [str(w), f_us(raw(w)), f_us(e), f_ratio(e / raw(w) if finite(e) and raw(w) else None)]
+                for p in poses_:
+                    us, pr = (p.get("us_per_round") or [])[k:k + 1], (p.get("predicted_us") or [])[k:k + 1]
+                    m, q = (us[0] if us else None), (pr[0] if pr else None)
+                    row.append(f"{f_us(m)} / {f_us(q)} ({100 * (q - m) / m:+.1f} %)" if finite(m) and finite(q) and m
+                               else DASH)
+                body.append(row)
+            md.append(f"Our client's CPU per round over tcp against the model's (W in-process workers over tcp in "
+                      f"another process; the run's client: no assist, no distinct faces; the workers' coherent "
+                      f"collider answers a pose asked again from its certificates, so their compute stays small on "
+                      f"these two cores), µs: the raw fit (W DEALERs to echoes), ours at an empty query, and per "
+                      f"pose ours / the model's (the raw fit + the measured work on the Results, as they come and "
+                      f"after the last) (error = (model − ours) / ours); ours at an empty query "
+                      f"{f_us(oc.get('fit_a_us'))} + {f_us(oc.get('fit_b_us_per_worker'))} µs × W:\n")
+            md += md_table(["W", "raw fit µs", "ours, empty query µs", "ours / raw"]
+                           + [f"pose {p.get('pose')} ({f_count(contacts.get(p.get('pose')))} contacts)" for p in poses_],
+                           body, left=0)
         ar = [a for a in d.get("assist_rounds") or [] if isinstance(a, dict)]
         if ar:
             ak = []

@@ -128,21 +128,51 @@ bool is_superset(const std::vector<std::uint32_t>& big, const std::vector<std::u
 }
 }  // namespace
 
-void choose_sets(std::vector<Peer>& peers, const BlockSetCache& sets, std::vector<std::uint8_t>& covered) {
-  std::fill(covered.begin(), covered.end(), 0);
+void choose_sets(std::vector<Peer>& peers, const BlockSetCache& sets, Coverage& cover) {
+  std::vector<std::uint8_t>& covered = cover.marks;
+  std::vector<SetPtr>& last = cover.partition;
   // A held set the worker may be queried with: any but its standby set, which is taken from.
   const auto queryable = [&](const Peer& p, std::uint64_t h) { return h != p.standby_hash ? sets.find(h) : nullptr; };
-  for (Peer& p : peers) {
+  bool same = last.size() == peers.size();
+  for (std::size_t i = 0; i < peers.size(); ++i) {
+    Peer& p = peers[i];
     p.asked = nullptr;
-    if (!heard(p.link)) continue;
-    if (p.holds(p.target_hash))
-      p.asked = sets.find(p.target_hash);
-    else
-      for (std::uint64_t h : p.held)
-        if (SetPtr s = queryable(p, h); s && (!p.asked || s->blocks.size() > p.asked->blocks.size())) p.asked = s;
-    if (p.asked)
-      for (std::uint32_t b : p.asked->blocks) covered[b] = 1;
+    if (heard(p.link)) {
+      if (p.holds(p.target_hash))
+        p.asked = sets.find(p.target_hash);
+      else
+        for (std::uint64_t h : p.held)
+          if (SetPtr s = queryable(p, h); s && (!p.asked || s->blocks.size() > p.asked->blocks.size())) p.asked = s;
+    }
+    same = same && p.asked == last[i];
   }
+  const auto standby = [&] {
+    for (Peer& p : peers) {
+      p.standby_asked = nullptr;
+      if (p.asked && p.standby_hash != p.asked->hash && p.holds(p.standby_hash))
+        p.standby_asked = sets.find(p.standby_hash);
+    }
+  };
+  cover.counting = true;
+  if (same) {  // sets are immutable: the same ones are the same partition
+    standby();
+    return;
+  }
+  std::fill(covered.begin(), covered.end(), 0);
+  std::size_t held = 0;
+  for (const Peer& p : peers)
+    if (p.asked) {
+      held += p.asked->blocks.size();
+      for (std::uint32_t b : p.asked->blocks) covered[b] = 1;
+    }
+  if (held == covered.size() && std::all_of(covered.begin(), covered.end(), [](std::uint8_t c) { return c; })) {
+    last.clear();  // each block in some set, as many blocks as the sets hold: in exactly one
+    for (const Peer& p : peers) last.push_back(p.asked);
+    standby();
+    return;
+  }
+  last.clear();
+  cover.counting = false;
   if (!std::all_of(covered.begin(), covered.end(), [](std::uint8_t c) { return c; }))
     for (Peer& p : peers) {
       if (!heard(p.link)) continue;
@@ -163,11 +193,7 @@ void choose_sets(std::vector<Peer>& peers, const BlockSetCache& sets, std::vecto
         for (std::uint32_t b : best->blocks) covered[b] = 1;
       }
     }
-  for (Peer& p : peers) {
-    p.standby_asked = nullptr;
-    if (p.asked && p.standby_hash != p.asked->hash && p.holds(p.standby_hash))
-      p.standby_asked = sets.find(p.standby_hash);
-  }
+  standby();
 }
 
 void refresh_targets(std::vector<Peer>& peers, BlockSetCache& sets) {

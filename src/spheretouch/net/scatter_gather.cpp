@@ -45,8 +45,8 @@ struct ScatterGather::Impl {
   // Nothing owed after the last round (every worker Live, its Result in, no heartbeat out): the
   // next skips its drain before the sends (two system calls a socket for nothing).
   bool owed_nothing = false;
-  std::vector<std::uint8_t> covered;  // per block, this round
-  std::vector<std::uint8_t> buf;      // encode buffer
+  client::Coverage coverage;      // the blocks this round's Results cover
+  std::vector<std::uint8_t> buf;  // encode buffer
   std::vector<zmq::pollitem_t> items;
   std::vector<std::uint32_t> polled;  // the peer of each item
   RoundResult* out = nullptr;
@@ -105,9 +105,7 @@ struct ScatterGather::Impl {
     runs.begin(out->pairs.size());
     out->pairs.insert(out->pairs.end(), r.pairs.begin(), r.pairs.end());
     runs.end(out->pairs);
-    for (std::uint32_t b : p.asked->blocks)
-      if (!std::binary_search(p.skip.begin(), p.skip.end(), b)) covered[b] = 1;
-    for (std::uint32_t b : p.take) covered[b] = 1;  // blocks of its standby set
+    coverage.note(p);
     out->worker_stats[std::size_t(&p - peers.data())] = r.stats;
     p.compute_ns = r.stats.compute_ns;
     if (weigh) ledger->note(r.worked);
@@ -183,11 +181,6 @@ struct ScatterGather::Impl {
     }
   }
 
-  void service_now() {
-    const auto now = Clock::now();
-    for (Peer& p : peers) drain(p, now);
-  }
-
   /// Gives a fresh socket to every worker that was asked but has been silent for
   /// reconnect_after (unless it is busy loading what we sent).
   void revive_silent(Clock::time_point now) {
@@ -208,11 +201,11 @@ struct ScatterGather::Impl {
     reassign_pending = prune_pending = false;
     client::refresh_targets(peers, *sets);
     for (Peer& p : peers) p.maybe_start_upload(cfg, *sets, now);
-    client::choose_sets(peers, *sets, covered);
+    client::choose_sets(peers, *sets, coverage);
     deal->deal(peers, *ledger);
     out->blocks_moved = deal->moved();
     if (assist) assist->choose(peers, *deal, *ledger);
-    std::fill(covered.begin(), covered.end(), 0);
+    coverage.begin_round();
     client::send_order(peers, order);  // the slowest of the round before first
     for (const std::uint32_t i : order) {
       Peer& p = peers[i];
@@ -309,7 +302,7 @@ Result<std::unique_ptr<ScatterGather>> ScatterGather::create(zmq::context_t& ctx
   if (config.assist_blocks > config.limits.max_skip)
     return fail("scatter-gather: assist_blocks = ", config.assist_blocks, " exceeds the skip list limit ",
                 config.limits.max_skip);
-  impl->covered.assign(nblocks, 0);
+  impl->coverage.marks.assign(nblocks, 0);
   impl->cfg = std::move(config);
   if (impl->cfg.assist_blocks > 0) {
     auto a = client::ClientAssist::create(*impl->scene, impl->cfg.assist_blocks, impl->cfg.limits.max_pairs);
@@ -360,24 +353,23 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   out.seq = seq;
   out.pairs.clear();
   out.complete = false;
-  out.workers_asked = out.workers_replied = out.blocks_covered = 0;
-  out.blocks_total = static_cast<std::uint32_t>(m.covered.size());
-  out.stale_dropped = out.bad_messages = 0;
-  out.stats = {};
+  out.workers_asked = out.workers_replied = out.blocks_covered = out.stale_dropped = out.bad_messages = 0;
+  out.blocks_total = static_cast<std::uint32_t>(m.coverage.marks.size());
   out.blocks_assisted = out.blocks_moved = 0;
-  out.assist = {};
+  out.stats = out.assist = QueryStats{};
   out.worker_stats.assign(m.peers.size(), QueryStats{});
   m.out = &out;
   m.runs.clear();
   m.in_round = false;
-  if (!m.owed_nothing) m.service_now();  // old replies are dropped here, Hellos applied
+  if (!m.owed_nothing)  // old replies are dropped here, Hellos applied
+    for (Peer& p : m.peers) m.drain(p, Clock::now());
   m.owed_nothing = true;
   m.cur_seq = seq;
   m.in_round = true;
   m.begin_round_sends(pose, Clock::now());
   if (m.assist) {  // while the workers compute
     m.runs.begin(out.pairs.size());
-    m.assist->answer(pose, out, m.covered, *m.ledger);
+    m.assist->answer(pose, out, m.coverage.marks, *m.ledger);
     m.runs.end(out.pairs);
   }
   const auto spin_until = std::min(deadline, Clock::now() + std::chrono::microseconds(m.cfg.spin_us));
@@ -397,7 +389,7 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   out.probe_faces.clear();
   out.object_faces.clear();
   if (m.cfg.distinct_faces) geom::distinct_faces(out.pairs, out.probe_faces, out.object_faces, m.ids_scratch);
-  out.blocks_covered = static_cast<std::uint32_t>(std::count(m.covered.begin(), m.covered.end(), 1));
+  out.blocks_covered = static_cast<std::uint32_t>(m.coverage.covered(out.blocks_assisted));
   out.complete = out.blocks_covered == out.blocks_total;
   if (m.weigh) m.ledger->end_round(out.pairs);
 }
@@ -451,6 +443,6 @@ std::vector<WorkerStatus> ScatterGather::workers() const {
 
 std::size_t ScatterGather::encoded_sets() const { return impl_->sets->size(); }
 
-std::uint32_t ScatterGather::blocks_total() const { return static_cast<std::uint32_t>(impl_->covered.size()); }
+std::uint32_t ScatterGather::blocks_total() const { return static_cast<std::uint32_t>(impl_->coverage.marks.size()); }
 
 }  // namespace st::net
