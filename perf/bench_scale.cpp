@@ -141,7 +141,7 @@ enum class FanOut { dealers, pub_pull };
 /// The client's CPU per round over tcp: W DEALERs here (or one PUB and one PULL), W ROUTER echoes
 /// (or SUB + PUSH pairs) in a child process (so this process's CPU time is the client's alone:
 /// its thread and its ZeroMQ I/O thread). Returns microseconds per round for each W
-/// (cpu_per_round). Runs before this process starts any other thread.
+/// (cpu_per_round). Forks: call it while this process runs no other thread.
 std::vector<double> client_cpu_tcp(const std::vector<std::uint32_t>& ws, std::size_t reply_bytes, int rounds,
                                    FanOut how = FanOut::dealers) {
   std::vector<double> out;
@@ -1339,13 +1339,16 @@ void run_scale(const ScaleArgs& a) {
   }
 
   // 5. Our client's CPU per round over tcp at the fit's W (our_client_cpu_tcp), at an empty query
-  //    and at each pose: against the raw fit (the same DEALERs to echoes, without our protocol,
-  //    workers or merge) and against what the model charges this VM's client (the fit's a + b W
-  //    and the measured work on the Results, as they come and after the last). Every context of
-  //    the sections above is gone: no thread runs here when it forks.
+  //    and at each pose, bracketed by the raw client's (client_cpu_tcp: the same DEALERs to
+  //    echoes, without our protocol, workers or merge) just before and just after (this VM's
+  //    speed moves in minutes: the fit above ran long before); against the raw client and against
+  //    what the model charges this VM's client: the raw client's CPU and the measured work on the
+  //    Results, as they come and after the last. Every context of the sections above is gone: no
+  //    thread runs here when they fork.
   struct OurClient {
     std::uint32_t workers = 0;
-    std::vector<double> us;  // the empty query's, then each pose's
+    double raw_us = 0;       // the raw client's, the mean of the runs before and after ours
+    std::vector<double> us;  // ours: the empty query's, then each pose's
   };
   std::vector<OurClient> ours;
   if (a.validate) {
@@ -1353,30 +1356,36 @@ void run_scale(const ScaleArgs& a) {
     far.translation() = geom::Vec3(1e5, 0, 0);
     std::vector<geom::Pose> at = {far};
     at.insert(at.end(), poses.begin(), poses.end());
+    const int rounds = std::max(50, a.gather_rounds / 2);
     for (std::uint32_t W : cpu_ws) {
       if (W > a.max_workers) break;
       const Split sp = split_for(W, geom::Mapping::block_cyclic);
       auto blocks = net::tree_blocks(part_tree, sp.layer, sp.block_size);
       if (!blocks || blocks.value().size() < W) continue;
       std::fprintf(stderr, "scale: our client's CPU per round over tcp, %u workers in a child process ...\n", W);
-      ours.push_back({W, our_client_cpu_tcp(W, probe, object, std::move(blocks).value(),
-                                            net::tree_backend_factory(per_block), at, std::max(50, a.gather_rounds / 2))});
+      OurClient o{W, client_cpu_tcp({W}, 8 * 64, rounds)[0], {}};
+      o.us = our_client_cpu_tcp(W, probe, object, std::move(blocks).value(), net::tree_backend_factory(per_block), at,
+                                rounds);
+      o.raw_us = 0.5 * (o.raw_us + client_cpu_tcp({W}, 8 * 64, rounds)[0]);
+      ours.push_back(std::move(o));
     }
   }
   std::vector<std::uint32_t> ours_ws;
-  std::vector<double> ours_far;
+  std::vector<double> ours_far, ours_raw;
   for (const OurClient& o : ours) {
     ours_ws.push_back(o.workers);
     ours_far.push_back(o.us[0]);
+    ours_raw.push_back(o.raw_us);
   }
   const auto [ours_a, ours_b] = fit_line(ours_ws, ours_far);
-  // What the model charges this VM's client at pose i (1-based; 0: the empty query) and W.
-  const auto client_predicted = [&](std::size_t i, std::uint32_t W) {
-    double us = cpu_a + cpu_b * W;
-    if (i == 0) return us;
+  const auto [raw_a, raw_b] = fit_line(ours_ws, ours_raw);
+  // What the model charges this VM's client at pose i (1-based; 0: the empty query) of `o`: the
+  // raw client's CPU there, and the work on the Results the row measured.
+  const auto client_predicted = [&](std::size_t i, const OurClient& o) {
+    if (i == 0) return o.raw_us;
     for (const Row& r : rows)
-      if (r.pose == i && r.workers == W && r.mapping == geom::Mapping::block_cyclic)
-        return us + r.arrivals_us + r.tail_us;
+      if (r.pose == i && r.workers == o.workers && r.mapping == geom::Mapping::block_cyclic)
+        return o.raw_us + r.arrivals_us + r.tail_us;
     return 0.0;
   };
 
@@ -1573,17 +1582,23 @@ void run_scale(const ScaleArgs& a) {
     // the model charges the client there.
     Json ours_json = Json::object();
     if (!ours.empty()) {
-      Json far_us = Json::array(), per_pose = Json::array();
-      for (const OurClient& o : ours) far_us.push_back(round_to(o.us[0], 2));
+      Json far_us = Json::array(), raw_us = Json::array(), per_pose = Json::array();
+      for (const OurClient& o : ours) {
+        far_us.push_back(round_to(o.us[0], 2));
+        raw_us.push_back(round_to(o.raw_us, 2));
+      }
       for (std::size_t i = 1; i <= poses.size(); ++i) {
         Json us = Json::array(), pred = Json::array();
         for (const OurClient& o : ours) {
           us.push_back(round_to(o.us[i], 2));
-          pred.push_back(round_to(client_predicted(i, o.workers), 2));
+          pred.push_back(round_to(client_predicted(i, o), 2));
         }
         per_pose.push_back({{"pose", i}, {"us_per_round", std::move(us)}, {"predicted_us", std::move(pred)}});
       }
       ours_json = {{"workers", ours_ws},
+                   {"raw_us_per_round", std::move(raw_us)},
+                   {"raw_fit_a_us", round_to(raw_a, 2)},
+                   {"raw_fit_b_us_per_worker", round_to(raw_b, 3)},
                    {"empty_us_per_round", std::move(far_us)},
                    {"fit_a_us", round_to(ours_a, 2)},
                    {"fit_b_us_per_worker", round_to(ours_b, 3)},
@@ -1634,12 +1649,12 @@ void run_scale(const ScaleArgs& a) {
               msg_work);
   if (!ours.empty()) {
     std::printf("our client's CPU per round over tcp (workers in a child process; empty query): ");
-    for (const OurClient& o : ours) std::printf("W=%u %.1f us  ", o.workers, o.us[0]);
-    std::printf("-> %.1f + %.2f W us (raw: %.1f + %.2f W)\n", ours_a, ours_b, cpu_a, cpu_b);
+    for (const OurClient& o : ours) std::printf("W=%u %.1f us (raw %.1f)  ", o.workers, o.us[0], o.raw_us);
+    std::printf("-> %.1f + %.2f W us (raw: %.1f + %.2f W)\n", ours_a, ours_b, raw_a, raw_b);
     for (std::size_t i = 1; i <= poses.size(); ++i) {
       std::printf("  pose %zu: ", i);
       for (const OurClient& o : ours) {
-        const double p = client_predicted(i, o.workers);
+        const double p = client_predicted(i, o);
         std::printf("W=%u %.1f us (model %.1f, %+.1f %%)  ", o.workers, o.us[i], p, 100.0 * (p - o.us[i]) / o.us[i]);
       }
       std::printf("\n");

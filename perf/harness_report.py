@@ -1160,29 +1160,29 @@ def scale_doc(doc, md):
         oc = d.get("client_cpu_ours") or {}
         if oc.get("workers"):
             contacts = {r.get("pose"): r.get("contacts") for r in rows_}
-            cc = d.get("client_cpu_tcp") or {}
             ws, empty = oc.get("workers") or [], oc.get("empty_us_per_round") or []
+            raws = oc.get("raw_us_per_round") or []
             poses_ = [p for p in oc.get("poses") or [] if isinstance(p, dict)]
-            raw = lambda w: (cc["fit_a_us"] + cc["fit_b_us_per_worker"] * w
-                             if finite(cc.get("fit_a_us")) and finite(cc.get("fit_b_us_per_worker")) else None)
             body = []
             for k, w in enumerate(ws):
-                e = empty[k] if k < len(empty) else None
-                row = [str(w), f_us(raw(w)), f_us(e), f_ratio(e / raw(w) if finite(e) and raw(w) else None)]
+                e, r = (empty[k] if k < len(empty) else None), (raws[k] if k < len(raws) else None)
+                row = [str(w), f_us(r), f_us(e), f_ratio(e / r if finite(e) and finite(r) and r else None)]
                 for p in poses_:
                     us, pr = (p.get("us_per_round") or [])[k:k + 1], (p.get("predicted_us") or [])[k:k + 1]
                     m, q = (us[0] if us else None), (pr[0] if pr else None)
                     row.append(f"{f_us(m)} / {f_us(q)} ({100 * (q - m) / m:+.1f} %)" if finite(m) and finite(q) and m
                                else DASH)
                 body.append(row)
-            md.append(f"Our client's CPU per round over tcp against the model's (W in-process workers over tcp in "
-                      f"another process; the run's client: no assist, no distinct faces; the workers' coherent "
-                      f"collider answers a pose asked again from its certificates, so their compute stays small on "
-                      f"these two cores), µs: the raw fit (W DEALERs to echoes), ours at an empty query, and per "
-                      f"pose ours / the model's (the raw fit + the measured work on the Results, as they come and "
-                      f"after the last) (error = (model − ours) / ours); ours at an empty query "
-                      f"{f_us(oc.get('fit_a_us'))} + {f_us(oc.get('fit_b_us_per_worker'))} µs × W:\n")
-            md += md_table(["W", "raw fit µs", "ours, empty query µs", "ours / raw"]
+            md.append(f"Our client's CPU per round over tcp against the raw client's and the model's (W in-process "
+                      f"workers over tcp in another process; the run's client: no assist, no distinct faces; the "
+                      f"workers' coherent collider answers a pose asked again from its certificates, so their compute "
+                      f"stays small on these two cores), µs: the raw client (W DEALERs to echoes, the mean of a run "
+                      f"just before ours and one just after), ours at an empty query, and per pose ours / the "
+                      f"model's (the raw client + the measured work on the Results, as they come and after the "
+                      f"last) (error = (model − ours) / ours). By W: ours at an empty query "
+                      f"{f_us(oc.get('fit_a_us'))} + {f_us(oc.get('fit_b_us_per_worker'))} µs × W, the raw client "
+                      f"{f_us(oc.get('raw_fit_a_us'))} + {f_us(oc.get('raw_fit_b_us_per_worker'))} µs × W:\n")
+            md += md_table(["W", "raw client µs", "ours, empty query µs", "ours / raw"]
                            + [f"pose {p.get('pose')} ({f_count(contacts.get(p.get('pose')))} contacts)" for p in poses_],
                            body, left=0)
         ar = [a for a in d.get("assist_rounds") or [] if isinstance(a, dict)]
