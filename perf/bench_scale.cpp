@@ -419,13 +419,15 @@ struct Row {
   }
 };
 
-/// The client's receipts, as ScatterGather's on_result: each Result of `frames` decoded into one
-/// sorted run appended to `merged` (after the runs already begun in `runs`).
+/// The client's receipts, as ScatterGather's on_result: each Result of `frames` decoded (into one
+/// Message, its room kept from Result to Result, as the client's drain does) into one sorted run
+/// appended to `merged` (after the runs already begun in `runs`).
 void take_results(std::span<const std::vector<std::uint8_t>> frames, const net::Limits& limits, geom::SortedRuns& runs,
                   std::vector<net::FacePair>& merged) {
+  static thread_local net::Message m;
   for (const auto& f : frames)
-    if (auto d = net::decode(f, limits))
-      if (const auto* res = std::get_if<net::ResultMsg>(&d.value())) {
+    if (net::decode(f, limits, m))
+      if (const auto* res = std::get_if<net::ResultMsg>(&m)) {
         runs.begin(merged.size());
         merged.insert(merged.end(), res->pairs.begin(), res->pairs.end());
         runs.end(merged);

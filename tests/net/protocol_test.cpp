@@ -60,6 +60,45 @@ TEST_CASE("every message survives encode/decode unchanged") {
   }
 }
 
+TEST_CASE("decoding into a reused Message gives what a fresh decode gives, whatever it held") {
+  // The client decodes every Result into one Message (its vectors' room kept): nothing of an
+  // earlier message may show through, after a larger Result, another type, or a refused frame.
+  std::mt19937_64 rng(777);
+  const Limits L = DefaultLimits();
+  ResultMsg big{
+      5, 1, 0xbeefull, {1, 2, 3}, std::vector<FacePair>(500, FacePair{9, 9}), 3, std::vector<WorkedBlock>(40, WorkedBlock{1, 1})};
+  for (std::uint32_t i = 0; i < big.worked.size(); ++i) big.worked[i] = {i, i + 1};
+  big.stats.work_limit_hit = true;  // not on the wire: a decode must not keep it either
+  Message reused = big;
+  int compared = 0, refused = 0;
+  for (int pass = 0; pass < 3; ++pass)
+    for (const Message& m : samples()) {
+      auto bytes = encode(m);
+      if (pass == 2) bytes[rng() % bytes.size()] ^= static_cast<std::uint8_t>(1u << (rng() % 8));
+      const auto fresh = decode(bytes, L);
+      const Status st = decode(bytes, L, reused);
+      REQUIRE(st.ok() == fresh.ok());
+      if (!st.ok()) {
+        CHECK(st.error() == fresh.error());
+        ++refused;
+        reused = big;  // whatever the refused frame left, the next decode starts from a large Result
+        continue;
+      }
+      CHECK(reused == fresh.value());
+      if (const auto* r = std::get_if<ResultMsg>(&reused)) CHECK_FALSE(r->stats.work_limit_hit);
+      ++compared;
+      if (pass == 1) reused = big;  // a Result decoded into a larger one
+    }
+  CHECK(compared > 2 * int(samples().size()));
+  MESSAGE(compared << " compared, " << refused << " refused alike");
+  // A small Result into a larger one's room: no allocation (the room is kept), the small one's values.
+  Message x = big;
+  const ResultMsg small{8, 2, 0xcafeull, {4, 5, 6}, {{1, 2}}, 0, {{3, 4}}};
+  REQUIRE(decode(encode(small), L, x).ok());
+  CHECK(std::get<ResultMsg>(x) == small);
+  CHECK(std::get<ResultMsg>(x).pairs.capacity() >= 500);
+}
+
 TEST_CASE("header layout is pinned: magic, version, type, flags, body length, little-endian") {
   const auto b = encode(HeartbeatMsg{0x0102030405060708ull});
   REQUIRE(b.size() == kHeaderBytes + 8);

@@ -112,13 +112,11 @@ Peer::Received Peer::receive(const Limits& limits, Clock::time_point now, Messag
     unreadable = "more than one frame";
     return Received::bad;
   }
-  Result<Message> r = decode({static_cast<const std::uint8_t*>(msg.data()), msg.size()}, limits);
-  if (!r) {
-    unreadable = r.error();
+  if (Status st = decode({static_cast<const std::uint8_t*>(msg.data()), msg.size()}, limits, m); !st) {
+    unreadable = st.error();
     return Received::bad;
   }
   silent_since = std::max(silent_since, now);
-  m = std::move(r).value();
   return Received::message;
 }
 

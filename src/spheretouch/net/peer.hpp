@@ -146,7 +146,8 @@ struct Peer {
   /// What receive() found.
   enum class Received : std::uint8_t { none, message, bad };
   /// The next message waiting on its socket, decoded into `m` (none: nothing waiting; bad: a
-  /// misframed or undecodable one, `unreadable` says why).
+  /// misframed or undecodable one, `unreadable` says why, `m` unspecified). A Result reuses the
+  /// room of the ResultMsg `m` holds (decode()).
   Received receive(const Limits& limits, Clock::time_point now, Message& m);
 };
 

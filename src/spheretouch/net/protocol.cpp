@@ -118,8 +118,9 @@ MsgType type_of(const Message& m) {
   return static_cast<MsgType>(m.index() + 1);  // variant order = MsgType order (asserted below)
 }
 
-Result<Message> decode_body(MsgType type, Reader& r, const Limits& L) {
-  Message out;
+// Decodes the body into `out`: a Result into the ResultMsg `out` holds, if it holds one, its
+// vectors' room reused (every field is written); any other message anew.
+Status decode_body(MsgType type, Reader& r, const Limits& L, Message& out) {
   switch (type) {
     case MsgType::Hello: {
       HelloMsg m;
@@ -182,7 +183,10 @@ Result<Message> decode_body(MsgType type, Reader& r, const Limits& L) {
       break;
     }
     case MsgType::Result: {
-      ResultMsg m;
+      ResultMsg& m = std::holds_alternative<ResultMsg>(out) ? std::get<ResultMsg>(out) : out.emplace<ResultMsg>();
+      m.stats = {};
+      m.pairs.clear();
+      m.worked.clear();
       m.seq = r.u64("seq");
       m.worker_id = r.u32("worker_id");
       m.hash = r.u64("hash");
@@ -216,7 +220,6 @@ Result<Message> decode_body(MsgType type, Reader& r, const Limits& L) {
           if (r.ok() && m.worked[i].work == 0) r.fail_at(at + 4, "worked work", ": 0 (a listed block did work)");
         }
       }
-      out = std::move(m);
       break;
     }
     case MsgType::Heartbeat: {
@@ -243,7 +246,7 @@ Result<Message> decode_body(MsgType type, Reader& r, const Limits& L) {
     }
   }
   if (!r.expect_end()) return Error{r.error()};
-  return out;
+  return Ok{};
 }
 
 }  // namespace
@@ -287,6 +290,12 @@ std::vector<std::uint8_t> encode(const Message& m) {
 }
 
 Result<Message> decode(std::span<const std::uint8_t> frame, const Limits& limits) {
+  Message out;
+  if (Status s = decode(frame, limits, out); !s) return Error{s.error()};
+  return out;
+}
+
+Status decode(std::span<const std::uint8_t> frame, const Limits& limits, Message& out) {
   if (frame.size() > limits.max_message_bytes)
     return fail("message of ", frame.size(), " bytes exceeds the limit ", limits.max_message_bytes);
   Reader h(frame.first(std::min(frame.size(), kHeaderBytes)), "header");
@@ -308,7 +317,7 @@ Result<Message> decode(std::span<const std::uint8_t> frame, const Limits& limits
                 " bytes");
   const auto t = static_cast<MsgType>(type);
   Reader r(frame.subspan(kHeaderBytes), type_name(t), kHeaderBytes);
-  return decode_body(t, r, limits);
+  return decode_body(t, r, limits, out);
 }
 
 }  // namespace st::net

@@ -191,6 +191,10 @@ void encode(const Message& m, std::vector<std::uint8_t>& out);
 std::vector<std::uint8_t> encode(const Message& m);
 /// Decodes one frame, checking it completely against `limits`.
 Result<Message> decode(std::span<const std::uint8_t> frame, const Limits& limits);
+/// The same into `out`: a Result into the ResultMsg `out` already holds, if it holds one, its
+/// vectors' room reused (a client that decodes every Result into one Message allocates nothing
+/// for them once the room is there). On an error `out` holds whatever was read so far.
+Status decode(std::span<const std::uint8_t> frame, const Limits& limits, Message& out);
 
 /// Name of a message type for logs ("Query"), or "unknown".
 const char* type_name(MsgType t);

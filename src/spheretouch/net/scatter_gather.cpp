@@ -47,6 +47,7 @@ struct ScatterGather::Impl {
   bool owed_nothing = false;
   client::Coverage coverage;      // the blocks this round's Results cover
   std::vector<std::uint8_t> buf;  // encode buffer
+  Message rx;                     // the message drain() decodes into (a Result's room kept)
   std::vector<zmq::pollitem_t> items;
   std::vector<std::uint32_t> polled;  // the peer of each item
   RoundResult* out = nullptr;
@@ -134,7 +135,7 @@ struct ScatterGather::Impl {
   }
 
   void drain(Peer& p, Clock::time_point now) {
-    Message m;
+    Message& m = rx;
     for (int budget = 0; budget < 256; ++budget) {
       const Peer::Received got = p.receive(cfg.limits, now, m);
       if (got == Peer::Received::none) return;
