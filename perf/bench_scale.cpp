@@ -1448,6 +1448,53 @@ void run_scale(const ScaleArgs& a) {
     return worker + 2 * n.rtt_us + (leaders + t.group - 1) * msg_work + t.leader_us + t.client_us +
            double(r.max_reply_bytes + t.leader_reply_bytes) / n.bytes_per_us;
   };
+  // The same gather simulated event by event, as predicted_simulated does the flat one: the W
+  // workers in the client's send order dealt round-robin into ceil(W / g) groups (each group a
+  // mix of heavy and light workers), the lightest of each its leader. The client sends the leaders'
+  // Queries (half a message pair each); a leader relays the Query to its members (half a pair
+  // each), then answers its own share; each member's Result crosses back to it over its link; once
+  // its own share is done the leader takes them as they come (half a pair each), then merges and
+  // encodes (the slowest leader's measured decode + merge + encode, t.leader_us) and sends one
+  // Result (the largest leader reply's bytes); the client takes the leaders' Results as they come
+  // (half a pair each), then decodes and merges them (t.client_us, after the last: conservative).
+  const auto predicted_two_level_simulated = [&](const Row& r, const Row::TwoLevel& t, const Network& n, bool replicated) {
+    const std::vector<double>& worker = replicated ? r.replicated_us : r.worker_us;
+    const std::vector<std::uint32_t>& order = replicated ? r.replicated_send_order : r.send_order;
+    if (worker.size() != r.workers || order.size() != r.workers || t.group < 2) return 0.0;
+    const double half = 0.5 * msg_work;
+    const std::size_t groups = (r.workers + t.group - 1) / t.group;
+    std::vector<double> back;  // when each leader's Result has reached the client's side of its link
+    double client = 0;
+    for (std::size_t k = 0; k < groups; ++k) {
+      std::vector<std::uint32_t> members;
+      for (std::size_t i = k; i < order.size(); i += groups) members.push_back(order[i]);
+      const auto lead = std::min_element(members.begin(), members.end(),
+                                         [&](std::uint32_t x, std::uint32_t y) { return worker[x] < worker[y]; });
+      const std::uint32_t leader = *lead;
+      members.erase(lead);
+      client += half;                                  // the leader's Query out
+      double at = client + n.rtt_us / 2;               // ... at the leader
+      std::vector<std::pair<double, std::size_t>> in;  // (a member's Result leaves it, its bytes)
+      for (const std::uint32_t m : members) {
+        at += half;  // relayed
+        in.push_back({at + n.rtt_us / 2 + worker[m], r.reply_bytes[m]});
+      }
+      std::sort(in.begin(), in.end());
+      double busy = at + worker[leader], link = 0;  // its own share after the relays
+      for (const auto& [leaves, bytes] : in) {
+        link = std::max(link, leaves + n.rtt_us / 2) + double(bytes) / n.bytes_per_us;
+        busy = std::max(busy, link) + half;
+      }
+      back.push_back(busy + t.leader_us + n.rtt_us / 2);
+    }
+    std::sort(back.begin(), back.end());
+    double link = 0;
+    for (const double b : back) {
+      link = std::max(link, b) + double(t.leader_reply_bytes) / n.bytes_per_us;
+      client = std::max(client, link) + half;
+    }
+    return client + t.client_us;
+  };
 
   if (a.json) {
     // Byte and face counts are whole numbers held in doubles: integers in the JSON, as before.
@@ -1548,6 +1595,10 @@ void run_scale(const ScaleArgs& a) {
           x[std::string("speedup_") + n.name] = round_to(r.single_us / predicted_two_level(r, t, n, false), 3);
           x[std::string("speedup_") + n.name + "_replicated"] =
               round_to(r.single_us / predicted_two_level(r, t, n, true), 3);
+          for (const bool rep : {false, true})
+            if (const double us = predicted_two_level_simulated(r, t, n, rep); us > 0)
+              x[std::string("speedup_") + n.name + "_simulated" + (rep ? "_replicated" : "")] =
+                  round_to(r.single_us / us, 3);
         }
         two.push_back(std::move(x));
       }

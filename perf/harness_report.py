@@ -1087,20 +1087,28 @@ def scale_doc(doc, md):
             if two and nets:
                 net = nets[0]
                 key = f"speedup_{net}_replicated"
-                md.append(f"A two-level gather (a model, not built: groups of g workers, the first of each relaying "
+                skey = f"speedup_{net}_simulated_replicated"
+                md.append(f"A two-level gather (a model, not built: groups of g workers, one of each relaying "
                           f"the Query and merging its group's Results into one for the client; two round trips, "
                           f"the client's message work for W / g leaders and a leader's for g - 1 members, the "
                           f"leader's and the client's decode and merge measured), {net}, replicated deal: flat "
-                          f"(as above) / two-level at the best g (g):\n")
+                          f"(as above) / two-level at the best g (g); then simulated event by event, the flat "
+                          f"gather (the table below) / two-level at the best g (g; the workers dealt round-robin "
+                          f"into groups in the client's send order, the lightest of each its leader, which relays "
+                          f"the Query, answers its own share, then takes its members' Results as they come):\n")
+
+                def best_of(r, k):
+                    opts = [t for t in r.get("two_level") or [] if isinstance(t, dict) and finite(t.get(k))]
+                    return max(opts, key=lambda t: t[k]) if opts else None
 
                 def two_level_cell(r):
                     if r is None:
                         return DASH
-                    opts = [t for t in r.get("two_level") or [] if isinstance(t, dict) and finite(t.get(key))]
-                    if not opts:
-                        return f_ratio(r.get(key))
-                    best = max(opts, key=lambda t: t[key])
-                    return f"{f_ratio(r.get(key))} / {f_ratio(best[key])} ({best.get('group')})"
+                    best, sim = best_of(r, key), best_of(r, skey)
+                    cell = f_ratio(r.get(key)) + (f" / {f_ratio(best[key])} ({best.get('group')})" if best else "")
+                    if finite(r.get(skey)):
+                        cell += f"; {f_ratio(r.get(skey))}" + (f" / {f_ratio(sim[skey])} ({sim.get('group')})" if sim else "")
+                    return cell
                 md += per_w_table(two, two_level_cell)
             simulated = [k for k in keys if k[1] == "block-cyclic"
                         and any(f"speedup_{n}_simulated" in by.get((k[0], k[1], w), {}) for w in ws for n in nets[:1])]
