@@ -40,6 +40,7 @@
 #include <memory>
 #include <random>
 #include <string>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <thread>
 #include <unistd.h>
@@ -678,7 +679,9 @@ std::vector<double> our_client_cpu_tcp(std::uint32_t W, const geom::Mesh& probe,
   for (std::uint32_t i = 0; i < W; ++i) endpoints.push_back("tcp://127.0.0.1:" + std::to_string(free_tcp_port()));
   const pid_t pid = ::fork();
   if (pid < 0) die("scale", "fork failed");
-  if (pid == 0) {  // the workers, until the parent's SIGTERM
+  if (pid == 0) {                        // the workers, until the parent's SIGTERM
+    ::prctl(PR_SET_PDEATHSIG, SIGTERM);  // or its end: a parent that dies leaves no workers behind
+    if (::getppid() == 1) ::_exit(1);    // it ended before the line above
     zmq::context_t ctx(1);
     auto lw = net::LocalWorkers::start(ctx, int(W), workers, [&](int i) { return endpoints[std::size_t(i)]; });
     if (!lw) {
@@ -695,8 +698,14 @@ std::vector<double> our_client_cpu_tcp(std::uint32_t W, const geom::Mesh& probe,
     cfg.distinct_faces = false;
     auto sg = net::ScatterGather::create(ctx, cfg, probe, object, std::move(blocks));
     if (!sg) die("scale", sg.error());
-    if (!sg.value()->wait_ready(Clock::now() + std::chrono::seconds(300)))
-      die("scale", "client-CPU check: " + std::to_string(W) + " workers over tcp not ready in 300 s");
+    for (const auto until = Clock::now() + std::chrono::seconds(300);
+         !sg.value()->wait_ready(Clock::now() + std::chrono::seconds(1));) {
+      int st = 0;
+      if (::waitpid(pid, &st, WNOHANG) == pid)
+        die("scale", "client-CPU check: the process of the " + std::to_string(W) + " workers ended (above: why)");
+      if (Clock::now() > until)
+        die("scale", "client-CPU check: " + std::to_string(W) + " workers over tcp not ready in 300 s");
+    }
     net::RoundResult rr;
     std::uint64_t seq = 0;
     int incomplete = 0;

@@ -47,7 +47,7 @@ struct ScatterGather::Impl {
   bool owed_nothing = false;
   client::Coverage coverage;      // the blocks this round's Results cover
   std::vector<std::uint8_t> buf;  // encode buffer
-  Message rx;                     // the message drain() decodes into (a Result's room kept)
+  Message rx;                     // drain() decodes into it (a Result's room kept: <= Limits::max_pairs)
   std::vector<zmq::pollitem_t> items;
   std::vector<std::uint32_t> polled;  // the peer of each item
   RoundResult* out = nullptr;
