@@ -163,7 +163,8 @@ void choose_sets(std::vector<Peer>& peers, const BlockSetCache& sets, Coverage& 
       held += p.asked->blocks.size();
       for (std::uint32_t b : p.asked->blocks) covered[b] = 1;
     }
-  if (held == covered.size() && std::all_of(covered.begin(), covered.end(), [](std::uint8_t c) { return c; })) {
+  const bool all = std::all_of(covered.begin(), covered.end(), [](std::uint8_t c) { return c; });
+  if (all && held == covered.size()) {
     last.clear();  // each block in some set, as many blocks as the sets hold: in exactly one
     for (const Peer& p : peers) last.push_back(p.asked);
     standby();
@@ -171,7 +172,7 @@ void choose_sets(std::vector<Peer>& peers, const BlockSetCache& sets, Coverage& 
   }
   last.clear();
   cover.counting = false;
-  if (!std::all_of(covered.begin(), covered.end(), [](std::uint8_t c) { return c; }))
+  if (!all)
     for (Peer& p : peers) {
       if (!heard(p.link)) continue;
       SetPtr best;

@@ -363,7 +363,7 @@ void ScatterGather::round(std::uint64_t seq, const geom::Pose& pose, Clock::time
   m.runs.clear();
   m.in_round = false;
   if (!m.owed_nothing)  // old replies are dropped here, Hellos applied
-    for (Peer& p : m.peers) m.drain(p, Clock::now());
+    for (const auto now = Clock::now(); Peer & p : m.peers) m.drain(p, now);
   m.owed_nothing = true;
   m.cur_seq = seq;
   m.in_round = true;
