@@ -474,29 +474,37 @@ TEST_CASE("scratch reuse: no reallocation once warm; non-finite pose gives nothi
   CHECK(res.pairs.empty());
 }
 
-TEST_CASE("SortedRuns merges sorted runs (and unsorted ones it sorts) into what std::sort gives, for 0 to 33 runs") {
+TEST_CASE("SortedRuns merges sorted runs (and unsorted ones it sorts) into what std::sort gives, for 0 to 65 runs") {
   std::mt19937_64 rng(5);
   st::geom::SortedRuns runs;
   std::vector<FacePair> pairs;
-  for (std::size_t k : {0, 1, 2, 3, 7, 8, 33})
-    for (int unsorted : {0, 1}) {
-      pairs.clear();
-      runs.clear();
-      for (std::size_t r = 0; r < k; ++r) {
-        runs.begin(pairs.size());
-        const std::size_t n = rng() % 50;  // empty runs too
-        for (std::size_t i = 0; i < n; ++i) pairs.push_back({std::uint32_t(rng() % 40), std::uint32_t(rng() % 400)});
-        // A worker's run is sorted; the last one (the assist's, or a worker that did not sort) may not be.
-        if (!(unsorted && r + 1 == k)) std::sort(pairs.end() - std::ptrdiff_t(n), pairs.end());
-        runs.end(pairs);
+  // Both of its ways: small ids (15 bits of key: 2 radix passes, so from 5 runs on it radix-sorts;
+  // many repeats), ids up to 2^20 (40 bits: 4 passes, from 17 runs on) and ids over all 32 bits
+  // (64 bits: 6 passes, it merges up to 64 runs, radix-sorts 65).
+  for (const std::uint32_t range : {400u, 1u << 20, 0u})
+    for (std::size_t k : {0, 1, 2, 3, 4, 5, 7, 8, 16, 17, 33, 64, 65})
+      for (int unsorted : {0, 1}) {
+        pairs.clear();
+        runs.clear();
+        const auto id = [&](std::uint32_t small) {  // a probe's ids below 40 with the small range
+          return range == 0 ? std::uint32_t(rng()) : std::uint32_t(rng() % (range == 400 ? small : range));
+        };
+        for (std::size_t r = 0; r < k; ++r) {
+          runs.begin(pairs.size());
+          const std::size_t n = rng() % 50;  // empty runs too
+          for (std::size_t i = 0; i < n; ++i) pairs.push_back({id(40), id(range)});
+          // A worker's run is sorted; the last one (the assist's, or a worker that did not sort) may not be.
+          if (!(unsorted && r + 1 == k)) std::sort(pairs.end() - std::ptrdiff_t(n), pairs.end());
+          runs.end(pairs);
+        }
+        std::vector<FacePair> expect = pairs;
+        std::sort(expect.begin(), expect.end());
+        runs.merge(pairs);
+        CAPTURE(range);
+        CAPTURE(k);
+        CAPTURE(unsorted);
+        CHECK(pairs == expect);
       }
-      std::vector<FacePair> expect = pairs;
-      std::sort(expect.begin(), expect.end());
-      runs.merge(pairs);
-      CAPTURE(k);
-      CAPTURE(unsorted);
-      CHECK(pairs == expect);
-    }
 }
 
 TEST_CASE("sort_distinct_ids and count_faces give std::sort + std::unique's ids, at every size and id range") {

@@ -367,8 +367,24 @@ void SortedRuns::end(std::vector<FacePair>& pairs) {
   if (!std::is_sorted(first, pairs.end())) std::sort(first, pairs.end());
 }
 
+namespace {
+constexpr int kRadixDigitBits = 11;  // radix_passes(): digits of at most this many bits
+}  // namespace
+
 void SortedRuns::merge(std::vector<FacePair>& pairs) {
   starts_.push_back(pairs.size());
+  std::size_t runs = 0;  // non-empty ones
+  for (std::size_t j = 0; j + 1 < starts_.size(); ++j) runs += starts_[j + 1] > starts_[j];
+  if (runs > 2) {  // the merge's passes against the radix sort's
+    std::uint32_t max_probe = 0, max_object = 0;
+    for (const FacePair& p : pairs) max_probe |= p.probe, max_object |= p.object;
+    const int bits = int(std::bit_width(max_probe) + std::bit_width(max_object));
+    if (int(std::bit_width(runs - 1)) > std::max(1, (bits + kRadixDigitBits - 1) / kRadixDigitBits)) {
+      sort_face_pairs(pairs, keys_);
+      starts_.clear();
+      return;
+    }
+  }
   while (starts_.size() > 2) {
     merged_.resize(pairs.size());
     next_.clear();
@@ -395,7 +411,7 @@ namespace {
 // array that holds the keys ascending (a or b).
 template <class Key>
 Key* radix_passes(Key* a, Key* b, std::size_t n, int bits) {
-  constexpr int kMaxDigit = 11;
+  constexpr int kMaxDigit = kRadixDigitBits;
   const int passes = std::max(1, (bits + kMaxDigit - 1) / kMaxDigit), digit = (bits + passes - 1) / passes;
   const std::size_t buckets = std::size_t(1) << digit;
   std::uint32_t count[std::size_t(1) << kMaxDigit];
