@@ -652,10 +652,10 @@ CMD_COLLIDE = ("build/perf/spheretouch-bench collide --probe .cache/models/hand_
                "--object .cache/models/<object>.off --poses <poses> --runs 300 --isa <isa> --json "
                "> {out}/collide_<object>_<isa>.json")
 CMD_SLIDES = ("build/perf/spheretouch-bench slides --probe .cache/models/hand_L2.off "
-              "--object .cache/models/<object>.off --poses <poses> --rounds 200 --reps 5 --json "
+              "--object .cache/models/<object>.off --poses <poses> --rounds 200 --reps 9 --json "
               "> {out}/slides_<object>.json")
 CMD_SLIDES_FOLLOW = ("build/perf/spheretouch-bench slides --probe .cache/models/hand_L2.off "
-                     "--object .cache/models/<object>.off --poses <poses> --rounds 200 --reps 5 --follow --json "
+                     "--object .cache/models/<object>.off --poses <poses> --rounds 200 --reps 9 --follow --json "
                      "> {out}/slides_follow_<object>.json")
 CMD_WITHDRAW = ("build/perf/spheretouch-bench slides --probe .cache/models/hand_L2.off "
                 "--object .cache/models/<object>.off --poses <poses> --steps '' --jerk 0 --withdraw 0.01 "

@@ -124,7 +124,7 @@ for o in "${collide_objects[@]}"; do
 done
 
 # The coherent collider along slides and a jerk, against today's path and the filter (same run).
-if [ $quick = 1 ]; then slide_args=(--rounds 60 --reps 1 --steps 0.01,0.1); else slide_args=(--rounds 200 --reps 5); fi
+if [ $quick = 1 ]; then slide_args=(--rounds 60 --reps 1 --steps 0.01,0.1); else slide_args=(--rounds 200 --reps 9); fi
 log "collision core: coherent collider along slides (${collide_objects[*]})"
 for o in "${collide_objects[@]}"; do
   if [ "$o" = elephant ]; then pf="$out/poses/hand_elephant.txt"; else pf="$out/poses/hand_${o}_targets.txt"; fi
