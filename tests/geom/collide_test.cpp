@@ -478,9 +478,10 @@ TEST_CASE("SortedRuns merges sorted runs (and unsorted ones it sorts) into what 
   std::mt19937_64 rng(5);
   st::geom::SortedRuns runs;
   std::vector<FacePair> pairs;
-  // Both of its ways: small ids (15 bits of key: 2 radix passes, so from 5 runs on it radix-sorts;
-  // many repeats), ids up to 2^20 (40 bits: 4 passes, from 17 runs on) and ids over all 32 bits
-  // (64 bits: 6 passes, it merges up to 64 runs, radix-sorts 65).
+  // Both of its ways, by the non-empty runs: small ids (15 bits of key: 2 radix passes, so from 5
+  // runs on it radix-sorts; many repeats), ids up to 2^20 (40 bits: 4 passes, from 17 runs on)
+  // and ids over all 32 bits (64 bits: 6 passes, it merges up to 64 runs, radix-sorts 65: no
+  // empty run there).
   for (const std::uint32_t range : {400u, 1u << 20, 0u})
     for (std::size_t k : {0, 1, 2, 3, 4, 5, 7, 8, 16, 17, 33, 64, 65})
       for (int unsorted : {0, 1}) {
@@ -491,7 +492,7 @@ TEST_CASE("SortedRuns merges sorted runs (and unsorted ones it sorts) into what 
         };
         for (std::size_t r = 0; r < k; ++r) {
           runs.begin(pairs.size());
-          const std::size_t n = rng() % 50;  // empty runs too
+          const std::size_t n = range == 0 ? 1 + rng() % 49 : rng() % 50;  // empty runs too
           for (std::size_t i = 0; i < n; ++i) pairs.push_back({id(40), id(range)});
           // A worker's run is sorted; the last one (the assist's, or a worker that did not sort) may not be.
           if (!(unsorted && r + 1 == k)) std::sort(pairs.end() - std::ptrdiff_t(n), pairs.end());
