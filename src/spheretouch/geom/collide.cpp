@@ -369,6 +369,18 @@ void SortedRuns::end(std::vector<FacePair>& pairs) {
 
 namespace {
 constexpr int kRadixDigitBits = 11;  // radix_passes(): digits of at most this many bits
+
+// The widths of the pairs' largest probe and object indices (an or of them has the max's width).
+struct KeyBits {
+  int probe = 0, object = 0;
+};
+KeyBits key_bits(std::span<const FacePair> pairs) {
+  std::uint32_t probe = 0, object = 0;
+  for (const FacePair& p : pairs) probe |= p.probe, object |= p.object;
+  return {int(std::bit_width(probe)), int(std::bit_width(object))};
+}
+// sort_face_pairs() with the key widths known (defined with radix_passes, below).
+void sort_pairs_keyed(std::span<FacePair> pairs, std::vector<std::uint64_t>& scratch, KeyBits kb);
 }  // namespace
 
 void SortedRuns::merge(std::vector<FacePair>& pairs) {
@@ -376,11 +388,10 @@ void SortedRuns::merge(std::vector<FacePair>& pairs) {
   std::size_t runs = 0;  // non-empty ones
   for (std::size_t j = 0; j + 1 < starts_.size(); ++j) runs += starts_[j + 1] > starts_[j];
   if (runs > 2) {  // the merge's passes against the radix sort's
-    std::uint32_t max_probe = 0, max_object = 0;
-    for (const FacePair& p : pairs) max_probe |= p.probe, max_object |= p.object;
-    const int bits = int(std::bit_width(max_probe) + std::bit_width(max_object));
+    const KeyBits kb = key_bits(pairs);
+    const int bits = kb.probe + kb.object;
     if (int(std::bit_width(runs - 1)) > std::max(1, (bits + kRadixDigitBits - 1) / kRadixDigitBits)) {
-      sort_face_pairs(pairs, keys_);
+      sort_pairs_keyed(pairs, keys_, kb);
       starts_.clear();
       return;
     }
@@ -439,17 +450,14 @@ std::size_t sort_distinct(std::uint32_t* ids, std::size_t n, std::uint32_t* tmp)
   ST_ASSERT(std::is_sorted(ids, ids + n), "the radix passes leave the ids ascending");
   return static_cast<std::size_t>(std::unique(ids, ids + n) - ids);
 }
-}  // namespace
 
-void sort_face_pairs(std::span<FacePair> pairs, std::vector<std::uint64_t>& scratch) {
+void sort_pairs_keyed(std::span<FacePair> pairs, std::vector<std::uint64_t>& scratch, KeyBits kb) {
   const std::size_t n = pairs.size();
   if (n < 64) {  // a handful: the comparison sort is quicker than clearing the counts
     std::sort(pairs.begin(), pairs.end());
     return;
   }
-  std::uint32_t max_probe = 0, max_object = 0;
-  for (const FacePair& p : pairs) max_probe = std::max(max_probe, p.probe), max_object = std::max(max_object, p.object);
-  const int object_bits = std::bit_width(max_object), bits = std::bit_width(max_probe) + object_bits;
+  const int object_bits = kb.object, bits = kb.probe + kb.object;
   scratch.resize(2 * n);
   std::uint64_t* keys = scratch.data();
   // The order of the keys is (probe, object).
@@ -459,6 +467,11 @@ void sort_face_pairs(std::span<FacePair> pairs, std::vector<std::uint64_t>& scra
   for (std::size_t i = 0; i < n; ++i)
     pairs[i] = {std::uint32_t(sorted[i] >> object_bits), std::uint32_t(sorted[i] & object_mask)};
   ST_ASSERT(std::is_sorted(pairs.begin(), pairs.end()), "the radix passes leave the pairs in (probe, object) order");
+}
+}  // namespace
+
+void sort_face_pairs(std::span<FacePair> pairs, std::vector<std::uint64_t>& scratch) {
+  sort_pairs_keyed(pairs, scratch, key_bits(pairs));
 }
 
 void sort_distinct_ids(std::vector<std::uint32_t>& ids, std::vector<std::uint32_t>& scratch) {
