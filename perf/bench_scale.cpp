@@ -1427,6 +1427,20 @@ void run_scale(const ScaleArgs& a) {
   // last, the rest of the merge (the run's client: no distinct faces). Unlike `predicted`, the
   // receipts of all but the last Results overlap the slower workers' compute. On this VM's client
   // CPU (vm_client) a message pair costs the fit's b and a round its a (added at the end).
+  // Messages taken as they come over one link, the step both simulated gathers share: each (when
+  // it leaves its sender, its bytes) crosses half a round trip of n, then its bytes at n's
+  // bandwidth, one at a time; the taker, busy until `busy`, spends `cost` on each once it has
+  // arrived. Returns when the taker is done with the last.
+  const auto take_as_they_come = [](std::vector<std::pair<double, std::size_t>>& sent, const Network& n, double busy,
+                                    double cost) {
+    std::sort(sent.begin(), sent.end());
+    double link = 0;
+    for (const auto& [leaves, bytes] : sent) {
+      link = std::max(link, leaves + n.rtt_us / 2) + double(bytes) / n.bytes_per_us;
+      busy = std::max(busy, link) + cost;
+    }
+    return busy;
+  };
   const auto predicted_simulated = [&](const Row& r, const Network& n, bool replicated) {
     const std::vector<double>& worker = replicated ? r.replicated_us : r.worker_us;
     const std::vector<std::uint32_t>& order = replicated ? r.replicated_send_order : r.send_order;
@@ -1438,13 +1452,7 @@ void run_scale(const ScaleArgs& a) {
       t += half;
       ready.push_back({t + n.rtt_us / 2 + worker[w], r.reply_bytes[w]});
     }
-    std::sort(ready.begin(), ready.end());
-    double link = 0, client = t;
-    for (const auto& [leaves, bytes] : ready) {
-      link = std::max(link, leaves + n.rtt_us / 2) + double(bytes) / n.bytes_per_us;
-      client = std::max(client, link) + half + each;
-    }
-    return client + r.tail_us + (n.vm_client ? cpu_a : 0.0);
+    return take_as_they_come(ready, n, t, half + each) + r.tail_us + (n.vm_client ? cpu_a : 0.0);
   };
   // The two-level gather (Row::TwoLevel) on network n: the slowest worker (with its encode), two
   // round trips (client - leader, leader - member), the client's message work for the ceil(W / g)
@@ -1472,7 +1480,7 @@ void run_scale(const ScaleArgs& a) {
     if (worker.size() != r.workers || order.size() != r.workers || t.group < 2) return 0.0;
     const double half = 0.5 * msg_work;
     const std::size_t groups = (r.workers + t.group - 1) / t.group;
-    std::vector<double> back;  // when each leader's Result has reached the client's side of its link
+    std::vector<std::pair<double, std::size_t>> back;  // (a leader's Result leaves it, its bytes)
     double client = 0;
     for (std::size_t k = 0; k < groups; ++k) {
       std::vector<std::uint32_t> members;
@@ -1488,21 +1496,10 @@ void run_scale(const ScaleArgs& a) {
         at += half;  // relayed
         in.push_back({at + n.rtt_us / 2 + worker[m], r.reply_bytes[m]});
       }
-      std::sort(in.begin(), in.end());
-      double busy = at + worker[leader], link = 0;  // its own share after the relays
-      for (const auto& [leaves, bytes] : in) {
-        link = std::max(link, leaves + n.rtt_us / 2) + double(bytes) / n.bytes_per_us;
-        busy = std::max(busy, link) + half;
-      }
-      back.push_back(busy + t.leader_us + n.rtt_us / 2);
+      const double busy = take_as_they_come(in, n, at + worker[leader], half);  // its own share after the relays
+      back.push_back({busy + t.leader_us, t.leader_reply_bytes});
     }
-    std::sort(back.begin(), back.end());
-    double link = 0;
-    for (const double b : back) {
-      link = std::max(link, b) + double(t.leader_reply_bytes) / n.bytes_per_us;
-      client = std::max(client, link) + half;
-    }
-    return client + t.client_us;
+    return take_as_they_come(back, n, client, half) + t.client_us;
   };
 
   if (a.json) {
