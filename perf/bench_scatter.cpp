@@ -3,13 +3,17 @@
 // overhead), over inproc, ipc or tcp loopback. Rounds are spaced like the collision loop spaces
 // them (--gap-us between the end of one round and the start of the next): ZeroMQ latency rises
 // when sends are spaced out (wake-ups from idle), so back-to-back bursts would flatter it.
-// Two references, measured in the same run, spaced the same way and alternating with it in
+// Three references, measured in the same run, spaced the same way and alternating with it in
 // blocks of 100 rounds:
 //  * baseline: one plain request-reply (Heartbeat -> Hello) with worker 0 over the same transport;
 //  * floor: the same N-way fan-out and gather done with raw ZeroMQ sockets (N ROUTER echo
-//    threads, one 8-byte frame each), i.e. what the machine and libzmq cost before any of ours.
+//    threads, one 8-byte frame each), i.e. what the machine and libzmq cost before any of ours;
+//  * sized floor: the same raw fan-out with frames of our messages' sizes (the encoded Query out,
+//    an empty Result back): what carrying a pose and an answer costs before any of ours (libzmq
+//    keeps frames of up to 33 bytes inside the message and allocates larger ones).
 // And a split of the overhead, alternating with them: the floor's raw client sending our encoded
-// Query to our workers (split - floor: what our workers add; ours - split: what our client adds).
+// Query to our workers (split - sized floor, the same bytes both ways: what our workers add;
+// ours - split: what our client adds).
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -76,14 +80,16 @@ int free_tcp_port() {
 /// `scatter --spawn`), until SIGTERM.
 void add_echo(CLI::App& app) {
   auto bind = std::make_shared<std::string>();
+  auto reply_bytes = std::make_shared<std::size_t>(8);
   CLI::App* cmd = app.add_subcommand("echo", "raw ZeroMQ echo process: scatter --spawn's floor")->group("");
   cmd->add_option("--bind", *bind, "endpoint")->required();
-  cmd->callback([bind] {
+  cmd->add_option("--reply-bytes", *reply_bytes, "bytes of each reply (at least 8)")->check(CLI::Range(8, 1 << 20));
+  cmd->callback([bind, reply_bytes] {
     zmq::context_t ctx(1);
     zmq::socket_t s(ctx, zmq::socket_type::router);
     s.set(zmq::sockopt::linger, 0);
     s.bind(*bind);
-    std::vector<std::uint8_t> reply(8, 0);
+    std::vector<std::uint8_t> reply(*reply_bytes, 0);
     for (;;) {
       zmq::pollitem_t it{s.handle(), 0, ZMQ_POLLIN, 0};
       if (zmq::poll(&it, 1, std::chrono::milliseconds(20)) > 0) echo_pending(s, reply);
@@ -134,7 +140,11 @@ void add_scatter(CLI::App& app) {
     std::vector<std::unique_ptr<zmq::context_t>> wctx;
     std::vector<std::unique_ptr<net::LocalWorkers>> local;
     std::vector<pid_t> procs;
-    std::vector<std::string> endpoints, echo_endpoints;
+    std::vector<std::string> endpoints, echo_endpoints, sized_echo_endpoints;
+    // The sized floor's frames: our Query (no skip, no take, as this bench sends) and an empty
+    // Result, as encoded (their sizes do not depend on the values).
+    const std::size_t query_bytes = net::encode(net::QueryMsg{}).size();
+    const std::size_t result_bytes = net::encode(net::ResultMsg{}).size();
     if (!a->spawn.empty()) {
       if (a->transport == "inproc") {
         std::fprintf(stderr, "--spawn needs tcp or ipc\n");
@@ -156,17 +166,21 @@ void add_scatter(CLI::App& app) {
       // The floor's echoes as processes too (this binary's hidden `echo` subcommand): a round to
       // daemons crosses processes, each with its own ZeroMQ I/O thread, which echo threads of this
       // process would not.
-      for (int i = 0; i < a->workers; ++i) {
-        std::string ep = a->transport == "ipc" ? endpoint_for("ipc", i, "floor")
-                                               : "tcp://127.0.0.1:" + std::to_string(free_tcp_port());
-        const pid_t pid = ::fork();
-        if (pid == 0) {
-          ::execl("/proc/self/exe", "spheretouch-bench", "echo", "--bind", ep.c_str(), (char*)nullptr);
-          ::_exit(127);
+      for (const std::size_t reply : {std::size_t{8}, result_bytes})
+        for (int i = 0; i < a->workers; ++i) {
+          const std::string tag = reply == 8 ? "floor" : "sized-floor";
+          std::string ep = a->transport == "ipc" ? endpoint_for("ipc", i, tag)
+                                                 : "tcp://127.0.0.1:" + std::to_string(free_tcp_port());
+          const std::string bytes = std::to_string(reply);
+          const pid_t pid = ::fork();
+          if (pid == 0) {
+            ::execl("/proc/self/exe", "spheretouch-bench", "echo", "--bind", ep.c_str(), "--reply-bytes", bytes.c_str(),
+                    (char*)nullptr);
+            ::_exit(127);
+          }
+          procs.push_back(pid);
+          (reply == 8 ? echo_endpoints : sized_echo_endpoints).push_back(ep);
         }
-        procs.push_back(pid);
-        echo_endpoints.push_back(ep);
-      }
     } else {
       for (int i = 0; i < a->workers; ++i) {
         zmq::context_t* wc = &ctx;
@@ -237,7 +251,7 @@ void add_scatter(CLI::App& app) {
     };
 
     // Split: raw DEALERs (the floor's client) sending our pre-encoded Query to our workers and
-    // waiting for their Results undecoded. Against the floor it is what our workers add; against
+    // waiting for their Results undecoded. Against the sized floor it is what our workers add; against
     // our rounds, what our client adds. It queries block sets a second client (routing id
     // "split") loaded and left on the workers.
     std::vector<zmq::socket_t> raw;
@@ -288,17 +302,24 @@ void add_scatter(CLI::App& app) {
     // Floor: the same fan-out with nothing of ours in it: N raw ROUTER echo threads on the same
     // transport and context, and N DEALERs sending one 8-byte frame each and waiting for all N
     // echoes. No ZeroMQ scatter-gather to N separate workers can be cheaper on this machine.
-    std::unique_ptr<FanOutFloor> floor_threads;
-    std::unique_ptr<FanOutGather> floor_procs;
-    if (echo_endpoints.empty())
+    // The sized floor: the same, its frames as large as our Query and Result.
+    std::unique_ptr<FanOutFloor> floor_threads, sized_threads;
+    std::unique_ptr<FanOutGather> floor_procs, sized_procs;
+    if (echo_endpoints.empty()) {
       floor_threads = std::make_unique<FanOutFloor>(ctx, a->transport, a->workers);
-    else
+      sized_threads = std::make_unique<FanOutFloor>(ctx, a->transport, a->workers, result_bytes);
+    } else {
       floor_procs = std::make_unique<FanOutGather>(ctx, echo_endpoints);
+      sized_procs = std::make_unique<FanOutGather>(ctx, sized_echo_endpoints);
+    }
     auto floor_round = [&](bool) {
       return floor_threads ? floor_threads->round(deadline) : floor_procs->round(deadline);
     };
+    auto sized_round = [&](bool) {
+      return sized_threads ? sized_threads->round(deadline, query_bytes) : sized_procs->round(deadline, query_bytes);
+    };
 
-    std::vector<double> us, base, flo, split;
+    std::vector<double> us, base, flo, sized, split;
     int lost = 0;  // baseline or floor rounds with no reply by the deadline (counted, not timed)
     // This process's CPU time over each variant's measured blocks (client, worker threads, echo
     // threads and ZeroMQ's I/O threads; the idle gaps' few wake-ups included): with threads, every
@@ -323,6 +344,7 @@ void add_scatter(CLI::App& app) {
     run_block(scatter_round, nullptr, a->warmup, false);
     run_block(baseline_round, nullptr, a->warmup, false);
     run_block(floor_round, nullptr, a->warmup, false);
+    run_block(sized_round, nullptr, a->warmup, false);
     run_block(split_round, nullptr, a->warmup, false);
     constexpr int kBlock = 100;
     for (int done = 0; done < a->rounds; done += kBlock) {
@@ -330,11 +352,13 @@ void add_scatter(CLI::App& app) {
       run_block(scatter_round, &us, n, true);
       run_block(baseline_round, &base, n, true);
       run_block(floor_round, &flo, n, true);
+      run_block(sized_round, &sized, n, true);
       run_block(split_round, &split, n, true);
     }
     const Stats s = summarise(us);
     const Stats b = summarise(base);
     const Stats f = summarise(flo);
+    const Stats fs = summarise(sized);
     const Stats sp = summarise(split);
     const bool threads = procs.empty();
     auto cpu_per_round = [&](const std::vector<double>& v) { return v.empty() ? 0.0 : cpu[&v] / double(v.size()); };
@@ -354,27 +378,36 @@ void add_scatter(CLI::App& app) {
                   {"baseline_p99_us", round_to(b.p99, 1)},
                   {"floor_p50_us", round_to(f.p50, 1)},
                   {"floor_p99_us", round_to(f.p99, 1)},
+                  {"sized_floor_p50_us", round_to(fs.p50, 1)},
+                  {"sized_floor_p99_us", round_to(fs.p99, 1)},
+                  {"query_bytes", query_bytes},
+                  {"result_bytes", result_bytes},
                   {"split_p50_us", round_to(sp.p50, 1)},
                   {"split_p99_us", round_to(sp.p99, 1)},
                   {"cpu_per_round_us", threads ? Json(round_to(cpu_per_round(us), 1)) : Json(nullptr)},
                   {"floor_cpu_per_round_us", threads ? Json(round_to(cpu_per_round(flo), 1)) : Json(nullptr)},
+                  {"sized_floor_cpu_per_round_us", threads ? Json(round_to(cpu_per_round(sized), 1)) : Json(nullptr)},
                   {"split_cpu_per_round_us", threads ? Json(round_to(cpu_per_round(split), 1)) : Json(nullptr)},
                   {"lost", lost}});
     else
       std::printf(
           "scatter  %d workers  %-6s gap %5d us  %d rounds (%d incomplete)  p50 %7.1f us  p99 %7.1f us  max %8.1f us"
           "\n  baseline 1 req-rep: p50 %6.1f us  p99 %6.1f us\n  floor, raw %d-way fan-out: p50 %6.1f us  p99 %6.1f us"
-          "  (ours / floor: p50 x%.2f, p99 x%.2f)%s\n  split, the floor's raw client to our workers: p50 %6.1f us  "
-          "p99 %6.1f us  (our workers add %+.1f us at p50, our client %+.1f us)\n",
+          "  (ours / floor: p50 x%.2f, p99 x%.2f)%s\n  sized floor, frames of %zu / %zu bytes: p50 %6.1f us  p99 %6.1f "
+          "us"
+          "  (ours / sized floor: p50 x%.2f, p99 x%.2f)\n  split, the floor's raw client to our workers: p50 %6.1f us  "
+          "p99 %6.1f us  (our workers add %+.1f us at p50 over the sized floor, our client %+.1f us)\n",
           a->workers, a->transport.c_str(), a->gap_us, a->rounds, incomplete, s.p50, s.p99, s.max, b.p50, b.p99,
           a->workers, f.p50, f.p99, f.p50 > 0 ? s.p50 / f.p50 : 0.0, f.p99 > 0 ? s.p99 / f.p99 : 0.0,
-          lost ? "  (some baseline/floor rounds lost: see --json)" : "", sp.p50, sp.p99, sp.p50 - f.p50, s.p50 - sp.p50);
+          lost ? "  (some baseline/floor rounds lost: see --json)" : "", query_bytes, result_bytes, fs.p50, fs.p99,
+          fs.p50 > 0 ? s.p50 / fs.p50 : 0.0, fs.p99 > 0 ? s.p99 / fs.p99 : 0.0, sp.p50, sp.p99, sp.p50 - fs.p50,
+          s.p50 - sp.p50);
     if (!a->json && threads)
       std::printf(
-          "  CPU per round, this process (client, workers, ZeroMQ's threads): ours %.1f us, floor %.1f us, split "
-          "%.1f us (our workers add %+.1f us, our client %+.1f us)\n",
-          cpu_per_round(us), cpu_per_round(flo), cpu_per_round(split), cpu_per_round(split) - cpu_per_round(flo),
-          cpu_per_round(us) - cpu_per_round(split));
+          "  CPU per round, this process (client, workers, ZeroMQ's threads): ours %.1f us, floor %.1f us, sized floor "
+          "%.1f us, split %.1f us (our workers add %+.1f us over the sized floor, our client %+.1f us)\n",
+          cpu_per_round(us), cpu_per_round(flo), cpu_per_round(sized), cpu_per_round(split),
+          cpu_per_round(split) - cpu_per_round(sized), cpu_per_round(us) - cpu_per_round(split));
     if (!a->csv.empty()) {
       const bool fresh = !std::ifstream(a->csv).good();
       std::ofstream o(a->csv, std::ios::app);

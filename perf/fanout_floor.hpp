@@ -127,8 +127,11 @@ class FanOutFloor {
   FanOutFloor(const FanOutFloor&) = delete;
   FanOutFloor& operator=(const FanOutFloor&) = delete;
 
-  /// One frame to every echo, then wait for all of them; false if the deadline passed first.
-  bool round(std::chrono::milliseconds deadline) { return gather_->round(deadline); }
+  /// One frame of `query_bytes` (at least 8) to every echo, then wait for all of them; false if
+  /// the deadline passed first.
+  bool round(std::chrono::milliseconds deadline, std::size_t query_bytes = 8) {
+    return gather_->round(deadline, query_bytes);
+  }
 
  private:
   void echo(zmq::socket_t& s) {
