@@ -80,6 +80,43 @@ TEST_CASE("merged pairs equal the single-process reference for 1, 2, 4 and 8 inp
   }
 }
 
+TEST_CASE("more workers than blocks: the idle ones are not awaited between heartbeats, never missed or marked down") {
+  // Two blocks over four workers (a small object of a scene, or a pinned split): two workers have
+  // nothing to answer. A round awaits a Hello from an idle worker only when it sends it a
+  // Heartbeat; it once awaited one every round, so each round between Heartbeats waited out its
+  // deadline, counted a miss and, three rounds on, marked the idle worker down.
+  zmq::context_t ctx;
+  test::NetScene s = test::small_scene(4, 24);
+  s.blocks = spatial_blocks(s.object, 200);
+  REQUIRE(s.blocks.size() == 2);
+  const std::string t = tag();
+  auto w = LocalWorkers::start(ctx, 4, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); });
+  REQUIRE_MESSAGE(w.ok(), w.error());
+  for (const bool replicas : {false, true}) {
+    CAPTURE(replicas);
+    ScatterConfig cfg;
+    cfg.endpoints = w.value()->endpoints();
+    cfg.routing_id = replicas ? "idle-r" : "idle";
+    cfg.replicas = replicas;
+    cfg.heartbeat_period = 1h;  // no Heartbeat after the first: every round is one between them
+    auto c = ScatterGather::create(ctx, cfg, s.probe, s.object, s.blocks);
+    REQUIRE_MESSAGE(c.ok(), c.error());
+    REQUIRE(c.value()->wait_ready(Clock::now() + 10s));
+    std::uint64_t seq = 0;
+    for (const geom::Pose& pose : test::contact_poses(s, 6)) {
+      RoundResult r = c.value()->round(++seq, pose, Clock::now() + 200ms);
+      CHECK(r.complete);
+      CHECK(r.workers_asked == 2);
+      CHECK(r.workers_replied == 2);
+      CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
+      for (const WorkerStatus& ws : c.value()->workers()) {
+        CHECK(ws.up);
+        CHECK(ws.misses == 0);
+      }
+    }
+  }
+}
+
 TEST_CASE("without distinct_faces a round gives the same pairs and leaves the face lists empty") {
   zmq::context_t ctx;
   const test::NetScene s = test::small_scene(10, 24);

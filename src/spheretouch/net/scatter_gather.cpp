@@ -230,9 +230,13 @@ struct ScatterGather::Impl {
           p.send(HeartbeatMsg{++p.nonce}, buf);
           owed_nothing = false;
         }
-      } else if (p.link != Link::Loading) {
-        p.step(TurnEvent::Ping);  // unknown or empty: it must at least say hello by the deadline
-        if (now >= p.heartbeat_due || p.link == Link::Unknown) p.heartbeat(cfg, now, buf);
+      } else if (p.link != Link::Loading && (now >= p.heartbeat_due || p.link == Link::Unknown)) {
+        // Unknown, or nothing to ask this round (no blocks: more workers than blocks): it must
+        // at least answer a Heartbeat by the deadline. Only a round that sends one waits for the
+        // Hello (and counts a miss without it): between Heartbeats the round has nothing of it
+        // to await, and awaiting it anyway held every such round to its deadline.
+        p.step(TurnEvent::Ping);
+        p.heartbeat(cfg, now, buf);
       }
       p.pump_upload(cfg, now, buf);
     }
