@@ -106,6 +106,57 @@ TEST_CASE("header layout is pinned: magic, version, type, flags, body length, li
   CHECK(b == want);
 }
 
+TEST_CASE("every body is its fields in order, little-endian, the header's length its size") {
+  // The encoder sizes a message first and writes it in place; this writes the same fields one by
+  // one with Writer, as the protocol lays them out, and compares the bytes.
+  auto header = [](Writer& w, MsgType t) {
+    w.u32(0x504e5453);  // "STNP"
+    w.u16(5);
+    w.u8(static_cast<std::uint8_t>(t));
+    w.u8(0);
+    w.u32(0);
+  };
+  auto pose = [](Writer& w, const geom::Pose& p) {
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) w.f64(p.matrix()(r, c));
+  };
+  for (const Message& m : samples()) {
+    CAPTURE(m.index());
+    std::vector<std::uint8_t> want;
+    Writer w(want);
+    header(w, static_cast<MsgType>(m.index() + 1));
+    if (const auto* h = std::get_if<HelloMsg>(&m)) {
+      w.u32(h->worker_id), w.u64(h->epoch), w.u64(h->echo), w.u32(std::uint32_t(h->held.size()));
+      for (const Held& x : h->held) w.u64(x.hash), w.u32(x.faces);
+    } else if (const auto* l = std::get_if<LoadBlocksMsg>(&m)) {
+      w.u64(l->hash), w.u64(l->total_bytes), w.u64(l->offset), w.u32(std::uint32_t(l->data.size())), w.bytes(l->data);
+    } else if (const auto* q = std::get_if<QueryMsg>(&m)) {
+      w.u64(q->seq), w.u64(q->hash), w.u32(q->object), pose(w, q->pose), w.u32(std::uint32_t(q->skip.size()));
+      for (std::uint32_t b : q->skip) w.u32(b);
+      w.u64(q->standby), w.u32(std::uint32_t(q->take.size()));
+      for (std::uint32_t b : q->take) w.u32(b);
+    } else if (const auto* r = std::get_if<ResultMsg>(&m)) {
+      w.u64(r->seq), w.u32(r->worker_id), w.u64(r->hash), w.u32(r->object);
+      w.u64(r->stats.sphere_tests), w.u64(r->stats.tri_tests), w.u64(r->stats.compute_ns);
+      w.u32(std::uint32_t(r->pairs.size()));
+      for (const FacePair& p : r->pairs) w.u32(p.probe), w.u32(p.object);
+      w.u32(std::uint32_t(r->worked.size()));
+      for (const WorkedBlock& b : r->worked) w.u32(b.block), w.u32(b.work);
+    } else if (const auto* hb = std::get_if<HeartbeatMsg>(&m)) {
+      w.u64(hb->nonce);
+    } else if (const auto* e = std::get_if<ErrorMsg>(&m)) {
+      w.u16(static_cast<std::uint16_t>(e->code)), w.u64(e->ref), w.u32(std::uint32_t(e->text.size()));
+      w.raw(e->text.data(), e->text.size());
+    }
+    w.patch_u32(8, static_cast<std::uint32_t>(want.size() - kHeaderBytes));
+    CHECK(encode(m) == want);
+    // Into a buffer that held a longer message: the same bytes, nothing of the old one left.
+    std::vector<std::uint8_t> reused(want.size() + 100, 0xee);
+    encode(m, reused);
+    CHECK(reused == want);
+  }
+}
+
 TEST_CASE("a message truncated at every byte offset is rejected with a message") {
   for (const Message& m : samples()) {
     const auto full = encode(m);
