@@ -7,10 +7,13 @@
 #include <doctest/doctest.h>
 
 #include <algorithm>
+#include <array>
 #include <numeric>
+#include <random>
 #include <thread>
 
 #include <spheretouch/geom/collide.hpp>
+#include <spheretouch/geom/primitives.hpp>
 #include <spheretouch/geom/sphere_tree.hpp>
 #include <spheretouch/net/local_workers.hpp>
 #include <spheretouch/net/reference_backend.hpp>
@@ -113,6 +116,61 @@ TEST_CASE("more workers than blocks: the idle ones are not awaited between heart
         CHECK(ws.up);
         CHECK(ws.misses == 0);
       }
+    }
+  }
+}
+
+TEST_CASE("randomised fleets: any deal, fewer blocks than workers, assist, replicas: exact rounds, no miss") {
+  // Seeded cases of what a caller may configure: 1-6 workers, an icosphere or capsule object cut
+  // into tree blocks or spatial blocks (sometimes fewer than the workers), each mapping, assist
+  // and replicas on or off; the probe slid along and into the object. Every round is complete and
+  // equals collide(); no worker misses a deadline or is marked down (a long heartbeat period: a
+  // round that awaited a reply it never asked for would count misses here).
+  zmq::context_t ctx;
+  std::mt19937_64 rng(20261129);
+  auto uni = [&](int a, int b) { return std::uniform_int_distribution<int>(a, b)(rng); };
+  for (int c = 0; c < 8; ++c) {
+    CAPTURE(c);
+    const geom::Mesh object = uni(0, 1) ? geom::make_icosphere(30.0, uni(3, 5)) : geom::make_capsule(12.0, 30.0, 16);
+    const geom::Mesh probe = geom::make_icosphere(8.0, 2);
+    const geom::SphereTree object_tree = geom::SphereTree::build(object).value();
+    const geom::SphereTree probe_tree = geom::SphereTree::build(probe).value();
+    const int workers = uni(1, 6);
+    Blocks blocks = uni(0, 2) ? tree_blocks(object_tree, std::uint32_t(uni(1, 3)), std::uint32_t(uni(1, 2))).value()
+                              : spatial_blocks(object, std::uint32_t(uni(60, 400)));
+    const std::string t = tag();
+    auto w = LocalWorkers::start(ctx, workers, tree_backend_factory(), [&](int i) { return inproc_endpoint(i, t); });
+    REQUIRE_MESSAGE(w.ok(), w.error());
+    ScatterConfig cfg;
+    cfg.endpoints = w.value()->endpoints();
+    cfg.mapping = std::array{geom::Mapping::block_cyclic, geom::Mapping::contiguous, geom::Mapping::random}[uni(0, 2)];
+    cfg.assist_blocks = uni(0, 1) ? std::uint32_t(uni(1, 3)) : 0;
+    cfg.replicas = workers > 1 && uni(0, 1);
+    cfg.heartbeat_period = 1h;
+    CAPTURE(workers);
+    CAPTURE(blocks.size());
+    CAPTURE(cfg.replicas);
+    CAPTURE(cfg.assist_blocks);
+    auto sg = ScatterGather::create(ctx, cfg, probe, object, blocks);
+    REQUIRE_MESSAGE(sg.ok(), sg.error());
+    REQUIRE(sg.value()->wait_ready(Clock::now() + 10s));
+    const geom::Vec3 dir = geom::Vec3(uni(-9, 9), uni(-9, 9), 10).normalized();
+    geom::Pose pose = geom::Pose::Identity();
+    geom::CollideScratch scratch;
+    geom::CollideResult plain;
+    geom::CollideConfig opt;
+    opt.sort_pairs = true;
+    RoundResult r;
+    for (int k = 0; k < 30; ++k) {
+      pose.translation() = dir * (36.0 - 0.3 * k) + geom::Vec3(0.2 * k, 0, 0);
+      sg.value()->round(std::uint64_t(k + 1), pose, Clock::now() + 5s, r);
+      geom::collide(probe, probe_tree, object, object_tree, pose, opt, scratch, plain);
+      CHECK(r.complete);
+      CHECK(r.pairs == plain.pairs);
+    }
+    for (const WorkerStatus& ws : sg.value()->workers()) {
+      CHECK(ws.up);
+      CHECK(ws.misses == 0);
     }
   }
 }
