@@ -120,6 +120,45 @@ TEST_CASE("more workers than blocks: the idle ones are not awaited between heart
   }
 }
 
+TEST_CASE("a worker that refuses a round's Query (over max_pairs) is not awaited, missed or marked down; it says why") {
+  // Workers that take at most 10 pairs a query: a pose in deep contact gives each more. The
+  // refusal (TooLarge, naming the Query's seq) ends that worker's turn: the round is incomplete
+  // without its blocks, the worker stays up with no miss (it once waited out every round's
+  // deadline for a Result that never came and, three rounds on, was marked down), and
+  // WorkerStatus::refused carries the worker's reason. A pose apart is answered again.
+  zmq::context_t ctx;
+  const test::NetScene s = test::small_scene(10, 24);
+  WorkerConfig base;
+  base.limits.max_pairs = 10;
+  base.penalty_factor = 0;  // (the penalty's own refusals end the turn the same way)
+  const std::string t = tag();
+  auto w = LocalWorkers::start(ctx, 2, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, base);
+  REQUIRE_MESSAGE(w.ok(), w.error());
+  auto c = client(ctx, *w.value(), s);
+  REQUIRE(c->wait_ready(Clock::now() + 10s));
+  geom::Pose deep = geom::Pose::Identity();
+  deep.translation() = geom::Vec3(0, 0, 28);  // the fingertip well into the sphere's top
+  REQUIRE(reference_collide(s.probe, s.object, deep).size() > 40);
+  std::uint64_t seq = 0;
+  for (int k = 0; k < 5; ++k) {
+    RoundResult r = c->round(++seq, deep, Clock::now() + 5s);
+    CHECK_FALSE(r.complete);
+    CHECK(r.workers_asked == 2);
+    bool named = false;
+    for (const WorkerStatus& ws : c->workers()) {
+      CHECK(ws.up);
+      CHECK(ws.misses == 0);
+      named = named || ws.refused.find("max_pairs") != std::string::npos;
+    }
+    CHECK(named);
+  }
+  geom::Pose apart = geom::Pose::Identity();
+  apart.translation() = geom::Vec3(0, 0, 100);
+  RoundResult r = c->round(++seq, apart, Clock::now() + 5s);
+  CHECK(r.complete);
+  CHECK(r.pairs.empty());
+}
+
 TEST_CASE("randomised fleets: any deal, fewer blocks than workers, assist, replicas: exact rounds, no miss") {
   // Seeded cases of what a caller may configure: 1-6 workers, an icosphere or capsule object cut
   // into tree blocks or spatial blocks (sometimes fewer than the workers), each mapping, assist

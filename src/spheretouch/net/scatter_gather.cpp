@@ -117,19 +117,26 @@ struct ScatterGather::Impl {
 
   void on_error(Peer& p, const ErrorMsg& e, Clock::time_point now) {
     const bool query_turn = p.turn == Turn::Queried || p.turn == Turn::Unsent || p.turn == Turn::Answered;
-    if (e.code == ErrorCode::NotLoaded && in_round && e.ref == cur_seq && query_turn) {
+    const bool this_query = in_round && e.ref == cur_seq && query_turn;
+    const bool load_refusal = e.code == ErrorCode::LoadFailed || e.code == ErrorCode::TooLarge;
+    if (e.code == ErrorCode::NotLoaded && this_query) {
       p.step(TurnEvent::NotLoaded);  // alive, just not holding what we asked for; its Hello follows
       // With a standby set named either set may be the one missing: the Hello says which.
       if (!p.standby_asked)
         p.held.erase(std::remove(p.held.begin(), p.held.end(), p.asked ? p.asked->hash : 0), p.held.end());
-    } else if (e.code == ErrorCode::LoadFailed || e.code == ErrorCode::TooLarge) {
-      if (p.link == Link::Loading && (e.ref == p.upload->hash || e.ref == 0)) {
-        p.refused_hash = p.upload->hash;
-        p.refused = e.text;
-        p.refused_at = now;
-        link(p, LinkEvent::LoadEnd);
-      }
-    } else if (out) {
+    } else if (load_refusal && p.link == Link::Loading && (e.ref == p.upload->hash || e.ref == 0)) {
+      p.refused_hash = p.upload->hash;
+      p.refused = e.text;
+      p.refused_at = now;
+      link(p, LinkEvent::LoadEnd);
+    } else if (this_query && e.code != ErrorCode::NotLoaded) {
+      // This round's Query refused (TooLarge: over max_pairs or the set's work budget, or the
+      // penalty after one; BadMessage): the worker is alive and sends no Result for it. The round
+      // stops awaiting it (incomplete without its blocks) instead of waiting out its deadline and
+      // counting a miss, which marked a refusing worker down; WorkerStatus::refused says why.
+      p.step(TurnEvent::NotLoaded);
+      p.refused = e.text;
+    } else if (!load_refusal && out) {
       ++out->bad_messages;
     }
   }

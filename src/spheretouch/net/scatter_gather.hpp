@@ -189,7 +189,8 @@ struct WorkerStatus {
   /// "header at byte 4: version: 1 not supported (this build speaks 2)": a daemon of another version.
   std::string unreadable;
   /// Why it last refused a block set this client sent (its LoadFailed or TooLarge text, such as a
-  /// set over its max_blockset_bytes or "worker full"); empty: none refused.
+  /// set over its max_blockset_bytes or "worker full") or a Query (a round's pairs over its
+  /// max_pairs or the set's work budget: that round is incomplete); empty: none refused.
   std::string refused;
   std::vector<std::uint32_t> standby_blocks;  ///< its copies of other workers' blocks (ScatterConfig::replicas)
   bool holds_standby = false;                 ///< it has acknowledged its standby set (or has none)
