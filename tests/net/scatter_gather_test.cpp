@@ -132,7 +132,8 @@ TEST_CASE("a worker that refuses a round's Query (over max_pairs) is not awaited
   base.limits.max_pairs = 10;
   base.penalty_factor = 0;  // (the penalty's own refusals end the turn the same way)
   const std::string t = tag();
-  auto w = LocalWorkers::start(ctx, 2, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, base);
+  auto w = LocalWorkers::start(
+      ctx, 2, reference_backend_factory(), [&](int i) { return inproc_endpoint(i, t); }, base);
   REQUIRE_MESSAGE(w.ok(), w.error());
   auto c = client(ctx, *w.value(), s);
   REQUIRE(c->wait_ready(Clock::now() + 10s));
