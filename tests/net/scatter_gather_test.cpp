@@ -44,6 +44,14 @@ std::unique_ptr<ScatterGather> client(zmq::context_t& ctx, const LocalWorkers& w
   return std::move(c.value());
 }
 
+// Every worker up, none with a missed deadline.
+void check_none_missed(const ScatterGather& c) {
+  for (const WorkerStatus& ws : c.workers()) {
+    CHECK(ws.up);
+    CHECK(ws.misses == 0);
+  }
+}
+
 // A fresh client gets these workers ready and one complete round equal to the reference.
 void check_one_exact_round(zmq::context_t& ctx, const LocalWorkers& w, const test::NetScene& s) {
   auto c = client(ctx, w, s);
@@ -112,10 +120,7 @@ TEST_CASE("more workers than blocks: the idle ones are not awaited between heart
       CHECK(r.workers_asked == 2);
       CHECK(r.workers_replied == 2);
       CHECK(r.pairs == reference_collide(s.probe, s.object, pose));
-      for (const WorkerStatus& ws : c.value()->workers()) {
-        CHECK(ws.up);
-        CHECK(ws.misses == 0);
-      }
+      check_none_missed(*c.value());
     }
   }
 }
@@ -145,13 +150,10 @@ TEST_CASE("a worker that refuses a round's Query (over max_pairs) is not awaited
     RoundResult r = c->round(++seq, deep, Clock::now() + 5s);
     CHECK_FALSE(r.complete);
     CHECK(r.workers_asked == 2);
-    bool named = false;
-    for (const WorkerStatus& ws : c->workers()) {
-      CHECK(ws.up);
-      CHECK(ws.misses == 0);
-      named = named || ws.refused.find("max_pairs") != std::string::npos;
-    }
-    CHECK(named);
+    check_none_missed(*c);
+    const auto ws = c->workers();
+    CHECK(std::any_of(ws.begin(), ws.end(),
+                      [](const WorkerStatus& x) { return x.refused.find("max_pairs") != std::string::npos; }));
   }
   geom::Pose apart = geom::Pose::Identity();
   apart.translation() = geom::Vec3(0, 0, 100);
@@ -208,10 +210,7 @@ TEST_CASE("randomised fleets: any deal, fewer blocks than workers, assist, repli
       CHECK(r.complete);
       CHECK(r.pairs == plain.pairs);
     }
-    for (const WorkerStatus& ws : sg.value()->workers()) {
-      CHECK(ws.up);
-      CHECK(ws.misses == 0);
-    }
+    check_none_missed(*sg.value());
   }
 }
 
