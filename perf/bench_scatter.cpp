@@ -303,21 +303,28 @@ void add_scatter(CLI::App& app) {
     // transport and context, and N DEALERs sending one 8-byte frame each and waiting for all N
     // echoes. No ZeroMQ scatter-gather to N separate workers can be cheaper on this machine.
     // The sized floor: the same, its frames as large as our Query and Result.
-    std::unique_ptr<FanOutFloor> floor_threads, sized_threads;
-    std::unique_ptr<FanOutGather> floor_procs, sized_procs;
-    if (echo_endpoints.empty()) {
-      floor_threads = std::make_unique<FanOutFloor>(ctx, a->transport, a->workers);
-      sized_threads = std::make_unique<FanOutFloor>(ctx, a->transport, a->workers, result_bytes);
-    } else {
-      floor_procs = std::make_unique<FanOutGather>(ctx, echo_endpoints);
-      sized_procs = std::make_unique<FanOutGather>(ctx, sized_echo_endpoints);
-    }
-    auto floor_round = [&](bool) {
-      return floor_threads ? floor_threads->round(deadline) : floor_procs->round(deadline);
+    // Either kind: echo threads of this process, or the echo processes of --spawn at `echoes`.
+    struct Floor {
+      std::unique_ptr<FanOutFloor> threads;
+      std::unique_ptr<FanOutGather> procs;
+      std::size_t query_bytes = 8;
+      bool round(std::chrono::milliseconds d) {
+        return threads ? threads->round(d, query_bytes) : procs->round(d, query_bytes);
+      }
     };
-    auto sized_round = [&](bool) {
-      return sized_threads ? sized_threads->round(deadline, query_bytes) : sized_procs->round(deadline, query_bytes);
+    auto make_floor = [&](const std::vector<std::string>& echoes, std::size_t query, std::size_t reply) {
+      Floor f;
+      f.query_bytes = query;
+      if (echoes.empty())
+        f.threads = std::make_unique<FanOutFloor>(ctx, a->transport, a->workers, reply);
+      else
+        f.procs = std::make_unique<FanOutGather>(ctx, echoes);
+      return f;
     };
+    Floor floor8 = make_floor(echo_endpoints, 8, 8),
+          sized_floor = make_floor(sized_echo_endpoints, query_bytes, result_bytes);
+    auto floor_round = [&](bool) { return floor8.round(deadline); };
+    auto sized_round = [&](bool) { return sized_floor.round(deadline); };
 
     std::vector<double> us, base, flo, sized, split;
     int lost = 0;  // baseline or floor rounds with no reply by the deadline (counted, not timed)
