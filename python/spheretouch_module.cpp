@@ -239,17 +239,19 @@ PYBIND11_MODULE(_core, m) {
 
   m.def(
       "load_mesh",
-      [](const std::string& path, const std::string& units, double scale) {
+      [](const std::string& path, const std::string& units, double scale, bool orient) {
         geom::LoadConfig o;
         o.units = units;
         o.scale = scale;
+        o.orient = orient;
         geom::LoadedMesh lm = take(geom::load_mesh(path, o));
         if (!lm.report.size_warning.empty() && PyErr_WarnEx(PyExc_UserWarning, lm.report.size_warning.c_str(), 1) < 0)
           throw py::error_already_set();  // warnings turned into errors
         return std::make_shared<Mesh>(std::move(lm.mesh));
       },
-      py::arg("path"), py::arg("units") = "mm", py::arg("scale") = 1.0,
-      "Reads a mesh file (OFF, OBJ, PLY, STL; other formats through assimp). units: um, mm, cm, m, in. Warns "
+      py::arg("path"), py::arg("units") = "mm", py::arg("scale") = 1.0, py::arg("orient") = true,
+      "Reads a mesh file (OFF, OBJ, PLY, STL; other formats through assimp). units: um, mm, cm, m, in. orient: "
+      "make the faces' winding consistent and outward, as the force needs (False keeps the file's). Warns "
       "(UserWarning) when the object's size is implausible in those units (a mesh in metres read as mm).");
 
   py::class_<SphereTree, std::shared_ptr<SphereTree>>(m, "SphereTree", "Layered boundary spheres over one mesh.")

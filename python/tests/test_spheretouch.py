@@ -355,6 +355,25 @@ def test_load_mesh_warns_when_the_size_is_implausible_for_its_units():
         os.unlink(path)
 
 
+def test_load_mesh_winds_a_file_written_inside_out_outward_unless_told_not_to():
+    with tempfile.NamedTemporaryFile("w", suffix=".off", delete=False) as fh:
+        v, f = box((100.0, 100.0, 100.0))
+        fh.write(f"OFF\n{len(v)} {len(f)} 0\n")
+        fh.writelines(f"{x} {y} {z}\n" for x, y, z in v)
+        fh.writelines(f"3 {a} {c} {b}\n" for a, b, c in f)  # every face wound clockwise from outside
+        path = fh.name
+    try:
+        def signed_volume(mesh):
+            p = mesh.vertices[mesh.faces.astype(np.int64)]
+            return float(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum()) / 6
+        fixed, as_read = st.load_mesh(path), st.load_mesh(path, orient=False)
+        assert math.isclose(signed_volume(fixed), 1e6, rel_tol=1e-9), signed_volume(fixed)
+        assert math.isclose(signed_volume(as_read), -1e6, rel_tol=1e-9), signed_volume(as_read)
+        assert np.array_equal(fixed.faces[:, 0], as_read.faces[:, 0])  # no face renumbered
+    finally:
+        os.unlink(path)
+
+
 def main():
     tests = [(k, v) for k, v in sorted(globals().items()) if k.startswith("test_") and callable(v)]
     passed = failed = 0

@@ -34,6 +34,10 @@ void print_info(const geom::LoadedMesh& lm) {
   std::printf("  topology    %s, %s (%zu boundary, %zu non-manifold, %zu misoriented edges)\n",
               t.closed() ? "closed" : "open", t.manifold() ? "manifold" : "not manifold", t.boundary_edges,
               t.nonmanifold_edges, t.misoriented_edges);
+  const std::string w = geom::describe_winding(r.orientation);
+  std::printf("  winding     %s\n", !w.empty()            ? w.c_str()
+                                    : r.orientation.parts ? "consistent and outward as read"
+                                                          : "as read");
   std::printf("  degenerate  %zu", r.degenerate.size());
   if (!r.degenerate.empty()) {
     std::printf(" (first:");
@@ -51,6 +55,7 @@ int print_scene_body(const engine::BodySpec& b, const std::string& field, const 
     geom::LoadConfig o;
     o.units = b.units;
     o.scale = b.scale;
+    o.orient = b.orient;
     Result<geom::LoadedMesh> r = geom::load_mesh(b.mesh, o);
     if (!r) {
       std::fprintf(stderr, "spheretouch: [%s] %s\n", field.c_str(), r.error().c_str());

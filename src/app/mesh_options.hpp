@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Command-line options shared by every subcommand that loads a mesh (--units, --scale).
+// Command-line options shared by every subcommand that loads a mesh (--units, --scale, --keep-winding).
 #pragma once
 #include <CLI/CLI.hpp>
 
@@ -7,13 +7,16 @@
 
 namespace st::app {
 
-/// Adds --units and --scale to `cmd`, writing into `opts`.
+/// Adds --units, --scale and --keep-winding to `cmd`, writing into `opts`.
 inline void add_load_options(CLI::App* cmd, geom::LoadConfig& opts) {
   cmd->add_option("--units", opts.units, "unit of the file's coordinates: um, mm, cm, m, in (converted to mm)")
       ->capture_default_str();
   cmd->add_option("--scale", opts.scale, "extra scale factor applied after the unit conversion")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  cmd->add_flag(
+      "--keep-winding", [&opts](std::int64_t) { opts.orient = false; },
+      "keep the file's face winding (default: made consistent and outward, as the force needs)");
 }
 
 /// Loads a mesh or prints the error and throws CLI::RuntimeError(2).

@@ -37,6 +37,25 @@ TEST_CASE("info on a generated and a real mesh reports reader, topology and coun
   CHECK(contains(r.output, "precision double"));
 }
 
+TEST_CASE("info says how the winding was made consistent and outward, and --keep-winding keeps the file's") {
+  st::test::TempDir d;
+  // The tetrahedron above with every face wound inward, and with one face wound inward.
+  st::test::write_file(d.file("in.off"),
+                       "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 3 1\n3 1 3 2\n3 0 2 3\n");
+  st::test::write_file(d.file("one.off"),
+                       "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 3 1\n3 1 2 3\n3 0 3 2\n");
+  auto r = run_command(spheretouch_exe() + " info " + d.file("in.off") + " " + d.file("one.off"));
+  INFO(r.output);
+  CHECK(r.exit_code == 0);
+  CHECK(contains(r.output,
+                 "winding     4 faces flipped to wind consistently and outward (1 closed part was inside out)"));
+  CHECK(contains(r.output, "winding     1 face flipped to wind consistently and outward\n"));
+  r = run_command(spheretouch_exe() + " info --keep-winding " + d.file("one.off"));
+  CHECK(r.exit_code == 0);
+  CHECK(contains(r.output, "winding     as read"));
+  CHECK(contains(r.output, "3 misoriented edges"));  // the file's topology, kept
+}
+
 TEST_CASE("export writes the format the output's extension names, or refuses it") {
   st::test::TempDir d;
   st::test::write_file(d.file("t.off"), "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 1 2 3\n3 0 3 2\n");

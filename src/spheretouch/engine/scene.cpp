@@ -90,6 +90,7 @@ void read_body(TomlReader& r, BodySpec& b, const std::string& dir, const std::st
   r.integer("segments", b.segments, 3, 1000);
   r.string("units", b.units, {"um", "mm", "cm", "m", "in"});
   r.number("scale", b.scale, 1e-12, 1e12);
+  r.boolean("orient", b.orient);
   if (!mesh.empty() && !b.builtin.empty()) r.error("mesh", "give either mesh or builtin, not both");
   if (mesh.empty() && b.builtin.empty()) r.error("mesh", "expected a mesh path (or \"model:NAME\") or a builtin shape");
   if (mesh.rfind("model:", 0) == 0)
@@ -587,8 +588,12 @@ Result<geom::Mesh> load_body(const BodySpec& b, const std::string& field) {
   geom::LoadConfig o;
   o.units = b.units;
   o.scale = b.scale;
+  o.orient = b.orient;
   Result<geom::LoadedMesh> r = geom::load_mesh(b.mesh, o);
   if (!r) return fail("[", field, "] ", r.error());
+  if (const std::string w = geom::describe_winding(r.value().report.orientation); !w.empty())
+    std::fprintf(stderr, "[%s] %s: %s (set [%s] orient = false to keep the file's)\n", field.c_str(), b.mesh.c_str(),
+                 w.c_str(), field.c_str());
   // Loads anyway (a tiny or huge object may be meant), but says so where the run starts.
   if (!r.value().report.size_warning.empty())
     std::fprintf(stderr, "[%s] %s (set [%s] units or scale)\n", field.c_str(), r.value().report.size_warning.c_str(),

@@ -43,6 +43,7 @@ struct BodySpec {
   ///@}
   std::string units = "mm";  ///< unit of the file's coordinates
   double scale = 1;          ///< extra factor
+  bool orient = true;        ///< make the faces' winding consistent and outward (geom::LoadConfig::orient)
 };
 
 /// Where an object sits in the world: its file coordinates are turned by rotation_deg (XYZ Euler,

@@ -163,6 +163,7 @@ Result<LoadedMesh> load_mesh(const std::string& path, const LoadConfig& options)
     m.recentre();
     if (Status v = m.validate(); !v) return Error{v.error()};
   }
+  if (options.orient) r.value().report.orientation = orient_faces(r.value().mesh);
   r.value().report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   r.value().report.size_warning = size_warning(r.value().mesh, path, options);
   return r;

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include <spheretouch/geom/mesh.hpp>
+#include <spheretouch/geom/orient.hpp>
 
 namespace st::inline SPHERETOUCH_ABI::geom {
 
@@ -19,6 +20,10 @@ namespace st::inline SPHERETOUCH_ABI::geom {
 struct LoadConfig {
   double scale = 1.0;        ///< extra factor applied after the unit conversion
   std::string units = "mm";  ///< unit of the file's coordinates: um, mm, cm, m, in
+  /// Make the faces' winding consistent and outward (orient_faces(): closed parts face out of
+  /// their material, open ones keep their majority's winding), as the contact models read it: a
+  /// face wound inward pulls the probe in. false keeps the file's winding.
+  bool orient = true;
   // Formats read by assimp (glTF, FBX, ...) are read in a child process, confined and budgeted:
   /// Let the file open other files (a glTF's .bin buffers), but only regular files inside its own
   /// directory. Off: it may open nothing but itself (embedded data: URIs still work).
@@ -39,6 +44,7 @@ struct LoadReport {
   std::size_t skipped_primitives = 0;     ///< points and lines in the file (not surfaces; ignored)
   std::size_t welded_vertices = 0;        ///< exact duplicate vertices merged (assimp path only)
   std::vector<std::uint32_t> degenerate;  ///< zero-area faces (kept, see DEGENERATE_POLICY)
+  OrientReport orientation;               ///< what orient_faces() changed (LoadConfig::orient; else nothing)
   double seconds = 0;                     ///< wall time to read and build the mesh
   /// A size implausible for a touchable object in the units the mesh was read in (a mesh in
   /// metres read as millimetres is 1000x too small): what and which units would fit; else empty.
