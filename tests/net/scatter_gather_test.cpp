@@ -472,6 +472,22 @@ TEST_CASE("an oversized frame is cut off by ZMQ_MAXMSGSIZE before it is buffered
   CHECK(std::get<HelloMsg>(r.value()).echo == 5);
 }
 
+TEST_CASE(
+    "wait_ready over tcp with a long heartbeat period: the first Heartbeat, dropped before the connection is up, is "
+    "sent again") {
+  zmq::context_t ctx;
+  const test::NetScene s = test::small_scene(6, 24);
+  auto wr = LocalWorkers::start(ctx, 2, reference_backend_factory(), [](int) { return std::string("tcp://127.0.0.1:*"); });
+  REQUIRE(wr.ok());
+  ScatterConfig cfg;
+  cfg.endpoints = wr.value()->endpoints();
+  cfg.heartbeat_period = 1h;
+  auto c = ScatterGather::create(ctx, cfg, s.probe, s.object, s.blocks);
+  REQUIRE(c.ok());
+  CHECK(c.value()->wait_ready(Clock::now() + 5s));  // before: not until the second Heartbeat, an hour on
+  for (const WorkerStatus& w : c.value()->workers()) CHECK(w.up);
+}
+
 TEST_CASE("a worker restarted before it is marked down (new epoch) is reloaded; the others are left alone") {
   zmq::context_t ctx;
   const test::NetScene s = test::small_scene(8, 24);

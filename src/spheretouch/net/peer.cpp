@@ -60,9 +60,14 @@ void Peer::step(TurnEvent e) {
 }
 
 void Peer::heartbeat(const ScatterConfig& cfg, Clock::time_point now, std::vector<std::uint8_t>& buf) {
-  heartbeat_due = now + cfg.heartbeat_period;
   asked_at = now;
-  send(HeartbeatMsg{++nonce}, buf);
+  const bool sent = send(HeartbeatMsg{++nonce}, buf);
+  // A first contact's Heartbeat sent before the connection is up is dropped (the sockets do not
+  // queue for a peer not connected): tried again soon, not a whole period later (a tcp:// worker
+  // connects within a few ms; wait_ready() would otherwise wait out heartbeat_period).
+  heartbeat_due =
+      now + (sent || link != Link::Unknown ? cfg.heartbeat_period
+                                           : std::min<Clock::duration>(cfg.heartbeat_period, kFirstContactRetry));
 }
 
 void Peer::maybe_start_upload(const ScatterConfig& cfg, const BlockSetCache& sets, Clock::time_point now) {

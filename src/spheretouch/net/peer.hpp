@@ -74,7 +74,10 @@ struct Peer {
   Link link = Link::Unknown;
   Turn turn = Turn::Idle;
   std::uint32_t worker_id = 0;
-  std::uint64_t epoch = 0;               // from its last Hello (0: none with an epoch yet)
+  std::uint64_t epoch = 0;  // from its last Hello (0: none with an epoch yet)
+  // The epoch its last restart replaced: a Hello of it read after the new one is from its
+  // previous life (still queued on the old connection), not news.
+  std::uint64_t retired_epoch = 0;
   std::uint32_t misses = 0;              // rounds missed in a row (0 while Down)
   std::vector<std::uint64_t> held;       // hashes from its last Hello, MRU first
   std::vector<std::uint32_t> original;   // its own blocks (ScatterConfig::mapping)
@@ -117,8 +120,10 @@ struct Peer {
   /// dropped by the caller before they get here.
   void step(TurnEvent e);
 
-  /// A Heartbeat now; the next one due heartbeat_period later.
+  /// A Heartbeat now; the next one due heartbeat_period later (kFirstContactRetry later when it
+  /// could not be queued to a worker never heard from: its connection is not up yet).
   void heartbeat(const ScatterConfig& cfg, Clock::time_point now, std::vector<std::uint8_t>& buf);
+  static constexpr std::chrono::milliseconds kFirstContactRetry{5};
   /// The set it should be sent next: its target, then its standby set; 0 when it holds both
   /// (or the target is still being encoded).
   std::uint64_t wanted() const {

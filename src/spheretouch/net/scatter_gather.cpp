@@ -65,6 +65,15 @@ struct ScatterGather::Impl {
   // ---- receiving ---------------------------------------------------------------------------
 
   void on_hello(Peer& p, const HelloMsg& h, Clock::time_point now) {
+    // A restarted worker's socket can still hold replies of its previous life after the first
+    // of its new one (ZeroMQ takes from the old and the new connection in turn): such a Hello
+    // would undo the restart (its sets look held again, an upload in progress is dropped) until
+    // the next reply says otherwise, and cost a reload.
+    if (h.epoch != 0 && h.epoch == p.retired_epoch) {
+      if (out) ++out->stale_dropped;
+      return;
+    }
+    if (h.epoch != 0 && p.epoch != 0 && h.epoch != p.epoch) p.retired_epoch = p.epoch;
     if (p.link == Link::Loading && h.epoch != p.epoch) link(p, LinkEvent::LoadEnd);  // restarted: what was sent is gone
     p.epoch = h.epoch;
     p.worker_id = h.worker_id;
