@@ -76,6 +76,7 @@ TEST_CASE("orient_faces: a box as it should be, inside out, or with one face the
     CHECK(m.faces == good.faces);  // every face back to its outward winding, corners as they were
     CHECK(m.topology().misoriented_edges == 0);
     CHECK(orient_faces(m).flipped == 0);  // a second pass changes nothing
+    CHECK(describe_winding(r).empty() == (mode == 0));
   }
 }
 
@@ -128,6 +129,9 @@ TEST_CASE("orient_faces: an open sheet is made consistent with the winding most 
   CHECK(r.flipped == 3);
   CHECK(r.closed_parts == 0);
   CHECK(g.faces == up);
+  CHECK(describe_winding(r) ==
+        "3 faces flipped to wind consistently and outward; 1 open part (no inside: touched as a solid's surface on "
+        "the side it faces; from behind the force pushes through)");
   // Most of it wound -z: it stays -z, the few +z faces join it.
   for (std::size_t f = 0; f < g.faces.size(); ++f)
     if (f % 5 != 0) flip(g.faces[f]);

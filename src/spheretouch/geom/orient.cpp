@@ -251,6 +251,9 @@ std::string describe_winding(const OrientReport& r) {
   if (r.cavities > 0)
     add(std::to_string(r.cavities) + (r.cavities == 1 ? " closed part is a cavity" : " closed parts are cavities") +
         " (wound inward)");
+  if (const std::size_t open = r.parts - r.closed_parts; open > 0)
+    add(std::to_string(open) + (open == 1 ? " open part" : " open parts") +
+        " (no inside: touched as a solid's surface on the side it faces; from behind the force pushes through)");
   if (r.unorientable_edges > 0)
     add(std::to_string(r.unorientable_edges) + " edges cannot agree (a non-orientable part)");
   if (r.nesting_skipped > 0)

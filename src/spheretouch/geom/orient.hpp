@@ -53,7 +53,8 @@ inline constexpr std::size_t kMaxNestingTests = std::size_t(1) << 26;
 OrientReport orient_faces(Mesh& mesh);
 
 /// One line for a user on what orient_faces() changed ("12 faces flipped: 1 closed part was
-/// inside out"), and what it could not decide; empty when it changed nothing and found nothing amiss.
+/// inside out"), the open parts (rendered one-sided) and what it could not decide; empty when it
+/// changed nothing and every part is closed.
 std::string describe_winding(const OrientReport& report);
 
 }  // namespace st::geom
