@@ -478,6 +478,86 @@ TEST_CASE("contact patch: pushed through a 1 mm plate and back: no pop-through, 
   CHECK(held > 100);  // fully through (cz < -5.5) no face collides: the held plane carries it
 }
 
+TEST_CASE("contact patch: an open sheet is pushed against from either side, through and back, as a plate is") {
+  // A 60 mm sheet at z = 0 wound +z (one surface: no inside, no thickness).
+  Mesh sheet = st::test::grid(12);
+  for (Vec3& v : sheet.local) v = Vec3(5 * v.x() - 30, 5 * v.y() - 30, 0);
+  const Mesh ball = make_icosphere(5, 12);
+  for (const double side : {+1.0, -1.0}) {
+    CAPTURE(side);
+    ContactBuilder b;
+    int held = 0, contacts = 0;
+    auto step = [&](double c) {  // the ball's centre at height side * c: depth 5 - c past the sheet
+      const double depth = 5.0 - c;
+      const ContactModel m = model_at(b, ball, sheet, pose_at({0.3, -0.2, side * c}));
+      CAPTURE(c);
+      REQUIRE(finite_model(m));
+      if (depth <= 0.02) return;
+      REQUIRE(m.in_contact());
+      ++contacts;
+      CHECK(angle_deg(fd(m), side * Vec3::UnitZ()) < 1e-6);  // out of the side it came from
+      CHECK(std::abs(m.penetration_mm - depth) <= kDepthTol);
+      if (m.flags & kHeld) ++held;
+    };
+    for (double c = 6.0; c >= -20.0; c -= 0.2) step(c);
+    for (double c = -20.0; c <= 6.0; c += 0.2) step(c);
+    CHECK(contacts > 200);
+    CHECK(held > 100);
+  }
+}
+
+TEST_CASE("contact patch: an open bowl, touched inside and outside, pushes toward the probe's side") {
+  // The lower half of a sphere of radius 40 (faces whose centroid is below z = -2), wound outward.
+  const Mesh full = make_icosphere(40, 24);
+  Mesh bowl = full;
+  bowl.faces.clear();
+  for (const Tri& t : full.faces)
+    if ((full.vertex(t[0]) + full.vertex(t[1]) + full.vertex(t[2])).z() / 3 < -2) bowl.faces.push_back(t);
+  const Mesh ball = make_icosphere(5, 12);
+  for (const double depth : {0.5, 1.0, 2.0}) {
+    CAPTURE(depth);
+    ContactBuilder inside, outside;
+    const ContactModel in = model_at(inside, ball, bowl, pose_at({0, 0, -40 + 5 - depth}));
+    const ContactModel out = model_at(outside, ball, bowl, pose_at({0, 0, -40 - 5 + depth}));
+    REQUIRE(in.in_contact());
+    REQUIRE(out.in_contact());
+    CHECK(angle_deg(fd(in), Vec3::UnitZ()) < 0.5);    // up, into the bowl
+    CHECK(angle_deg(fd(out), -Vec3::UnitZ()) < 0.5);  // down, away from it
+    CHECK(std::abs(in.penetration_mm - depth) < 0.1);
+    CHECK(std::abs(out.penetration_mm - depth) < 0.1);
+  }
+}
+
+TEST_CASE("contact patch: a closed part beside an open one renders as it does alone; the back's pairs in any order") {
+  Mesh sheet = st::test::grid(8);
+  for (Vec3& v : sheet.local) v = Vec3(5 * v.x() + 100, 5 * v.y(), 0);  // well away from the box
+  Mesh both = box40();
+  const auto base = std::uint32_t(both.local.size());
+  for (const Vec3& v : sheet.local) both.local.push_back(v - both.origin);
+  for (const Tri& t : sheet.faces) both.faces.push_back({t[0] + base, t[1] + base, t[2] + base});
+  ContactBuilder alone, beside;
+  for (double z = 28.0; z >= 24.0; z -= 0.5) {  // the ball pressed into the box's top
+    const Pose p = pose_at({1.0, 2.0, z});
+    const ContactModel a = model_at(alone, ball10(), box40(), p), c = model_at(beside, ball10(), both, p);
+    CAPTURE(z);
+    CHECK(a.in_contact() == c.in_contact());
+    CHECK(fd(a) == fd(c));
+    CHECK(a.penetration_mm == c.penetration_mm);
+  }
+  // From under the sheet: the model of the back, whatever the pairs' order.
+  const Pose under = pose_at({120.0, 20.0, -10.0 + 1.5});
+  std::vector<FacePair> pairs = st::test::brute_force(ball10(), both, under);
+  REQUIRE_FALSE(pairs.empty());
+  ContactBuilder sorted, shuffled;
+  const ContactModel m = sorted.build(ball10(), both, under, pairs);
+  std::mt19937 rng(3);
+  std::shuffle(pairs.begin(), pairs.end(), rng);
+  const ContactModel n = shuffled.build(ball10(), both, under, pairs);
+  CHECK(angle_deg(fd(m), -Vec3::UnitZ()) < 1e-6);
+  CHECK(fd(m) == fd(n));
+  CHECK(m.penetration_mm == n.penetration_mm);
+}
+
 TEST_CASE("contact patch: bad input gives a finite model and a flag") {
   ContactBuilder b;
   const Pose good = pose_at({0, 0, 27});

@@ -130,8 +130,8 @@ TEST_CASE("orient_faces: an open sheet is made consistent with the winding most 
   CHECK(r.closed_parts == 0);
   CHECK(g.faces == up);
   CHECK(describe_winding(r) ==
-        "3 faces flipped to wind consistently and outward; 1 open part (no inside: touched as a solid's surface on "
-        "the side it faces; from behind the force pushes through)");
+        "3 faces flipped to wind consistently and outward; 1 open part (no inside: a contact takes the side the "
+        "probe comes from)");
   // Most of it wound -z: it stays -z, the few +z faces join it.
   for (std::size_t f = 0; f < g.faces.size(); ++f)
     if (f % 5 != 0) flip(g.faces[f]);

@@ -172,9 +172,16 @@ TEST_CASE("HapticServo: when the collision side stops, the force fades to zero")
   ContactBuilder b;
   const Mesh w = wall(), t = tip();
   const std::vector<ContactPair> pairs = {{0, 0}, {1, 0}, {2, 0}};
+  // The tip comes down onto the wall from above (the wall is one open surface: a contact takes
+  // the side the probe comes from) and is pressed 3 mm in.
   Pose pose = Pose::Identity();
-  pose.translation() = Eigen::Vector3d(0, 0, -3);
-  ContactModel m = b.build(t, w, pose, pairs);
+  ContactModel m;
+  for (double z = 0.5; z >= -3.0; z -= 0.5) {
+    pose.translation() = Eigen::Vector3d(0, 0, z);
+    m = b.build(t, w, pose, pairs);
+  }
+  REQUIRE(m.in_contact());
+  CHECK(m.force_dir.z == 1.0);
   m.seq = 1;
   models->write(ContactSet::of(m));
   TickInfo info;

@@ -10,6 +10,7 @@
 
 #include <spheretouch/geom/check.hpp>
 #include <spheretouch/geom/contact_patch.hpp>
+#include <spheretouch/geom/orient.hpp>
 
 namespace st::inline SPHERETOUCH_ABI::geom {
 
@@ -57,6 +58,41 @@ std::string check(const ContactConfig& c) {
 ContactBuilder::ContactBuilder(ContactConfig config) : config_(config), patch_(std::make_unique<Patch>(config)) {
   ST_ASSERT(check(config).empty(), "a ContactBuilder's config passes check() (contact.hpp)");
 }
+/// The object as a contact on the back of its open parts sees it (contact.hpp, top): its open
+/// parts' faces wound the other way, and a patch model of its own. Made once per object mesh.
+struct ContactBuilder::Back {
+  const Mesh* of = nullptr;  // the object it was made for (with its sizes: as PatchBody::sized_for)
+  std::size_t nv = 0, nf = 0;
+  std::vector<std::uint8_t> open;  // per face: in an open part (empty: none)
+  Mesh mesh;                       // the object with the open faces flipped
+  std::unique_ptr<Patch> patch;
+  bool active = false;  // the contact in progress is on the back
+  bool made_for(const Mesh& m) const { return of == &m && nv == m.local.size() && nf == m.faces.size(); }
+};
+
+ContactBuilder::Back& ContactBuilder::back_for(const Mesh& object) {
+  if (!back_) back_ = std::make_unique<Back>();
+  Back& b = *back_;
+  if (b.made_for(object)) return b;
+  b = Back{};
+  b.of = &object;
+  b.nv = object.local.size();
+  b.nf = object.faces.size();
+  b.open = open_part_faces(object);
+  if (std::find(b.open.begin(), b.open.end(), 1) == b.open.end()) {
+    b.open.clear();
+    return b;
+  }
+  b.mesh.name = object.name;
+  b.mesh.origin = object.origin;
+  b.mesh.local = object.local;
+  b.mesh.faces = object.faces;
+  for (std::size_t f = 0; f < b.nf; ++f)
+    if (b.open[f]) std::swap(b.mesh.faces[f][1], b.mesh.faces[f][2]);
+  b.patch = std::make_unique<Patch>(config_);
+  return b;
+}
+
 ContactBuilder::~ContactBuilder() = default;
 ContactBuilder::ContactBuilder(ContactBuilder&&) noexcept = default;
 ContactBuilder& ContactBuilder::operator=(ContactBuilder&&) noexcept = default;
@@ -66,25 +102,64 @@ void ContactBuilder::reset() {
   first_point_.setZero();
   first_normal_.setZero();
   patch_->reset();
+  if (back_ && back_->patch) back_->patch->reset();
+  if (back_) back_->active = false;
 }
 
 bool ContactBuilder::has_first_face() const {
-  return config_.model == ContactModelKind::paper ? first_face_ != UINT32_MAX : patch_->has_history();
+  if (config_.model == ContactModelKind::paper) return first_face_ != UINT32_MAX;
+  return back_ && back_->active ? back_->patch->has_history() : patch_->has_history();
 }
 
 void ContactBuilder::prepare(const Mesh& probe, const Mesh& object) {
-  if (config_.model == ContactModelKind::patch) patch_->prepare(probe, object);
+  if (config_.model != ContactModelKind::patch) return;
+  patch_->prepare(probe, object);
+  if (Back& b = back_for(object); b.patch) b.patch->prepare(probe, b.mesh);
 }
 
 std::size_t ContactBuilder::bytes() const {
-  return patch_->bytes() + (probe_faces_.capacity() + object_faces_.capacity() + probe_vertices_.capacity()) * 4 +
+  std::size_t back = 0;
+  if (back_ && back_->patch)
+    back = back_->patch->bytes() + back_->open.capacity() + back_->mesh.local.capacity() * sizeof(Vec3) +
+           back_->mesh.faces.capacity() * sizeof(Tri);
+  return patch_->bytes() + back + (probe_faces_.capacity() + object_faces_.capacity() + probe_vertices_.capacity()) * 4 +
          probe_points_.capacity() * sizeof(Vec3);
+}
+
+ContactModel ContactBuilder::build_patch(const Mesh& probe, const Mesh& object, const Pose& pose,
+                                         std::span<const ContactPair> pairs) {
+  Back& b = back_for(object);
+  if (!b.patch) return patch_->build(probe, object, pose, pairs);  // every part closed
+  if (b.active) {
+    if (b.patch->has_history()) {  // a contact on the back goes on, on the back
+      ContactModel m = b.patch->build(probe, b.mesh, pose, pairs);
+      if (!m.in_contact()) b.active = false;
+      return m;
+    }
+    b.active = false;
+  }
+  const bool going_on = patch_->has_history();
+  ContactModel m = patch_->build(probe, object, pose, pairs);
+  if (going_on || !m.in_contact()) return m;
+  // A first contact: if it meets an open part, the side the probe is less deep on.
+  const bool open_met = std::any_of(pairs.begin(), pairs.end(), [&](const ContactPair& p) {
+    return p.object < b.open.size() && b.open[p.object] != 0;
+  });
+  if (!open_met) return m;
+  ContactModel rear = b.patch->build(probe, b.mesh, pose, pairs);
+  if (rear.in_contact() && rear.penetration_mm < m.penetration_mm) {
+    patch_->reset();
+    b.active = true;
+    return rear;
+  }
+  b.patch->reset();
+  return m;
 }
 
 ContactModel ContactBuilder::build(const Mesh& probe, const Mesh& object, const Pose& pose,
                                    std::span<const ContactPair> pairs) {
   ContactModel m = config_.model == ContactModelKind::paper ? build_paper(probe, object, pose, pairs)
-                                                            : patch_->build(probe, object, pose, pairs);
+                                                            : build_patch(probe, object, pose, pairs);
   m.kind = static_cast<std::uint32_t>(config_.model);
   ST_ASSERT(!m.in_contact() || std::abs(to_eigen(m.force_dir).norm() - 1.0) < 1e-9, "FD is a unit vector in contact");
   ST_ASSERT(std::isfinite(m.penetration_mm) && m.penetration_mm >= 0, "PD is finite and >= 0");

@@ -46,6 +46,12 @@
 //    extended); PD is the depth under it (flag kHeld). It ends once the point is clear on the
 //    entry side. The proxy shown to a user is the probe moved out by PD along FD
 //    (ContactModel::proxy_offset()).
+//  * Open surfaces (a sheet, a scan open at its base: a part with no inside, orient.hpp) have no
+//    side of their own: a contact takes the side the probe is on. At a first contact that meets
+//    an open part's faces the model is built both ways, as the faces are wound and with the open
+//    parts' faces wound the other way, and the one with the smaller PD is kept (the probe is
+//    less deep on the side it came from) for as long as the contact lasts; the next contact
+//    chooses again. An object with open parts keeps a second copy of its faces for this.
 //  * Order: the model is a function of the set of pairs. They are taken in (probe, object)
 //    order, each once (sorted in scratch when not given so), and the segments' areas are
 //    measured from a point of the intersection curve, so neither the worker count nor the
@@ -269,6 +275,7 @@ class ContactBuilder {
 
  private:
   ContactModel build_paper(const Mesh& probe, const Mesh& object, const Pose& pose, std::span<const ContactPair> pairs);
+  ContactModel build_patch(const Mesh& probe, const Mesh& object, const Pose& pose, std::span<const ContactPair> pairs);
   ContactConfig config_;
   std::uint32_t first_face_ = UINT32_MAX;  ///< paper: recorded face, UINT32_MAX = none
   Vec3 first_point_{Vec3::Zero()};         ///< paper: its centroid, object local frame, mm
@@ -280,6 +287,11 @@ class ContactBuilder {
   friend class DepthSearch;
   friend struct PatchTestAccess;  // tests/geom: the patch model's parts, tested one at a time
   std::unique_ptr<Patch> patch_;
+  /// patch: the object with its open parts wound the other way, and a model of its own for a
+  /// contact on their back (contact.cpp).
+  struct Back;
+  std::unique_ptr<Back> back_;
+  Back& back_for(const Mesh& object);
 };
 
 }  // namespace st::geom

@@ -96,24 +96,36 @@ double solid_angle(const Vec3& a, const Vec3& b, const Vec3& c) {
   return 2 * std::atan2(num, den);
 }
 
-}  // namespace
+// The edge-connected parts of a mesh and what orient_faces() needs of each: a face's part and
+// whether the walk flipped it against its part's first face; per part its first face, the area
+// wound as in the file and against it, the signed volume as the walk left it (about the part's
+// bounds' centre, for precision), its bounds and whether it is closed.
+struct Parts {
+  std::vector<std::uint32_t> part, first;
+  std::vector<std::uint8_t> flip, closed;
+  std::vector<double> kept, against, volume6;
+  std::vector<Box> bounds;
+  std::size_t unorientable_edges = 0;
+  std::size_t count() const { return first.size(); }
+};
 
-OrientReport orient_faces(Mesh& mesh) {
-  OrientReport rep;
+Parts find_parts(const Mesh& mesh) {
+  Parts ps;
   const auto nf = static_cast<std::uint32_t>(mesh.faces.size());
-  if (nf == 0) return rep;
   const Adjacency g = adjacency(mesh);
 
   // The walk: part of each face, and whether it disagrees with its part's first face.
   constexpr std::uint32_t kNone = UINT32_MAX;
-  std::vector<std::uint32_t> part(nf, kNone), queue;
-  std::vector<std::uint8_t> flip(nf, 0);
-  std::vector<std::uint32_t> part_first;  // each part's first face (lowest index)
+  std::vector<std::uint32_t>& part = ps.part;
+  std::vector<std::uint8_t>& flip = ps.flip;
+  part.assign(nf, kNone);
+  flip.assign(nf, 0);
+  std::vector<std::uint32_t> queue;
   std::vector<std::uint8_t> part_open;
   for (std::uint32_t s = 0; s < nf; ++s) {
     if (part[s] != kNone) continue;
-    const auto id = static_cast<std::uint32_t>(part_first.size());
-    part_first.push_back(s);
+    const auto id = static_cast<std::uint32_t>(ps.first.size());
+    ps.first.push_back(s);
     part_open.push_back(0);
     part[s] = id;
     queue.assign(1, s);
@@ -128,13 +140,12 @@ OrientReport orient_faces(Mesh& mesh) {
           flip[n] = want;
           queue.push_back(n);
         } else if (flip[n] != want && f < n) {
-          ++rep.unorientable_edges;
+          ++ps.unorientable_edges;
         }
       }
     }
   }
-  const std::size_t parts = part_first.size();
-  rep.parts = parts;
+  const std::size_t parts = ps.count();
   // An edge that more faces share leaves open each part that uses it an odd number of times
   // (two cubes that meet along an edge: each uses it twice, and each is closed).
   {
@@ -151,27 +162,45 @@ OrientReport orient_faces(Mesh& mesh) {
       }
     }
   }
-
-  // Per part: the area wound as in the file and against it, the signed volume as the walk left
-  // it (about the part's bounds' centre, for precision), and its bounds.
-  std::vector<double> kept(parts, 0), against(parts, 0), volume6(parts, 0);
-  std::vector<Box> bounds(parts);
+  ps.kept.assign(parts, 0);
+  ps.against.assign(parts, 0);
+  ps.volume6.assign(parts, 0);
+  ps.bounds.assign(parts, Box{});
   for (std::uint32_t f = 0; f < nf; ++f)
-    for (std::uint32_t v : mesh.faces[f]) bounds[part[f]].grow(mesh.local[v]);
+    for (std::uint32_t v : mesh.faces[f]) ps.bounds[part[f]].grow(mesh.local[v]);
   for (std::uint32_t f = 0; f < nf; ++f) {
     const Corners c = corners(mesh, f, flip[f]);
-    const Vec3 o = bounds[part[f]].centre();
+    const Vec3 o = ps.bounds[part[f]].centre();
     const double area = (c.b - c.a).cross(c.c - c.a).norm();
-    (flip[f] ? against : kept)[part[f]] += area;
-    volume6[part[f]] += (c.a - o).dot((c.b - o).cross(c.c - o));
+    (flip[f] ? ps.against : ps.kept)[part[f]] += area;
+    ps.volume6[part[f]] += (c.a - o).dot((c.b - o).cross(c.c - o));
   }
   // A closed part whose volume is lost in rounding (a flat closed sheet) has no inside either.
-  std::vector<std::uint8_t> closed(parts, 0);
+  ps.closed.assign(parts, 0);
   for (std::size_t p = 0; p < parts; ++p) {
-    const double d = bounds[p].diagonal();
-    closed[p] = !part_open[p] && std::abs(volume6[p]) > 1e-9 * d * d * d;
-    rep.closed_parts += closed[p];
+    const double d = ps.bounds[p].diagonal();
+    ps.closed[p] = !part_open[p] && std::abs(ps.volume6[p]) > 1e-9 * d * d * d;
   }
+  return ps;
+}
+
+}  // namespace
+
+OrientReport orient_faces(Mesh& mesh) {
+  OrientReport rep;
+  const auto nf = static_cast<std::uint32_t>(mesh.faces.size());
+  if (nf == 0) return rep;
+  const Parts ps = find_parts(mesh);
+  const std::vector<std::uint32_t>& part = ps.part;
+  const std::vector<std::uint8_t>& flip = ps.flip;
+  const std::vector<std::uint8_t>& closed = ps.closed;
+  const std::vector<double>&kept = ps.kept, &against = ps.against, &volume6 = ps.volume6;
+  const std::vector<Box>& bounds = ps.bounds;
+  const std::vector<std::uint32_t>& part_first = ps.first;
+  const std::size_t parts = ps.count();
+  rep.parts = parts;
+  rep.unorientable_edges = ps.unorientable_edges;
+  for (std::size_t p = 0; p < parts; ++p) rep.closed_parts += closed[p];
 
   // Nesting: how many other closed parts hold a vertex of each closed part (winding number about
   // them, either winding: |w| > 1/2), those whose bounds hold it only.
@@ -237,6 +266,14 @@ OrientReport orient_faces(Mesh& mesh) {
   return rep;
 }
 
+std::vector<std::uint8_t> open_part_faces(const Mesh& mesh) {
+  std::vector<std::uint8_t> open(mesh.faces.size(), 0);
+  if (mesh.faces.empty()) return open;
+  const Parts ps = find_parts(mesh);
+  for (std::size_t f = 0; f < open.size(); ++f) open[f] = !ps.closed[ps.part[f]];
+  return open;
+}
+
 std::string describe_winding(const OrientReport& r) {
   std::string out;
   auto add = [&out](const std::string& s) { out += (out.empty() ? "" : "; ") + s; };
@@ -253,7 +290,7 @@ std::string describe_winding(const OrientReport& r) {
         " (wound inward)");
   if (const std::size_t open = r.parts - r.closed_parts; open > 0)
     add(std::to_string(open) + (open == 1 ? " open part" : " open parts") +
-        " (no inside: touched as a solid's surface on the side it faces; from behind the force pushes through)");
+        " (no inside: a contact takes the side the probe comes from)");
   if (r.unorientable_edges > 0)
     add(std::to_string(r.unorientable_edges) + " edges cannot agree (a non-orientable part)");
   if (r.nesting_skipped > 0)

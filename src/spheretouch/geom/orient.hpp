@@ -24,7 +24,9 @@
 #pragma once
 #include <spheretouch/abi.hpp>
 #include <cstddef>
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include <spheretouch/geom/mesh.hpp>
 
@@ -52,8 +54,12 @@ inline constexpr std::size_t kMaxNestingTests = std::size_t(1) << 26;
 /// Deterministic; O(F log F) plus the nesting test.
 OrientReport orient_faces(Mesh& mesh);
 
+/// Per face, 1 when it lies in an open part (as orient_faces() finds the parts): no inside, so
+/// the patch model lets a contact take the side the probe comes from (contact.hpp).
+std::vector<std::uint8_t> open_part_faces(const Mesh& mesh);
+
 /// One line for a user on what orient_faces() changed ("12 faces flipped: 1 closed part was
-/// inside out"), the open parts (rendered one-sided) and what it could not decide; empty when it
+/// inside out"), the open parts (no inside) and what it could not decide; empty when it
 /// changed nothing and every part is closed.
 std::string describe_winding(const OrientReport& report);
 
