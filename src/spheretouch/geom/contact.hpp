@@ -51,7 +51,8 @@
 //    an open part's faces the model is built both ways, as the faces are wound and with the open
 //    parts' faces wound the other way, and the one with the smaller PD is kept (the probe is
 //    less deep on the side it came from) for as long as the contact lasts; the next contact
-//    chooses again. An object with open parts keeps a second copy of its faces for this.
+//    chooses again. For an object with open parts the builder keeps a second copy of the mesh (its
+//    vertices and faces) and of the model's per-mesh state.
 //  * Order: the model is a function of the set of pairs. They are taken in (probe, object)
 //    order, each once (sorted in scratch when not given so), and the segments' areas are
 //    measured from a point of the intersection curve, so neither the worker count nor the
