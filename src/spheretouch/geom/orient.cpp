@@ -191,38 +191,32 @@ OrientReport orient_faces(Mesh& mesh) {
   const auto nf = static_cast<std::uint32_t>(mesh.faces.size());
   if (nf == 0) return rep;
   const Parts ps = find_parts(mesh);
-  const std::vector<std::uint32_t>& part = ps.part;
-  const std::vector<std::uint8_t>& flip = ps.flip;
-  const std::vector<std::uint8_t>& closed = ps.closed;
-  const std::vector<double>&kept = ps.kept, &against = ps.against, &volume6 = ps.volume6;
-  const std::vector<Box>& bounds = ps.bounds;
-  const std::vector<std::uint32_t>& part_first = ps.first;
   const std::size_t parts = ps.count();
   rep.parts = parts;
   rep.unorientable_edges = ps.unorientable_edges;
-  for (std::size_t p = 0; p < parts; ++p) rep.closed_parts += closed[p];
+  for (std::size_t p = 0; p < parts; ++p) rep.closed_parts += ps.closed[p];
 
   // Nesting: how many other closed parts hold a vertex of each closed part (winding number about
   // them, either winding: |w| > 1/2), those whose bounds hold it only.
   std::vector<std::uint32_t> faces_of(nf);  // faces grouped by part
   std::vector<std::uint32_t> part_at(parts + 1, 0);
-  for (std::uint32_t f = 0; f < nf; ++f) ++part_at[part[f] + 1];
+  for (std::uint32_t f = 0; f < nf; ++f) ++part_at[ps.part[f] + 1];
   for (std::size_t p = 0; p < parts; ++p) part_at[p + 1] += part_at[p];
   {
     std::vector<std::uint32_t> at(part_at.begin(), part_at.end() - 1);
-    for (std::uint32_t f = 0; f < nf; ++f) faces_of[at[part[f]]++] = f;
+    for (std::uint32_t f = 0; f < nf; ++f) faces_of[at[ps.part[f]]++] = f;
   }
   std::vector<std::uint32_t> closed_list;
   for (std::uint32_t p = 0; p < parts; ++p)
-    if (closed[p]) closed_list.push_back(p);
+    if (ps.closed[p]) closed_list.push_back(p);
   std::size_t visits = 0;
   std::vector<std::uint8_t> odd(parts, 0);
   for (const std::uint32_t p : closed_list) {
-    const Vec3 x = mesh.local[mesh.faces[part_first[p]][0]];
+    const Vec3 x = mesh.local[mesh.faces[ps.first[p]][0]];
     bool inside_odd = false, skipped = false;
     for (const std::uint32_t q : closed_list) {
       if (q == p) continue;
-      const Box& b = bounds[q];
+      const Box& b = ps.bounds[q];
       if (!(x.x() > b.lo.x() && x.y() > b.lo.y() && x.z() > b.lo.z() && x.x() < b.hi.x() && x.y() < b.hi.y() &&
             x.z() < b.hi.z()))
         continue;
@@ -234,7 +228,7 @@ OrientReport orient_faces(Mesh& mesh) {
       visits += n;
       double omega = 0;
       for (std::uint32_t k = part_at[q]; k < part_at[q + 1]; ++k) {
-        const Corners c = corners(mesh, faces_of[k], flip[faces_of[k]]);
+        const Corners c = corners(mesh, faces_of[k], ps.flip[faces_of[k]]);
         omega += solid_angle(c.a - x, c.b - x, c.c - x);
       }
       if (std::abs(omega) > 2 * kPi) inside_odd = !inside_odd;  // |w| = |Ω| / 4π > 1/2
@@ -249,17 +243,18 @@ OrientReport orient_faces(Mesh& mesh) {
   // Each part turned as a whole where it should be.
   std::vector<std::uint8_t> turn(parts, 0);
   for (std::size_t p = 0; p < parts; ++p) {
-    if (closed[p]) {
-      turn[p] = (volume6[p] > 0) == bool(odd[p]);  // outward unless a cavity
+    if (ps.closed[p]) {
+      turn[p] = (ps.volume6[p] > 0) == bool(odd[p]);  // outward unless a cavity
       rep.cavities += odd[p];
     } else {
-      turn[p] = against[p] > kept[p];  // the file's majority, by area
+      turn[p] = ps.against[p] > ps.kept[p];  // the file's majority, by area
     }
-    // Inside out in the file: most of the area of a closed part wound against where it ends.
-    rep.inverted_parts += closed[p] && (turn[p] ? kept[p] : against[p]) > (turn[p] ? against[p] : kept[p]);
+    // Inside out in the file: most of the area of a closed part flipped here.
+    const double flipped = turn[p] ? ps.kept[p] : ps.against[p], unchanged = ps.kept[p] + ps.against[p] - flipped;
+    rep.inverted_parts += ps.closed[p] && flipped > unchanged;
   }
   for (std::uint32_t f = 0; f < nf; ++f)
-    if (flip[f] ^ turn[part[f]]) {
+    if (ps.flip[f] ^ turn[ps.part[f]]) {
       std::swap(mesh.faces[f][1], mesh.faces[f][2]);
       ++rep.flipped;
     }
