@@ -10,6 +10,7 @@
 #include <spheretouch/net/scatter_gather.hpp>
 #include "net_test_util.hpp"
 #include "old_worker.hpp"
+#include "scripted_worker.hpp"
 
 using namespace st;
 using namespace st::net;
@@ -21,96 +22,69 @@ namespace {
 /// kind of bad reply, and every tenth time with a valid empty Result.
 class FakeWorker {
  public:
-  explicit FakeWorker(zmq::context_t& ctx) : sock_(ctx, zmq::socket_type::router) {
-    sock_.set(zmq::sockopt::linger, 0);
-    sock_.set(zmq::sockopt::router_handover, 1);  // as WorkerService: a reconnecting client keeps its routing id
-    sock_.bind("tcp://127.0.0.1:*");
-    endpoint_ = sock_.get(zmq::sockopt::last_endpoint);
-    thread_ = std::thread([this] { loop(); });
-  }
-  ~FakeWorker() {
-    stop_ = true;
-    thread_.join();
-  }
-  const std::string& endpoint() const { return endpoint_; }
+  explicit FakeWorker(zmq::context_t& ctx)
+      : worker_(ctx, [this](const std::string& id, std::span<const std::uint8_t> frame) { on(id, frame); }) {}
+  const std::string& endpoint() const { return worker_.endpoint(); }
   int hostile_sent() const { return hostile_.load(); }
 
  private:
-  void reply(const zmq::message_t& id, const std::vector<std::uint8_t>& b, bool more_after = false) {
-    zmq::message_t i(id.data(), id.size());
-    sock_.send(i, zmq::send_flags::sndmore);
-    sock_.send(zmq::buffer(b), more_after ? zmq::send_flags::sndmore : zmq::send_flags::none);
-  }
-  void loop() {
-    std::mt19937_64 rng(5);
-    int n = 0;
-    while (!stop_) {
-      zmq::pollitem_t it{sock_.handle(), 0, ZMQ_POLLIN, 0};
-      zmq::poll(&it, 1, 10ms);
-      if (!(it.revents & ZMQ_POLLIN)) continue;
-      zmq::message_t id, frame;
-      (void)sock_.recv(id);
-      (void)sock_.recv(frame);
-      auto m = decode({static_cast<const std::uint8_t*>(frame.data()), frame.size()}, DefaultLimits());
-      if (!m) continue;
-      if (auto* h = std::get_if<HeartbeatMsg>(&m.value())) {
-        reply(id, encode(HelloMsg{0, 77, h->nonce, held_}));
-        continue;
+  void on(const std::string& id, std::span<const std::uint8_t> frame) {
+    auto m = decode(frame, DefaultLimits());
+    if (!m) return;
+    if (auto* h = std::get_if<HeartbeatMsg>(&m.value()))
+      return worker_.reply(id, encode(HelloMsg{0, 77, h->nonce, held_}));
+    if (auto* l = std::get_if<LoadBlocksMsg>(&m.value())) {
+      if (l->offset + l->data.size() == l->total_bytes) {
+        held_ = {{l->hash, 1}};
+        worker_.reply(id, encode(HelloMsg{0, 77, 0, held_}));
       }
-      if (auto* l = std::get_if<LoadBlocksMsg>(&m.value())) {
-        if (l->offset + l->data.size() == l->total_bytes) {
-          held_ = {{l->hash, 1}};
-          reply(id, encode(HelloMsg{0, 77, 0, held_}));
-        }
-        continue;
-      }
-      auto* q = std::get_if<QueryMsg>(&m.value());
-      if (!q) continue;
-      const ResultMsg good{q->seq, 0, q->hash, {}, {}};
-      std::vector<std::uint8_t> b = encode(good);
-      switch (n++ % 10) {
-        case 0:
-          b.resize(b.size() - 1);
-          break;  // truncated
-        case 1:
-          b[4] = 7;
-          break;  // wrong version
-        case 2:
-          for (auto& c : b) c = static_cast<std::uint8_t>(rng());
-          break;  // garbage
-        case 3:
-          b = encode(ResultMsg{q->seq, 0, q->hash, {}, {{0, 0xfffffff0u}}});
-          break;  // face id out of range
-        case 4:
-          b = encode(ResultMsg{q->seq - 1, 0, q->hash, {}, {}});
-          break;  // stale
-        case 5:
-          reply(id, b, true);
-          break;  // two frames
-        case 6:
-          b = encode(ResultMsg{q->seq, 0, q->hash ^ 1, {}, {}});
-          break;  // wrong block set
-        case 7: {
-          const std::uint32_t big = 0x7fffffff;
-          std::memcpy(b.data() + b.size() - 4, &big, 4);
-          break;
-        }  // huge count
-        case 8:
-          b.assign(64u << 10, 0x11);
-          break;  // over the client's frame limit
-        case 9:
-          break;  // valid
-      }
-      if (n % 10 != 0) hostile_++;
-      reply(id, b);
+      return;
     }
+    auto* q = std::get_if<QueryMsg>(&m.value());
+    if (!q) return;
+    const ResultMsg good{q->seq, 0, q->hash, {}, {}};
+    std::vector<std::uint8_t> b = encode(good);
+    switch (n_++ % 10) {
+      case 0:
+        b.resize(b.size() - 1);
+        break;  // truncated
+      case 1:
+        b[4] = 7;
+        break;  // wrong version
+      case 2:
+        for (auto& c : b) c = static_cast<std::uint8_t>(rng_());
+        break;  // garbage
+      case 3:
+        b = encode(ResultMsg{q->seq, 0, q->hash, {}, {{0, 0xfffffff0u}}});
+        break;  // face id out of range
+      case 4:
+        b = encode(ResultMsg{q->seq - 1, 0, q->hash, {}, {}});
+        break;  // stale
+      case 5:
+        worker_.reply(id, b, true);
+        break;  // two frames
+      case 6:
+        b = encode(ResultMsg{q->seq, 0, q->hash ^ 1, {}, {}});
+        break;  // wrong block set
+      case 7: {
+        const std::uint32_t big = 0x7fffffff;
+        std::memcpy(b.data() + b.size() - 4, &big, 4);
+        break;
+      }  // huge count
+      case 8:
+        b.assign(64u << 10, 0x11);
+        break;  // over the client's frame limit
+      case 9:
+        break;  // valid
+    }
+    if (n_ % 10 != 0) hostile_++;
+    worker_.reply(id, b);
   }
-  zmq::socket_t sock_;
-  std::string endpoint_;
+  std::mt19937_64 rng_{5};
+  int n_ = 0;
   std::vector<Held> held_;
-  std::atomic<bool> stop_{false};
   std::atomic<int> hostile_{0};
-  std::thread thread_;
+  test::ScriptedWorker worker_;  // last: its thread runs on() on the members above
 };
 
 }  // namespace
@@ -155,70 +129,52 @@ namespace {
 /// when the old connection still holds one.
 class RestartingWorker {
  public:
-  explicit RestartingWorker(zmq::context_t& ctx) : sock_(ctx, zmq::socket_type::router) {
-    sock_.set(zmq::sockopt::linger, 0);
-    sock_.set(zmq::sockopt::router_handover, 1);
-    sock_.bind("tcp://127.0.0.1:*");
-    endpoint_ = sock_.get(zmq::sockopt::last_endpoint);
-    thread_ = std::thread([this] { loop(); });
-  }
-  ~RestartingWorker() {
-    stop_ = true;
-    thread_.join();
-  }
-  const std::string& endpoint() const { return endpoint_; }
+  explicit RestartingWorker(zmq::context_t& ctx)
+      : worker_(
+            ctx, [this](const std::string& id, std::span<const std::uint8_t> frame) { on(id, frame); },
+            [this] { maybe_restart(); }) {}
+  const std::string& endpoint() const { return worker_.endpoint(); }
   void restart() { restart_ = true; }
   int loads() const { return loads_.load(); }
 
  private:
-  void reply(const std::string& id, const Message& m) {
-    sock_.send(zmq::buffer(id), zmq::send_flags::sndmore);
-    sock_.send(zmq::buffer(encode(m)), zmq::send_flags::none);
+  void send(const std::string& id, const Message& m) { worker_.reply(id, encode(m)); }
+  void maybe_restart() {
+    if (client_.empty() || !restart_.exchange(false)) return;
+    const std::vector<Held> old_held = held_;
+    const std::uint64_t old_epoch = epoch_;
+    epoch_ += 1;
+    held_.clear();
+    send(client_, HelloMsg{0, epoch_, 0, held_});
+    send(client_, HelloMsg{0, old_epoch, 0, old_held});  // late, from before the restart
   }
-  void loop() {
-    while (!stop_) {
-      if (restart_.exchange(false) && !client_.empty()) {
-        const std::vector<Held> old_held = held_;
-        const std::uint64_t old_epoch = epoch_;
-        epoch_ += 1;
-        held_.clear();
-        reply(client_, HelloMsg{0, epoch_, 0, held_});
-        reply(client_, HelloMsg{0, old_epoch, 0, old_held});  // late, from before the restart
+  void on(const std::string& id, std::span<const std::uint8_t> frame) {
+    client_ = id;
+    auto m = decode(frame, DefaultLimits());
+    if (!m) return;
+    if (auto* h = std::get_if<HeartbeatMsg>(&m.value())) {
+      send(id, HelloMsg{0, epoch_, h->nonce, held_});
+    } else if (auto* l = std::get_if<LoadBlocksMsg>(&m.value())) {
+      if (l->offset + l->data.size() == l->total_bytes) {
+        ++loads_;
+        held_ = {{l->hash, 1}};
+        send(id, HelloMsg{0, epoch_, 0, held_});
       }
-      zmq::pollitem_t it{sock_.handle(), 0, ZMQ_POLLIN, 0};
-      zmq::poll(&it, 1, 5ms);
-      if (!(it.revents & ZMQ_POLLIN)) continue;
-      zmq::message_t id, frame;
-      (void)sock_.recv(id);
-      (void)sock_.recv(frame);
-      client_.assign(static_cast<const char*>(id.data()), id.size());
-      auto m = decode({static_cast<const std::uint8_t*>(frame.data()), frame.size()}, DefaultLimits());
-      if (!m) continue;
-      if (auto* h = std::get_if<HeartbeatMsg>(&m.value())) {
-        reply(client_, HelloMsg{0, epoch_, h->nonce, held_});
-      } else if (auto* l = std::get_if<LoadBlocksMsg>(&m.value())) {
-        if (l->offset + l->data.size() == l->total_bytes) {
-          ++loads_;
-          held_ = {{l->hash, 1}};
-          reply(client_, HelloMsg{0, epoch_, 0, held_});
-        }
-      } else if (auto* q = std::get_if<QueryMsg>(&m.value())) {
-        if (!held_.empty() && held_[0].hash == q->hash) {
-          reply(client_, ResultMsg{q->seq, 0, q->hash, {}, {}});
-        } else {
-          reply(client_, ErrorMsg{ErrorCode::NotLoaded, q->seq, "not held"});
-          reply(client_, HelloMsg{0, epoch_, 0, held_});
-        }
+    } else if (auto* q = std::get_if<QueryMsg>(&m.value())) {
+      if (!held_.empty() && held_[0].hash == q->hash) {
+        send(id, ResultMsg{q->seq, 0, q->hash, {}, {}});
+      } else {
+        send(id, ErrorMsg{ErrorCode::NotLoaded, q->seq, "not held"});
+        send(id, HelloMsg{0, epoch_, 0, held_});
       }
     }
   }
-  zmq::socket_t sock_;
-  std::string endpoint_, client_;
+  std::string client_;
   std::vector<Held> held_;
   std::uint64_t epoch_ = 1000;
-  std::atomic<bool> stop_{false}, restart_{false};
+  std::atomic<bool> restart_{false};
   std::atomic<int> loads_{0};
-  std::thread thread_;
+  test::ScriptedWorker worker_;  // last: its thread runs the members above
 };
 
 }  // namespace
