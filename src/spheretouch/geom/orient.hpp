@@ -10,13 +10,15 @@
 // over each edge-connected part flips every face whose winding disagrees with the face it was
 // reached from (two faces of an oriented surface traverse their shared edge in opposite
 // directions). Then each part is turned as a whole:
-//  * a closed part (no edge it uses once: an edge shared with other parts, used twice by each of
-//    two cubes that meet along it, leaves both closed) faces out of the material: outward (positive signed
-//    volume) when it lies inside an even number of the other closed parts, inward when odd (the
-//    wall of a cavity, the inner shell of a hollow ball). Inside is decided by the winding number
-//    of a vertex of the part about the other part (the sum of its faces' signed solid angles).
+//  * a closed part (no edge it uses once: an edge shared with other parts, used twice by each
+//    of two cubes that meet along it, leaves both closed) faces out of the material: outward
+//    (positive signed volume) when it lies inside an even number of the other closed parts,
+//    inward when odd (the wall of a cavity, the inner shell of a hollow ball). Inside is decided
+//    by the winding number of a vertex of the part about the other part (the sum of its faces'
+//    signed solid angles).
 //  * an open part (a sheet, a plate modelled by one surface, a soup) has no inside: it keeps the
-//    winding the larger area of its faces had in the file.
+//    winding the larger area of its faces had in the file (a contact with it takes the side the
+//    probe comes from: contact.hpp).
 // Edges used by three or more faces join nothing (which way round is ambiguous there), so parts
 // that meet only along such edges are oriented each on its own. A part that cannot be oriented
 // (a Möbius strip) keeps what the walk gave it, and its disagreeing edges are counted.
@@ -47,7 +49,7 @@ struct OrientReport {
 
 /// Bound on the face visits the nesting test may make (winding numbers of one vertex per closed
 /// part about the closed parts whose bounds hold it): beyond it the remaining parts are wound
-/// outward. 2^26 visits are ~1 s; a mesh needs thousands of nested closed parts to reach it.
+/// outward. Only meshes of many closed parts inside each other's bounds come near it.
 inline constexpr std::size_t kMaxNestingTests = std::size_t(1) << 26;
 
 /// Makes the winding of `mesh` consistent across each part and outward (header comment).
@@ -58,9 +60,9 @@ OrientReport orient_faces(Mesh& mesh);
 /// the patch model lets a contact take the side the probe comes from (contact.hpp).
 std::vector<std::uint8_t> open_part_faces(const Mesh& mesh);
 
-/// One line for a user on what orient_faces() changed ("12 faces flipped: 1 closed part was
-/// inside out"), the open parts (no inside) and what it could not decide; empty when it
-/// changed nothing and every part is closed.
+/// One line for a user on what orient_faces() changed ("12 faces flipped to wind consistently and
+/// outward (1 closed part was inside out)"), the open parts (no inside) and what it could not
+/// decide; empty when it changed nothing and every part is closed.
 std::string describe_winding(const OrientReport& report);
 
 }  // namespace st::geom

@@ -74,10 +74,8 @@ struct Peer {
   Link link = Link::Unknown;
   Turn turn = Turn::Idle;
   std::uint32_t worker_id = 0;
-  std::uint64_t epoch = 0;  // from its last Hello (0: none with an epoch yet)
-  // The epoch its last restart replaced: a Hello of it read after the new one is from its
-  // previous life (still queued on the old connection), not news.
-  std::uint64_t retired_epoch = 0;
+  std::uint64_t epoch = 0;               // from its last Hello (0: none with an epoch yet)
+  std::uint64_t retired_epoch = 0;       // the epoch its last restart replaced (a Hello of it is stale)
   std::uint32_t misses = 0;              // rounds missed in a row (0 while Down)
   std::vector<std::uint64_t> held;       // hashes from its last Hello, MRU first
   std::vector<std::uint32_t> original;   // its own blocks (ScatterConfig::mapping)

@@ -161,13 +161,13 @@ struct RoundResult {
   std::uint32_t workers_replied = 0;        ///< Results merged this round
   std::uint32_t blocks_covered = 0;         ///< blocks whose pairs are in `pairs`
   std::uint32_t blocks_total = 0;           ///< blocks in the partition
-  std::uint32_t stale_dropped = 0;       ///< replies of older rounds (or of a restarted worker's previous life) dropped
-  std::uint32_t bad_messages = 0;        ///< undecodable or unexpected replies dropped
-  QueryStats stats;                      ///< summed counters; compute_ns is the slowest worker's
-  std::vector<QueryStats> worker_stats;  ///< per worker (endpoint order): its Result's counters, zero if none
-  std::uint32_t blocks_assisted = 0;     ///< blocks the client answered itself (ScatterConfig::assist_blocks)
-  QueryStats assist;                     ///< the client's own work on them (tests also in `stats`; its time here only)
-  std::uint32_t blocks_moved = 0;        ///< blocks answered by their standby holder to balance the load (replicas)
+  std::uint32_t stale_dropped = 0;          ///< stale replies dropped (older rounds, a restarted worker's past life)
+  std::uint32_t bad_messages = 0;           ///< undecodable or unexpected replies dropped
+  QueryStats stats;                         ///< summed counters; compute_ns is the slowest worker's
+  std::vector<QueryStats> worker_stats;     ///< per worker (endpoint order): its Result's counters, zero if none
+  std::uint32_t blocks_assisted = 0;        ///< blocks the client answered itself (ScatterConfig::assist_blocks)
+  QueryStats assist;               ///< the client's own work on them (tests also in `stats`; its time here only)
+  std::uint32_t blocks_moved = 0;  ///< blocks answered by their standby holder to balance the load (replicas)
   /// "Contacts" (paper §3.5): distinct colliding probe faces + distinct colliding object faces (0
   /// without ScatterConfig::distinct_faces).
   std::size_t contacts() const { return probe_faces.size() + object_faces.size(); }
