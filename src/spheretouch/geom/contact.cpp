@@ -130,14 +130,12 @@ ContactModel ContactBuilder::build_patch(const Mesh& probe, const Mesh& object, 
                                          std::span<const ContactPair> pairs) {
   Back& b = back_for(object);
   if (!b.patch) return patch_->build(probe, object, pose, pairs);  // every part closed
-  if (b.active) {
-    if (b.patch->has_history()) {  // a contact on the back goes on, on the back
-      ContactModel m = b.patch->build(probe, b.mesh, pose, pairs);
-      if (!m.in_contact()) b.active = false;
-      return m;
-    }
-    b.active = false;
+  if (b.active && b.patch->has_history()) {                        // a contact on the back goes on, on the back
+    ContactModel m = b.patch->build(probe, b.mesh, pose, pairs);
+    if (!m.in_contact()) b.active = false;
+    return m;
   }
+  b.active = false;
   const bool going_on = patch_->has_history();
   ContactModel m = patch_->build(probe, object, pose, pairs);
   if (going_on || !m.in_contact()) return m;
