@@ -11,8 +11,10 @@
 #include <limits>
 #include <vector>
 
+#include <spheretouch/geom/collide.hpp>
 #include <spheretouch/geom/contact.hpp>
 #include <spheretouch/geom/primitives.hpp>
+#include <spheretouch/geom/sphere_tree.hpp>
 #include "analytic_shapes.hpp"
 #include "test_models.hpp"
 
@@ -556,6 +558,64 @@ TEST_CASE("contact patch: a closed part beside an open one renders as it does al
   CHECK(angle_deg(fd(m), -Vec3::UnitZ()) < 1e-6);
   CHECK(fd(m) == fd(n));
   CHECK(m.penetration_mm == n.penetration_mm);
+}
+
+TEST_CASE("contact patch: a mesh written as a soup (three corners per face) renders as the welded mesh, bit for bit") {
+  // PLY and OFF are read as written, and many exporters write a corner once per face (or once per
+  // side of a seam). The model walks the surface from corner to corner; before the builder joined
+  // coincident corners, a ball soup pressed into a sphere soup was pushed inward (FD -z, PD < 0.7).
+  auto soup = [](const Mesh& m) {
+    Mesh s;
+    s.origin = m.origin;
+    for (const Tri& t : m.faces) {
+      const auto b = std::uint32_t(s.local.size());
+      for (std::uint32_t v : t) s.local.push_back(m.local[v]);
+      s.faces.push_back({b, b + 1, b + 2});
+    }
+    return s;
+  };
+  Mesh sheet = st::test::grid(12);
+  for (Vec3& v : sheet.local) v = Vec3(5 * v.x() - 30, 5 * v.y() - 30, -80);  // below the sphere
+  const Mesh ball = make_icosphere(5, 8);
+  Mesh object = make_icosphere(50, 24);
+  const auto base = std::uint32_t(object.local.size());
+  for (const Vec3& v : sheet.local) object.local.push_back(v - object.origin);
+  for (const Tri& t : sheet.faces) object.faces.push_back({t[0] + base, t[1] + base, t[2] + base});
+  const Mesh ball_soup = soup(ball), object_soup = soup(object);
+  REQUIRE(object_soup.local.size() == 3 * object.faces.size());
+  const SphereTree ball_tree = SphereTree::build(ball).value(), object_tree = SphereTree::build(object).value();
+  CollideScratch scratch;
+  CollideResult r;
+  ContactBuilder welded, soups, probe_soup;
+  int in_contact = 0, held = 0;
+  auto step = [&](const Vec3& at, const Vec3& out) {
+    const Pose p = pose_at(at);
+    collide(ball, ball_tree, object, object_tree, p, DefaultCollideConfig(), scratch, r);
+    const ContactModel a = welded.build(ball, object, p, r.pairs);
+    const ContactModel b = soups.build(ball_soup, object_soup, p, r.pairs);
+    const ContactModel c = probe_soup.build(ball_soup, object, p, r.pairs);
+    CAPTURE(at);
+    REQUIRE(finite_model(b));
+    for (const ContactModel* m : {&b, &c}) {
+      CHECK(fd(*m) == fd(a));
+      CHECK(m->penetration_mm == a.penetration_mm);
+      CHECK(m->flags == a.flags);
+      CHECK(to_eigen(m->plane_point) == to_eigen(a.plane_point));
+      CHECK(to_eigen(m->pressure_point) == to_eigen(a.pressure_point));
+    }
+    if (a.in_contact()) {
+      ++in_contact;
+      held += (a.flags & kHeld) != 0;
+      CHECK(fd(a).dot(out) > 0.9);  // and that is the right way
+    }
+  };
+  for (double d = 0; d <= 9.5; d += 0.1) step({0.3, 0.2, 55 - d}, Vec3::UnitZ());  // pressed into the sphere
+  for (double x = 0; x <= 10; x += 0.2) step({0.3 + x, 0.2, 52}, Vec3(0.3 + x, 0.2, 52).normalized());  // slid
+  for (double k = 52; k <= 60; k += 0.2) step(k * Vec3(10.3, 0.2, 52).normalized(), Vec3(10.3, 0.2, 52).normalized());
+  for (double z = -90; z <= -60; z += 0.2) step({0.4, -0.3, z}, -Vec3::UnitZ());  // the sheet from below, through it
+  CHECK(in_contact > 200);
+  CHECK(held > 20);
+  CHECK(soups.bytes() > welded.bytes());  // the joined copies are counted
 }
 
 TEST_CASE("contact patch: bad input gives a finite model and a flag") {

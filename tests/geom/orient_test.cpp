@@ -4,6 +4,7 @@
 // counted, the model set left alone, and the force on a file wound inside out.
 #include <spheretouch/geom/orient.hpp>
 
+#include <limits>
 #include <random>
 
 #include <spheretouch/geom/collide.hpp>
@@ -96,6 +97,52 @@ TEST_CASE("orient_faces: random closed meshes, faces flipped at random and the w
     CHECK(m.faces == good.faces);
     CHECK(r.closed_parts == 1);
     CHECK(r.unorientable_edges == 0);
+  }
+}
+
+TEST_CASE("coincident_vertices: each vertex names the lowest index at its position (-0 = +0, NaN alone)") {
+  Mesh m;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  m.local = {Vec3(1, 2, 3),
+             Vec3(0, 0, 0),
+             Vec3(1, 2, 3),
+             Vec3(-0.0, 0, -0.0),
+             Vec3(nan, 0, 0),
+             Vec3(nan, 0, 0),
+             Vec3(1, 2, 3.0000000000000004),
+             Vec3(0, 0, 0)};
+  CHECK(coincident_vertices(m) == std::vector<std::uint32_t>{0, 1, 0, 1, 4, 5, 6, 1});
+  CHECK(coincident_vertices(Mesh{}).empty());
+}
+
+TEST_CASE("orient_faces: a soup (three corners per face, as PLY and OFF are read) is joined at its corners") {
+  // Each face its own three vertices: without joining coincident corners every face is an open
+  // part of its own and keeps the winding the file gave it.
+  auto soup = [](const Mesh& m) {
+    Mesh s;
+    for (const Tri& t : m.faces) {
+      const auto b = std::uint32_t(s.local.size());
+      for (std::uint32_t v : t) s.local.push_back(m.local[v]);
+      s.faces.push_back({b, b + 1, b + 2});
+    }
+    return s;
+  };
+  std::mt19937 rng(11);
+  for (const Mesh& shape : {make_box(Vec3(100, 60, 40)), make_icosphere(10, 4)}) {
+    const Mesh good = soup(shape);
+    REQUIRE(good.topology().closed());  // joined through its coincident corners
+    for (int trial = 0; trial < 6; ++trial) {
+      Mesh m = good;
+      std::bernoulli_distribution some(0.3);
+      for (Tri& t : m.faces)
+        if ((trial % 2 == 1) != some(rng)) flip(t);
+      CAPTURE(trial);
+      const OrientReport r = orient_faces(m);
+      CHECK(r.parts == 1);
+      CHECK(r.closed_parts == 1);
+      CHECK(m.faces == good.faces);
+      CHECK(m.local == good.local);  // no vertex merged or moved
+    }
   }
 }
 

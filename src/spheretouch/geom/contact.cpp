@@ -93,6 +93,53 @@ ContactBuilder::Back& ContactBuilder::back_for(const Mesh& object) {
   return b;
 }
 
+/// A mesh as the patch model reads it. The model walks the surface from vertex to vertex (the
+/// depth climb, the walks under a held contact, the open parts): a surface whose corners are
+/// written once per face (a soup) would have no walk past a face. Here each position is one
+/// vertex and the faces keep their order, so the pairs' face ids hold and every position the
+/// model reports is one of the mesh's. Made once per mesh, and only for a mesh with repeats.
+struct ContactBuilder::Joined {
+  const Mesh* of = nullptr;
+  std::size_t nv = 0, nf = 0;
+  bool repeats = false;  // some corners repeat: `mesh` is the joined copy
+  Mesh mesh;
+  bool made_for(const Mesh& m) const { return of == &m && nv == m.local.size() && nf == m.faces.size(); }
+};
+
+const Mesh& ContactBuilder::joined(const Mesh& mesh, int which) {
+  if (!joined_[which]) joined_[which] = std::make_unique<Joined>();
+  Joined& j = *joined_[which];
+  if (!j.made_for(mesh)) {
+    const bool was_copy = j.repeats;
+    j = Joined{};
+    j.of = &mesh;
+    j.nv = mesh.local.size();
+    j.nf = mesh.faces.size();
+    const std::vector<std::uint32_t> same = coincident_vertices(mesh);
+    std::vector<std::uint32_t> id(same.size());
+    std::uint32_t n = 0;
+    for (std::size_t v = 0; v < same.size(); ++v) id[v] = same[v] == v ? n++ : id[same[v]];
+    j.repeats = n < same.size();
+    if (j.repeats) {
+      j.mesh.name = mesh.name;
+      j.mesh.origin = mesh.origin;
+      j.mesh.local.reserve(n);
+      for (std::size_t v = 0; v < same.size(); ++v)
+        if (same[v] == v) j.mesh.local.push_back(mesh.local[v]);
+      j.mesh.faces = mesh.faces;
+      for (Tri& t : j.mesh.faces)
+        for (std::uint32_t& v : t)
+          if (v < id.size()) v = id[v];  // (an index out of range stays so: build() skips its pairs)
+    }
+    // What was made for the copy this one replaces (at the same address) is not for it.
+    if (was_copy || j.repeats) {
+      patch_ = std::make_unique<Patch>(config_);
+      back_.reset();
+    }
+  }
+  return j.repeats ? j.mesh : mesh;
+}
+
 ContactBuilder::~ContactBuilder() = default;
 ContactBuilder::ContactBuilder(ContactBuilder&&) noexcept = default;
 ContactBuilder& ContactBuilder::operator=(ContactBuilder&&) noexcept = default;
@@ -113,8 +160,10 @@ bool ContactBuilder::has_first_face() const {
 
 void ContactBuilder::prepare(const Mesh& probe, const Mesh& object) {
   if (config_.model != ContactModelKind::patch) return;
-  patch_->prepare(probe, object);
-  if (Back& b = back_for(object); b.patch) b.patch->prepare(probe, b.mesh);
+  const Mesh& p = joined(probe, 0);
+  const Mesh& o = joined(object, 1);
+  patch_->prepare(p, o);
+  if (Back& b = back_for(o); b.patch) b.patch->prepare(p, b.mesh);
 }
 
 std::size_t ContactBuilder::bytes() const {
@@ -122,12 +171,16 @@ std::size_t ContactBuilder::bytes() const {
   if (back_ && back_->patch)
     back = back_->patch->bytes() + back_->open.capacity() + back_->mesh.local.capacity() * sizeof(Vec3) +
            back_->mesh.faces.capacity() * sizeof(Tri);
+  for (const auto& j : joined_)
+    if (j && j->repeats) back += j->mesh.local.capacity() * sizeof(Vec3) + j->mesh.faces.capacity() * sizeof(Tri);
   return patch_->bytes() + back + (probe_faces_.capacity() + object_faces_.capacity() + probe_vertices_.capacity()) * 4 +
          probe_points_.capacity() * sizeof(Vec3);
 }
 
-ContactModel ContactBuilder::build_patch(const Mesh& probe, const Mesh& object, const Pose& pose,
+ContactModel ContactBuilder::build_patch(const Mesh& probe_as_given, const Mesh& object_as_given, const Pose& pose,
                                          std::span<const ContactPair> pairs) {
+  const Mesh& probe = joined(probe_as_given, 0);
+  const Mesh& object = joined(object_as_given, 1);
   Back& b = back_for(object);
   if (!b.patch) return patch_->build(probe, object, pose, pairs);  // every part closed
   if (b.active && b.patch->has_history()) {                        // a contact on the back goes on, on the back

@@ -53,6 +53,9 @@
 //    less deep on the side it came from) for as long as the contact lasts; the next contact
 //    chooses again. For an object with open parts the builder keeps a second copy of the mesh (its
 //    vertices and faces) and of the model's per-mesh state.
+//  * Corners at one position are one vertex (coincident_vertices()): a mesh written as a soup,
+//    or split at its seams, renders as the welded mesh, bit for bit (the builder keeps a joined
+//    copy of such a mesh: each position once, the faces in their order).
 //  * Order: the model is a function of the set of pairs. They are taken in (probe, object)
 //    order, each once (sorted in scratch when not given so), and the segments' areas are
 //    measured from a point of the intersection curve, so neither the worker count nor the
@@ -293,6 +296,11 @@ class ContactBuilder {
   struct Back;
   std::unique_ptr<Back> back_;
   Back& back_for(const Mesh& object);
+  /// patch: a mesh whose corners repeat (coincident_vertices(): a soup, seams) as the model reads
+  /// it, each position once and the faces in their order (contact.cpp).
+  struct Joined;
+  std::unique_ptr<Joined> joined_[2];  // probe, object
+  const Mesh& joined(const Mesh& mesh, int which);
 };
 
 }  // namespace st::geom

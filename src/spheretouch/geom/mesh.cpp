@@ -32,11 +32,13 @@ Topology Mesh::topology() const {
     std::uint64_t key;
     bool forward;
   };
+  const std::vector<std::uint32_t> same = coincident_vertices(*this);
   std::vector<Half> halves;
   halves.reserve(faces.size() * 3);
   for (const Tri& f : faces) {
     for (int k = 0; k < 3; ++k) {
-      std::uint32_t a = f[k], b = f[(k + 1) % 3];
+      const std::uint32_t a = f[k] < same.size() ? same[f[k]] : f[k];
+      const std::uint32_t b = f[(k + 1) % 3] < same.size() ? same[f[(k + 1) % 3]] : f[(k + 1) % 3];
       if (a == b) continue;  // an edge of a degenerate face with a repeated vertex has no extent
       const bool fwd = a < b;
       const std::uint64_t key = fwd ? (std::uint64_t(a) << 32 | b) : (std::uint64_t(b) << 32 | a);
@@ -58,6 +60,29 @@ Topology Mesh::topology() const {
     i = j;
   }
   return t;
+}
+
+std::vector<std::uint32_t> coincident_vertices(const Mesh& mesh) {
+  const auto nv = static_cast<std::uint32_t>(mesh.local.size());
+  std::vector<std::uint32_t> same(nv);
+  std::vector<std::uint32_t> order;
+  order.reserve(nv);
+  for (std::uint32_t v = 0; v < nv; ++v) {
+    same[v] = v;
+    if (mesh.local[v].allFinite()) order.push_back(v);  // (NaN would break the ordering)
+  }
+  // Lexicographic by value (so -0 == +0), ties by index: each run of equal positions starts at
+  // its lowest index.
+  auto less = [&](std::uint32_t i, std::uint32_t j) {
+    const Vec3 &a = mesh.local[i], &b = mesh.local[j];
+    for (int k = 0; k < 3; ++k)
+      if (a[k] != b[k]) return a[k] < b[k];
+    return i < j;
+  };
+  std::sort(order.begin(), order.end(), less);
+  for (std::size_t i = 1; i < order.size(); ++i)
+    if (mesh.local[order[i]] == mesh.local[order[i - 1]]) same[order[i]] = same[order[i - 1]];
+  return same;
 }
 
 std::vector<std::uint32_t> Mesh::degenerate_faces() const {

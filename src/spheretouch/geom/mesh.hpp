@@ -60,8 +60,8 @@ struct Mesh {
   Vec3 vertex(std::uint32_t i) const { return origin + local[i]; }  ///< position in the body's frame
   Box local_bounds() const;                                         ///< bounds of `local`
   Box bounds() const;                                               ///< bounds in the body's frame
-  Topology topology() const;                                        ///< edge counts (O(F log F))
-  std::vector<std::uint32_t> degenerate_faces() const;              ///< zero-area faces, ascending
+  Topology topology() const;  ///< edge counts, corners joined as coincident_vertices() joins them (O(F log F))
+  std::vector<std::uint32_t> degenerate_faces() const;  ///< zero-area faces, ascending
   /// Re-centres the body: origin becomes the bounding-box centre, snapped so that subtracting it
   /// from every vertex is exact where the coordinates allow (see mesh.cpp).
   void recentre();
@@ -70,6 +70,14 @@ struct Mesh {
   /// Checks indices and coordinates; the error names the first bad face or vertex.
   Status validate() const;
 };
+
+/// Per vertex, the lowest index of a vertex at the same position (itself when it has none;
+/// -0 and +0 are the same, a non-finite vertex has none). A file written as three corners per
+/// triangle (a soup: PLY and OFF are read as written) or split at its seams (normals, texture
+/// coordinates) holds one corner of the surface several times; what reads the surface's
+/// connectivity (topology(), orient_faces(), the patch contact model) joins faces through these.
+/// O(V log V).
+std::vector<std::uint32_t> coincident_vertices(const Mesh& mesh);
 
 /// Word-wise multiply-rotate hash with a final avalanche (not cryptographic: it tells a changed
 /// mesh or a stale cache file, not a forged one).

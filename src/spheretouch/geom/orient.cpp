@@ -32,11 +32,12 @@ Adjacency adjacency(const Mesh& mesh) {
     bool forward;
   };
   const auto nf = static_cast<std::uint32_t>(mesh.faces.size());
+  const std::vector<std::uint32_t> same_at = coincident_vertices(mesh);  // a soup's corners joined
   std::vector<Half> halves;
   halves.reserve(std::size_t(nf) * 3);
   for (std::uint32_t f = 0; f < nf; ++f)
     for (int k = 0; k < 3; ++k) {
-      const std::uint32_t a = mesh.faces[f][k], b = mesh.faces[f][(k + 1) % 3];
+      const std::uint32_t a = same_at[mesh.faces[f][k]], b = same_at[mesh.faces[f][(k + 1) % 3]];
       if (a == b) continue;  // a repeated vertex: no edge
       const bool fwd = a < b;
       halves.push_back({fwd ? (std::uint64_t(a) << 32 | b) : (std::uint64_t(b) << 32 | a), f, fwd});

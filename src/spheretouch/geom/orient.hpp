@@ -6,7 +6,8 @@
 /// pulls the probe into the object instead of pushing it out. Files often have such faces: an
 /// exporter that writes clockwise, a mirrored part, a few facets flipped by a repair tool.
 //
-// How. Faces are joined across their manifold edges (exactly two faces use the edge); a walk
+// How. Faces are joined across their manifold edges (exactly two faces use the edge; corners at
+// one position are one corner, coincident_vertices(), so a soup is joined as welded); a walk
 // over each edge-connected part flips every face whose winding disagrees with the face it was
 // reached from (two faces of an oriented surface traverse their shared edge in opposite
 // directions). Then each part is turned as a whole:
