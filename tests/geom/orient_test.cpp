@@ -168,6 +168,53 @@ TEST_CASE("orient_faces: a hollow solid's cavity is wound inward, a body inside 
   }
 }
 
+TEST_CASE("orient_faces: closed parts pushed into each other are each wound outward; one wholly inside is a cavity") {
+  // A ball of radius 10 and an 8 mm cube moved along x: inside it (0), through its surface (5, 12:
+  // some corners out), apart (18). One vertex of the cube inside the ball made it a cavity before,
+  // wound inward, and the force on its faces pulled the probe in.
+  const Mesh ball = make_icosphere(10, 4), cube = make_box(Vec3(8, 8, 8));
+  const Mesh probe = make_icosphere(1, 2);
+  const SphereTree probe_tree = SphereTree::build(probe).value();
+  for (const double shift : {0.0, 5.0, 12.0, 18.0})
+    for (const bool cube_first : {true, false})
+      for (int mode = 0; mode < 4; ++mode) {  // either part inside out
+        CAPTURE(shift);
+        CAPTURE(cube_first);
+        CAPTURE(mode);
+        const Mesh good = cube_first ? join(cube, ball, Vec3(-shift, 0, 0)) : join(ball, cube, Vec3(shift, 0, 0));
+        const std::size_t n_first = (cube_first ? cube : ball).faces.size();
+        Mesh m = good;
+        for (std::size_t f = 0; f < m.faces.size(); ++f)
+          if ((mode >> (f < n_first ? 0 : 1)) & 1) flip(m.faces[f]);
+        const OrientReport r = orient_faces(m);
+        const bool nested = shift == 0.0;
+        CHECK(r.closed_parts == 2);
+        CHECK(r.cavities == (nested ? 1u : 0u));
+        const double v_first = volume6(m, 0, n_first), v_second = volume6(m, n_first);
+        const double v_cube = cube_first ? v_first : v_second, v_ball = cube_first ? v_second : v_first;
+        CHECK(v_ball > 0);
+        CHECK((v_cube < 0) == nested);
+        if (shift < 10) continue;
+        // A small ball 0.3 mm into the cube's face farthest from the ball (+x, outside it).
+        const Vec3 cube_centre = cube_first ? Vec3(0, 0, 0) : Vec3(shift, 0, 0);
+        const Vec3 ball_centre = cube_first ? Vec3(-shift, 0, 0) : Vec3(0, 0, 0);
+        const Vec3 at = cube_centre + Vec3(4 + 1 - 0.3, 0, 0), out = Vec3::UnitX();
+        REQUIRE((at - ball_centre).norm() > 12);  // clear of the ball
+        const SphereTree tree = SphereTree::build(m).value();
+        Pose p = Pose::Identity();
+        p.translation() = at;  // (the body frame: m.origin is 0 here)
+        CollideScratch sc;
+        CollideResult cr;
+        collide(probe, probe_tree, m, tree, p, CollideConfig{}, sc, cr);
+        REQUIRE_FALSE(cr.pairs.empty());
+        ContactBuilder b;
+        const ContactModel c = b.build(probe, m, p, cr.pairs);
+        REQUIRE(c.in_contact());
+        CHECK(to_eigen(c.force_dir).dot(out) > 0.99);
+        CHECK(c.penetration_mm == doctest::Approx(0.3).epsilon(0.2));
+      }
+}
+
 TEST_CASE("orient_faces: an open sheet is made consistent with the winding most of its area had") {
   Mesh g = st::test::grid(6);  // 72 faces, +z
   const std::vector<Tri> up = g.faces;

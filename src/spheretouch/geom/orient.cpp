@@ -13,6 +13,8 @@ namespace st::inline SPHERETOUCH_ABI::geom {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
+// Vertices of a closed part whose winding numbers about another decide whether it lies inside it.
+constexpr std::size_t kNestSamples = 16;
 
 // Faces joined across manifold edges, as compressed rows: face f's neighbours are
 // next[first[f] .. first[f + 1]), with `same` set where both faces traverse the edge the same
@@ -197,8 +199,11 @@ OrientReport orient_faces(Mesh& mesh) {
   rep.unorientable_edges = ps.unorientable_edges;
   for (std::size_t p = 0; p < parts; ++p) rep.closed_parts += ps.closed[p];
 
-  // Nesting: how many other closed parts hold a vertex of each closed part (winding number about
-  // them, either winding: |w| > 1/2), those whose bounds hold it only.
+  // Nesting: how many other closed parts hold each closed part (either winding). Part p is inside
+  // q when its bounds are and every one of up to kNestSamples of its vertices (its first, its
+  // extremes along each axis, others spread over its faces) has a winding number about q over
+  // 1/2. Parts that overlap without nesting (an assembly's closed parts pushed into each other,
+  // a mesh's shells that intersect) have vertices on both sides: neither is a cavity.
   std::vector<std::uint32_t> faces_of(nf);  // faces grouped by part
   std::vector<std::uint32_t> part_at(parts + 1, 0);
   for (std::uint32_t f = 0; f < nf; ++f) ++part_at[ps.part[f] + 1];
@@ -210,29 +215,52 @@ OrientReport orient_faces(Mesh& mesh) {
   std::vector<std::uint32_t> closed_list;
   for (std::uint32_t p = 0; p < parts; ++p)
     if (ps.closed[p]) closed_list.push_back(p);
+  auto holds = [](const Box& outer, const Box& inner) {
+    return (inner.lo.array() > outer.lo.array()).all() && (inner.hi.array() < outer.hi.array()).all();
+  };
   std::size_t visits = 0;
   std::vector<std::uint8_t> odd(parts, 0);
+  std::vector<Vec3> samples;
   for (const std::uint32_t p : closed_list) {
-    const Vec3 x = mesh.local[mesh.faces[ps.first[p]][0]];
     bool inside_odd = false, skipped = false;
+    samples.clear();
     for (const std::uint32_t q : closed_list) {
-      if (q == p) continue;
-      const Box& b = ps.bounds[q];
-      if (!(x.x() > b.lo.x() && x.y() > b.lo.y() && x.z() > b.lo.z() && x.x() < b.hi.x() && x.y() < b.hi.y() &&
-            x.z() < b.hi.z()))
-        continue;
+      if (q == p || !holds(ps.bounds[q], ps.bounds[p])) continue;
+      if (samples.empty()) {  // p's sample vertices (first corners of its faces), made once it may be nested
+        const std::uint32_t* pf = faces_of.data() + part_at[p];
+        const std::uint32_t n = part_at[p + 1] - part_at[p];
+        auto at = [&](std::uint32_t k) -> const Vec3& { return mesh.local[mesh.faces[pf[k]][0]]; };
+        std::vector<std::uint32_t> picks(7, 0);  // the first, then the least and greatest along x, y, z
+        for (std::uint32_t k = 1; k < n; ++k)
+          for (int a = 0; a < 3; ++a) {
+            if (at(k)[a] < at(picks[1 + 2 * a])[a]) picks[1 + 2 * a] = k;
+            if (at(k)[a] > at(picks[2 + 2 * a])[a]) picks[2 + 2 * a] = k;
+          }
+        for (std::uint32_t i = 1; picks.size() < kNestSamples; ++i)  // spread over the rest
+          picks.push_back(std::uint32_t(std::uint64_t(n) * i / (kNestSamples - 6)));
+        std::sort(picks.begin(), picks.end());
+        picks.erase(std::unique(picks.begin(), picks.end()), picks.end());
+        for (std::uint32_t k : picks) samples.push_back(at(k));
+      }
       const std::size_t n = part_at[q + 1] - part_at[q];
-      if (visits + n > kMaxNestingTests) {
+      if (visits + n * samples.size() > kMaxNestingTests) {
         skipped = true;
         break;
       }
-      visits += n;
-      double omega = 0;
-      for (std::uint32_t k = part_at[q]; k < part_at[q + 1]; ++k) {
-        const Corners c = corners(mesh, faces_of[k], ps.flip[faces_of[k]]);
-        omega += solid_angle(c.a - x, c.b - x, c.c - x);
+      bool all_inside = true;
+      for (const Vec3& x : samples) {
+        visits += n;
+        double omega = 0;
+        for (std::uint32_t k = part_at[q]; k < part_at[q + 1]; ++k) {
+          const Corners c = corners(mesh, faces_of[k], ps.flip[faces_of[k]]);
+          omega += solid_angle(c.a - x, c.b - x, c.c - x);
+        }
+        if (!(std::abs(omega) > 2 * kPi)) {  // |w| = |Ω| / 4π <= 1/2: outside q
+          all_inside = false;
+          break;
+        }
       }
-      if (std::abs(omega) > 2 * kPi) inside_odd = !inside_odd;  // |w| = |Ω| / 4π > 1/2
+      if (all_inside) inside_odd = !inside_odd;
     }
     if (skipped) {
       ++rep.nesting_skipped;

@@ -14,9 +14,11 @@
 //  * a closed part (no edge it uses once: an edge shared with other parts, used twice by each
 //    of two cubes that meet along it, leaves both closed) faces out of the material: outward
 //    (positive signed volume) when it lies inside an even number of the other closed parts,
-//    inward when odd (the wall of a cavity, the inner shell of a hollow ball). Inside is decided
-//    by the winding number of a vertex of the part about the other part (the sum of its faces'
-//    signed solid angles).
+//    inward when odd (the wall of a cavity, the inner shell of a hollow ball). A part lies inside
+//    another when its bounds do and so do up to 16 of its vertices (its extremes along each axis
+//    and others spread over it), each by its winding number about the other part (the sum of its
+//    faces' signed solid angles); closed parts that overlap without one holding the other (an
+//    assembly's parts pushed into each other) are each wound outward.
 //  * an open part (a sheet, a plate modelled by one surface, a soup) has no inside: it keeps the
 //    winding the larger area of its faces had in the file (a contact with it takes the side the
 //    probe comes from: contact.hpp).
@@ -48,9 +50,9 @@ struct OrientReport {
   std::size_t nesting_skipped = 0;
 };
 
-/// Bound on the face visits the nesting test may make (winding numbers of one vertex per closed
-/// part about the closed parts whose bounds hold it): beyond it the remaining parts are wound
-/// outward. Only meshes of many closed parts inside each other's bounds come near it.
+/// Bound on the face visits the nesting test may make (winding numbers of up to 16 vertices per
+/// closed part about the closed parts whose bounds hold its bounds): beyond it the remaining parts
+/// are wound outward. Only meshes of many closed parts inside each other's bounds come near it.
 inline constexpr std::size_t kMaxNestingTests = std::size_t(1) << 26;
 
 /// Makes the winding of `mesh` consistent across each part and outward (header comment).
