@@ -618,6 +618,85 @@ TEST_CASE("contact patch: a mesh written as a soup (three corners per face) rend
   CHECK(soups.bytes() > welded.bytes());  // the joined copies are counted
 }
 
+TEST_CASE(
+    "contact patch: a face written twice counts once: a double-sided sheet pushes as the sheet, a box as the box") {
+  // Double-sided geometry is often written as each face again the other way round; the two
+  // cancelled (no force at all through such a sheet), and a face repeated the same way doubled.
+  Mesh sheet = st::test::grid(12);
+  for (Vec3& v : sheet.local) v = Vec3(5 * v.x() - 30, 5 * v.y() - 30, 0);
+  std::mt19937 rng(9);
+  auto twice = [&](const Mesh& m, int how) {  // 0: reversed after; 1: reversed first at random; 2: as a soup; 3: same way
+    Mesh d = m;
+    d.faces.clear();
+    for (const Tri& t : m.faces) {
+      const Tri back{t[0], t[2], t[1]}, again = how == 3 ? t : back;
+      const bool swap = how == 1 && rng() % 2;
+      d.faces.push_back(swap ? again : t);
+      d.faces.push_back(swap ? t : again);
+    }
+    if (how == 2) {
+      Mesh soup = d;
+      soup.local.clear();
+      soup.faces.clear();
+      for (const Tri& t : d.faces) {
+        const auto b = std::uint32_t(soup.local.size());
+        for (std::uint32_t v : t) soup.local.push_back(d.local[v]);
+        soup.faces.push_back({b, b + 1, b + 2});
+      }
+      return soup;
+    }
+    return d;
+  };
+  const Mesh ball = make_icosphere(5, 12);
+  const SphereTree ball_tree = SphereTree::build(ball).value();
+  CollideScratch scratch;
+  CollideResult r;
+  auto model = [&](ContactBuilder& b, const Mesh& object, const SphereTree& tree, const Pose& p) {
+    collide(ball, ball_tree, object, tree, p, DefaultCollideConfig(), scratch, r);
+    return b.build(ball, object, p, r.pairs);
+  };
+  const SphereTree sheet_tree = SphereTree::build(sheet).value();
+  for (int how = 0; how < 4; ++how) {
+    const Mesh d = twice(sheet, how);
+    const SphereTree tree = SphereTree::build(d).value();
+    for (const double side : {+1.0, -1.0}) {
+      CAPTURE(how);
+      CAPTURE(side);
+      ContactBuilder once, both;
+      int contacts = 0, held = 0;
+      auto step = [&](double c) {  // the ball's centre at height side * c: depth 5 - c past the sheet
+        const Pose p = pose_at({0.3, -0.2, side * c});
+        const ContactModel a = model(once, sheet, sheet_tree, p), m = model(both, d, tree, p);
+        CAPTURE(c);
+        REQUIRE(finite_model(m));
+        CHECK(m.in_contact() == a.in_contact());
+        if (!a.in_contact()) return;
+        ++contacts;
+        held += (m.flags & kHeld) != 0;
+        CHECK(angle_deg(fd(m), side * Vec3::UnitZ()) < 1e-6);  // out of the side it came from
+        CHECK(std::abs(m.penetration_mm - a.penetration_mm) < 1e-9);
+      };
+      for (double c = 6.0; c >= -20.0; c -= 0.2) step(c);
+      for (double c = -20.0; c <= 6.0; c += 0.2) step(c);
+      CHECK(contacts > 200);
+      CHECK(held > 100);
+    }
+  }
+  // A closed box written both ways round (in a random order): the box, pressed from above.
+  const Mesh box = twice(box40(), 1);
+  const SphereTree box_tree = SphereTree::build(box).value(), box40_tree = SphereTree::build(box40()).value();
+  for (double depth : {0.5, 2.0, 4.0}) {
+    CAPTURE(depth);
+    ContactBuilder once, both;
+    const Pose p = pose_at({1.3, -2.1, 25.0 - depth});
+    const ContactModel a = model(once, box40(), box40_tree, p), m = model(both, box, box_tree, p);
+    REQUIRE(m.in_contact());
+    CHECK(angle_deg(fd(m), Vec3::UnitZ()) < 1e-6);
+    CHECK(std::abs(m.penetration_mm - a.penetration_mm) < 1e-9);
+    CHECK(std::abs(m.penetration_mm - depth) <= kDepthTol);
+  }
+}
+
 TEST_CASE("contact patch: bad input gives a finite model and a flag") {
   ContactBuilder b;
   const Pose good = pose_at({0, 0, 27});

@@ -95,14 +95,20 @@ ContactBuilder::Back& ContactBuilder::back_for(const Mesh& object) {
 
 /// A mesh as the patch model reads it. The model walks the surface from vertex to vertex (the
 /// depth climb, the walks under a held contact, the open parts): a surface whose corners are
-/// written once per face (a soup) would have no walk past a face. Here each position is one
-/// vertex and the faces keep their order, so the pairs' face ids hold and every position the
-/// model reports is one of the mesh's. Made once per mesh, and only for a mesh with repeats.
+/// written once per face (a soup) would have no walk past a face, and a face written twice (a
+/// double-sided sheet: each face again the other way round; a face repeated by an exporter)
+/// would cancel or double the surface it is part of. Here each position is one vertex, a face
+/// written again is the first face of its corners (the pairs name that one: `face_of`; the
+/// others stay in place as a point, so every face keeps its id), and the faces so made one
+/// surface are wound consistently (orient_faces(): which way a face written both ways is wound
+/// is not in the file). Made once per mesh, and only for a mesh with repeats.
 struct ContactBuilder::Joined {
   const Mesh* of = nullptr;
   std::size_t nv = 0, nf = 0;
-  bool repeats = false;  // some corners repeat: `mesh` is the joined copy
-  Mesh mesh;
+  bool repeats = false;                  // some corners or faces repeat: `mesh` is the joined copy
+  Mesh mesh;                             //
+  std::vector<std::uint32_t> vertex_of;  // its vertex -> the mesh's (the lowest at that position)
+  std::vector<std::uint32_t> face_of;    // the mesh's face -> the first face of its corners (empty: none repeat)
   bool made_for(const Mesh& m) const { return of == &m && nv == m.local.size() && nf == m.faces.size(); }
 };
 
@@ -117,19 +123,42 @@ const Mesh& ContactBuilder::joined(const Mesh& mesh, int which) {
     j.nf = mesh.faces.size();
     const std::vector<std::uint32_t> same = coincident_vertices(mesh);
     std::vector<std::uint32_t> id(same.size());
-    std::uint32_t n = 0;
-    for (std::size_t v = 0; v < same.size(); ++v) id[v] = same[v] == v ? n++ : id[same[v]];
-    j.repeats = n < same.size();
+    for (std::size_t v = 0; v < same.size(); ++v) {
+      id[v] = same[v] == v ? std::uint32_t(j.vertex_of.size()) : id[same[v]];
+      if (same[v] == v) j.vertex_of.push_back(std::uint32_t(v));
+    }
+    std::vector<Tri> faces = mesh.faces;
+    for (Tri& t : faces)
+      for (std::uint32_t& v : t)
+        if (v < id.size()) v = id[v];  // (an index out of range stays so: build() skips its pairs)
+    // Faces on the same three corners, in any order: each names the first of them.
+    std::vector<std::pair<Tri, std::uint32_t>> keyed;
+    for (std::uint32_t f = 0; f < faces.size(); ++f) {
+      Tri k = faces[f];
+      std::sort(k.begin(), k.end());
+      if (k[0] != k[1] && k[1] != k[2]) keyed.push_back({k, f});  // (a degenerate face is a point or a segment)
+    }
+    std::sort(keyed.begin(), keyed.end());
+    for (std::size_t i = 1; i < keyed.size(); ++i)
+      if (keyed[i].first == keyed[i - 1].first) {
+        if (j.face_of.empty()) {
+          j.face_of.resize(faces.size());
+          for (std::uint32_t f = 0; f < faces.size(); ++f) j.face_of[f] = f;
+        }
+        const std::uint32_t f = keyed[i].second, first = j.face_of[keyed[i - 1].second];
+        j.face_of[f] = first;
+        faces[f] = {faces[f][0], faces[f][0], faces[f][0]};
+      }
+    j.repeats = j.vertex_of.size() < same.size() || !j.face_of.empty();
     if (j.repeats) {
       j.mesh.name = mesh.name;
       j.mesh.origin = mesh.origin;
-      j.mesh.local.reserve(n);
-      for (std::size_t v = 0; v < same.size(); ++v)
-        if (same[v] == v) j.mesh.local.push_back(mesh.local[v]);
-      j.mesh.faces = mesh.faces;
-      for (Tri& t : j.mesh.faces)
-        for (std::uint32_t& v : t)
-          if (v < id.size()) v = id[v];  // (an index out of range stays so: build() skips its pairs)
+      j.mesh.local.reserve(j.vertex_of.size());
+      for (std::uint32_t v : j.vertex_of) j.mesh.local.push_back(mesh.local[v]);
+      j.mesh.faces = std::move(faces);
+      if (!j.face_of.empty()) (void)orient_faces(j.mesh);
+    } else {
+      j.vertex_of.clear();
     }
     // What was made for the copy this one replaces (at the same address) is not for it.
     if (was_copy || j.repeats) {
@@ -172,7 +201,10 @@ std::size_t ContactBuilder::bytes() const {
     back = back_->patch->bytes() + back_->open.capacity() + back_->mesh.local.capacity() * sizeof(Vec3) +
            back_->mesh.faces.capacity() * sizeof(Tri);
   for (const auto& j : joined_)
-    if (j && j->repeats) back += j->mesh.local.capacity() * sizeof(Vec3) + j->mesh.faces.capacity() * sizeof(Tri);
+    if (j && j->repeats)
+      back += j->mesh.local.capacity() * sizeof(Vec3) + j->mesh.faces.capacity() * sizeof(Tri) +
+              (j->vertex_of.capacity() + j->face_of.capacity()) * 4;
+  back += named_pairs_.capacity() * sizeof(ContactPair);
   return patch_->bytes() + back + (probe_faces_.capacity() + object_faces_.capacity() + probe_vertices_.capacity()) * 4 +
          probe_points_.capacity() * sizeof(Vec3);
 }
@@ -181,6 +213,24 @@ ContactModel ContactBuilder::build_patch(const Mesh& probe_as_given, const Mesh&
                                          std::span<const ContactPair> pairs) {
   const Mesh& probe = joined(probe_as_given, 0);
   const Mesh& object = joined(object_as_given, 1);
+  const Joined &jp = *joined_[0], &jo = *joined_[1];
+  if (!jp.face_of.empty() || !jo.face_of.empty()) {  // a face written again is its first's
+    named_pairs_.assign(pairs.begin(), pairs.end());
+    for (ContactPair& q : named_pairs_) {
+      if (q.probe < jp.face_of.size()) q.probe = jp.face_of[q.probe];
+      if (q.object < jo.face_of.size()) q.object = jo.face_of[q.object];
+    }
+    std::sort(named_pairs_.begin(), named_pairs_.end());
+    named_pairs_.erase(std::unique(named_pairs_.begin(), named_pairs_.end()), named_pairs_.end());
+    pairs = named_pairs_;
+  }
+  ContactModel m = build_patch_joined(probe, object, pose, pairs);
+  if (m.deepest_probe_vertex < jp.vertex_of.size()) m.deepest_probe_vertex = jp.vertex_of[m.deepest_probe_vertex];
+  return m;
+}
+
+ContactModel ContactBuilder::build_patch_joined(const Mesh& probe, const Mesh& object, const Pose& pose,
+                                                std::span<const ContactPair> pairs) {
   Back& b = back_for(object);
   if (!b.patch) return patch_->build(probe, object, pose, pairs);  // every part closed
   if (b.active && b.patch->has_history()) {                        // a contact on the back goes on, on the back

@@ -54,8 +54,11 @@
 //    chooses again. For an object with open parts the builder keeps a second copy of the mesh (its
 //    vertices and faces) and of the model's per-mesh state.
 //  * Corners at one position are one vertex (coincident_vertices()): a mesh written as a soup,
-//    or split at its seams, renders as the welded mesh, bit for bit (the builder keeps a joined
-//    copy of such a mesh: each position once, the faces in their order).
+//    or split at its seams, renders as the welded mesh, bit for bit. A face written again on the
+//    same corners (a double-sided sheet: each face also the other way round; a face an exporter
+//    repeated) is one face, the first (pairs with the others count as pairs with it), and a
+//    surface so joined is wound consistently. The builder keeps a joined copy of such a mesh
+//    (each position once, the faces in their order, the repeats left in place as points).
 //  * Order: the model is a function of the set of pairs. They are taken in (probe, object)
 //    order, each once (sorted in scratch when not given so), and the segments' areas are
 //    measured from a point of the intersection curve, so neither the worker count nor the
@@ -280,6 +283,8 @@ class ContactBuilder {
  private:
   ContactModel build_paper(const Mesh& probe, const Mesh& object, const Pose& pose, std::span<const ContactPair> pairs);
   ContactModel build_patch(const Mesh& probe, const Mesh& object, const Pose& pose, std::span<const ContactPair> pairs);
+  ContactModel build_patch_joined(const Mesh& probe, const Mesh& object, const Pose& pose,
+                                  std::span<const ContactPair> pairs);
   ContactConfig config_;
   std::uint32_t first_face_ = UINT32_MAX;  ///< paper: recorded face, UINT32_MAX = none
   Vec3 first_point_{Vec3::Zero()};         ///< paper: its centroid, object local frame, mm
@@ -299,7 +304,8 @@ class ContactBuilder {
   /// patch: a mesh whose corners repeat (coincident_vertices(): a soup, seams) as the model reads
   /// it, each position once and the faces in their order (contact.cpp).
   struct Joined;
-  std::unique_ptr<Joined> joined_[2];  // probe, object
+  std::unique_ptr<Joined> joined_[2];     // probe, object
+  std::vector<ContactPair> named_pairs_;  // scratch: the pairs with repeated faces named by their first
   const Mesh& joined(const Mesh& mesh, int which);
 };
 
