@@ -695,6 +695,45 @@ TEST_CASE(
     CHECK(std::abs(m.penetration_mm - a.penetration_mm) < 1e-9);
     CHECK(std::abs(m.penetration_mm - depth) <= kDepthTol);
   }
+  // Two cubes glued face to face (each closed: the wall between them written both ways, as voxels
+  // and assemblies are): the wall stays inside, the top pushes straight up over it.
+  Mesh glued = box40();
+  for (const Vec3& v : box40().local) glued.local.push_back(v + Vec3(40, 0, 0));
+  for (const Tri& t : box40().faces)
+    glued.faces.push_back({t[0] + std::uint32_t(box40().local.size()), t[1] + std::uint32_t(box40().local.size()),
+                           t[2] + std::uint32_t(box40().local.size())});
+  const SphereTree glued_tree = SphereTree::build(glued).value();
+  for (const double x : {20.0, 22.0})
+    for (double depth = 0.5; depth <= 8.0; depth += 0.5) {
+      CAPTURE(x);
+      CAPTURE(depth);
+      ContactBuilder b;
+      const ContactModel m = model(b, glued, glued_tree, pose_at({x, 1.0, 25.0 - depth}));
+      REQUIRE(m.in_contact());
+      CHECK(angle_deg(fd(m), Vec3::UnitZ()) < 1e-6);
+      CHECK(std::abs(m.penetration_mm - depth) <= kDepthTol);
+    }
+  // A fin written both ways standing on the box's edge (its rim partly free): a sheet, pushed
+  // from either side.
+  Mesh fin = box40();
+  const auto f0 = std::uint32_t(fin.local.size());
+  for (const Vec3& v : {Vec3(20, -20, 20), Vec3(20, 20, 20), Vec3(20, 20, 40), Vec3(20, -20, 40)})
+    fin.local.push_back(v);
+  for (const Tri& t : {Tri{f0, f0 + 1, f0 + 2}, Tri{f0, f0 + 2, f0 + 3}}) {
+    fin.faces.push_back(t);
+    fin.faces.push_back({t[0], t[2], t[1]});
+  }
+  const SphereTree fin_tree = SphereTree::build(fin).value();
+  for (const double side : {+1.0, -1.0})
+    for (double depth = 0.5; depth <= 3.0; depth += 0.5) {
+      CAPTURE(side);
+      CAPTURE(depth);
+      ContactBuilder b;
+      const ContactModel m = model(b, fin, fin_tree, pose_at({20 + side * (5 - depth), 1.0, 32.0}));
+      REQUIRE(m.in_contact());
+      CHECK(angle_deg(fd(m), side * Vec3::UnitX()) < 1e-6);
+      CHECK(std::abs(m.penetration_mm - depth) <= kDepthTol);
+    }
 }
 
 TEST_CASE("contact patch: bad input gives a finite model and a flag") {

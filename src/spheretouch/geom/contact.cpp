@@ -93,15 +93,133 @@ ContactBuilder::Back& ContactBuilder::back_for(const Mesh& object) {
   return b;
 }
 
+namespace {
+
+// Whether face t (distinct corners) runs its corners in ascending order, up to rotation.
+bool ascending(const Tri& t) {
+  const int m = t[0] < t[1] ? (t[0] < t[2] ? 0 : 2) : (t[1] < t[2] ? 1 : 2);
+  return t[(m + 1) % 3] < t[(m + 2) % 3];
+}
+
+// Faces written again on the same three corners, each named by the first of them (the result,
+// per face; empty when none is), the others made a point in `faces` so no walk crosses them.
+// Twice the other way round is either the two sides of one sheet (double-sided geometry) or the
+// wall two solids share (voxels, an assembly's parts glued face to face): a wall's two faces
+// cancel in the patch's vector area, as the surface of the solids' union should, so they stay.
+// Which is which: the repeats, joined across the edges they share, make regions; a region whose
+// rim is all attached to other faces and whose faces are all written both ways is a wall; any
+// other (a free rim, a fin's rim partly free, no rim: a closed surface written twice) is one
+// face. A face repeated the same way is one face.
+std::vector<std::uint32_t> first_of_repeats(std::vector<Tri>& faces) {
+  constexpr std::uint32_t kNone = UINT32_MAX;
+  const auto nf = static_cast<std::uint32_t>(faces.size());
+  std::vector<std::pair<Tri, std::uint32_t>> keyed;
+  keyed.reserve(nf);
+  for (std::uint32_t f = 0; f < nf; ++f) {
+    Tri k = faces[f];
+    std::sort(k.begin(), k.end());
+    if (k[0] != k[1] && k[1] != k[2]) keyed.push_back({k, f});  // (a degenerate face is a point or a segment)
+  }
+  std::sort(keyed.begin(), keyed.end());
+  std::vector<std::uint32_t> group(nf, kNone), first;  // a repeated face's group; a group's first face
+  std::vector<std::uint8_t> both_ways;
+  for (std::size_t i = 0; i < keyed.size();) {
+    std::size_t e = i + 1;
+    while (e < keyed.size() && keyed[e].first == keyed[i].first) ++e;
+    if (e - i > 1) {
+      const auto g = static_cast<std::uint32_t>(first.size());
+      first.push_back(keyed[i].second);  // (ties sort by face id: the lowest)
+      both_ways.push_back(0);
+      for (std::size_t k = i; k < e; ++k) {
+        group[keyed[k].second] = g;
+        both_ways[g] |= ascending(faces[keyed[k].second]) != ascending(faces[keyed[i].second]);
+      }
+    }
+    i = e;
+  }
+  if (first.empty()) return {};
+  // The edges' uses, grouped by edge.
+  struct Use {
+    std::uint64_t key;
+    std::uint32_t face;
+  };
+  std::vector<Use> uses;
+  uses.reserve(std::size_t(nf) * 3);
+  for (std::uint32_t f = 0; f < nf; ++f)
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t a = std::min(faces[f][k], faces[f][(k + 1) % 3]),
+                          b = std::max(faces[f][k], faces[f][(k + 1) % 3]);
+      if (a != b) uses.push_back({std::uint64_t(a) << 32 | b, f});
+    }
+  std::sort(uses.begin(), uses.end(), [](const Use& x, const Use& y) { return x.key < y.key; });
+  std::vector<std::uint32_t> root(first.size());
+  for (std::uint32_t g = 0; g < root.size(); ++g) root[g] = g;
+  auto find = [&](std::uint32_t g) {
+    while (root[g] != g) g = root[g] = root[root[g]];
+    return g;
+  };
+  struct Edge {
+    std::size_t begin, end;
+  };
+  std::vector<Edge> shared;  // the edges a repeated face uses
+  std::vector<std::uint32_t> groups;
+  for (std::size_t i = 0; i < uses.size();) {
+    std::size_t e = i;
+    std::uint32_t g0 = kNone;
+    for (; e < uses.size() && uses[e].key == uses[i].key; ++e)
+      if (const std::uint32_t g = group[uses[e].face]; g != kNone) {
+        if (g0 == kNone) g0 = g;
+        root[find(g)] = find(g0);  // groups meeting at an edge are one region
+      }
+    if (g0 != kNone) shared.push_back({i, e});
+    i = e;
+  }
+  std::vector<std::uint8_t> rim(first.size(), 0), free_rim(first.size(), 0), one_way(first.size(), 0);
+  for (const Edge& ed : shared) {
+    groups.clear();
+    bool other = false;
+    for (std::size_t k = ed.begin; k < ed.end; ++k) {
+      const std::uint32_t g = group[uses[k].face];
+      if (g == kNone)
+        other = true;
+      else
+        groups.push_back(g);
+    }
+    std::sort(groups.begin(), groups.end());
+    if (std::unique(groups.begin(), groups.end()) - groups.begin() != 1) continue;  // inside a region
+    const std::uint32_t r = find(groups[0]);
+    rim[r] = 1;  // on the region's rim
+    free_rim[r] |= !other;
+  }
+  for (std::uint32_t g = 0; g < first.size(); ++g) one_way[find(g)] |= !both_ways[g];
+  std::vector<std::uint32_t> face_of;
+  for (std::uint32_t f = 0; f < nf; ++f) {
+    const std::uint32_t g = group[f];
+    if (g == kNone || f == first[g]) continue;
+    const std::uint32_t r = find(g);
+    if (rim[r] && !free_rim[r] && !one_way[r]) continue;  // a wall between solids: both sides stay
+    if (face_of.empty()) {
+      face_of.resize(nf);
+      for (std::uint32_t h = 0; h < nf; ++h) face_of[h] = h;
+    }
+    face_of[f] = first[g];
+    faces[f] = {faces[f][0], faces[f][0], faces[f][0]};
+  }
+  return face_of;
+}
+
+}  // namespace
+
 /// A mesh as the patch model reads it. The model walks the surface from vertex to vertex (the
 /// depth climb, the walks under a held contact, the open parts): a surface whose corners are
 /// written once per face (a soup) would have no walk past a face, and a face written twice (a
 /// double-sided sheet: each face again the other way round; a face repeated by an exporter)
 /// would cancel or double the surface it is part of. Here each position is one vertex, a face
-/// written again is the first face of its corners (the pairs name that one: `face_of`; the
-/// others stay in place as a point, so every face keeps its id), and the faces so made one
-/// surface are wound consistently (orient_faces(): which way a face written both ways is wound
-/// is not in the file). Made once per mesh, and only for a mesh with repeats.
+/// written again is the first face of its corners (first_of_repeats(): the pairs name that one,
+/// `face_of`; the others stay in place as a point, so every face keeps its id; the wall two
+/// solids share stays as written), and the faces so made one surface are wound consistently
+/// (orient_faces(): which way a face written both ways is wound is not in the file). Made once
+/// per mesh, and only for a mesh with repeats.
 struct ContactBuilder::Joined {
   const Mesh* of = nullptr;
   std::size_t nv = 0, nf = 0;
@@ -131,24 +249,7 @@ const Mesh& ContactBuilder::joined(const Mesh& mesh, int which) {
     for (Tri& t : faces)
       for (std::uint32_t& v : t)
         if (v < id.size()) v = id[v];  // (an index out of range stays so: build() skips its pairs)
-    // Faces on the same three corners, in any order: each names the first of them.
-    std::vector<std::pair<Tri, std::uint32_t>> keyed;
-    for (std::uint32_t f = 0; f < faces.size(); ++f) {
-      Tri k = faces[f];
-      std::sort(k.begin(), k.end());
-      if (k[0] != k[1] && k[1] != k[2]) keyed.push_back({k, f});  // (a degenerate face is a point or a segment)
-    }
-    std::sort(keyed.begin(), keyed.end());
-    for (std::size_t i = 1; i < keyed.size(); ++i)
-      if (keyed[i].first == keyed[i - 1].first) {
-        if (j.face_of.empty()) {
-          j.face_of.resize(faces.size());
-          for (std::uint32_t f = 0; f < faces.size(); ++f) j.face_of[f] = f;
-        }
-        const std::uint32_t f = keyed[i].second, first = j.face_of[keyed[i - 1].second];
-        j.face_of[f] = first;
-        faces[f] = {faces[f][0], faces[f][0], faces[f][0]};
-      }
+    j.face_of = first_of_repeats(faces);
     j.repeats = j.vertex_of.size() < same.size() || !j.face_of.empty();
     if (j.repeats) {
       j.mesh.name = mesh.name;

@@ -55,10 +55,12 @@
 //    vertices and faces) and of the model's per-mesh state.
 //  * Corners at one position are one vertex (coincident_vertices()): a mesh written as a soup,
 //    or split at its seams, renders as the welded mesh, bit for bit. A face written again on the
-//    same corners (a double-sided sheet: each face also the other way round; a face an exporter
-//    repeated) is one face, the first (pairs with the others count as pairs with it), and a
-//    surface so joined is wound consistently. The builder keeps a joined copy of such a mesh
-//    (each position once, the faces in their order, the repeats left in place as points).
+//    same corners (a double-sided sheet, fin or shell: each face also the other way round; a face
+//    an exporter repeated) is one face, the first (pairs with the others count as pairs with it),
+//    and a surface so joined is wound consistently; the wall two solids share (written both ways,
+//    its rim all on other faces: voxels, parts glued face to face) stays as written, its sides
+//    cancelling as the union's surface has no wall there. The builder keeps a joined copy of
+//    such a mesh (each position once, the faces in their order, the repeats left as points).
 //  * Order: the model is a function of the set of pairs. They are taken in (probe, object)
 //    order, each once (sorted in scratch when not given so), and the segments' areas are
 //    measured from a point of the intersection curve, so neither the worker count nor the
