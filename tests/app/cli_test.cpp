@@ -56,6 +56,20 @@ TEST_CASE("info says how the winding was made consistent and outward, and --keep
   CHECK(contains(r.output, "3 misoriented edges"));  // the file's topology, kept
 }
 
+TEST_CASE("info on a soup (each face its own corners) reports it closed, its shared corners counted") {
+  st::test::TempDir d;
+  // The tetrahedron above, written as 12 vertices (three per face), one face wound inward.
+  st::test::write_file(d.file("soup.off"),
+                       "OFF\n12 4 0\n0 0 0\n0 1 0\n1 0 0\n0 0 0\n1 0 0\n0 0 1\n1 0 0\n0 1 0\n0 0 1\n0 0 0\n"
+                       "0 1 0\n0 0 1\n3 0 1 2\n3 3 4 5\n3 6 7 8\n3 9 10 11\n");
+  const auto r = run_command(spheretouch_exe() + " info " + d.file("soup.off"));
+  INFO(r.output);
+  CHECK(r.exit_code == 0);
+  CHECK(contains(r.output, "vertices    12 (8 at the position of another"));
+  CHECK(contains(r.output, "closed, manifold"));
+  CHECK(contains(r.output, "winding     1 face flipped to wind consistently and outward\n"));
+}
+
 TEST_CASE("export writes the format the output's extension names, or refuses it") {
   st::test::TempDir d;
   st::test::write_file(d.file("t.off"), "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 1 2 3\n3 0 3 2\n");
