@@ -602,6 +602,10 @@ TEST_CASE("contact patch: a mesh written as a soup (three corners per face) rend
       CHECK(m->flags == a.flags);
       CHECK(to_eigen(m->plane_point) == to_eigen(a.plane_point));
       CHECK(to_eigen(m->pressure_point) == to_eigen(a.pressure_point));
+      CHECK(m->pairs == a.pairs);
+      CHECK((m->deepest_probe_vertex < ball_soup.local.size()) == (a.deepest_probe_vertex < ball.local.size()));
+      if (a.deepest_probe_vertex < ball.local.size() && m->deepest_probe_vertex < ball_soup.local.size())
+        CHECK(ball_soup.local[m->deepest_probe_vertex] == ball.local[a.deepest_probe_vertex]);  // named in the soup's ids
     }
     if (a.in_contact()) {
       ++in_contact;
@@ -894,35 +898,41 @@ TEST_CASE("contact patch: the model is a function of the pair set, not of the pa
 TEST_CASE("contact patch: held under a thin plate while under the surface it entered, dropped once clear") {
   // A 100 mm plate of 12 faces (top at z = +0.5): the ball pushed through, slid 30 mm sideways
   // under it (far outside the entry patch's footprint), brought back up on the other side of a
-  // face diagonal, and out: held all the way under the top, nothing once clear above it.
-  const Mesh plate = make_box({100, 100, 1});
-  const Mesh ball = make_icosphere(5, 12);
-  ContactBuilder b;
-  auto at = [&](double x, double z) { return model_at(b, ball, plate, pose_at({x, -0.2, z})); };
-  for (double z = 6; z >= -8; z -= 0.2) REQUIRE(at(0.3, z).in_contact() == (z < 5.5));
-  int held = 0;
-  for (double x = 0.3; x <= 30.3; x += 0.5) {
-    const ContactModel m = at(x, -8);
-    REQUIRE(m.in_contact());
-    held += (m.flags & kHeld) != 0;
-    CHECK(angle_deg(fd(m), Vec3::UnitZ()) < 1e-9);
-    CHECK(std::abs(m.penetration_mm - 13.5) <= kDepthTol);
+  // face diagonal, and out: held all the way under the top, nothing once clear above it. The same
+  // scene a thousand times smaller holds the same way, and past the plate's edge as far relative
+  // to the ball (before, hold_margin_mm held it 1 mm past: 200 of its radii).
+  for (const double s : {1.0, 1e-3}) {
+    CAPTURE(s);
+    const Mesh plate = make_box({100 * s, 100 * s, s});
+    const Mesh ball = make_icosphere(5 * s, 12);
+    ContactBuilder b;
+    auto at = [&](double x, double z) { return model_at(b, ball, plate, pose_at({x * s, -0.2 * s, z * s})); };
+    for (double z = 6; z >= -8; z -= 0.2) REQUIRE(at(0.3, z).in_contact() == (z < 5.5));
+    int held = 0;
+    for (double x = 0.3; x <= 30.3; x += 0.5) {
+      const ContactModel m = at(x, -8);
+      REQUIRE(m.in_contact());
+      held += (m.flags & kHeld) != 0;
+      CHECK(angle_deg(fd(m), Vec3::UnitZ()) < 1e-9);
+      CHECK(std::abs(m.penetration_mm - 13.5 * s) <= kDepthTol * s);
+    }
+    CHECK(held == 61);
+    for (double z = -8; z <= 5.0; z += 0.2) {
+      const ContactModel m = at(30.3, z);
+      CAPTURE(z);
+      REQUIRE(m.in_contact());
+      CHECK(fd(m).z() > 0.99);  // never the underside's plane
+      CHECK(std::abs(m.penetration_mm - (0.5 - (z - 5)) * s) <= kDepthTol * s);
+    }
+    for (double z = 5.6; z <= 8; z += 0.2) CHECK_FALSE(at(30.3, z).in_contact());  // clear above: nothing held
+    // Slid out past the plate's edge (x = 50): held within the margin (1 mm, a quarter of the
+    // ball's radius at the small scale) of it, then dropped.
+    for (double z = 6; z >= -8; z -= 0.2) (void)at(45, z);
+    CHECK((at(45, -8).flags & kHeld) != 0);
+    CHECK((at(50.5, -8).flags & kHeld) != 0);
+    const ContactModel off = at(51.5, -8);
+    CHECK_FALSE(off.in_contact());
   }
-  CHECK(held == 61);
-  for (double z = -8; z <= 5.0; z += 0.2) {
-    const ContactModel m = at(30.3, z);
-    CAPTURE(z);
-    REQUIRE(m.in_contact());
-    CHECK(fd(m).z() > 0.99);  // never the underside's plane
-    CHECK(std::abs(m.penetration_mm - (0.5 - (z - 5))) <= kDepthTol);
-  }
-  for (double z = 5.6; z <= 8; z += 0.2) CHECK_FALSE(at(30.3, z).in_contact());  // clear above: nothing held
-  // Slid out past the plate's edge (x = 50): held within hold_margin_mm (1 mm) of it, then dropped.
-  for (double z = 6; z >= -8; z -= 0.2) (void)at(45, z);
-  CHECK((at(45, -8).flags & kHeld) != 0);
-  CHECK((at(50.5, -8).flags & kHeld) != 0);
-  const ContactModel off = at(51.5, -8);
-  CHECK_FALSE(off.in_contact());
 }
 
 namespace {

@@ -223,8 +223,8 @@ std::vector<std::uint32_t> first_of_repeats(std::vector<Tri>& faces) {
 struct ContactBuilder::Joined {
   const Mesh* of = nullptr;
   std::size_t nv = 0, nf = 0;
-  bool repeats = false;                  // some corners or faces repeat: `mesh` is the joined copy
-  Mesh mesh;                             //
+  bool repeats = false;  // some corners or faces repeat: `mesh` is the joined copy
+  Mesh mesh;
   std::vector<std::uint32_t> vertex_of;  // its vertex -> the mesh's (the lowest at that position)
   std::vector<std::uint32_t> face_of;    // the mesh's face -> the first face of its corners (empty: none repeat)
   bool made_for(const Mesh& m) const { return of == &m && nv == m.local.size() && nf == m.faces.size(); }
@@ -259,7 +259,7 @@ const Mesh& ContactBuilder::joined(const Mesh& mesh, int which) {
       j.mesh.faces = std::move(faces);
       if (!j.face_of.empty()) (void)orient_faces(j.mesh);
     } else {
-      j.vertex_of.clear();
+      j.vertex_of = {};  // (its capacity too: a vertex each)
     }
     // What was made for the copy this one replaces (at the same address) is not for it.
     if (was_copy || j.repeats) {
@@ -312,6 +312,7 @@ std::size_t ContactBuilder::bytes() const {
 
 ContactModel ContactBuilder::build_patch(const Mesh& probe_as_given, const Mesh& object_as_given, const Pose& pose,
                                          std::span<const ContactPair> pairs) {
+  const auto given = static_cast<std::uint32_t>(std::min<std::size_t>(pairs.size(), UINT32_MAX));
   const Mesh& probe = joined(probe_as_given, 0);
   const Mesh& object = joined(object_as_given, 1);
   const Joined &jp = *joined_[0], &jo = *joined_[1];
@@ -327,6 +328,7 @@ ContactModel ContactBuilder::build_patch(const Mesh& probe_as_given, const Mesh&
   }
   ContactModel m = build_patch_joined(probe, object, pose, pairs);
   if (m.deepest_probe_vertex < jp.vertex_of.size()) m.deepest_probe_vertex = jp.vertex_of[m.deepest_probe_vertex];
+  m.pairs = given;
   return m;
 }
 

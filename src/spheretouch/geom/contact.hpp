@@ -42,8 +42,8 @@
 //    feature, so that no front face collides any more, FD is kept while the tracked probe point
 //    (the deepest one when contact was last rendered) is under the surface it entered: a walk
 //    over that surface's faces that face FD, from the face found last round, finds the face over
-//    the point (or, within hold_margin_mm past the surface's edge, the last face's plane
-//    extended); PD is the depth under it (flag kHeld). It ends once the point is clear on the
+//    the point (or, within hold_margin_mm, at most a quarter of the probe's bounding radius, past
+//    the surface's edge, the last face's plane extended); PD is the depth under it (flag kHeld). It ends once the point is clear on the
 //    entry side. The proxy shown to a user is the probe moved out by PD along FD
 //    (ContactModel::proxy_offset()).
 //  * Open surfaces (a sheet, a scan open at its base: a part with no inside, orient.hpp) have no
@@ -236,7 +236,9 @@ ContactModel place(const ContactModel& m, const Pose& placement);
 struct ContactConfig {
   ContactModelKind model = ContactModelKind::patch;  ///< which model
   double replane_angle_deg = 60.0;  ///< paper: re-record the first contact face when FD turns further than this
-  double hold_margin_mm = 1.0;      ///< patch: a held contact lasts this far past the edge of the surface it entered
+  /// patch: a held contact lasts this far past the edge of the surface it entered (at most a
+  /// quarter of the probe's bounding radius: a tiny probe is not held far past a tiny plate)
+  double hold_margin_mm = 1.0;
   /// patch: vertices the depth search may visit per body and round (kInsideCapped past it)
   std::uint32_t max_inside_vertices = 1u << 18;
 };

@@ -68,6 +68,9 @@ constexpr double kConcaveSlackMm = 1e-6;
 /// Steps the held contact's walk may take from last round's face: a slide of a few face widths a
 /// round (fast motion over a fine mesh).
 constexpr int kMaxHoldSteps = 256;
+/// A held contact lasts at most this fraction of the probe's bounding radius past the edge of the
+/// surface it entered (Patch::hold_margin).
+constexpr double kHoldMarginOfProbe = 0.25;
 
 /// Unit normal n of a triangle, its unnormalised normal cr = (b−a)×(c−a) and |cr|; false when
 /// degenerate (kDegenerateRel) or non-finite.
@@ -227,6 +230,11 @@ void ContactBuilder::Patch::prepare(const Mesh& probe, const Mesh& object) {
     probe_world.assign(probe_s.nv, Vec3::Zero());
     probe_xform_stamp.assign(probe_s.nv, 0);
     epoch = 0;
+    const Box b = probe.local_bounds();
+    double r2 = 0;  // the probe's bounding radius about its bounds' centre, squared
+    if (!b.empty())
+      for (const Vec3& v : probe.local) r2 = std::max(r2, (v - b.centre()).squaredNorm());
+    hold_margin = std::min(config.hold_margin_mm, kHoldMarginOfProbe * std::sqrt(r2));
   }
   if (!object_s.sized_for(object)) {
     object_s.reset(object);
@@ -270,9 +278,9 @@ bool ContactBuilder::Patch::hold(const Mesh& probe, const Mesh& object, ContactM
   std::uint32_t face = held_face, last = held_face;
   double depth = 0;
   if (!walk.exit(x, face, depth, kMaxHoldSteps, &last)) {
-    // Past the surface's edge (or a turn of more than ~85°): held within hold_margin_mm of the
-    // last face walked, its plane extended.
-    if (last == UINT32_MAX || !walk.near_face(x, last, config.hold_margin_mm, depth)) return false;
+    // Past the surface's edge (or a turn of more than ~85°): held within hold_margin of the last
+    // face walked, its plane extended.
+    if (last == UINT32_MAX || !walk.near_face(x, last, hold_margin, depth)) return false;
     face = last;
   }
   if (!(depth > 0)) return false;  // clear on the entry side

@@ -229,9 +229,13 @@ struct ContactBuilder::Patch {
   Vec3 held_n{Vec3::Zero()};             ///< its normal
   Vec3 held_tracked{Vec3::Zero()};       ///< the probe point held against it, probe-local, mm
   std::uint32_t held_face = UINT32_MAX;  ///< the entered surface's face over the tracked point, last found
+  /// How far past the entered surface's edge a contact is held: hold_margin_mm, at most
+  /// kHoldMarginOfProbe of the probe's bounding radius (prepare(): a probe of 0.005 mm held 1 mm
+  /// past a plate's edge would feel a wall 200 of its radii long that is not there).
+  double hold_margin = 0;
   /// The held contact, when the model gives no direction (the probe is past a feature it entered,
   /// or touches only its far side): while the tracked point is under the entered surface (a walk
-  /// over its faces that face held_n, or within hold_margin_mm past its edge, the last face's
+  /// over its faces that face held_n, or within hold_margin past its edge, the last face's
   /// plane extended), fills m with FD = held_n and PD = the depth under it; false: clear of it.
   bool hold(const Mesh& probe, const Mesh& object, ContactModel& m);
   // Scratch.
