@@ -294,7 +294,11 @@ std::vector<std::uint8_t> open_part_faces(const Mesh& mesh) {
   std::vector<std::uint8_t> open(mesh.faces.size(), 0);
   if (mesh.faces.empty()) return open;
   const Parts ps = find_parts(mesh);
-  for (std::size_t f = 0; f < open.size(); ++f) open[f] = !ps.closed[ps.part[f]];
+  for (std::size_t f = 0; f < open.size(); ++f) {
+    const Tri& t = mesh.faces[f];
+    const bool point = mesh.local[t[0]] == mesh.local[t[1]] && mesh.local[t[1]] == mesh.local[t[2]];
+    open[f] = !ps.closed[ps.part[f]] && !point;  // (a point has no side to take)
+  }
   return open;
 }
 

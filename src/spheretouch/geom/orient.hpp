@@ -59,8 +59,9 @@ inline constexpr std::size_t kMaxNestingTests = std::size_t(1) << 26;
 /// Deterministic; O(F log F) plus the nesting test.
 OrientReport orient_faces(Mesh& mesh);
 
-/// Per face, 1 when it lies in an open part (as orient_faces() finds the parts): no inside, so
-/// the patch model lets a contact take the side the probe comes from (contact.hpp).
+/// Per face, 1 when it lies in an open part (as orient_faces() finds the parts) and is not a
+/// point: no inside, so the patch model lets a contact take the side the probe comes from
+/// (contact.hpp).
 std::vector<std::uint8_t> open_part_faces(const Mesh& mesh);
 
 /// One line for a user on what orient_faces() changed ("12 faces flipped to wind consistently and
