@@ -493,6 +493,60 @@ ForceScene release_scene() {
   return s;
 }
 
+/// The mesh as some files write it: "soup" (three corners of its own per face, as PLY and OFF
+/// exporters often write them) or "twice" (each face again the other way round: double-sided
+/// geometry). The faces keep their ids (a face written again comes right after its first), so the
+/// scene renders as the mesh did.
+geom::Mesh as_written(const geom::Mesh& m, const std::string& how) {
+  geom::Mesh w;
+  w.name = m.name + "_" + how;
+  w.origin = m.origin;
+  if (how == "soup") {
+    for (const geom::Tri& t : m.faces) {
+      const auto b = std::uint32_t(w.local.size());
+      for (std::uint32_t v : t) w.local.push_back(m.local[v]);
+      w.faces.push_back({b, b + 1, b + 2});
+    }
+  } else {
+    w.local = m.local;
+    for (const geom::Tri& t : m.faces) w.faces.push_back(t), w.faces.push_back({t[0], t[2], t[1]});
+  }
+  return w;
+}
+
+/// A cell solid as a voxel exporter writes it: every solid cell a closed cube of 12 triangles with
+/// eight corners of its own, so two cells side by side both write the face between them (the
+/// wall inside the solid, once each way round).
+geom::Mesh voxel_mesh(const CellSolid& c, const char* name) {
+  geom::Mesh m;
+  m.name = name;
+  for (int i = 0; i < c.cells(0); ++i)
+    for (int j = 0; j < c.cells(1); ++j)
+      for (int k = 0; k < c.cells(2); ++k) {
+        if (!c.at(i, j, k)) continue;
+        geom::Mesh cube = geom::make_box({c.lines[0][i + 1] - c.lines[0][i], c.lines[1][j + 1] - c.lines[1][j],
+                                          c.lines[2][k + 1] - c.lines[2][k]});
+        const geom::Vec3 centre(0.5 * (c.lines[0][i] + c.lines[0][i + 1]), 0.5 * (c.lines[1][j] + c.lines[1][j + 1]),
+                                0.5 * (c.lines[2][k] + c.lines[2][k + 1]));
+        const auto b = std::uint32_t(m.local.size());
+        for (std::uint32_t v = 0; v < cube.local.size(); ++v) m.local.push_back(cube.vertex(v) + centre);
+        for (const geom::Tri& t : cube.faces) m.faces.push_back({t[0] + b, t[1] + b, t[2] + b});
+      }
+  return m;
+}
+
+/// A scene again with its object as some files write it (as_written, or voxels for the crease);
+/// its twin is the scene as the bench writes it.
+ForceScene written_scene(ForceScene s, geom::Mesh written) {
+  s.twin = s.name;
+  s.name += "_" + written.name.substr(written.name.rfind('_') + 1);
+  geom::TreeConfig tc = geom::DefaultTreeConfig();
+  tc.leaf_faces = kSolidLeafFaces;
+  const std::string label = written.name;
+  s.object = generated(label, std::move(written), tc);
+  return s;
+}
+
 /// The generated scenes a name stands for ("meshes" = all of them).
 constexpr double kFrictionMuS = 0.6, kFrictionMuD = 0.4;  // the friction scenes' material
 constexpr double kFrictionFnN = 1.1;                      // their normal force in open loop, N
@@ -598,6 +652,15 @@ std::vector<ForceScene> generated_scenes(const std::string& n) {
   if (all || n == "pocket") out.push_back(pocket_scene());
   if (all || n == "plate_through") out.push_back(plate_through_scene());
   if (all || n == "release") out.push_back(release_scene());
+  if (all || n == "written") {  // the same solids as files write them
+    out.push_back(written_scene(box_edge_scene(1), as_written(box100(1), "soup")));
+    out.push_back(written_scene(box_edge_scene(16), as_written(box100(16), "twice")));
+    CellSolid c = CellSolid::empty({-50, 0, 50}, {-50, 50}, {-50, 0, 50});  // crease_scene's L
+    c.set(0, 0, 0, true);
+    c.set(1, 0, 0, true);
+    c.set(0, 0, 1, true);
+    out.push_back(written_scene(crease_scene(1), voxel_mesh(c, "crease_voxels")));
+  }
   return out;
 }
 
@@ -1244,7 +1307,8 @@ void add_force(CLI::App& app) {
   cmd->add_option("--scenes", a->scenes,
                   "box, sphere, plate, hand_elephant, hand_armadillo (model set); generated CAD-like solids with a "
                   "ball against the analytic truth: box_edge, box_corner, ridge, crease, inner_corner, pocket, "
-                  "plate_through, release, or meshes (all of them); friction: a ball sliding on a box face with "
+                  "plate_through, release, written (box_edge and crease as files write them: a soup, each face "
+                  "twice, voxels), or meshes (all of them); friction: a ball sliding on a box face with "
                   "μs 0.6, μd 0.4 at 1.1 N (2, 10, 50 mm/s, stop-and-go, a held push and a break-away ramp)")
       ->capture_default_str();
   cmd->add_option("--workers-check", a->workers_check,
@@ -1309,7 +1373,7 @@ void add_force(CLI::App& app) {
       } else {
         die("force", "--scenes: unknown scene '" + n +
                          "' (box, sphere, plate, hand_elephant, hand_armadillo, hand_elephant_twist, box_edge, "
-                         "box_corner, ridge, crease, inner_corner, pocket, plate_through, release, meshes, friction)");
+                         "box_corner, ridge, crease, inner_corner, pocket, plate_through, release, written, meshes, friction)");
       }
     }
     std::vector<int> worker_counts;
