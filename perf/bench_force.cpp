@@ -524,8 +524,8 @@ geom::Mesh voxel_mesh(const CellSolid& c, const char* name) {
     for (int j = 0; j < c.cells(1); ++j)
       for (int k = 0; k < c.cells(2); ++k) {
         if (!c.at(i, j, k)) continue;
-        geom::Mesh cube = geom::make_box({c.lines[0][i + 1] - c.lines[0][i], c.lines[1][j + 1] - c.lines[1][j],
-                                          c.lines[2][k + 1] - c.lines[2][k]});
+        geom::Mesh cube = geom::make_box(
+            {c.lines[0][i + 1] - c.lines[0][i], c.lines[1][j + 1] - c.lines[1][j], c.lines[2][k + 1] - c.lines[2][k]});
         const geom::Vec3 centre(0.5 * (c.lines[0][i] + c.lines[0][i + 1]), 0.5 * (c.lines[1][j] + c.lines[1][j + 1]),
                                 0.5 * (c.lines[2][k] + c.lines[2][k + 1]));
         const auto b = std::uint32_t(m.local.size());
@@ -1371,9 +1371,10 @@ void add_force(CLI::App& app) {
       } else if (auto g = generated_scenes(n); !g.empty()) {
         for (ForceScene& x : g) scenes.push_back(std::move(x));
       } else {
-        die("force", "--scenes: unknown scene '" + n +
-                         "' (box, sphere, plate, hand_elephant, hand_armadillo, hand_elephant_twist, box_edge, "
-                         "box_corner, ridge, crease, inner_corner, pocket, plate_through, release, written, meshes, friction)");
+        die("force",
+            "--scenes: unknown scene '" + n +
+                "' (box, sphere, plate, hand_elephant, hand_armadillo, hand_elephant_twist, box_edge, "
+                "box_corner, ridge, crease, inner_corner, pocket, plate_through, release, written, meshes, friction)");
       }
     }
     std::vector<int> worker_counts;

@@ -564,16 +564,7 @@ TEST_CASE("contact patch: a mesh written as a soup (three corners per face) rend
   // PLY and OFF are read as written, and many exporters write a corner once per face (or once per
   // side of a seam). The model walks the surface from corner to corner; before the builder joined
   // coincident corners, a ball soup pressed into a sphere soup was pushed inward (FD -z, PD < 0.7).
-  auto soup = [](const Mesh& m) {
-    Mesh s;
-    s.origin = m.origin;
-    for (const Tri& t : m.faces) {
-      const auto b = std::uint32_t(s.local.size());
-      for (std::uint32_t v : t) s.local.push_back(m.local[v]);
-      s.faces.push_back({b, b + 1, b + 2});
-    }
-    return s;
-  };
+  using st::test::soup;
   Mesh sheet = st::test::grid(12);
   for (Vec3& v : sheet.local) v = Vec3(5 * v.x() - 30, 5 * v.y() - 30, -80);  // below the sphere
   const Mesh ball = make_icosphere(5, 8);
@@ -638,18 +629,7 @@ TEST_CASE(
       d.faces.push_back(swap ? again : t);
       d.faces.push_back(swap ? t : again);
     }
-    if (how == 2) {
-      Mesh soup = d;
-      soup.local.clear();
-      soup.faces.clear();
-      for (const Tri& t : d.faces) {
-        const auto b = std::uint32_t(soup.local.size());
-        for (std::uint32_t v : t) soup.local.push_back(d.local[v]);
-        soup.faces.push_back({b, b + 1, b + 2});
-      }
-      return soup;
-    }
-    return d;
+    return how == 2 ? st::test::soup(d) : d;
   };
   const Mesh ball = make_icosphere(5, 12);
   const SphereTree ball_tree = SphereTree::build(ball).value();

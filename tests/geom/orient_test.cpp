@@ -118,15 +118,7 @@ TEST_CASE("coincident_vertices: each vertex names the lowest index at its positi
 TEST_CASE("orient_faces: a soup (three corners per face, as PLY and OFF are read) is joined at its corners") {
   // Each face its own three vertices: without joining coincident corners every face is an open
   // part of its own and keeps the winding the file gave it.
-  auto soup = [](const Mesh& m) {
-    Mesh s;
-    for (const Tri& t : m.faces) {
-      const auto b = std::uint32_t(s.local.size());
-      for (std::uint32_t v : t) s.local.push_back(m.local[v]);
-      s.faces.push_back({b, b + 1, b + 2});
-    }
-    return s;
-  };
+  using st::test::soup;
   std::mt19937 rng(11);
   for (const Mesh& shape : {make_box(Vec3(100, 60, 40)), make_icosphere(10, 4)}) {
     const Mesh good = soup(shape);

@@ -42,6 +42,20 @@ inline geom::Mesh grid(int n, double height = 0) {
   return m;
 }
 
+/// The mesh as a soup: every face its own three corners (as PLY and OFF exporters often write
+/// them), the faces in their order.
+inline geom::Mesh soup(const geom::Mesh& m) {
+  geom::Mesh s;
+  s.name = m.name;
+  s.origin = m.origin;
+  for (const geom::Tri& t : m.faces) {
+    const auto b = std::uint32_t(s.local.size());
+    for (std::uint32_t v : t) s.local.push_back(m.local[v]);
+    s.faces.push_back({b, b + 1, b + 2});
+  }
+  return s;
+}
+
 /// A model of the set, loaded once per process. A missing model set fails the test (never skips):
 /// run scripts/models.sh.
 inline const geom::Mesh* model_mesh(const std::string& name) {
