@@ -450,14 +450,17 @@ def force(out, md, summary):
         md.append("")
     if f.get("truth"):
         md.append("Generated CAD-like solids (written by the bench: faces as large as the solid's cells, or split "
-                  "16 x 16) touched by a ball, against the analytic truth: the smallest translation that clears the "
+                  "16 x 16; `_soup`, `_twice`, `_voxels`: the same solid as files write it, three corners of its own "
+                  "per face, each face again the other way round, each cell a closed cube) touched by a ball, against "
+                  "the analytic truth: the smallest translation that clears the "
                   "ball (its depth and direction; for the plate, the depth under the top it entered, as a proxy "
                   "would hold it). Ferr: |F - law(true depth) n| over ticks in contact, RMS and max, N; over law: max "
                   "|F| - law(true depth), N; PD over: max PD - true depth at the rounds' poses, mm; turn: FD's change "
                   "between rounds over the slide, p99, deg; dir: angle(F, true normal) p90; lag: angle(F, FD of a "
                   "model built at the tick's own pose) p90, deg; step: largest per-tick |dF|, N; clear: max |F| "
                   "while clear by >= 0.1 / 0.3 mm, N; keep: plate, min share of the force kept sliding 6 mm under "
-                  "it; twin: direction against the same scene on the other tessellation, p99, deg; order: a second "
+                  "it; twin: direction against the same scene on the other tessellation (for a solid as files write "
+                  "it, as the bench writes it), p99, deg; order: a second "
                   "builder fed each round's pairs permuted (same = bit for bit); workers: the trace with W "
                   "in-process workers (scatter-gather) equals 0 workers' tick for tick. The thermal guard of the "
                   "saturator is off in these scenes (only the peak clamp).\n")
