@@ -781,6 +781,14 @@ TEST_CASE("contact patch: bad input gives a finite model and a flag") {
   const ContactModel o = b3.build(ball10(), box, good, only_sliver);
   CHECK_FALSE(o.in_contact());
   CHECK(finite_model(o));
+  // A mesh not validated: a face naming no vertex, in a soup with a face written twice (the joined
+  // copy and the open parts are not made from it; the model skips the face).
+  Mesh broken = st::test::soup(box40());
+  broken.faces.push_back(broken.faces[0]);
+  broken.faces.push_back({0, 1, 999999});
+  ContactBuilder b4;
+  const ContactModel k = b4.build(ball10(), broken, good, pairs);
+  CHECK(finite_model(k));
 }
 
 TEST_CASE("contact patch: a hand on the elephant: finite, PD and FD consistent with the paper's contact set") {

@@ -58,42 +58,14 @@ std::string check(const ContactConfig& c) {
 ContactBuilder::ContactBuilder(ContactConfig config) : config_(config), patch_(std::make_unique<Patch>(config)) {
   ST_ASSERT(check(config).empty(), "a ContactBuilder's config passes check() (contact.hpp)");
 }
-/// The object as a contact on the back of its open parts sees it (contact.hpp, top): its open
-/// parts' faces wound the other way, and a patch model of its own. Made once per object mesh.
-struct ContactBuilder::Back {
-  const Mesh* of = nullptr;  // the object it was made for (with its sizes: as PatchBody::sized_for)
-  std::size_t nv = 0, nf = 0;
-  std::vector<std::uint8_t> open;  // per face: in an open part (empty: none)
-  Mesh mesh;                       // the object with the open faces flipped
-  std::unique_ptr<Patch> patch;
-  bool active = false;  // the contact in progress is on the back
-  bool made_for(const Mesh& m) const { return of == &m && nv == m.local.size() && nf == m.faces.size(); }
-};
-
-ContactBuilder::Back& ContactBuilder::back_for(const Mesh& object) {
-  if (!back_) back_ = std::make_unique<Back>();
-  Back& b = *back_;
-  if (b.made_for(object)) return b;
-  b = Back{};
-  b.of = &object;
-  b.nv = object.local.size();
-  b.nf = object.faces.size();
-  b.open = open_part_faces(object);
-  if (std::find(b.open.begin(), b.open.end(), 1) == b.open.end()) {
-    b.open.clear();
-    return b;
-  }
-  b.mesh.name = object.name;
-  b.mesh.origin = object.origin;
-  b.mesh.local = object.local;
-  b.mesh.faces = object.faces;
-  for (std::size_t f = 0; f < b.nf; ++f)
-    if (b.open[f]) std::swap(b.mesh.faces[f][1], b.mesh.faces[f][2]);
-  b.patch = std::make_unique<Patch>(config_);
-  return b;
-}
-
 namespace {
+
+// Whether every face's corners name vertices of the mesh (the model skips a face that does not;
+// the part analysis and the joined copy need them all).
+bool corners_in_range(const Mesh& m) {
+  const std::size_t nv = m.local.size();
+  return std::all_of(m.faces.begin(), m.faces.end(), [nv](const Tri& t) { return t[0] < nv && t[1] < nv && t[2] < nv; });
+}
 
 // Whether face t (distinct corners) runs its corners in ascending order, up to rotation.
 bool ascending(const Tri& t) {
@@ -210,6 +182,42 @@ std::vector<std::uint32_t> first_of_repeats(std::vector<Tri>& faces) {
 
 }  // namespace
 
+/// The object as a contact on the back of its open parts sees it (contact.hpp, top): its open
+/// parts' faces wound the other way, and a patch model of its own. Made once per object mesh.
+struct ContactBuilder::Back {
+  const Mesh* of = nullptr;  // the object it was made for (with its sizes: as PatchBody::sized_for)
+  std::size_t nv = 0, nf = 0;
+  std::vector<std::uint8_t> open;  // per face: in an open part (empty: none)
+  Mesh mesh;                       // the object with the open faces flipped
+  std::unique_ptr<Patch> patch;
+  bool active = false;  // the contact in progress is on the back
+  bool made_for(const Mesh& m) const { return of == &m && nv == m.local.size() && nf == m.faces.size(); }
+};
+
+ContactBuilder::Back& ContactBuilder::back_for(const Mesh& object) {
+  if (!back_) back_ = std::make_unique<Back>();
+  Back& b = *back_;
+  if (b.made_for(object)) return b;
+  b = Back{};
+  b.of = &object;
+  b.nv = object.local.size();
+  b.nf = object.faces.size();
+  if (!corners_in_range(object)) return b;  // (no open parts read from faces that name no vertex)
+  b.open = open_part_faces(object);
+  if (std::find(b.open.begin(), b.open.end(), 1) == b.open.end()) {
+    b.open.clear();
+    return b;
+  }
+  b.mesh.name = object.name;
+  b.mesh.origin = object.origin;
+  b.mesh.local = object.local;
+  b.mesh.faces = object.faces;
+  for (std::size_t f = 0; f < b.nf; ++f)
+    if (b.open[f]) std::swap(b.mesh.faces[f][1], b.mesh.faces[f][2]);
+  b.patch = std::make_unique<Patch>(config_);
+  return b;
+}
+
 /// A mesh as the patch model reads it. The model walks the surface from vertex to vertex (the
 /// depth climb, the walks under a held contact, the open parts): a surface whose corners are
 /// written once per face (a soup) would have no walk past a face, and a face written twice (a
@@ -239,6 +247,7 @@ const Mesh& ContactBuilder::joined(const Mesh& mesh, int which) {
     j.of = &mesh;
     j.nv = mesh.local.size();
     j.nf = mesh.faces.size();
+    if (!corners_in_range(mesh)) return mesh;  // read as given (the model skips such faces)
     const std::vector<std::uint32_t> same = coincident_vertices(mesh);
     std::vector<std::uint32_t> id(same.size());
     for (std::size_t v = 0; v < same.size(); ++v) {
