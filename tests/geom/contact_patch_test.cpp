@@ -614,7 +614,7 @@ TEST_CASE("contact patch: a mesh written as a soup (three corners per face) rend
 }
 
 TEST_CASE(
-    "contact patch: a face written twice counts once: a double-sided sheet pushes as the sheet, a box as the box") {
+    "contact patch: a face written twice is one (a double-sided sheet, box or fin); a wall two solids share stays") {
   // Double-sided geometry is often written as each face again the other way round; the two
   // cancelled (no force at all through such a sheet), and a face repeated the same way doubled.
   Mesh sheet = st::test::grid(12);
