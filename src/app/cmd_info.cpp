@@ -28,14 +28,11 @@ void print_info(const geom::LoadedMesh& lm) {
   if (r.skipped_primitives) std::printf(", %zu points/lines ignored", r.skipped_primitives);
   std::printf(")\n  vertices    %zu", m.num_vertices());
   if (r.welded_vertices) std::printf(" (%zu exact duplicates welded)", r.welded_vertices);
-  const std::vector<std::uint32_t> same = geom::coincident_vertices(m);
-  std::size_t shared = 0;
-  for (std::size_t v = 0; v < same.size(); ++v) shared += same[v] != v;
-  if (shared)
+  if (t.shared_corners)
     std::printf(
         " (%zu at the position of another, kept as the file numbers them; one corner to the topology, the "
         "winding and the contact model)",
-        shared);
+        t.shared_corners);
   std::printf("\n  bounds      [%.6g, %.6g, %.6g] .. [%.6g, %.6g, %.6g] mm, diagonal %.6g mm\n", b.lo.x(), b.lo.y(),
               b.lo.z(), b.hi.x(), b.hi.y(), b.hi.z(), b.diagonal());
   std::printf("  centre      [%.17g, %.17g, %.17g] mm (body-local origin)\n", m.origin.x(), m.origin.y(), m.origin.z());

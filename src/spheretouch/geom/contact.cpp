@@ -60,6 +60,14 @@ ContactBuilder::ContactBuilder(ContactConfig config) : config_(config), patch_(s
 }
 namespace {
 
+// Which mesh something was made from: its address and sizes (as PatchBody::sized_for).
+struct MadeFor {
+  const Mesh* of = nullptr;
+  std::size_t nv = 0, nf = 0;
+  explicit MadeFor(const Mesh* m = nullptr) : of(m), nv(m ? m->local.size() : 0), nf(m ? m->faces.size() : 0) {}
+  bool operator()(const Mesh& m) const { return of == &m && nv == m.local.size() && nf == m.faces.size(); }
+};
+
 // Whether every face's corners name vertices of the mesh (the model skips a face that does not;
 // the part analysis and the joined copy need them all).
 bool corners_in_range(const Mesh& m) {
@@ -185,13 +193,11 @@ std::vector<std::uint32_t> first_of_repeats(std::vector<Tri>& faces) {
 /// The object as a contact on the back of its open parts sees it (contact.hpp, top): its open
 /// parts' faces wound the other way, and a patch model of its own. Made once per object mesh.
 struct ContactBuilder::Back {
-  const Mesh* of = nullptr;  // the object it was made for (with its sizes: as PatchBody::sized_for)
-  std::size_t nv = 0, nf = 0;
+  MadeFor made_for;                // the object it was made for
   std::vector<std::uint8_t> open;  // per face: in an open part (empty: none)
   Mesh mesh;                       // the object with the open faces flipped
   std::unique_ptr<Patch> patch;
   bool active = false;  // the contact in progress is on the back
-  bool made_for(const Mesh& m) const { return of == &m && nv == m.local.size() && nf == m.faces.size(); }
 };
 
 ContactBuilder::Back& ContactBuilder::back_for(const Mesh& object) {
@@ -199,9 +205,7 @@ ContactBuilder::Back& ContactBuilder::back_for(const Mesh& object) {
   Back& b = *back_;
   if (b.made_for(object)) return b;
   b = Back{};
-  b.of = &object;
-  b.nv = object.local.size();
-  b.nf = object.faces.size();
+  b.made_for = MadeFor(&object);
   if (!corners_in_range(object)) return b;  // (no open parts read from faces that name no vertex)
   b.open = open_part_faces(object);
   if (std::find(b.open.begin(), b.open.end(), 1) == b.open.end()) {
@@ -212,7 +216,7 @@ ContactBuilder::Back& ContactBuilder::back_for(const Mesh& object) {
   b.mesh.origin = object.origin;
   b.mesh.local = object.local;
   b.mesh.faces = object.faces;
-  for (std::size_t f = 0; f < b.nf; ++f)
+  for (std::size_t f = 0; f < b.open.size(); ++f)
     if (b.open[f]) std::swap(b.mesh.faces[f][1], b.mesh.faces[f][2]);
   b.patch = std::make_unique<Patch>(config_);
   return b;
@@ -229,13 +233,11 @@ ContactBuilder::Back& ContactBuilder::back_for(const Mesh& object) {
 /// (orient_faces(): which way a face written both ways is wound is not in the file). Made once
 /// per mesh, and only for a mesh with repeats.
 struct ContactBuilder::Joined {
-  const Mesh* of = nullptr;
-  std::size_t nv = 0, nf = 0;
+  MadeFor made_for;      // the mesh it was made for
   bool repeats = false;  // some corners or faces repeat: `mesh` is the joined copy
   Mesh mesh;
   std::vector<std::uint32_t> vertex_of;  // its vertex -> the mesh's (the lowest at that position)
   std::vector<std::uint32_t> face_of;    // the mesh's face -> the first face of its corners (empty: none repeat)
-  bool made_for(const Mesh& m) const { return of == &m && nv == m.local.size() && nf == m.faces.size(); }
 };
 
 const Mesh& ContactBuilder::joined(const Mesh& mesh, int which) {
@@ -244,9 +246,7 @@ const Mesh& ContactBuilder::joined(const Mesh& mesh, int which) {
   if (!j.made_for(mesh)) {
     const bool was_copy = j.repeats;
     j = Joined{};
-    j.of = &mesh;
-    j.nv = mesh.local.size();
-    j.nf = mesh.faces.size();
+    j.made_for = MadeFor(&mesh);
     if (!corners_in_range(mesh)) return mesh;  // read as given (the model skips such faces)
     const std::vector<std::uint32_t> same = coincident_vertices(mesh);
     std::vector<std::uint32_t> id(same.size());

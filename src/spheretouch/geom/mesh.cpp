@@ -47,6 +47,7 @@ Topology Mesh::topology() const {
   }
   std::sort(halves.begin(), halves.end(), [](const Half& x, const Half& y) { return x.key < y.key; });
   Topology t;
+  for (std::size_t v = 0; v < same.size(); ++v) t.shared_corners += same[v] != v;
   for (std::size_t i = 0; i < halves.size();) {
     std::size_t j = i;
     while (j < halves.size() && halves[j].key == halves[i].key) ++j;

@@ -41,10 +41,11 @@ struct Box {
 
 /// Edge-topology facts about a mesh, computed by Mesh::topology().
 struct Topology {
-  std::size_t boundary_edges = 0;                      ///< edges used by exactly one face (open surface)
-  std::size_t nonmanifold_edges = 0;                   ///< edges used by three or more faces
-  std::size_t misoriented_edges = 0;                   ///< manifold edges whose two faces traverse them the same way
-  bool closed() const { return boundary_edges == 0; }  ///< watertight
+  std::size_t boundary_edges = 0;     ///< edges used by exactly one face (open surface)
+  std::size_t nonmanifold_edges = 0;  ///< edges used by three or more faces
+  std::size_t misoriented_edges = 0;  ///< manifold edges whose two faces traverse them the same way
+  std::size_t shared_corners = 0;     ///< vertices at the position of a lower-numbered one (coincident_vertices())
+  bool closed() const { return boundary_edges == 0; }                                 ///< watertight
   bool manifold() const { return nonmanifold_edges == 0 && misoriented_edges == 0; }  ///< 2-manifold, oriented
 };
 
