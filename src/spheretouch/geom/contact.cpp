@@ -64,7 +64,8 @@ namespace {
 struct MadeFor {
   const Mesh* of = nullptr;
   std::size_t nv = 0, nf = 0;
-  explicit MadeFor(const Mesh* m = nullptr) : of(m), nv(m ? m->local.size() : 0), nf(m ? m->faces.size() : 0) {}
+  MadeFor() = default;
+  explicit MadeFor(const Mesh& m) : of(&m), nv(m.local.size()), nf(m.faces.size()) {}
   bool operator()(const Mesh& m) const { return of == &m && nv == m.local.size() && nf == m.faces.size(); }
 };
 
@@ -205,7 +206,7 @@ ContactBuilder::Back& ContactBuilder::back_for(const Mesh& object) {
   Back& b = *back_;
   if (b.made_for(object)) return b;
   b = Back{};
-  b.made_for = MadeFor(&object);
+  b.made_for = MadeFor(object);
   if (!corners_in_range(object)) return b;  // (no open parts read from faces that name no vertex)
   b.open = open_part_faces(object);
   if (std::find(b.open.begin(), b.open.end(), 1) == b.open.end()) {
@@ -246,7 +247,7 @@ const Mesh& ContactBuilder::joined(const Mesh& mesh, int which) {
   if (!j.made_for(mesh)) {
     const bool was_copy = j.repeats;
     j = Joined{};
-    j.made_for = MadeFor(&mesh);
+    j.made_for = MadeFor(mesh);
     if (!corners_in_range(mesh)) return mesh;  // read as given (the model skips such faces)
     const std::vector<std::uint32_t> same = coincident_vertices(mesh);
     std::vector<std::uint32_t> id(same.size());
